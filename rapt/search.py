@@ -1,0 +1,350 @@
+"""``rapt.search``: run a boundary search against a vectorised system under test.
+
+The runner owns everything a sampler must not: calling the system, splitting batches
+over an executor, recording failures, and persisting every evaluated row so that a study
+killed halfway resumes without re-running or duplicating a single point.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from rapt.executors import resolve_executor
+from rapt.samplers import METHODS, Sampler, make_sampler
+from rapt.scores import check_output_types, infer_output_types
+from rapt.space import StateSpace
+from rapt.store import SCHEMA_VERSION, StudyStore
+
+__all__ = ["search", "Study"]
+
+#: Stop a study whose first batches all failed: the system is broken, not the scenarios.
+_ALL_FAILED_BATCHES = 3
+
+
+@dataclass
+class Study:
+    """The result of :func:`search`.
+
+    ``X`` (N, d) and ``Y`` (N, m) are the successfully evaluated samples in evaluation order,
+    ``X`` in the units ``fn`` received (physical for bounds, unit cube for a general
+    :class:`StateSpace`); ``U`` holds the same states in the unit cube.  Failed rows are in
+    ``X_failed`` with one ``failures`` reason each.
+    """
+
+    X: np.ndarray
+    Y: np.ndarray
+    U: np.ndarray
+    batch: np.ndarray
+    X_failed: np.ndarray
+    failures: list[str]
+    method: str
+    seed: int
+    space: StateSpace
+    output_types: tuple[str, ...]
+    sampler: Sampler = field(repr=False)
+    store: str | None = None
+
+    @property
+    def n_evaluated(self) -> int:
+        """Rows evaluated, failed ones included (what the budget counts)."""
+        return int(self.X.shape[0] + self.X_failed.shape[0])
+
+    def scenarios(self) -> list[dict[str, Any]]:
+        """The successful samples as named scenarios in physical units."""
+        return self.space.decode(self.U)
+
+
+def search(fn: Callable[[np.ndarray], Any], bounds: Any, budget: int, method: str = "s-ndv",
+           batch_size: int = 100, seed: int = 0, *, store: str | Path | None = None,
+           executor: Any = None, chunk_size: int | None = None,
+           output_types: Sequence[str] | None = None, n_initial: int | None = None,
+           sampler_options: dict[str, Any] | None = None,
+           progress: Callable[[int, int], None] | None = None) -> Study:
+    """Search the space for performance boundaries of ``fn``.
+
+    Parameters
+    ----------
+    fn:
+        Maps an (n, d) float array of states to an (n, m) array of scores.  It may also
+        return ``(X_evaluated, Y)`` when it evaluated different states than it was given
+        (a projection onto valid states).  Rows of NaN, or an exception for a chunk, are
+        recorded as failed and the search goes on.
+    bounds:
+        ``[(low, high), ...]`` per input (``fn`` gets physical values), or a
+        :class:`~rapt.space.StateSpace` (``fn`` gets unit-cube rows; decode with the space).
+    budget:
+        Total rows to evaluate, failed rows included.  With a ``store`` holding fewer, the
+        study continues up to ``budget``.
+    method:
+        One of ``random``, ``sobol``, ``lhs``, ``gpr``, ``nndv``, ``s-ndv``.
+    batch_size, seed:
+        Points per batch (``L``); the seed of every random choice.
+    store:
+        SQLite file.  If it already holds this study, the search resumes; with the same
+        seed the result equals an uninterrupted run.
+    executor:
+        ``None`` (call ``fn`` in process on whole batches), any
+        ``concurrent.futures.Executor``, or a ``dask.distributed.Client``.
+    chunk_size:
+        Rows per task when an executor is used (default: two tasks per worker per batch).
+    output_types:
+        Per score column ``categorical``, ``binary`` or ``continuous``; inferred from the
+        first successful batch when omitted.
+    n_initial:
+        Space-filling samples before the adaptive metric takes over (default: one batch).
+    sampler_options:
+        Extra keyword arguments for the sampler (e.g. ``k``, ``g``, ``v``).
+    progress:
+        Called as ``progress(evaluated, budget)`` after every batch.
+    """
+    if not callable(fn):
+        raise ValueError("fn: expected a callable mapping an (n, d) array to an (n, m) array")
+    space = bounds if isinstance(bounds, StateSpace) else StateSpace.from_bounds(bounds)
+    physical = not isinstance(bounds, StateSpace)
+    if method not in METHODS:
+        raise ValueError(f"method: unknown method {method!r}; allowed: {', '.join(METHODS)}")
+    for name, value in (("budget", budget), ("batch_size", batch_size)):
+        if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or value < 1:
+            raise ValueError(f"{name}: expected a positive integer, got {value!r}")
+    if budget < batch_size:
+        raise ValueError(f"budget: {budget} is smaller than batch_size {batch_size}; raise budget or lower batch_size")
+    if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
+        raise ValueError(f"seed: expected a non-negative integer, got {seed!r}")
+    if chunk_size is not None and (not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1):
+        raise ValueError(f"chunk_size: expected a positive integer or None, got {chunk_size!r}")
+    if n_initial is not None and (not isinstance(n_initial, (int, np.integer)) or n_initial < 0):
+        raise ValueError(f"n_initial: expected a non-negative integer or None, got {n_initial!r}")
+    if output_types is not None:
+        output_types = tuple(output_types)
+        check_output_types(output_types, len(output_types))
+    options = dict(sampler_options or {})
+    if METHODS[method].adaptive:
+        options.setdefault("n_initial", batch_size if n_initial is None else int(n_initial))
+    elif method == "lhs":
+        options.setdefault("size", int(budget))
+    sampler = make_sampler(method, space.dim, seed=int(seed), output_types=output_types, **options)
+    ex, workers = resolve_executor(executor)
+
+    config = {
+        "schema_version": SCHEMA_VERSION, "method": method, "seed": int(seed), "dim": space.dim,
+        "batch_size": int(batch_size), "space": space.to_config(), "physical": physical,
+        "sampler_options": {k: v for k, v in options.items() if k != "size" and _jsonable(v)},
+    }
+    db = StudyStore(":memory:" if store is None else store)
+    try:
+        runner = _Runner(fn, space, physical, sampler, db, ex, workers, chunk_size, int(batch_size))
+        runner.open(config, output_types)
+        runner.run(int(budget), progress)
+        return runner.study(method, int(seed), None if store is None else str(store))
+    finally:
+        db.close()
+
+
+def _jsonable(v: Any) -> bool:
+    return isinstance(v, (int, float, str, bool, type(None), list, tuple, dict))
+
+
+class _Runner:
+    """One study in progress: replay what the store holds, then evaluate the rest."""
+
+    def __init__(self, fn, space: StateSpace, physical: bool, sampler: Sampler, db: StudyStore,
+                 executor: cf.Executor | None, workers: int, chunk_size: int | None, batch_size: int):
+        self.fn = fn
+        self.space = space
+        self.physical = physical
+        self.sampler = sampler
+        self.db = db
+        self.executor = executor
+        self.workers = workers
+        self.chunk_size = chunk_size
+        self.batch_size = batch_size
+        self.n_outputs: int | None = None
+        # Per evaluated row, in (batch, row) order.
+        self.U: list[np.ndarray] = []
+        self.Y: list[np.ndarray] = []
+        self.batch_of: list[np.ndarray] = []
+        self.U_failed: list[np.ndarray] = []
+        self.reasons: list[str] = []
+        self.asked = 0
+        self.batches = 0
+
+    # -- opening and replay ------------------------------------------------------------
+    def open(self, config: dict[str, Any], output_types: tuple[str, ...] | None) -> None:
+        meta = self.db.get_meta()
+        if not meta:
+            self.db.set_meta(config)
+            if output_types is not None:
+                self.db.set_meta({"output_types": list(output_types)})
+            return
+        for key in ("schema_version", "method", "seed", "dim", "batch_size", "space", "physical", "sampler_options"):
+            if meta.get(key) != config[key]:
+                raise ValueError(
+                    f"store: {self.db.path} holds a study with {key}={meta.get(key)!r}, not {config[key]!r}; "
+                    f"pass the same {key} to resume it, or use a new store path"
+                )
+        stored_types = meta.get("output_types")
+        if stored_types is not None:
+            if output_types is not None and tuple(stored_types) != output_types:
+                raise ValueError(
+                    f"output_types: the store was created with {stored_types}; pass the same or omit output_types"
+                )
+            self.sampler.output_types = tuple(stored_types)
+        self._replay()
+
+    def _replay(self) -> None:
+        batches = self.db.batches()
+        rows_by_batch: dict[int, list] = {}
+        for rec in self.db.samples():
+            rows_by_batch.setdefault(rec[0], []).append(rec)
+        for b, asked in batches:
+            recs = rows_by_batch.get(b, [])
+            self.asked += asked.shape[0]
+            self.batches = b + 1
+            if len(recs) == asked.shape[0]:
+                self._accept(b, recs)
+        self.sampler.fast_forward(self.batches, self.asked)
+
+    def _accept(self, b: int, recs: list) -> None:
+        """Add a completed batch's rows (in row order) to the study and tell the sampler."""
+        recs = sorted(recs, key=lambda r: r[1])
+        ok = [r for r in recs if r[4] == "ok"]
+        bad = [r for r in recs if r[4] != "ok"]
+        if ok:
+            U = np.vstack([r[2] for r in ok])
+            Y = np.vstack([r[3] for r in ok])
+            if self.n_outputs is None:
+                self.n_outputs = Y.shape[1]
+            if self.sampler.output_types is None:
+                self.sampler.output_types = infer_output_types(Y)
+                self.db.set_meta({"output_types": list(self.sampler.output_types)})
+            self.sampler.tell(U, Y)
+            self.U.append(U)
+            self.Y.append(Y)
+            self.batch_of.append(np.full(len(ok), b, dtype=np.int64))
+        if bad:
+            Uf = np.vstack([r[2] for r in bad])
+            self.sampler.tell_failed(Uf)
+            self.U_failed.append(Uf)
+            self.reasons.extend(r[5] or "failed" for r in bad)
+
+    # -- evaluation --------------------------------------------------------------------
+    def run(self, budget: int, progress) -> None:
+        # Finish a batch that was asked but not fully evaluated before the last stop.
+        stored = self.db.batches()
+        if stored and len(self.db.done_rows(stored[-1][0])) < stored[-1][1].shape[0]:
+            self._evaluate_batch(stored[-1][0], stored[-1][1])
+            self._report(progress, budget)
+        while self.asked < budget:
+            n = min(self.batch_size, budget - self.asked)
+            asked = self.sampler.ask(n)
+            b = self.batches
+            self.db.add_batch(b, asked)
+            self.batches += 1
+            self.asked += n
+            self._evaluate_batch(b, asked)
+            self._report(progress, budget)
+
+    def _report(self, progress, budget: int) -> None:
+        if not any(len(u) for u in self.U) and len(self.reasons) and self.batches >= _ALL_FAILED_BATCHES:
+            raise RuntimeError(
+                f"fn: every row of the first {self.batches} batches failed (last reason: {self.reasons[-1]}); "
+                "fix the system under test before searching"
+            )
+        if progress is not None:
+            progress(self.db.count(), budget)
+
+    def _evaluate_batch(self, b: int, asked: np.ndarray) -> None:
+        done = self.db.done_rows(b)
+        todo = np.array([i for i in range(asked.shape[0]) if i not in done], dtype=np.int64)
+        if todo.size:
+            if self.executor is None:
+                self._record(b, todo, asked[todo], *self._call(asked[todo]))
+            else:
+                size = self.chunk_size or max(1, math.ceil(todo.size / (2 * self.workers)))
+                futures = {}
+                for start in range(0, todo.size, size):
+                    rows = todo[start:start + size]
+                    fut = self.executor.submit(_call_fn, self.fn, self._to_fn(asked[rows]))
+                    futures[fut] = rows
+                for fut in cf.as_completed(futures):
+                    rows = futures[fut]
+                    self._record(b, rows, asked[rows], *self._unpack(fut, len(rows)))
+        self._accept(b, self.db.samples(b))
+
+    def _to_fn(self, U: np.ndarray) -> np.ndarray:
+        return self.space.from_unit_array(U) if self.physical else U
+
+    def _call(self, U: np.ndarray):
+        try:
+            out = _call_fn(self.fn, self._to_fn(U))
+        except Exception as exc:  # the system under test failed for this chunk
+            return None, None, _reason(exc)
+        return (*out, None)
+
+    def _unpack(self, fut: cf.Future, n: int):
+        try:
+            return (*fut.result(), None)
+        except Exception as exc:
+            return None, None, _reason(exc)
+
+    def _record(self, b: int, rows: np.ndarray, U_asked: np.ndarray, X_eval, Y, error: str | None) -> None:
+        n = rows.size
+        if error is not None:
+            self.db.add_samples(b, rows, U_asked, None, ["failed"] * n, [error] * n)
+            return
+        Y = np.asarray(Y, dtype=float)
+        if Y.ndim == 1 and Y.shape[0] == n:
+            Y = Y[:, None]
+        expected_m = self.n_outputs if self.n_outputs is not None else (
+            len(self.sampler.output_types) if self.sampler.output_types else None)
+        if Y.ndim != 2 or Y.shape[0] != n or (expected_m is not None and Y.shape[1] != expected_m):
+            shape = f"({n}, {expected_m})" if expected_m else f"({n}, m)"
+            raise ValueError(f"fn: returned scores of shape {Y.shape} for {n} states; expected {shape}")
+        if self.n_outputs is None:
+            self.n_outputs = Y.shape[1]
+        if X_eval is None:
+            U = U_asked
+        else:
+            X_eval = np.asarray(X_eval, dtype=float)
+            if X_eval.shape != (n, self.space.dim):
+                raise ValueError(
+                    f"fn: returned evaluated states of shape {X_eval.shape}; expected ({n}, {self.space.dim})"
+                )
+            U = self.space.to_unit_array(X_eval) if self.physical else X_eval
+        finite = np.all(np.isfinite(Y), axis=1) & np.all(np.isfinite(U), axis=1)
+        status = np.where(finite, "ok", "failed")
+        reasons = [None if f else "score row contains NaN or inf" for f in finite]
+        Y_clean = np.where(finite[:, None], Y, 0.0)
+        self.db.add_samples(b, rows, U, Y_clean, status, reasons)
+
+    def study(self, method: str, seed: int, store: str | None) -> Study:
+        m = self.n_outputs or 0
+        U = np.vstack(self.U) if self.U else np.empty((0, self.space.dim))
+        Y = np.vstack(self.Y) if self.Y else np.empty((0, m))
+        Uf = np.vstack(self.U_failed) if self.U_failed else np.empty((0, self.space.dim))
+        to_x = self.space.from_unit_array if self.physical else (lambda a: a)
+        return Study(
+            X=to_x(U) if len(U) else U.copy(), Y=Y, U=U,
+            batch=np.concatenate(self.batch_of) if self.batch_of else np.empty(0, dtype=np.int64),
+            X_failed=to_x(Uf) if len(Uf) else Uf.copy(), failures=list(self.reasons), method=method, seed=seed,
+            space=self.space, output_types=tuple(self.sampler.output_types or ()), sampler=self.sampler, store=store,
+        )
+
+
+def _call_fn(fn, X: np.ndarray):
+    """Call ``fn`` and split an optional ``(X_evaluated, Y)`` answer (runs on workers too)."""
+    out = fn(X)
+    if isinstance(out, tuple) and len(out) == 2:
+        return np.asarray(out[0], dtype=float), np.asarray(out[1], dtype=float)
+    return None, np.asarray(out, dtype=float)
+
+
+def _reason(exc: BaseException) -> str:
+    text = " ".join(str(exc).split())
+    return f"{type(exc).__name__}: {text}"[:500]
