@@ -217,16 +217,19 @@ class GPRSampler(InformationSampler):
     scikit-learn's kernel has closed-form gradients.  Categorical scores are one-hot
     encoded; the gradient is the Frobenius norm of the Jacobian of the predicted mean
     (central differences).  A GP is O(n³): it is fitted on at most ``max_fit`` samples (a
-    seeded random subset), which keeps the method usable but is meant for small studies.
+    seeded random subset) with kernel hyperparameters tuned on at most ``max_hyper_fit``,
+    which keeps the method usable but is meant for small studies.
     """
 
     name = "gpr"
 
-    def __init__(self, dim: int, *, max_fit: int = 1000, step: float = 1e-3, **kwargs):
+    def __init__(self, dim: int, *, max_fit: int = 1000, max_hyper_fit: int = 200, step: float = 1e-3, **kwargs):
         kwargs.setdefault("min_candidates", 1000)
         kwargs.setdefault("candidates_per_point", 5.0)
         super().__init__(dim, **kwargs)
         _check_positive("max_fit", max_fit, integer=True)
+        _check_positive("max_hyper_fit", max_hyper_fit, integer=True)
+        self.max_hyper_fit = int(max_hyper_fit)
         _check_positive("step", step)
         self.max_fit = int(max_fit)
         self.step = float(step)
@@ -259,9 +262,17 @@ class GPRSampler(InformationSampler):
             X, T = X[rows], T[rows]
         kernel = ConstantKernel(1.0, (1e-3, 1e3)) * Matern(length_scale=0.2, length_scale_bounds=(1e-3, 10.0), nu=self.nu) \
             + WhiteKernel(1e-4, (1e-8, 1e-1))
-        gp = GaussianProcessRegressor(kernel=kernel, normalize_y=True, random_state=int(rng.integers(2**31 - 1)))
+        # Hyperparameters from a small subset (the optimiser's likelihood evaluations are the
+        # O(n³) cost), then the posterior from all fitted samples with those fixed.
+        hyper_rows = np.arange(X.shape[0])
+        if X.shape[0] > self.max_hyper_fit:
+            hyper_rows = np.sort(rng.choice(X.shape[0], size=self.max_hyper_fit, replace=False))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)
+            tuned = GaussianProcessRegressor(kernel=kernel, normalize_y=True,
+                                             random_state=int(rng.integers(2**31 - 1)))
+            tuned.fit(X[hyper_rows], T[hyper_rows])
+            gp = GaussianProcessRegressor(kernel=tuned.kernel_, normalize_y=True, optimizer=None)
             gp.fit(X, T)
         _, std = gp.predict(candidates, return_std=True)
         std = std.reshape(candidates.shape[0], -1).mean(axis=1)
