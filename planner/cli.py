@@ -1,0 +1,108 @@
+"""``rapt-plan``: the test engineer's command line.
+
+Until the mission simulator lands, ``rapt-plan search`` runs a boundary search on a
+bundled synthetic system with known boundaries and prints how well it found them,
+side by side with a space-filling baseline.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+from rich.console import Console
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+import rapt
+from rapt.metrics import quality_table
+from rapt.testfunctions import REFERENCE_SETTINGS, SYSTEMS, get_system, search_output_types
+
+app = typer.Typer(no_args_is_help=True, add_completion=False, help=__doc__.splitlines()[0])
+err = Console(stderr=True)
+out = Console()
+
+
+def fail(message: str) -> None:
+    """One-line error, exit code 2, no traceback."""
+    err.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True)
+    raise typer.Exit(code=2)
+
+
+@app.callback()
+def main() -> None:
+    """Plan field tests of autonomous underwater vehicles from adaptive boundary searches."""
+
+
+@app.command()
+def search(
+    system: Annotated[str, typer.Argument(help=f"Synthetic system: {', '.join(SYSTEMS)}.")] = "plates2d",
+    budget: Annotated[Optional[int], typer.Option(help="Samples to evaluate (default: the system's reference budget).")] = None,
+    method: Annotated[str, typer.Option(help=f"Search method: {', '.join(rapt.METHODS)}.")] = "s-ndv",
+    batch_size: Annotated[int, typer.Option("--batch-size", help="Samples per batch.")] = 100,
+    seed: Annotated[int, typer.Option(help="Seed of every random choice.")] = 0,
+    store: Annotated[Optional[Path], typer.Option(help="SQLite study store; an existing one is resumed.")] = None,
+    d_eps: Annotated[Optional[float], typer.Option("--d-eps", help="Boundary width for the quality metrics.")] = None,
+    baseline: Annotated[str, typer.Option(help="Method to compare against (or 'none').")] = "sobol",
+) -> None:
+    """Search a synthetic system for its performance boundaries and print the quality table."""
+    if system not in SYSTEMS:
+        fail(f"SYSTEM: unknown system {system!r}; choose one of: {', '.join(SYSTEMS)}")
+    if baseline != "none" and baseline not in rapt.METHODS:
+        fail(f"--baseline: unknown method {baseline!r}; choose one of: {', '.join(rapt.METHODS)}, none")
+    ref_budget, ref_eps = REFERENCE_SETTINGS[system]
+    budget = ref_budget if budget is None else budget
+    d_eps = ref_eps if d_eps is None else d_eps
+    if d_eps <= 0:
+        fail(f"--d-eps: must be > 0, got {d_eps}")
+    sut = get_system(system)
+    bounds = [(0.0, 1.0)] * sut.dim
+    types = search_output_types(sut)
+
+    rows = []
+    methods = [method] + ([baseline] if baseline not in ("none", method) else [])
+    for i, m in enumerate(methods):
+        with Progress(TextColumn(f"{m:>6}"), BarColumn(), MofNCompleteColumn(), TextColumn("{task.fields[rate]}"),
+                      TimeElapsedColumn(), console=err, transient=True, disable=not err.is_terminal) as bar:
+            task = bar.add_task(m, total=budget, rate="")
+            start = time.perf_counter()
+
+            def progress(done: int, total: int) -> None:
+                elapsed = max(time.perf_counter() - start, 1e-9)
+                bar.update(task, completed=done, rate=f"{done / elapsed:,.0f} runs/s")
+
+            try:
+                study = rapt.search(sut, bounds, budget, method=m, batch_size=batch_size, seed=seed,
+                                    store=store if i == 0 else None, output_types=types, progress=progress)
+            except ValueError as exc:
+                fail(str(exc))
+            elapsed = time.perf_counter() - start
+        q = quality_table(sut, study.X, d_eps, seed=seed)
+        rows.append((m, q, elapsed, study))
+
+    table = Table(title=f"{system}: {budget} samples, D_eps = {d_eps:g}, seed {seed}")
+    for col in ("method", "precision", "coverage", "mean distance", "time (s)", "precision ×", "coverage ×"):
+        table.add_column(col, justify="right" if col != "method" else "left")
+    base = rows[-1][1] if len(rows) > 1 else None
+    for m, q, elapsed, _ in rows:
+        ratio_p = f"{q['precision'] / base['precision']:.2f}" if base and base["precision"] > 0 else "-"
+        ratio_c = f"{q['coverage'] / base['coverage']:.2f}" if base and base["coverage"] > 0 else "-"
+        table.add_row(m, f"{q['precision']:.1%}", f"{q['coverage']:.1%}", f"{q['mean_distance']:.4f}",
+                      f"{elapsed:.2f}", ratio_p, ratio_c)
+    out.print(table)
+    study = rows[0][3]
+    if study.failures:
+        out.print(f"{len(study.failures)} rows failed; first reason: {study.failures[0]}")
+    if store is not None:
+        out.print(f"study stored in {store} ({study.n_evaluated} rows)")
+
+
+def run() -> None:  # pragma: no cover - console entry for `python -m planner.cli`
+    app()
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(app())

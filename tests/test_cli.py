@@ -1,0 +1,34 @@
+import re
+
+from typer.testing import CliRunner
+
+from planner.cli import app
+
+runner = CliRunner()
+
+
+def test_search_prints_quality_against_sobol(tmp_path):
+    db = tmp_path / "study.db"
+    result = runner.invoke(app, ["search", "plates2d", "--budget", "600", "--store", str(db)])
+    assert result.exit_code == 0, result.output
+    assert "plates2d: 600 samples, D_eps = 0.01" in result.output
+    rows = {m.group(1): float(m.group(2)) for m in re.finditer(r"│ (s-ndv|sobol)\s+│\s+([\d.]+)%", result.output)}
+    assert rows["s-ndv"] > 2.5 * rows["sobol"]
+    assert db.exists() and "600 rows" in result.output
+    again = runner.invoke(app, ["search", "plates2d", "--budget", "600", "--store", str(db)])
+    assert again.exit_code == 0 and again.output.count("s-ndv") == result.output.count("s-ndv")
+
+
+def test_bad_input_is_one_line_and_exit_2():
+    for args, expect in [
+        (["search", "plates9d"], "SYSTEM: unknown system 'plates9d'"),
+        (["search", "plates2d", "--budget", "50"], "budget: 50 is smaller than batch_size 100"),
+        (["search", "plates2d", "--method", "lola"], "method: unknown method 'lola'"),
+        (["search", "plates2d", "--baseline", "grid"], "--baseline: unknown method 'grid'"),
+        (["search", "plates2d", "--d-eps", "0"], "--d-eps: must be > 0"),
+    ]:
+        result = runner.invoke(app, args)
+        assert result.exit_code == 2, (args, result.output)
+        assert expect in result.output
+        assert "Traceback" not in result.output
+        assert len([line for line in result.output.splitlines() if line.strip()]) == 1
