@@ -1,0 +1,185 @@
+"""Boundary pairs: samples on either side of a performance boundary (sections 3.5.2-3.5.4).
+
+A boundary pair is two samples in different modes that are each other's nearest
+neighbour in the other's mode (definition vii; Algorithm 3's two nearest-neighbour
+searches).  Pairs are ranked by distance — the closer, the more precisely the pair pins
+the boundary — and typed by the two modes they join.  Two thresholds prune them: the
+absolute width ``D_eps`` (eq. 3.10) and the per-type quantile ``q_B`` (eq. 3.11).
+
+Inside each mode, DBSCAN groups samples into contiguous clusters; a pair with an endpoint
+that DBSCAN calls noise (isolated in its mode) is marked ``likely_noise``: with a noisy
+simulator a lone sample of the "wrong" mode creates pairs that are not behaviour changes.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from rapt.modes import performance_modes
+
+__all__ = ["BoundaryPairs", "boundary_pairs", "mutual_pairs"]
+
+
+@dataclass
+class BoundaryPairs:
+    """Boundary pairs sorted by ascending distance.
+
+    ``i``/``j`` index the samples (``mode_i < mode_j``); ``cluster_i``/``cluster_j`` are
+    the DBSCAN clusters of the endpoints inside their modes (-1: noise; all 0 when
+    clustering was not requested).
+    """
+
+    i: np.ndarray
+    j: np.ndarray
+    distance: np.ndarray
+    mode_i: np.ndarray
+    mode_j: np.ndarray
+    cluster_i: np.ndarray
+    cluster_j: np.ndarray
+    likely_noise: np.ndarray
+    labels: np.ndarray = field(repr=False)
+
+    def __len__(self) -> int:
+        return int(self.i.shape[0])
+
+    def types(self) -> list[tuple[int, int, int]]:
+        """Boundary types present as ``(mode_a, mode_b, number of pairs)``."""
+        if len(self) == 0:
+            return []
+        keys, counts = np.unique(np.column_stack([self.mode_i, self.mode_j]), axis=0, return_counts=True)
+        return [(int(a), int(b), int(c)) for (a, b), c in zip(keys, counts)]
+
+    def select(self, mask: np.ndarray) -> "BoundaryPairs":
+        mask = np.asarray(mask)
+        return BoundaryPairs(self.i[mask], self.j[mask], self.distance[mask], self.mode_i[mask], self.mode_j[mask],
+                             self.cluster_i[mask], self.cluster_j[mask], self.likely_noise[mask], self.labels)
+
+    def of_type(self, mode_a: int, mode_b: int) -> "BoundaryPairs":
+        a, b = min(mode_a, mode_b), max(mode_a, mode_b)
+        return self.select((self.mode_i == a) & (self.mode_j == b))
+
+
+def mutual_pairs(X: np.ndarray, labels: np.ndarray, groups: Sequence[int] | None = None
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Mutual nearest neighbours across every pair of label groups.
+
+    For groups ``a < b``: ``x ∈ a`` and ``y ∈ b`` form a pair when ``y`` is ``x``'s nearest
+    neighbour in ``b`` and ``x`` is ``y``'s nearest neighbour in ``a``.  Returns (i, j, d)
+    with ``labels[i] < labels[j]``, unsorted.
+    """
+    groups = np.unique(labels) if groups is None else np.asarray(groups)
+    members = {int(g): np.flatnonzero(labels == g) for g in groups}
+    trees = {g: cKDTree(X[idx]) for g, idx in members.items() if idx.size}
+    out_i, out_j, out_d = [], [], []
+    keys = sorted(trees)
+    for ai, a in enumerate(keys):
+        for b in keys[ai + 1:]:
+            ia, ib = members[a], members[b]
+            d_ab, nn_ab = trees[b].query(X[ia], k=1, workers=-1)  # for each a: nearest b (local index)
+            _, nn_ba = trees[a].query(X[ib], k=1, workers=-1)  # for each b: nearest a (local index)
+            mutual = nn_ba[nn_ab] == np.arange(ia.size)
+            out_i.append(ia[mutual])
+            out_j.append(ib[nn_ab[mutual]])
+            out_d.append(d_ab[mutual])
+    if not out_i:
+        empty = np.empty(0, dtype=np.int64)
+        return empty, empty, np.empty(0)
+    return np.concatenate(out_i), np.concatenate(out_j), np.concatenate(out_d)
+
+
+def boundary_pairs(X: np.ndarray, Y: np.ndarray | None = None, *, labels: np.ndarray | None = None,
+                   output_types: Sequence[str] | None = None, bandwidth: float = 0.2,
+                   d_eps: float | None = None, quantile: float | None = None,
+                   weights: np.ndarray | None = None, cluster_eps: float | None = None,
+                   min_samples: int = 20) -> BoundaryPairs:
+    """Find, threshold and rank the boundary pairs of a labelled sample set (Algorithm 2).
+
+    Parameters
+    ----------
+    X:
+        (N, d) states, normally in the unit cube.
+    Y, labels:
+        Scores to derive modes from (:func:`rapt.performance_modes`), or the modes directly.
+    d_eps:
+        Keep pairs closer than this (eq. 3.10).
+    quantile:
+        ``q_B`` of eq. 3.11: per boundary type, keep pairs no farther than that quantile of
+        the type's pair distances (the dissertation uses 0.2).
+    weights:
+        Per-input scale (e.g. tree importance) — distances are measured in ``X ∘ weights``.
+    cluster_eps, min_samples:
+        DBSCAN ``ε_C`` and ``n_min`` inside each mode; when given, pairs touching DBSCAN
+        noise are marked ``likely_noise``.
+    """
+    X = np.asarray(X, dtype=float)
+    if X.ndim != 2 or X.shape[0] == 0:
+        raise ValueError(f"X: expected a non-empty (N, d) array of states, got shape {X.shape}")
+    if not np.all(np.isfinite(X)):
+        raise ValueError("X: states must be finite")
+    if (Y is None) == (labels is None):
+        raise ValueError("Y, labels: give exactly one of scores Y or mode labels")
+    if labels is None:
+        Y = np.asarray(Y, dtype=float)
+        if Y.ndim == 1:
+            Y = Y[:, None]
+        if Y.shape[0] != X.shape[0]:
+            raise ValueError(f"Y: expected {X.shape[0]} score rows (one per state), got {Y.shape[0]}")
+        labels = performance_modes(Y, output_types, bandwidth=bandwidth)
+    else:
+        labels = np.asarray(labels).reshape(-1)
+        if labels.shape[0] != X.shape[0]:
+            raise ValueError(f"labels: expected {X.shape[0]} labels (one per state), got {labels.shape[0]}")
+        _, labels = np.unique(labels, return_inverse=True)
+        labels = labels.reshape(-1)
+    if d_eps is not None and not (np.isfinite(d_eps) and d_eps > 0):
+        raise ValueError(f"d_eps: expected a distance > 0, got {d_eps!r}")
+    if quantile is not None and not (0 < quantile <= 1):
+        raise ValueError(f"quantile: expected q_B in (0, 1], got {quantile!r}")
+    if weights is not None:
+        weights = np.asarray(weights, dtype=float)
+        if weights.shape != (X.shape[1],) or np.any(weights < 0) or not np.all(np.isfinite(weights)):
+            raise ValueError(f"weights: expected {X.shape[1]} non-negative finite scale factors, got {weights!r}")
+        X = X * weights
+
+    i, j, d = mutual_pairs(X, labels)
+    keep = np.ones(i.shape[0], dtype=bool)
+    if d_eps is not None:
+        keep &= d < d_eps
+    i, j, d = i[keep], j[keep], d[keep]
+    mi, mj = labels[i], labels[j]
+    if quantile is not None and i.size:
+        keep = np.zeros(i.size, dtype=bool)
+        type_key = mi * (labels.max() + 1) + mj
+        for key in np.unique(type_key):
+            sel = type_key == key
+            keep[sel] = d[sel] <= np.quantile(d[sel], quantile)
+        i, j, d, mi, mj = i[keep], j[keep], d[keep], mi[keep], mj[keep]
+
+    clusters = np.zeros(X.shape[0], dtype=np.int64)
+    if cluster_eps is not None:
+        clusters = _dbscan_within_modes(X, labels, cluster_eps, min_samples)
+    order = np.lexsort((j, i, d))
+    i, j, d, mi, mj = i[order], j[order], d[order], mi[order], mj[order]
+    ci, cj = clusters[i], clusters[j]
+    return BoundaryPairs(i.astype(np.int64), j.astype(np.int64), d, mi.astype(np.int64), mj.astype(np.int64),
+                         ci, cj, (ci < 0) | (cj < 0), labels)
+
+
+def _dbscan_within_modes(X: np.ndarray, labels: np.ndarray, eps: float, min_samples: int) -> np.ndarray:
+    from sklearn.cluster import DBSCAN
+
+    if not (np.isfinite(eps) and eps > 0):
+        raise ValueError(f"cluster_eps: expected ε_C > 0, got {eps!r}")
+    if not isinstance(min_samples, (int, np.integer)) or min_samples < 1:
+        raise ValueError(f"min_samples: expected a positive integer n_min, got {min_samples!r}")
+    out = np.full(X.shape[0], -1, dtype=np.int64)
+    for g in np.unique(labels):
+        idx = np.flatnonzero(labels == g)
+        if idx.size < min_samples:
+            continue  # every member is isolated: all noise
+        out[idx] = DBSCAN(eps=eps, min_samples=min_samples).fit(X[idx]).labels_
+    return out
