@@ -9,13 +9,18 @@ Knows nothing of vehicles or MAVLink: a system under test is any function from a
 ((200, 2), (200, 1))
 """
 
+from rapt.boundaries import BoundaryPairs, boundary_pairs
+from rapt.modes import performance_modes
+from rapt.scoretree import ScoreTree
 from rapt.search import Study, search
+from rapt.subboundaries import SubBoundaryTree, subboundary_tree
 from rapt.space import Categorical, Continuous, Integer, Permutation, StateSpace
 from rapt.samplers import METHODS, make_sampler
 
 __all__ = [
     "search", "Study", "StateSpace", "Continuous", "Integer", "Categorical", "Permutation",
-    "METHODS", "make_sampler",
+    "METHODS", "make_sampler", "performance_modes", "boundary_pairs", "BoundaryPairs", "ScoreTree",
+    "subboundary_tree", "SubBoundaryTree",
 ]
 
 __version__ = "0.1.0"

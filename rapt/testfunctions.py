@@ -557,3 +557,79 @@ REFERENCE_SETTINGS: dict[str, tuple[int, float]] = {
 def search_output_types(system: SyntheticSystem) -> tuple[str, ...]:
     """The ``output_types`` to pass to :func:`rapt.search` for ``system``."""
     return tuple("continuous" if t == "continuous" else "categorical" for t in system.output_types)
+
+
+class Hierarchical2D(SyntheticSystem):
+    """Section 4.3.2's hierarchical system: 2 inputs, 12 binary score elements in 3 levels.
+
+    Leaves (columns 6-11) are regions of the square (half-planes and discs); level 2
+    (columns 2-5) combines them (``s1 = l1 ∧ l2``, ``s2 = l3``, ``s3 = l4 ∧ l5``,
+    ``s4 = l6``); the root is mission ``s1 ∧ s2`` (column 0) and safety ``s3 ∧ s4``
+    (column 1), giving the four modes TF, SS, MS, TS.  :attr:`score_tree` declares the
+    nesting.  Boundaries of composite elements have no simple closed form, so distances
+    are measured to boundary points extracted from a fine grid (resolution ``1/grid``).
+    """
+
+    SCORE_TREE = {
+        "name": "root", "indices": [0, 1], "children": [
+            {"name": "s1", "indices": [2], "children": [{"name": "l1", "indices": [6]}, {"name": "l2", "indices": [7]}]},
+            {"name": "s2", "indices": [3], "children": [{"name": "l3", "indices": [8]}]},
+            {"name": "s3", "indices": [4], "children": [{"name": "l4", "indices": [9]}, {"name": "l5", "indices": [10]}]},
+            {"name": "s4", "indices": [5], "children": [{"name": "l6", "indices": [11]}]},
+        ],
+    }
+
+    def __init__(self, grid: int = 1024):
+        self.dim = 2
+        self.n_outputs = 12
+        self.output_types = ("categorical",) * 12
+        self.n_classes = (2,) * 12
+        self.active_dims = ((0, 1),) * 12
+        self.name = "hierarchical2d"
+        self.grid = int(grid)
+        self._trees = None
+
+    @property
+    def score_tree(self) -> dict:
+        return self.SCORE_TREE
+
+    def _evaluate(self, X):
+        x, y = X[:, 0], X[:, 1]
+        l1 = x + y < 1.3
+        l2 = np.hypot(x - 0.75, y - 0.55) > 0.15
+        l3 = y < 0.8
+        l4 = np.hypot(x - 0.15, y - 0.45) > 0.2
+        l5 = x > 0.1
+        l6 = x - y < 0.55
+        s1, s2, s3, s4 = l1 & l2, l3, l4 & l5, l6
+        cols = [s1 & s2, s3 & s4, s1, s2, s3, s4, l1, l2, l3, l4, l5, l6]
+        return np.column_stack(cols).astype(float)
+
+    def _boundary_trees(self):
+        if self._trees is None:
+            from scipy.spatial import cKDTree
+
+            g = self.grid
+            c = (np.arange(g) + 0.5) / g
+            xx, yy = np.meshgrid(c, c, indexing="ij")
+            V = self._evaluate(np.column_stack([xx.ravel(), yy.ravel()])).reshape(g, g, 12)
+            trees = []
+            for k in range(12):
+                v = V[:, :, k]
+                pts = []
+                dx = np.argwhere(v[1:, :] != v[:-1, :])
+                pts.append(np.column_stack([(dx[:, 0] + 1.0) / g, (dx[:, 1] + 0.5) / g]))
+                dy = np.argwhere(v[:, 1:] != v[:, :-1])
+                pts.append(np.column_stack([(dy[:, 0] + 0.5) / g, (dy[:, 1] + 1.0) / g]))
+                P = np.vstack(pts)
+                trees.append(cKDTree(P) if len(P) else None)
+            self._trees = trees
+        return self._trees
+
+    def _distance(self, X):
+        out = np.full((X.shape[0], 12), np.inf)
+        for k, tree in enumerate(self._boundary_trees()):
+            if tree is not None:
+                out[:, k] = tree.query(X, k=1)[0]
+        return out
+

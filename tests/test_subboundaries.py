@@ -1,0 +1,84 @@
+import numpy as np
+import pytest
+
+import rapt
+from rapt.metrics import subboundary_recovery
+from rapt.scoretree import ScoreTree
+from rapt.testfunctions import Hierarchical2D
+
+
+def test_score_tree_from_nested_mappings():
+    tree = ScoreTree.from_mapping(Hierarchical2D.SCORE_TREE)
+    assert tree.levels() == [(0, 1), (2, 3, 4, 5), (6, 7, 8, 9, 10, 11)]
+    assert [leaf.name for leaf in tree.leaves()] == ["l1", "l2", "l3", "l4", "l5", "l6"]
+    assert ScoreTree.from_mapping(tree.to_mapping()) == tree
+    assert tree.depth == 3
+
+
+@pytest.mark.parametrize("spec, match", [
+    ({"indices": [0], "children": [{"indices": [7]}]}, "names score column 7, but Y has 3 columns"),
+    ({"indices": [0], "children": [{"indices": [0]}]}, "column 0 appears in two nodes"),
+    ({"indices": []}, "has no score indices"),
+    ({"indices": [0], "kids": []}, r"unknown field\(s\) \['kids'\]"),
+    ({"children": []}, "missing 'indices'"),
+    ({"indices": [0], "children": [{"indices": ["a"]}]}, r"tree.children\[0\].indices: 'a' is not a column number"),
+])
+def test_bad_trees_name_the_field(spec, match):
+    with pytest.raises(ValueError, match=match):
+        rapt.subboundary_tree(np.zeros((4, 2)), np.zeros((4, 3)), spec)
+
+
+def test_hand_built_tree_and_reconstruction():
+    # 1-D states; root score r splits at x=0.5; its child c splits the r=0 half at x=0.25.
+    X = np.array([[0.0], [0.1], [0.2], [0.3], [0.4], [0.6], [0.7], [0.9]])
+    r = (X[:, 0] > 0.5).astype(float)
+    c = (X[:, 0] > 0.25).astype(float)
+    Y = np.column_stack([r, c])
+    T = rapt.subboundary_tree(X, Y, {"indices": [0], "children": [{"indices": [1]}]})
+    i, j, d, lv = T.pairs(0)
+    assert list(zip(i, j)) == [(4, 5)] and d == pytest.approx([0.2])
+    i, j, d, lv = T.pairs(1)
+    assert list(zip(i, j)) == [(2, 3)] and lv.tolist() == [1]  # only inside the r=0 parent
+    assert T.n_clusters(0) == 2 and T.n_clusters(1) == 3
+    rec = T.reconstruct(1, 1.0)  # where c = 1: x in {0.3, 0.4} (r=0) and {0.6, 0.7, 0.9} (r=1)
+    assert sorted(rec.members.tolist()) == [3, 4, 5, 6, 7]
+    assert sorted(zip(rec.i.tolist(), rec.j.tolist())) == [(3, 2)]
+    rec0 = T.reconstruct(0, 0.0)
+    assert rec0.members.tolist() == [0, 1, 2, 3, 4] and list(zip(rec0.i, rec0.j)) == [(4, 5)]
+    with pytest.raises(ValueError, match="column 5 is not in the score tree"):
+        T.reconstruct(5, 1.0)
+
+
+def test_single_mode_gives_no_boundaries_but_a_tree():
+    X = np.random.default_rng(0).random((30, 2))
+    Y = np.column_stack([np.ones(30), (X[:, 0] > 0.5)])
+    T = rapt.subboundary_tree(X, Y, {"indices": [0], "children": [{"indices": [1]}]})
+    assert T.pairs(0)[0].size == 0 and T.pairs(1)[0].size > 0
+
+
+def test_hierarchical_system_sub_boundaries_match_ground_truth():
+    h = Hierarchical2D()
+    study = rapt.search(h, [(0, 1)] * 2, 4000, method="s-ndv", seed=0, output_types=("categorical",) * 12)
+    T = rapt.subboundary_tree(study.X, study.Y, h.score_tree)
+    assert [T.n_clusters(lv) for lv in range(3)] == [4, 8, 12]
+    report = subboundary_recovery(h, T, grid=256, tol=0.05)
+    for row in report:
+        assert row["recovered_fraction"] == 1.0, row
+        assert row["on_boundary_fraction"] > 0.85, row
+    # Reconstructing a leaf gives clusters where the leaf has that value and pairs on its outline.
+    rec = T.reconstruct(9, 0.0)  # l4 = 0: inside the disc at (0.15, 0.45)
+    assert np.all(study.Y[rec.members, 9] == 0.0)
+    assert np.all(study.Y[rec.j, 9] == 1.0)
+    near = h.boundary_distance(study.X)[:, 9]
+    assert np.mean(near[rec.i] < 0.03) > 0.9
+
+
+def test_subboundary_errors():
+    with pytest.raises(ValueError, match="Y: expected 3 score rows"):
+        rapt.subboundary_tree(np.zeros((3, 2)), np.zeros((2, 1)), {"indices": [0]})
+    with pytest.raises(ValueError, match="row 0 has NaN"):
+        rapt.subboundary_tree(np.zeros((1, 2)), np.array([[np.nan]]), {"indices": [0]})
+    with pytest.raises(ValueError, match="X: expected a non-empty"):
+        rapt.subboundary_tree(np.zeros((0, 2)), np.zeros((0, 1)), {"indices": [0]})
+    with pytest.raises(ValueError, match="tree: expected a mapping"):
+        rapt.subboundary_tree(np.zeros((2, 2)), np.zeros((2, 1)), [0])
