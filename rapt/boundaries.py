@@ -21,7 +21,7 @@ from scipy.spatial import cKDTree
 
 from rapt.modes import performance_modes
 
-__all__ = ["BoundaryPairs", "boundary_pairs", "mutual_pairs"]
+__all__ = ["BoundaryPairs", "boundary_pairs", "mutual_pairs", "pair_differences"]
 
 
 @dataclass
@@ -183,3 +183,19 @@ def _dbscan_within_modes(X: np.ndarray, labels: np.ndarray, eps: float, min_samp
             continue  # every member is isolated: all noise
         out[idx] = DBSCAN(eps=eps, min_samples=min_samples).fit(X[idx]).labels_
     return out
+
+
+def pair_differences(X: np.ndarray, pairs: BoundaryPairs, bounds: np.ndarray | None = None) -> np.ndarray:
+    """What changed across each pair: ``(X[j] - X[i])`` per input, normalised by the input's range.
+
+    ``X`` in the unit cube needs no ``bounds``; for physical units pass the (d, 2) bounds.
+    Rows line up with the pairs, ready for a parallel-coordinates view.
+    """
+    X = np.asarray(X, dtype=float)
+    diff = X[pairs.j] - X[pairs.i]
+    if bounds is not None:
+        b = np.asarray(bounds, dtype=float)
+        if b.shape != (X.shape[1], 2):
+            raise ValueError(f"bounds: expected shape ({X.shape[1]}, 2), got {b.shape}")
+        diff = diff / (b[:, 1] - b[:, 0])
+    return diff

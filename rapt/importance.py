@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 from sklearn.tree import DecisionTreeClassifier, DecisionTreeRegressor
 
-__all__ = ["tree_importance", "importance_weights"]
+__all__ = ["tree_importance", "importance_weights", "output_importance", "boundary_type_importance"]
 
 
 def tree_importance(X: np.ndarray, y: np.ndarray, kind: str, *, max_samples: int = 20000,
@@ -54,3 +54,39 @@ def importance_weights(importance: np.ndarray) -> np.ndarray:
     if top <= 0:
         return np.ones_like(importance)
     return importance / top
+
+
+def output_importance(X: np.ndarray, Y: np.ndarray, output_types, *, max_samples: int = 20000,
+                      random_state: int = 0) -> np.ndarray:
+    """Tree importance of every input for every score column: an (m, d) array, rows sum to 1 or 0."""
+    X = np.asarray(X, dtype=float)
+    Y = np.asarray(Y, dtype=float)
+    if Y.ndim == 1:
+        Y = Y[:, None]
+    types = tuple(output_types)
+    if len(types) != Y.shape[1]:
+        raise ValueError(f"output_types: got {len(types)} types for {Y.shape[1]} score columns")
+    return np.vstack([
+        tree_importance(X, Y[:, k], "continuous" if t == "continuous" else "categorical",
+                        max_samples=max_samples, random_state=random_state + k)
+        for k, t in enumerate(types)
+    ])
+
+
+def boundary_type_importance(X: np.ndarray, labels: np.ndarray, types, *, max_samples: int = 20000,
+                             random_state: int = 0) -> dict[tuple[int, int], np.ndarray]:
+    """Per boundary type ``(a, b)``: which inputs separate mode ``a`` from mode ``b``.
+
+    A classification tree is fitted on the samples of the two modes only, so the answer is
+    specific to that transition (e.g. start time for a fuel boundary, an obstacle's
+    position for a collision boundary).
+    """
+    X = np.asarray(X, dtype=float)
+    labels = np.asarray(labels)
+    out = {}
+    for n, t in enumerate(types):
+        a, b = int(t[0]), int(t[1])
+        rows = np.flatnonzero((labels == a) | (labels == b))
+        out[(a, b)] = tree_importance(X[rows], labels[rows], "categorical", max_samples=max_samples,
+                                      random_state=random_state + n)
+    return out

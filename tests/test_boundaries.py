@@ -100,3 +100,26 @@ def test_noise_filter_flags_isolated_endpoints():
 def test_boundary_pair_errors(kwargs, match):
     with pytest.raises(ValueError, match=match):
         boundary_pairs(**kwargs)
+
+
+def test_pair_differences_and_type_importance():
+    from rapt.boundaries import pair_differences
+    from rapt.importance import boundary_type_importance, output_importance
+
+    rng = np.random.default_rng(3)
+    X = rng.random((3000, 3))
+    # mode 0/1 split on x0, mode 1/2 split on x2
+    labels = np.where(X[:, 0] < 0.5, 0, np.where(X[:, 2] < 0.5, 1, 2))
+    bp = boundary_pairs(X, labels=labels, quantile=0.5)
+    diff = pair_differences(X, bp)
+    assert diff.shape == (len(bp), 3)
+    assert np.allclose(np.abs(diff).sum(axis=1) > 0, True)
+    sel01 = (bp.mode_i == 0) & (bp.mode_j == 1)
+    assert np.median(np.abs(diff[sel01, 0])) > np.median(np.abs(diff[sel01, 1]))
+    physical = pair_differences(X * [10, 1, 1], bp, bounds=[(0, 10), (0, 1), (0, 1)])
+    assert np.allclose(physical, diff)
+    vi = boundary_type_importance(X, labels, [(0, 1), (1, 2)])
+    assert vi[(0, 1)].argmax() == 0 and vi[(1, 2)].argmax() == 2
+    Y = np.column_stack([X[:, 1] > 0.3, X[:, 2]])
+    oi = output_importance(X, Y, ["binary", "continuous"])
+    assert oi.shape == (2, 3) and oi[0].argmax() == 1 and oi[1].argmax() == 2
