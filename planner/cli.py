@@ -95,9 +95,9 @@ def search(
     out.print(table)
     study = rows[0][3]
     if study.failures:
-        out.print(f"{len(study.failures)} rows failed; first reason: {study.failures[0]}")
+        out.print(f"{len(study.failures)} rows failed; first reason: {study.failures[0]}", soft_wrap=True)
     if store is not None:
-        out.print(f"study stored in {store} ({study.n_evaluated} rows)")
+        out.print(f"study stored in {store} ({study.n_evaluated} rows)", soft_wrap=True, highlight=False)
 
 
 def run() -> None:  # pragma: no cover - console entry for `python -m planner.cli`

@@ -20,6 +20,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from rapt.modes import performance_modes
+from rapt.parallel import query_workers
 
 __all__ = ["BoundaryPairs", "boundary_pairs", "mutual_pairs", "pair_differences"]
 
@@ -79,8 +80,8 @@ def mutual_pairs(X: np.ndarray, labels: np.ndarray, groups: Sequence[int] | None
     for ai, a in enumerate(keys):
         for b in keys[ai + 1:]:
             ia, ib = members[a], members[b]
-            d_ab, nn_ab = trees[b].query(X[ia], k=1, workers=-1)  # for each a: nearest b (local index)
-            _, nn_ba = trees[a].query(X[ib], k=1, workers=-1)  # for each b: nearest a (local index)
+            d_ab, nn_ab = trees[b].query(X[ia], k=1, workers=query_workers(ia.size))  # for each a: nearest b (local index)
+            _, nn_ba = trees[a].query(X[ib], k=1, workers=query_workers(ib.size))  # for each b: nearest a (local index)
             mutual = nn_ba[nn_ab] == np.arange(ia.size)
             out_i.append(ia[mutual])
             out_j.append(ib[nn_ab[mutual]])

@@ -14,6 +14,7 @@ from typing import Protocol, TYPE_CHECKING
 
 import numpy as np
 from scipy.spatial import cKDTree
+from rapt.parallel import query_workers
 
 if TYPE_CHECKING:  # pragma: no cover
     from rapt.samplers.base import Sampler
@@ -67,7 +68,7 @@ def select_batch(candidates: np.ndarray, information: np.ndarray, n: int, radius
         live = block[~suppressed[block]]
         if live.size == 0:
             continue
-        balls = tree.query_ball_point(pts[live], r=radius[live], workers=-1)
+        balls = tree.query_ball_point(pts[live], r=radius[live], workers=query_workers(live.size))
         for i, ball in zip(live, balls):
             if suppressed[i]:
                 continue

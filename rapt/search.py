@@ -173,6 +173,8 @@ class _Runner:
         self.reasons: list[str] = []
         self.asked = 0
         self.batches = 0
+        # Rows recorded by this process for the batch in progress (same shape as StudyStore.samples).
+        self._fresh: list[tuple] = []
 
     # -- opening and replay ------------------------------------------------------------
     def open(self, config: dict[str, Any], output_types: tuple[str, ...] | None) -> None:
@@ -275,7 +277,11 @@ class _Runner:
                 for fut in cf.as_completed(futures):
                     rows = futures[fut]
                     self._record(b, rows, asked[rows], *self._unpack(fut, len(rows)))
-        self._accept(b, self.db.samples(b))
+        if done:  # part of this batch was evaluated by an earlier run: read it all back
+            self._accept(b, self.db.samples(b))
+        else:
+            self._accept(b, self._fresh)
+        self._fresh = []
 
     def _to_fn(self, U: np.ndarray) -> np.ndarray:
         return self.space.from_unit_array(U) if self.physical else U
@@ -297,6 +303,7 @@ class _Runner:
         n = rows.size
         if error is not None:
             self.db.add_samples(b, rows, U_asked, None, ["failed"] * n, [error] * n)
+            self._fresh.extend((b, int(r), U_asked[k], None, "failed", error) for k, r in enumerate(rows))
             return
         Y = np.asarray(Y, dtype=float)
         if Y.ndim == 1 and Y.shape[0] == n:
@@ -322,6 +329,8 @@ class _Runner:
         reasons = [None if f else "score row contains NaN or inf" for f in finite]
         Y_clean = np.where(finite[:, None], Y, 0.0)
         self.db.add_samples(b, rows, U, Y_clean, status, reasons)
+        self._fresh.extend((b, int(r), U[k], Y_clean[k] if finite[k] else None, str(status[k]), reasons[k])
+                           for k, r in enumerate(rows))
 
     def study(self, method: str, seed: int, store: str | None) -> Study:
         m = self.n_outputs or 0

@@ -549,7 +549,7 @@ REFERENCE_SETTINGS: dict[str, tuple[int, float]] = {
     "custom2d": (1000, 0.01),
     "plates2d": (1000, 0.01),
     "plates3d": (3000, 0.02),
-    "plates3d-screened": (10000, 0.01),
+    "plates3d-screened": (10000, 0.02),
     "composite8d": (10000, 0.003),
 }
 

@@ -206,7 +206,9 @@ def test_partially_evaluated_batch_is_completed_not_rerun(tmp_path):
                     store=db, chunk_size=25, executor=_Serial())
     with StudyStore(db) as s:
         stored = s.count()
-    assert stored in (325, 350, 375)  # the other chunks of batch 4 were kept
+    # Batches 1-3 are on disk, plus whichever chunks of batch 4 were collected before the
+    # interrupt surfaced (futures complete in no fixed order).
+    assert stored in (300, 325, 350, 375)
     calls = []
 
     def counted(X):
