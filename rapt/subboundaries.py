@@ -4,52 +4,30 @@ Clustering on all leaf scores at once is slow (the dissertation's took 2 hours a
 runs) and mixes unrelated effects.  Instead the samples are split by the root scores
 (performance modes), each cluster is split again by the scores of the next level of the
 score tree, and so on down; boundary pairs are found between the sub-clusters of each
-parent only, so every step works on ever smaller sets.  Any score element's clusters and
-boundary can then be reconstructed from the tree without clustering again.
+parent only.  Any score element's clusters and boundary can then be reconstructed from
+the tree without clustering again.
+
+Implementation: a level's sub-clusters are the distinct (parent cluster, level scores)
+combinations — one vectorised ``unique`` per level for discrete scores, mean shift per
+parent for continuous ones.  Pairs come from one k-nearest-neighbour graph of the
+samples, built once and filtered per level (:func:`rapt.boundaries.graph_mutual_pairs`),
+so the cost does not grow with the number of sub-clusters, which runs into thousands for
+a 66-leaf tree.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from rapt.boundaries import mutual_pairs
+from rapt.boundaries import graph_mutual_pairs, knn_graph
 from rapt.modes import performance_modes
 from rapt.scores import check_output_types, infer_output_types
 from rapt.scoretree import ScoreTree
 
-__all__ = ["SubBoundaryNode", "SubBoundaryTree", "Reconstruction", "subboundary_tree"]
-
-
-@dataclass
-class SubBoundaryNode:
-    """One parent cluster split by the scores ``K`` of its level.
-
-    ``members`` are sample indices; ``labels[n]`` is the sub-cluster of ``members[n]``;
-    ``values[c]`` the representative (mean) scores ``K`` of sub-cluster ``c``.  Pairs join
-    samples of different sub-clusters (global indices ``i``, ``j``).
-    """
-
-    level: int
-    K: tuple[int, ...]
-    members: np.ndarray
-    labels: np.ndarray
-    values: np.ndarray
-    i: np.ndarray
-    j: np.ndarray
-    distance: np.ndarray
-    children: list["SubBoundaryNode"] = field(default_factory=list)
-
-    @property
-    def n_clusters(self) -> int:
-        return int(self.values.shape[0])
-
-    def walk(self):
-        yield self
-        for c in self.children:
-            yield from c.walk()
+__all__ = ["SubBoundaryTree", "Reconstruction", "subboundary_tree"]
 
 
 @dataclass
@@ -59,7 +37,7 @@ class Reconstruction:
     ``clusters`` lists the sample-index arrays of the sub-clusters whose value of the
     element is the requested one; ``members`` is their union.  Boundary pairs
     (``i`` inside, ``j`` outside) are the tree's pairs, at the element's level or above,
-    that cross from those clusters to samples where the element differs.
+    that cross from those clusters to samples outside them.
     """
 
     score_index: int
@@ -76,79 +54,76 @@ class Reconstruction:
 
 
 class SubBoundaryTree:
-    """The result of :func:`subboundary_tree`; ``root`` is the mode split."""
+    """The result of :func:`subboundary_tree`.
 
-    def __init__(self, root: SubBoundaryNode, tree: ScoreTree, X: np.ndarray, Y: np.ndarray,
-                 output_types: tuple[str, ...], assignment: np.ndarray):
-        self.root = root
+    ``assignment[l, n]`` is sample n's sub-cluster at level l (ids unique across parents);
+    ``values[l][c]`` the mean scores of level l's columns in cluster c; ``parent[l][c]``
+    the level l-1 cluster that c splits (-1 at the root).
+    """
+
+    def __init__(self, tree: ScoreTree, X: np.ndarray, Y: np.ndarray, output_types: tuple[str, ...],
+                 assignment: np.ndarray, values: list[np.ndarray], parent: list[np.ndarray],
+                 pairs: list[tuple[np.ndarray, np.ndarray, np.ndarray]], k: int):
         self.score_tree = tree
+        self.levels = tree.levels()
         self.X = X
         self.Y = Y
         self.output_types = output_types
-        #: ``assignment[l, n]``: global sub-cluster id of sample n at level l (unique across parents).
         self.assignment = assignment
-
-    @property
-    def levels(self) -> list[tuple[int, ...]]:
-        return self.score_tree.levels()
-
-    def nodes(self) -> list[SubBoundaryNode]:
-        return list(self.root.walk())
+        self.values = values
+        self.parent = parent
+        self._pairs = pairs
+        self.k = k
 
     def n_clusters(self, level: int) -> int:
-        return int(np.unique(self.assignment[level]).size)
+        return int(self.values[level].shape[0])
+
+    def children(self, level: int, cluster: int) -> np.ndarray:
+        """Sub-clusters at ``level + 1`` of cluster ``cluster`` at ``level``."""
+        return np.flatnonzero(self.parent[level + 1] == cluster)
+
+    def members(self, level: int, cluster: int) -> np.ndarray:
+        return np.flatnonzero(self.assignment[level] == cluster)
 
     def pairs(self, level: int | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-        """All sub-boundary pairs (i, j, distance, level), optionally of one level."""
-        parts = [(n.i, n.j, n.distance, np.full(n.i.size, n.level)) for n in self.nodes()
-                 if level is None or n.level == level]
-        if not parts:
-            e = np.empty(0, dtype=np.int64)
-            return e, e, np.empty(0), e
-        return tuple(np.concatenate(p) for p in zip(*parts))  # type: ignore[return-value]
+        """Sub-boundary pairs (i, j, distance, level) sorted by distance, optionally of one level."""
+        chosen = range(len(self.levels)) if level is None else [level]
+        parts = [(*self._pairs[lv], np.full(self._pairs[lv][0].size, lv, dtype=np.int64)) for lv in chosen]
+        i, j, d, lv = (np.concatenate(p) for p in zip(*parts))
+        order = np.lexsort((j, i, d))
+        return i[order], j[order], d[order], lv[order]
 
     def reconstruct(self, score_index: int, value: float) -> Reconstruction:
         """Clusters and boundary pairs of score element ``score_index`` at ``value``."""
-        levels = self.levels
-        owning = [lv for lv, cols in enumerate(levels) if score_index in cols]
+        owning = [lv for lv, cols in enumerate(self.levels) if score_index in cols]
         if not owning:
-            raise ValueError(
-                f"score_index: column {score_index} is not in the score tree (columns: {sorted(c for l in levels for c in l)})"
-            )
+            cols = sorted(c for level in self.levels for c in level)
+            raise ValueError(f"score_index: column {score_index} is not in the score tree (columns: {cols})")
         lv = owning[0]
-        col = levels[lv].index(score_index)
-        clusters: list[np.ndarray] = []
-        for node in self.nodes():
-            if node.level != lv or node.n_clusters == 0:
-                continue
-            vals = node.values[:, col]
-            if self._is_discrete(score_index):
-                chosen = np.flatnonzero(vals == value)  # a discrete cluster has one exact value
-            else:
-                gap = np.abs(vals - value)  # Algorithm 4: the cluster nearest in score
-                chosen = np.flatnonzero(gap == gap.min())
-            for c in chosen:
-                clusters.append(node.members[node.labels == c])
-        members = np.sort(np.concatenate(clusters)) if clusters else np.empty(0, dtype=np.int64)
-        inside = np.zeros(self.X.shape[0], dtype=bool)
-        inside[members] = True
-        # Samples whose own cluster at this level does not have the value are "outside";
-        # pairs from this level and every level above can cross the element's boundary.
-        i, j, d, l = self.pairs()
-        sel = (l <= lv) & (inside[i] != inside[j])
-        i, j, d, l = i[sel], j[sel], d[sel], l[sel]
+        vals = self.values[lv][:, self.levels[lv].index(score_index)]
+        if self.output_types[score_index] != "continuous":
+            chosen = np.flatnonzero(vals == value)  # a discrete cluster has one exact value
+        else:  # Algorithm 4: within each parent, the cluster nearest in score
+            gap = np.abs(vals - value)
+            par = self.parent[lv]
+            best = np.full(par.max() + 2, np.inf)
+            np.minimum.at(best, par + 1, gap)
+            chosen = np.flatnonzero(gap == best[par + 1])
+        inside = np.isin(self.assignment[lv], chosen)
+        clusters = [self.members(lv, c) for c in chosen]
+        members = np.flatnonzero(inside)
+        i, j, d, level = self.pairs()
+        sel = (level <= lv) & (inside[i] != inside[j])
+        i, j, d, level = i[sel], j[sel], d[sel], level[sel]
         swap = ~inside[i]
         i, j = np.where(swap, j, i), np.where(swap, i, j)
-        order = np.argsort(d, kind="stable")
-        return Reconstruction(score_index, float(value), clusters, members, i[order], j[order], d[order], l[order])
-
-    def _is_discrete(self, score_index: int) -> bool:
-        return self.output_types[score_index] != "continuous"
+        return Reconstruction(score_index, float(value), clusters, members, i, j, d, level)
 
 
 def subboundary_tree(X: np.ndarray, Y: np.ndarray, tree: ScoreTree | Mapping[str, Any], *,
                      output_types: Sequence[str] | None = None, bandwidth: float = 0.2,
-                     weights: np.ndarray | None = None) -> SubBoundaryTree:
+                     weights: np.ndarray | None = None, k: int = 12,
+                     exact_below: int = 2000) -> SubBoundaryTree:
     """Algorithm 3: split by the score tree level by level and pair sub-clusters within parents.
 
     Parameters
@@ -162,7 +137,11 @@ def subboundary_tree(X: np.ndarray, Y: np.ndarray, tree: ScoreTree | Mapping[str
         Per score column; inferred when omitted.  Continuous columns are clustered with
         mean shift (bandwidth ``λ_P`` on normalised scores) inside each parent cluster.
     weights:
-        Per-input scale for the nearest-neighbour searches (sensitivity scaling).
+        Per-input scale for the neighbour searches (sensitivity scaling, section 3.5.3).
+    k, exact_below:
+        Pairs are mutual nearest neighbours within each sample's ``k`` nearest samples;
+        below ``exact_below`` samples the graph is complete, which is exactly
+        Algorithm 3's two nearest-neighbour searches per pair of sub-clusters.
     """
     X = np.asarray(X, dtype=float)
     Y = np.asarray(Y, dtype=float)
@@ -175,42 +154,55 @@ def subboundary_tree(X: np.ndarray, Y: np.ndarray, tree: ScoreTree | Mapping[str
     if not np.all(np.isfinite(Y)):
         bad = int(np.flatnonzero(~np.all(np.isfinite(Y), axis=1))[0])
         raise ValueError(f"Y: scores must be finite; row {bad} has NaN or inf (drop failed runs first)")
-    try:
-        tree = ScoreTree.from_mapping(tree)
-    except TypeError:
-        raise ValueError("tree: expected a ScoreTree or a mapping with 'indices' and 'children'") from None
+    if not isinstance(k, (int, np.integer)) or k < 1:
+        raise ValueError(f"k: expected a positive number of neighbours, got {k!r}")
+    if not isinstance(tree, (ScoreTree, Mapping)):
+        raise ValueError("tree: expected a ScoreTree or a mapping with 'indices' and 'children'")
+    tree = ScoreTree.from_mapping(tree)
     tree.validate(Y.shape[1])
     types = infer_output_types(Y) if output_types is None else check_output_types(output_types, Y.shape[1])
     Xs = X if weights is None else X * _check_weights(weights, X.shape[1])
+    n = X.shape[0]
     levels = tree.levels()
-    assignment = np.zeros((len(levels), X.shape[0]), dtype=np.int64)
-    counter = [0]
 
-    def build(members: np.ndarray, level: int) -> SubBoundaryNode:
-        K = levels[level]
+    assignment = np.empty((len(levels), n), dtype=np.int64)
+    values: list[np.ndarray] = []
+    parents: list[np.ndarray] = []
+    previous = np.zeros(n, dtype=np.int64)
+    for lv, K in enumerate(levels):
         cols = list(K)
-        sub = performance_modes(Y[np.ix_(members, cols)], [types[c] for c in cols], bandwidth=bandwidth)
-        n_sub = int(sub.max()) + 1
-        values = np.vstack([Y[np.ix_(members[sub == c], cols)].mean(axis=0) for c in range(n_sub)])
-        assignment[level, members] = counter[0] + sub
-        counter[0] += n_sub
-        if n_sub > 1:
-            li, lj, d = mutual_pairs(Xs[members], sub)
-            gi, gj = members[li], members[lj]
-        else:
-            gi = gj = np.empty(0, dtype=np.int64)
-            d = np.empty(0)
-        order = np.lexsort((gj, gi, d))
-        node = SubBoundaryNode(level, tuple(K), members, sub, values, gi[order], gj[order], d[order])
-        if level + 1 < len(levels):
-            for c in range(n_sub):
-                child_members = members[sub == c]
-                if child_members.size >= 1:
-                    node.children.append(build(child_members, level + 1))
-        return node
+        sub = _split(previous, Y[:, cols], [types[c] for c in cols], bandwidth)
+        ids, inverse = np.unique(np.column_stack([previous, sub]), axis=0, return_inverse=True)
+        inverse = inverse.reshape(-1)
+        assignment[lv] = inverse
+        counts = np.bincount(inverse, minlength=ids.shape[0]).astype(float)
+        values.append(np.column_stack([np.bincount(inverse, weights=Y[:, c], minlength=ids.shape[0]) / counts
+                                       for c in cols]))
+        parents.append(ids[:, 0] if lv else np.full(ids.shape[0], -1, dtype=np.int64))
+        previous = inverse
 
-    root = build(np.arange(X.shape[0]), 0)
-    return SubBoundaryTree(root, tree, X, Y, tuple(types), assignment)
+    dist, idx = knn_graph(Xs, n - 1 if n <= exact_below else int(k))
+    pairs = []
+    for lv in range(len(levels)):
+        parent = assignment[lv - 1] if lv else None
+        pairs.append(graph_mutual_pairs(dist, idx, assignment[lv], parent))
+    return SubBoundaryTree(tree, X, Y, tuple(types), assignment, values, parents, pairs,
+                           n - 1 if n <= exact_below else int(k))
+
+
+def _split(parent: np.ndarray, Yk: np.ndarray, types: list[str], bandwidth: float) -> np.ndarray:
+    """Sub-cluster label of each sample within its parent, from this level's scores."""
+    discrete = [c for c, t in enumerate(types) if t != "continuous"]
+    continuous = [c for c, t in enumerate(types) if t == "continuous"]
+    parts = [Yk[:, discrete]] if discrete else []
+    if continuous:
+        lab = np.zeros(Yk.shape[0])
+        for p in np.unique(parent):
+            rows = np.flatnonzero(parent == p)
+            lab[rows] = performance_modes(Yk[np.ix_(rows, continuous)], ["continuous"] * len(continuous),
+                                          bandwidth=bandwidth)
+        parts.append(lab[:, None])
+    return np.unique(np.hstack(parts), axis=0, return_inverse=True)[1].reshape(-1)
 
 
 def _check_weights(weights: np.ndarray, d: int) -> np.ndarray:

@@ -633,3 +633,64 @@ class Hierarchical2D(SyntheticSystem):
                 out[:, k] = tree.query(X, k=1)[0]
         return out
 
+
+
+class HierarchicalND(SyntheticSystem):
+    """A mission-like score tree over many inputs: 66 leaves in 4 levels (benchmarks).
+
+    Each leaf is a pass/fail region in a 2-D slice of the inputs (fail inside a disc, like
+    an obstacle's keep-out): which inputs a leaf reads is drawn with a skewed preference,
+    so a few inputs matter to many scores (a UUV's start time) and most to few.  Level 3
+    ANDs groups of 3 leaves, level 2 ANDs groups of level-3 nodes, and the root holds
+    mission (AND of the first three level-2 nodes) and safety (the other three).
+    Columns: 0-1 root, 2-7 level 2, 8-29 level 3, 30-95 leaves.  Leaf boundaries are the
+    disc outlines (exact distance in their 2-D slice); composite nodes have no
+    closed-form distance and report NaN.
+    """
+
+    def __init__(self, dim: int = 18, seed: int = 2018):
+        rng = np.random.default_rng(seed)
+        self.dim = int(dim)
+        n_leaves, n_l3, n_l2 = 66, 22, 6
+        self.n_outputs = 2 + n_l2 + n_l3 + n_leaves
+        self.output_types = ("categorical",) * self.n_outputs
+        self.n_classes = (2,) * self.n_outputs
+        self.name = f"hierarchical{self.dim}d"
+        pref = 1.0 / np.arange(1, self.dim + 1)
+        pref /= pref.sum()
+        self.leaf_inputs = np.array([rng.choice(self.dim, size=2, replace=False, p=pref) for _ in range(n_leaves)])
+        self.leaf_centres = rng.uniform(0.25, 0.75, size=(n_leaves, 2))
+        self.leaf_radii = rng.uniform(0.05, 0.12, size=n_leaves)
+        self.l3_groups = [list(range(3 * g, 3 * g + 3)) for g in range(n_l3)]
+        sizes = [4, 4, 4, 4, 3, 3]
+        starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+        self.l2_groups = [list(range(s, s + n)) for s, n in zip(starts, sizes)]
+        leaf0, l3_0, l2_0 = 2 + n_l2 + n_l3, 2 + n_l2, 2
+        self.active_dims = tuple(
+            tuple(range(self.dim)) if k < leaf0 else tuple(int(i) for i in self.leaf_inputs[k - leaf0])
+            for k in range(self.n_outputs)
+        )
+        children_l3 = lambda g: [{"name": f"leaf{k}", "indices": [leaf0 + k]} for k in self.l3_groups[g]]
+        children_l2 = lambda h: [{"name": f"l3_{g}", "indices": [l3_0 + g], "children": children_l3(g)}
+                                 for g in self.l2_groups[h]]
+        self.score_tree = {
+            "name": "root", "indices": [0, 1],
+            "children": [{"name": f"l2_{h}", "indices": [l2_0 + h], "children": children_l2(h)} for h in range(n_l2)],
+        }
+
+    def _evaluate(self, X):
+        a, b = self.leaf_inputs[:, 0], self.leaf_inputs[:, 1]
+        dx = X[:, a] - self.leaf_centres[:, 0]
+        dy = X[:, b] - self.leaf_centres[:, 1]
+        leaves = (dx * dx + dy * dy) > self.leaf_radii ** 2  # pass outside the disc
+        l3 = np.column_stack([leaves[:, g].all(axis=1) for g in self.l3_groups])
+        l2 = np.column_stack([l3[:, g].all(axis=1) for g in self.l2_groups])
+        root = np.column_stack([l2[:, :3].all(axis=1), l2[:, 3:].all(axis=1)])
+        return np.hstack([root, l2, l3, leaves]).astype(float)
+
+    def _distance(self, X):
+        out = np.full((X.shape[0], self.n_outputs), np.nan)
+        a, b = self.leaf_inputs[:, 0], self.leaf_inputs[:, 1]
+        r = np.hypot(X[:, a] - self.leaf_centres[:, 0], X[:, b] - self.leaf_centres[:, 1])
+        out[:, -len(self.leaf_radii):] = np.abs(r - self.leaf_radii)
+        return out

@@ -80,5 +80,32 @@ def test_subboundary_errors():
         rapt.subboundary_tree(np.zeros((1, 2)), np.array([[np.nan]]), {"indices": [0]})
     with pytest.raises(ValueError, match="X: expected a non-empty"):
         rapt.subboundary_tree(np.zeros((0, 2)), np.zeros((0, 1)), {"indices": [0]})
-    with pytest.raises(ValueError, match="tree: expected a mapping"):
+    with pytest.raises(ValueError, match="tree: expected a ScoreTree or a mapping"):
         rapt.subboundary_tree(np.zeros((2, 2)), np.zeros((2, 1)), [0])
+
+
+def test_knn_graph_pairs_agree_with_exact_pairs_on_short_boundaries():
+    h = Hierarchical2D()
+    X = np.random.default_rng(5).random((3000, 2))
+    Y = h(X)
+    exact = rapt.subboundary_tree(X, Y, h.score_tree, exact_below=10**6)
+    graph = rapt.subboundary_tree(X, Y, h.score_tree, k=12, exact_below=0)
+    for lv in range(3):
+        ei, ej, ed, _ = exact.pairs(lv)
+        gi, gj, gd, _ = graph.pairs(lv)
+        g = set(zip(gi.tolist(), gj.tolist()))
+        short = ed <= np.quantile(ed, 0.5)
+        # every short exact pair is found by the graph, and the graph invents none
+        assert all((a, b) in g for a, b in zip(ei[short].tolist(), ej[short].tolist()))
+        assert g <= set(zip(ei.tolist(), ej.tolist()))
+    assert np.array_equal(exact.assignment, graph.assignment)
+
+
+def test_children_and_members_follow_the_hierarchy():
+    h = Hierarchical2D()
+    X = np.random.default_rng(1).random((2000, 2))
+    T = rapt.subboundary_tree(X, h(X), h.score_tree)
+    for c in range(T.n_clusters(0)):
+        kids = T.children(0, c)
+        assert kids.size >= 1
+        assert sorted(np.concatenate([T.members(1, kc) for kc in kids]).tolist()) == T.members(0, c).tolist()
