@@ -1,0 +1,105 @@
+"""Boundary identification: correctness, noise, and the cost of a sub-boundary tree.
+
+Three parts, each printed as a table:
+
+1. Correctness on the hierarchical system of section 4.3.2 (``Hierarchical2D``: 2
+   inputs, 12 score elements, 3 levels) after a 4000-sample S-NDV search: per level,
+   the share of true sub-boundary types recovered (a pair of that type shorter than
+   0.05) and the share of reported pairs lying on a true boundary.
+2. Noise (section 4.2): Plates2D with fuzzy boundaries (sigma) and with a global error
+   rate (gamma): how many boundary pairs lie on a true boundary, and how well the DBSCAN
+   noise flag separates false pairs from true ones (share of false pairs flagged, share
+   of true pairs kept).
+3. Cost: the full sub-boundary tree of ``HierarchicalND`` (18 inputs, 66 leaves, 4
+   levels) at growing sample counts, peak memory, and — at the smallest size — the
+   old all-leaves-at-once method (modes from all 66 leaves, pairs between every two
+   modes) for comparison.
+
+Run:  python benchmarks/boundaries.py [--sizes 10000 30000 100000] [--skip-noise]
+"""
+
+from __future__ import annotations
+
+import argparse
+import resource
+import time
+
+import numpy as np
+
+import rapt
+from rapt.boundaries import boundary_pairs, mutual_pairs
+from rapt.metrics import subboundary_recovery
+from rapt.modes import performance_modes
+from rapt.testfunctions import FuzzyBoundary, GlobalNoise, Hierarchical2D, HierarchicalND, Plates2D
+
+
+def correctness() -> None:
+    h = Hierarchical2D()
+    study = rapt.search(h, [(0, 1)] * 2, 4000, method="s-ndv", seed=0, output_types=("categorical",) * 12)
+    tree = rapt.subboundary_tree(study.X, study.Y, h.score_tree)
+    print("1. Hierarchical2D (12 elements, 3 levels), 4000 S-NDV samples")
+    print(f"{'level':>5} {'clusters':>8} {'true types':>10} {'recovered':>9} {'pairs':>6} {'on a true boundary':>19}")
+    for row in subboundary_recovery(h, tree, grid=512, tol=0.05):
+        print(f"{row['level']:>5} {tree.n_clusters(row['level']):>8} {row['true_types']:>10} "
+              f"{row['recovered_fraction']:>9.0%} {row['pairs']:>6} {row['on_boundary_fraction']:>19.1%}")
+
+
+def noise(tol: float = 0.03) -> None:
+    truth = Plates2D()
+    print(f"\n2. Noise on Plates2D, 3000 S-NDV samples; a pair is true when both ends lie within {tol} of a true "
+          "boundary (and, with global noise, both carry their noise-free label)")
+    print(f"{'system':>16} {'pairs':>6} {'true':>6} {'false flagged':>13} {'true kept':>9}")
+    for label, system in [("clean", Plates2D())] + [(f"fuzzy σ={s}", FuzzyBoundary(Plates2D(), s, seed=1)) for s in (0.01, 0.03)] \
+            + [(f"global γ={g}", GlobalNoise(Plates2D(), g, seed=1)) for g in (0.02, 0.05, 0.1)]:
+        study = rapt.search(system, [(0, 1)] * 2, 3000, method="s-ndv", seed=0, output_types=("categorical",))
+        bp = boundary_pairs(study.X, study.Y, cluster_eps=0.05, min_samples=5)
+        d = truth.boundary_distance(study.X)[:, 0]
+        near = (d[bp.i] < tol) & (d[bp.j] < tol)
+        if isinstance(system, GlobalNoise):  # a flipped label far from home is an outlier, not a boundary
+            clean = truth(study.X)[:, 0] == study.Y[:, 0]
+            true = near & clean[bp.i] & clean[bp.j]
+        else:  # a fuzzy boundary's mixed labels are the boundary region itself
+            true = near
+        flagged_false = bp.likely_noise[~true].mean() if np.any(~true) else float("nan")
+        kept_true = (~bp.likely_noise[true]).mean() if np.any(true) else float("nan")
+        print(f"{label:>16} {len(bp):>6} {true.mean():>6.1%} {flagged_false:>13.1%} {kept_true:>9.1%}")
+
+
+def cost(sizes: list[int]) -> None:
+    h = HierarchicalND()
+    rng = np.random.default_rng(0)
+    print(f"\n3. Sub-boundary tree of {h.name} ({h.dim} inputs, 66 leaves, 4 levels), uniform samples")
+    print(f"{'samples':>9} {'tree (s)':>9} {'clusters per level':>24} {'pairs':>8} {'peak RSS (GB)':>13}")
+    for n in sizes:
+        X = rng.random((n, h.dim))
+        Y = h(X)
+        t0 = time.perf_counter()
+        tree = rapt.subboundary_tree(X, Y, h.score_tree)
+        t = time.perf_counter() - t0
+        peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6
+        clusters = "/".join(str(tree.n_clusters(lv)) for lv in range(4))
+        print(f"{n:>9,} {t:>9.2f} {clusters:>24} {tree.pairs()[0].size:>8,} {peak:>13.2f}")
+    n = sizes[0]
+    X = rng.random((n, h.dim))
+    Y = h(X)
+    t0 = time.perf_counter()
+    labels = performance_modes(Y[:, 30:], ["binary"] * 66)
+    i, _, _ = mutual_pairs(X, labels)
+    t = time.perf_counter() - t0
+    print(f"All 66 leaves at once (Algorithm 2), {n:,} samples: {t:.2f} s "
+          f"({labels.max() + 1} modes, {i.size:,} pairs)")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", type=int, nargs="+", default=[10_000, 30_000, 100_000])
+    ap.add_argument("--skip-noise", action="store_true")
+    args = ap.parse_args()
+    correctness()
+    if not args.skip_noise:
+        noise()
+    cost(sorted(args.sizes))
+
+
+if __name__ == "__main__":
+    main()
