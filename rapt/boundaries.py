@@ -20,6 +20,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from rapt.modes import performance_modes
+from rapt.validation import check_scores, check_states
 from rapt.parallel import query_workers
 
 __all__ = ["BoundaryPairs", "boundary_pairs", "mutual_pairs", "knn_graph", "graph_mutual_pairs", "pair_differences"]
@@ -171,20 +172,11 @@ def boundary_pairs(X: np.ndarray, Y: np.ndarray | None = None, *, labels: np.nda
         DBSCAN ``ε_C`` and ``n_min`` inside each mode; when given, pairs touching DBSCAN
         noise are marked ``likely_noise``.
     """
-    X = np.asarray(X, dtype=float)
-    if X.ndim != 2 or X.shape[0] == 0:
-        raise ValueError(f"X: expected a non-empty (N, d) array of states, got shape {X.shape}")
-    if not np.all(np.isfinite(X)):
-        raise ValueError("X: states must be finite")
+    X = check_states(X)
     if (Y is None) == (labels is None):
         raise ValueError("Y, labels: give exactly one of scores Y or mode labels")
     if labels is None:
-        Y = np.asarray(Y, dtype=float)
-        if Y.ndim == 1:
-            Y = Y[:, None]
-        if Y.shape[0] != X.shape[0]:
-            raise ValueError(f"Y: expected {X.shape[0]} score rows (one per state), got {Y.shape[0]}")
-        labels = performance_modes(Y, output_types, bandwidth=bandwidth)
+        labels = performance_modes(check_scores(Y, X.shape[0]), output_types, bandwidth=bandwidth)
     else:
         labels = np.asarray(labels).reshape(-1)
         if labels.shape[0] != X.shape[0]:

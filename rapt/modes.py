@@ -15,6 +15,7 @@ from typing import Sequence
 import numpy as np
 
 from rapt.scores import check_output_types, infer_output_types
+from rapt.validation import check_scores
 
 __all__ = ["performance_modes"]
 
@@ -37,18 +38,7 @@ def performance_modes(Y: np.ndarray, output_types: Sequence[str] | None = None, 
     Modes are numbered in the lexicographic order of their defining labels, so the same
     scores always give the same numbering.
     """
-    Y = np.asarray(Y, dtype=float)
-    if Y.ndim == 1:
-        Y = Y[:, None]
-    if Y.ndim != 2:
-        raise ValueError(f"Y: expected an (N, m) array of scores, got shape {Y.shape}")
-    if Y.shape[0] == 0:
-        raise ValueError("Y: no samples; performance modes need at least one scored sample")
-    if Y.shape[1] == 0:
-        raise ValueError("Y: no score columns")
-    if not np.all(np.isfinite(Y)):
-        bad = int(np.flatnonzero(~np.all(np.isfinite(Y), axis=1))[0])
-        raise ValueError(f"Y: scores must be finite; row {bad} has NaN or inf (drop failed runs first)")
+    Y = check_scores(Y)
     if not np.isfinite(bandwidth) or bandwidth <= 0:
         raise ValueError(f"bandwidth: expected a number > 0, got {bandwidth!r}")
     types = infer_output_types(Y) if output_types is None else check_output_types(output_types, Y.shape[1])

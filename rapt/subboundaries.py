@@ -26,6 +26,7 @@ from rapt.boundaries import graph_mutual_pairs, knn_graph
 from rapt.modes import performance_modes
 from rapt.scores import check_output_types, infer_output_types
 from rapt.scoretree import ScoreTree
+from rapt.validation import check_scores, check_states
 
 __all__ = ["SubBoundaryTree", "Reconstruction", "subboundary_tree"]
 
@@ -143,17 +144,8 @@ def subboundary_tree(X: np.ndarray, Y: np.ndarray, tree: ScoreTree | Mapping[str
         below ``exact_below`` samples the graph is complete, which is exactly
         Algorithm 3's two nearest-neighbour searches per pair of sub-clusters.
     """
-    X = np.asarray(X, dtype=float)
-    Y = np.asarray(Y, dtype=float)
-    if Y.ndim == 1:
-        Y = Y[:, None]
-    if X.ndim != 2 or X.shape[0] == 0:
-        raise ValueError(f"X: expected a non-empty (N, d) array of states, got shape {X.shape}")
-    if Y.ndim != 2 or Y.shape[0] != X.shape[0]:
-        raise ValueError(f"Y: expected {X.shape[0]} score rows (one per state), got shape {Y.shape}")
-    if not np.all(np.isfinite(Y)):
-        bad = int(np.flatnonzero(~np.all(np.isfinite(Y), axis=1))[0])
-        raise ValueError(f"Y: scores must be finite; row {bad} has NaN or inf (drop failed runs first)")
+    X = check_states(X)
+    Y = check_scores(Y, X.shape[0])
     if not isinstance(k, (int, np.integer)) or k < 1:
         raise ValueError(f"k: expected a positive number of neighbours, got {k!r}")
     if not isinstance(tree, (ScoreTree, Mapping)):
