@@ -100,9 +100,5 @@ def search(
         out.print(f"study stored in {store} ({study.n_evaluated} rows)", soft_wrap=True, highlight=False)
 
 
-def run() -> None:  # pragma: no cover - console entry for `python -m planner.cli`
-    app()
-
-
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(app())

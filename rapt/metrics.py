@@ -305,7 +305,8 @@ def subboundary_recovery(system, subtree, *, grid: int = 512, tol: float = 0.05,
             if where.size == 0:
                 continue
             ka, kb = a[where[:, 0], where[:, 1]], b[where[:, 0], where[:, 1]]
-            mid = (where + 0.5 + (0.5 if axis == 0 else 0.0) * np.array([1, 0]) + (0.5 if axis == 1 else 0.0) * np.array([0, 1])) / g
+            # midpoint of the edge between the two cells, in unit coordinates
+            mid = (where + (np.array([1.0, 0.5]) if axis == 0 else np.array([0.5, 1.0]))) / g
             lo, hi = np.minimum(ka, kb), np.maximum(ka, kb)
             for t in np.unique(np.column_stack([lo, hi]), axis=0):
                 sel = (lo == t[0]) & (hi == t[1])

@@ -175,6 +175,8 @@ class _Runner:
         self.batches = 0
         # Rows recorded by this process for the batch in progress (same shape as StudyStore.samples).
         self._fresh: list[tuple] = []
+        # (batch, asked points) of a batch found incomplete in the store, set by _replay.
+        self._unfinished: tuple[int, np.ndarray] | None = None
 
     # -- opening and replay ------------------------------------------------------------
     def open(self, config: dict[str, Any], output_types: tuple[str, ...] | None) -> None:
@@ -210,6 +212,8 @@ class _Runner:
             self.batches = b + 1
             if len(recs) == asked.shape[0]:
                 self._accept(b, recs)
+            else:  # only the last asked batch can be incomplete
+                self._unfinished = (b, asked)
         self.sampler.fast_forward(self.batches, self.asked)
 
     def _accept(self, b: int, recs: list) -> None:
@@ -238,9 +242,9 @@ class _Runner:
     # -- evaluation --------------------------------------------------------------------
     def run(self, budget: int, progress) -> None:
         # Finish a batch that was asked but not fully evaluated before the last stop.
-        stored = self.db.batches()
-        if stored and len(self.db.done_rows(stored[-1][0])) < stored[-1][1].shape[0]:
-            self._evaluate_batch(stored[-1][0], stored[-1][1])
+        if self._unfinished is not None:
+            self._evaluate_batch(*self._unfinished)
+            self._unfinished = None
             self._report(progress, budget)
         while self.asked < budget:
             n = min(self.batch_size, budget - self.asked)
