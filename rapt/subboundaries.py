@@ -17,6 +17,7 @@ a 66-leaf tree.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
@@ -24,7 +25,7 @@ import numpy as np
 
 from rapt.boundaries import graph_mutual_pairs, knn_graph
 from rapt.modes import performance_modes
-from rapt.scores import check_output_types, infer_output_types
+from rapt.scores import check_output_types, infer_output_types, row_codes
 from rapt.scoretree import ScoreTree
 from rapt.validation import check_scores, check_states
 
@@ -75,6 +76,8 @@ class SubBoundaryTree:
         self.parent = parent
         self._pairs = pairs
         self.k = k
+        #: Seconds spent splitting the levels, building the neighbour graph and pairing.
+        self.timings: dict[str, float] = {}
 
     def n_clusters(self, level: int) -> int:
         return int(self.values[level].shape[0])
@@ -124,7 +127,7 @@ class SubBoundaryTree:
 def subboundary_tree(X: np.ndarray, Y: np.ndarray, tree: ScoreTree | Mapping[str, Any], *,
                      output_types: Sequence[str] | None = None, bandwidth: float = 0.2,
                      weights: np.ndarray | None = None, k: int = 12,
-                     exact_below: int = 2000) -> SubBoundaryTree:
+                     exact_below: int = 2000, neighbours: str = "auto") -> SubBoundaryTree:
     """Algorithm 3: split by the score tree level by level and pair sub-clusters within parents.
 
     Parameters
@@ -143,11 +146,17 @@ def subboundary_tree(X: np.ndarray, Y: np.ndarray, tree: ScoreTree | Mapping[str
         Pairs are mutual nearest neighbours within each sample's ``k`` nearest samples;
         below ``exact_below`` samples the graph is complete, which is exactly
         Algorithm 3's two nearest-neighbour searches per pair of sub-clusters.
+    neighbours:
+        How the k-graph is built: ``"exact"``, ``"hnsw"`` (approximate, for 10^5+ samples
+        in many dimensions) or ``"auto"`` (see :func:`rapt.boundaries.knn_graph`).
     """
+    started = time.perf_counter()
     X = check_states(X)
     Y = check_scores(Y, X.shape[0])
     if not isinstance(k, (int, np.integer)) or k < 1:
         raise ValueError(f"k: expected a positive number of neighbours, got {k!r}")
+    if neighbours not in ("auto", "exact", "hnsw"):
+        raise ValueError(f"neighbours: expected 'auto', 'exact' or 'hnsw', got {neighbours!r}")
     if not isinstance(tree, (ScoreTree, Mapping)):
         raise ValueError("tree: expected a ScoreTree or a mapping with 'indices' and 'children'")
     tree = ScoreTree.from_mapping(tree)
@@ -161,40 +170,45 @@ def subboundary_tree(X: np.ndarray, Y: np.ndarray, tree: ScoreTree | Mapping[str
     values: list[np.ndarray] = []
     parents: list[np.ndarray] = []
     previous = np.zeros(n, dtype=np.int64)
+    columns = np.ascontiguousarray(Y.T)  # column access on a wide (N, m) matrix is strided
     for lv, K in enumerate(levels):
         cols = list(K)
-        sub = _split(previous, Y[:, cols], [types[c] for c in cols], bandwidth)
-        ids, inverse = np.unique(np.column_stack([previous, sub]), axis=0, return_inverse=True)
+        sub, n_sub = _split(previous, columns[cols], [types[c] for c in cols], bandwidth)
+        keys, inverse = np.unique(previous * n_sub + sub, return_inverse=True)  # (parent, sub) in order
         inverse = inverse.reshape(-1)
         assignment[lv] = inverse
-        counts = np.bincount(inverse, minlength=ids.shape[0]).astype(float)
-        values.append(np.column_stack([np.bincount(inverse, weights=Y[:, c], minlength=ids.shape[0]) / counts
+        counts = np.bincount(inverse, minlength=keys.size).astype(float)
+        values.append(np.column_stack([np.bincount(inverse, weights=columns[c], minlength=keys.size) / counts
                                        for c in cols]))
-        parents.append(ids[:, 0] if lv else np.full(ids.shape[0], -1, dtype=np.int64))
+        parents.append(keys // n_sub if lv else np.full(keys.size, -1, dtype=np.int64))
         previous = inverse
 
-    dist, idx = knn_graph(Xs, n - 1 if n <= exact_below else int(k))
+    split_done = time.perf_counter()
+    dist, idx = knn_graph(Xs, n - 1 if n <= exact_below else int(k), method=neighbours)
+    graph_done = time.perf_counter()
     pairs = []
     for lv in range(len(levels)):
         parent = assignment[lv - 1] if lv else None
         pairs.append(graph_mutual_pairs(dist, idx, assignment[lv], parent))
-    return SubBoundaryTree(tree, X, Y, tuple(types), assignment, values, parents, pairs,
-                           n - 1 if n <= exact_below else int(k))
+    result = SubBoundaryTree(tree, X, Y, tuple(types), assignment, values, parents, pairs,
+                             n - 1 if n <= exact_below else int(k))
+    result.timings = {"split": split_done - started, "graph": graph_done - split_done,
+                      "pairs": time.perf_counter() - graph_done}
+    return result
 
 
-def _split(parent: np.ndarray, Yk: np.ndarray, types: list[str], bandwidth: float) -> np.ndarray:
-    """Sub-cluster label of each sample within its parent, from this level's scores."""
-    discrete = [c for c, t in enumerate(types) if t != "continuous"]
-    continuous = [c for c, t in enumerate(types) if t == "continuous"]
-    parts = [Yk[:, discrete]] if discrete else []
-    if continuous:
-        lab = np.zeros(Yk.shape[0])
+def _split(parent: np.ndarray, columns: np.ndarray, types: list[str], bandwidth: float) -> tuple[np.ndarray, int]:
+    """Sub-cluster code of each sample within its parent from this level's score columns: (codes, count)."""
+    parts = [col for col, t in zip(columns, types) if t != "continuous"]
+    continuous = np.array([col for col, t in zip(columns, types) if t == "continuous"])
+    if continuous.size:
+        lab = np.zeros(parent.shape[0])
         for p in np.unique(parent):
             rows = np.flatnonzero(parent == p)
-            lab[rows] = performance_modes(Yk[np.ix_(rows, continuous)], ["continuous"] * len(continuous),
+            lab[rows] = performance_modes(continuous[:, rows].T, ["continuous"] * continuous.shape[0],
                                           bandwidth=bandwidth)
-        parts.append(lab[:, None])
-    return np.unique(np.hstack(parts), axis=0, return_inverse=True)[1].reshape(-1)
+        parts.append(lab)
+    return row_codes(parts)
 
 
 def _check_weights(weights: np.ndarray, d: int) -> np.ndarray:

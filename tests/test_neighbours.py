@@ -1,0 +1,81 @@
+"""The neighbour graph and the row coding that make sub-boundary trees scale."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+from hypothesis.extra.numpy import arrays
+
+from rapt.boundaries import graph_mutual_pairs, knn_graph, mutual_pairs
+from rapt.scores import infer_output_types, row_codes
+
+
+@settings(max_examples=60, deadline=None)
+@given(arrays(np.float64, st.tuples(st.integers(1, 40), st.integers(1, 6)),
+              elements=st.sampled_from([0.0, 1.0, 2.0, -3.0, 0.5, 7.25])))
+def test_row_codes_number_rows_like_unique(A):
+    codes, count = row_codes(A)
+    _, expected = np.unique(A, axis=0, return_inverse=True)
+    assert count == len(np.unique(A, axis=0))
+    assert np.array_equal(codes, expected.reshape(-1))
+
+
+def test_row_codes_survive_keys_wider_than_64_bits():
+    A = np.random.default_rng(0).integers(0, 3, size=(5000, 90)).astype(float)  # 3^90 >> 2^63
+    codes, count = row_codes(A)
+    _, expected = np.unique(A, axis=0, return_inverse=True)
+    assert np.array_equal(codes, expected.reshape(-1)) and count == expected.max() + 1
+
+
+def test_infer_output_types_vectorised():
+    rng = np.random.default_rng(1)
+    Y = np.column_stack([rng.integers(0, 2, 500), rng.integers(0, 5, 500), rng.random(500),
+                         rng.integers(0, 40, 500), np.full(500, 3.0), rng.integers(-2, 0, 500)])
+    assert infer_output_types(Y) == ("binary", "categorical", "continuous", "continuous", "categorical",
+                                     "categorical")
+    Y[0, 0] = np.nan  # NaNs are ignored when guessing
+    assert infer_output_types(Y)[0] == "binary"
+
+
+def _edges(i, j):
+    return set(zip(i.tolist(), j.tolist()))
+
+
+@pytest.mark.parametrize("k", [5, 40])  # the column-comparison path and the per-row sort path
+def test_graph_pairs_on_a_complete_graph_equal_exact_mutual_pairs(k):
+    rng = np.random.default_rng(2)
+    X = rng.random((k + 1, 3))
+    labels = rng.integers(0, 4, k + 1)
+    dist, idx = knn_graph(X, k, method="exact")
+    gi, gj, gd = graph_mutual_pairs(dist, idx, labels)
+    ei, ej, ed = mutual_pairs(X, labels)
+    assert _edges(gi, gj) == _edges(ei, ej)
+    assert np.allclose(np.sort(gd), np.sort(ed))
+
+
+def test_parents_restrict_pairs_to_siblings():
+    rng = np.random.default_rng(3)
+    X = rng.random((400, 2))
+    groups = (X[:, 0] > 0.5).astype(int) + 2 * (X[:, 1] > 0.5)
+    parents = (X[:, 1] > 0.5).astype(int)
+    dist, idx = knn_graph(X, 12)
+    i, j, _ = graph_mutual_pairs(dist, idx, groups, parents)
+    assert i.size > 0
+    assert np.all(parents[i] == parents[j]) and np.all(groups[i] < groups[j])
+
+
+def test_hnsw_graph_finds_most_exact_neighbours_and_is_deterministic():
+    X = np.random.default_rng(4).random((5000, 12))
+    d_exact, i_exact = knn_graph(X, 10, method="exact")
+    d1, i1 = knn_graph(X, 10, method="hnsw")
+    d2, i2 = knn_graph(X, 10, method="hnsw")
+    assert np.array_equal(i1, i2) and np.array_equal(d1, d2)
+    assert not np.any(i1 == np.arange(5000)[:, None])  # self is never a neighbour
+    recall = np.mean([len(set(a) & set(b)) / 10 for a, b in zip(i1, i_exact)])
+    assert recall > 0.9
+    assert np.all(np.diff(d1, axis=1) >= -1e-6)  # nearest first
+    assert np.allclose(d1[:, 0], np.linalg.norm(X - X[i1[:, 0]], axis=1), atol=1e-5)
+
+
+def test_knn_graph_rejects_unknown_method():
+    with pytest.raises(ValueError, match="method"):
+        knn_graph(np.zeros((3, 2)), 1, method="lsh")
