@@ -2,3 +2,15 @@
 
 Depends on :mod:`rapt` for shared types only; never imports :mod:`bridge`.
 """
+
+from sim.mission import Mission
+from sim.simulate import Result, simulate
+
+__all__ = ["Mission", "Result", "simulate", "load_mission"]
+
+
+def load_mission(path) -> Mission:
+    """Load and validate a TOML mission file (see :mod:`sim.missionfile`)."""
+    from sim.missionfile import load_mission as _load
+
+    return _load(path)
