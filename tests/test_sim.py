@@ -147,9 +147,13 @@ def test_entering_a_no_go_area_fails_safety_but_the_run_goes_on():
 
 
 def test_leaving_the_operational_area_ends_the_run_as_a_safety_failure():
-    r = run(mission(waypoints=((0.0, 1500.0),), time_limit_s=3000.0))
+    # a 3.5 m/s current beats the vehicle's 3 m/s, however it keeps off the edge
+    r = run(mission(current=Current(speed=3.5, direction_deg=90.0, peak_hour=0.0, perturbation=0.0)))
     assert col(r, "operational_area") == 0.0 and col(r, "operational_area.margin_m") < 0
-    assert col(r, "safety_success") == 0.0 and col(r, "mission.time_s") < 3000.0
+    assert col(r, "safety_success") == 0.0 and col(r, "mission.time_s") < 3600.0  # the run ended there
+    assert r.trajectories[0][-1, 0] == col(r, "mission.time_s")
+    calm = run(mission(waypoints=((0.0, 1500.0),)))  # a waypoint outside: the autonomy stays inside
+    assert col(calm, "operational_area") == 1.0 and col(calm, "waypoint.0") == 0.0
 
 
 def test_time_limit_turns_the_vehicle_back_and_fails_the_mission_when_home_is_too_far():
