@@ -1,8 +1,9 @@
 """``rapt-plan``: the test engineer's command line.
 
-Until the mission simulator lands, ``rapt-plan search`` runs a boundary search on a
-bundled synthetic system with known boundaries and prints how well it found them,
-side by side with a space-filling baseline.
+``rapt-plan study MISSION`` searches a mission file's scenario space with the simulator
+and reports the performance modes and boundary types it found, side by side with a
+space-filling design (Figure 3.12).  ``rapt-plan search SYSTEM`` does the same on a
+bundled synthetic system with known boundaries and prints how well it found them.
 """
 
 from __future__ import annotations
@@ -98,6 +99,86 @@ def search(
         out.print(f"{len(study.failures)} rows failed; first reason: {study.failures[0]}", soft_wrap=True)
     if store is not None:
         out.print(f"study stored in {store} ({study.n_evaluated} rows)", soft_wrap=True, highlight=False)
+
+
+@app.command()
+def study(
+    mission_file: Annotated[Path, typer.Argument(help="Mission file (TOML), e.g. examples/range2017.toml.")],
+    budget: Annotated[int, typer.Option(help="Scenarios to simulate.")] = 3000,
+    method: Annotated[str, typer.Option(help=f"Search method: {', '.join(rapt.METHODS)}.")] = "s-ndv",
+    batch_size: Annotated[int, typer.Option("--batch-size", help="Scenarios per batch.")] = 500,
+    seed: Annotated[int, typer.Option(help="Seed of every random choice.")] = 0,
+    store: Annotated[Optional[Path], typer.Option(help="SQLite study store; an existing one is resumed.")] = None,
+    stochastic: Annotated[bool, typer.Option(help="Navigation drift and current perturbations on.")] = False,
+    baseline: Annotated[str, typer.Option(help="Method to compare against (or 'none').")] = "sobol",
+) -> None:
+    """Search a mission's scenarios for performance boundaries; print modes and boundary types."""
+    import numpy as np
+
+    import sim
+    from sim.scoring import MODE_NAMES
+
+    if baseline != "none" and baseline not in rapt.METHODS:
+        fail(f"--baseline: unknown method {baseline!r}; choose one of: {', '.join(rapt.METHODS)}, none")
+    if not mission_file.is_file():
+        fail(f"MISSION_FILE: {mission_file} does not exist; give the path of a mission TOML file")
+    try:
+        mission = sim.load_mission(mission_file)
+    except ValueError as exc:
+        fail(str(exc))
+
+    def run_root_scores(X):  # the search steers on mission and safety success (section 4.3.6)
+        return sim.simulate(mission, X, seed=seed, stochastic=stochastic).scores[:, :2]
+
+    results = []
+    methods = [method] + ([baseline] if baseline not in ("none", method) else [])
+    for i, m in enumerate(methods):
+        with Progress(TextColumn(f"{m:>6}"), BarColumn(), MofNCompleteColumn(), TextColumn("{task.fields[rate]}"),
+                      TimeElapsedColumn(), console=err, transient=True, disable=not err.is_terminal) as bar:
+            task = bar.add_task(m, total=budget, rate="")
+            start = time.perf_counter()
+
+            def progress(done: int, total: int) -> None:
+                elapsed = max(time.perf_counter() - start, 1e-9)
+                bar.update(task, completed=done, rate=f"{done / elapsed:,.0f} runs/s")
+
+            try:
+                found = rapt.search(run_root_scores, mission.space, budget, method=m, batch_size=batch_size,
+                                    seed=seed, store=store if i == 0 else None,
+                                    output_types=("binary", "binary"), progress=progress)
+            except ValueError as exc:
+                fail(str(exc))
+            elapsed = time.perf_counter() - start
+        modes = (2 * found.Y[:, 0] + found.Y[:, 1]).astype(int)
+        pairs = rapt.boundary_pairs(found.X, labels=modes) if np.unique(modes).size > 1 else None
+        results.append((m, found, modes, pairs, elapsed))
+
+    table = Table(title=f"{mission.name}: {budget} scenarios ({mission.dim}-D), seed {seed}")
+    table.add_column("", justify="left")
+    for m, *_ in results:
+        table.add_column(m, justify="right")
+    present = {m: sorted(set(modes.tolist())) for m, _, modes, _, _ in results}
+    table.add_row("valid runs", *[f"{len(f.X):,}" for _, f, *_ in results])
+    table.add_row("invalid scenarios", *[f"{len(f.X_failed):,}" for _, f, *_ in results])
+    for k, name in enumerate(MODE_NAMES):
+        table.add_row(f"mode {name}", *[f"{np.mean(modes == k):.1%}" for _, _, modes, _, _ in results])
+    types = sorted({tuple(sorted((present[m][a], present[m][b]))) for m, _, _, bp, _ in results if bp
+                    for a, b, _ in bp.types()})
+    for a, b in types:
+        cells = []
+        for m, _, _, bp, _ in results:
+            n = 0
+            if bp is not None and a in present[m] and b in present[m]:
+                n = len(bp.of_type(present[m].index(a), present[m].index(b)))
+            total = len(bp) if bp is not None and len(bp) else 1
+            cells.append(f"{n:,} ({n / total:.0%})")
+        table.add_row(f"boundary {MODE_NAMES[a]}/{MODE_NAMES[b]}", *cells)
+    table.add_row("median pair distance",
+                  *[f"{np.median(bp.distance):.3f}" if bp is not None and len(bp) else "-" for *_, bp, _ in results])
+    table.add_row("time (s)", *[f"{e:.1f}" for *_, e in results])
+    out.print(table)
+    if store is not None:
+        out.print(f"study stored in {store} ({results[0][1].n_evaluated} scenarios)", soft_wrap=True, highlight=False)
 
 
 if __name__ == "__main__":  # pragma: no cover

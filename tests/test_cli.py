@@ -1,10 +1,12 @@
 import re
+from pathlib import Path
 
 from typer.testing import CliRunner
 
 from planner.cli import app
 
 runner = CliRunner()
+RANGE2017 = str(Path(__file__).resolve().parents[1] / "examples" / "range2017.toml")
 
 
 def test_search_prints_quality_against_sobol(tmp_path):
@@ -31,4 +33,30 @@ def test_bad_input_is_one_line_and_exit_2():
         assert result.exit_code == 2, (args, result.output)
         assert expect in result.output
         assert "Traceback" not in result.output
+        assert len([line for line in result.output.splitlines() if line.strip()]) == 1
+
+
+def test_study_of_a_mission_reports_modes_and_boundary_types(tmp_path):
+    db = tmp_path / "study.db"
+    args = ["study", RANGE2017, "--budget", "1000", "--batch-size", "250", "--store", str(db)]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    assert "range2017: 1000 scenarios (15-D)" in result.output
+    shares = {m.group(1): float(m.group(2)) for m in re.finditer(r"mode (TF|SS|MS|TS)\s+│\s+([\d.]+)%", result.output)}
+    assert set(shares) == {"TF", "SS", "MS", "TS"} and sum(v > 0 for v in shares.values()) >= 3
+    assert "boundary TF/SS" in result.output and "1000 scenarios)" in result.output
+    again = runner.invoke(app, args)  # resumed from the store: same table
+    assert again.exit_code == 0
+    assert again.output.split("time (s)")[0] == result.output.split("time (s)")[0]
+
+
+def test_study_bad_mission_is_one_line_and_exit_2(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[mission]\nname = "x"\nbogus = 1\n')
+    for args, expect in [(["study", str(tmp_path / "missing.toml")], "MISSION_FILE: "),
+                         (["study", str(bad)], f"{bad}: "),
+                         (["study", RANGE2017, "--baseline", "grid"], "--baseline: unknown method")]:
+        result = runner.invoke(app, args)
+        assert result.exit_code == 2, (args, result.output)
+        assert expect in result.output and "Traceback" not in result.output
         assert len([line for line in result.output.splitlines() if line.strip()]) == 1

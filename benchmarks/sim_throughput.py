@@ -1,0 +1,97 @@
+"""Simulator throughput and the 2017 mission's performance modes (issue 4).
+
+Three tables, measured side by side in one run:
+
+1. Full simulations of ``examples/range2017.toml`` per second against batch size
+   (deterministic; one stochastic row), counting only valid scenarios — invalid ones are
+   reported, not simulated — and the time a million-scenario study's simulations take.
+2. The same code one scenario at a time (a per-scenario Python loop, as a simulator that
+   cannot batch would run it) and the batch's speed-up over it.
+3. A Sobol study of the 2017 mission: how the valid runs split over the performance
+   modes TF/SS/MS/TS and how the boundary pairs split over boundary types (Figure 4.23).
+
+Run:  python benchmarks/sim_throughput.py [--sizes 256 1024 4096 16384] [--study 4096]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy.stats import qmc
+
+import rapt
+import sim
+from sim.scoring import MODE_NAMES
+
+MISSION = Path(__file__).resolve().parents[1] / "examples" / "range2017.toml"
+
+
+def throughput(mission, sizes: list[int], loop_n: int) -> None:
+    X = qmc.Sobol(mission.dim, seed=0).random(max(sizes))
+    print(f"1. {mission.name}: full simulations per second (2 cores, numpy, dt = {mission.dt:g} s, "
+          f"time limit {mission.time_limit_s:g} s)")
+    print(f"{'batch':>7} {'mode':>13} {'seconds':>8} {'valid runs':>10} {'runs/s':>8} {'10^6 runs (min)':>16}")
+    best = 0.0
+    for n in sizes:
+        for stochastic in (False, True) if n == sizes[-1] else (False,):
+            t0 = time.perf_counter()
+            r = sim.simulate(mission, X[:n], seed=1, stochastic=stochastic)
+            t = time.perf_counter() - t0
+            rate = r.valid.sum() / t
+            if not stochastic:
+                best = max(best, rate)
+            print(f"{n:>7,} {'stochastic' if stochastic else 'deterministic':>13} {t:>8.2f} {r.valid.sum():>10,} "
+                  f"{rate:>8.0f} {1e6 / rate / 60:>16.1f}")
+    rows = np.flatnonzero(sim.simulate(mission, X[:loop_n * 2]).valid)[:loop_n]
+    t0 = time.perf_counter()
+    for i in rows:
+        sim.simulate(mission, X[i:i + 1])
+    t = time.perf_counter() - t0
+    loop_rate = rows.size / t
+    print(f"\n2. The same code one scenario at a time ({rows.size} scenarios): {loop_rate:.1f} runs/s; "
+          f"the best batch is {best / loop_rate:.0f}x faster")
+    return best
+
+
+def modes_and_boundaries(mission, n: int) -> None:
+    X = qmc.Sobol(mission.dim, seed=1).random(n)
+    r = sim.simulate(mission, X)
+    Xv, modes = X[r.valid], r.modes[r.valid]
+    print(f"\n3. Sobol study of {n:,} {mission.name} scenarios: {r.valid.sum():,} valid "
+          f"({(~r.valid).sum():,} invalid, e.g. {_top_reason(r)})")
+    counts = np.bincount(modes, minlength=4)
+    print("   performance modes: " + ", ".join(f"{MODE_NAMES[k]} {c:,} ({c / counts.sum():.0%})"
+                                             for k, c in enumerate(counts)))
+    bp = rapt.boundary_pairs(Xv, labels=modes)
+    present = sorted(set(modes.tolist()))
+    print(f"   boundary pairs: {len(bp):,} in {len(bp.types())} boundary types")
+    for a, b, c in sorted(bp.types(), key=lambda t: -t[2]):
+        ma, mb = MODE_NAMES[present[a]], MODE_NAMES[present[b]]
+        sel = bp.of_type(a, b)
+        print(f"   {ma:>2}/{mb:<2} {c:>6,} pairs  median distance {np.median(sel.distance):.3f}")
+
+
+def _top_reason(r) -> str:
+    reasons = [x for x in r.invalid_reason if x]
+    if not reasons:
+        return "none"
+    values, counts = np.unique(reasons, return_counts=True)
+    return f"'{values[np.argmax(counts)]}'"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--sizes", type=int, nargs="+", default=[256, 1024, 4096, 16384])
+    ap.add_argument("--loop", type=int, default=20, help="scenarios run one at a time")
+    ap.add_argument("--study", type=int, default=4096, help="Sobol scenarios for the mode distribution")
+    args = ap.parse_args()
+    mission = sim.load_mission(MISSION)
+    throughput(mission, sorted(args.sizes), args.loop)
+    modes_and_boundaries(mission, args.study)
+
+
+if __name__ == "__main__":
+    main()
