@@ -33,6 +33,24 @@ def fail(message: str) -> None:
     raise typer.Exit(code=2)
 
 
+def run_search(label: str, fn, bounds, budget: int, **kwargs):
+    """``rapt.search`` behind a progress bar on stderr; bad arguments become one-line errors."""
+    with Progress(TextColumn(f"{label:>6}"), BarColumn(), MofNCompleteColumn(), TextColumn("{task.fields[rate]}"),
+                  TimeElapsedColumn(), console=err, transient=True, disable=not err.is_terminal) as bar:
+        task = bar.add_task(label, total=budget, rate="")
+        start = time.perf_counter()
+
+        def progress(done: int, total: int) -> None:
+            elapsed = max(time.perf_counter() - start, 1e-9)
+            bar.update(task, completed=done, rate=f"{done / elapsed:,.0f} runs/s")
+
+        try:
+            found = rapt.search(fn, bounds, budget, progress=progress, **kwargs)
+        except ValueError as exc:
+            fail(str(exc))
+        return found, time.perf_counter() - start
+
+
 @app.callback()
 def main() -> None:
     """Plan field tests of autonomous underwater vehicles from adaptive boundary searches."""
@@ -66,21 +84,8 @@ def search(
     rows = []
     methods = [method] + ([baseline] if baseline not in ("none", method) else [])
     for i, m in enumerate(methods):
-        with Progress(TextColumn(f"{m:>6}"), BarColumn(), MofNCompleteColumn(), TextColumn("{task.fields[rate]}"),
-                      TimeElapsedColumn(), console=err, transient=True, disable=not err.is_terminal) as bar:
-            task = bar.add_task(m, total=budget, rate="")
-            start = time.perf_counter()
-
-            def progress(done: int, total: int) -> None:
-                elapsed = max(time.perf_counter() - start, 1e-9)
-                bar.update(task, completed=done, rate=f"{done / elapsed:,.0f} runs/s")
-
-            try:
-                study = rapt.search(sut, bounds, budget, method=m, batch_size=batch_size, seed=seed,
-                                    store=store if i == 0 else None, output_types=types, progress=progress)
-            except ValueError as exc:
-                fail(str(exc))
-            elapsed = time.perf_counter() - start
+        study, elapsed = run_search(m, sut, bounds, budget, method=m, batch_size=batch_size, seed=seed,
+                                    store=store if i == 0 else None, output_types=types)
         q = quality_table(sut, study.X, d_eps, seed=seed)
         rows.append((m, q, elapsed, study))
 
@@ -133,22 +138,8 @@ def study(
     results = []
     methods = [method] + ([baseline] if baseline not in ("none", method) else [])
     for i, m in enumerate(methods):
-        with Progress(TextColumn(f"{m:>6}"), BarColumn(), MofNCompleteColumn(), TextColumn("{task.fields[rate]}"),
-                      TimeElapsedColumn(), console=err, transient=True, disable=not err.is_terminal) as bar:
-            task = bar.add_task(m, total=budget, rate="")
-            start = time.perf_counter()
-
-            def progress(done: int, total: int) -> None:
-                elapsed = max(time.perf_counter() - start, 1e-9)
-                bar.update(task, completed=done, rate=f"{done / elapsed:,.0f} runs/s")
-
-            try:
-                found = rapt.search(run_root_scores, mission.space, budget, method=m, batch_size=batch_size,
-                                    seed=seed, store=store if i == 0 else None,
-                                    output_types=("binary", "binary"), progress=progress)
-            except ValueError as exc:
-                fail(str(exc))
-            elapsed = time.perf_counter() - start
+        found, elapsed = run_search(m, run_root_scores, mission.space, budget, method=m, batch_size=batch_size,
+                                    seed=seed, store=store if i == 0 else None, output_types=("binary", "binary"))
         modes = (2 * found.Y[:, 0] + found.Y[:, 1]).astype(int)
         pairs = rapt.boundary_pairs(found.X, labels=modes) if np.unique(modes).size > 1 else None
         results.append((m, found, modes, pairs, elapsed))
