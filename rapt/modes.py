@@ -17,7 +17,7 @@ import numpy as np
 from rapt.scores import check_output_types, infer_output_types
 from rapt.validation import check_scores
 
-__all__ = ["performance_modes"]
+__all__ = ["performance_modes", "mean_shift_normalised"]
 
 
 def performance_modes(Y: np.ndarray, output_types: Sequence[str] | None = None, *, bandwidth: float = 0.2,
@@ -53,20 +53,78 @@ def performance_modes(Y: np.ndarray, output_types: Sequence[str] | None = None, 
 
 
 def _mean_shift_labels(Yc: np.ndarray, bandwidth: float, bin_seeding: bool) -> np.ndarray:
-    from sklearn.cluster import MeanShift
-
     lo, hi = Yc.min(axis=0), Yc.max(axis=0)
-    span = np.where(hi > lo, hi - lo, 1.0)
-    Z = (Yc - lo) / span
     if np.all(hi <= lo):
         return np.zeros(Yc.shape[0], dtype=np.int64)
+    span = np.where(hi > lo, hi - lo, 1.0)
+    return mean_shift_normalised((Yc - lo) / span, bandwidth, bin_seeding)
+
+
+#: Up to this many distinct rows, mean shift runs as a few dense numpy iterations: a
+#: sub-boundary tree clusters thousands of small parents, where scikit-learn's per-call
+#: overhead (~5 ms) would dominate.
+SMALL_MEAN_SHIFT = 256
+
+
+def _small_mean_shift(Z: np.ndarray, bandwidth: float, max_iter: int = 300) -> np.ndarray:
+    """Flat-kernel mean shift seeded at every row, as scikit-learn's ``MeanShift`` does it.
+
+    Each seed moves to the mean of the rows within ``bandwidth`` until it stops; centres are
+    kept in order of how many rows they hold, dropping any within ``bandwidth`` of a kept
+    one; rows take their nearest centre.  Labels are numbered by centre (lexicographic).
+    """
+    d2 = lambda a, b: ((a[:, None, :] - b[None, :, :]) ** 2).sum(-1)
+    centres = Z.copy()
+    for _ in range(max_iter):
+        near = d2(centres, Z) <= bandwidth ** 2
+        new = (near @ Z) / near.sum(axis=1, keepdims=True)
+        moved = np.abs(new - centres).max()
+        centres = new
+        if moved <= 1e-3 * bandwidth:
+            break
+    intensity = (d2(centres, Z) <= bandwidth ** 2).sum(axis=1)
+    order = np.lexsort((*centres.T[::-1], -intensity))  # most populated first, ties by position
+    kept: list[int] = []
+    for i in order:
+        if not kept or np.all(((centres[kept] - centres[i]) ** 2).sum(-1) > bandwidth ** 2):
+            kept.append(int(i))
+    c = centres[kept]
+    labels = np.argmin(d2(Z, c), axis=1)
+    rank = np.empty(len(kept), dtype=np.int64)
+    rank[np.lexsort(c.T[::-1])] = np.arange(len(kept))
+    return rank[labels]
+
+
+def mean_shift_normalised(Z: np.ndarray, bandwidth: float, bin_seeding: bool = True) -> np.ndarray:
+    """Flat-kernel mean-shift labels of scores already normalised to a common scale.
+
+    Callers that cluster many subsets (a sub-boundary tree's parents) normalise once over
+    all samples, so ``bandwidth`` means the same in every subset.  Labels are numbered by
+    cluster centre, so they do not depend on seeding order.
+    """
+    import warnings
+
+    from sklearn.cluster import MeanShift
+
+    if Z.shape[0] <= 1 or np.ptp(Z, axis=0).max() <= bandwidth / 2:
+        return np.zeros(Z.shape[0], dtype=np.int64)  # all within one kernel: one cluster
     # Identical score rows are clustered once: simulations often repeat exact scores.
     uniq, inverse = np.unique(Z, axis=0, return_inverse=True)
     if uniq.shape[0] == 1:
-        return np.zeros(Yc.shape[0], dtype=np.int64)
-    ms = MeanShift(bandwidth=bandwidth, bin_seeding=bin_seeding, cluster_all=True, n_jobs=1)
-    ms.fit(uniq)
-    # Number clusters by their centre (lexicographic) so labels do not depend on seeding order.
+        return np.zeros(Z.shape[0], dtype=np.int64)
+    if uniq.shape[0] <= SMALL_MEAN_SHIFT:
+        labels = _small_mean_shift(uniq, bandwidth)
+        return labels[inverse.reshape(-1)]
+    # Bin seeding is what makes a million rows fast; with few rows in many columns a bin centre
+    # can lie farther than the bandwidth from every row, so then seed from the rows themselves.
+    seeding = bin_seeding and uniq.shape[0] > 1000
+    ms = MeanShift(bandwidth=bandwidth, bin_seeding=seeding, cluster_all=True, n_jobs=1)
+    with warnings.catch_warnings():  # too few points for bin seeding: sklearn seeds from the points
+        warnings.filterwarnings("ignore", message="Binning data failed", category=UserWarning)
+        try:
+            ms.fit(uniq)
+        except ValueError:  # no row within the bandwidth of any bin centre
+            ms = MeanShift(bandwidth=bandwidth, bin_seeding=False, cluster_all=True, n_jobs=1).fit(uniq)
     order = np.lexsort(ms.cluster_centers_.T[::-1])
     rank = np.empty_like(order)
     rank[order] = np.arange(order.size)

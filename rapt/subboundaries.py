@@ -24,7 +24,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from rapt.boundaries import graph_mutual_pairs, knn_graph
-from rapt.modes import performance_modes
+from rapt.modes import mean_shift_normalised
 from rapt.scores import check_output_types, infer_output_types, row_codes
 from rapt.scoretree import ScoreTree
 from rapt.validation import check_scores, check_states
@@ -198,15 +198,21 @@ def subboundary_tree(X: np.ndarray, Y: np.ndarray, tree: ScoreTree | Mapping[str
 
 
 def _split(parent: np.ndarray, columns: np.ndarray, types: list[str], bandwidth: float) -> tuple[np.ndarray, int]:
-    """Sub-cluster code of each sample within its parent from this level's score columns: (codes, count)."""
+    """Sub-cluster code of each sample within its parent from this level's score columns: (codes, count).
+
+    Continuous columns are normalised once over all samples, then mean-shifted inside each
+    parent, so ``bandwidth`` (λ_P) means the same score difference in every parent.
+    """
     parts = [col for col, t in zip(columns, types) if t != "continuous"]
     continuous = np.array([col for col, t in zip(columns, types) if t == "continuous"])
     if continuous.size:
+        lo, hi = continuous.min(axis=1, keepdims=True), continuous.max(axis=1, keepdims=True)
+        Z = ((continuous - lo) / np.where(hi > lo, hi - lo, 1.0)).T
+        order = np.argsort(parent, kind="stable")
+        bounds = np.flatnonzero(np.diff(parent[order])) + 1
         lab = np.zeros(parent.shape[0])
-        for p in np.unique(parent):
-            rows = np.flatnonzero(parent == p)
-            lab[rows] = performance_modes(continuous[:, rows].T, ["continuous"] * continuous.shape[0],
-                                          bandwidth=bandwidth)
+        for rows in np.split(order, bounds):
+            lab[rows] = mean_shift_normalised(Z[rows], bandwidth)
         parts.append(lab)
     return row_codes(parts)
 

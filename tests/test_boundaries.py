@@ -123,3 +123,21 @@ def test_pair_differences_and_type_importance():
     Y = np.column_stack([X[:, 1] > 0.3, X[:, 2]])
     oi = output_importance(X, Y, ["binary", "continuous"])
     assert oi.shape == (2, 3) and oi[0].argmax() == 1 and oi[1].argmax() == 2
+
+
+def test_small_mean_shift_partitions_like_scikit_learn():
+    from sklearn.cluster import MeanShift
+    from sklearn.metrics import adjusted_rand_score
+
+    from rapt.modes import _small_mean_shift
+
+    rng = np.random.default_rng(7)
+    scores = []
+    for trial in range(30):
+        k = rng.integers(1, 4)
+        centres = rng.random((k, 3))
+        Z = np.vstack([c + 0.03 * rng.standard_normal((rng.integers(3, 30), 3)) for c in centres])
+        ours = _small_mean_shift(Z, 0.2)
+        ref = MeanShift(bandwidth=0.2).fit(Z).labels_
+        scores.append(adjusted_rand_score(ref, ours))
+    assert np.mean(scores) > 0.97 and np.min(scores) > 0.8

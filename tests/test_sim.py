@@ -234,3 +234,19 @@ def test_trajectories_cover_the_run():
     track = r.trajectories[0]
     assert track.shape[1] == 8 and track[-1, 0] == pytest.approx(col(r, "mission.time_s"))
     assert np.hypot(track[-1, 1] - 0.0, track[-1, 2] + 820.0) <= 15.0 + 1e-6
+
+
+def test_a_mission_study_feeds_the_sub_boundary_tree():
+    import rapt
+
+    m = sim.load_mission(EXAMPLES / "range2017.toml")
+    X = np.random.default_rng(4).random((1024, m.dim))
+    r = sim.simulate(m, X)
+    tree = rapt.subboundary_tree(X[r.valid], r.scores[r.valid], m.score_tree, output_types=r.output_types)
+    assert len(tree.levels) == 4 and tree.n_clusters(0) >= 3
+    roots = r.scores[r.valid][:, :2]
+    assert tree.n_clusters(0) == len(np.unique(roots, axis=0))  # level 0 = the performance modes
+    rec = tree.reconstruct(r.names.index("recovery"), 0.0)  # every run that failed to get home
+    assert rec.members.size == int((r.column("recovery")[r.valid] == 0).sum())
+    inside = np.isin(np.arange(r.valid.sum()), rec.members)
+    assert len(rec) > 0 and np.all(inside[rec.i]) and not np.any(inside[rec.j])
