@@ -250,3 +250,23 @@ def test_a_mission_study_feeds_the_sub_boundary_tree():
     assert rec.members.size == int((r.column("recovery")[r.valid] == 0).sum())
     inside = np.isin(np.arange(r.valid.sum()), rec.members)
     assert len(rec) > 0 and np.all(inside[rec.i]) and not np.any(inside[rec.j])
+
+
+def _simulate_alone(path, row):
+    m = sim.load_mission(path)
+    return sim.simulate(m, row[None, :]).scores[0]
+
+
+def test_a_single_vehicle_in_its_own_process_scores_as_in_the_batch():
+    import concurrent.futures as cf
+    import multiprocessing as mp
+
+    path = EXAMPLES / "range2017.toml"
+    m = sim.load_mission(path)
+    X = np.random.default_rng(8).random((64, m.dim))
+    batch = sim.simulate(m, X)
+    rows = np.flatnonzero(batch.valid)[:4]
+    with cf.ProcessPoolExecutor(1, mp_context=mp.get_context("spawn")) as pool:
+        alone = list(pool.map(_simulate_alone, [path] * rows.size, [X[i] for i in rows]))
+    for i, scores in zip(rows, alone):
+        np.testing.assert_array_equal(scores, batch.scores[i])
