@@ -311,7 +311,10 @@ class Autonomy:
         fy += NOGO_GAIN * (np.clip(1 - (obs.y - y0) / OP_MARGIN_M, 0, 1) - np.clip(1 - (y1 - obs.y) / OP_MARGIN_M, 0, 1))
 
         course = np.arctan2(fx, fy)
-        loiter = (kind == GOAL_SURVEY) & in_area | (kind == GOAL_TRANSMIT) & in_tx
+        # home: surface at the recovery point and wait to be picked up
+        rx, ry = self.mission.recovery
+        at_home = self.returning & (np.hypot(obs.x - rx, obs.y - ry) <= self.mission.recovery_radius)
+        loiter = (kind == GOAL_SURVEY) & in_area | (kind == GOAL_TRANSMIT) & in_tx | at_home
         speed = np.where(loiter, LOITER_FRACTION * spec.cruise_speed, spec.cruise_speed)
         # crabbing: through-water velocity = desired ground velocity - predicted current
         ce, cn = obs.current_e, obs.current_n
@@ -321,4 +324,4 @@ class Autonomy:
         wn = speed * np.cos(course) - cn
         heading = np.arctan2(we, wn)
         water_speed = np.minimum(np.hypot(we, wn), spec.max_speed)
-        return Command(heading, water_speed, sending)
+        return Command(heading, water_speed, sending | at_home)

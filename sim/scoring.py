@@ -77,12 +77,25 @@ class Scorer:
         self.left_area = np.zeros(n, dtype=bool)
         op = m.operational_area
         self.op_bounds = (op.x - op.width / 2, op.x + op.width / 2, op.y - op.height / 2, op.y + op.height / 2)
+        rx, ry = m.launch
+        self.prev_x, self.prev_y = np.full(n, float(rx)), np.full(n, float(ry))
         self._rows = np.arange(n)
 
+    def update_from(self, tel, active: np.ndarray, nogo_distance: np.ndarray | None = None) -> np.ndarray:
+        """Score one step of telemetry (:class:`sim.world.Telemetry`); returns the runs that end here."""
+        step_m = np.hypot(tel.x - self.prev_x, tel.y - self.prev_y)
+        self.prev_x, self.prev_y = tel.x, tel.y
+        return self.update(tel.t, tel.x, tel.y, tel.battery, tel.surfaced, tel.contact_distance, tel.detected,
+                           step_m, active, nogo_distance)
+
     def update(self, t: float, x: np.ndarray, y: np.ndarray, battery: np.ndarray, surfaced: np.ndarray,
-               returning: np.ndarray, contacts_distance: np.ndarray, detected: np.ndarray, step_m: np.ndarray,
+               contacts_distance: np.ndarray, detected: np.ndarray, step_m: np.ndarray,
                active: np.ndarray, nogo_distance: np.ndarray | None = None) -> np.ndarray:
-        """Score one step of the ``active`` runs; returns the runs that end here."""
+        """Score one step of the ``active`` runs; returns the runs that end here.
+
+        A run ends when the vehicle surfaces at the recovery point (recovered), touches an
+        obstacle, leaves the operational area or runs out of battery.
+        """
         scen, m, a = self.scen, self.mission, active
         self.distance += np.where(a, step_m, 0.0)
         self.battery_left = np.where(a, battery, self.battery_left)
@@ -147,7 +160,7 @@ class Scorer:
         self.op_margin = np.where(a, np.minimum(self.op_margin, op_d), self.op_margin)
         left = a & (op_d < 0)
         self.rec_distance = np.where(a, np.minimum(self.rec_distance, rec_d), self.rec_distance)
-        home = a & returning & at_recovery
+        home = a & surfaced & at_recovery
         self.rec_time = np.where(home, t, self.rec_time)
         self.rec_battery = np.where(home, battery, self.rec_battery)
         dead = a & (battery <= 0)
@@ -158,8 +171,12 @@ class Scorer:
         self.end_time = np.where(ended, t, self.end_time)
         return ended
 
-    def scores(self, autonomy) -> np.ndarray:
-        """The (N, m) score matrix in :func:`sim.metrics.metric_names` order."""
+    def scores(self, wp_aborted: np.ndarray, return_reason: np.ndarray) -> np.ndarray:
+        """The (N, m) score matrix in :func:`sim.metrics.metric_names` order.
+
+        Two leaves are the autonomy's own decisions, which no track shows: which waypoints it
+        abandoned and why it turned home (the back-seat reports them on its status channel).
+        """
         scen, m = self.scen, self.mission
         n = scen.n
         W, A = scen.waypoints.shape[0], scen.area_rect.shape[1]
@@ -192,7 +209,7 @@ class Scorer:
             cols[f"waypoint.{i}.closest_m"] = self.wp_closest[:, i]
             cols[f"waypoint.{i}.time_s"] = self.wp_time[:, i]
             cols[f"waypoint.{i}.battery"] = self.wp_battery[:, i]
-            cols[f"waypoint.{i}.aborted"] = autonomy.wp_aborted[:, i]
+            cols[f"waypoint.{i}.aborted"] = wp_aborted[:, i]
         for k, area in enumerate(m.mission_areas):
             cols[f"area.{area.name}"] = area_ok[:, k]
             for leaf, arr in (("dwell_s", self.area_dwell), ("entry_s", self.area_entry), ("done_s", self.area_done),
@@ -206,7 +223,7 @@ class Scorer:
         cols["mission.time_s"] = self.end_time
         cols["mission.battery_left"] = self.battery_left
         cols["mission.distance_m"] = self.distance
-        cols["mission.return_reason"] = autonomy.return_reason
+        cols["mission.return_reason"] = return_reason
         names = [o.name for o in m.obstacles] + [b.name for b in m.barriers]
         kinds = ["obstacle"] * T + ["barrier"] * B
         for k, (kind, name) in enumerate(zip(kinds, names)):

@@ -117,7 +117,7 @@ def test_transmission_surfaces_inside_the_area_only_while_the_window_is_open():
     tx = Transmission("TX", -400.0, -400.0, 300.0, 300.0, 300.0, 1200.0, 120.0)
     r = run(mission(transmission=tx, mission_requires=("transmission",)))
     track = r.trajectories[0]
-    surfaced_t = track[track[:, 6] > 0, 0]
+    surfaced_t = track[track[:, 5] > 0, 0]
     assert col(r, "transmission") == 1.0 and col(r, "surfacing.outside_s") == 0.0
     assert surfaced_t.min() >= 300.0 and surfaced_t.max() < 1500.0
     assert col(r, "transmission.time_s") - 300.0 >= 120.0 - 1e-9
@@ -270,3 +270,17 @@ def test_a_single_vehicle_in_its_own_process_scores_as_in_the_batch():
         alone = list(pool.map(_simulate_alone, [path] * rows.size, [X[i] for i in rows]))
     for i, scores in zip(rows, alone):
         np.testing.assert_array_equal(scores, batch.scores[i])
+
+
+def test_a_run_rescored_from_its_telemetry_track_matches_the_batch():
+    from sim.replay import score_track
+
+    m = sim.load_mission(EXAMPLES / "range2017.toml")
+    X = np.random.default_rng(9).random((40, m.dim))
+    r = sim.simulate(m, X, trajectories=True)
+    names = r.names
+    for i in np.flatnonzero(r.valid)[:15]:
+        aborted = [r.scores[i, names.index(f"waypoint.{w}.aborted")] > 0 for w in range(len(m.waypoints))]
+        again = score_track(m, X[i], r.trajectories[i][:, :6], aborted,
+                            int(r.scores[i, names.index("mission.return_reason")]))
+        np.testing.assert_array_equal(again, r.scores[i])

@@ -1,0 +1,70 @@
+"""What crosses the front-seat/back-seat interface, at the precision MAVLink carries it.
+
+The back-seat autonomy and the scorer never see the simulator's float64 state: they see
+what a front-seat reports over MAVLink — positions and contact points as float32 metres
+(``LOCAL_POSITION_NED``, ``OBSTACLE_DISTANCE_3D``), heading as float32 radians
+(``ATTITUDE``), energy used in whole hectojoules (``BATTERY_STATUS.energy_consumed``) —
+and the front-seat sees set-points as float32 velocity and yaw
+(``SET_POSITION_TARGET_LOCAL_NED``).  The batch simulator applies exactly these
+roundings too, so a scenario flown over MAVLink in software-in-the-loop scores the same,
+bit for bit, as in a batch.
+
+Frames: the simulator's local frame is x east, y north; MAVLink's LOCAL_NED is x north,
+y east, z down.  Depth is a commanded state here: ``vz < 0`` asks the front-seat to
+surface, ``vz > 0`` to stay at ``DEPTH_M``.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["report_position", "report_heading", "energy_consumed_hj", "battery_fraction", "encode_command",
+           "decode_command", "DEPTH_M", "HJ_PER_WH"]
+
+#: Running depth below the surface (m); LOCAL_POSITION_NED.z is 0 on the surface.
+DEPTH_M = 2.0
+#: 1 Wh = 3600 J = 36 hJ.
+HJ_PER_WH = 36.0
+#: Vertical speed in a set-point that says "surface" (negative, NED) or "stay down" (positive).
+SURFACE_VZ = -0.5
+DIVE_VZ = 0.5
+
+
+def report_position(v: np.ndarray) -> np.ndarray:
+    """A coordinate as reported in float32 metres."""
+    return np.asarray(v, dtype=np.float32).astype(np.float64)
+
+
+def report_heading(heading: np.ndarray) -> np.ndarray:
+    """A compass heading (radians) as ATTITUDE.yaw reports it: float32 in (-pi, pi]."""
+    h = np.pi - np.mod(np.pi - np.asarray(heading, dtype=float), 2.0 * np.pi)
+    return h.astype(np.float32).astype(np.float64)
+
+
+def energy_consumed_hj(start_wh: np.ndarray, energy_wh: np.ndarray) -> np.ndarray:
+    """Energy used so far in whole hectojoules (BATTERY_STATUS.energy_consumed, int32)."""
+    return np.floor((np.asarray(start_wh) - np.asarray(energy_wh)) * HJ_PER_WH + 1e-9).astype(np.int64)
+
+
+def battery_fraction(start_wh: np.ndarray, consumed_hj: np.ndarray, capacity_wh: float) -> np.ndarray:
+    """Charge fraction the back-seat derives from the energy consumed and the known start charge."""
+    return (np.asarray(start_wh, dtype=float) - np.asarray(consumed_hj, dtype=float) / HJ_PER_WH) / capacity_wh
+
+
+def encode_command(heading: np.ndarray, speed: np.ndarray, surface: np.ndarray
+                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(vx north, vy east, vz down, yaw) float32 set-point for a through-water heading and speed."""
+    heading = np.asarray(heading, dtype=float)
+    speed = np.asarray(speed, dtype=float)
+    vx = (speed * np.cos(heading)).astype(np.float32)
+    vy = (speed * np.sin(heading)).astype(np.float32)
+    vz = np.where(np.asarray(surface, dtype=bool), SURFACE_VZ, DIVE_VZ).astype(np.float32)
+    return vx, vy, vz, report_heading(heading).astype(np.float32)
+
+
+def decode_command(vx, vy, vz, yaw) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The front-seat's reading of a set-point: (heading, speed, surface)."""
+    vx = np.asarray(vx, dtype=np.float32).astype(np.float64)
+    vy = np.asarray(vy, dtype=np.float32).astype(np.float64)
+    heading = np.asarray(yaw, dtype=np.float32).astype(np.float64)
+    return heading, np.hypot(vx, vy), np.asarray(vz, dtype=np.float32) < 0
