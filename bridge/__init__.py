@@ -1,4 +1,32 @@
 """The Zenoh bus linking a MAVLink front-seat, back-seat autonomy processes and the MCAP logger.
 
 Never imports :mod:`sim`; the planner wires the autonomy to the bus.
+
+Modules: :mod:`bridge.keys` (the key scheme), :mod:`bridge.session` (loopback Zenoh
+sessions), :mod:`bridge.setpoint` (the back-seat set-point), :mod:`bridge.frames` (MAVLink
+frame handling), :mod:`bridge.mavlink_bridge` (:class:`MavlinkBridge`) and
+:mod:`bridge.logger` (:class:`McapLogger`). The names below are imported on first use, so
+``import bridge.keys`` stays cheap for a back-seat process.
 """
+
+from importlib import import_module
+
+_EXPORTS = {
+    "MavlinkBridge": "bridge.mavlink_bridge",
+    "McapLogger": "bridge.logger",
+    "read_log": "bridge.logger",
+    "read_metadata": "bridge.logger",
+    "Setpoint": "bridge.setpoint",
+    "open_session": "bridge.session",
+    "zenoh_config": "bridge.session",
+}
+
+__all__ = [*_EXPORTS, "keys"]
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(import_module(_EXPORTS[name]), name)
+    if name == "keys":
+        return import_module("bridge.keys")
+    raise AttributeError(f"module 'bridge' has no attribute {name!r}")

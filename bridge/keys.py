@@ -1,0 +1,115 @@
+"""The Zenoh key expressions of one vehicle, in one place so every process agrees on them.
+
+Everything about a vehicle lives under ``rapt/<vehicle>/``:
+
+==========================================  ===============================================
+``rapt/<v>/mavlink/<MSG_NAME>``             one decoded MAVLink message as JSON (``msg.to_dict()``,
+                                            bytes base64, NaN as null) plus ``"_recv_ns"``
+``rapt/<v>/mavlink/raw``                    every received MAVLink frame's bytes, in order, one
+                                            reliable publisher, signature blocks left intact
+``rapt/<v>/command/<source>``               a back-seat set-point, JSON ``{"tick_ms": int|null,
+                                            "vx": m/s north, "vy": m/s east, "vz": m/s down
+                                            (negative rises), "yaw": rad}``
+``rapt/<v>/control/active``                 the source name allowed to command (text payload;
+                                            ``"autonomy"`` until someone says otherwise)
+``rapt/<v>/status/<source>``                free JSON from a back-seat process (only logged)
+``rapt/<v>/meta/<name>``                    scenario metadata JSON (mission file, scenario id,
+                                            parameters, plan id); MCAP metadata in the log
+``rapt/<v>/alive/<role>``                   liveliness tokens (``bridge``, ``logger``, ...)
+==========================================  ===============================================
+
+``<vehicle>``, ``<source>``, ``<name>`` and ``<role>`` are single key chunks: non-empty, without
+``/``, ``*``, ``$``, ``?``, ``#`` or spaces. ``"*"`` is accepted where a pattern makes sense
+(``command(v, "*")``, ``alive(v, "*")``).
+"""
+
+from __future__ import annotations
+
+import re
+
+__all__ = [
+    "PREFIX",
+    "DEFAULT_VEHICLE",
+    "DEFAULT_ACTIVE",
+    "telemetry",
+    "raw",
+    "command",
+    "active",
+    "status",
+    "meta",
+    "alive",
+    "everything",
+    "split",
+]
+
+PREFIX = "rapt"
+DEFAULT_VEHICLE = "uuv1"
+DEFAULT_ACTIVE = "autonomy"
+
+_CHUNK = re.compile(r"[A-Za-z0-9_.\-]+\Z")
+
+
+def _chunk(value: str, argument: str, *, wildcard: bool = False) -> str:
+    if not isinstance(value, str):
+        raise TypeError(f"{argument}: expected a str, got {type(value).__name__}")
+    if wildcard and value == "*":
+        return value
+    if not _CHUNK.match(value):
+        raise ValueError(
+            f"{argument}: {value!r} is not a single key chunk (letters, digits, '_', '.', '-')"
+        )
+    return value
+
+
+def telemetry(vehicle: str, msg_name: str) -> str:
+    """``rapt/<vehicle>/mavlink/<MSG_NAME>``: one decoded message type as JSON."""
+    name = _chunk(msg_name, "msg_name", wildcard=True)
+    if name == "raw":
+        raise ValueError("msg_name: 'raw' is reserved for raw frames")
+    return f"{PREFIX}/{_chunk(vehicle, 'vehicle')}/mavlink/{name}"
+
+
+def raw(vehicle: str) -> str:
+    """``rapt/<vehicle>/mavlink/raw``: every received frame's bytes, in order."""
+    return f"{PREFIX}/{_chunk(vehicle, 'vehicle')}/mavlink/raw"
+
+
+def command(vehicle: str, source: str) -> str:
+    """``rapt/<vehicle>/command/<source>``: a set-point JSON from a back-seat source."""
+    return f"{PREFIX}/{_chunk(vehicle, 'vehicle')}/command/{_chunk(source, 'source', wildcard=True)}"
+
+
+def active(vehicle: str) -> str:
+    """``rapt/<vehicle>/control/active``: the name of the source allowed to command."""
+    return f"{PREFIX}/{_chunk(vehicle, 'vehicle')}/control/active"
+
+
+def status(vehicle: str, source: str) -> str:
+    """``rapt/<vehicle>/status/<source>``: free JSON from a back-seat process."""
+    return f"{PREFIX}/{_chunk(vehicle, 'vehicle')}/status/{_chunk(source, 'source', wildcard=True)}"
+
+
+def meta(vehicle: str, name: str) -> str:
+    """``rapt/<vehicle>/meta/<name>``: scenario metadata JSON."""
+    return f"{PREFIX}/{_chunk(vehicle, 'vehicle')}/meta/{_chunk(name, 'name', wildcard=True)}"
+
+
+def alive(vehicle: str, role: str) -> str:
+    """``rapt/<vehicle>/alive/<role>``: a liveliness token."""
+    return f"{PREFIX}/{_chunk(vehicle, 'vehicle')}/alive/{_chunk(role, 'role', wildcard=True)}"
+
+
+def everything(vehicle: str) -> str:
+    """``rapt/<vehicle>/**``: all keys of one vehicle."""
+    return f"{PREFIX}/{_chunk(vehicle, 'vehicle')}/**"
+
+
+def split(key: str) -> tuple[str, str, str]:
+    """``"rapt/uuv1/mavlink/HEARTBEAT"`` -> ``("uuv1", "mavlink", "HEARTBEAT")``.
+
+    Raises ValueError for a key outside the scheme.
+    """
+    parts = str(key).split("/", 3)
+    if len(parts) != 4 or parts[0] != PREFIX or not parts[1] or not parts[2] or not parts[3]:
+        raise ValueError(f"key: {key!r} is not of the form {PREFIX}/<vehicle>/<kind>/<name>")
+    return parts[1], parts[2], parts[3]

@@ -1,0 +1,390 @@
+"""Everything on one vehicle's bus, recorded to an MCAP file that Foxglove opens and a crash cannot ruin.
+
+Each key becomes a JSON channel (``jsonschema`` schemas), raw MAVLink frames go to
+``/mavlink/raw`` with their signature blocks stripped (logs must never carry signatures),
+``meta/*`` keys also become MCAP metadata records, and liveliness changes are logged as
+``{"alive": bool}`` on the token's key. Chunks are small and flushed about once a second,
+so a logger killed with SIGKILL leaves a file that :func:`read_log` reads up to the last
+flush. Samples are taken off Zenoh by a thread that only queues them (unbounded) and are
+written by another, so a slow disk never makes Zenoh drop; anything that cannot be written
+is counted in ``stats["errors"]``, never dropped silently.
+
+Payloads that are not a JSON object are wrapped: ``{"value": <JSON or text>}``, or
+``{"base64": ...}`` for bytes that are not UTF-8.
+"""
+
+from __future__ import annotations
+
+import argparse
+import base64
+import json
+import logging
+import queue
+import signal
+import sys
+import threading
+import time
+from pathlib import Path
+from typing import Any
+
+import zenoh
+from mcap.exceptions import EndOfFile, McapError
+from mcap.reader import NonSeekingReader, make_reader
+from mcap.writer import CompressionType, Writer
+
+from . import keys
+from .frames import strip_signature
+from .session import open_session, zenoh_config
+
+__all__ = ["McapLogger", "read_log", "read_metadata", "RAW_TOPIC", "main"]
+
+log = logging.getLogger(__name__)
+
+#: Topic of the raw MAVLink frames (signature blocks stripped).
+RAW_TOPIC = "/mavlink/raw"
+#: Message encoding of RAW_TOPIC: one MAVLink frame per message, no schema.
+RAW_ENCODING = "mavlink"
+
+_OBJECT = {"type": "object"}
+_SCHEMAS: dict[str, dict] = {
+    "rapt.Json": {"type": "object", "title": "free JSON"},
+    "rapt.Setpoint": {
+        "type": "object",
+        "title": "back-seat set-point",
+        "properties": {
+            "tick_ms": {"type": ["integer", "null"]},
+            "vx": {"type": "number", "description": "m/s north"},
+            "vy": {"type": "number", "description": "m/s east"},
+            "vz": {"type": "number", "description": "m/s down"},
+            "yaw": {"type": "number", "description": "rad"},
+        },
+    },
+    "rapt.Liveliness": {"type": "object", "properties": {"alive": {"type": "boolean"}}},
+}
+_STOP = object()
+
+
+def _schema_for(kind: str, name: str) -> tuple[str, dict]:
+    if kind == "mavlink":
+        return f"mavlink.{name}", {
+            "type": "object",
+            "title": f"MAVLink {name}",
+            "properties": {"mavpackettype": {"type": "string"}, "_recv_ns": {"type": "integer"}},
+        }
+    if kind == "command":
+        return "rapt.Setpoint", _SCHEMAS["rapt.Setpoint"]
+    if kind == "alive":
+        return "rapt.Liveliness", _SCHEMAS["rapt.Liveliness"]
+    return "rapt.Json", _SCHEMAS["rapt.Json"]
+
+
+def _as_object(payload: bytes) -> tuple[bytes, dict]:
+    """(JSON bytes of an object, the object) for any payload; see the module docstring."""
+    try:
+        text = payload.decode("utf-8")
+    except UnicodeDecodeError:
+        obj: dict = {"base64": base64.b64encode(payload).decode("ascii")}
+        return json.dumps(obj).encode(), obj
+    try:
+        value = json.loads(text)
+    except ValueError:
+        obj = {"value": text}
+        return json.dumps(obj).encode(), obj
+    if isinstance(value, dict):
+        return payload, value
+    obj = {"value": value}
+    return json.dumps(obj).encode(), obj
+
+
+class McapLogger:
+    """Record ``rapt/<vehicle>/**`` and its liveliness tokens to the MCAP file ``path``.
+
+    ``session``: an open ``zenoh.Session`` (left open), a ``zenoh.Config``, or None for an
+    in-process session of its own. Use as a context manager or call :meth:`start`/:meth:`close`.
+    """
+
+    def __init__(
+        self,
+        path: str | Path,
+        session: zenoh.Session | zenoh.Config | None = None,
+        *,
+        vehicle: str = keys.DEFAULT_VEHICLE,
+        chunk_size: int = 64 * 1024,
+        flush_interval_s: float = 1.0,
+        compression: str = "zstd",
+    ):
+        keys.everything(vehicle)  # validates the name
+        if not (isinstance(chunk_size, int) and chunk_size > 0):
+            raise ValueError(f"chunk_size: expected an int > 0, got {chunk_size!r}")
+        if not (isinstance(flush_interval_s, (int, float)) and flush_interval_s > 0):
+            raise ValueError(f"flush_interval_s: expected a number > 0, got {flush_interval_s!r}")
+        codecs = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
+        if compression not in codecs:
+            raise ValueError(f"compression: expected one of {sorted(codecs)}, got {compression!r}")
+        self.path = Path(path)
+        self.vehicle = vehicle
+        self.chunk_size = chunk_size
+        self.flush_interval_s = float(flush_interval_s)
+        self._compression = codecs[compression]
+        self._session_arg = session
+        self._session: zenoh.Session | None = None
+        self._owns_session = False
+        self._queue: queue.SimpleQueue = queue.SimpleQueue()
+        self._subs: list[Any] = []
+        self._token: Any = None
+        self._drainers: list[threading.Thread] = []
+        self._writer_thread: threading.Thread | None = None
+        self._file: Any = None
+        self._writer: Writer | None = None
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, tuple[int, list[int]]] = {}
+        self._started = False
+        self._closed = False
+        self._counts = dict.fromkeys(("written", "metadata", "errors", "flushes"), 0)
+        self._received = [0, 0]  # per drain thread (data, liveliness): no shared counter between threads
+
+    # ----------------------------------------------------------------- life cycle
+    def __enter__(self) -> McapLogger:
+        self.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def start(self) -> McapLogger:
+        """Open the file, subscribe, start the threads."""
+        if self._started:
+            raise RuntimeError("start: the logger was already started")
+        self._started = True
+        try:
+            self._file = open(self.path, "wb")
+            self._writer = Writer(self._file, chunk_size=self.chunk_size, compression=self._compression)
+            self._writer.start(profile="", library="rapt-bridge")
+            if isinstance(self._session_arg, zenoh.Session):
+                self._session = self._session_arg
+            else:
+                config = self._session_arg if self._session_arg is not None else zenoh_config()
+                self._session = zenoh.open(config)
+                self._owns_session = True
+            s = self._session
+            self._writer_thread = threading.Thread(target=self._write_loop, name="mcap-writer", daemon=True)
+            self._writer_thread.start()
+            data = s.declare_subscriber(keys.everything(self.vehicle), zenoh.handlers.FifoChannel(1 << 16))
+            alive = s.liveliness().declare_subscriber(
+                keys.alive(self.vehicle, "*"), zenoh.handlers.FifoChannel(1024), history=True
+            )
+            self._subs = [data, alive]
+            for index, sub in enumerate(self._subs):
+                thread = threading.Thread(
+                    target=self._drain, args=(sub.handler, index), name="mcap-drain", daemon=True
+                )
+                thread.start()
+                self._drainers.append(thread)
+            self._token = s.liveliness().declare_token(keys.alive(self.vehicle, "logger"))
+        except BaseException:
+            self.close()
+            raise
+        return self
+
+    def close(self) -> None:
+        """Stop receiving, write what was queued, finish the MCAP file (summary + footer). Idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        if self._token is not None:
+            try:
+                self._token.undeclare()
+            except zenoh.ZError:
+                pass
+        for sub in self._subs:
+            try:
+                sub.undeclare()
+            except zenoh.ZError:
+                pass
+        for thread in self._drainers:
+            thread.join(timeout=10)
+        if self._writer_thread is not None:
+            self._queue.put(_STOP)
+            self._writer_thread.join(timeout=60)
+        if self._writer is not None:
+            self._writer.finish()
+        if self._file is not None:
+            self._file.close()
+        if self._owns_session and self._session is not None:
+            self._session.close()
+
+    @property
+    def stats(self) -> dict[str, int]:
+        """received (samples off Zenoh), written (MCAP messages), metadata, errors, flushes, queued."""
+        out = {"received": sum(self._received), **self._counts}
+        out["queued"] = self._queue.qsize()
+        return out
+
+    # ----------------------------------------------------------------- threads
+    def _drain(self, handler: Any, index: int) -> None:
+        """Only move samples from Zenoh's channel to the unbounded queue: never blocks Zenoh for long."""
+        put, received = self._queue.put, self._received
+        while True:
+            try:
+                sample = handler.recv()
+            except zenoh.ZError:  # undeclared: closing
+                return
+            now = time.time_ns()
+            received[index] += 1
+            if index == 1:  # liveliness
+                put((str(sample.key_expr), now, None, sample.kind == zenoh.SampleKind.PUT))
+            else:
+                put((str(sample.key_expr), now, sample.payload.to_bytes(), sample.kind == zenoh.SampleKind.PUT))
+
+    def _write_loop(self) -> None:
+        get = self._queue.get
+        next_flush = time.monotonic() + self.flush_interval_s
+        dirty = False
+        while True:
+            timeout = next_flush - time.monotonic()
+            try:
+                item = get(timeout=timeout) if timeout > 0 else get(block=False)
+            except queue.Empty:
+                item = None
+            if item is _STOP:
+                return
+            if item is not None:
+                try:
+                    self._write(*item)
+                    dirty = True
+                except Exception:  # one bad sample must not stop the log
+                    self._counts["errors"] += 1
+                    log.exception("logger: cannot write a sample on %s", item[0])
+            if time.monotonic() >= next_flush:
+                if dirty:
+                    self._writer.flush()
+                    self._counts["flushes"] += 1
+                    dirty = False
+                next_flush = time.monotonic() + self.flush_interval_s
+
+    def _channel(self, topic: str, encoding: str, schema: tuple[str, dict] | None) -> tuple[int, list[int]]:
+        entry = self._channels.get(topic)
+        if entry is None:
+            schema_id = 0
+            if schema is not None:
+                name, body = schema
+                schema_id = self._schemas.get(name, 0)
+                if not schema_id:
+                    schema_id = self._writer.register_schema(name, "jsonschema", json.dumps(body).encode())
+                    self._schemas[name] = schema_id
+            channel_id = self._writer.register_channel(topic, encoding, schema_id)
+            entry = self._channels[topic] = (channel_id, [0])
+        return entry
+
+    def _write(self, key: str, recv_ns: int, payload: bytes | None, put: bool) -> None:
+        try:
+            _, kind, name = keys.split(key)
+        except ValueError:
+            kind, name = "", key
+        w = self._writer
+        if payload is None:  # liveliness change
+            channel_id, seq = self._channel(key, "json", _schema_for("alive", name))
+            data = json.dumps({"alive": put}).encode()
+            publish_ns = recv_ns
+        elif kind == "mavlink" and name == "raw":
+            channel_id, seq = self._channel(RAW_TOPIC, RAW_ENCODING, None)
+            data = strip_signature(payload)
+            publish_ns = recv_ns
+        else:
+            channel_id, seq = self._channel(key, "json", _schema_for(kind, name))
+            if put:
+                data, obj = _as_object(payload)
+            else:
+                obj = {"deleted": True}
+                data = json.dumps(obj).encode()
+            stamp = obj.get("_recv_ns")
+            publish_ns = stamp if isinstance(stamp, int) and not isinstance(stamp, bool) else recv_ns
+            if kind == "meta" and put:
+                w.add_metadata(name, {str(k): v if isinstance(v, str) else json.dumps(v) for k, v in obj.items()})
+                self._counts["metadata"] += 1
+        w.add_message(channel_id, log_time=recv_ns, data=data, publish_time=publish_ns, sequence=seq[0])
+        seq[0] += 1
+        self._counts["written"] += 1
+
+
+# --------------------------------------------------------------------------- reading
+def _decode(channel: Any, data: bytes) -> Any:
+    return json.loads(data) if channel.message_encoding == "json" else bytes(data)
+
+
+def read_log(path: str | Path) -> list[tuple[str, int, Any]]:
+    """``[(topic, log_time_ns, payload)]`` in file order; JSON as dicts, raw frames as bytes.
+
+    A file without a footer (the logger was killed) is read linearly up to its last complete
+    chunk.
+    """
+    path = Path(path)
+    with open(path, "rb") as f:
+        try:
+            reader = make_reader(f)
+            reader.get_summary()
+            return [
+                (c.topic, m.log_time, _decode(c, m.data)) for _, c, m in reader.iter_messages(log_time_order=False)
+            ]
+        except McapError:
+            f.seek(0)
+        out = []
+        try:
+            for _, c, m in NonSeekingReader(f).iter_messages(log_time_order=False):
+                out.append((c.topic, m.log_time, _decode(c, m.data)))
+        except EndOfFile:
+            pass
+        return out
+
+
+def read_metadata(path: str | Path) -> dict[str, dict[str, str]]:
+    """``{name: {key: str}}`` from the MCAP metadata records (a later record of a name wins)."""
+    path = Path(path)
+    out: dict[str, dict[str, str]] = {}
+    with open(path, "rb") as f:
+        try:
+            reader = make_reader(f)
+            reader.get_summary()
+            for record in reader.iter_metadata():
+                out[record.name] = dict(record.metadata)
+            return out
+        except McapError:
+            f.seek(0)
+            out.clear()
+        try:
+            for record in NonSeekingReader(f).iter_metadata():
+                out[record.name] = dict(record.metadata)
+        except EndOfFile:
+            pass
+        return out
+
+
+# --------------------------------------------------------------------------- command line
+def main(argv: list[str] | None = None) -> int:
+    """``python -m bridge.logger OUT.mcap --connect tcp/127.0.0.1:7447``: log until SIGINT/SIGTERM."""
+    parser = argparse.ArgumentParser(prog="python -m bridge.logger", description=main.__doc__)
+    parser.add_argument("path", type=Path)
+    parser.add_argument("--vehicle", default=keys.DEFAULT_VEHICLE)
+    parser.add_argument("--connect", action="append", default=[], help="Zenoh endpoint to connect to")
+    parser.add_argument("--listen", action="append", default=[], help="Zenoh endpoint to listen on")
+    parser.add_argument("--config", type=Path, default=None, help="Zenoh config file (taken as-is)")
+    parser.add_argument("--flush-interval", type=float, default=1.0)
+    parser.add_argument("--chunk-size", type=int, default=64 * 1024)
+    args = parser.parse_args(argv)
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    with open_session(args.listen, args.connect, args.config) as session:
+        with McapLogger(
+            args.path, session, vehicle=args.vehicle, chunk_size=args.chunk_size, flush_interval_s=args.flush_interval
+        ) as logger:
+            print("ready", flush=True)
+            while not stop.wait(0.5):
+                pass
+            stats = logger.stats
+    print(json.dumps(stats), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

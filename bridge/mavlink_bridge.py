@@ -1,0 +1,656 @@
+"""One MAVLink link (the vehicle's front-seat) joined to the Zenoh bus, with the safety gates between.
+
+Every valid frame goes out as raw bytes and as JSON per message type; set-points from the
+active back-seat source come back as ``SET_POSITION_TARGET_LOCAL_NED`` (velocity + yaw). On a
+real vehicle nothing reaches MAVLink unless ``allow_commands`` is set, the vehicle is heard
+from, the set-point does not push it out of the geofence and the rate limit allows it. The
+link may drop or go silent at any time: the bridge then forwards nothing and keeps reopening
+the connection until frames come back.
+
+Benchmarking the round trip: a vehicle stamps ``time_boot_ms`` on a telemetry message, the
+back-seat echoes it as the set-point's ``tick_ms``, and the vehicle receives it back as
+``SET_POSITION_TARGET_LOCAL_NED.time_boot_ms``; wall time between the two, measured at the
+vehicle, is the MAVLink -> Zenoh -> back-seat -> Zenoh -> MAVLink latency. ``stats`` holds
+every counter a benchmark needs to check that nothing was refused or dropped on the way.
+"""
+
+from __future__ import annotations
+
+import logging
+import math
+import os
+import select
+import socket
+import threading
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+os.environ.setdefault("MAVLINK20", "1")
+
+import zenoh  # noqa: E402
+from pymavlink import mavutil  # noqa: E402
+
+from . import keys  # noqa: E402
+from .frames import FrameSplitter, mavlink2, message_json  # noqa: E402
+from .session import zenoh_config  # noqa: E402
+from .setpoint import Setpoint  # noqa: E402
+
+__all__ = ["MavlinkBridge", "ARDUSUB_MODES", "TYPE_MASK_VELOCITY_YAW", "load_signing_key", "outward"]
+
+log = logging.getLogger(__name__)
+
+#: ArduSub ``Mode::Number`` (ArduSub/mode.h).
+ARDUSUB_MODES = {
+    "STABILIZE": 0,
+    "ACRO": 1,
+    "ALT_HOLD": 2,
+    "AUTO": 3,
+    "GUIDED": 4,
+    "CIRCLE": 7,
+    "SURFACE": 9,
+    "POSHOLD": 16,
+    "MANUAL": 19,
+    "MOTOR_DETECT": 20,
+    "SURFTRAK": 21,
+}
+
+#: Ignore position (1|2|4), acceleration (64|128|256) and yaw rate (2048): velocity + yaw.
+TYPE_MASK_VELOCITY_YAW = 2503
+
+_DIALECT = "ardupilotmega"
+_POLL_S = 0.1  # idle wake-up: silence detection and resync of a stalled partial frame
+_MAX_BACKOFF_S = 0.5
+
+
+def load_signing_key(signing_key: bytes | str | os.PathLike) -> bytes:
+    """A 32-byte MAVLink2 signing key from bytes, or from a file of 32 bytes or 64 hex digits."""
+    if isinstance(signing_key, (bytes, bytearray)):
+        if len(signing_key) != 32:
+            raise ValueError(f"signing_key: expected 32 bytes, got {len(signing_key)}")
+        return bytes(signing_key)
+    if not isinstance(signing_key, (str, os.PathLike)):
+        raise TypeError(f"signing_key: expected 32 bytes or a key file path, got {type(signing_key).__name__}")
+    path = Path(signing_key)
+    if not path.is_file():
+        raise ValueError(f"signing_key: {str(path)!r} is not a file")
+    data = path.read_bytes()
+    if len(data) == 32:
+        return data
+    text = data.strip()
+    if len(text) == 64:
+        try:
+            return bytes.fromhex(text.decode("ascii"))
+        except (ValueError, UnicodeDecodeError):
+            pass
+    raise ValueError(f"signing_key: {str(path)!r} holds neither 32 bytes nor 64 hex digits")
+
+
+def outward(
+    fence: tuple[float, float, float, float], margin: float, north: float, east: float, vn: float, ve: float
+) -> bool:
+    """True when velocity (vn, ve) heads out through an edge of ``fence`` that (north, east) is within ``margin`` of."""
+    n_min, n_max, e_min, e_max = fence
+    return (
+        (vn > 0 and north >= n_max - margin)
+        or (vn < 0 and north <= n_min + margin)
+        or (ve > 0 and east >= e_max - margin)
+        or (ve < 0 and east <= e_min + margin)
+    )
+
+
+def _geofence(value: Sequence[float] | None) -> tuple[float, float, float, float] | None:
+    if value is None:
+        return None
+    try:
+        n_min, n_max, e_min, e_max = (float(v) for v in value)
+    except (TypeError, ValueError):
+        raise ValueError("geofence: expected (north_min, north_max, east_min, east_max) in metres") from None
+    if not all(math.isfinite(v) for v in (n_min, n_max, e_min, e_max)) or n_min >= n_max or e_min >= e_max:
+        raise ValueError(f"geofence: need finite north_min < north_max and east_min < east_max, got {tuple(value)}")
+    return n_min, n_max, e_min, e_max
+
+
+class MavlinkBridge:
+    """Bridge one pymavlink connection (``udpin:``, ``udpout:``, ``tcp:``, ``tcpin:``, serial) to Zenoh.
+
+    ``session`` is an open ``zenoh.Session`` (not closed by the bridge), a ``zenoh.Config``
+    or None (the bridge opens and closes its own session; None means in-process only).
+    Use as a context manager, or call :meth:`start` and :meth:`close`.
+    """
+
+    def __init__(
+        self,
+        device: str,
+        session: zenoh.Session | zenoh.Config | None = None,
+        *,
+        vehicle: str = keys.DEFAULT_VEHICLE,
+        allow_commands: bool = False,
+        geofence: Sequence[float] | None = None,
+        geofence_margin_m: float = 20.0,
+        max_rate_hz: float | None = None,
+        signing_key: bytes | str | os.PathLike | None = None,
+        silence_s: float = 2.0,
+        heartbeat_hz: float = 1.0,
+        source_system: int = 1,
+        source_component: int = mavlink2.MAV_COMP_ID_ONBOARD_COMPUTER,
+        baud: int = 115200,
+    ):
+        if not isinstance(device, str) or not device:
+            raise ValueError(f"device: expected a pymavlink connection string, got {device!r}")
+        keys.raw(vehicle)  # validates the name
+        if not (isinstance(geofence_margin_m, (int, float)) and geofence_margin_m >= 0):
+            raise ValueError(f"geofence_margin_m: expected a number >= 0, got {geofence_margin_m!r}")
+        if max_rate_hz is not None and not (isinstance(max_rate_hz, (int, float)) and max_rate_hz > 0):
+            raise ValueError(f"max_rate_hz: expected None or a number > 0, got {max_rate_hz!r}")
+        if not (isinstance(silence_s, (int, float)) and silence_s > 0):
+            raise ValueError(f"silence_s: expected a number > 0, got {silence_s!r}")
+        if not (isinstance(heartbeat_hz, (int, float)) and heartbeat_hz > 0):
+            raise ValueError(f"heartbeat_hz: expected a number > 0, got {heartbeat_hz!r}")
+        for name, value in (("source_system", source_system), ("source_component", source_component)):
+            if not (isinstance(value, int) and 1 <= value <= 255):
+                raise ValueError(f"{name}: expected an int in 1..255, got {value!r}")
+        self.device = device
+        self.vehicle = vehicle
+        self.allow_commands = bool(allow_commands)
+        self.geofence = _geofence(geofence)
+        self.geofence_margin_m = float(geofence_margin_m)
+        self.max_rate_hz = None if max_rate_hz is None else float(max_rate_hz)
+        self.silence_s = float(silence_s)
+        self.heartbeat_hz = float(heartbeat_hz)
+        self.source_system = source_system
+        self.source_component = source_component
+        self.baud = baud
+        self._key = None if signing_key is None else load_signing_key(signing_key)
+        self._session_arg = session
+
+        self._session: zenoh.Session | None = None
+        self._owns_session = False
+        self._conn: Any = None
+        self._datagram = device.startswith(("udp:", "udpin:", "udpout:", "udpbcast:", "mcast:"))
+        self._send_lock = threading.Lock()
+        self._stop = threading.Event()
+        self._wake_r: socket.socket | None = None  # wakes the reader thread on close()
+        self._wake_w: socket.socket | None = None
+        self._threads: list[threading.Thread] = []
+        self._splitter = FrameSplitter(self._decode)
+        self._publishers: dict[str, zenoh.Publisher] = {}
+        self._raw_pub: zenoh.Publisher | None = None
+        self._cmd_sub: Any = None
+        self._active_sub: Any = None
+        self._cmd_handler: Any = None
+        self._active_handler: Any = None
+        self._opened_at = time.monotonic()
+        self._token: Any = None
+        self._active = keys.DEFAULT_ACTIVE
+        self._active_lock = threading.Lock()
+        self._target: tuple[int, int] | None = None
+        self._position: tuple[float, float, float] | None = None  # north, east, monotonic time
+        self._last_frame = -math.inf
+        self._heard = False  # frames seen on the current connection
+        self._lost = False  # a link loss happened after frames were seen
+        self._last_forward = -math.inf
+        self._acks: dict[int, tuple[int, int]] = {}
+        self._ack_cond = threading.Condition()
+        self._ack_serial = 0
+        self._started = False
+        self._closed = False
+        self._counts = dict.fromkeys(
+            (
+                "frames_in",
+                "frames_out",
+                "heartbeats_out",
+                "published",
+                "publish_errors",
+                "commands_in",
+                "commands_inactive",
+                "commands_invalid",
+                "commands_refused",
+                "commands_stale",
+                "commands_geofence",
+                "commands_rate_limited",
+                "commands_forwarded",
+                "reconnects",
+                "link_losses",
+                "reopens",
+                "open_failures",
+            ),
+            0,
+        )
+
+    # ----------------------------------------------------------------- life cycle
+    def __enter__(self) -> MavlinkBridge:
+        self.start()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __repr__(self) -> str:
+        return (
+            f"MavlinkBridge({self.device!r}, vehicle={self.vehicle!r}, allow_commands={self.allow_commands}, "
+            f"signed={self._key is not None})"
+        )
+
+    def start(self) -> MavlinkBridge:
+        """Open the session entities and the link, then start the reader, command and heartbeat threads."""
+        if self._started:
+            raise RuntimeError("start: the bridge was already started")
+        self._started = True
+        try:
+            self._wake_r, self._wake_w = socket.socketpair()
+            if isinstance(self._session_arg, zenoh.Session):
+                self._session = self._session_arg
+            else:
+                config = self._session_arg if self._session_arg is not None else zenoh_config()
+                self._session = zenoh.open(config)
+                self._owns_session = True
+            s, v = self._session, self.vehicle
+            self._raw_pub = s.declare_publisher(
+                keys.raw(v),
+                encoding=zenoh.Encoding.APPLICATION_OCTET_STREAM,
+                reliability=zenoh.Reliability.RELIABLE,
+            )
+            self._cmd_sub = s.declare_subscriber(keys.command(v, "*"), zenoh.handlers.FifoChannel(4096))
+            self._active_sub = s.declare_subscriber(keys.active(v), zenoh.handlers.FifoChannel(256))
+            # Handlers are read by our threads; the subscriber objects are only touched here and in close().
+            self._cmd_handler = self._cmd_sub.handler
+            self._active_handler = self._active_sub.handler
+            self._token = s.liveliness().declare_token(keys.alive(v, "bridge"))
+            try:
+                self._open()
+            except (OSError, ConnectionError) as error:  # the reader thread keeps trying
+                log.warning("bridge %s: cannot open %s yet (%s); retrying", v, self.device, error)
+                self._counts["open_failures"] += 1
+            for target, name in (
+                (self._read_loop, "reader"),
+                (self._command_loop, "commands"),
+                (self._heartbeat_loop, "heartbeat"),
+            ):
+                thread = threading.Thread(target=target, name=f"bridge-{v}-{name}", daemon=True)
+                thread.start()
+                self._threads.append(thread)
+        except BaseException:
+            self.close()
+            raise
+        return self
+
+    def close(self) -> None:
+        """Stop the threads, close the link, undeclare everything, close an owned session. Idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        self._stop.set()
+        if self._wake_w is not None:
+            try:
+                self._wake_w.send(b"x")
+            except OSError:
+                pass
+        for sub in (self._cmd_sub, self._active_sub):
+            if sub is not None:
+                try:
+                    sub.undeclare()
+                except zenoh.ZError:
+                    pass
+        for thread in self._threads:
+            thread.join(timeout=5)
+        with self._send_lock:
+            self._close_conn()
+        for entity in (self._token, self._raw_pub, *self._publishers.values()):
+            if entity is not None:
+                try:
+                    entity.undeclare()
+                except zenoh.ZError:
+                    pass
+        self._publishers.clear()
+        if self._owns_session and self._session is not None:
+            self._session.close()
+        for sock in (self._wake_r, self._wake_w):
+            if sock is not None:
+                sock.close()
+
+    # ----------------------------------------------------------------- state
+    @property
+    def stats(self) -> dict[str, int]:
+        """Counters: frames in/out, bad frames, refused unsigned frames, commands by fate, reconnects."""
+        out = dict(self._counts)
+        sp = self._splitter
+        out.update(
+            bad_frames=sp.bad_frames,
+            bad_bytes=sp.bad_bytes,
+            unsigned_refused=sp.unsigned,
+            bad_signature=sp.bad_signature,
+        )
+        return out
+
+    @property
+    def linked(self) -> bool:
+        """A frame arrived within ``silence_s`` and an autopilot HEARTBEAT gave the target."""
+        return self._target is not None and time.monotonic() - self._last_frame <= self.silence_s
+
+    @property
+    def target(self) -> tuple[int, int] | None:
+        """(system, component) of the autopilot, from its HEARTBEAT."""
+        return self._target
+
+    @property
+    def active(self) -> str:
+        """The source whose set-points are forwarded."""
+        self._drain_active()
+        return self._active
+
+    # ----------------------------------------------------------------- MAVLink link
+    def _open(self) -> None:
+        try:
+            conn = mavutil.mavlink_connection(
+                self.device,
+                baud=self.baud,
+                source_system=self.source_system,
+                source_component=self.source_component,
+                dialect=_DIALECT,
+                autoreconnect=False,
+                retries=0,
+            )
+        except ImportError as error:  # pymavlink imports pyserial only for serial ports
+            raise RuntimeError(f"device: {self.device!r} is a serial port and needs pyserial ({error})") from None
+        if isinstance(conn, mavutil.mavudp):
+            try:  # bursts of small datagrams overflow the default buffer; the kernel caps this
+                conn.port.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 21)
+            except OSError:
+                pass
+        if self._key is not None:
+            conn.setup_signing(self._key, sign_outgoing=True, allow_unsigned_callback=_refuse_unsigned)
+        with self._send_lock:
+            self._conn = conn
+        self._splitter.reset()
+        self._heard = False
+        self._opened_at = time.monotonic()
+
+    def _close_conn(self) -> None:
+        conn, self._conn = self._conn, None
+        if conn is not None:
+            try:
+                conn.close()
+            except Exception:  # closing a dead serial port or socket may raise
+                pass
+
+    def _link_lost(self, reason: str) -> None:
+        log.info("bridge %s: link lost (%s); reopening %s", self.vehicle, reason, self.device)
+        if self._heard:
+            self._lost = True
+            self._counts["link_losses"] += 1
+        self._last_frame = -math.inf
+        self._target = None  # nothing stale: a vehicle that comes back announces itself again
+        self._position = None
+        with self._send_lock:
+            self._close_conn()
+
+    def _decode(self, buf: bytearray) -> Any:
+        conn = self._conn
+        if self._key is None:
+            return conn.mav.decode(buf)
+        with self._send_lock:  # signing timestamps are shared with the sending side
+            return conn.mav.decode(buf)
+
+    def _read_loop(self) -> None:
+        backoff = 0.05
+        while not self._stop.is_set():
+            conn = self._conn
+            if conn is None:
+                try:
+                    self._open()
+                    self._counts["reopens"] += 1
+                    backoff = 0.05
+                except Exception as error:  # OSError, SerialException, ...: keep trying
+                    self._counts["open_failures"] += 1
+                    log.debug("bridge %s: reopen failed: %s", self.vehicle, error)
+                    if self._stop.wait(backoff):
+                        break
+                    backoff = min(2 * backoff, _MAX_BACKOFF_S)
+                continue
+            try:
+                fd = conn.fd
+                readable = select.select([fd, self._wake_r], [], [], _POLL_S)[0]
+            except (OSError, ValueError, TypeError) as error:
+                self._link_lost(f"select: {error}")
+                continue
+            if self._wake_r in readable:
+                break
+            if fd in readable:
+                accepting = isinstance(conn, mavutil.mavtcpin) and conn.port is None
+                try:
+                    if isinstance(conn, mavutil.mavtcp):
+                        data = conn.port.recv(65536)  # pymavlink's recv hides EOF behind a print
+                    else:
+                        data = conn.recv(65536)
+                except BlockingIOError:
+                    continue
+                except Exception as error:  # OSError, SerialException
+                    self._link_lost(str(error) or type(error).__name__)
+                    continue
+                if not data:
+                    if not (accepting or self._datagram):
+                        self._link_lost("end of stream")
+                    continue
+                recv_ns = time.time_ns()
+                for frame, msg in self._splitter.feed(data, datagram=self._datagram):
+                    self._on_frame(frame, msg, recv_ns)
+            elif self._splitter.pending:  # idle with a partial frame held back: junk, not a frame
+                recv_ns = time.time_ns()
+                for frame, msg in self._splitter.resync():
+                    self._on_frame(frame, msg, recv_ns)
+            # no valid frame for silence_s (even if junk or refused frames keep coming): reopen
+            quiet_since = self._last_frame if self._heard else self._opened_at
+            if time.monotonic() - quiet_since > self.silence_s:
+                self._link_lost("silent")
+
+    def _on_frame(self, frame: bytes, msg: Any, recv_ns: int) -> None:
+        now = time.monotonic()
+        if self._lost:
+            self._lost = False
+            self._counts["reconnects"] += 1
+            log.info("bridge %s: link back", self.vehicle)
+        self._heard = True
+        self._last_frame = now
+        self._counts["frames_in"] += 1
+        name = msg.get_type()
+        if name == "HEARTBEAT":
+            if msg.autopilot != mavlink2.MAV_AUTOPILOT_INVALID:
+                self._target = (msg.get_srcSystem(), msg.get_srcComponent())
+        elif name == "LOCAL_POSITION_NED":
+            self._position = (msg.x, msg.y, now)
+        elif name == "COMMAND_ACK" and msg.result != mavlink2.MAV_RESULT_IN_PROGRESS:
+            with self._ack_cond:
+                self._ack_serial += 1
+                self._acks[msg.command] = (msg.result, self._ack_serial)
+                self._ack_cond.notify_all()
+        try:
+            pub = self._publishers.get(name)
+            if pub is None:
+                pub = self._session.declare_publisher(
+                    keys.telemetry(self.vehicle, name),
+                    encoding=zenoh.Encoding.APPLICATION_JSON,
+                    reliability=zenoh.Reliability.RELIABLE,
+                )  # not express: batching keeps bursts lossless, and costs no measurable latency
+                self._publishers[name] = pub
+            pub.put(message_json(msg, recv_ns))
+            self._raw_pub.put(frame)
+            self._counts["published"] += 2
+        except Exception as error:  # a closing session, an unencodable field: count, keep reading
+            self._counts["publish_errors"] += 1
+            log.warning("bridge %s: cannot publish %s: %s", self.vehicle, name, error)
+
+    def _send(self, msg: Any) -> bool:
+        """Send under the lock; False when there is no open connection."""
+        with self._send_lock:
+            conn = self._conn
+            if conn is None:
+                return False
+            conn.mav.send(msg)
+            self._counts["frames_out"] += 1
+            return True
+
+    # ----------------------------------------------------------------- heartbeat
+    def _heartbeat_loop(self) -> None:
+        period = 1.0 / self.heartbeat_hz
+        while not self._stop.is_set():
+            msg = mavlink2.MAVLink_heartbeat_message(
+                mavlink2.MAV_TYPE_ONBOARD_CONTROLLER,
+                mavlink2.MAV_AUTOPILOT_INVALID,
+                0,
+                0,
+                mavlink2.MAV_STATE_ACTIVE,
+                3,
+            )
+            try:
+                if self._send(msg):
+                    self._counts["heartbeats_out"] += 1
+            except Exception as error:  # a write on a dying link
+                log.debug("bridge %s: heartbeat not sent: %s", self.vehicle, error)
+            if self._stop.wait(period):
+                break
+
+    # ----------------------------------------------------------------- commands
+    def _drain_active(self) -> None:
+        handler = self._active_handler
+        if handler is None:
+            return
+        with self._active_lock:
+            while True:
+                try:
+                    sample = handler.try_recv()
+                except zenoh.ZError:
+                    return
+                if sample is None:
+                    return
+                if sample.kind == zenoh.SampleKind.DELETE:
+                    self._active = keys.DEFAULT_ACTIVE
+                    continue
+                try:
+                    name = sample.payload.to_bytes().decode("utf-8").strip()
+                    keys.command(self.vehicle, name)
+                except ValueError:
+                    log.warning("bridge %s: ignoring an invalid active source", self.vehicle)
+                    continue
+                self._active = name
+
+    def _command_loop(self) -> None:
+        handler = self._cmd_handler
+        while True:
+            try:
+                sample = handler.recv()
+            except zenoh.ZError:  # the subscriber was undeclared: closing
+                return
+            try:
+                self._drain_active()
+                self._on_command(sample)
+            except Exception:  # never let one bad sample stop command handling
+                log.exception("bridge %s: command handling failed", self.vehicle)
+
+    def _on_command(self, sample: Any) -> None:
+        c = self._counts
+        c["commands_in"] += 1
+        if sample.kind != zenoh.SampleKind.PUT:
+            return
+        source = str(sample.key_expr).rsplit("/", 1)[-1]
+        if source != self._active:
+            c["commands_inactive"] += 1
+            return
+        try:
+            sp = Setpoint.from_json(sample.payload.to_bytes())
+        except ValueError as error:
+            c["commands_invalid"] += 1
+            log.debug("bridge %s: invalid set-point from %s: %s", self.vehicle, source, error)
+            return
+        if not self.allow_commands:
+            c["commands_refused"] += 1
+            return
+        now = time.monotonic()
+        target = self._target
+        if target is None or now - self._last_frame > self.silence_s:
+            c["commands_stale"] += 1
+            return
+        if self.geofence is not None and (sp.vx or sp.vy):
+            pos = self._position
+            if (
+                pos is None
+                or now - pos[2] > self.silence_s
+                or outward(self.geofence, self.geofence_margin_m, pos[0], pos[1], sp.vx, sp.vy)
+            ):
+                c["commands_geofence"] += 1
+                return
+        if self.max_rate_hz is not None:
+            if now - self._last_forward < 1.0 / self.max_rate_hz:
+                c["commands_rate_limited"] += 1
+                return
+            self._last_forward = now
+        msg = mavlink2.MAVLink_set_position_target_local_ned_message(
+            sp.tick_ms or 0,
+            target[0],
+            target[1],
+            mavlink2.MAV_FRAME_LOCAL_NED,
+            TYPE_MASK_VELOCITY_YAW,
+            0.0,
+            0.0,
+            0.0,
+            sp.vx,
+            sp.vy,
+            sp.vz,
+            0.0,
+            0.0,
+            0.0,
+            sp.yaw,
+            0.0,
+        )
+        if self._send(msg):
+            c["commands_forwarded"] += 1
+        else:
+            c["commands_stale"] += 1
+
+    # ----------------------------------------------------------------- COMMAND_LONG helpers
+    def arm(self, armed: bool = True, *, force: bool = False, timeout: float = 1.0, retries: int = 3) -> int:
+        """Arm (or disarm) with MAV_CMD_COMPONENT_ARM_DISARM; returns the COMMAND_ACK result (0 = accepted)."""
+        params = (1.0 if armed else 0.0, 21196.0 if force else 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        return self._command_long(mavlink2.MAV_CMD_COMPONENT_ARM_DISARM, params, timeout, retries, "arm")
+
+    def set_mode(self, mode: str | int, *, timeout: float = 1.0, retries: int = 3) -> int:
+        """Switch ArduSub mode (name like "GUIDED" or number) with MAV_CMD_DO_SET_MODE; returns the ACK result."""
+        if isinstance(mode, str):
+            number = ARDUSUB_MODES.get(mode.strip().upper())
+            if number is None:
+                raise ValueError(f"mode: unknown ArduSub mode {mode!r} (known: {', '.join(ARDUSUB_MODES)})")
+        elif isinstance(mode, int) and not isinstance(mode, bool) and mode in ARDUSUB_MODES.values():
+            number = mode
+        else:
+            raise ValueError(f"mode: expected an ArduSub mode name or number, got {mode!r}")
+        params = (float(mavlink2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED), float(number), 0.0, 0.0, 0.0, 0.0, 0.0)
+        return self._command_long(mavlink2.MAV_CMD_DO_SET_MODE, params, timeout, retries, "set_mode")
+
+    def _command_long(self, command: int, params: Sequence[float], timeout: float, retries: int, what: str) -> int:
+        if not self.allow_commands:
+            self._counts["commands_refused"] += 1
+            raise PermissionError(f"{what}: allow_commands is False, nothing but HEARTBEAT is sent to the vehicle")
+        if not self.linked:
+            raise RuntimeError(f"{what}: no autopilot heard within the last {self.silence_s} s")
+        target = self._target
+        for attempt in range(retries + 1):
+            with self._ack_cond:
+                serial = self._ack_serial
+            msg = mavlink2.MAVLink_command_long_message(target[0], target[1], command, attempt, *params)
+            self._send(msg)
+            deadline = time.monotonic() + timeout
+            with self._ack_cond:
+                while True:
+                    ack = self._acks.get(command)
+                    if ack is not None and ack[1] > serial:
+                        return ack[0]
+                    remaining = deadline - time.monotonic()
+                    if remaining <= 0 or self._stop.is_set():
+                        break
+                    self._ack_cond.wait(remaining)
+        raise TimeoutError(f"{what}: no COMMAND_ACK after {retries + 1} tries")
+
+
+def _refuse_unsigned(mav: Any, msg_id: int) -> bool:
+    return False

@@ -1,0 +1,95 @@
+"""Zenoh sessions that stay on loopback unless a deployment config file says otherwise.
+
+Zenoh 1.x peers listen on every interface and multicast-scout by default; a test rig or a
+single-computer vehicle must not. :func:`zenoh_config` turns scouting (multicast and gossip)
+off and uses only the endpoints given, which must be loopback (``tcp/127.0.0.1:7447``,
+``tcp/[::1]:7447``, ``tcp/localhost:7447`` or ``unixsock-stream/<path>``).
+
+Topology: one process (normally the one running the bridge) listens on a hub endpoint as a
+peer; every other process connects to it in client mode. A peer routes for its clients, but
+peers do not forward between other peers, so two back-seats connected to the hub as peers
+would not hear each other (probed on eclipse-zenoh 1.10). A config file (a real deployment
+with a back-seat on another computer) is taken as-is.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Iterable
+from pathlib import Path
+
+import zenoh
+
+__all__ = ["DEFAULT_HUB", "zenoh_config", "open_session"]
+
+#: The conventional hub endpoint when nothing else is given to a command line.
+DEFAULT_HUB = "tcp/127.0.0.1:7447"
+
+_LOOPBACK_HOSTS = ("127.", "[::1]", "localhost")
+
+
+def _endpoints(values: Iterable[str] | str, argument: str) -> list[str]:
+    if isinstance(values, str):
+        values = [values]
+    out = []
+    for endpoint in values:
+        if not isinstance(endpoint, str) or "/" not in endpoint:
+            raise ValueError(f"{argument}: {endpoint!r} is not a Zenoh endpoint like 'tcp/127.0.0.1:7447'")
+        protocol, _, address = endpoint.partition("/")
+        if protocol == "unixsock-stream":
+            out.append(endpoint)
+            continue
+        host = address.split("#", 1)[0].split("?", 1)[0]
+        if protocol not in ("tcp", "udp", "tls", "quic", "ws") or not host.startswith(_LOOPBACK_HOSTS):
+            raise ValueError(
+                f"{argument}: {endpoint!r} is not a loopback endpoint; pass config_file for other networks"
+            )
+        out.append(endpoint)
+    return out
+
+
+def zenoh_config(
+    listen: Iterable[str] | str = (),
+    connect: Iterable[str] | str = (),
+    config_file: str | Path | None = None,
+    *,
+    mode: str | None = None,
+) -> zenoh.Config:
+    """A config listening on ``listen`` and connecting to ``connect``, scouting off.
+
+    ``mode`` defaults to ``"client"`` when only ``connect`` is given and ``"peer"`` otherwise
+    (a hub, or with neither endpoint an in-process-only session). With ``config_file`` the
+    file is loaded unchanged and the other arguments must be left out.
+    """
+    if config_file is not None:
+        if listen or connect or mode:
+            raise ValueError("config_file: give either a config file or listen/connect/mode, not both")
+        path = Path(config_file)
+        if not path.is_file():
+            raise FileNotFoundError(f"config_file: {str(path)!r} does not exist")
+        return zenoh.Config.from_file(str(path))
+    listen, connect = _endpoints(listen, "listen"), _endpoints(connect, "connect")
+    if mode is None:
+        mode = "client" if connect and not listen else "peer"
+    if mode not in ("peer", "client", "router"):
+        raise ValueError(f"mode: expected 'peer', 'client' or 'router', got {mode!r}")
+    if mode == "client" and (listen or not connect):
+        raise ValueError("mode: a client needs connect endpoints and cannot listen")
+    config = zenoh.Config()
+    config.insert_json5("mode", json.dumps(mode))
+    config.insert_json5("listen/endpoints", json.dumps(listen))
+    config.insert_json5("connect/endpoints", json.dumps(connect))
+    config.insert_json5("scouting/multicast/enabled", "false")
+    config.insert_json5("scouting/gossip/enabled", "false")
+    return config
+
+
+def open_session(
+    listen: Iterable[str] | str = (),
+    connect: Iterable[str] | str = (),
+    config_file: str | Path | None = None,
+    *,
+    mode: str | None = None,
+) -> zenoh.Session:
+    """Open a session with :func:`zenoh_config`; close it (or use ``with``) when done."""
+    return zenoh.open(zenoh_config(listen, connect, config_file, mode=mode))
