@@ -172,5 +172,203 @@ def study(
         out.print(f"study stored in {store} ({results[0][1].n_evaluated} scenarios)", soft_wrap=True, highlight=False)
 
 
+def _mission_and_scenario(mission_file: Path, scenario: str):
+    import sim
+    from planner.scenarios import resolve_scenario
+
+    if not mission_file.is_file():
+        fail(f"MISSION_FILE: {mission_file} does not exist; give the path of a mission TOML file")
+    try:
+        mission = sim.load_mission(mission_file)
+        u, sid = resolve_scenario(mission, scenario)
+        scen = sim.scenario.make_scenarios(mission, u[None, :])
+    except ValueError as exc:
+        fail(str(exc))
+    if not scen.valid[0]:
+        fail(f"--scenario: {scenario} is invalid for {mission.name} ({scen.invalid_reason[0]}); pick another")
+    return mission, u, sid
+
+
+def _wait_for_signal(until=None) -> None:
+    """Block until SIGINT/SIGTERM (or ``until()`` is true), so a process stops cleanly."""
+    import signal
+    import threading
+
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    while not stop.wait(0.1):
+        if until is not None and until():
+            break
+
+
+def _bus_session(connect: list[str], config_file: Optional[Path]):
+    """A Zenoh session joining the bus: the config file as given, else the endpoints (loopback by default)."""
+    from bridge.session import open_session
+
+    try:
+        return open_session(config_file=config_file) if config_file is not None else open_session(connect=connect)
+    except (ValueError, OSError) as exc:
+        fail(str(exc))
+
+
+ScenarioOpt = Annotated[str, typer.Option("--scenario", help="Row number of the mission's Sobol design, or a "
+                                                              "JSON file with 'u' or 'parameters'.")]
+ZenohListen = Annotated[list[str], typer.Option("--zenoh-listen", help="Zenoh endpoints to listen on.")]
+ZenohConnect = Annotated[list[str], typer.Option("--zenoh-connect", help="Zenoh endpoints to connect to.")]
+ZenohConfig = Annotated[Optional[Path], typer.Option("--zenoh-config", help="Zenoh config file (real deployments).")]
+Vehicle = Annotated[str, typer.Option("--vehicle", help="Vehicle name on the bus.")]
+
+
+@app.command()
+def run(
+    mission_file: Annotated[Path, typer.Argument(help="Mission file (TOML).")],
+    scenario: ScenarioOpt = "0",
+    speedup: Annotated[Optional[float], typer.Option(help="Real time times this factor (default: lock-step).")] = None,
+    log: Annotated[Optional[Path], typer.Option(help="Record the bus to this MCAP file.")] = None,
+    timeout: Annotated[float, typer.Option(help="Give up after this many wall seconds.")] = 600.0,
+) -> None:
+    """Fly one scenario software-in-the-loop: front-seat, bridge, autonomy (and logger)."""
+    import numpy as np
+
+    import sim
+    from planner.sil import run_sil
+
+    mission, u, sid = _mission_and_scenario(mission_file, scenario)
+    if speedup is not None and speedup <= 0:
+        fail(f"--speedup: expected a factor > 0, got {speedup}")
+    try:
+        result = run_sil(mission, u, log_path=log, speedup=speedup, timeout_s=timeout, scenario_id=sid,
+                         mission_file=str(mission_file))
+    except (ValueError, RuntimeError, TimeoutError) as exc:
+        fail(str(exc))
+    batch = sim.simulate(mission, u[None, :])
+    same = bool(np.array_equal(result.scores, batch.scores[0]))
+    names = batch.names
+    mode = ("TF", "SS", "MS", "TS")[int(2 * result.scores[0] + result.scores[1])]
+    table = Table(title=f"{mission.name} scenario {sid}: software in the loop")
+    table.add_column("", justify="left")
+    table.add_column("value", justify="right")
+    table.add_row("ended", result.ended)
+    table.add_row("mode", mode)
+    table.add_row("simulated time", f"{result.sim_s:,.0f} s in {result.wall_s:.1f} s ({result.speedup:,.0f}x)")
+    for name in ("mission_areas", "transmission", "recovery", "nogo_areas", "mission.battery_left"):
+        if name in names:
+            table.add_row(name, f"{result.scores[names.index(name)]:g}")
+    table.add_row("same scores as the batch simulator", "yes" if same else "NO")
+    if log is not None:
+        table.add_row("log", str(log))
+    out.print(table)
+
+
+@app.command()
+def frontseat(
+    mission_file: Annotated[Path, typer.Argument(help="Mission file (TOML).")],
+    mavlink: Annotated[str, typer.Option(help="pymavlink connection to serve on, e.g. udpin:127.0.0.1:14550.")],
+    scenario: ScenarioOpt = "0",
+    speedup: Annotated[Optional[float], typer.Option(help="Real time times this factor (default: lock-step).")] = None,
+) -> None:
+    """Serve the simulated front-seat of one scenario on a MAVLink connection."""
+    from sim.frontseat import FrontSeat
+
+    mission, u, _ = _mission_and_scenario(mission_file, scenario)
+    try:
+        fs = FrontSeat(mission, u, mavlink, lockstep=speedup is None, speedup=speedup or 1.0)
+    except (ValueError, OSError) as exc:
+        fail(f"--mavlink: {exc}")
+    import threading
+
+    thread = threading.Thread(target=fs.serve, daemon=True)
+    thread.start()
+    _wait_for_signal()
+    fs.stop()
+    thread.join(timeout=5)
+    fs.close()
+
+
+@app.command("bridge")
+def bridge_cmd(
+    mavlink: Annotated[str, typer.Option(help="The vehicle's MAVLink connection (pymavlink string).")],
+    vehicle: Vehicle = "uuv1",
+    zenoh_listen: ZenohListen = ["tcp/127.0.0.1:7447"],
+    zenoh_connect: ZenohConnect = [],
+    zenoh_config: ZenohConfig = None,
+    allow_commands: Annotated[bool, typer.Option("--allow-commands", help="Forward back-seat set-points.")] = False,
+    signing_key: Annotated[Optional[Path], typer.Option(help="MAVLink 2 signing key file (32 bytes).")] = None,
+    geofence: Annotated[Optional[str], typer.Option(help="north_min,north_max,east_min,east_max in m.")] = None,
+    max_rate: Annotated[Optional[float], typer.Option("--max-rate", help="Set-points per second at most.")] = None,
+    arm: Annotated[bool, typer.Option("--arm", help="Once the vehicle is heard: GUIDED and arm "
+                                                     "(needs --allow-commands).")] = False,
+) -> None:
+    """Join a vehicle's MAVLink port (simulated or real) to the Zenoh bus."""
+    import time
+    from bridge.mavlink_bridge import MavlinkBridge
+    from bridge.session import zenoh_config as make_config
+
+    fence = None
+    if geofence is not None:
+        try:
+            fence = [float(v) for v in geofence.split(",")]
+        except ValueError:
+            fail(f"--geofence: expected four numbers north_min,north_max,east_min,east_max, got {geofence!r}")
+    try:
+        conf = (make_config(config_file=zenoh_config) if zenoh_config is not None
+                else make_config(listen=zenoh_listen, connect=zenoh_connect))
+        if arm and not allow_commands:
+            fail("--arm: arming sends commands to the vehicle; add --allow-commands")
+        with MavlinkBridge(mavlink, conf, vehicle=vehicle, allow_commands=allow_commands, geofence=fence,
+                           max_rate_hz=max_rate, signing_key=signing_key) as link:
+            if arm:
+                deadline = time.monotonic() + 30
+                while link.target is None and time.monotonic() < deadline:
+                    time.sleep(0.05)
+                if link.target is None:
+                    fail("--mavlink: no vehicle HEARTBEAT within 30 s; check the connection string")
+                link.set_mode("GUIDED")
+                link.arm(True)
+            _wait_for_signal()
+    except (ValueError, OSError) as exc:
+        fail(str(exc))
+
+
+@app.command()
+def autonomy(
+    mission_file: Annotated[Path, typer.Argument(help="Mission file (TOML).")],
+    scenario: ScenarioOpt = "0",
+    vehicle: Vehicle = "uuv1",
+    source: Annotated[str, typer.Option(help="Name this autonomy publishes its set-points under.")] = "autonomy",
+    zenoh_connect: ZenohConnect = ["tcp/127.0.0.1:7447"],
+    zenoh_config: ZenohConfig = None,
+) -> None:
+    """Run the back-seat autonomy of one scenario on the bus."""
+    from planner.backseat import BackSeat
+
+    mission, u, _ = _mission_and_scenario(mission_file, scenario)
+    session = _bus_session(zenoh_connect, zenoh_config)
+    try:
+        with BackSeat(session, vehicle, mission, u, source=source):
+            _wait_for_signal()
+    finally:
+        session.close()
+
+
+@app.command("log")
+def log_cmd(
+    out_file: Annotated[Path, typer.Option("--out", help="MCAP file to write.")],
+    vehicle: Vehicle = "uuv1",
+    zenoh_connect: ZenohConnect = ["tcp/127.0.0.1:7447"],
+    zenoh_config: ZenohConfig = None,
+) -> None:
+    """Record a vehicle's bus traffic to MCAP until stopped."""
+    from bridge.logger import McapLogger
+
+    session = _bus_session(zenoh_connect, zenoh_config)
+    try:
+        with McapLogger(out_file, session, vehicle=vehicle):
+            _wait_for_signal()
+    finally:
+        session.close()
+
+
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(app())

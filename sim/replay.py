@@ -21,7 +21,7 @@ from sim.scoring import Scorer
 from sim.sonar import sense
 from sim.world import Telemetry
 
-__all__ = ["TRACK_FIELDS", "score_track"]
+__all__ = ["TRACK_FIELDS", "score_track", "TrackBuilder"]
 
 #: Columns of a track: one row per reported step.
 TRACK_FIELDS = ("t", "x", "y", "heading", "energy_hj", "surfaced")
@@ -55,3 +55,35 @@ def score_track(mission: Mission, u: Sequence[float], track: np.ndarray, wp_abor
     aborted = np.zeros((1, len(mission.waypoints)), dtype=bool)
     aborted[0, :len(wp_aborted)] = np.asarray(wp_aborted, dtype=bool)[:len(mission.waypoints)]
     return scorer.scores(aborted, np.array([int(return_reason)]))[0]
+
+
+class TrackBuilder:
+    """Turns a vehicle's MAVLink telemetry, in order, into track rows (TRACK_FIELDS).
+
+    A step's reports (LOCAL_POSITION_NED, ATTITUDE, BATTERY_STATUS) are closed by
+    SYSTEM_TIME; a step reported twice (a front-seat repeating itself for late joiners)
+    counts once.  Feed decoded pymavlink messages with :meth:`add`.
+    """
+
+    NEEDED = ("LOCAL_POSITION_NED", "ATTITUDE", "BATTERY_STATUS")
+
+    def __init__(self):
+        self.rows: list[tuple[float, ...]] = []
+        self._tick: dict = {}
+        self._last_ms = -1
+
+    def add(self, msg) -> None:
+        kind = msg.get_type()
+        if kind in self.NEEDED:
+            self._tick[kind] = msg
+        elif kind == "SYSTEM_TIME":
+            ms = int(msg.time_boot_ms)
+            if ms > self._last_ms and all(k in self._tick for k in self.NEEDED):
+                lp, att, bat = (self._tick[k] for k in self.NEEDED)
+                self.rows.append((ms / 1000.0, float(lp.y), float(lp.x), float(att.yaw), float(bat.energy_consumed),
+                                  1.0 if lp.z <= 0 else 0.0))
+                self._last_ms = ms
+            self._tick = {}
+
+    def track(self) -> np.ndarray:
+        return np.array(self.rows, dtype=float).reshape(-1, len(TRACK_FIELDS))

@@ -1,0 +1,131 @@
+"""The back-seat autonomy as a process on the bus: telemetry in, set-points out.
+
+It runs the very autonomy of the batch simulator (:class:`sim.autonomy.Autonomy`, one
+vehicle) on what the front-seat reports over MAVLink, relayed by the bridge on Zenoh:
+it reads the ordered raw frame stream, gathers one step's telemetry until SYSTEM_TIME
+closes it, decides once per step (a repeated step gets the same answer again), and
+publishes the set-point under its source name.  Whether that set-point reaches the
+vehicle is the bus's choice (the ``control/active`` key), so another autonomy can fly
+while this one's commands are still recorded.  It also publishes its own account of the
+run — aborted waypoints, why it turned home — which no track shows.
+
+This module is where planner wires ``sim`` to ``bridge``: neither imports the other.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import threading
+import time
+
+import numpy as np
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
+
+from bridge import keys  # noqa: E402
+from sim.autonomy import Autonomy, Observation  # noqa: E402
+from sim.interface import battery_fraction, encode_command  # noqa: E402
+from sim.mission import Mission  # noqa: E402
+from sim.scenario import make_scenarios  # noqa: E402
+
+__all__ = ["BackSeat"]
+
+
+class BackSeat:
+    """Fly scenario ``u`` of ``mission`` from the bus of ``session`` as ``source``."""
+
+    def __init__(self, session, vehicle: str, mission: Mission, u, source: str = "autonomy"):
+        scen = make_scenarios(mission, np.asarray(u, dtype=float).reshape(1, -1))
+        if not scen.valid[0]:
+            raise ValueError(f"scenario: invalid for mission '{mission.name}' ({scen.invalid_reason[0]})")
+        self.mission, self.scen, self.vehicle, self.source = mission, scen, vehicle, source
+        self.autonomy = Autonomy(scen)
+        self.start_wh = scen.battery0 * mission.vehicle.battery_wh
+        self.n_contacts = scen.obstacles.shape[1] + scen.barriers.shape[1]
+        self.session = session
+        self._parser = mavlink.MAVLink(None)
+        self._parser.robust_parsing = True
+        self._tick: dict = {}
+        self._answered: dict[int, dict] = {}
+        self.last_tick_ms = -1
+        self.steps = 0
+        self._stop = threading.Event()
+        self._sub = session.declare_subscriber(keys.raw(vehicle))  # FIFO channel, read by our thread
+        self._pub = session.declare_publisher(keys.command(vehicle, source))
+        self._status = session.declare_publisher(keys.status(vehicle, source))
+        self._token = session.liveliness().declare_token(keys.alive(vehicle, source))
+        self._thread = threading.Thread(target=self._run, name=f"backseat-{source}", daemon=True)
+
+    def start(self) -> "BackSeat":
+        self._thread.start()
+        return self
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5)
+        for entity in (self._sub, self._pub, self._status, self._token):
+            try:
+                entity.undeclare()
+            except Exception:  # already gone with the session
+                pass
+
+    def __enter__(self) -> "BackSeat":
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # -- the loop --------------------------------------------------------------------
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            sample = self._sub.try_recv()
+            if sample is None:
+                time.sleep(0.0002)
+                continue
+            for msg in self._parser.parse_buffer(sample.payload.to_bytes()) or []:
+                self._on_message(msg)
+
+    def _on_message(self, msg) -> None:
+        kind = msg.get_type()
+        if kind == "SYSTEM_TIME":
+            self._decide(int(msg.time_boot_ms))
+            self._tick = {}
+        elif kind == "OBSTACLE_DISTANCE_3D":
+            self._tick.setdefault("contacts", {})[int(msg.obstacle_id)] = (float(msg.y), float(msg.x))
+        elif kind in ("LOCAL_POSITION_NED", "ATTITUDE", "BATTERY_STATUS"):
+            self._tick[kind] = msg
+
+    def _decide(self, tick_ms: int) -> None:
+        if tick_ms in self._answered:  # the front-seat repeated a step: same answer again
+            self._pub.put(json.dumps(self._answered[tick_ms]))
+            return
+        if tick_ms < self.last_tick_ms or not all(k in self._tick for k in
+                                                 ("LOCAL_POSITION_NED", "ATTITUDE", "BATTERY_STATUS")):
+            return  # a stale or incomplete step (joined mid-step): wait for the next one
+        obs = self._observation(tick_ms)
+        cmd = self.autonomy.step(obs, self.mission.dt, np.ones(1, dtype=bool))
+        vx, vy, vz, yaw = encode_command(cmd.heading, cmd.speed, cmd.surface)
+        answer = {"tick_ms": tick_ms, "vx": float(vx[0]), "vy": float(vy[0]), "vz": float(vz[0]),
+                  "yaw": float(yaw[0])}
+        self._answered = {tick_ms: answer}
+        self.last_tick_ms = tick_ms
+        self.steps += 1
+        self._pub.put(json.dumps(answer))
+        a = self.autonomy
+        self._status.put(json.dumps({
+            "tick_ms": tick_ms, "goal": int(a.goal_kind[0]), "returning": bool(a.returning[0]),
+            "return_reason": int(a.return_reason[0]), "wp_aborted": [bool(v) for v in a.wp_aborted[0]],
+        }))
+
+    def _observation(self, tick_ms: int) -> Observation:
+        lp, att, bat = self._tick["LOCAL_POSITION_NED"], self._tick["ATTITUDE"], self._tick["BATTERY_STATUS"]
+        k = self.n_contacts
+        cx, cy, seen = np.zeros((1, k)), np.zeros((1, k)), np.zeros((1, k), dtype=bool)
+        for j, (east, north) in self._tick.get("contacts", {}).items():
+            if 0 <= j < k:
+                cx[0, j], cy[0, j], seen[0, j] = east, north, True
+        battery = battery_fraction(self.start_wh, np.array([bat.energy_consumed]), self.mission.vehicle.battery_wh)
+        return Observation(tick_ms / 1000.0, np.array([float(lp.y)]), np.array([float(lp.x)]),
+                           np.array([float(att.yaw)]), battery, cx, cy, np.zeros((1, k)), seen)

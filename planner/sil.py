@@ -1,0 +1,157 @@
+"""Software-in-the-loop: one scenario flown through the interfaces used on the water.
+
+The simulated front-seat (:class:`sim.frontseat.FrontSeat`) speaks MAVLink on loopback;
+the bridge puts it on a Zenoh bus; the back-seat autonomy (:class:`planner.backseat.
+BackSeat`) flies it from the bus; the MCAP logger records everything.  In lock-step the
+simulated clock advances when the back-seat answers each step, so a 45-minute mission
+flies in seconds.  The run is scored from its recorded telemetry, the way a range day's
+logs are (:func:`sim.replay.score_track`).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import threading
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
+
+from bridge import keys  # noqa: E402
+from bridge.mavlink_bridge import MavlinkBridge  # noqa: E402
+from bridge.session import open_session  # noqa: E402
+from planner.backseat import BackSeat  # noqa: E402
+from sim.frontseat import FrontSeat  # noqa: E402
+from sim.mission import Mission  # noqa: E402
+from sim.replay import TrackBuilder, score_track  # noqa: E402
+
+__all__ = ["SilResult", "run_sil", "free_port"]
+
+
+def free_port(kind: int = socket.SOCK_DGRAM) -> int:
+    """A free loopback port (UDP by default)."""
+    with socket.socket(socket.AF_INET, kind) as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@dataclass
+class SilResult:
+    scores: np.ndarray
+    track: np.ndarray
+    ended: str
+    sim_s: float
+    wall_s: float
+    steps: int
+    wp_aborted: list[bool]
+    return_reason: int
+    bridge_stats: dict = field(default_factory=dict)
+    log_path: Path | None = None
+
+    @property
+    def speedup(self) -> float:
+        return self.sim_s / self.wall_s if self.wall_s > 0 else float("inf")
+
+
+class _Recorder:
+    """Builds the track from the bus's ordered raw frames (independent of the back-seat)."""
+
+    def __init__(self, session, vehicle: str):
+        self.builder = TrackBuilder()
+        self.parser = mavlink.MAVLink(None)
+        self.parser.robust_parsing = True
+        self.sub = session.declare_subscriber(keys.raw(vehicle))
+        self._stop = threading.Event()
+        self.thread = threading.Thread(target=self._run, daemon=True)
+        self.thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.is_set():
+            sample = self.sub.try_recv()
+            if sample is None:
+                time.sleep(0.0005)
+                continue
+            for msg in self.parser.parse_buffer(sample.payload.to_bytes()) or []:
+                self.builder.add(msg)
+
+    def close(self) -> None:
+        self._stop.set()
+        self.thread.join(timeout=5)
+        self.sub.undeclare()
+
+
+def run_sil(mission: Mission, u, *, vehicle: str = "uuv1", log_path: str | Path | None = None,
+            speedup: float | None = None, timeout_s: float = 600.0, scenario_id: str = "",
+            mission_file: str = "") -> SilResult:
+    """Fly scenario ``u`` through front-seat, bridge, back-seat (and logger); return its scores.
+
+    ``speedup=None`` runs lock-step (as fast as the back-seat answers); a number runs the
+    front-seat in real time times that factor.
+    """
+    u = np.asarray(u, dtype=float)
+    port = free_port()
+    fs = FrontSeat(mission, u, f"udpin:127.0.0.1:{port}", lockstep=speedup is None, speedup=speedup or 1.0)
+    fs_thread = threading.Thread(target=fs.serve, name="frontseat", daemon=True)
+    session = open_session(listen=[f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"])
+    logger = bridge = backseat = recorder = None
+    started = time.perf_counter()
+    try:
+        fs_thread.start()
+        if log_path is not None:
+            from bridge.logger import McapLogger
+
+            logger = McapLogger(log_path, session, vehicle=vehicle).start()
+        recorder = _Recorder(session, vehicle)
+        session.put(keys.meta(vehicle, "scenario"), json.dumps({
+            "mission": mission.name, "mission_file": mission_file or mission.source, "scenario_id": scenario_id,
+            "u": u.tolist(), "parameters": _jsonable(mission.space.decode(u[None, :])[0]),
+        }))
+        backseat = BackSeat(session, vehicle, mission, u).start()
+        bridge = MavlinkBridge(f"udpout:127.0.0.1:{port}", session, vehicle=vehicle, allow_commands=True).start()
+        deadline = time.monotonic() + 10
+        while bridge.target is None and time.monotonic() < deadline:
+            time.sleep(0.01)
+        if bridge.target is None:
+            raise RuntimeError("front-seat: no HEARTBEAT on the MAVLink link within 10 s")
+        bridge.set_mode("GUIDED")
+        bridge.arm(True)
+        deadline = time.monotonic() + timeout_s
+        while not fs.ended and time.monotonic() < deadline:
+            time.sleep(0.005)
+        if not fs.ended:
+            raise TimeoutError(f"timeout_s: the run did not end within {timeout_s} s of wall time")
+        time.sleep(0.3)  # let the last step's telemetry reach the recorder and the logger
+        wall = time.perf_counter() - started
+        status = backseat.autonomy
+        wp_aborted = [bool(v) for v in status.wp_aborted[0]]
+        reason = int(status.return_reason[0])
+        track = recorder.builder.track()
+        stats = dict(bridge.stats)
+    finally:
+        for part in (backseat, bridge, recorder, logger):
+            if part is not None:
+                part.close()
+        fs.stop()
+        fs_thread.join(timeout=5)
+        fs.close()
+        session.close()
+    scores = score_track(mission, u, track, wp_aborted, reason)
+    return SilResult(scores, track, fs.stats.ended, fs.t, wall, fs.stats.ticks, wp_aborted, reason, stats,
+                     Path(log_path) if log_path else None)
+
+
+def _jsonable(values: dict) -> dict:
+    out = {}
+    for k, v in values.items():
+        if isinstance(v, (np.floating, np.integer)):
+            v = v.item()
+        elif isinstance(v, tuple):
+            v = list(v)
+        out[k] = v
+    return out
