@@ -262,6 +262,68 @@ def run(
 
 
 @app.command()
+def generate(
+    mission_file: Annotated[Path, typer.Argument(help="Mission file (TOML).")],
+    out_dir: Annotated[Path, typer.Option("--out", help="Directory for plan.json and the per-scenario files.")],
+    budget: Annotated[int, typer.Option(help="Runs in the search.")] = 3000,
+    pairs: Annotated[int, typer.Option(help="Boundary pairs in the plan.")] = 5,
+    global_fraction: Annotated[float, typer.Option(help="Share of the budget for the space-filling start.")] = 0.2,
+    dithers: Annotated[int, typer.Option(help="Stochastic dither runs per pair.")] = 2000,
+    seed: Annotated[int, typer.Option(help="Seed of every random choice.")] = 0,
+    batch_size: Annotated[int, typer.Option("--batch-size", help="Runs per search batch.")] = 500,
+    resume: Annotated[bool, typer.Option(help="Continue the study stored in OUT/study.db.")] = False,
+) -> None:
+    """Search a mission, choose boundary pairs, dither them and write a field plan."""
+    from planner.generate import GenerateConfig, generate as run_generate
+
+    import sim
+
+    if not mission_file.is_file():
+        fail(f"MISSION_FILE: {mission_file} does not exist; give the path of a mission TOML file")
+    try:
+        mission = sim.load_mission(mission_file)
+    except ValueError as exc:
+        fail(str(exc))
+    store = out_dir / "study.db"
+    if store.exists() and not resume:
+        fail(f"--out: {store} already holds a study; add --resume to continue it or choose another directory")
+    cfg = GenerateConfig(budget=budget, pairs=pairs, global_fraction=global_fraction, seed=seed,
+                         batch_size=batch_size, dithers=dithers, store=store)
+    try:
+        cfg.check()
+    except ValueError as exc:
+        fail(str(exc))
+    out_dir.mkdir(parents=True, exist_ok=True)
+    with Progress(TextColumn("{task.description:>8}"), BarColumn(), MofNCompleteColumn(),
+                  TextColumn("{task.fields[rate]}"), TimeElapsedColumn(), console=err, transient=True,
+                  disable=not err.is_terminal) as bar:
+        tasks: dict = {}
+        start = time.perf_counter()
+
+        def progress(stage: str, done: int, total: int) -> None:
+            if stage not in tasks:
+                tasks[stage] = bar.add_task(stage, total=total, rate="")
+            rate = f"{done / max(time.perf_counter() - start, 1e-9):,.0f} runs/s" if stage == "search" else ""
+            bar.update(tasks[stage], completed=done, rate=rate)
+
+        try:
+            plan = run_generate(mission, mission_file, out_dir, cfg, progress)
+        except (ValueError, RuntimeError) as exc:
+            fail(str(exc))
+    table = Table(title=f"{mission.name}: field plan in {out_dir}")
+    for col in ("pair", "sub-boundary", "modes", "distance", "P(predicted mode) a / b"):
+        table.add_column(col, justify="left" if col == "sub-boundary" else "right")
+    by_id = {sc["id"]: sc for sc in plan["scenarios"]}
+    for p in plan["pairs"]:
+        probs = [by_id[s]["dithering"].get("p_predicted_mode") for s in p["scenarios"]]
+        table.add_row(str(p["id"]), ", ".join(p["elements"]), " / ".join(p["modes"]), f"{p['distance']:.3f}",
+                      " / ".join("-" if v is None else f"{v:.0%}" for v in probs))
+    out.print(table)
+    out.print(f"{plan['study']['valid_runs']:,} valid runs; plan.json and {len(plan['scenarios'])} scenarios "
+              f"(.plan, .waypoints, .geojson) written", soft_wrap=True, highlight=False)
+
+
+@app.command()
 def frontseat(
     mission_file: Annotated[Path, typer.Argument(help="Mission file (TOML).")],
     mavlink: Annotated[str, typer.Option(help="pymavlink connection to serve on, e.g. udpin:127.0.0.1:14550.")],

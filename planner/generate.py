@@ -1,0 +1,257 @@
+"""From a mission file to a field plan: search, analyse, choose pairs, dither (section 4.4).
+
+The stages of ``rapt-plan generate``, each a function a test can run on a small budget:
+
+1. :func:`search_mission` — a space-filling start, then S-NDV on the root scores, every
+   batch written to the study store (a killed run resumes where it stopped).
+2. :func:`analyse` — every valid run re-scored in full (the simulator is deterministic),
+   the sub-boundary tree over the mission's score tree, sensitivity of each root score.
+3. :func:`select_pairs` — K boundary pairs on different sub-boundaries, shortest first,
+   kept clear of invalid scenarios and of isolated samples (noise rather than behaviour).
+4. :func:`dither` — Gaussian dithers around every chosen scenario re-simulated with the
+   stochastic effects on: how likely each shows its predicted mode, the nearest boundary
+   in its neighbourhood, and sub-boundaries there that the pair does not test
+   (orthogonal: another kind of element; parallel: another element of the same kind).
+
+:func:`generate` runs them all and writes ``plan.json`` (schema ``rapt.plan/1``) and, per
+scenario, a QGroundControl ``.plan``, a ``QGC WPL 110`` file and its predicted track as
+GeoJSON (:mod:`planner.exports`).  Still to come (issue 6): robust variants of fragile
+pairs, ``--refine``, and the HTML report.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+import rapt
+import sim
+from rapt.importance import output_importance
+from sim.mission import Mission
+from sim.scoring import MODE_NAMES
+
+from planner.exports import write_scenario_files
+
+__all__ = ["GenerateConfig", "search_mission", "analyse", "select_pairs", "dither", "generate", "PLAN_SCHEMA"]
+
+PLAN_SCHEMA = "rapt.plan/1"
+
+
+@dataclass
+class GenerateConfig:
+    budget: int = 3000
+    pairs: int = 5
+    global_fraction: float = 0.2
+    seed: int = 0
+    batch_size: int = 500
+    dithers: int = 2000
+    dither_sigma: float = 0.02
+    executor: Any = None
+    store: Path | None = None
+
+    def check(self) -> None:
+        if not isinstance(self.budget, int) or self.budget < 2 * self.batch_size:
+            raise ValueError(f"--budget: expected at least {2 * self.batch_size} runs, got {self.budget}")
+        if not (0 < self.global_fraction < 1):
+            raise ValueError(f"--global-fraction: expected a share in (0, 1), got {self.global_fraction}")
+        if not isinstance(self.pairs, int) or self.pairs < 1:
+            raise ValueError(f"--pairs: expected a positive number of pairs, got {self.pairs}")
+        if not isinstance(self.dithers, int) or self.dithers < 0:
+            raise ValueError(f"--dithers: expected a number of runs >= 0, got {self.dithers}")
+
+
+# -- 1. search --------------------------------------------------------------------------
+def search_mission(mission: Mission, cfg: GenerateConfig,
+                   progress: Callable[[int, int], None] | None = None) -> rapt.Study:
+    """Global then adaptive search on mission and safety success; invalid scenarios fail."""
+
+    def root_scores(U):
+        return sim.simulate(mission, U).scores[:, :2]
+
+    return rapt.search(root_scores, mission.space, cfg.budget, method="s-ndv", batch_size=cfg.batch_size,
+                       seed=cfg.seed, store=cfg.store, executor=cfg.executor, output_types=("binary", "binary"),
+                       n_initial=int(round(cfg.budget * cfg.global_fraction)), progress=progress)
+
+
+# -- 2. analysis --------------------------------------------------------------------------
+@dataclass
+class Analysis:
+    X: np.ndarray
+    result: sim.Result
+    tree: rapt.SubBoundaryTree
+    sensitivity: dict[str, dict[str, float]]
+    X_invalid: np.ndarray
+    boundary_types: list[dict] = field(default_factory=list)
+
+
+def analyse(mission: Mission, study: rapt.Study) -> Analysis:
+    X = study.X
+    result = sim.simulate(mission, X)  # deterministic: the same runs, every score column
+    if not result.valid.all():
+        raise RuntimeError("study: re-simulation disagrees with the stored runs (was the mission file edited?)")
+    tree = rapt.subboundary_tree(X, result.scores, mission.score_tree, output_types=result.output_types)
+    imp = output_importance(X, result.scores[:, :2], ("binary", "binary"), random_state=0)
+    sensitivity = {}
+    for row, name in zip(imp, ("mission_success", "safety_success")):
+        sensitivity[name] = {p.name: float(row[mission.space.slice_of(p.name)].sum()) for p in mission.space.parameters}
+    a = Analysis(X, result, tree, sensitivity, study.X_failed)
+    a.boundary_types = _boundary_types(a)
+    return a
+
+
+def _pair_elements(a: Analysis, i: int, j: int, level: int) -> list[str]:
+    """Names of the discrete score elements of ``level`` that differ across a pair."""
+    cols = a.tree.levels[level]
+    types = a.result.output_types
+    return [a.result.names[c] for c in cols if types[c] != "continuous" and a.result.scores[i, c] != a.result.scores[j, c]]
+
+
+def _boundary_types(a: Analysis) -> list[dict]:
+    i, j, d, lv = a.tree.pairs()
+    counts: dict[tuple, list[float]] = {}
+    for ii, jj, dd, ll in zip(i.tolist(), j.tolist(), d.tolist(), lv.tolist()):
+        key = (ll, tuple(_pair_elements(a, ii, jj, ll)))
+        if key[1]:
+            counts.setdefault(key, []).append(dd)
+    rows = [{"level": k[0], "elements": list(k[1]), "pairs": len(v), "shortest": min(v)} for k, v in counts.items()]
+    return sorted(rows, key=lambda r: (r["level"], -r["pairs"], r["shortest"]))
+
+
+# -- 3. pair selection --------------------------------------------------------------------
+def select_pairs(a: Analysis, k: int, min_cluster: int = 3) -> list[dict]:
+    """K pairs on distinct sub-boundaries: root-mode changes first, then deeper elements.
+
+    A pair is skipped when an endpoint's sub-cluster at the pair's level has fewer than
+    ``min_cluster`` runs (a lone run is more likely noise than a behaviour), or when an
+    invalid scenario lies closer to an endpoint than the pair's own length.
+    """
+    i, j, d, lv = a.tree.pairs()
+    invalid = cKDTree(a.X_invalid) if len(a.X_invalid) else None
+    sizes = [np.bincount(a.tree.assignment[level]) for level in range(len(a.tree.levels))]
+    chosen, seen = [], set()
+    for ii, jj, dd, ll in sorted(zip(i.tolist(), j.tolist(), d.tolist(), lv.tolist()), key=lambda p: (p[3] > 0, p[2])):
+        elements = tuple(_pair_elements(a, ii, jj, ll))
+        if not elements or (ll, elements) in seen:
+            continue
+        asg = a.tree.assignment[ll]
+        if min(sizes[ll][asg[ii]], sizes[ll][asg[jj]]) < min_cluster:
+            continue
+        if invalid is not None:
+            near, _ = invalid.query(a.X[[ii, jj]], k=1)
+            if np.any(near < dd):
+                continue
+        seen.add((ll, elements))
+        modes = a.result.modes
+        chosen.append({"level": ll, "elements": list(elements), "distance": dd, "rows": [ii, jj],
+                       "modes": [MODE_NAMES[modes[ii]], MODE_NAMES[modes[jj]]]})
+        if len(chosen) == k:
+            break
+    return chosen
+
+
+# -- 4. dithering ---------------------------------------------------------------------------
+def dither(mission: Mission, u: np.ndarray, predicted_mode: int, elements: list[str], n: int, sigma: float,
+           seed: int) -> dict:
+    """Stochastic runs of ``n`` Gaussian dithers around ``u``: reproducibility and neighbours."""
+    rng = np.random.default_rng(seed)
+    U = np.clip(u + sigma * rng.standard_normal((n, u.size)), 0.0, 1.0)
+    U[0] = u  # the scenario itself, with the stochastic effects on
+    r = sim.simulate(mission, U, seed=seed, stochastic=True)
+    ok = r.valid
+    out: dict[str, Any] = {"runs": int(n), "valid": int(ok.sum()), "sigma": sigma}
+    if not ok.any():
+        return out
+    dist = np.linalg.norm(U[ok] - u, axis=1)
+    modes = r.modes[ok]
+    out["p_predicted_mode"] = float(np.mean(modes == predicted_mode))
+    out["modes"] = {MODE_NAMES[m]: int(c) for m, c in zip(*np.unique(modes, return_counts=True))}
+    other = modes != predicted_mode
+    out["nearest_other_mode"] = float(dist[other].min()) if other.any() else None
+    # sub-boundaries in the neighbourhood: elements that flip among runs of the predicted mode
+    same = r.scores[ok][~other]
+    names, types = r.names, r.output_types
+    flips = []
+    if same.shape[0] > 1:
+        ref = r.scores[0]
+        for c, (name, t) in enumerate(zip(names, types)):
+            if t == "continuous" or "." not in name or name in elements:
+                continue
+            differ = same[:, c] != ref[c]
+            if differ.any():
+                kind = name.split(".")[0]
+                relation = "parallel" if any(e.split(".")[0] == kind for e in elements) else "orthogonal"
+                flips.append({"element": name, "relation": relation, "share": float(differ.mean()),
+                              "nearest": float(dist[~other][differ].min())})
+    out["sub_boundaries"] = sorted(flips, key=lambda f: f["nearest"])[:8]
+    return out
+
+
+# -- everything ------------------------------------------------------------------------------
+def generate(mission: Mission, mission_path: Path, out_dir: Path, cfg: GenerateConfig,
+             progress: Callable[[str, int, int], None] | None = None) -> dict:
+    """Run stages 1-4 and write ``plan.json`` (plus per-scenario files) into ``out_dir``."""
+    cfg.check()
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    study = search_mission(mission, cfg, None if progress is None else lambda d, t: progress("search", d, t))
+    a = analyse(mission, study)
+    pairs = select_pairs(a, cfg.pairs)
+    scenarios, plan_pairs = [], []
+    rows = [row for pair in pairs for row in pair["rows"]]
+    tracks = sim.simulate(mission, a.X[rows], trajectories=True).trajectories if rows else []
+    track_of = dict(zip(rows, tracks))
+    for p_index, pair in enumerate(pairs, start=1):
+        ids = []
+        for side, row in zip("ab", pair["rows"]):
+            sid = f"pair{p_index}{side}"
+            u = a.X[row]
+            mode = int(a.result.modes[row])
+            stats = dither(mission, u, mode, pair["elements"], cfg.dithers // 2, cfg.dither_sigma,
+                           cfg.seed * 1000 + 2 * p_index + (side == "b")) if cfg.dithers else {}
+            if progress is not None:
+                progress("dither", 2 * p_index - (side == "a"), 2 * len(pairs))
+            scenarios.append({
+                "id": sid, "u": [float(v) for v in u],
+                "parameters": _jsonable(mission.space.decode(u[None, :])[0]),
+                "predicted": {"mode": MODE_NAMES[mode],
+                              "scores": {n: float(a.result.scores[row, c]) for c, n in enumerate(a.result.names)
+                                         if c in a.tree.levels[0] or c in a.tree.levels[min(1, len(a.tree.levels) - 1)]}},
+                "dithering": stats,
+                "files": {kind: path.name for kind, path in
+                          write_scenario_files(mission, u, out_dir, sid, track_of[row]).items()},
+            })
+            ids.append(sid)
+        plan_pairs.append({"id": p_index, "level": pair["level"], "elements": pair["elements"],
+                           "modes": pair["modes"], "distance": pair["distance"], "scenarios": ids})
+    modes = a.result.modes
+    plan = {
+        "schema": PLAN_SCHEMA,
+        "mission": {"name": mission.name, "file": str(mission_path), "dim": mission.dim,
+                    "parameters": mission.space.names},
+        "study": {"budget": cfg.budget, "seed": cfg.seed, "global_fraction": cfg.global_fraction,
+                  "valid_runs": int(len(a.X)), "invalid_runs": int(len(a.X_invalid)),
+                  "modes": {MODE_NAMES[m]: int(c) for m, c in zip(*np.unique(modes, return_counts=True))},
+                  "boundary_types": a.boundary_types[:30]},
+        "sensitivity": a.sensitivity,
+        "pairs": plan_pairs,
+        "scenarios": scenarios,
+        "run_order": [s["id"] for s in scenarios],
+    }
+    (out_dir / "plan.json").write_text(json.dumps(plan, indent=2))
+    return plan
+
+
+def _jsonable(values: dict) -> dict:
+    out = {}
+    for k, v in values.items():
+        if isinstance(v, (np.floating, np.integer)):
+            v = v.item()
+        elif isinstance(v, tuple):
+            v = list(v)
+        out[k] = v
+    return out

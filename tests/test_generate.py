@@ -1,0 +1,93 @@
+"""rapt-plan generate on small budgets: each stage, the plan file, determinism, resume, errors."""
+
+import json
+import re
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+import sim
+from planner.cli import app
+from planner.generate import PLAN_SCHEMA, GenerateConfig, analyse, generate, search_mission, select_pairs
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+runner = CliRunner()
+
+
+@pytest.fixture(scope="module")
+def range2017():
+    return sim.load_mission(EXAMPLES / "range2017.toml")
+
+
+def small(tmp_path, **kw):
+    base = dict(budget=1000, batch_size=250, dithers=60, pairs=4, store=tmp_path / "study.db")
+    base.update(kw)
+    return GenerateConfig(**base)
+
+
+def test_stages_search_analyse_and_select_distinct_sub_boundaries(range2017, tmp_path):
+    cfg = small(tmp_path)
+    study = search_mission(range2017, cfg)
+    assert study.n_evaluated == 1000 and len(study.X_failed) > 0  # invalid scenarios are kept out
+    a = analyse(range2017, study)
+    assert set(np.unique(a.result.modes)) >= {0, 1, 3}
+    assert set(a.sensitivity) == {"mission_success", "safety_success"}
+    assert max(a.sensitivity["mission_success"], key=a.sensitivity["mission_success"].get) in range2017.space.names
+    pairs = select_pairs(a, 4)
+    keys = {(p["level"], tuple(p["elements"])) for p in pairs}
+    assert len(pairs) == 4 and len(keys) == 4  # four different sub-boundaries
+    for p in pairs:
+        i, j = p["rows"]
+        assert p["modes"][0] != p["modes"][1] or p["level"] > 0
+        changed = [n for n in p["elements"] if a.result.column(n)[i] != a.result.column(n)[j]]
+        assert changed == p["elements"]  # the pair really flips these elements
+
+
+def test_generate_writes_a_plan_whose_predictions_hold(range2017, tmp_path):
+    plan = generate(range2017, EXAMPLES / "range2017.toml", tmp_path / "out", small(tmp_path))
+    on_disk = json.loads((tmp_path / "out" / "plan.json").read_text())
+    assert on_disk == json.loads(json.dumps(plan)) and plan["schema"] == PLAN_SCHEMA
+    assert {"mission", "study", "sensitivity", "pairs", "scenarios", "run_order"} <= set(plan)
+    assert len(plan["scenarios"]) == 2 * len(plan["pairs"]) == len(plan["run_order"])
+    U = np.array([s["u"] for s in plan["scenarios"]])
+    again = sim.simulate(range2017, U)
+    for s, mode in zip(plan["scenarios"], again.modes):
+        assert s["predicted"]["mode"] == ("TF", "SS", "MS", "TS")[mode]
+        d = s["dithering"]
+        assert 0 <= d["p_predicted_mode"] <= 1 and d["runs"] == 30
+        for kind, name in s["files"].items():
+            assert (tmp_path / "out" / name).is_file(), kind
+        assert set(s["parameters"]) == set(range2017.space.names)
+
+
+def test_same_seed_same_plan(range2017, tmp_path):
+    a = generate(range2017, EXAMPLES / "range2017.toml", tmp_path / "a", small(tmp_path / "a"))
+    b = generate(range2017, EXAMPLES / "range2017.toml", tmp_path / "b", small(tmp_path / "b"))
+    assert a == b
+
+
+def test_cli_generate_resume_and_errors(tmp_path):
+    out = tmp_path / "plan"
+    args = ["generate", str(EXAMPLES / "imitation7.toml"), "--out", str(out), "--budget", "600",
+            "--batch-size", "200", "--dithers", "40", "--pairs", "2"]
+    first = runner.invoke(app, args)
+    assert first.exit_code == 0, first.output
+    assert "field plan in" in first.output and (out / "plan.json").is_file()
+    refused = runner.invoke(app, args)
+    assert refused.exit_code == 2 and "--resume" in refused.output
+    plan_before = (out / "plan.json").read_text()
+    again = runner.invoke(app, args + ["--resume"])  # the stored runs are reused, not re-run
+    assert again.exit_code == 0, again.output
+    assert re.search(r"\d+ valid runs", again.output) and (out / "plan.json").read_text() == plan_before
+    bad = tmp_path / "bad.toml"
+    bad.write_text((EXAMPLES / "imitation7.toml").read_text().replace("[vehicle]", "[vehicle]\ncruize_speed = 2.0", 1))
+    for argv, expect in [(["generate", str(bad), "--out", str(tmp_path / "x")], "cruize_speed"),
+                         (["generate", str(tmp_path / "none.toml"), "--out", str(tmp_path / "x")], "MISSION_FILE"),
+                         (["generate", str(EXAMPLES / "imitation7.toml"), "--out", str(tmp_path / "y"),
+                           "--budget", "100"], "--budget")]:
+        result = runner.invoke(app, argv)
+        assert result.exit_code == 2, (argv, result.output)
+        assert expect in result.output and "Traceback" not in result.output
+        assert len([line for line in result.output.splitlines() if line.strip()]) == 1
