@@ -272,9 +272,10 @@ def generate(
     seed: Annotated[int, typer.Option(help="Seed of every random choice.")] = 0,
     batch_size: Annotated[int, typer.Option("--batch-size", help="Runs per search batch.")] = 500,
     resume: Annotated[bool, typer.Option(help="Continue the study stored in OUT/study.db.")] = False,
+    executor: Annotated[str, typer.Option(help="local, processes or dask://host:port.")] = "local",
 ) -> None:
     """Search a mission, choose boundary pairs, dither them and write a field plan."""
-    from planner.generate import GenerateConfig, generate as run_generate
+    from planner.generate import GenerateConfig, generate as run_generate, make_executor
 
     import sim
 
@@ -293,6 +294,10 @@ def generate(
         cfg.check()
     except ValueError as exc:
         fail(str(exc))
+    try:
+        cfg.executor, close_executor = make_executor(executor)
+    except (ValueError, OSError) as exc:
+        fail(str(exc))
     out_dir.mkdir(parents=True, exist_ok=True)
     with Progress(TextColumn("{task.description:>8}"), BarColumn(), MofNCompleteColumn(),
                   TextColumn("{task.fields[rate]}"), TimeElapsedColumn(), console=err, transient=True,
@@ -310,6 +315,8 @@ def generate(
             plan = run_generate(mission, mission_file, out_dir, cfg, progress)
         except (ValueError, RuntimeError) as exc:
             fail(str(exc))
+        finally:
+            close_executor()
     table = Table(title=f"{mission.name}: field plan in {out_dir}")
     for col in ("pair", "sub-boundary", "modes", "distance", "P(predicted mode) a / b"):
         table.add_column(col, justify="left" if col == "sub-boundary" else "right")

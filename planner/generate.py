@@ -66,14 +66,41 @@ class GenerateConfig:
 
 
 # -- 1. search --------------------------------------------------------------------------
+@dataclass(frozen=True)
+class RootScores:
+    """Mission and safety success of unit-cube scenarios; picklable, so it runs on any executor."""
+
+    mission: Mission
+
+    def __call__(self, U: np.ndarray) -> np.ndarray:
+        return sim.simulate(self.mission, U).scores[:, :2]
+
+
+def make_executor(spec: str):
+    """``local`` (in process), ``processes`` (one per core) or ``dask://host:port``; returns (executor, close)."""
+    if spec == "local":
+        return None, lambda: None
+    if spec == "processes":
+        import concurrent.futures as cf
+        import multiprocessing as mp
+        import os
+
+        pool = cf.ProcessPoolExecutor(max_workers=os.cpu_count() or 2, mp_context=mp.get_context("spawn"))
+        return pool, lambda: pool.shutdown(cancel_futures=True)
+    if spec.startswith("dask://"):
+        try:
+            from distributed import Client
+        except ImportError:
+            raise ValueError("--executor: dask:// needs the cluster extra; pip install -e '.[cluster]'") from None
+        client = Client(f"tcp://{spec[len('dask://'):]}", timeout=10)
+        return client, client.close
+    raise ValueError(f"--executor: expected local, processes or dask://host:port, got {spec!r}")
+
 def search_mission(mission: Mission, cfg: GenerateConfig,
                    progress: Callable[[int, int], None] | None = None) -> rapt.Study:
     """Global then adaptive search on mission and safety success; invalid scenarios fail."""
 
-    def root_scores(U):
-        return sim.simulate(mission, U).scores[:, :2]
-
-    return rapt.search(root_scores, mission.space, cfg.budget, method="s-ndv", batch_size=cfg.batch_size,
+    return rapt.search(RootScores(mission), mission.space, cfg.budget, method="s-ndv", batch_size=cfg.batch_size,
                        seed=cfg.seed, store=cfg.store, executor=cfg.executor, output_types=("binary", "binary"),
                        n_initial=int(round(cfg.budget * cfg.global_fraction)), progress=progress)
 

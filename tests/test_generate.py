@@ -91,3 +91,21 @@ def test_cli_generate_resume_and_errors(tmp_path):
         assert result.exit_code == 2, (argv, result.output)
         assert expect in result.output and "Traceback" not in result.output
         assert len([line for line in result.output.splitlines() if line.strip()]) == 1
+
+
+def test_same_plan_with_processes_and_a_dask_cluster(range2017, tmp_path):
+    from distributed import Client, LocalCluster
+
+    from planner.generate import make_executor
+
+    cfg = dict(budget=1000, batch_size=250, dithers=0, pairs=3)
+    base = generate(range2017, EXAMPLES / "range2017.toml", tmp_path / "local", GenerateConfig(**cfg))
+    pool, close = make_executor("processes")
+    try:
+        procs = generate(range2017, EXAMPLES / "range2017.toml", tmp_path / "procs", GenerateConfig(**cfg, executor=pool))
+    finally:
+        close()
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+                      host="127.0.0.1") as cluster, Client(cluster) as client:
+        dask = generate(range2017, EXAMPLES / "range2017.toml", tmp_path / "dask", GenerateConfig(**cfg, executor=client))
+    assert base == procs == dask
