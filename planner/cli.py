@@ -273,6 +273,7 @@ def generate(
     batch_size: Annotated[int, typer.Option("--batch-size", help="Runs per search batch.")] = 500,
     resume: Annotated[bool, typer.Option(help="Continue the study stored in OUT/study.db.")] = False,
     executor: Annotated[str, typer.Option(help="local, processes or dask://host:port.")] = "local",
+    refine: Annotated[int, typer.Option(help="Runs per pair of a focused second search (0: none).")] = 0,
 ) -> None:
     """Search a mission, choose boundary pairs, dither them and write a field plan."""
     from planner.generate import GenerateConfig, generate as run_generate, make_executor
@@ -289,7 +290,7 @@ def generate(
     if store.exists() and not resume:
         fail(f"--out: {store} already holds a study; add --resume to continue it or choose another directory")
     cfg = GenerateConfig(budget=budget, pairs=pairs, global_fraction=global_fraction, seed=seed,
-                         batch_size=batch_size, dithers=dithers, store=store)
+                         batch_size=batch_size, dithers=dithers, store=store, refine=refine)
     try:
         cfg.check()
     except ValueError as exc:

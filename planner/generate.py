@@ -15,8 +15,9 @@ The stages of ``rapt-plan generate``, each a function a test can run on a small 
 
 :func:`generate` runs them all and writes ``plan.json`` (schema ``rapt.plan/1``) and, per
 scenario, a QGroundControl ``.plan``, a ``QGC WPL 110`` file and its predicted track as
-GeoJSON (:mod:`planner.exports`).  Still to come (issue 6): robust variants of fragile
-pairs, ``--refine``, and the HTML report.
+GeoJSON (:mod:`planner.exports`), and ``report.html`` (:mod:`planner.report`).  Stages 5
+and 6 — robust variants of fragile scenarios and ``--refine`` — are :func:`robust_variant`
+and :func:`refine_pair`.
 """
 
 from __future__ import annotations
@@ -36,6 +37,7 @@ from sim.mission import Mission
 from sim.scoring import MODE_NAMES
 
 from planner.exports import write_scenario_files
+from planner.report import write_report
 
 __all__ = ["GenerateConfig", "search_mission", "analyse", "select_pairs", "dither", "generate", "PLAN_SCHEMA"]
 
@@ -53,6 +55,9 @@ class GenerateConfig:
     dither_sigma: float = 0.02
     executor: Any = None
     store: Path | None = None
+    refine: int = 0  # runs per pair of the focused second search (0: off)
+    refine_min_distance: float = 0.02  # refined pairs stay at least this far apart (unit cube)
+    fragile_below: float = 0.8  # P(predicted mode) under which a scenario gets a robust variant
 
     def check(self) -> None:
         if not isinstance(self.budget, int) or self.budget < 2 * self.batch_size:
@@ -61,6 +66,8 @@ class GenerateConfig:
             raise ValueError(f"--global-fraction: expected a share in (0, 1), got {self.global_fraction}")
         if not isinstance(self.pairs, int) or self.pairs < 1:
             raise ValueError(f"--pairs: expected a positive number of pairs, got {self.pairs}")
+        if not isinstance(self.refine, int) or self.refine < 0:
+            raise ValueError(f"--refine: expected runs per pair >= 0, got {self.refine}")
         if not isinstance(self.dithers, int) or self.dithers < 0:
             raise ValueError(f"--dithers: expected a number of runs >= 0, got {self.dithers}")
 
@@ -183,12 +190,17 @@ def select_pairs(a: Analysis, k: int, min_cluster: int = 3) -> list[dict]:
 
 # -- 4. dithering ---------------------------------------------------------------------------
 def dither(mission: Mission, u: np.ndarray, predicted_mode: int, elements: list[str], n: int, sigma: float,
-           seed: int) -> dict:
-    """Stochastic runs of ``n`` Gaussian dithers around ``u``: reproducibility and neighbours."""
+           seed: int, runs: dict | None = None) -> dict:
+    """Stochastic runs of ``n`` Gaussian dithers around ``u``: reproducibility and neighbours.
+
+    ``runs``, when given, receives the dithers' unit-cube rows and modes (for the report).
+    """
     rng = np.random.default_rng(seed)
     U = np.clip(u + sigma * rng.standard_normal((n, u.size)), 0.0, 1.0)
     U[0] = u  # the scenario itself, with the stochastic effects on
     r = sim.simulate(mission, U, seed=seed, stochastic=True)
+    if runs is not None:
+        runs["U"], runs["modes"] = U, r.modes
     ok = r.valid
     out: dict[str, Any] = {"runs": int(n), "valid": int(ok.sum()), "sigma": sigma}
     if not ok.any():
@@ -218,6 +230,75 @@ def dither(mission: Mission, u: np.ndarray, predicted_mode: int, elements: list[
     return out
 
 
+# -- 5. robust variants ---------------------------------------------------------------------
+VARIANT_STEPS = (0.02, 0.04, 0.08, 0.16)
+
+
+def robust_variant(mission: Mission, u: np.ndarray, partner: np.ndarray, mode: int, sensitivity: np.ndarray,
+                   n: int, sigma: float, target: float, seed: int) -> dict | None:
+    """Move a fragile scenario away from its boundary along its most sensitive coordinate.
+
+    The direction is away from the pair's other scenario; the smallest step (in the unit
+    cube) whose deterministic run keeps the predicted mode and whose dithers show it at
+    least ``target`` of the time wins (section 4.5.3's "M" scenarios).  None if no step does.
+    """
+    order = np.argsort(-sensitivity)
+    for c in order[:3]:
+        direction = np.sign(u[c] - partner[c]) or 1.0
+        for step in VARIANT_STEPS:
+            v = u.copy()
+            v[c] = np.clip(v[c] + direction * step, 0.0, 1.0)
+            if v[c] == u[c]:
+                break
+            r = sim.simulate(mission, v[None, :])
+            if not r.valid[0] or r.modes[0] != mode:
+                continue
+            stats = dither(mission, v, mode, [], n, sigma, seed)
+            if stats.get("p_predicted_mode", 0.0) >= target:
+                return {"u": [float(x) for x in v], "coordinate": int(c), "step": float(direction * step),
+                        "p_predicted_mode": stats["p_predicted_mode"]}
+    return None
+
+
+# -- 6. refinement ----------------------------------------------------------------------------
+def refine_pair(mission: Mission, a: Analysis, pair: dict, runs: int, min_distance: float = 0.02) -> dict:
+    """Sharpen a pair with a search focused on its own sub-scores (section 4.3.6).
+
+    Bisection on the segment between the two scenarios: each run is scored on the pair's
+    elements only, and replaces the end whose element values it shares, so the pair keeps
+    straddling the same sub-boundary while its length halves per run (``runs`` at most).
+    A run showing a third combination (another sub-boundary between them) or an invalid
+    scenario stops the search there, and so does ``min_distance``: two scenarios closer
+    than that cannot be told apart on the water (section 4.1: straddle the boundary
+    without being too close together).
+    """
+    names = a.result.names
+    cols = [names.index(e) for e in pair["elements"]]
+    i, j = pair["rows"]
+    lo, hi = a.X[i].copy(), a.X[j].copy()
+    side_lo, side_hi = a.result.scores[i, cols], a.result.scores[j, cols]
+    for _ in range(runs):
+        if np.linalg.norm(hi - lo) / 2 < min_distance:
+            break
+        mid = (lo + hi) / 2
+        r = sim.simulate(mission, mid[None, :])
+        if not r.valid[0]:
+            break
+        y = r.scores[0, cols]
+        if np.array_equal(y, side_lo):
+            lo = mid
+        elif np.array_equal(y, side_hi):
+            hi = mid
+        else:
+            break
+    d = float(np.linalg.norm(hi - lo))
+    if d >= pair["distance"]:
+        return pair
+    r = sim.simulate(mission, np.vstack([lo, hi]))
+    return {**pair, "distance": d, "refined": True, "u_override": [lo, hi],
+            "modes": [MODE_NAMES[r.modes[0]], MODE_NAMES[r.modes[1]]]}
+
+
 # -- everything ------------------------------------------------------------------------------
 def generate(mission: Mission, mission_path: Path, out_dir: Path, cfg: GenerateConfig,
              progress: Callable[[str, int, int], None] | None = None) -> dict:
@@ -228,33 +309,64 @@ def generate(mission: Mission, mission_path: Path, out_dir: Path, cfg: GenerateC
     study = search_mission(mission, cfg, None if progress is None else lambda d, t: progress("search", d, t))
     a = analyse(mission, study)
     pairs = select_pairs(a, cfg.pairs)
-    scenarios, plan_pairs = [], []
-    rows = [row for pair in pairs for row in pair["rows"]]
-    tracks = sim.simulate(mission, a.X[rows], trajectories=True).trajectories if rows else []
-    track_of = dict(zip(rows, tracks))
+    if cfg.refine:
+        pairs = [refine_pair(mission, a, pair, cfg.refine, cfg.refine_min_distance) for pair in pairs]
+        if progress is not None:
+            progress("refine", len(pairs), len(pairs))
+    sens = np.zeros(mission.dim)
+    for root in a.sensitivity.values():
+        for p in mission.space.parameters:
+            sens[mission.space.slice_of(p.name)] += root[p.name] / max(mission.space.slice_of(p.name).stop
+                                                                       - mission.space.slice_of(p.name).start, 1)
+    scenarios, plan_pairs, variants = [], [], []
+    dither_runs: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    U_chosen = [np.asarray(pair.get("u_override", [a.X[r] for r in pair["rows"]])) for pair in pairs]
+    flat = np.vstack(U_chosen) if U_chosen else np.zeros((0, mission.dim))
+    chosen_run = sim.simulate(mission, flat, trajectories=True) if len(flat) else None
     for p_index, pair in enumerate(pairs, start=1):
         ids = []
-        for side, row in zip("ab", pair["rows"]):
+        for side_index, side in enumerate("ab"):
+            k = 2 * (p_index - 1) + side_index
             sid = f"pair{p_index}{side}"
-            u = a.X[row]
-            mode = int(a.result.modes[row])
+            u = flat[k]
+            mode = int(chosen_run.modes[k])
+            partner = flat[k + 1 if side_index == 0 else k - 1]
+            runs: dict = {}
             stats = dither(mission, u, mode, pair["elements"], cfg.dithers // 2, cfg.dither_sigma,
-                           cfg.seed * 1000 + 2 * p_index + (side == "b")) if cfg.dithers else {}
+                           cfg.seed * 1000 + 2 * p_index + (side == "b"), runs) if cfg.dithers else {}
+            if runs:
+                dither_runs[sid] = (runs["U"], runs["modes"])
             if progress is not None:
                 progress("dither", 2 * p_index - (side == "a"), 2 * len(pairs))
             scenarios.append({
                 "id": sid, "u": [float(v) for v in u],
                 "parameters": _jsonable(mission.space.decode(u[None, :])[0]),
                 "predicted": {"mode": MODE_NAMES[mode],
-                              "scores": {n: float(a.result.scores[row, c]) for c, n in enumerate(a.result.names)
+                              "scores": {n: float(chosen_run.scores[k, c]) for c, n in enumerate(chosen_run.names)
                                          if c in a.tree.levels[0] or c in a.tree.levels[min(1, len(a.tree.levels) - 1)]}},
                 "dithering": stats,
                 "files": {kind: path.name for kind, path in
-                          write_scenario_files(mission, u, out_dir, sid, track_of[row]).items()},
+                          write_scenario_files(mission, u, out_dir, sid, chosen_run.trajectories[k]).items()},
             })
             ids.append(sid)
+            if cfg.dithers and stats.get("p_predicted_mode", 1.0) < cfg.fragile_below:
+                v = robust_variant(mission, u, partner, mode, sens, max(cfg.dithers // 10, 20), cfg.dither_sigma,
+                                   cfg.fragile_below, cfg.seed * 1000 + 500 + k)
+                if v is not None:
+                    vid = f"{sid}M"
+                    c = v["coordinate"]
+                    name = next(p.name for p in mission.space.parameters if c in range(
+                        mission.space.slice_of(p.name).start, mission.space.slice_of(p.name).stop))
+                    variants.append({"id": vid, "variant_of": sid, "u": v["u"],
+                                     "parameters": _jsonable(mission.space.decode(np.array(v["u"])[None, :])[0]),
+                                     "moved": {"parameter": name, "unit_step": v["step"]},
+                                     "predicted": {"mode": MODE_NAMES[mode]},
+                                     "p_predicted_mode": v["p_predicted_mode"],
+                                     "files": {kind: path.name for kind, path in
+                                               write_scenario_files(mission, np.array(v["u"]), out_dir, vid).items()}})
         plan_pairs.append({"id": p_index, "level": pair["level"], "elements": pair["elements"],
-                           "modes": pair["modes"], "distance": pair["distance"], "scenarios": ids})
+                           "modes": pair["modes"], "distance": pair["distance"], "scenarios": ids,
+                           "refined": bool(pair.get("refined", False))})
     modes = a.result.modes
     plan = {
         "schema": PLAN_SCHEMA,
@@ -267,9 +379,11 @@ def generate(mission: Mission, mission_path: Path, out_dir: Path, cfg: GenerateC
         "sensitivity": a.sensitivity,
         "pairs": plan_pairs,
         "scenarios": scenarios,
-        "run_order": [s["id"] for s in scenarios],
+        "variants": variants,
+        "run_order": [s["id"] for s in scenarios] + [v["id"] for v in variants],
     }
     (out_dir / "plan.json").write_text(json.dumps(plan, indent=2))
+    write_report(plan, out_dir, dither_runs)
     return plan
 
 

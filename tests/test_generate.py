@@ -50,7 +50,9 @@ def test_generate_writes_a_plan_whose_predictions_hold(range2017, tmp_path):
     on_disk = json.loads((tmp_path / "out" / "plan.json").read_text())
     assert on_disk == json.loads(json.dumps(plan)) and plan["schema"] == PLAN_SCHEMA
     assert {"mission", "study", "sensitivity", "pairs", "scenarios", "run_order"} <= set(plan)
-    assert len(plan["scenarios"]) == 2 * len(plan["pairs"]) == len(plan["run_order"])
+    assert len(plan["scenarios"]) == 2 * len(plan["pairs"])
+    assert plan["run_order"] == [s["id"] for s in plan["scenarios"]] + [v["id"] for v in plan["variants"]]
+    assert (tmp_path / "out" / "report.html").is_file()
     U = np.array([s["u"] for s in plan["scenarios"]])
     again = sim.simulate(range2017, U)
     for s, mode in zip(plan["scenarios"], again.modes):
@@ -109,3 +111,27 @@ def test_same_plan_with_processes_and_a_dask_cluster(range2017, tmp_path):
                       host="127.0.0.1") as cluster, Client(cluster) as client:
         dask = generate(range2017, EXAMPLES / "range2017.toml", tmp_path / "dask", GenerateConfig(**cfg, executor=client))
     assert base == procs == dask
+
+
+def test_refine_sharpens_pairs_and_variants_keep_their_mode(range2017, tmp_path):
+    from planner.generate import refine_pair
+
+    cfg = small(tmp_path)
+    a = analyse(range2017, search_mission(range2017, cfg))
+    refined = [(p, refine_pair(range2017, a, p, runs=12, min_distance=0.02)) for p in select_pairs(a, 4)]
+    refined = [(p, q) for p, q in refined if q.get("refined")]
+    assert refined  # bisection stops early only at a third behaviour or an invalid scenario
+    pair, sharp = refined[0]
+    assert 0.02 <= sharp["distance"] < pair["distance"] / 4
+    lo, hi = sharp["u_override"]
+    r = sim.simulate(range2017, np.vstack([lo, hi]))
+    cols = [r.names.index(e) for e in pair["elements"]]
+    i, j = pair["rows"]
+    np.testing.assert_array_equal(r.scores[0, cols], a.result.scores[i, cols])  # still the same sub-boundary
+    np.testing.assert_array_equal(r.scores[1, cols], a.result.scores[j, cols])
+    plan = generate(range2017, EXAMPLES / "range2017.toml", tmp_path / "out",
+                    small(tmp_path, dithers=100, refine=8, pairs=2, fragile_below=0.9))
+    for v in plan["variants"]:
+        assert v["p_predicted_mode"] >= 0.9 and v["variant_of"] in plan["run_order"]
+        mode = sim.simulate(range2017, np.array(v["u"])[None, :]).modes[0]
+        assert ("TF", "SS", "MS", "TS")[mode] == v["predicted"]["mode"]
