@@ -3,10 +3,11 @@
 Depends on :mod:`rapt` for shared types only; never imports :mod:`bridge`.
 """
 
+from sim.bias import Bias, parse_bias
 from sim.mission import Mission
 from sim.simulate import Result, simulate
 
-__all__ = ["Mission", "Result", "simulate", "load_mission"]
+__all__ = ["Bias", "Mission", "Result", "simulate", "load_mission", "parse_bias"]
 
 
 def load_mission(path) -> Mission:

@@ -76,7 +76,7 @@ class FrontSeat:
 
     def __init__(self, mission: Mission, u, connection: str, *, lockstep: bool = True, speedup: float = 1.0,
                  stochastic: bool = False, seed: int = 0, failsafe_s: float = 5.0, sysid: int = 1,
-                 telemetry_period_s: float = 0.5):
+                 telemetry_period_s: float = 0.5, bias=None):
         self.mission = mission
         self.u = np.asarray(u, dtype=float).reshape(1, -1)
         scen = make_scenarios(mission, self.u)
@@ -85,7 +85,10 @@ class FrontSeat:
         if speedup <= 0:
             raise ValueError(f"speedup: expected a factor > 0, got {speedup}")
         self.scen = scen
-        self.world = World(scen, scenario_generators(self.u, seed) if stochastic else None)
+        # a biased vehicle (sim.bias) flies like a real one whose speed, tide, compass or
+        # battery differ from the model; the back-seat on the far side does not know
+        self.bias = bias
+        self.world = World(scen, scenario_generators(self.u, seed) if stochastic else None, bias)
         self.referee = Scorer(scen)
         self.frame = LocalFrame(mission.origin_lat, mission.origin_lon)
         self.lockstep, self.speedup, self.failsafe_s = lockstep, float(speedup), float(failsafe_s)

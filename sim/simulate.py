@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from sim.autonomy import Autonomy, Observation
+from sim.bias import bias_arrays
 from sim.environment import tidal_current
 from sim.geometry import rect_signed_distance
 from sim.metrics import metric_names, metric_types
@@ -51,12 +52,14 @@ class Result:
 
 
 def simulate(mission: Mission, X: np.ndarray, seed: int = 0, stochastic: bool = False,
-             trajectories: bool = False) -> Result:
+             trajectories: bool = False, bias=None) -> Result:
     """Simulate unit-cube scenarios ``X`` (N, mission.dim) of ``mission``.
 
     ``stochastic`` switches on navigation drift and current perturbations, seeded per
     scenario from ``seed`` and the row's own values, so a row gives the same run alone or
-    in any batch.
+    in any batch.  ``bias`` (a :class:`sim.bias.Bias`, or one per row) flies the scenarios
+    with a biased vehicle and range while the autonomy plans unbiased; None or the
+    neutral bias gives exactly the unbiased results.
     """
     scen = make_scenarios(mission, X)
     names, types = metric_names(mission), metric_types(mission)
@@ -66,7 +69,7 @@ def simulate(mission: Mission, X: np.ndarray, seed: int = 0, stochastic: bool = 
     if rows.size:
         sub = scen.select(rows)
         rngs = scenario_generators(np.asarray(X, dtype=float)[rows], seed) if stochastic else None
-        got, tr = run_scenarios(sub, rngs, trajectories)
+        got, tr = run_scenarios(sub, rngs, trajectories, bias_arrays(bias, scen.n).select(rows))
         scores[rows] = got
         if trajectories:
             for r, t in zip(rows.tolist(), tr):
@@ -88,7 +91,7 @@ def _take_rows(obj, keep: np.ndarray, n: int) -> None:
         obj._rows = np.arange(keep.size)
 
 
-def run_scenarios(scen: Scenarios, rngs: list[np.random.Generator] | None, record: bool
+def run_scenarios(scen: Scenarios, rngs: list[np.random.Generator] | None, record: bool, bias=None
                   ) -> tuple[np.ndarray, list[np.ndarray]]:
     """Step valid scenarios to the end; returns (scores, trajectories).
 
@@ -97,7 +100,7 @@ def run_scenarios(scen: Scenarios, rngs: list[np.random.Generator] | None, recor
     """
     m = scen.mission
     dt, n = m.dt, scen.n
-    world = World(scen, rngs)
+    world = World(scen, rngs, bias)
     autonomy = Autonomy(scen)
     scorer = Scorer(scen)
     active = np.ones(n, dtype=bool)

@@ -54,8 +54,14 @@ def propulsion_power(spec: Vehicle, speed: np.ndarray) -> np.ndarray:
 
 
 def step_vehicle(s: VehicleState, spec: Vehicle, heading_cmd: np.ndarray, speed_cmd: np.ndarray,
-                 current_e: np.ndarray, current_n: np.ndarray, dt: float, moving: np.ndarray) -> None:
-    """Advance every ``moving`` vehicle by ``dt`` seconds in place (the others stay frozen)."""
+                 current_e: np.ndarray, current_n: np.ndarray, dt: float, moving: np.ndarray, *,
+                 speed_scale=1.0, course_bias=0.0, energy_scale=1.0) -> None:
+    """Advance every ``moving`` vehicle by ``dt`` seconds in place (the others stay frozen).
+
+    Execution bias (:mod:`sim.bias`): ``speed_scale`` multiplies the speed the vehicle
+    achieves, ``course_bias`` (radians) turns its track through water clockwise of its
+    bow, ``energy_scale`` divides the charge drawn.  The defaults change nothing.
+    """
     rmax = np.deg2rad(spec.max_turn_rate_dps)
     err = wrap_angle(heading_cmd - s.heading)
     r_des = np.clip(err / HEADING_TIME_S, -rmax, rmax)
@@ -63,10 +69,11 @@ def step_vehicle(s: VehicleState, spec: Vehicle, heading_cmd: np.ndarray, speed_
     a_u = 1.0 - np.exp(-dt / spec.surge_time_constant_s)
     a_v = 1.0 - np.exp(-dt * spec.sway_damping)
     r = s.yaw_rate + (r_des - s.yaw_rate) * a_r
-    u = s.surge + (np.clip(speed_cmd, 0.0, spec.max_speed) - s.surge) * a_u
+    u = s.surge + (np.clip(speed_cmd, 0.0, spec.max_speed) * speed_scale - s.surge) * a_u
     v = s.sway + (-SWAY_COUPLING * u * r - s.sway) * a_v
     psi = wrap_angle(s.heading + r * dt)
-    sin, cos = np.sin(psi), np.cos(psi)
+    course = psi + course_bias
+    sin, cos = np.sin(course), np.cos(course)
     ve = u * sin + v * cos + current_e
     vn = u * cos - v * sin + current_n
     power = propulsion_power(spec, u)
@@ -77,4 +84,4 @@ def step_vehicle(s: VehicleState, spec: Vehicle, heading_cmd: np.ndarray, speed_
     s.surge = np.where(m, u, s.surge)
     s.sway = np.where(m, v, s.sway)
     s.yaw_rate = np.where(m, r, s.yaw_rate)
-    s.energy_wh = np.where(m, s.energy_wh - power * dt / 3600.0, s.energy_wh)
+    s.energy_wh = np.where(m, s.energy_wh - power * dt / 3600.0 / energy_scale, s.energy_wh)

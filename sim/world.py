@@ -14,6 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sim.bias import bias_arrays
 from sim.environment import tidal_current
 from sim.interface import battery_fraction, energy_consumed_hj, report_heading, report_position
 from sim.navigation import Navigation
@@ -85,9 +86,13 @@ class NoiseStreams:
 
 
 class World:
-    """Vehicles of the scenarios ``scen`` at their launch point, at rest, submerged."""
+    """Vehicles of the scenarios ``scen`` at their launch point, at rest, submerged.
 
-    def __init__(self, scen: Scenarios, rngs: list[np.random.Generator] | None = None):
+    ``bias`` (one :class:`sim.bias.Bias`, or one per scenario) makes the vehicles behave
+    like biased real ones; the autonomy never sees it.
+    """
+
+    def __init__(self, scen: Scenarios, rngs: list[np.random.Generator] | None = None, bias=None):
         m = scen.mission
         self.scen, self.mission, self.spec = scen, m, m.vehicle
         n = scen.n
@@ -101,6 +106,7 @@ class World:
         self.surfaced = np.zeros(n, dtype=bool)
         self.drift_e = np.zeros(n)
         self.drift_n = np.zeros(n)
+        self.bias = bias_arrays(bias, n)
 
     def take(self, keep: np.ndarray) -> None:
         """Keep only the vehicles ``keep`` (finished runs are dropped from a batch)."""
@@ -111,6 +117,7 @@ class World:
             self.noise.take(keep)
         self.start_wh, self.surfaced = self.start_wh[keep], self.surfaced[keep]
         self.drift_e, self.drift_n = self.drift_e[keep], self.drift_n[keep]
+        self.bias = self.bias.select(keep)
 
     def telemetry(self, t: float) -> Telemetry:
         s, scen = self.state, self.scen
@@ -135,7 +142,8 @@ class World:
         """Apply a decoded set-point to the ``moving`` vehicles for one step from time ``t``."""
         m, dt = self.mission, self.mission.dt
         self.surfaced = np.asarray(surface, dtype=bool) & moving
-        ce, cn = tidal_current(m.current, self.scen.start_time + t)
+        b = self.bias
+        ce, cn = tidal_current(m.current, self.scen.start_time + b.start_time + t, b.current_scale, b.current_offset)
         z = self.noise.next() if self.noise is not None else None
         if z is not None:
             # slowly varying unpredicted current: first-order Gauss-Markov, 10-minute correlation
@@ -143,5 +151,6 @@ class World:
             s = m.current.perturbation * np.sqrt(1 - a * a)
             self.drift_e = a * self.drift_e + s * z[:, 0]
             self.drift_n = a * self.drift_n + s * z[:, 1]
-        step_vehicle(self.state, self.spec, heading, speed, ce + self.drift_e, cn + self.drift_n, dt, moving)
+        step_vehicle(self.state, self.spec, heading, speed, ce + self.drift_e, cn + self.drift_n, dt, moving,
+                     speed_scale=b.speed, course_bias=b.heading_rad, energy_scale=b.battery)
         self.nav.step(dt, self.surfaced, None if z is None else z[:, 2:])
