@@ -222,27 +222,51 @@ Vehicle = Annotated[str, typer.Option("--vehicle", help="Vehicle name on the bus
 
 @app.command()
 def run(
-    mission_file: Annotated[Path, typer.Argument(help="Mission file (TOML).")],
-    scenario: ScenarioOpt = "0",
+    mission_file: Annotated[Path, typer.Argument(metavar="MISSION_OR_PLAN",
+                                                 help="Mission file (TOML), or a plan.json from rapt-plan generate.")],
+    scenario: Annotated[str, typer.Option("--scenario", help="Row number of the mission's Sobol design, or a JSON "
+                                                            "file with 'u' or 'parameters'; with a plan, a scenario "
+                                                            "id such as pair1a.")] = "0",
     speedup: Annotated[Optional[float], typer.Option(help="Real time times this factor (default: lock-step).")] = None,
     log: Annotated[Optional[Path], typer.Option(help="Record the bus to this MCAP file.")] = None,
     timeout: Annotated[float, typer.Option(help="Give up after this many wall seconds.")] = 600.0,
+    inject_bias: Annotated[Optional[str], typer.Option(
+        "--inject-bias", help="Fly a biased vehicle for rehearsal, e.g. speed=1.15,current_offset=0.3 "
+                              "(speed, current_scale, current_offset, heading, battery, start_time; see sim.bias). "
+                              "Not written to the log.")] = None,
 ) -> None:
     """Fly one scenario software-in-the-loop: front-seat, bridge, autonomy (and logger)."""
     import numpy as np
 
     import sim
     from planner.sil import run_sil
+    from sim.bias import parse_bias
 
-    mission, u, sid = _mission_and_scenario(mission_file, scenario)
+    try:
+        bias = parse_bias(inject_bias) if inject_bias is not None else None
+    except ValueError as exc:
+        fail(f"--inject-bias: {exc}")
+    pid = ""
+    if mission_file.suffix == ".json" or mission_file.is_dir():
+        from planner.plans import load_plan
+
+        try:
+            plan = load_plan(mission_file)
+            mission, u, sid, pid = plan.mission, plan.u(scenario), scenario, plan.id
+        except ValueError as exc:
+            fail(str(exc))
+        source = str(plan.mission_file)
+    else:
+        mission, u, sid = _mission_and_scenario(mission_file, scenario)
+        source = str(mission_file)
     if speedup is not None and speedup <= 0:
         fail(f"--speedup: expected a factor > 0, got {speedup}")
     try:
         result = run_sil(mission, u, log_path=log, speedup=speedup, timeout_s=timeout, scenario_id=sid,
-                         mission_file=str(mission_file))
+                         mission_file=source, plan_id=pid, bias=bias)
     except (ValueError, RuntimeError, TimeoutError) as exc:
         fail(str(exc))
-    batch = sim.simulate(mission, u[None, :])
+    batch = sim.simulate(mission, u[None, :], bias=bias)
     same = bool(np.array_equal(result.scores, batch.scores[0]))
     names = batch.names
     mode = ("TF", "SS", "MS", "TS")[int(2 * result.scores[0] + result.scores[1])]
@@ -251,11 +275,14 @@ def run(
     table.add_column("value", justify="right")
     table.add_row("ended", result.ended)
     table.add_row("mode", mode)
+    if bias is not None:
+        table.add_row("injected bias", str(bias))
     table.add_row("simulated time", f"{result.sim_s:,.0f} s in {result.wall_s:.1f} s ({result.speedup:,.0f}x)")
     for name in ("mission_areas", "transmission", "recovery", "nogo_areas", "mission.battery_left"):
         if name in names:
             table.add_row(name, f"{result.scores[names.index(name)]:g}")
-    table.add_row("same scores as the batch simulator", "yes" if same else "NO")
+    table.add_row("same scores as the batch simulator" + (" (same bias)" if bias is not None else ""),
+                  "yes" if same else "NO")
     if log is not None:
         table.add_row("log", str(log))
     out.print(table)
@@ -329,6 +356,91 @@ def generate(
     out.print(table)
     out.print(f"{plan['study']['valid_runs']:,} valid runs; plan.json and {len(plan['scenarios'])} scenarios "
               f"(.plan, .waypoints, .geojson) written", soft_wrap=True, highlight=False)
+
+
+@app.command()
+def compare(
+    plan_dir: Annotated[Path, typer.Argument(help="Plan directory (or its plan.json) from rapt-plan generate.")],
+    logs: Annotated[list[Path], typer.Argument(help="MCAP logs of the plan's runs (SIL or the real vehicle).")],
+    out_dir: Annotated[Path, typer.Option("--out", help="Directory for comparison.json and comparison.html.")]
+        = Path("comparison"),
+    dithers: Annotated[int, typer.Option(help="Stochastic runs checking each adjusted scenario (0: none).")] = 20,
+    seed: Annotated[int, typer.Option(help="Seed of every random choice.")] = 0,
+    fit: Annotated[Optional[str], typer.Option(help="Bias parameters to fit, comma-separated (default: all of "
+                                                    "speed, current_scale, current_offset, heading, battery, "
+                                                    "start_time).")] = None,
+) -> None:
+    """Compare run logs with the plan: predicted vs observed, execution bias, re-plan."""
+    from planner.compare import CompareConfig, compare as run_compare
+    from sim.bias import BIAS_NAMES
+
+    names = BIAS_NAMES
+    if fit is not None:
+        names = tuple(n.strip() for n in fit.split(",") if n.strip())
+        bad = [n for n in names if n not in BIAS_NAMES]
+        if bad or not names:
+            fail(f"--fit: unknown bias parameter {bad[0] if bad else fit!r}; choose from {', '.join(BIAS_NAMES)}")
+    if dithers < 0:
+        fail(f"--dithers: expected a number of runs >= 0, got {dithers}")
+    for p in logs:
+        if not p.is_file():
+            fail(f"LOGS: {p} does not exist; give the .mcap files of the plan's runs")
+    with err.status("comparing", spinner="dots") if err.is_terminal else _nullcontext() as status:
+        def progress(stage: str) -> None:
+            if status is not None:
+                status.update(stage)
+
+        try:
+            result = run_compare(plan_dir, logs, out_dir, CompareConfig(dithers=dithers, seed=seed, fit=names),
+                                 progress)
+        except ValueError as exc:
+            fail(str(exc))
+    for lg in result["logs"]:
+        for problem in lg["lost"]:
+            err.print(f"[yellow]warning:[/] {Path(lg['path']).name}: {problem}", highlight=False, soft_wrap=True)
+    table = Table(title=f"{result['plan']['mission']}: {len(result['scenarios'])} run(s) against plan "
+                        f"{result['plan']['id']}")
+    for col in ("scenario", "predicted", "observed", "corrected", "path error (m)", "corrected (m)"):
+        table.add_column(col, justify="left" if col == "scenario" else "right")
+    for r in result["scenarios"]:
+        pe, pc = r["path_error_m"], r["path_error_corrected_m"]
+        table.add_row(r["id"], r["predicted_mode"], r["observed_mode"] or "end not logged", r["corrected_mode"],
+                      "-" if pe is None else f"{pe:.1f}", "-" if pc is None else f"{pc:.1f}")
+    out.print(table)
+    bias = Table(title="execution bias (fitted jointly to all logs)")
+    for col in ("parameter", "estimate", "std. error", "unit"):
+        bias.add_column(col, justify="left" if col in ("parameter", "unit") else "right")
+    units = result["bias_fit"]["units"]
+    for n, v in result["bias"].items():
+        se = "not identifiable" if v["stderr"] is None else f"{v['stderr']:.2g}"
+        bias.add_row(n, f"{v['estimate']:.4g}", se, units[n])
+    out.print(bias)
+    ag = result["mode_agreement"]
+    pct = (lambda v: "-" if v is None else f"{v:.0%}")
+    out.print(f"mode agreement: {pct(ag['uncorrected'])} as planned, {pct(ag['corrected'])} with the fitted bias "
+              f"({ag['scenarios']} scenarios with a logged end)", highlight=False)
+    flagged = [p for p in result["pairs"] if p["flagged"]]
+    for p in flagged:
+        out.print(f"pair {p['id']} ({' / '.join(p['scenarios'])}) flagged: {p['reason']}", highlight=False,
+                  soft_wrap=True)
+    for q in result["proposals"]:
+        if q["found"]:
+            mv = q["moved"]
+            out.print(f"  propose {q['id']}: {mv['parameter']} {mv['from']:.6g} -> {mv['to']:.6g} "
+                      f"(under the bias: {q['predicted_mode_under_bias']})" if isinstance(mv["from"], float) else
+                      f"  propose {q['id']}: {mv['parameter']} {mv['from']} -> {mv['to']}", highlight=False,
+                      soft_wrap=True)
+        else:
+            out.print(f"  {q['variant_of']}: {q['note']}", highlight=False, soft_wrap=True)
+    out.print(f"comparison.json and comparison.html written to {out_dir}", highlight=False, soft_wrap=True)
+
+
+class _nullcontext:
+    def __enter__(self):
+        return None
+
+    def __exit__(self, *exc):
+        return False
 
 
 @app.command()

@@ -88,15 +88,19 @@ class _Recorder:
 
 def run_sil(mission: Mission, u, *, vehicle: str = "uuv1", log_path: str | Path | None = None,
             speedup: float | None = None, timeout_s: float = 600.0, scenario_id: str = "",
-            mission_file: str = "") -> SilResult:
+            mission_file: str = "", plan_id: str = "", bias=None) -> SilResult:
     """Fly scenario ``u`` through front-seat, bridge, back-seat (and logger); return its scores.
 
     ``speedup=None`` runs lock-step (as fast as the back-seat answers); a number runs the
-    front-seat in real time times that factor.
+    front-seat in real time times that factor.  ``bias`` (:class:`sim.bias.Bias`) makes the
+    simulated front-seat a biased vehicle; it is not recorded in the log, whose metadata
+    names only the mission, plan and scenario — ``rapt-plan compare`` estimates the bias
+    blind, as from a real vehicle.
     """
     u = np.asarray(u, dtype=float)
     port = free_port()
-    fs = FrontSeat(mission, u, f"udpin:127.0.0.1:{port}", lockstep=speedup is None, speedup=speedup or 1.0)
+    fs = FrontSeat(mission, u, f"udpin:127.0.0.1:{port}", lockstep=speedup is None, speedup=speedup or 1.0,
+                   bias=bias)
     fs_thread = threading.Thread(target=fs.serve, name="frontseat", daemon=True)
     session = open_session(listen=[f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"])
     logger = bridge = backseat = recorder = None
@@ -110,7 +114,7 @@ def run_sil(mission: Mission, u, *, vehicle: str = "uuv1", log_path: str | Path 
         recorder = _Recorder(session, vehicle)
         session.put(keys.meta(vehicle, "scenario"), json.dumps({
             "mission": mission.name, "mission_file": mission_file or mission.source, "scenario_id": scenario_id,
-            "u": u.tolist(), "parameters": _jsonable(mission.space.decode(u[None, :])[0]),
+            "plan_id": plan_id, "u": u.tolist(), "parameters": _jsonable(mission.space.decode(u[None, :])[0]),
         }))
         backseat = BackSeat(session, vehicle, mission, u).start()
         bridge = MavlinkBridge(f"udpout:127.0.0.1:{port}", session, vehicle=vehicle, allow_commands=True).start()

@@ -1,0 +1,316 @@
+"""After the range day: compare run logs with a plan's predictions, estimate the bias, re-plan.
+
+``rapt-plan compare PLAN_DIR LOG.mcap...`` (section 4.6's first lesson: "an automatic way
+to identify and apply this bias to our predictions").  :func:`compare`
+
+1. reads every log (:mod:`planner.logs`; never modified, damaged ones as far as they go)
+   and matches it to its plan scenario by the recorded metadata — a log of another
+   mission or plan is refused with a one-line error;
+2. rebuilds each run's track, scores it with the mission's own scorer and score tree
+   (:func:`sim.replay.score_track`), and sets predicted against observed mode and
+   sub-scores per scenario and per pair (did the pair straddle its boundary?), with the
+   path error in metres against the predicted trajectory;
+3. fits the execution bias (:mod:`sim.bias`) to all logs jointly (:mod:`planner.biasfit`),
+   with a standard error per parameter;
+4. re-predicts every run and every plan scenario under the fitted bias — the corrected
+   predictions — and flags the pairs that no longer straddle their boundary, with an
+   adjusted "M" scenario for each side that moved (:mod:`planner.replan`);
+5. writes ``comparison.json`` and ``comparison.html`` (:mod:`planner.compare_report`).
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+import sim
+from planner.biasfit import fit_bias
+from planner.logs import LogError, LoggedRun, read_run
+from planner.plans import Plan, load_plan
+from planner.replan import adjust_for_bias
+from sim.bias import BIAS_NAMES, BIAS_UNITS, NEUTRAL
+from sim.replay import score_track
+from sim.scenario import make_scenarios
+from sim.scoring import MODE_NAMES
+
+__all__ = ["compare", "CompareConfig", "COMPARISON_SCHEMA", "match_logs"]
+
+COMPARISON_SCHEMA = "rapt.comparison/1"
+
+
+@dataclass
+class CompareConfig:
+    dithers: int = 20  # stochastic runs checking each adjusted scenario (0: none)
+    seed: int = 0
+    fit: tuple[str, ...] = BIAS_NAMES  # bias parameters to fit; the others stay neutral
+    p_target: float = 0.8
+
+
+@dataclass
+class Observation:
+    run: LoggedRun
+    sid: str
+    u: np.ndarray
+    scores: np.ndarray | None = None
+    mode: str | None = None  # None: the run's end is not in the log
+    notes: list[str] = field(default_factory=list)
+
+
+def match_logs(plan: Plan, runs: list[LoggedRun]) -> list[Observation]:
+    """Each log's plan scenario, by its metadata; LogError naming the log that does not belong."""
+    out = []
+    for run in runs:
+        meta, name = run.meta, run.path.name
+        mission = meta.get("mission")
+        if mission != plan.mission.name:
+            raise LogError(f"LOG: {name} was flown on mission {mission!r}, but the plan is for "
+                           f"{plan.mission.name!r}; compare a plan only with the logs of its own runs")
+        pid = meta.get("plan_id") or ""
+        if pid and pid != plan.id:
+            raise LogError(f"LOG: {name} flew plan {pid}, not this plan ({plan.id}); give the plan directory "
+                           "its runs were flown from")
+        u = np.asarray(meta.get("u", []), dtype=float)
+        sid = str(meta.get("scenario_id", ""))
+        known = {s["id"]: np.asarray(s["u"], dtype=float) for s in plan.scenarios + plan.variants}
+        if sid not in known or u.shape != known[sid].shape or not np.allclose(u, known[sid], rtol=0, atol=1e-9):
+            same = [k for k, v in known.items() if u.shape == v.shape and np.allclose(u, v, rtol=0, atol=1e-9)]
+            if not same:
+                raise LogError(f"LOG: {name} flew scenario {sid!r}, which is not a scenario of this plan (no plan "
+                               "scenario has its parameters); fly it with rapt-plan run PLAN/plan.json --scenario ID")
+            sid = same[0]
+        out.append(Observation(run, sid, known[sid]))
+    return out
+
+
+def _elements(plan: Plan, pair: dict, names: list[str]) -> list[int]:
+    cols = [names.index(e) for e in pair.get("elements", []) if e in names]
+    return cols or [0, 1]
+
+
+def _path_error(track: np.ndarray, pred: np.ndarray | None) -> dict | None:
+    """Horizontal distance between a logged and a predicted track at the same times (m)."""
+    if pred is None or track.shape[0] == 0:
+        return None
+    n = min(track.shape[0], pred.shape[0])
+    d = np.hypot(track[:n, 1] - pred[:n, 1], track[:n, 2] - pred[:n, 2])
+    return {"rms_m": float(np.sqrt(np.mean(d ** 2))), "max_m": float(d.max()), "compared_s": float(track[n - 1, 0]),
+            "duration_observed_s": float(track[-1, 0]), "duration_predicted_s": float(pred[-1, 0])}
+
+
+def compare(plan_path: str | Path, log_paths: list[str | Path], out_dir: str | Path | None = None,
+            cfg: CompareConfig | None = None, progress: Callable[[str], None] | None = None) -> dict:
+    """Run the comparison (see the module docstring); returns what ``comparison.json`` holds."""
+    cfg = cfg or CompareConfig()
+    say = progress or (lambda _: None)
+    plan = load_plan(plan_path)
+    m = plan.mission
+    if not log_paths:
+        raise ValueError("LOGS: give at least one .mcap log of a run of this plan")
+    say("reading logs")
+    runs = [read_run(p) for p in log_paths]
+    obs = match_logs(plan, runs)
+
+    # -- predictions of every plan scenario: unbiased, as planned -----------------------
+    ids = [s["id"] for s in plan.scenarios + plan.variants]
+    U_plan = np.array([plan.u(i) for i in ids]).reshape(-1, m.dim)
+    pred = sim.simulate(m, U_plan, trajectories=True)
+    names = pred.names
+    row_of = {sid: k for k, sid in enumerate(ids)}
+    for s in plan.scenarios + plan.variants:
+        planned = s.get("predicted", {}).get("mode")
+        got = MODE_NAMES[pred.modes[row_of[s["id"]]]] if pred.valid[row_of[s["id"]]] else "invalid"
+        if planned and planned != got:
+            raise ValueError(f"PLAN: scenario {s['id']} is predicted {got} by {plan.mission_file} but the plan says "
+                             f"{planned}; the mission file changed since the plan was made — regenerate the plan")
+
+    # -- observed ----------------------------------------------------------------------
+    say("scoring logged runs")
+    for o in obs:
+        if o.run.steps.shape[0]:
+            o.scores = score_track(m, o.u, o.run.track, o.run.wp_aborted, o.run.return_reason)
+            if o.run.has_end:
+                o.mode = MODE_NAMES[int(2 * o.scores[0] + o.scores[1])]
+
+    # -- bias ---------------------------------------------------------------------------
+    say("fitting the execution bias")
+    start_times = [float(make_scenarios(m, o.u[None, :]).start_time[0]) for o in obs]
+    fit = fit_bias(m, [o.run for o in obs], start_times, fit=tuple(cfg.fit))
+    bias = fit.bias
+
+    say("re-predicting under the fitted bias")
+    corr = sim.simulate(m, U_plan, trajectories=True, bias=bias)
+
+    # -- per run / per scenario ---------------------------------------------------------
+    scen_rows = []
+    for o in obs:
+        k = row_of[o.sid]
+        p_traj, c_traj = pred.trajectories[k], corr.trajectories[k]
+        sub = {}
+        for c in sorted(set(_level_cols(m, 1)) | {0, 1}):
+            sub[names[c]] = {"predicted": _f(pred.scores[k, c]), "observed": _f(o.scores[c]) if o.scores is not None
+                             else None, "corrected": _f(corr.scores[k, c])}
+        scen_rows.append({
+            "id": o.sid, "log": o.run.path.name,
+            "predicted_mode": MODE_NAMES[pred.modes[k]],
+            "observed_mode": o.mode,
+            "corrected_mode": MODE_NAMES[corr.modes[k]],
+            "path_error_m": _round(_path_error(o.run.track, p_traj), "rms_m"),
+            "path_error": _path_error(o.run.track, p_traj),
+            "path_error_corrected_m": _round(_path_error(o.run.track, c_traj), "rms_m"),
+            "ended": o.run.ended or None,
+            "steps": int(o.run.steps.shape[0]),
+            "log_complete": bool(o.run.complete_file and o.run.has_end),
+            "lost": list(o.run.problems),
+            "sub_scores": sub,
+        })
+
+    # mode agreement per scenario: every observed run of it agrees
+    by_sid: dict[str, list[dict]] = {}
+    for r in scen_rows:
+        if r["observed_mode"] is not None:
+            by_sid.setdefault(r["id"], []).append(r)
+    agree_u = [all(r["predicted_mode"] == r["observed_mode"] for r in rs) for rs in by_sid.values()]
+    agree_c = [all(r["corrected_mode"] == r["observed_mode"] for r in rs) for rs in by_sid.values()]
+    agreement = {"uncorrected": float(np.mean(agree_u)) if agree_u else None,
+                 "corrected": float(np.mean(agree_c)) if agree_c else None,
+                 "scenarios": len(by_sid),
+                 "runs_without_end": [r["log"] for r in scen_rows if r["observed_mode"] is None]}
+
+    # -- pairs: observed straddle, and under the fitted bias -----------------------------
+    say("re-planning")
+    flown = {o.sid for o in obs}
+    sens = plan.sensitivity()
+    pair_rows, proposals = [], []
+    for pair in plan.pairs:
+        a, b = pair["scenarios"]
+        cols = _elements(plan, pair, names)
+        ka, kb = row_of[a], row_of[b]
+        intended = {a: pred.scores[ka, cols], b: pred.scores[kb, cols]}
+        biased = {a: corr.scores[ka, cols], b: corr.scores[kb, cols]}
+        observed = {}
+        for o in obs:
+            if o.sid in (a, b) and o.mode is not None:
+                observed.setdefault(o.sid, o.scores[cols])
+        row = {"id": pair["id"], "scenarios": [a, b], "elements": [names[c] for c in cols],
+               "predicted_modes": [MODE_NAMES[pred.modes[ka]], MODE_NAMES[pred.modes[kb]]],
+               "observed_modes": [_obs_mode(obs, a), _obs_mode(obs, b)],
+               "corrected_modes": [MODE_NAMES[corr.modes[ka]], MODE_NAMES[corr.modes[kb]]],
+               "remaining": [s for s in (a, b) if s not in flown]}
+        if a in observed and b in observed:
+            row["observed_straddles"] = bool(np.any(observed[a] != observed[b]))
+            row["observed_as_predicted"] = bool(np.array_equal(observed[a], intended[a])
+                                                and np.array_equal(observed[b], intended[b]))
+        else:
+            row["observed_straddles"] = row["observed_as_predicted"] = None
+        moved = [s for s in (a, b) if not np.array_equal(biased[s], intended[s])]
+        row["straddles_under_bias"] = bool(np.any(biased[a] != biased[b]))
+        row["flagged"] = bool(moved)
+        row["moved_sides"] = moved
+        if moved:
+            why = ("both sides now show the same " + ", ".join(names[c] for c in cols)
+                   if not row["straddles_under_bias"] else
+                   "side(s) " + ", ".join(moved) + " no longer show their predicted " + ", ".join(names[c] for c in cols))
+            row["reason"] = why
+            for s in moved:
+                partner = b if s == a else a
+                k = row_of[s]
+                found = adjust_for_bias(m, U_plan[k], U_plan[row_of[partner]], cols, intended[s], bias, sens,
+                                        dithers=cfg.dithers, p_target=cfg.p_target, seed=cfg.seed * 1000 + k)
+                prop = {"id": f"{s}M", "variant_of": s, "pair": pair["id"],
+                        "intended": {names[c]: _f(v) for c, v in zip(cols, intended[s])},
+                        "under_bias": {names[c]: _f(v) for c, v in zip(cols, biased[s])}}
+                if found is None:
+                    prop.update(found=False, note="no move of up to 0.3 (unit cube) along the three most sensitive "
+                                                  "parameters restores it; choose a new pair")
+                else:
+                    v = np.array(found["u"])
+                    c = found["coordinate"]
+                    pname = _owner(m, c)
+                    before = m.space.decode(U_plan[k][None, :])[0][pname]
+                    after = m.space.decode(v[None, :])[0][pname]
+                    prop.update(found=True, u=found["u"], parameters=_jsonable(m.space.decode(v[None, :])[0]),
+                                moved={"parameter": pname, "unit_step": found["unit_step"], "from": _jv(before),
+                                       "to": _jv(after)},
+                                predicted_mode_under_bias=found["mode"], p_intended=found["p_intended"],
+                                robust=found["robust"])
+                proposals.append(prop)
+        pair_rows.append(row)
+
+    remaining = [{"id": sid, "predicted_mode": MODE_NAMES[pred.modes[row_of[sid]]],
+                  "corrected_mode": MODE_NAMES[corr.modes[row_of[sid]]],
+                  "changed": bool(pred.modes[row_of[sid]] != corr.modes[row_of[sid]])}
+                 for sid in plan.data.get("run_order", ids) if sid in row_of and sid not in flown]
+
+    result = {
+        "schema": COMPARISON_SCHEMA,
+        "plan": {"id": plan.id, "path": str(plan.path), "mission": m.name, "mission_file": str(plan.mission_file)},
+        "logs": [{"path": str(o.run.path), "scenario": o.sid, "messages": o.run.messages,
+                  "complete": bool(o.run.complete_file and o.run.has_end), "lost": o.run.problems} for o in obs],
+        "bias": fit.to_dict(),
+        "bias_fit": {"units": dict(BIAS_UNITS), "neutral": dict(NEUTRAL), "fitted": list(cfg.fit),
+                     "rms_position_m": fit.rms_position_m, "rms_position_unbiased_m": fit.rms_position_neutral_m,
+                     "rms_energy_wh": fit.rms_energy_wh, "segments": fit.segments, "residuals": fit.residuals,
+                     "runs": fit.runs, "converged": fit.success, "message": fit.message,
+                     "correlation": fit.correlation},
+        "scenarios": scen_rows,
+        "mode_agreement": agreement,
+        "pairs": pair_rows,
+        "remaining": remaining,
+        "proposals": proposals,
+    }
+    if out_dir is not None:
+        out_dir = Path(out_dir)
+        inputs = {Path(p).resolve() for p in log_paths} | {plan.path.resolve()}
+        out_dir.mkdir(parents=True, exist_ok=True)
+        target = (out_dir / "comparison.json").resolve()
+        if target in inputs:
+            raise ValueError(f"--out: {out_dir} would overwrite an input; choose another directory")
+        say("writing the report")
+        target.write_text(json.dumps(result, indent=2))
+        from planner.compare_report import write_comparison_report
+
+        traj = {o.sid: (pred.trajectories[row_of[o.sid]], corr.trajectories[row_of[o.sid]]) for o in obs}
+        write_comparison_report(result, plan, [(o.sid, o.run.track) for o in obs], traj, out_dir)
+    return result
+
+
+def _level_cols(m, level: int) -> list[int]:
+    tree = m.score_tree
+    if level == 0:
+        return list(tree.get("indices", [0, 1]))
+    return [i for child in tree.get("children", []) for i in child.get("indices", [])]
+
+
+def _obs_mode(obs: list[Observation], sid: str) -> str | None:
+    modes = [o.mode for o in obs if o.sid == sid and o.mode is not None]
+    return modes[0] if modes else None
+
+
+def _owner(m, c: int) -> str:
+    return next(p.name for p in m.space.parameters if c in range(m.space.slice_of(p.name).start,
+                                                                 m.space.slice_of(p.name).stop))
+
+
+def _f(v) -> float | None:
+    v = float(v)
+    return v if np.isfinite(v) else None
+
+
+def _round(d: dict | None, key: str) -> float | None:
+    return None if d is None else round(d[key], 3)
+
+
+def _jv(v):
+    if isinstance(v, (np.floating, np.integer)):
+        return v.item()
+    if isinstance(v, tuple):
+        return list(v)
+    return v
+
+
+def _jsonable(values: dict) -> dict:
+    return {k: _jv(v) for k, v in values.items()}

@@ -1,0 +1,201 @@
+"""``comparison.html``: predicted against observed runs, the bias estimate and the re-plan table.
+
+One self-contained page beside ``comparison.json`` (inline CSS, PNG figures in
+``figures/``, no JavaScript, nothing from the network), drawn headless with matplotlib's
+Agg backend like the plan's own report:
+
+* what was lost from damaged or truncated logs;
+* the execution bias estimate: each parameter with its standard error and neutral value;
+* mode agreement before and after the bias correction;
+* per logged run a map: the mission's elements for that scenario, the predicted track
+  (as planned), the track re-predicted under the fitted bias, and the observed track;
+* per pair: did it straddle its boundary on the water, does it still under the bias;
+* the re-plan table: the adjusted "M" scenarios proposed for the next runs.
+"""
+
+from __future__ import annotations
+
+import html
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")  # files only: no display on CI machines or range laptops
+
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.patches import Rectangle  # noqa: E402
+
+from sim.scenario import make_scenarios  # noqa: E402
+
+__all__ = ["write_comparison_report", "REPORT_NAME"]
+
+REPORT_NAME = "comparison.html"
+FIGURES = "figures"
+CSS = """body{font-family:sans-serif;max-width:1100px;margin:2em auto;color:#222}
+table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}
+th{background:#eee}td.l,th.l{text-align:left}.bad{color:#b00020;font-weight:bold}.ok{color:#1b7f2a}
+img{max-width:100%}.warn{background:#fff4e5;border-left:4px solid #f0a020;padding:.5em 1em}"""
+
+
+def _e(v: Any) -> str:
+    return html.escape("" if v is None else str(v))
+
+
+def _num(v: Any, digits: int = 3) -> str:
+    if v is None:
+        return "–"
+    if isinstance(v, float):
+        return f"{v:.{digits}g}"
+    return _e(v)
+
+
+def _rects(ax, rects: np.ndarray, face: str, edge: str, alpha: float, label: str | None = None) -> None:
+    for i, (x0, x1, y0, y1) in enumerate(np.asarray(rects).reshape(-1, 4)):
+        ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, facecolor=face, edgecolor=edge, alpha=alpha,
+                               label=label if i == 0 else None))
+
+
+def _map(plan, sid: str, track: np.ndarray, predicted, corrected, row: dict, path: Path) -> None:
+    m = plan.mission
+    scen = make_scenarios(m, plan.u(sid)[None, :])
+    fig, ax = plt.subplots(figsize=(5.2, 5.2))
+    op = m.operational_area
+    ax.add_patch(Rectangle((op.x - op.width / 2, op.y - op.height / 2), op.width, op.height, fill=False,
+                           edgecolor="#333"))
+    _rects(ax, scen.area_rect[0], "#4daf4a", "#2b7a28", 0.3, "mission area")
+    if m.transmission is not None:
+        _rects(ax, scen.tx_rect[0], "#80b1d3", "#377eb8", 0.3, "transmission")
+    _rects(ax, scen.nogo[0], "#e41a1c", "#a50f15", 0.35, "no-go")
+    _rects(ax, scen.barriers[0], "#984ea3", "#54278f", 0.35, "barrier")
+    if m.waypoints:
+        w = np.array(m.waypoints)
+        ax.plot(w[:, 0], w[:, 1], "k^", ms=6, label="waypoint")
+    ax.plot(*m.recovery, "ks", ms=6, label="recovery")
+    if predicted is not None:
+        ax.plot(predicted[:, 1], predicted[:, 2], "--", color="#555", lw=1.2, label=f"predicted ({row['predicted_mode']})")
+    if corrected is not None:
+        ax.plot(corrected[:, 1], corrected[:, 2], ":", color="#1f77b4", lw=1.6,
+                label=f"bias-corrected ({row['corrected_mode']})")
+    if track.shape[0]:
+        ax.plot(track[:, 1], track[:, 2], "-", color="#d62728", lw=1.4,
+                label=f"observed ({row['observed_mode'] or 'end not logged'})")
+    ax.set_aspect("equal")
+    ax.set_xlim(op.x - op.width / 2 - 20, op.x + op.width / 2 + 20)
+    ax.set_ylim(op.y - op.height / 2 - 20, op.y + op.height / 2 + 20)
+    ax.set_xlabel("east (m)")
+    ax.set_ylabel("north (m)")
+    err = row.get("path_error_m")
+    ax.set_title(f"{sid}: path error {err:.1f} m" if err is not None else sid, fontsize=10)
+    ax.legend(fontsize=7, loc="lower right")
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def _bias_figure(result: dict, path: Path) -> None:
+    bias, neutral, units = result["bias"], result["bias_fit"]["neutral"], result["bias_fit"]["units"]
+    names = list(bias)
+    fig, axes = plt.subplots(1, len(names), figsize=(1.7 * len(names), 2.6))
+    for ax, n in zip(np.atleast_1d(axes), names):
+        est, se = bias[n]["estimate"], bias[n]["stderr"]
+        ax.axhline(neutral[n], color="#999", lw=1)
+        ax.errorbar([0], [est], yerr=[[2 * se if se else 0]], fmt="o", color="#1f77b4", capsize=4)
+        ax.set_xticks([])
+        ax.set_title(f"{n}\n({units[n]})", fontsize=8)
+        ax.tick_params(labelsize=7)
+    fig.suptitle("execution bias: estimate ± 2 s.e. (grey: neutral)", fontsize=9)
+    fig.tight_layout()
+    fig.savefig(path, dpi=90)
+    plt.close(fig)
+
+
+def write_comparison_report(result: dict, plan, tracks: list[tuple[str, np.ndarray]], traj: dict,
+                            out_dir: Path) -> Path:
+    """Write ``comparison.html`` and its figures into ``out_dir``; returns the page's path."""
+    out_dir = Path(out_dir)
+    fig_dir = out_dir / FIGURES
+    fig_dir.mkdir(parents=True, exist_ok=True)
+    parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>RAPT comparison: {_e(result['plan']['mission'])}"
+             f"</title><style>{CSS}</style></head><body>",
+             f"<h1>Range day against plan {_e(result['plan']['id'])} ({_e(result['plan']['mission'])})</h1>",
+             f"<p>{len(result['logs'])} log(s) of plan <code>{_e(result['plan']['path'])}</code>.</p>"]
+    lost = [(lg["path"], p) for lg in result["logs"] for p in lg["lost"]]
+    if lost:
+        parts.append("<div class='warn'><b>What the logs lost</b><ul>"
+                     + "".join(f"<li><code>{_e(Path(p).name)}</code>: {_e(msg)}</li>" for p, msg in lost)
+                     + "</ul></div>")
+    # bias
+    _bias_figure(result, fig_dir / "bias.png")
+    fitd = result["bias_fit"]
+    parts.append("<h2>Execution bias</h2><table><tr><th class='l'>parameter</th><th>estimate</th><th>std. error</th>"
+                 "<th>neutral</th><th class='l'>unit</th></tr>")
+    for n, v in result["bias"].items():
+        se = "not identifiable" if v["stderr"] is None else f"{v['stderr']:.2g}"
+        parts.append(f"<tr><td class='l'>{_e(n)}</td><td>{v['estimate']:.4g}</td><td>{se}</td>"
+                     f"<td>{fitd['neutral'][n]:g}</td><td class='l'>{_e(fitd['units'][n])}</td></tr>")
+    parts.append(f"</table><p>Fitted on {fitd['runs']} run(s), {fitd['segments']} open-loop segments: position "
+                 f"residual {fitd['rms_position_m']:.3g} m RMS (unbiased model: {fitd['rms_position_unbiased_m']:.3g} m), "
+                 f"energy residual {fitd['rms_energy_wh']:.3g} Wh RMS.</p><img src='{FIGURES}/bias.png' alt='bias'>")
+    ag = result["mode_agreement"]
+    pct = (lambda v: "–" if v is None else f"{v:.0%}")
+    parts.append(f"<h2>Mode agreement</h2><p>Predicted modes matched the observed ones on <b>{pct(ag['uncorrected'])}"
+                 f"</b> of {ag['scenarios']} scenario(s) as planned, and on <b>{pct(ag['corrected'])}</b> with the "
+                 "fitted bias applied.</p>")
+    # scenarios
+    parts.append("<h2>Scenarios</h2><table><tr><th class='l'>scenario</th><th class='l'>log</th><th>predicted</th>"
+                 "<th>observed</th><th>corrected</th><th>path error (m)</th><th>corrected (m)</th>"
+                 "<th class='l'>ended</th></tr>")
+    for r in result["scenarios"]:
+        cls = "ok" if r["observed_mode"] == r["predicted_mode"] else "bad"
+        parts.append(f"<tr><td class='l'>{_e(r['id'])}</td><td class='l'>{_e(r['log'])}</td>"
+                     f"<td>{_e(r['predicted_mode'])}</td><td class='{cls}'>{_e(r['observed_mode'] or '–')}</td>"
+                     f"<td>{_e(r['corrected_mode'])}</td><td>{_num(r['path_error_m'])}</td>"
+                     f"<td>{_num(r['path_error_corrected_m'])}</td><td class='l'>{_e(r['ended'] or 'not in log')}</td></tr>")
+    parts.append("</table>")
+    for i, (sid, track) in enumerate(tracks):
+        row = result["scenarios"][i]
+        name = f"run{i + 1}_{sid}.png".replace("/", "_")
+        p, c = traj.get(sid, (None, None))
+        _map(plan, sid, track, p, c, row, fig_dir / name)
+        parts.append(f"<img src='{FIGURES}/{_e(name)}' alt='{_e(sid)}' style='width:48%'>")
+    # pairs
+    parts.append("<h2>Pairs</h2><table><tr><th>pair</th><th class='l'>scenarios</th><th class='l'>elements</th>"
+                 "<th>predicted</th><th>observed</th><th>straddled on the water</th><th>under the bias</th></tr>")
+    yn = (lambda v: "–" if v is None else ("yes" if v else "<span class='bad'>no</span>"))
+    for p in result["pairs"]:
+        parts.append(f"<tr><td>{_e(p['id'])}</td><td class='l'>{_e(' / '.join(p['scenarios']))}</td>"
+                     f"<td class='l'>{_e(', '.join(p['elements']))}</td><td>{_e(' / '.join(p['predicted_modes']))}</td>"
+                     f"<td>{_e(' / '.join(m or '–' for m in p['observed_modes']))}</td>"
+                     f"<td>{yn(p['observed_straddles'])}</td>"
+                     f"<td>{'<span class=bad>flagged: ' + _e(p.get('reason')) + '</span>' if p['flagged'] else 'holds'}"
+                     "</td></tr>")
+    parts.append("</table><h2>Re-plan: adjusted scenarios for the next runs</h2>")
+    if not result["proposals"]:
+        parts.append("<p>Every pair still straddles its boundary under the fitted bias; no adjustment needed.</p>")
+    else:
+        parts.append("<table><tr><th class='l'>new</th><th class='l'>replaces</th><th class='l'>move</th>"
+                     "<th>mode under bias</th><th>P(intended) in dithers</th></tr>")
+        for q in result["proposals"]:
+            if q["found"]:
+                mv = q["moved"]
+                move = f"{mv['parameter']}: {_num(mv['from'], 5)} → {_num(mv['to'], 5)}"
+                parts.append(f"<tr><td class='l'>{_e(q['id'])}</td><td class='l'>{_e(q['variant_of'])}</td>"
+                             f"<td class='l'>{_e(move)}</td><td>{_e(q['predicted_mode_under_bias'])}</td>"
+                             f"<td>{_num(q['p_intended'])}{'' if q['robust'] else ' (fragile)'}</td></tr>")
+            else:
+                parts.append(f"<tr><td class='l'>–</td><td class='l'>{_e(q['variant_of'])}</td>"
+                             f"<td class='l' colspan=3>{_e(q['note'])}</td></tr>")
+        parts.append("</table>")
+    if result["remaining"]:
+        parts.append("<h3>Scenarios not flown yet, re-predicted</h3><table><tr><th class='l'>scenario</th>"
+                     "<th>as planned</th><th>under the bias</th></tr>")
+        for r in result["remaining"]:
+            parts.append(f"<tr><td class='l'>{_e(r['id'])}</td><td>{_e(r['predicted_mode'])}</td>"
+                         f"<td class='{'bad' if r['changed'] else 'ok'}'>{_e(r['corrected_mode'])}</td></tr>")
+        parts.append("</table>")
+    parts.append("</body></html>")
+    page = out_dir / REPORT_NAME
+    page.write_text("\n".join(parts))
+    return page

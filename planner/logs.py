@@ -1,0 +1,238 @@
+"""Read a run back from the MCAP log our logger wrote — SIL or a real vehicle through the bridge.
+
+What a run's log holds (:mod:`bridge.logger`): the vehicle's MAVLink frames in order on
+``/mavlink/raw``, the back-seat's set-points (``rapt/<v>/command/<source>``), its status
+(aborted waypoints, why it turned home), and the scenario metadata (``meta/scenario``:
+mission, plan id, scenario id, unit-cube row).  :func:`read_run` turns that into a
+:class:`LoggedRun`: one row per reported step (:data:`STEP_FIELDS`), the set-point the
+vehicle was given at each step, and an account of anything lost.
+
+A log is read record by record and never modified.  A logger killed mid-run leaves a
+file with no summary or footer and a half-written last chunk: everything before it is
+read, a chunk that fails its CRC or decompression is skipped (and counted), and
+:attr:`LoggedRun.problems` says what is missing — down to "the run's end is not in the
+log", in which case the run has no observed mode.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+os.environ.setdefault("MAVLINK20", "1")
+from mcap.exceptions import McapError  # noqa: E402
+from mcap.records import Channel, Chunk, Footer, Message, Metadata, Schema  # noqa: E402
+from mcap.stream_reader import StreamReader, breakup_chunk  # noqa: E402
+from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
+
+from bridge import keys  # noqa: E402
+from bridge.logger import RAW_TOPIC  # noqa: E402
+from sim.interface import decode_command  # noqa: E402
+
+__all__ = ["LoggedRun", "read_run", "STEP_FIELDS", "LogError"]
+
+#: Columns of :attr:`LoggedRun.steps`; the first six are :data:`sim.replay.TRACK_FIELDS`.
+STEP_FIELDS = ("t", "x", "y", "heading", "energy_hj", "surfaced", "surge", "yaw_rate")
+NEEDED = ("LOCAL_POSITION_NED", "ATTITUDE", "BATTERY_STATUS")
+
+
+class LogError(ValueError):
+    """A log that cannot be compared at all (not MCAP, no scenario metadata)."""
+
+
+@dataclass
+class LoggedRun:
+    path: Path
+    meta: dict
+    steps: np.ndarray  # (n, STEP_FIELDS)
+    setpoints: np.ndarray  # (n, 3): heading, speed, surface of the set-point applied after each step; NaN: none
+    ended: str  # the front-seat's "run ended: <reason>", "" if not in the log
+    wp_aborted: list[bool]
+    return_reason: int
+    complete_file: bool
+    problems: list[str] = field(default_factory=list)
+    messages: int = 0
+
+    @property
+    def track(self) -> np.ndarray:
+        """(n, TRACK_FIELDS) rows for :func:`sim.replay.score_track`."""
+        return self.steps[:, :6]
+
+    @property
+    def scenario_id(self) -> str:
+        return str(self.meta.get("scenario_id", ""))
+
+    @property
+    def has_end(self) -> bool:
+        return bool(self.ended)
+
+
+class _Steps:
+    """A step's reports are closed by SYSTEM_TIME; a step repeated for late joiners counts once."""
+
+    def __init__(self):
+        self.rows: list[tuple[float, ...]] = []
+        self.tick: dict = {}
+        self.last_ms = -1
+        self.ended = ""
+
+    def add(self, msg) -> None:
+        kind = msg.get_type()
+        if kind in NEEDED:
+            self.tick[kind] = msg
+        elif kind == "STATUSTEXT":
+            text = msg.text if isinstance(msg.text, str) else bytes(msg.text).decode(errors="replace")
+            if text.startswith("run ended:"):
+                self.ended = text.split(":", 1)[1].strip().rstrip("\x00")
+        elif kind == "SYSTEM_TIME":
+            ms = int(msg.time_boot_ms)
+            if ms > self.last_ms and all(k in self.tick for k in NEEDED):
+                lp, att, bat = (self.tick[k] for k in NEEDED)
+                surge = float(np.hypot(np.float32(lp.vx), np.float32(lp.vy)))
+                self.rows.append((ms / 1000.0, float(lp.y), float(lp.x), float(att.yaw), float(bat.energy_consumed),
+                                  1.0 if lp.z <= 0 else 0.0, surge, float(att.yawspeed)))
+                self.last_ms = ms
+            self.tick = {}
+
+
+#: MAVLink message ids a run's track needs (everything else on /mavlink/raw is skipped unparsed).
+WANTED_IDS = {mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED, mavlink.MAVLINK_MSG_ID_ATTITUDE,
+              mavlink.MAVLINK_MSG_ID_BATTERY_STATUS, mavlink.MAVLINK_MSG_ID_SYSTEM_TIME,
+              mavlink.MAVLINK_MSG_ID_STATUSTEXT}
+
+
+def _decode_frame(parser, frame: bytes):
+    """One logged frame (the logger stores one per message) decoded if it is wanted; CRC-checked."""
+    if len(frame) >= 10 and frame[0] == 0xFD:  # MAVLink 2: the id is bytes 7..9, little-endian
+        msg_id = frame[7] | frame[8] << 8 | frame[9] << 16
+    elif len(frame) >= 6 and frame[0] == 0xFE:  # MAVLink 1
+        msg_id = frame[5]
+    else:
+        return None
+    if msg_id not in WANTED_IDS:
+        return None
+    try:
+        return parser.decode(bytearray(frame))
+    except Exception:  # a damaged frame: drop it, as a MAVLink parser would
+        return None
+
+
+def read_run(path: str | Path) -> LoggedRun:
+    """Read one run's log (see the module docstring); LogError when nothing comparable is in it."""
+    path = Path(path)
+    if not path.is_file():
+        raise LogError(f"LOG: {path} does not exist")
+    size = path.stat().st_size
+    channels: dict[int, Channel] = {}
+    steps = _Steps()
+    parser = mavlink.MAVLink(None)
+    parser.robust_parsing = True
+    meta: dict = {}
+    commands: dict[str, dict[int, tuple[float, float, float, float]]] = {}
+    status: dict = {}
+    active = keys.DEFAULT_ACTIVE
+    problems: list[str] = []
+    lost_chunks: list[tuple[int, int]] = []
+    footer = False
+    n_messages = 0
+    consumed = 0
+
+    def on_message(msg: Message) -> None:
+        nonlocal active, n_messages
+        ch = channels.get(msg.channel_id)
+        if ch is None:
+            return
+        n_messages += 1
+        if ch.topic == RAW_TOPIC:
+            m = _decode_frame(parser, bytes(msg.data))
+            if m is not None:
+                steps.add(m)
+            return
+        try:
+            _, kind, name = keys.split(ch.topic)
+            obj = json.loads(msg.data)
+        except ValueError:
+            return
+        if kind == "meta" and name == "scenario" and isinstance(obj, dict):
+            meta.update(obj)
+        elif kind == "command" and isinstance(obj, dict) and obj.get("tick_ms") is not None:
+            commands.setdefault(name, {})[int(obj["tick_ms"])] = (float(obj["vx"]), float(obj["vy"]),
+                                                                  float(obj["vz"]), float(obj["yaw"]))
+        elif kind == "status" and isinstance(obj, dict):
+            status[name] = obj
+        elif kind == "control" and name == "active":
+            active = str(obj.get("value", obj)) if isinstance(obj, dict) else str(obj)
+
+    def on_record(rec) -> None:
+        if isinstance(rec, Channel):
+            channels[rec.id] = rec
+        elif isinstance(rec, Message):
+            on_message(rec)
+        elif isinstance(rec, Metadata) and rec.name == "scenario":
+            for k, v in rec.metadata.items():
+                try:
+                    meta.setdefault(k, json.loads(v) if k in ("u", "parameters") else v)
+                except ValueError:
+                    meta.setdefault(k, v)
+
+    with open(path, "rb") as f:
+        reader = StreamReader(f, emit_chunks=True, record_size_limit=max(size, 1))
+        try:
+            for rec in reader.records:
+                consumed = f.tell()
+                if isinstance(rec, Chunk):
+                    try:
+                        inner = breakup_chunk(rec, validate_crc=True)
+                    except Exception:  # CRC mismatch, bad compression: skip this chunk, keep going
+                        lost_chunks.append((rec.message_start_time, rec.message_end_time))
+                        continue
+                    for r in inner:
+                        on_record(r)
+                elif isinstance(rec, Footer):
+                    footer = True
+                elif not isinstance(rec, Schema):
+                    on_record(rec)
+        except (McapError, EOFError, ValueError, OSError, MemoryError, IndexError, KeyError) as exc:
+            if consumed == 0 and not channels:
+                raise LogError(f"LOG: {path} is not an MCAP file our logger wrote ({type(exc).__name__}: {exc}); "
+                               "give the .mcap file of a run") from None
+            problems.append(f"the file ends or is damaged after byte {consumed:,} of {size:,}; "
+                            f"{size - consumed:,} bytes unreadable")
+        except Exception as exc:  # anything else from a damaged record: stop there, keep what was read
+            problems.append(f"unreadable record after byte {consumed:,} of {size:,} ({type(exc).__name__})")
+    if not footer:
+        problems.insert(0, "no summary or footer: the logger did not finish the file (killed mid-run?)")
+    if lost_chunks:
+        t0 = min(a for a, _ in lost_chunks) / 1e9
+        t1 = max(b for _, b in lost_chunks) / 1e9
+        problems.append(f"{len(lost_chunks)} damaged chunk(s) skipped (log time {t0:.3f}..{t1:.3f} s)")
+    if not meta:
+        raise LogError(f"LOG: {path} has no scenario metadata (meta/scenario); it was not written by "
+                       "rapt-plan run or a logger beside a planned run")
+    rows = np.array(steps.rows, dtype=float).reshape(-1, len(STEP_FIELDS))
+    if rows.shape[0] == 0:
+        problems.append("no complete telemetry step in the log")
+    source = active if active in commands else (max(commands, key=lambda k: len(commands[k])) if commands else None)
+    setpoints = np.full((rows.shape[0], 3), np.nan)
+    if source is not None and rows.shape[0]:
+        table = commands[source]
+        ticks = np.array(sorted(table))
+        values = np.array([table[k] for k in ticks], dtype=np.float32)
+        step_ms = np.round(rows[:, 0] * 1000).astype(np.int64)
+        # the set-point the front-seat flew after each step: the latest one issued for a tick <= this step
+        idx = np.searchsorted(ticks, step_ms, side="right") - 1
+        ok = idx >= 0
+        h, s, up = decode_command(values[idx[ok], 0], values[idx[ok], 1], values[idx[ok], 2], values[idx[ok], 3])
+        setpoints[ok] = np.column_stack([h, s, up.astype(float)])
+    elif rows.shape[0]:
+        problems.append("no back-seat set-points in the log: the trajectory cannot be replayed for the bias fit")
+    st = status.get(source or keys.DEFAULT_ACTIVE) or (next(iter(status.values())) if status else {})
+    if not steps.ended:
+        last = rows[-1, 0] if rows.shape[0] else 0.0
+        problems.append(f"the run's end is not in the log (track stops at {last:,.0f} s): no observed mode")
+    return LoggedRun(path, meta, rows, setpoints, steps.ended, [bool(v) for v in st.get("wp_aborted", [])],
+                     int(st.get("return_reason", 0)), footer, problems, n_messages)

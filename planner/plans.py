@@ -1,0 +1,104 @@
+"""A field plan on disk (``plan.json``, schema ``rapt.plan/1``): load it, name it, find its scenarios.
+
+``rapt-plan generate`` writes the plan; ``rapt-plan run PLAN --scenario pair1a`` flies one
+of its scenarios and ``rapt-plan compare PLAN_DIR LOGS`` reads the logs back against it.
+A plan's id is a digest of what makes its runs comparable — the mission's name and every
+scenario's and variant's id and unit-cube row — so a log records which plan it flew and a
+log of another plan is recognised, even when the plan's files have been copied elsewhere.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+import sim
+from sim.mission import Mission
+
+__all__ = ["Plan", "load_plan", "plan_id"]
+
+SCHEMA = "rapt.plan/1"
+
+
+def plan_id(plan: dict) -> str:
+    """12 hex digits naming the plan's mission and scenarios (not its file or timestamps)."""
+    rows = [(s["id"], [round(float(v), 12) for v in s["u"]])
+            for s in list(plan.get("scenarios", [])) + list(plan.get("variants", []))]
+    text = json.dumps({"mission": plan.get("mission", {}).get("name"), "scenarios": rows}, sort_keys=True)
+    return hashlib.sha256(text.encode()).hexdigest()[:12]
+
+
+@dataclass
+class Plan:
+    """A loaded plan: its JSON, where it lives, its mission and id."""
+
+    data: dict
+    path: Path
+    mission: Mission
+    mission_file: Path
+    id: str
+
+    @property
+    def scenarios(self) -> list[dict]:
+        """The pair scenarios, in plan order."""
+        return list(self.data.get("scenarios", []))
+
+    @property
+    def variants(self) -> list[dict]:
+        return list(self.data.get("variants", []))
+
+    @property
+    def pairs(self) -> list[dict]:
+        return list(self.data.get("pairs", []))
+
+    def scenario(self, sid: str) -> dict:
+        """A scenario or variant by id; ValueError listing the ids there are."""
+        for s in self.scenarios + self.variants:
+            if s["id"] == sid:
+                return s
+        ids = [s["id"] for s in self.scenarios + self.variants]
+        raise ValueError(f"--scenario: {sid!r} is not a scenario of {self.path}; choose one of {', '.join(ids)}")
+
+    def u(self, sid: str) -> np.ndarray:
+        return np.asarray(self.scenario(sid)["u"], dtype=float)
+
+    def sensitivity(self) -> np.ndarray:
+        """Per unit-cube coordinate: the summed root-score importance of its parameter."""
+        space = self.mission.space
+        out = np.zeros(self.mission.dim)
+        for root in self.data.get("sensitivity", {}).values():
+            for p in space.parameters:
+                sl = space.slice_of(p.name)
+                out[sl] += float(root.get(p.name, 0.0)) / max(sl.stop - sl.start, 1)
+        return out
+
+
+def load_plan(path: str | Path) -> Plan:
+    """``plan.json`` or the directory holding it; ValueError (one line) when it is not a plan."""
+    path = Path(path)
+    if path.is_dir():
+        path = path / "plan.json"
+    if not path.is_file():
+        raise ValueError(f"PLAN: {path} does not exist; give a plan directory or plan.json from rapt-plan generate")
+    try:
+        data = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"PLAN: {path} is not valid JSON ({exc}); regenerate it with rapt-plan generate") from None
+    if not isinstance(data, dict) or data.get("schema") != SCHEMA:
+        raise ValueError(f"PLAN: {path} is not a {SCHEMA} plan (schema {data.get('schema')!r}); "
+                         "give the plan.json written by rapt-plan generate")
+    file = Path(data.get("mission", {}).get("file", ""))
+    candidates = [file] if file.is_absolute() else [Path.cwd() / file, path.parent / file, path.parent / file.name]
+    found = next((c for c in candidates if c.is_file()), None)
+    if found is None:
+        raise ValueError(f"PLAN: {path} names mission file {str(file)!r}, which is not there; "
+                         "put the mission file back or next to plan.json")
+    mission = sim.load_mission(found)
+    if mission.name != data["mission"].get("name"):
+        raise ValueError(f"PLAN: {found} holds mission {mission.name!r}, but the plan was made for "
+                         f"{data['mission'].get('name')!r}; point the plan at its own mission file")
+    return Plan(data, path, mission, found, plan_id(data))
