@@ -418,7 +418,7 @@ def compare(
     ag = result["mode_agreement"]
     pct = (lambda v: "-" if v is None else f"{v:.0%}")
     out.print(f"mode agreement: {pct(ag['uncorrected'])} as planned, {pct(ag['corrected'])} with the fitted bias "
-              f"({ag['scenarios']} scenarios with a logged end)", highlight=False)
+              f"({ag['scenarios']} scenarios with a logged end)", highlight=False, soft_wrap=True)
     flagged = [p for p in result["pairs"] if p["flagged"]]
     for p in flagged:
         out.print(f"pair {p['id']} ({' / '.join(p['scenarios'])}) flagged: {p['reason']}", highlight=False,
