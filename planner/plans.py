@@ -88,8 +88,9 @@ def load_plan(path: str | Path) -> Plan:
         data = json.loads(path.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise ValueError(f"PLAN: {path} is not valid JSON ({exc}); regenerate it with rapt-plan generate") from None
-    if not isinstance(data, dict) or data.get("schema") != SCHEMA:
-        raise ValueError(f"PLAN: {path} is not a {SCHEMA} plan (schema {data.get('schema')!r}); "
+    schema = data.get("schema") if isinstance(data, dict) else None
+    if schema != SCHEMA:
+        raise ValueError(f"PLAN: {path} is not a {SCHEMA} plan (schema {schema!r}); "
                          "give the plan.json written by rapt-plan generate")
     file = Path(data.get("mission", {}).get("file", ""))
     candidates = [file] if file.is_absolute() else [Path.cwd() / file, path.parent / file, path.parent / file.name]

@@ -60,22 +60,21 @@ def adjust_for_bias(mission: Mission, u: np.ndarray, partner: np.ndarray, cols: 
     ranked = sorted(np.flatnonzero(hit).tolist(), key=lambda i: (moves[i][0], -sensitivity[moves[i][1]]))
     if not ranked:
         return None
-    fallback = None
+    first = ranked[:4]  # dither the few smallest matches only, in one batch
+    entries = [{"u": [float(x) for x in U[i]], "coordinate": moves[i][1], "unit_step": moves[i][2],
+                "mode": MODE_NAMES[int(r.modes[i])], "p_intended": None, "robust": True} for i in first]
+    if dithers <= 0:
+        return entries[0]
     rng = np.random.default_rng(seed)
-    for i in ranked[:6]:  # dither the few smallest matches only
-        v = U[i]
-        entry = {"u": [float(x) for x in v], "coordinate": moves[i][1], "unit_step": moves[i][2],
-                 "mode": MODE_NAMES[int(r.modes[i])], "p_intended": None, "robust": True}
-        if dithers <= 0:
+    D = np.clip(np.repeat(U[first], dithers, axis=0) + sigma * rng.standard_normal((len(first) * dithers, u.size)),
+                0.0, 1.0)
+    D[::dithers] = U[first]  # each candidate itself, with the stochastic effects on
+    d = sim.simulate(mission, D, seed=seed, stochastic=True, bias=bias)
+    show = d.valid & np.all(d.scores[:, cols] == np.asarray(target)[None, :], axis=1)
+    for j, entry in enumerate(entries):
+        block = slice(j * dithers, (j + 1) * dithers)
+        ok = d.valid[block]
+        entry["p_intended"] = float(show[block][ok].mean()) if ok.any() else 0.0
+        if entry["p_intended"] >= p_target:
             return entry
-        D = np.clip(v + sigma * rng.standard_normal((dithers, v.size)), 0.0, 1.0)
-        D[0] = v
-        d = sim.simulate(mission, D, seed=seed, stochastic=True, bias=bias)
-        ok = d.valid
-        p = float(np.mean(np.all(d.scores[ok][:, cols] == np.asarray(target)[None, :], axis=1))) if ok.any() else 0.0
-        entry["p_intended"] = p
-        if p >= p_target:
-            return entry
-        if fallback is None or p > fallback["p_intended"]:
-            fallback = {**entry, "robust": False}
-    return fallback
+    return {**max(entries, key=lambda e: e["p_intended"]), "robust": False}
