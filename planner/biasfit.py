@@ -18,9 +18,10 @@ vehicle's unmodelled disturbances do not accumulate.
 :func:`fit_bias` minimises those residuals over the six bias parameters with
 ``scipy.optimize.least_squares`` (all segments of all logs in one vectorised batch) and
 gives each parameter a standard error from the Jacobian at the solution,
-``(J^T J)^-1 s^2`` with ``s^2`` the residual variance.  A parameter the logs carry no
-information about (a mission without current, say) stays neutral and is reported as not
-identifiable.  The fitted bias is then checked closed loop by :mod:`planner.compare`.
+``(J^T J)^-1 s^2`` with ``s^2`` the residual variance.  A weak prior around neutral
+(:data:`PRIOR_SD`) keeps a direction the logs barely inform (one run, one tide phase)
+from wandering to a bound; a parameter the logs carry no information about at all (a
+mission without current, say) stays neutral and is reported as not identifiable.  The fitted bias is then checked closed loop by :mod:`planner.compare`.
 """
 
 from __future__ import annotations
@@ -42,6 +43,11 @@ SEGMENT_STEPS = 60
 #: Residual units: metres of position, watt-hours of energy used.
 SIGMA_POSITION_M = 1.0
 SIGMA_ENERGY_WH = 0.05
+#: A weak prior around neutral, one standard deviation per parameter: far wider than any
+#: range day's bias, so informative logs are not pulled, but a direction the logs say
+#: nothing about (one run, one tide phase: current scale against offset) stays put.
+PRIOR_SD = {"speed": 0.5, "current_scale": 1.0, "current_offset": 1.0, "heading": 15.0, "battery": 1.0,
+            "start_time": 3 * 3600.0}
 #: Parameter scaling for the optimiser (a unit step of each is a comparable effect).
 SCALE = {"speed": 0.1, "current_scale": 0.1, "current_offset": 0.1, "heading": 1.0, "battery": 0.1,
          "start_time": 600.0}
@@ -183,24 +189,30 @@ def fit_bias(mission: Mission, runs: list, start_times: list[float], fit: tuple[
     def to_bias(p: np.ndarray) -> Bias:
         return Bias(**{n: float(v) for n, v in zip(names, base + scale * p)})
 
+    prior = scale / np.array([PRIOR_SD[n] for n in names])
+    weight = [0.0]  # the prior's rows, in units of the data's residual scale (set after a first fit)
+
     def fun(p: np.ndarray) -> np.ndarray:
-        return np.concatenate(_residuals(mission, seg, to_bias(p)))
+        return np.concatenate([*_residuals(mission, seg, to_bias(p)), weight[0] * prior * p])
 
     p0 = np.zeros(len(names))
     r0 = _residuals(mission, seg, to_bias(p0))
-    sol = least_squares(fun, p0, bounds=(lo, hi), method="trf", loss="soft_l1", f_scale=5.0, diff_step=1e-6,
-                        x_scale=1.0, max_nfev=200)
-    J = sol.jac
-    m, k = J.shape
+    opts = dict(bounds=(lo, hi), method="trf", loss="soft_l1", f_scale=5.0, diff_step=1e-6, x_scale=1.0)
+    sol = least_squares(fun, p0, max_nfev=200, **opts)  # the data alone
+    m = sol.fun.size - len(names)
+    s2 = float(sol.fun[:m] @ sol.fun[:m]) / max(m - len(names), 1)
+    weight[0] = float(np.sqrt(s2))  # then the prior, weighed against the data's own noise
+    sol = least_squares(fun, sol.x, max_nfev=100, **opts)
+    J = sol.jac[:m]  # the data's Jacobian (the prior rows last)
     col = np.linalg.norm(J, axis=0)
     known = col > 1e-8 * max(col.max(), 1e-300)
-    res = sol.fun
+    res = sol.fun[:m]
     s2 = float(res @ res) / max(m - int(known.sum()), 1)
     stderr: dict[str, float | None] = {n: None for n in BIAS_NAMES}
     correlation: dict[str, dict[str, float]] = {}
     if known.any():
         Jk = J[:, known]
-        cov = np.linalg.pinv(Jk.T @ Jk) * s2
+        cov = np.linalg.pinv(Jk.T @ Jk / s2 + np.diag(prior[known] ** 2))  # posterior, Gauss-Newton
         sd = np.sqrt(np.clip(np.diag(cov), 0, None))
         kn = [n for n, ok in zip(names, known) if ok]
         for n, v, sc in zip(kn, sd, scale[known]):

@@ -234,6 +234,8 @@ def run(
         "--inject-bias", help="Fly a biased vehicle for rehearsal, e.g. speed=1.15,current_offset=0.3 "
                               "(speed, current_scale, current_offset, heading, battery, start_time; see sim.bias). "
                               "Not written to the log.")] = None,
+    stochastic: Annotated[bool, typer.Option(help="Navigation drift and current perturbations on (seeded).")] = False,
+    seed: Annotated[int, typer.Option(help="Seed of the stochastic effects.")] = 0,
 ) -> None:
     """Fly one scenario software-in-the-loop: front-seat, bridge, autonomy (and logger)."""
     import numpy as np
@@ -263,10 +265,10 @@ def run(
         fail(f"--speedup: expected a factor > 0, got {speedup}")
     try:
         result = run_sil(mission, u, log_path=log, speedup=speedup, timeout_s=timeout, scenario_id=sid,
-                         mission_file=source, plan_id=pid, bias=bias)
+                         mission_file=source, plan_id=pid, bias=bias, stochastic=stochastic, seed=seed)
     except (ValueError, RuntimeError, TimeoutError) as exc:
         fail(str(exc))
-    batch = sim.simulate(mission, u[None, :], bias=bias)
+    batch = sim.simulate(mission, u[None, :], bias=bias, seed=seed, stochastic=stochastic)
     same = bool(np.array_equal(result.scores, batch.scores[0]))
     names = batch.names
     mode = ("TF", "SS", "MS", "TS")[int(2 * result.scores[0] + result.scores[1])]
@@ -281,8 +283,11 @@ def run(
     for name in ("mission_areas", "transmission", "recovery", "nogo_areas", "mission.battery_left"):
         if name in names:
             table.add_row(name, f"{result.scores[names.index(name)]:g}")
-    table.add_row("same scores as the batch simulator" + (" (same bias)" if bias is not None else ""),
-                  "yes" if same else "NO")
+    if stochastic:  # the log holds what the navigation believed, the batch scores ground truth
+        table.add_row("batch simulator's mode (ground truth)", ("TF", "SS", "MS", "TS")[int(batch.modes[0])])
+    else:
+        table.add_row("same scores as the batch simulator" + (" (same bias)" if bias is not None else ""),
+                      "yes" if same else "NO")
     if log is not None:
         table.add_row("log", str(log))
     out.print(table)
@@ -297,7 +302,8 @@ def generate(
     global_fraction: Annotated[float, typer.Option(help="Share of the budget for the space-filling start.")] = 0.2,
     dithers: Annotated[int, typer.Option(help="Stochastic dither runs per pair.")] = 2000,
     seed: Annotated[int, typer.Option(help="Seed of every random choice.")] = 0,
-    batch_size: Annotated[int, typer.Option("--batch-size", help="Runs per search batch.")] = 500,
+    batch_size: Annotated[Optional[int], typer.Option("--batch-size", help="Runs per search batch "
+                                                        "(default: about 40 batches of 250 to 5,000).")] = None,
     resume: Annotated[bool, typer.Option(help="Continue the study stored in OUT/study.db.")] = False,
     executor: Annotated[str, typer.Option(help="local, processes or dask://host:port.")] = "local",
     refine: Annotated[int, typer.Option(help="Runs per pair of a focused second search (0: none).")] = 0,

@@ -51,6 +51,15 @@ def _num(v: Any, digits: int = 3) -> str:
     return _e(v)
 
 
+def _differ(row: dict) -> str:
+    """Sub-scores (level 1) whose observed value is not the predicted one, as name predicted→observed."""
+    out = []
+    for name, v in row.get("sub_scores", {}).items():
+        if v["observed"] is not None and v["observed"] != v["predicted"]:
+            out.append(f"{name} {v['predicted']:g}→{v['observed']:g}")
+    return ", ".join(out) or "–"
+
+
 def _rects(ax, rects: np.ndarray, face: str, edge: str, alpha: float, label: str | None = None) -> None:
     for i, (x0, x1, y0, y1) in enumerate(np.asarray(rects).reshape(-1, 4)):
         ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, facecolor=face, edgecolor=edge, alpha=alpha,
@@ -60,7 +69,7 @@ def _rects(ax, rects: np.ndarray, face: str, edge: str, alpha: float, label: str
 def _map(plan, sid: str, track: np.ndarray, predicted, corrected, row: dict, path: Path) -> None:
     m = plan.mission
     scen = make_scenarios(m, plan.u(sid)[None, :])
-    fig, ax = plt.subplots(figsize=(5.2, 5.2))
+    fig, ax = plt.subplots(figsize=(5.2, 6.0))
     op = m.operational_area
     ax.add_patch(Rectangle((op.x - op.width / 2, op.y - op.height / 2), op.width, op.height, fill=False,
                            edgecolor="#333"))
@@ -75,12 +84,12 @@ def _map(plan, sid: str, track: np.ndarray, predicted, corrected, row: dict, pat
     ax.plot(*m.recovery, "ks", ms=6, label="recovery")
     if predicted is not None:
         ax.plot(predicted[:, 1], predicted[:, 2], "--", color="#555", lw=1.2, label=f"predicted ({row['predicted_mode']})")
-    if corrected is not None:
-        ax.plot(corrected[:, 1], corrected[:, 2], ":", color="#1f77b4", lw=1.6,
-                label=f"bias-corrected ({row['corrected_mode']})")
     if track.shape[0]:
-        ax.plot(track[:, 1], track[:, 2], "-", color="#d62728", lw=1.4,
+        ax.plot(track[:, 1], track[:, 2], "-", color="#d62728", lw=2.4, alpha=0.55,
                 label=f"observed ({row['observed_mode'] or 'end not logged'})")
+    if corrected is not None:  # on top: where it overlays the observed track, the bias explains the run
+        ax.plot(corrected[:, 1], corrected[:, 2], ":", color="#1f4e9c", lw=1.4,
+                label=f"bias-corrected ({row['corrected_mode']})")
     ax.set_aspect("equal")
     ax.set_xlim(op.x - op.width / 2 - 20, op.x + op.width / 2 + 20)
     ax.set_ylim(op.y - op.height / 2 - 20, op.y + op.height / 2 + 20)
@@ -88,7 +97,7 @@ def _map(plan, sid: str, track: np.ndarray, predicted, corrected, row: dict, pat
     ax.set_ylabel("north (m)")
     err = row.get("path_error_m")
     ax.set_title(f"{sid}: path error {err:.1f} m" if err is not None else sid, fontsize=10)
-    ax.legend(fontsize=7, loc="lower right")
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=3, frameon=False)
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
@@ -146,13 +155,14 @@ def write_comparison_report(result: dict, plan, tracks: list[tuple[str, np.ndarr
     # scenarios
     parts.append("<h2>Scenarios</h2><table><tr><th class='l'>scenario</th><th class='l'>log</th><th>predicted</th>"
                  "<th>observed</th><th>corrected</th><th>path error (m)</th><th>corrected (m)</th>"
-                 "<th class='l'>ended</th></tr>")
+                 "<th class='l'>ended</th><th class='l'>sub-scores not as predicted</th></tr>")
     for r in result["scenarios"]:
         cls = "ok" if r["observed_mode"] == r["predicted_mode"] else "bad"
         parts.append(f"<tr><td class='l'>{_e(r['id'])}</td><td class='l'>{_e(r['log'])}</td>"
                      f"<td>{_e(r['predicted_mode'])}</td><td class='{cls}'>{_e(r['observed_mode'] or '–')}</td>"
                      f"<td>{_e(r['corrected_mode'])}</td><td>{_num(r['path_error_m'])}</td>"
-                     f"<td>{_num(r['path_error_corrected_m'])}</td><td class='l'>{_e(r['ended'] or 'not in log')}</td></tr>")
+                     f"<td>{_num(r['path_error_corrected_m'])}</td><td class='l'>{_e(r['ended'] or 'not in log')}</td>"
+                     f"<td class='l'>{_e(_differ(r))}</td></tr>")
     parts.append("</table>")
     for i, (sid, track) in enumerate(tracks):
         row = result["scenarios"][i]

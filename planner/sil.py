@@ -88,19 +88,22 @@ class _Recorder:
 
 def run_sil(mission: Mission, u, *, vehicle: str = "uuv1", log_path: str | Path | None = None,
             speedup: float | None = None, timeout_s: float = 600.0, scenario_id: str = "",
-            mission_file: str = "", plan_id: str = "", bias=None) -> SilResult:
+            mission_file: str = "", plan_id: str = "", bias=None, stochastic: bool = False,
+            seed: int = 0) -> SilResult:
     """Fly scenario ``u`` through front-seat, bridge, back-seat (and logger); return its scores.
 
     ``speedup=None`` runs lock-step (as fast as the back-seat answers); a number runs the
     front-seat in real time times that factor.  ``bias`` (:class:`sim.bias.Bias`) makes the
     simulated front-seat a biased vehicle; it is not recorded in the log, whose metadata
     names only the mission, plan and scenario — ``rapt-plan compare`` estimates the bias
-    blind, as from a real vehicle.
+    blind, as from a real vehicle.  ``stochastic`` turns on the front-seat's navigation
+    drift and current perturbations (seeded by ``seed``): the vehicle then reports where
+    its navigation thinks it is, as a real one does.
     """
     u = np.asarray(u, dtype=float)
     port = free_port()
     fs = FrontSeat(mission, u, f"udpin:127.0.0.1:{port}", lockstep=speedup is None, speedup=speedup or 1.0,
-                   bias=bias)
+                   bias=bias, stochastic=stochastic, seed=seed)
     fs_thread = threading.Thread(target=fs.serve, name="frontseat", daemon=True)
     session = open_session(listen=[f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"])
     logger = bridge = backseat = recorder = None
