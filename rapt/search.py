@@ -65,7 +65,8 @@ def search(fn: Callable[[np.ndarray], Any], bounds: Any, budget: int, method: st
            executor: Any = None, chunk_size: int | None = None,
            output_types: Sequence[str] | None = None, n_initial: int | None = None,
            sampler_options: dict[str, Any] | None = None,
-           progress: Callable[[int, int], None] | None = None) -> Study:
+           progress: Callable[[int, int], None] | None = None,
+           on_batch: Callable[[np.ndarray, np.ndarray], None] | None = None) -> Study:
     """Search the space for performance boundaries of ``fn``.
 
     Parameters
@@ -102,6 +103,10 @@ def search(fn: Callable[[np.ndarray], Any], bounds: Any, budget: int, method: st
         Extra keyword arguments for the sampler (e.g. ``k``, ``g``, ``v``).
     progress:
         Called as ``progress(evaluated, budget)`` after every batch.
+    on_batch:
+        Called as ``on_batch(U, Y)`` with the unit-cube rows and scores of each completed
+        batch's successful evaluations, replayed batches of a resumed study included: how
+        a caller follows the modes found so far without reading the store.
     """
     if not callable(fn):
         raise ValueError("fn: expected a callable mapping an (n, d) array to an (n, m) array")
@@ -138,7 +143,7 @@ def search(fn: Callable[[np.ndarray], Any], bounds: Any, budget: int, method: st
     }
     db = StudyStore(":memory:" if store is None else store)
     try:
-        runner = _Runner(fn, space, physical, sampler, db, ex, workers, chunk_size, int(batch_size))
+        runner = _Runner(fn, space, physical, sampler, db, ex, workers, chunk_size, int(batch_size), on_batch)
         runner.open(config, output_types)
         runner.run(int(budget), progress)
         return runner.study(method, int(seed), None if store is None else str(store))
@@ -154,7 +159,8 @@ class _Runner:
     """One study in progress: replay what the store holds, then evaluate the rest."""
 
     def __init__(self, fn, space: StateSpace, physical: bool, sampler: Sampler, db: StudyStore,
-                 executor: cf.Executor | None, workers: int, chunk_size: int | None, batch_size: int):
+                 executor: cf.Executor | None, workers: int, chunk_size: int | None, batch_size: int,
+                 on_batch: Callable[[np.ndarray, np.ndarray], None] | None = None):
         self.fn = fn
         self.space = space
         self.physical = physical
@@ -164,6 +170,7 @@ class _Runner:
         self.workers = workers
         self.chunk_size = chunk_size
         self.batch_size = batch_size
+        self.on_batch = on_batch
         self.n_outputs: int | None = None
         # Per evaluated row, in (batch, row) order.
         self.U: list[np.ndarray] = []
@@ -233,6 +240,8 @@ class _Runner:
             self.U.append(U)
             self.Y.append(Y)
             self.batch_of.append(np.full(len(ok), b, dtype=np.int64))
+            if self.on_batch is not None:
+                self.on_batch(U, Y)
         if bad:
             Uf = np.vstack([r[2] for r in bad])
             self.sampler.tell_failed(Uf)
