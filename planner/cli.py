@@ -339,11 +339,12 @@ def generate(
         tasks: dict = {}
         start = time.perf_counter()
 
-        def progress(stage: str, done: int, total: int) -> None:
+        def progress(stage: str, done: int, total: int, detail: str) -> None:
             if stage not in tasks:
                 tasks[stage] = bar.add_task(stage, total=total, rate="")
-            rate = f"{done / max(time.perf_counter() - start, 1e-9):,.0f} runs/s" if stage == "search" else ""
-            bar.update(tasks[stage], completed=done, rate=rate)
+            if stage == "search":
+                detail = f"{done / max(time.perf_counter() - start, 1e-9):,.0f} runs/s, {detail}"
+            bar.update(tasks[stage], completed=done, rate=detail)
 
         try:
             plan = run_generate(mission, mission_file, out_dir, cfg, progress)

@@ -7,25 +7,27 @@ The stages of ``rapt-plan generate``, each a function a test can run on a small 
 2. :func:`analyse` — every valid run re-scored in full (the simulator is deterministic),
    the sub-boundary tree over the mission's score tree, sensitivity of each root score.
 3. :func:`select_pairs` — K boundary pairs on different sub-boundaries, shortest first,
-   kept clear of invalid scenarios and of isolated samples (noise rather than behaviour).
-4. :func:`dither` — Gaussian dithers around every chosen scenario re-simulated with the
-   stochastic effects on: how likely each shows its predicted mode, the nearest boundary
-   in its neighbourhood, and sub-boundaries there that the pair does not test
+   kept clear of invalid scenarios and of isolated samples (noise rather than behaviour);
+   with ``--refine``, :func:`refine_pair` bisects each pair on its own sub-scores.
+4. :func:`dither_many` — Gaussian dithers around every chosen scenario re-simulated with
+   the stochastic effects on: how likely each shows its predicted mode, the nearest
+   boundary in its neighbourhood, and sub-boundaries there that the pair does not test
    (orthogonal: another kind of element; parallel: another element of the same kind).
+5. :func:`robust_variants` — fragile scenarios moved away from their boundary ("M").
 
-:func:`generate` runs them all and writes ``plan.json`` (schema ``rapt.plan/1``) and, per
-scenario, a QGroundControl ``.plan``, a ``QGC WPL 110`` file and its predicted track as
-GeoJSON (:mod:`planner.exports`), and ``report.html`` (:mod:`planner.report`).  Stages 5
-and 6 — robust variants of fragile scenarios and ``--refine`` — are :func:`robust_variant`
-and :func:`refine_pair`.
+:func:`generate` runs them all and writes ``plan.json`` (schema ``rapt.plan/1``,
+documented in ``planner/plan.schema.json``) and, per scenario, a QGroundControl
+``.plan``, a ``QGC WPL 110`` file and its predicted track as GeoJSON
+(:mod:`planner.exports`), and ``report.html`` (:mod:`planner.report`).
 """
 
 from __future__ import annotations
 
 import json
+import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -38,10 +40,21 @@ from sim.scoring import MODE_NAMES
 
 from planner.exports import write_scenario_files
 from planner.report import write_report
+from planner.search_status import SearchStatus
 
-__all__ = ["GenerateConfig", "search_mission", "analyse", "select_pairs", "dither", "generate", "PLAN_SCHEMA"]
+__all__ = ["GenerateConfig", "search_mission", "analyse", "select_pairs", "dither_many", "robust_variants",
+           "refine_pair", "generate", "auto_batch_size", "PLAN_SCHEMA"]
 
 PLAN_SCHEMA = "rapt.plan/1"
+
+
+def auto_batch_size(budget: int) -> int:
+    """About 40 batches of 250 to 5,000 runs.
+
+    Small batches steer the search more often; large ones keep the vectorised simulator
+    at full speed (its throughput more than triples from 256 to 4,096 scenarios a batch).
+    """
+    return int(np.clip(budget // 40, 250, 5000))
 
 
 @dataclass
@@ -50,7 +63,7 @@ class GenerateConfig:
     pairs: int = 5
     global_fraction: float = 0.2
     seed: int = 0
-    batch_size: int = 500
+    batch_size: int | None = None  # None: auto_batch_size(budget)
     dithers: int = 2000
     dither_sigma: float = 0.02
     executor: Any = None
@@ -59,7 +72,13 @@ class GenerateConfig:
     refine_min_distance: float = 0.02  # refined pairs stay at least this far apart (unit cube)
     fragile_below: float = 0.8  # P(predicted mode) under which a scenario gets a robust variant
 
+    def __post_init__(self) -> None:
+        if self.batch_size is None and isinstance(self.budget, int):
+            self.batch_size = auto_batch_size(self.budget)
+
     def check(self) -> None:
+        if not isinstance(self.batch_size, int) or self.batch_size < 1:
+            raise ValueError(f"--batch-size: expected a positive number of runs, got {self.batch_size}")
         if not isinstance(self.budget, int) or self.budget < 2 * self.batch_size:
             raise ValueError(f"--budget: expected at least {2 * self.batch_size} runs, got {self.budget}")
         if not (0 < self.global_fraction < 1):
@@ -103,13 +122,14 @@ def make_executor(spec: str):
         return client, client.close
     raise ValueError(f"--executor: expected local, processes or dask://host:port, got {spec!r}")
 
-def search_mission(mission: Mission, cfg: GenerateConfig,
-                   progress: Callable[[int, int], None] | None = None) -> rapt.Study:
+def search_mission(mission: Mission, cfg: GenerateConfig, progress: Callable[[int, int], None] | None = None,
+                   on_batch: Callable[[np.ndarray, np.ndarray], None] | None = None) -> rapt.Study:
     """Global then adaptive search on mission and safety success; invalid scenarios fail."""
 
     return rapt.search(RootScores(mission), mission.space, cfg.budget, method="s-ndv", batch_size=cfg.batch_size,
                        seed=cfg.seed, store=cfg.store, executor=cfg.executor, output_types=("binary", "binary"),
-                       n_initial=int(round(cfg.budget * cfg.global_fraction)), progress=progress)
+                       n_initial=int(round(cfg.budget * cfg.global_fraction)), progress=progress,
+                       on_batch=on_batch)
 
 
 # -- 2. analysis --------------------------------------------------------------------------
@@ -189,34 +209,51 @@ def select_pairs(a: Analysis, k: int, min_cluster: int = 3) -> list[dict]:
 
 
 # -- 4. dithering ---------------------------------------------------------------------------
-def dither(mission: Mission, u: np.ndarray, predicted_mode: int, elements: list[str], n: int, sigma: float,
-           seed: int, runs: dict | None = None) -> dict:
-    """Stochastic runs of ``n`` Gaussian dithers around ``u``: reproducibility and neighbours.
+def dither_many(mission: Mission, centres: np.ndarray, predicted: Sequence[int], elements: Sequence[list[str]],
+                n: int, sigma: float, seed: int) -> tuple[list[dict], np.ndarray, np.ndarray]:
+    """Stochastic runs of ``n`` Gaussian dithers around each centre, all in one batch.
 
-    ``runs``, when given, receives the dithers' unit-cube rows and modes (for the report).
+    Returns per centre the statistics of :func:`dither_stats`, and the dithers' unit-cube
+    rows and modes, (k, n, d) and (k, n), for the report.  The first dither of each centre
+    is the centre itself, with the stochastic effects on.
     """
+    centres = np.atleast_2d(np.asarray(centres, dtype=float))
+    k, d = centres.shape
     rng = np.random.default_rng(seed)
-    U = np.clip(u + sigma * rng.standard_normal((n, u.size)), 0.0, 1.0)
-    U[0] = u  # the scenario itself, with the stochastic effects on
-    r = sim.simulate(mission, U, seed=seed, stochastic=True)
-    if runs is not None:
-        runs["U"], runs["modes"] = U, r.modes
-    ok = r.valid
-    out: dict[str, Any] = {"runs": int(n), "valid": int(ok.sum()), "sigma": sigma}
-    if not ok.any():
+    U = np.clip(centres[:, None, :] + sigma * rng.standard_normal((k, n, d)), 0.0, 1.0)
+    U[:, 0] = centres
+    r = sim.simulate(mission, U.reshape(k * n, d), seed=seed, stochastic=True)
+    stats = []
+    for c in range(k):
+        rows = slice(c * n, (c + 1) * n)
+        stats.append(dither_stats(U[c], r.scores[rows], r.modes[rows], r.valid[rows], r.names, r.output_types,
+                                  int(predicted[c]), list(elements[c]), sigma))
+    return stats, U, r.modes.reshape(k, n)
+
+
+def dither_stats(U: np.ndarray, scores: np.ndarray, modes: np.ndarray, valid: np.ndarray, names: list[str],
+                 types: Sequence[str], predicted_mode: int, elements: list[str], sigma: float) -> dict:
+    """Reproducibility and neighbours of one dithered scenario (sections 4.4.5-4.4.7).
+
+    How often the predicted mode shows, how close the nearest run of another mode lies,
+    and which sub-boundaries the neighbourhood holds that the pair does not test: an
+    element that flips among runs of the predicted mode is *parallel* when it is of the
+    same kind as the pair's elements (another no-go area), *orthogonal* otherwise.
+    """
+    u = U[0]
+    out: dict[str, Any] = {"runs": int(U.shape[0]), "valid": int(valid.sum()), "sigma": sigma}
+    if not valid.any():
         return out
-    dist = np.linalg.norm(U[ok] - u, axis=1)
-    modes = r.modes[ok]
+    dist = np.linalg.norm(U[valid] - u, axis=1)
+    modes = modes[valid]
     out["p_predicted_mode"] = float(np.mean(modes == predicted_mode))
     out["modes"] = {MODE_NAMES[m]: int(c) for m, c in zip(*np.unique(modes, return_counts=True))}
     other = modes != predicted_mode
     out["nearest_other_mode"] = float(dist[other].min()) if other.any() else None
-    # sub-boundaries in the neighbourhood: elements that flip among runs of the predicted mode
-    same = r.scores[ok][~other]
-    names, types = r.names, r.output_types
+    same = scores[valid][~other]
     flips = []
-    if same.shape[0] > 1:
-        ref = r.scores[0]
+    if same.shape[0] > 1 and valid[0]:
+        ref = scores[0]
         for c, (name, t) in enumerate(zip(names, types)):
             if t == "continuous" or "." not in name or name in elements:
                 continue
@@ -231,33 +268,49 @@ def dither(mission: Mission, u: np.ndarray, predicted_mode: int, elements: list[
 
 
 # -- 5. robust variants ---------------------------------------------------------------------
-VARIANT_STEPS = (0.02, 0.04, 0.08, 0.16)
+VARIANT_STEPS = (0.02, 0.05, 0.1)
+VARIANT_COORDINATES = 2  # the most sensitive coordinates tried
 
 
-def robust_variant(mission: Mission, u: np.ndarray, partner: np.ndarray, mode: int, sensitivity: np.ndarray,
-                   n: int, sigma: float, target: float, seed: int) -> dict | None:
-    """Move a fragile scenario away from its boundary along its most sensitive coordinate.
+def robust_variants(mission: Mission, fragile: np.ndarray, partners: np.ndarray, modes: Sequence[int],
+                    sensitivity: np.ndarray, n: int, sigma: float, target: float, seed: int) -> list[dict | None]:
+    """Move fragile scenarios away from their boundary along their most sensitive coordinates.
 
-    The direction is away from the pair's other scenario; the smallest step (in the unit
-    cube) whose deterministic run keeps the predicted mode and whose dithers show it at
-    least ``target`` of the time wins (section 4.5.3's "M" scenarios).  None if no step does.
+    For each scenario the candidates step away from the pair's other scenario along the
+    ``VARIANT_COORDINATES`` most sensitive coordinates by ``VARIANT_STEPS`` (unit cube); the
+    first candidate, in that order, whose deterministic run keeps the predicted mode and
+    whose dithers show it at least ``target`` of the time wins (section 4.5.3's "M"
+    scenarios); None where none does.  All candidates run in two batches.
     """
-    order = np.argsort(-sensitivity)
-    for c in order[:3]:
-        direction = np.sign(u[c] - partner[c]) or 1.0
-        for step in VARIANT_STEPS:
-            v = u.copy()
-            v[c] = np.clip(v[c] + direction * step, 0.0, 1.0)
-            if v[c] == u[c]:
-                break
-            r = sim.simulate(mission, v[None, :])
-            if not r.valid[0] or r.modes[0] != mode:
-                continue
-            stats = dither(mission, v, mode, [], n, sigma, seed)
-            if stats.get("p_predicted_mode", 0.0) >= target:
-                return {"u": [float(x) for x in v], "coordinate": int(c), "step": float(direction * step),
-                        "p_predicted_mode": stats["p_predicted_mode"]}
-    return None
+    fragile = np.atleast_2d(np.asarray(fragile, dtype=float))
+    cands, owner, meta = [], [], []
+    for s, (u, partner) in enumerate(zip(fragile, np.atleast_2d(partners))):
+        for c in np.argsort(-sensitivity, kind="stable")[:VARIANT_COORDINATES]:
+            direction = np.sign(u[c] - partner[c]) or 1.0
+            for step in VARIANT_STEPS:
+                v = u.copy()
+                v[c] = np.clip(v[c] + direction * step, 0.0, 1.0)
+                if v[c] == u[c]:
+                    break
+                cands.append(v)
+                owner.append(s)
+                meta.append((int(c), float(v[c] - u[c])))
+    out: list[dict | None] = [None] * len(fragile)
+    if not cands:
+        return out
+    V, owner = np.array(cands), np.array(owner)
+    det = sim.simulate(mission, V)
+    keep = np.flatnonzero(det.valid & (det.modes == np.asarray(modes)[owner]))
+    if keep.size == 0:
+        return out
+    stats, _, _ = dither_many(mission, V[keep], np.asarray(modes)[owner[keep]], [[]] * keep.size, n, sigma, seed)
+    for idx, st in zip(keep.tolist(), stats):
+        s = owner[idx]
+        if out[s] is None and st.get("p_predicted_mode", 0.0) >= target:
+            c, step = meta[idx]
+            out[s] = {"u": [float(x) for x in V[idx]], "coordinate": c, "step": step,
+                      "p_predicted_mode": st["p_predicted_mode"]}
+    return out
 
 
 # -- 6. refinement ----------------------------------------------------------------------------
@@ -301,72 +354,82 @@ def refine_pair(mission: Mission, a: Analysis, pair: dict, runs: int, min_distan
 
 # -- everything ------------------------------------------------------------------------------
 def generate(mission: Mission, mission_path: Path, out_dir: Path, cfg: GenerateConfig,
-             progress: Callable[[str, int, int], None] | None = None) -> dict:
-    """Run stages 1-4 and write ``plan.json`` (plus per-scenario files) into ``out_dir``."""
+             progress: Callable[[str, int, int, str], None] | None = None,
+             timings: dict[str, float] | None = None) -> dict:
+    """Run every stage and write ``plan.json`` (plus per-scenario files and the report) into ``out_dir``.
+
+    ``progress(stage, done, total, detail)`` follows the stages; during the search
+    ``detail`` says how many modes and boundary links the runs so far show
+    (:class:`~planner.search_status.SearchStatus`).  ``timings``, when given, receives the
+    wall seconds of each stage (kept out of the plan, which depends on the seed only).
+    """
     cfg.check()
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
-    study = search_mission(mission, cfg, None if progress is None else lambda d, t: progress("search", d, t))
+    clock = _StageClock(timings)
+    status = SearchStatus(mission.dim) if progress is not None else None
+    searched = None if status is None else lambda done, total: progress("search", done, total, status.summary())
+    study = search_mission(mission, cfg, searched, on_batch=status)
+    clock.lap("search")
     a = analyse(mission, study)
+    clock.lap("analysis")
     pairs = select_pairs(a, cfg.pairs)
+    clock.lap("selection")
     if cfg.refine:
         pairs = [refine_pair(mission, a, pair, cfg.refine, cfg.refine_min_distance) for pair in pairs]
         if progress is not None:
-            progress("refine", len(pairs), len(pairs))
-    sens = np.zeros(mission.dim)
-    for root in a.sensitivity.values():
-        for p in mission.space.parameters:
-            sens[mission.space.slice_of(p.name)] += root[p.name] / max(mission.space.slice_of(p.name).stop
-                                                                       - mission.space.slice_of(p.name).start, 1)
-    scenarios, plan_pairs, variants = [], [], []
+            progress("refine", len(pairs), len(pairs), "")
+        clock.lap("refinement")
+    sens = _coordinate_sensitivity(mission, a.sensitivity)
+    U = (np.vstack([np.asarray(p.get("u_override", [a.X[r] for r in p["rows"]])) for p in pairs])
+         if pairs else np.zeros((0, mission.dim)))
+    ids = [f"pair{p}{side}" for p in range(1, len(pairs) + 1) for side in "ab"]
+    partners = U[np.arange(len(U)) ^ 1]  # a's partner is b and b's is a
+    chosen = sim.simulate(mission, U, trajectories=True)
+    elements = [pair["elements"] for pair in pairs for _ in "ab"]
+    stats: list[dict] = [{} for _ in ids]
     dither_runs: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-    U_chosen = [np.asarray(pair.get("u_override", [a.X[r] for r in pair["rows"]])) for pair in pairs]
-    flat = np.vstack(U_chosen) if U_chosen else np.zeros((0, mission.dim))
-    chosen_run = sim.simulate(mission, flat, trajectories=True) if len(flat) else None
-    for p_index, pair in enumerate(pairs, start=1):
-        ids = []
-        for side_index, side in enumerate("ab"):
-            k = 2 * (p_index - 1) + side_index
-            sid = f"pair{p_index}{side}"
-            u = flat[k]
-            mode = int(chosen_run.modes[k])
-            partner = flat[k + 1 if side_index == 0 else k - 1]
-            runs: dict = {}
-            stats = dither(mission, u, mode, pair["elements"], cfg.dithers // 2, cfg.dither_sigma,
-                           cfg.seed * 1000 + 2 * p_index + (side == "b"), runs) if cfg.dithers else {}
-            if runs:
-                dither_runs[sid] = (runs["U"], runs["modes"])
-            if progress is not None:
-                progress("dither", 2 * p_index - (side == "a"), 2 * len(pairs))
-            scenarios.append({
-                "id": sid, "u": [float(v) for v in u],
-                "parameters": _jsonable(mission.space.decode(u[None, :])[0]),
-                "predicted": {"mode": MODE_NAMES[mode],
-                              "scores": {n: float(chosen_run.scores[k, c]) for c, n in enumerate(chosen_run.names)
-                                         if c in a.tree.levels[0] or c in a.tree.levels[min(1, len(a.tree.levels) - 1)]}},
-                "dithering": stats,
-                "files": {kind: path.name for kind, path in
-                          write_scenario_files(mission, u, out_dir, sid, chosen_run.trajectories[k]).items()},
-            })
-            ids.append(sid)
-            if cfg.dithers and stats.get("p_predicted_mode", 1.0) < cfg.fragile_below:
-                v = robust_variant(mission, u, partner, mode, sens, max(cfg.dithers // 10, 20), cfg.dither_sigma,
-                                   cfg.fragile_below, cfg.seed * 1000 + 500 + k)
-                if v is not None:
-                    vid = f"{sid}M"
-                    c = v["coordinate"]
-                    name = next(p.name for p in mission.space.parameters if c in range(
-                        mission.space.slice_of(p.name).start, mission.space.slice_of(p.name).stop))
-                    variants.append({"id": vid, "variant_of": sid, "u": v["u"],
-                                     "parameters": _jsonable(mission.space.decode(np.array(v["u"])[None, :])[0]),
-                                     "moved": {"parameter": name, "unit_step": v["step"]},
-                                     "predicted": {"mode": MODE_NAMES[mode]},
-                                     "p_predicted_mode": v["p_predicted_mode"],
-                                     "files": {kind: path.name for kind, path in
-                                               write_scenario_files(mission, np.array(v["u"]), out_dir, vid).items()}})
-        plan_pairs.append({"id": p_index, "level": pair["level"], "elements": pair["elements"],
-                           "modes": pair["modes"], "distance": pair["distance"], "scenarios": ids,
-                           "refined": bool(pair.get("refined", False))})
+    if cfg.dithers and len(U):
+        stats, dU, dmodes = dither_many(mission, U, chosen.modes, elements, cfg.dithers // 2, cfg.dither_sigma,
+                                        cfg.seed)
+        dither_runs = {sid: (dU[k], dmodes[k]) for k, sid in enumerate(ids)}
+        if progress is not None:
+            progress("dither", len(ids), len(ids), "")
+    clock.lap("dithering")
+    fragile = [k for k, st in enumerate(stats) if st.get("p_predicted_mode", 1.0) < cfg.fragile_below]
+    found = robust_variants(mission, U[fragile], partners[fragile], chosen.modes[fragile], sens,
+                            max(cfg.dithers // 10, 20), cfg.dither_sigma, cfg.fragile_below,
+                            cfg.seed + 1) if fragile and cfg.dithers else []
+    clock.lap("variants")
+    level_cols = set(a.tree.levels[0]) | set(a.tree.levels[min(1, len(a.tree.levels) - 1)])
+    scenarios = []
+    for k, sid in enumerate(ids):
+        mode = int(chosen.modes[k])
+        scenarios.append({
+            "id": sid, "u": [float(v) for v in U[k]],
+            "parameters": _jsonable(mission.space.decode(U[k][None, :])[0]),
+            "predicted": {"mode": MODE_NAMES[mode],
+                          "scores": {n: float(chosen.scores[k, c]) for c, n in enumerate(chosen.names)
+                                     if c in level_cols}},
+            "dithering": stats[k],
+            "files": {kind: path.name for kind, path in
+                      write_scenario_files(mission, U[k], out_dir, sid, chosen.trajectories[k]).items()},
+        })
+    variants = []
+    for k, v in zip(fragile, found):
+        if v is None:
+            continue
+        vid = f"{ids[k]}M"
+        variants.append({"id": vid, "variant_of": ids[k], "u": v["u"],
+                         "parameters": _jsonable(mission.space.decode(np.array(v["u"])[None, :])[0]),
+                         "moved": {"parameter": _owner(mission, v["coordinate"]), "unit_step": v["step"]},
+                         "predicted": {"mode": MODE_NAMES[int(chosen.modes[k])]},
+                         "p_predicted_mode": v["p_predicted_mode"],
+                         "files": {kind: path.name for kind, path in
+                                   write_scenario_files(mission, np.array(v["u"]), out_dir, vid).items()}})
+    plan_pairs = [{"id": p, "level": pair["level"], "elements": pair["elements"], "modes": pair["modes"],
+                   "distance": pair["distance"], "scenarios": [f"pair{p}a", f"pair{p}b"],
+                   "refined": bool(pair.get("refined", False))} for p, pair in enumerate(pairs, start=1)]
     modes = a.result.modes
     plan = {
         "schema": PLAN_SCHEMA,
@@ -384,7 +447,38 @@ def generate(mission: Mission, mission_path: Path, out_dir: Path, cfg: GenerateC
     }
     (out_dir / "plan.json").write_text(json.dumps(plan, indent=2))
     write_report(plan, out_dir, dither_runs)
+    clock.lap("files")
     return plan
+
+
+class _StageClock:
+    """Wall seconds per stage into a caller's dict (or nowhere)."""
+
+    def __init__(self, into: dict[str, float] | None):
+        self.into = into
+        self.last = time.perf_counter()
+
+    def lap(self, stage: str) -> None:
+        now = time.perf_counter()
+        if self.into is not None:
+            self.into[stage] = self.into.get(stage, 0.0) + now - self.last
+        self.last = now
+
+
+def _coordinate_sensitivity(mission: Mission, sensitivity: dict[str, dict[str, float]]) -> np.ndarray:
+    """Importance per unit-cube coordinate, summed over the root scores (a parameter's share split evenly)."""
+    sens = np.zeros(mission.dim)
+    for root in sensitivity.values():
+        for p in mission.space.parameters:
+            sl = mission.space.slice_of(p.name)
+            sens[sl] += root[p.name] / max(sl.stop - sl.start, 1)
+    return sens
+
+
+def _owner(mission: Mission, coordinate: int) -> str:
+    """The parameter a unit-cube coordinate encodes."""
+    return next(p.name for p in mission.space.parameters
+                if mission.space.slice_of(p.name).start <= coordinate < mission.space.slice_of(p.name).stop)
 
 
 def _jsonable(values: dict) -> dict:

@@ -4,16 +4,32 @@ import json
 import re
 from pathlib import Path
 
+import jsonschema
 import numpy as np
 import pytest
 from typer.testing import CliRunner
 
+import planner
 import sim
 from planner.cli import app
 from planner.generate import PLAN_SCHEMA, GenerateConfig, analyse, generate, search_mission, select_pairs
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+SCHEMA = json.loads((Path(planner.__file__).parent / "plan.schema.json").read_text())
+PLAN_VALIDATOR = jsonschema.Draft202012Validator(SCHEMA)
 runner = CliRunner()
+
+
+def test_plan_schema_is_valid_and_rejects_what_the_planner_never_writes(plan_dir):
+    jsonschema.Draft202012Validator.check_schema(SCHEMA)
+    assert SCHEMA["properties"]["schema"]["const"] == PLAN_SCHEMA
+    _, plan = plan_dir
+    bad = json.loads(json.dumps(plan))
+    bad["scenarios"][0]["predicted"]["mode"] = "XX"
+    bad["pairs"][0]["extra"] = 1
+    bad["scenarios"][1]["u"][0] = 1.5
+    errors = {tuple(e.absolute_path) for e in PLAN_VALIDATOR.iter_errors(bad)}
+    assert errors == {("scenarios", 0, "predicted", "mode"), ("pairs", 0), ("scenarios", 1, "u", 0)}
 
 
 @pytest.fixture(scope="module")
@@ -45,10 +61,18 @@ def test_stages_search_analyse_and_select_distinct_sub_boundaries(range2017, tmp
         assert changed == p["elements"]  # the pair really flips these elements
 
 
-def test_generate_writes_a_plan_whose_predictions_hold(range2017, tmp_path):
-    plan = generate(range2017, EXAMPLES / "range2017.toml", tmp_path / "out", small(tmp_path))
+@pytest.fixture(scope="module")
+def plan_dir(range2017, tmp_path_factory):
+    out = tmp_path_factory.mktemp("plan")
+    plan = generate(range2017, EXAMPLES / "range2017.toml", out / "out", small(out, pairs=3, fragile_below=0.5))
+    return out, plan
+
+
+def test_generate_writes_a_plan_whose_predictions_hold(range2017, plan_dir):
+    tmp_path, plan = plan_dir
     on_disk = json.loads((tmp_path / "out" / "plan.json").read_text())
     assert on_disk == json.loads(json.dumps(plan)) and plan["schema"] == PLAN_SCHEMA
+    PLAN_VALIDATOR.validate(on_disk)  # the published schema describes what we write
     assert {"mission", "study", "sensitivity", "pairs", "scenarios", "run_order"} <= set(plan)
     assert len(plan["scenarios"]) == 2 * len(plan["pairs"])
     assert plan["run_order"] == [s["id"] for s in plan["scenarios"]] + [v["id"] for v in plan["variants"]]
@@ -64,10 +88,10 @@ def test_generate_writes_a_plan_whose_predictions_hold(range2017, tmp_path):
         assert set(s["parameters"]) == set(range2017.space.names)
 
 
-def test_same_seed_same_plan(range2017, tmp_path):
-    a = generate(range2017, EXAMPLES / "range2017.toml", tmp_path / "a", small(tmp_path / "a"))
-    b = generate(range2017, EXAMPLES / "range2017.toml", tmp_path / "b", small(tmp_path / "b"))
-    assert a == b
+def test_same_seed_same_plan(range2017, plan_dir, tmp_path):
+    _, plan = plan_dir
+    again = generate(range2017, EXAMPLES / "range2017.toml", tmp_path / "b", small(tmp_path, pairs=3, fragile_below=0.5))
+    assert again == plan
 
 
 def test_cli_generate_resume_and_errors(tmp_path):
@@ -130,8 +154,35 @@ def test_refine_sharpens_pairs_and_variants_keep_their_mode(range2017, tmp_path)
     np.testing.assert_array_equal(r.scores[0, cols], a.result.scores[i, cols])  # still the same sub-boundary
     np.testing.assert_array_equal(r.scores[1, cols], a.result.scores[j, cols])
     plan = generate(range2017, EXAMPLES / "range2017.toml", tmp_path / "out",
-                    small(tmp_path, dithers=100, refine=8, pairs=2, fragile_below=0.9))
+                    small(tmp_path, dithers=60, refine=8, pairs=2, fragile_below=0.9))
     for v in plan["variants"]:
         assert v["p_predicted_mode"] >= 0.9 and v["variant_of"] in plan["run_order"]
         mode = sim.simulate(range2017, np.array(v["u"])[None, :]).modes[0]
         assert ("TF", "SS", "MS", "TS")[mode] == v["predicted"]["mode"]
+
+
+def test_generate_runs_end_to_end_on_the_chapter3_mission(tmp_path):
+    """uuv18: 18 parameters, the permutation of mission-area priorities, 62 leaf scores."""
+    mission = sim.load_mission(EXAMPLES / "uuv18.toml")
+    plan = generate(mission, EXAMPLES / "uuv18.toml", tmp_path / "out",
+                    GenerateConfig(budget=800, batch_size=200, dithers=40, pairs=2, store=tmp_path / "study.db"))
+    PLAN_VALIDATOR.validate(json.loads((tmp_path / "out" / "plan.json").read_text()))
+    assert len(plan["pairs"]) == 2 and plan["mission"]["name"] == mission.name
+    modes = sim.simulate(mission, np.array([s["u"] for s in plan["scenarios"]])).modes
+    assert [s["predicted"]["mode"] for s in plan["scenarios"]] == [("TF", "SS", "MS", "TS")[m] for m in modes]
+    for p in plan["pairs"]:
+        a, b = (next(s for s in plan["scenarios"] if s["id"] == sid) for sid in p["scenarios"])
+        assert any(a["predicted"]["scores"].get(e) != b["predicted"]["scores"].get(e) for e in p["elements"]) \
+            or p["level"] > 1  # deeper elements are not in the predicted top-level scores
+
+
+def test_search_status_counts_modes_and_cross_mode_links():
+    from planner.search_status import SearchStatus
+
+    status = SearchStatus(2)
+    status(np.array([[0.1, 0.1], [0.9, 0.9]]), np.array([[1.0, 1.0], [0.0, 0.0]]))  # TS, TF
+    assert status.links == 0 and status.modes_found == 2
+    # nearest earlier runs: (0.1, 0.1) is TS -> a link for the SS run; (0.9, 0.9) is TF -> none for the TF run
+    status(np.array([[0.12, 0.1], [0.88, 0.9]]), np.array([[0.0, 1.0], [0.0, 0.0]]))
+    assert status.links == 1 and status.modes_found == 3
+    assert status.summary() == "3 modes, 1 boundary links"
