@@ -18,7 +18,9 @@ vehicle's unmodelled disturbances do not accumulate.
 :func:`fit_bias` minimises those residuals over the six bias parameters with
 ``scipy.optimize.least_squares`` (all segments of all logs in one vectorised batch) and
 gives each parameter a standard error from the Jacobian at the solution,
-``(J^T J)^-1 s^2`` with ``s^2`` the residual variance.  A weak prior around neutral
+``(J^T J)^-1 s^2`` with ``s^2`` the residual variance — or, when larger, the cluster-robust
+(sandwich) estimate by segment, since an unmodelled current or navigation drift makes a
+segment's residuals move together and the plain formula would then be optimistic.  A weak prior around neutral
 (:data:`PRIOR_SD`) keeps a direction the logs barely inform (one run, one tide phase)
 from wandering to a bound; a parameter the logs carry no information about at all (a
 mission without current, say) stays neutral and is reported as not identifiable.  The fitted bias is then checked closed loop by :mod:`planner.compare`.
@@ -212,12 +214,20 @@ def fit_bias(mission: Mission, runs: list, start_times: list[float], fit: tuple[
     correlation: dict[str, dict[str, float]] = {}
     if known.any():
         Jk = J[:, known]
-        cov = np.linalg.pinv(Jk.T @ Jk / s2 + np.diag(prior[known] ** 2))  # posterior, Gauss-Newton
-        sd = np.sqrt(np.clip(np.diag(cov), 0, None))
+        bread = np.linalg.pinv(Jk.T @ Jk / s2 + np.diag(prior[known] ** 2))
+        # residuals within a segment are correlated (an unmodelled current displaces every later
+        # step): a cluster-robust (sandwich) covariance by segment, and the larger of the two
+        seg_of = np.nonzero(seg.valid)[0]
+        groups = np.concatenate([seg_of, seg_of, seg_of])
+        score = np.zeros((seg.valid.shape[0], Jk.shape[1]))
+        np.add.at(score, groups, Jk * (res / s2)[:, None])
+        robust = bread @ (score.T @ score) @ bread
+        sd = np.sqrt(np.clip(np.maximum(np.diag(bread), np.diag(robust)), 0, None))
         kn = [n for n, ok in zip(names, known) if ok]
         for n, v, sc in zip(kn, sd, scale[known]):
             stderr[n] = float(v * sc)
-        corr = cov / np.outer(np.where(sd > 0, sd, 1), np.where(sd > 0, sd, 1))
+        bsd = np.sqrt(np.clip(np.diag(bread), 1e-300, None))
+        corr = bread / np.outer(bsd, bsd)
         correlation = {a: {b: float(corr[i, j]) for j, b in enumerate(kn) if b != a} for i, a in enumerate(kn)}
     p = np.where(known, sol.x, 0.0)
     for n in BIAS_NAMES:  # parameters left out of the fit stay neutral, exactly

@@ -87,8 +87,12 @@ def match_logs(plan: Plan, runs: list[LoggedRun]) -> list[Observation]:
 
 
 def _elements(plan: Plan, pair: dict, names: list[str]) -> list[int]:
+    """Score columns a pair tests: its elements, and on the root level both root scores (the
+    mode), so an adjusted pair tests the same boundary type as planned (TF/SS, not TF/TS)."""
     cols = [names.index(e) for e in pair.get("elements", []) if e in names]
-    return cols or [0, 1]
+    if not cols or pair.get("level", 0) == 0:
+        cols = sorted(set(cols) | {0, 1})
+    return cols
 
 
 def _path_error(track: np.ndarray, pred: np.ndarray | None) -> dict | None:
