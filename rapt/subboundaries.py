@@ -76,6 +76,8 @@ class SubBoundaryTree:
         self.parent = parent
         self._pairs = pairs
         self.k = k
+        #: Each sample's graph neighbours (N, k), nearest first; set by :func:`subboundary_tree`.
+        self.neighbours: np.ndarray | None = None
         #: Seconds spent splitting the levels, building the neighbour graph and pairing.
         self.timings: dict[str, float] = {}
 
@@ -161,7 +163,8 @@ def subboundary_tree(X: np.ndarray, Y: np.ndarray, tree: ScoreTree | Mapping[str
         raise ValueError("tree: expected a ScoreTree or a mapping with 'indices' and 'children'")
     tree = ScoreTree.from_mapping(tree)
     tree.validate(Y.shape[1])
-    types = infer_output_types(Y) if output_types is None else check_output_types(output_types, Y.shape[1])
+    columns = np.ascontiguousarray(Y.T)  # (m, N): a column of the row-major (N, m) matrix is strided
+    types = infer_output_types(columns.T) if output_types is None else check_output_types(output_types, Y.shape[1])
     Xs = X if weights is None else X * _check_weights(weights, X.shape[1])
     n = X.shape[0]
     levels = tree.levels()
@@ -170,7 +173,6 @@ def subboundary_tree(X: np.ndarray, Y: np.ndarray, tree: ScoreTree | Mapping[str
     values: list[np.ndarray] = []
     parents: list[np.ndarray] = []
     previous = np.zeros(n, dtype=np.int64)
-    columns = np.ascontiguousarray(Y.T)  # column access on a wide (N, m) matrix is strided
     for lv, K in enumerate(levels):
         cols = list(K)
         sub, n_sub = _split(previous, columns[cols], [types[c] for c in cols], bandwidth)
@@ -192,6 +194,7 @@ def subboundary_tree(X: np.ndarray, Y: np.ndarray, tree: ScoreTree | Mapping[str
         pairs.append(graph_mutual_pairs(dist, idx, assignment[lv], parent))
     result = SubBoundaryTree(tree, X, Y, tuple(types), assignment, values, parents, pairs,
                              n - 1 if n <= exact_below else int(k))
+    result.neighbours = idx  # the (N, k) neighbour graph the pairs came from (nearest first)
     result.timings = {"split": split_done - started, "graph": graph_done - split_done,
                       "pairs": time.perf_counter() - graph_done}
     return result

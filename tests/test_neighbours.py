@@ -79,3 +79,40 @@ def test_hnsw_graph_finds_most_exact_neighbours_and_is_deterministic():
 def test_knn_graph_rejects_unknown_method():
     with pytest.raises(ValueError, match="method"):
         knn_graph(np.zeros((3, 2)), 1, method="lsh")
+
+
+def test_hnsw_graph_pairs_match_the_exact_graph_pairs():
+    # The approximate graph must give (nearly) the pairs of the exact k-graph at every level
+    # of a sub-boundary tree: same clusters, >= 95 % of the pairs, no type with 2+ pairs lost.
+    import rapt
+    from rapt.testfunctions import HierarchicalND
+
+    h = HierarchicalND(dim=10)
+    X = np.random.default_rng(7).random((3000, 10))
+    Y = h(X)
+    exact = rapt.subboundary_tree(X, Y, h.score_tree, exact_below=0, neighbours="exact")
+    fast = rapt.subboundary_tree(X, Y, h.score_tree, exact_below=0, neighbours="hnsw")
+    assert np.array_equal(exact.assignment, fast.assignment)
+    for lv in range(4):
+        ei, ej, ed, _ = exact.pairs(lv)
+        fi, fj, fd, _ = fast.pairs(lv)
+        e, f = _edges(ei, ej), _edges(fi, fj)
+        assert len(e) > 20
+        assert len(e & f) >= 0.95 * len(e) and len(e & f) >= 0.95 * len(f), (lv, len(e), len(f), len(e & f))
+        a = exact.assignment[lv]
+        types, counts = np.unique(np.column_stack([a[ei], a[ej]]), axis=0, return_counts=True)
+        found = _edges(a[fi], a[fj])
+        assert all((int(s), int(t)) in found for (s, t), c in zip(types, counts) if c >= 2), lv
+        assert np.array_equal(fast.neighbours.shape, (3000, 12))
+
+
+def test_hnsw_pairs_are_deterministic():
+    import rapt
+    from rapt.testfunctions import HierarchicalND
+
+    h = HierarchicalND(dim=10)
+    X = np.random.default_rng(8).random((3000, 10))
+    a = rapt.subboundary_tree(X, h(X), h.score_tree, exact_below=0, neighbours="hnsw")
+    b = rapt.subboundary_tree(X, h(X), h.score_tree, exact_below=0, neighbours="hnsw")
+    for lv in range(4):
+        assert all(np.array_equal(u, v) for u, v in zip(a.pairs(lv), b.pairs(lv)))
