@@ -304,9 +304,12 @@ def generate(
     seed: Annotated[int, typer.Option(help="Seed of every random choice.")] = 0,
     batch_size: Annotated[Optional[int], typer.Option("--batch-size", help="Runs per search batch "
                                                         "(default: about 40 batches of 250 to 5,000).")] = None,
-    resume: Annotated[bool, typer.Option(help="Continue the study stored in OUT/study.db.")] = False,
+    resume: Annotated[bool, typer.Option(help="Continue the study stored in OUT/study.db (or start it: "
+                                              "nothing evaluated is run again).")] = False,
     executor: Annotated[str, typer.Option(help="local, processes or dask://host:port.")] = "local",
-    refine: Annotated[int, typer.Option(help="Runs per pair of a focused second search (0: none).")] = 0,
+    refine: Annotated[bool, typer.Option("--refine", help="Sharpen each pair with a focused second search "
+                                                         "on its own sub-scores.")] = False,
+    refine_runs: Annotated[int, typer.Option("--refine-runs", help="Runs per pair of --refine.")] = 12,
 ) -> None:
     """Search a mission, choose boundary pairs, dither them and write a field plan."""
     from planner.generate import GenerateConfig, generate as run_generate, make_executor
@@ -323,7 +326,7 @@ def generate(
     if store.exists() and not resume:
         fail(f"--out: {store} already holds a study; add --resume to continue it or choose another directory")
     cfg = GenerateConfig(budget=budget, pairs=pairs, global_fraction=global_fraction, seed=seed,
-                         batch_size=batch_size, dithers=dithers, store=store, refine=refine)
+                         batch_size=batch_size, dithers=dithers, store=store, refine=refine_runs if refine else 0)
     try:
         cfg.check()
     except ValueError as exc:

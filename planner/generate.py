@@ -8,7 +8,7 @@ The stages of ``rapt-plan generate``, each a function a test can run on a small 
    the sub-boundary tree over the mission's score tree, sensitivity of each root score.
 3. :func:`select_pairs` — K boundary pairs on different sub-boundaries, shortest first,
    kept clear of invalid scenarios and of isolated samples (noise rather than behaviour);
-   with ``--refine``, :func:`refine_pair` bisects each pair on its own sub-scores.
+   with ``--refine``, :func:`refine_pairs` bisects each pair on its own sub-scores.
 4. :func:`dither_many` — Gaussian dithers around every chosen scenario re-simulated with
    the stochastic effects on: how likely each shows its predicted mode, the nearest
    boundary in its neighbourhood, and sub-boundaries there that the pair does not test
@@ -43,7 +43,7 @@ from planner.report import write_report
 from planner.search_status import SearchStatus
 
 __all__ = ["GenerateConfig", "search_mission", "analyse", "select_pairs", "dither_many", "robust_variants",
-           "refine_pair", "generate", "auto_batch_size", "PLAN_SCHEMA"]
+           "refine_pairs", "generate", "auto_batch_size", "PLAN_SCHEMA"]
 
 PLAN_SCHEMA = "rapt.plan/1"
 
@@ -86,7 +86,7 @@ class GenerateConfig:
         if not isinstance(self.pairs, int) or self.pairs < 1:
             raise ValueError(f"--pairs: expected a positive number of pairs, got {self.pairs}")
         if not isinstance(self.refine, int) or self.refine < 0:
-            raise ValueError(f"--refine: expected runs per pair >= 0, got {self.refine}")
+            raise ValueError(f"--refine-runs: expected runs per pair >= 0, got {self.refine}")
         if not isinstance(self.dithers, int) or self.dithers < 0:
             raise ValueError(f"--dithers: expected a number of runs >= 0, got {self.dithers}")
 
@@ -314,42 +314,48 @@ def robust_variants(mission: Mission, fragile: np.ndarray, partners: np.ndarray,
 
 
 # -- 6. refinement ----------------------------------------------------------------------------
-def refine_pair(mission: Mission, a: Analysis, pair: dict, runs: int, min_distance: float = 0.02) -> dict:
-    """Sharpen a pair with a search focused on its own sub-scores (section 4.3.6).
+def refine_pairs(mission: Mission, a: Analysis, pairs: list[dict], runs: int, min_distance: float = 0.02) -> list[dict]:
+    """Sharpen pairs with a search focused on their own sub-scores (section 4.3.6).
 
-    Bisection on the segment between the two scenarios: each run is scored on the pair's
-    elements only, and replaces the end whose element values it shares, so the pair keeps
-    straddling the same sub-boundary while its length halves per run (``runs`` at most).
-    A run showing a third combination (another sub-boundary between them) or an invalid
-    scenario stops the search there, and so does ``min_distance``: two scenarios closer
-    than that cannot be told apart on the water (section 4.1: straddle the boundary
-    without being too close together).
+    Bisection on the segment between each pair's two scenarios: each run is scored on the
+    pair's elements only, and replaces the end whose element values it shares, so the pair
+    keeps straddling the same sub-boundary while its length halves per run (``runs`` at
+    most).  A run showing a third combination (another sub-boundary between them) or an
+    invalid scenario stops that pair's search, and so does ``min_distance``: two scenarios
+    closer than that cannot be told apart on the water (section 4.1: straddle the boundary
+    without being too close together).  All pairs bisect in step, one batch per run.
     """
     names = a.result.names
-    cols = [names.index(e) for e in pair["elements"]]
-    i, j = pair["rows"]
-    lo, hi = a.X[i].copy(), a.X[j].copy()
-    side_lo, side_hi = a.result.scores[i, cols], a.result.scores[j, cols]
+    cols = [[names.index(e) for e in pair["elements"]] for pair in pairs]
+    lo = np.array([a.X[pair["rows"][0]] for pair in pairs]).reshape(len(pairs), -1)
+    hi = np.array([a.X[pair["rows"][1]] for pair in pairs]).reshape(len(pairs), -1)
+    side_lo = [a.result.scores[p["rows"][0], c] for p, c in zip(pairs, cols)]
+    side_hi = [a.result.scores[p["rows"][1], c] for p, c in zip(pairs, cols)]
+    active = np.ones(len(pairs), dtype=bool)
     for _ in range(runs):
-        if np.linalg.norm(hi - lo) / 2 < min_distance:
+        active &= np.linalg.norm(hi - lo, axis=1) / 2 >= min_distance
+        rows = np.flatnonzero(active)
+        if rows.size == 0:
             break
-        mid = (lo + hi) / 2
-        r = sim.simulate(mission, mid[None, :])
-        if not r.valid[0]:
-            break
-        y = r.scores[0, cols]
-        if np.array_equal(y, side_lo):
-            lo = mid
-        elif np.array_equal(y, side_hi):
-            hi = mid
-        else:
-            break
-    d = float(np.linalg.norm(hi - lo))
-    if d >= pair["distance"]:
-        return pair
-    r = sim.simulate(mission, np.vstack([lo, hi]))
-    return {**pair, "distance": d, "refined": True, "u_override": [lo, hi],
-            "modes": [MODE_NAMES[r.modes[0]], MODE_NAMES[r.modes[1]]]}
+        mid = (lo[rows] + hi[rows]) / 2
+        r = sim.simulate(mission, mid)
+        for k, row in enumerate(rows.tolist()):
+            y = r.scores[k, cols[row]]
+            if r.valid[k] and np.array_equal(y, side_lo[row]):
+                lo[row] = mid[k]
+            elif r.valid[k] and np.array_equal(y, side_hi[row]):
+                hi[row] = mid[k]
+            else:
+                active[row] = False
+    d = np.linalg.norm(hi - lo, axis=1)
+    better = np.flatnonzero(d < np.array([p["distance"] for p in pairs]))
+    out = list(pairs)
+    if better.size:
+        r = sim.simulate(mission, np.vstack([lo[better], hi[better]]))
+        for k, row in enumerate(better.tolist()):
+            out[row] = {**pairs[row], "distance": float(d[row]), "refined": True, "u_override": [lo[row], hi[row]],
+                        "modes": [MODE_NAMES[r.modes[k]], MODE_NAMES[r.modes[better.size + k]]]}
+    return out
 
 
 # -- everything ------------------------------------------------------------------------------
@@ -376,7 +382,7 @@ def generate(mission: Mission, mission_path: Path, out_dir: Path, cfg: GenerateC
     pairs = select_pairs(a, cfg.pairs)
     clock.lap("selection")
     if cfg.refine:
-        pairs = [refine_pair(mission, a, pair, cfg.refine, cfg.refine_min_distance) for pair in pairs]
+        pairs = refine_pairs(mission, a, pairs, cfg.refine, cfg.refine_min_distance)
         if progress is not None:
             progress("refine", len(pairs), len(pairs), "")
         clock.lap("refinement")

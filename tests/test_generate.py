@@ -138,11 +138,12 @@ def test_same_plan_with_processes_and_a_dask_cluster(range2017, tmp_path):
 
 
 def test_refine_sharpens_pairs_and_variants_keep_their_mode(range2017, tmp_path):
-    from planner.generate import refine_pair
+    from planner.generate import refine_pairs
 
     cfg = small(tmp_path)
     a = analyse(range2017, search_mission(range2017, cfg))
-    refined = [(p, refine_pair(range2017, a, p, runs=12, min_distance=0.02)) for p in select_pairs(a, 4)]
+    chosen = select_pairs(a, 4)
+    refined = list(zip(chosen, refine_pairs(range2017, a, chosen, runs=12, min_distance=0.02)))
     refined = [(p, q) for p, q in refined if q.get("refined")]
     assert refined  # bisection stops early only at a third behaviour or an invalid scenario
     pair, sharp = refined[0]
