@@ -12,7 +12,6 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import shutil
 import subprocess
 import sys
 from concurrent.futures import ThreadPoolExecutor
@@ -236,9 +235,8 @@ def test_neutral_bias_is_bit_identical_and_a_bias_is_per_row():
     m = sim.load_mission(MISSION)
     X = np.random.default_rng(5).random((16, m.dim))
     plain = sim.simulate(m, X)
-    np.testing.assert_array_equal(sim.simulate(m, X, bias=Bias()).scores, plain.scores)
     b = Bias(speed=1.1, heading=2.0, battery=0.9, current_scale=1.2, start_time=1800.0)
-    one = sim.simulate(m, X[:4], bias=b)
-    rows = sim.simulate(m, X[:4], bias=[b] * 4)
-    np.testing.assert_array_equal(one.scores, rows.scores)
-    assert not np.array_equal(one.scores, plain.scores[:4], equal_nan=True)
+    mixed = sim.simulate(m, np.vstack([X, X[:4]]), bias=[Bias()] * 16 + [b] * 4)  # one bias per row
+    np.testing.assert_array_equal(mixed.scores[:16], plain.scores)  # neutral: bit for bit
+    np.testing.assert_array_equal(sim.simulate(m, X[:4], bias=b).scores, mixed.scores[16:])
+    assert not np.array_equal(mixed.scores[16:], plain.scores[:4], equal_nan=True)
