@@ -66,7 +66,8 @@ def search(fn: Callable[[np.ndarray], Any], bounds: Any, budget: int, method: st
            output_types: Sequence[str] | None = None, n_initial: int | None = None,
            sampler_options: dict[str, Any] | None = None,
            progress: Callable[[int, int], None] | None = None,
-           on_batch: Callable[[np.ndarray, np.ndarray], None] | None = None) -> Study:
+           on_batch: Callable[[np.ndarray, np.ndarray], None] | None = None,
+           steer: Sequence[int] | None = None) -> Study:
     """Search the space for performance boundaries of ``fn``.
 
     Parameters
@@ -107,6 +108,12 @@ def search(fn: Callable[[np.ndarray], Any], bounds: Any, budget: int, method: st
         Called as ``on_batch(U, Y)`` with the unit-cube rows and scores of each completed
         batch's successful evaluations, replayed batches of a resumed study included: how
         a caller follows the modes found so far without reading the store.
+    steer:
+        Score columns the sampler steers on (default: all).  Every column ``fn`` returns
+        is stored and comes back in ``Study.Y``; ``output_types`` then describes the
+        steered columns.  Searching on the root scores of a hierarchy while keeping every
+        sub-score for the sub-boundary analysis (section 4.3.6) spares a second run of
+        each sample.
     """
     if not callable(fn):
         raise ValueError("fn: expected a callable mapping an (n, d) array to an (n, m) array")
@@ -125,9 +132,16 @@ def search(fn: Callable[[np.ndarray], Any], bounds: Any, budget: int, method: st
         raise ValueError(f"chunk_size: expected a positive integer or None, got {chunk_size!r}")
     if n_initial is not None and (not isinstance(n_initial, (int, np.integer)) or n_initial < 0):
         raise ValueError(f"n_initial: expected a non-negative integer or None, got {n_initial!r}")
+    if steer is not None:
+        steer = [int(c) for c in steer] if all(isinstance(c, (int, np.integer)) for c in steer) else None
+        if not steer or min(steer) < 0 or len(set(steer)) != len(steer):
+            raise ValueError("steer: expected distinct non-negative score column indices, e.g. steer=[0, 1]")
     if output_types is not None:
         output_types = tuple(output_types)
         check_output_types(output_types, len(output_types))
+        if steer is not None and len(output_types) != len(steer):
+            raise ValueError(f"output_types: expected one type per steered column ({len(steer)}), "
+                             f"got {len(output_types)}")
     options = dict(sampler_options or {})
     if METHODS[method].adaptive:
         options.setdefault("n_initial", batch_size if n_initial is None else int(n_initial))
@@ -140,10 +154,11 @@ def search(fn: Callable[[np.ndarray], Any], bounds: Any, budget: int, method: st
         "schema_version": SCHEMA_VERSION, "method": method, "seed": int(seed), "dim": space.dim,
         "batch_size": int(batch_size), "space": space.to_config(), "physical": physical,
         "sampler_options": {k: v for k, v in options.items() if k != "size" and _jsonable(v)},
+        "steer": steer,
     }
     db = StudyStore(":memory:" if store is None else store)
     try:
-        runner = _Runner(fn, space, physical, sampler, db, ex, workers, chunk_size, int(batch_size), on_batch)
+        runner = _Runner(fn, space, physical, sampler, db, ex, workers, chunk_size, int(batch_size), on_batch, steer)
         runner.open(config, output_types)
         runner.run(int(budget), progress)
         return runner.study(method, int(seed), None if store is None else str(store))
@@ -160,7 +175,8 @@ class _Runner:
 
     def __init__(self, fn, space: StateSpace, physical: bool, sampler: Sampler, db: StudyStore,
                  executor: cf.Executor | None, workers: int, chunk_size: int | None, batch_size: int,
-                 on_batch: Callable[[np.ndarray, np.ndarray], None] | None = None):
+                 on_batch: Callable[[np.ndarray, np.ndarray], None] | None = None,
+                 steer: list[int] | None = None):
         self.fn = fn
         self.space = space
         self.physical = physical
@@ -171,6 +187,7 @@ class _Runner:
         self.chunk_size = chunk_size
         self.batch_size = batch_size
         self.on_batch = on_batch
+        self.steer = steer
         self.n_outputs: int | None = None
         # Per evaluated row, in (batch, row) order.
         self.U: list[np.ndarray] = []
@@ -193,7 +210,8 @@ class _Runner:
             if output_types is not None:
                 self.db.set_meta({"output_types": list(output_types)})
             return
-        for key in ("schema_version", "method", "seed", "dim", "batch_size", "space", "physical", "sampler_options"):
+        for key in ("schema_version", "method", "seed", "dim", "batch_size", "space", "physical", "sampler_options",
+                    "steer"):
             if meta.get(key) != config[key]:
                 raise ValueError(
                     f"store: {self.db.path} holds a study with {key}={meta.get(key)!r}, not {config[key]!r}; "
@@ -233,10 +251,14 @@ class _Runner:
             Y = np.vstack([r[3] for r in ok])
             if self.n_outputs is None:
                 self.n_outputs = Y.shape[1]
+            if self.steer is not None and max(self.steer) >= Y.shape[1]:
+                raise ValueError(f"steer: column {max(self.steer)} does not exist; fn returns "
+                                 f"{Y.shape[1]} score columns")
+            steered = Y if self.steer is None else Y[:, self.steer]
             if self.sampler.output_types is None:
-                self.sampler.output_types = infer_output_types(Y)
+                self.sampler.output_types = infer_output_types(steered)
                 self.db.set_meta({"output_types": list(self.sampler.output_types)})
-            self.sampler.tell(U, Y)
+            self.sampler.tell(U, steered)
             self.U.append(U)
             self.Y.append(Y)
             self.batch_of.append(np.full(len(ok), b, dtype=np.int64))
@@ -322,7 +344,7 @@ class _Runner:
         if Y.ndim == 1 and Y.shape[0] == n:
             Y = Y[:, None]
         expected_m = self.n_outputs if self.n_outputs is not None else (
-            len(self.sampler.output_types) if self.sampler.output_types else None)
+            len(self.sampler.output_types) if self.sampler.output_types and self.steer is None else None)
         if Y.ndim != 2 or Y.shape[0] != n or (expected_m is not None and Y.shape[1] != expected_m):
             shape = f"({n}, {expected_m})" if expected_m else f"({n}, m)"
             raise ValueError(f"fn: returned scores of shape {Y.shape} for {n} states; expected {shape}")

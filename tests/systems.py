@@ -36,3 +36,8 @@ def projecting(X):
     """Evaluates the state snapped to a 0.05 grid and reports the state it used."""
     X = np.round(np.asarray(X, dtype=float) / 0.05) * 0.05
     return X, disk(X)
+
+
+def first_of_two_outputs(X):
+    """Column 0 of two_outputs alone."""
+    return two_outputs(X)[:, :1]

@@ -12,7 +12,7 @@ import pytest
 
 import rapt
 from rapt.store import StudyStore
-from tests.systems import disk, flaky, projecting, two_outputs
+from tests.systems import disk, first_of_two_outputs, flaky, projecting, two_outputs
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -266,3 +266,19 @@ def test_general_state_space_passes_unit_rows():
     assert study.output_types == ("binary", "continuous")
     assert study.scenarios()[0]["order"] in {p for p in [("A", "B", "C"), ("A", "C", "B"), ("B", "A", "C"),
                                                          ("B", "C", "A"), ("C", "A", "B"), ("C", "B", "A")]}
+
+
+def test_steer_searches_on_some_columns_and_keeps_them_all(tmp_path):
+    kw = dict(bounds=[(0, 1)] * 3, budget=400, batch_size=100, seed=3)
+    steered = rapt.search(two_outputs, steer=[0], output_types=("binary",), store=tmp_path / "s.db", **kw)
+    alone = rapt.search(first_of_two_outputs, output_types=("binary",), **kw)
+    np.testing.assert_array_equal(steered.X, alone.X)  # the sampler saw column 0 only
+    np.testing.assert_array_equal(steered.Y, two_outputs(steered.X))  # every column is kept
+    resumed = rapt.search(two_outputs, steer=[0], output_types=("binary",), store=tmp_path / "s.db", **kw)
+    np.testing.assert_array_equal(resumed.Y, steered.Y)
+    with pytest.raises(ValueError, match="steer"):
+        rapt.search(two_outputs, steer=[1], output_types=("binary",), store=tmp_path / "s.db", **kw)
+    with pytest.raises(ValueError, match="steer: column 5 does not exist"):
+        rapt.search(two_outputs, steer=[5], **kw)
+    with pytest.raises(ValueError, match="steer: expected distinct"):
+        rapt.search(two_outputs, steer=[0, 0], **kw)
