@@ -36,7 +36,8 @@ import rapt
 import sim
 from rapt.importance import output_importance
 from sim.mission import Mission
-from sim.scoring import MODE_NAMES
+from sim.metrics import metric_names, metric_types
+from sim.scoring import MODE_NAMES, modes_from_scores
 
 from planner.exports import write_scenario_files
 from planner.report import write_report
@@ -93,13 +94,17 @@ class GenerateConfig:
 
 # -- 1. search --------------------------------------------------------------------------
 @dataclass(frozen=True)
-class RootScores:
-    """Mission and safety success of unit-cube scenarios; picklable, so it runs on any executor."""
+class MissionScores:
+    """Every score of unit-cube scenarios (NaN rows for invalid ones); picklable, so it runs on any executor."""
 
     mission: Mission
 
     def __call__(self, U: np.ndarray) -> np.ndarray:
-        return sim.simulate(self.mission, U).scores[:, :2]
+        return sim.simulate(self.mission, U).scores
+
+
+ROOT_COLUMNS = (0, 1)  # mission and safety success: what the search steers on
+SPOT_CHECK_RUNS = 8  # stored runs simulated again before an analysis trusts the store
 
 
 def make_executor(spec: str):
@@ -124,10 +129,13 @@ def make_executor(spec: str):
 
 def search_mission(mission: Mission, cfg: GenerateConfig, progress: Callable[[int, int], None] | None = None,
                    on_batch: Callable[[np.ndarray, np.ndarray], None] | None = None) -> rapt.Study:
-    """Global then adaptive search on mission and safety success; invalid scenarios fail."""
+    """Global then adaptive search steered by mission and safety success; invalid scenarios fail.
 
-    return rapt.search(RootScores(mission), mission.space, cfg.budget, method="s-ndv", batch_size=cfg.batch_size,
-                       seed=cfg.seed, store=cfg.store, executor=cfg.executor, output_types=("binary", "binary"),
+    Every score is stored with its run, so the sub-boundary analysis needs no second run.
+    """
+    return rapt.search(MissionScores(mission), mission.space, cfg.budget, method="s-ndv",
+                       batch_size=cfg.batch_size, seed=cfg.seed, store=cfg.store, executor=cfg.executor,
+                       output_types=("binary", "binary"), steer=ROOT_COLUMNS,
                        n_initial=int(round(cfg.budget * cfg.global_fraction)), progress=progress,
                        on_batch=on_batch)
 
@@ -144,10 +152,13 @@ class Analysis:
 
 
 def analyse(mission: Mission, study: rapt.Study) -> Analysis:
-    X = study.X
-    result = sim.simulate(mission, X)  # deterministic: the same runs, every score column
-    if not result.valid.all():
-        raise RuntimeError("study: re-simulation disagrees with the stored runs (was the mission file edited?)")
+    X, Y = study.X, study.Y
+    names, types = metric_names(mission), metric_types(mission)
+    spot = sim.simulate(mission, X[:SPOT_CHECK_RUNS])
+    if Y.shape[1] != len(names) or not np.array_equal(spot.scores, Y[:SPOT_CHECK_RUNS], equal_nan=True):
+        raise RuntimeError("study: the stored runs do not match the mission file (was it edited?); "
+                           "plan into a new --out directory")
+    result = sim.Result(Y, modes_from_scores(Y), np.ones(len(Y), dtype=bool), [""] * len(Y), names, types)
     tree = rapt.subboundary_tree(X, result.scores, mission.score_tree, output_types=result.output_types)
     imp = output_importance(X, result.scores[:, :2], ("binary", "binary"), random_state=0)
     sensitivity = {}
