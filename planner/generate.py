@@ -104,6 +104,10 @@ class MissionScores:
 
 
 ROOT_COLUMNS = (0, 1)  # mission and safety success: what the search steers on
+# S-NDV's neighbours come from at most this many samples (rapt NNDVSampler.max_reference):
+# a mission's parameters all matter, so its effective dimension is high and neighbour
+# queries cost O(n) each; past this the asks of a 10^5-run study would dominate it.
+SEARCH_REFERENCE = 25_000
 SPOT_CHECK_RUNS = 8  # stored runs simulated again before an analysis trusts the store
 
 
@@ -136,6 +140,7 @@ def search_mission(mission: Mission, cfg: GenerateConfig, progress: Callable[[in
     return rapt.search(MissionScores(mission), mission.space, cfg.budget, method="s-ndv",
                        batch_size=cfg.batch_size, seed=cfg.seed, store=cfg.store, executor=cfg.executor,
                        output_types=("binary", "binary"), steer=ROOT_COLUMNS,
+                       sampler_options={"max_reference": SEARCH_REFERENCE},
                        n_initial=int(round(cfg.budget * cfg.global_fraction)), progress=progress,
                        on_batch=on_batch)
 

@@ -122,3 +122,24 @@ def test_tell_validation():
         make_sampler("tpe", 2)
     with pytest.raises(ValueError, match="n: expected a positive"):
         s.ask(0)
+
+
+def test_max_reference_bounds_the_neighbour_set_deterministically():
+
+
+    def told(**kw):
+        s = make_sampler("s-ndv", 2, seed=5, output_types=("binary",), **kw)
+        X = np.random.default_rng(0).random((600, 2))
+        s.tell(X, disk(X))
+        return s
+
+    capped = told(max_reference=100)
+    X_ref, targets = capped._reference(np.random.default_rng(1))
+    assert X_ref.shape == (100, 2) and targets[0][1].shape == (100,)
+    assert told()._reference(np.random.default_rng(1))[0].shape == (600, 2)  # off by default
+    a, b = told(max_reference=100).ask(50), told(max_reference=100).ask(50)
+    np.testing.assert_array_equal(a, b)  # seeded: the same subset, the same batch
+    near = np.abs(np.hypot(a[:, 0] - 0.5, a[:, 1] - 0.5) - 0.3)
+    assert np.median(near) < 0.08  # still drawn to the circle from a sixth of the data
+    with pytest.raises(ValueError, match="max_reference"):
+        make_sampler("nndv", 2, max_reference=8)
