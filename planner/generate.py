@@ -107,7 +107,7 @@ ROOT_COLUMNS = (0, 1)  # mission and safety success: what the search steers on
 # S-NDV's neighbours come from at most this many samples (rapt NNDVSampler.max_reference):
 # a mission's parameters all matter, so its effective dimension is high and neighbour
 # queries cost O(n) each; past this the asks of a 10^5-run study would dominate it.
-SEARCH_REFERENCE = 25_000
+SEARCH_REFERENCE = 10_000
 SPOT_CHECK_RUNS = 8  # stored runs simulated again before an analysis trusts the store
 
 

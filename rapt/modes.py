@@ -63,6 +63,7 @@ def _mean_shift_labels(Yc: np.ndarray, bandwidth: float, bin_seeding: bool) -> n
 #: Up to this many distinct rows, mean shift runs as a few dense numpy iterations: a
 #: sub-boundary tree clusters thousands of small parents, where scikit-learn's per-call
 #: overhead (~5 ms) would dominate.
+MEAN_SHIFT_MAX_FIT = 2000  # distinct rows a mean-shift fit sees (see mean_shift_normalised)
 SMALL_MEAN_SHIFT = 256
 
 
@@ -115,17 +116,25 @@ def mean_shift_normalised(Z: np.ndarray, bandwidth: float, bin_seeding: bool = T
     if uniq.shape[0] <= SMALL_MEAN_SHIFT:
         labels = _small_mean_shift(uniq, bandwidth)
         return labels[inverse.reshape(-1)]
-    # Bin seeding is what makes a million rows fast; with few rows in many columns a bin centre
+    # Centres come from at most MEAN_SHIFT_MAX_FIT distinct rows (a seeded subset): in many
+    # score columns bin seeding leaves about one seed per row, so a full fit grows as n^2
+    # (minutes per parent at 10^5 runs); every row then joins its nearest centre, which is
+    # what cluster_all does with the rows of a full fit anyway.
+    fit = uniq
+    if uniq.shape[0] > MEAN_SHIFT_MAX_FIT:
+        fit = uniq[np.sort(np.random.default_rng(0).choice(uniq.shape[0], MEAN_SHIFT_MAX_FIT, replace=False))]
+    # Bin seeding is what makes many rows fast; with few rows in many columns a bin centre
     # can lie farther than the bandwidth from every row, so then seed from the rows themselves.
-    seeding = bin_seeding and uniq.shape[0] > 1000
+    seeding = bin_seeding and fit.shape[0] > 1000
     ms = MeanShift(bandwidth=bandwidth, bin_seeding=seeding, cluster_all=True, n_jobs=1)
     with warnings.catch_warnings():  # too few points for bin seeding: sklearn seeds from the points
         warnings.filterwarnings("ignore", message="Binning data failed", category=UserWarning)
         try:
-            ms.fit(uniq)
+            ms.fit(fit)
         except ValueError:  # no row within the bandwidth of any bin centre
-            ms = MeanShift(bandwidth=bandwidth, bin_seeding=False, cluster_all=True, n_jobs=1).fit(uniq)
+            ms = MeanShift(bandwidth=bandwidth, bin_seeding=False, cluster_all=True, n_jobs=1).fit(fit)
+    labels = ms.labels_ if fit is uniq else ms.predict(uniq)
     order = np.lexsort(ms.cluster_centers_.T[::-1])
     rank = np.empty_like(order)
     rank[order] = np.arange(order.size)
-    return rank[ms.labels_][inverse.reshape(-1)]
+    return rank[labels][inverse.reshape(-1)]

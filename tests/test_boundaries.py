@@ -141,3 +141,16 @@ def test_small_mean_shift_partitions_like_scikit_learn():
         ref = MeanShift(bandwidth=0.2).fit(Z).labels_
         scores.append(adjusted_rand_score(ref, ours))
     assert np.mean(scores) > 0.97 and np.min(scores) > 0.8
+
+
+def test_mean_shift_of_many_rows_fits_a_subset_and_assigns_every_row():
+    from rapt.modes import MEAN_SHIFT_MAX_FIT, mean_shift_normalised
+
+    rng = np.random.default_rng(3)
+    centres = np.array([[0.1] * 5, [0.5] * 5, [0.9] * 5])
+    truth = rng.integers(0, 3, 3 * MEAN_SHIFT_MAX_FIT)
+    Z = centres[truth] + 0.01 * rng.standard_normal((truth.size, 5))
+    labels = mean_shift_normalised(Z, 0.2)
+    assert labels.shape == truth.shape and np.unique(labels).size == 3
+    assert all(np.unique(labels[truth == k]).size == 1 for k in range(3))  # every row with its blob
+    np.testing.assert_array_equal(labels, mean_shift_normalised(Z, 0.2))  # seeded subset: deterministic
