@@ -60,11 +60,20 @@ def _mean_shift_labels(Yc: np.ndarray, bandwidth: float, bin_seeding: bool) -> n
     return mean_shift_normalised((Yc - lo) / span, bandwidth, bin_seeding)
 
 
-#: Up to this many distinct rows, mean shift runs as a few dense numpy iterations: a
-#: sub-boundary tree clusters thousands of small parents, where scikit-learn's per-call
-#: overhead (~5 ms) would dominate.
-MEAN_SHIFT_MAX_FIT = 2000  # distinct rows a mean-shift fit sees (see mean_shift_normalised)
-SMALL_MEAN_SHIFT = 256
+#: Mean shift runs as dense numpy iterations on at most this many distinct rows: a
+#: sub-boundary tree clusters thousands of parents, where scikit-learn's per-seed overhead
+#: (~0.1 ms a call, ~5 ms a fit) dominates, and in many score columns bin seeding leaves
+#: about one seed per row, so a full fit grows as n^2.  Larger sets fit their centres on
+#: a seeded subset of this size and every row joins its nearest centre — what
+#: ``cluster_all`` does with the rows of a full fit anyway.
+MEAN_SHIFT_MAX_FIT = 2000
+BIN_SEEDING_ABOVE = 1000  # distinct rows above which bins seed the shift
+
+
+def _sq_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Squared Euclidean distances (len(a), len(b)) through one matrix product."""
+    d = (a * a).sum(1)[:, None] + (b * b).sum(1)[None, :] - 2.0 * (a @ b.T)
+    return np.maximum(d, 0.0)
 
 
 def _small_mean_shift(Z: np.ndarray, bandwidth: float, max_iter: int = 300) -> np.ndarray:
@@ -74,23 +83,39 @@ def _small_mean_shift(Z: np.ndarray, bandwidth: float, max_iter: int = 300) -> n
     kept in order of how many rows they hold, dropping any within ``bandwidth`` of a kept
     one; rows take their nearest centre.  Labels are numbered by centre (lexicographic).
     """
-    d2 = lambda a, b: ((a[:, None, :] - b[None, :, :]) ** 2).sum(-1)
-    centres = Z.copy()
+    centres, _ = _shift_seeds(Z, bandwidth, max_iter)
+    return _nearest_centre_labels(Z, centres, bandwidth)
+
+
+def _shift_seeds(Z: np.ndarray, bandwidth: float, max_iter: int,
+                 seeds: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Seeds (default: every row of ``Z``) shifted to convergence; returns (centres, rows within bandwidth of each)."""
+    b2 = bandwidth ** 2
+    centres = (Z if seeds is None else seeds).astype(float, copy=True)
     for _ in range(max_iter):
-        near = d2(centres, Z) <= bandwidth ** 2
-        new = (near @ Z) / near.sum(axis=1, keepdims=True)
+        near = (_sq_distances(centres, Z) <= b2).astype(float)
+        count = near.sum(axis=1, keepdims=True)
+        new = np.where(count > 0, (near @ Z) / np.maximum(count, 1.0), centres)  # a lone seed stays put
         moved = np.abs(new - centres).max()
         centres = new
         if moved <= 1e-3 * bandwidth:
             break
-    intensity = (d2(centres, Z) <= bandwidth ** 2).sum(axis=1)
+    intensity = (_sq_distances(centres, Z) <= b2).sum(axis=1)
+    return centres[intensity > 0], intensity[intensity > 0]  # seeds no row reached are dropped
+
+
+def _nearest_centre_labels(Z: np.ndarray, centres: np.ndarray, bandwidth: float,
+                           intensity: np.ndarray | None = None, rows: np.ndarray | None = None) -> np.ndarray:
+    """Deduplicate converged seeds (most populated first) and label ``rows`` (default ``Z``) by nearest centre."""
+    if intensity is None:
+        intensity = (_sq_distances(centres, Z) <= bandwidth ** 2).sum(axis=1)
     order = np.lexsort((*centres.T[::-1], -intensity))  # most populated first, ties by position
     kept: list[int] = []
     for i in order:
         if not kept or np.all(((centres[kept] - centres[i]) ** 2).sum(-1) > bandwidth ** 2):
             kept.append(int(i))
     c = centres[kept]
-    labels = np.argmin(d2(Z, c), axis=1)
+    labels = np.argmin(_sq_distances(Z if rows is None else rows, c), axis=1)
     rank = np.empty(len(kept), dtype=np.int64)
     rank[np.lexsort(c.T[::-1])] = np.arange(len(kept))
     return rank[labels]
@@ -102,39 +127,25 @@ def mean_shift_normalised(Z: np.ndarray, bandwidth: float, bin_seeding: bool = T
     Callers that cluster many subsets (a sub-boundary tree's parents) normalise once over
     all samples, so ``bandwidth`` means the same in every subset.  Labels are numbered by
     cluster centre, so they do not depend on seeding order.
+    With ``bin_seeding``, the centres of the occupied cells of a grid of side ``bandwidth``
+    seed the shift, and seeds no row is within reach of are dropped, as in scikit-learn's
+    ``bin_seeding``: far fewer seeds than rows in a few score columns, and in many columns
+    isolated rows join the nearest centre instead of founding clusters of one.
     """
-    import warnings
-
-    from sklearn.cluster import MeanShift
-
     if Z.shape[0] <= 1 or np.ptp(Z, axis=0).max() <= bandwidth / 2:
         return np.zeros(Z.shape[0], dtype=np.int64)  # all within one kernel: one cluster
     # Identical score rows are clustered once: simulations often repeat exact scores.
     uniq, inverse = np.unique(Z, axis=0, return_inverse=True)
     if uniq.shape[0] == 1:
         return np.zeros(Z.shape[0], dtype=np.int64)
-    if uniq.shape[0] <= SMALL_MEAN_SHIFT:
-        labels = _small_mean_shift(uniq, bandwidth)
-        return labels[inverse.reshape(-1)]
-    # Centres come from at most MEAN_SHIFT_MAX_FIT distinct rows (a seeded subset): in many
-    # score columns bin seeding leaves about one seed per row, so a full fit grows as n^2
-    # (minutes per parent at 10^5 runs); every row then joins its nearest centre, which is
-    # what cluster_all does with the rows of a full fit anyway.
     fit = uniq
     if uniq.shape[0] > MEAN_SHIFT_MAX_FIT:
         fit = uniq[np.sort(np.random.default_rng(0).choice(uniq.shape[0], MEAN_SHIFT_MAX_FIT, replace=False))]
-    # Bin seeding is what makes many rows fast; with few rows in many columns a bin centre
-    # can lie farther than the bandwidth from every row, so then seed from the rows themselves.
-    seeding = bin_seeding and fit.shape[0] > 1000
-    ms = MeanShift(bandwidth=bandwidth, bin_seeding=seeding, cluster_all=True, n_jobs=1)
-    with warnings.catch_warnings():  # too few points for bin seeding: sklearn seeds from the points
-        warnings.filterwarnings("ignore", message="Binning data failed", category=UserWarning)
-        try:
-            ms.fit(fit)
-        except ValueError:  # no row within the bandwidth of any bin centre
-            ms = MeanShift(bandwidth=bandwidth, bin_seeding=False, cluster_all=True, n_jobs=1).fit(fit)
-    labels = ms.labels_ if fit is uniq else ms.predict(uniq)
-    order = np.lexsort(ms.cluster_centers_.T[::-1])
-    rank = np.empty_like(order)
-    rank[order] = np.arange(order.size)
-    return rank[labels][inverse.reshape(-1)]
+    # Bins only pay off with many rows; with few, seed from every row (as the old fits did).
+    binned = bin_seeding and fit.shape[0] > BIN_SEEDING_ABOVE
+    seeds = np.unique(np.round(fit / bandwidth), axis=0) * bandwidth if binned else None
+    centres, intensity = _shift_seeds(fit, bandwidth, 300, seeds)
+    if centres.shape[0] == 0:  # no row within the bandwidth of any cell centre: seed from the rows
+        centres, intensity = _shift_seeds(fit, bandwidth, 300)
+    labels = _nearest_centre_labels(fit, centres, bandwidth, intensity, rows=uniq)
+    return labels[inverse.reshape(-1)]
