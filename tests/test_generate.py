@@ -187,3 +187,38 @@ def test_search_status_counts_modes_and_cross_mode_links():
     status(np.array([[0.12, 0.1], [0.88, 0.9]]), np.array([[0.0, 1.0], [0.0, 0.0]]))
     assert status.links == 1 and status.modes_found == 3
     assert status.summary() == "3 modes, 1 boundary links"
+
+
+def test_generate_killed_mid_search_resumes_to_the_uninterrupted_plan(tmp_path):
+    import os
+    import signal
+    import sqlite3
+    import subprocess
+    import sys
+    import time
+
+    exe = Path(sys.executable).with_name("rapt-plan")
+    cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "planner.cli"]
+    args = ["generate", str(EXAMPLES / "imitation7.toml"), "--budget", "2000", "--batch-size", "250",
+            "--dithers", "40", "--pairs", "2"]
+    killed = tmp_path / "killed"
+    proc = subprocess.Popen(cmd + args + ["--out", str(killed)], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, env={**os.environ, "COLUMNS": "200"})
+    rows, deadline = 0, time.monotonic() + 240
+    try:
+        while rows < 500 and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.2)
+            try:
+                with sqlite3.connect(f"file:{killed / 'study.db'}?mode=ro", uri=True) as con:
+                    rows = con.execute("SELECT COUNT(*) FROM samples").fetchone()[0]
+            except sqlite3.Error:
+                pass  # not created yet
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    assert 500 <= rows < 2000, rows  # killed mid-search, with runs stored
+    resumed = runner.invoke(app, args + ["--out", str(killed), "--resume"])
+    assert resumed.exit_code == 0, resumed.output
+    whole = runner.invoke(app, args + ["--out", str(tmp_path / "whole")])
+    assert whole.exit_code == 0, whole.output
+    assert (killed / "plan.json").read_text() == (tmp_path / "whole" / "plan.json").read_text()
