@@ -166,7 +166,7 @@ def test_generate_runs_end_to_end_on_the_chapter3_mission(tmp_path):
     """uuv18: 18 parameters, the permutation of mission-area priorities, 62 leaf scores."""
     mission = sim.load_mission(EXAMPLES / "uuv18.toml")
     plan = generate(mission, EXAMPLES / "uuv18.toml", tmp_path / "out",
-                    GenerateConfig(budget=800, batch_size=200, dithers=40, pairs=2, store=tmp_path / "study.db"))
+                    GenerateConfig(budget=400, batch_size=200, dithers=20, pairs=2, store=tmp_path / "study.db"))
     PLAN_VALIDATOR.validate(json.loads((tmp_path / "out" / "plan.json").read_text()))
     assert len(plan["pairs"]) == 2 and plan["mission"]["name"] == mission.name
     modes = sim.simulate(mission, np.array([s["u"] for s in plan["scenarios"]])).modes
