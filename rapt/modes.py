@@ -83,8 +83,8 @@ def _small_mean_shift(Z: np.ndarray, bandwidth: float, max_iter: int = 300) -> n
     kept in order of how many rows they hold, dropping any within ``bandwidth`` of a kept
     one; rows take their nearest centre.  Labels are numbered by centre (lexicographic).
     """
-    centres, _ = _shift_seeds(Z, bandwidth, max_iter)
-    return _nearest_centre_labels(Z, centres, bandwidth)
+    centres, intensity = _shift_seeds(Z, bandwidth, max_iter)
+    return _nearest_centre_labels(Z, centres, bandwidth, intensity)
 
 
 def _shift_seeds(Z: np.ndarray, bandwidth: float, max_iter: int,
@@ -104,11 +104,9 @@ def _shift_seeds(Z: np.ndarray, bandwidth: float, max_iter: int,
     return centres[intensity > 0], intensity[intensity > 0]  # seeds no row reached are dropped
 
 
-def _nearest_centre_labels(Z: np.ndarray, centres: np.ndarray, bandwidth: float,
-                           intensity: np.ndarray | None = None, rows: np.ndarray | None = None) -> np.ndarray:
+def _nearest_centre_labels(Z: np.ndarray, centres: np.ndarray, bandwidth: float, intensity: np.ndarray,
+                           rows: np.ndarray | None = None) -> np.ndarray:
     """Deduplicate converged seeds (most populated first) and label ``rows`` (default ``Z``) by nearest centre."""
-    if intensity is None:
-        intensity = (_sq_distances(centres, Z) <= bandwidth ** 2).sum(axis=1)
     order = np.lexsort((*centres.T[::-1], -intensity))  # most populated first, ties by position
     kept: list[int] = []
     for i in order:
