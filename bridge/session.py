@@ -20,10 +20,14 @@ from pathlib import Path
 
 import zenoh
 
-__all__ = ["DEFAULT_HUB", "zenoh_config", "open_session"]
+__all__ = ["DEFAULT_HUB", "CONNECT_TIMEOUT_S", "zenoh_config", "open_session"]
 
 #: The conventional hub endpoint when nothing else is given to a command line.
 DEFAULT_HUB = "tcp/127.0.0.1:7447"
+
+#: How long a client waits for its hub by default. Processes of one vehicle start in any
+#: order (a systemd unit, a launch script, a test); Zenoh's client default (0) fails at once.
+CONNECT_TIMEOUT_S = 10.0
 
 _LOOPBACK_HOSTS = ("127.", "[::1]", "localhost")
 
@@ -54,12 +58,14 @@ def zenoh_config(
     config_file: str | Path | None = None,
     *,
     mode: str | None = None,
+    connect_timeout: float = CONNECT_TIMEOUT_S,
 ) -> zenoh.Config:
     """A config listening on ``listen`` and connecting to ``connect``, scouting off.
 
     ``mode`` defaults to ``"client"`` when only ``connect`` is given and ``"peer"`` otherwise
     (a hub, or with neither endpoint an in-process-only session). With ``config_file`` the
-    file is loaded unchanged and the other arguments must be left out.
+    file is loaded unchanged and the other arguments must be left out. A client retries its
+    endpoints for ``connect_timeout`` seconds before giving up, so it may start before its hub.
     """
     if config_file is not None:
         if listen or connect or mode:
@@ -81,6 +87,13 @@ def zenoh_config(
     config.insert_json5("connect/endpoints", json.dumps(connect))
     config.insert_json5("scouting/multicast/enabled", "false")
     config.insert_json5("scouting/gossip/enabled", "false")
+    if mode == "client":
+        if not connect_timeout > 0:
+            raise ValueError(f"connect_timeout: expected a positive number of seconds, got {connect_timeout!r}")
+        config.insert_json5("connect/timeout_ms", json.dumps(int(connect_timeout * 1000)))
+        config.insert_json5(
+            "connect/retry", json.dumps({"period_init_ms": 100, "period_max_ms": 1000, "period_increase_factor": 2})
+        )
     return config
 
 
@@ -90,6 +103,19 @@ def open_session(
     config_file: str | Path | None = None,
     *,
     mode: str | None = None,
+    connect_timeout: float = CONNECT_TIMEOUT_S,
 ) -> zenoh.Session:
-    """Open a session with :func:`zenoh_config`; close it (or use ``with``) when done."""
-    return zenoh.open(zenoh_config(listen, connect, config_file, mode=mode))
+    """Open a session with :func:`zenoh_config`; close it (or use ``with``) when done.
+
+    Raises ``ConnectionError`` naming the endpoints when no hub answered in time.
+    """
+    connect = [connect] if isinstance(connect, str) else list(connect)
+    config = zenoh_config(listen, connect, config_file, mode=mode, connect_timeout=connect_timeout)
+    try:
+        return zenoh.open(config)
+    except zenoh.ZError as exc:
+        where = ", ".join(connect)
+        raise ConnectionError(
+            f"zenoh: could not open the session ({where or 'config file'}): {str(exc).split(' at ')[0]}; "
+            "start the hub (rapt-plan bridge) first or fix the endpoint"
+        ) from exc

@@ -611,3 +611,29 @@ def test_liveliness_token_while_running():
             assert [kind for _, kind, _ in alive.items()] == [zenoh.SampleKind.PUT, zenoh.SampleKind.DELETE]
         finally:
             alive.close()
+
+
+def test_a_client_waits_for_a_hub_that_starts_later_and_names_a_missing_one():
+    import threading
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    holder = {}
+
+    def start_hub_late():
+        time.sleep(1.0)
+        holder["hub"] = open_session(listen=[endpoint])
+
+    starter = threading.Thread(target=start_hub_late)
+    starter.start()
+    client = open_session(connect=[endpoint], connect_timeout=8)  # blocks until the hub is up
+    starter.join()
+    try:
+        wait_until(lambda: list(client.info.peers_zid()), what="the late hub")
+    finally:
+        client.close()
+        holder["hub"].close()
+    nobody = f"tcp/127.0.0.1:{free_port()}"
+    started = time.monotonic()
+    with pytest.raises(ConnectionError, match=f"could not open the session \\({nobody}\\).*start the hub"):
+        open_session(connect=[nobody], connect_timeout=0.5)
+    assert time.monotonic() - started < 5

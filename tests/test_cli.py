@@ -93,7 +93,7 @@ def test_each_piece_runs_as_its_own_process_and_stops_cleanly(tmp_path):
     zen = ["--zenoh-connect", f"tcp/127.0.0.1:{hub}"]
     procs = [subprocess.Popen(cli + ["bridge", "--mavlink", f"udpout:127.0.0.1:{udp}", "--zenoh-listen",
                                      f"tcp/127.0.0.1:{hub}", "--allow-commands", "--arm"])]
-    time.sleep(1.0)
+    # No pause: the clients wait for the hub (bridge.session.CONNECT_TIMEOUT_S), in any start order.
     procs += [subprocess.Popen(cli + ["log", "--out", str(log)] + zen),
               subprocess.Popen(cli + ["autonomy", RANGE2017, "--scenario", "3"] + zen),
               subprocess.Popen(cli + ["frontseat", RANGE2017, "--scenario", "3", "--mavlink",
