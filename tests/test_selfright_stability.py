@@ -1,0 +1,150 @@
+"""Algorithm 5 on shapes with known answers: hull faces, snapping, tipping angles, energies, robot files."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from sim.robots import Box, Link, Robot, RobotFileError, StabilityFunction, body_angles, down_normals, load_robot
+from sim.robots.model import read_stl
+
+L, W, H, M = 0.4, 0.3, 0.2, 2.0  # box length (x), width (y), height (z), mass
+NO_JOINTS = np.zeros((1, 0))
+
+
+def box_robot() -> Robot:
+    return Robot("box", [Link("b", M, [Box((L, W, H))])], [])
+
+
+@pytest.mark.parametrize("planar", [True, False])
+def test_box_hull_faces_are_its_sides(planar):
+    F = StabilityFunction(box_robot(), 0.0, planar=planar)
+    hull = F.hull(np.zeros(0))
+    assert hull.n_faces == (4 if planar else 6)  # coplanar triangles merged into one face each
+    got = {tuple(np.round(n, 9) + 0.0) for n in hull.normals}
+    sides = {(0.0, 0.0, -1.0), (0.0, 0.0, 1.0), (1.0, 0.0, 0.0), (-1.0, 0.0, 0.0)}
+    assert sides <= got
+    # body angles round-trip to the face normals
+    assert np.allclose(down_normals(hull.angles, F.planar), hull.normals, atol=1e-12)
+    if planar:
+        assert sorted(np.round(np.degrees(hull.angles[:, 0])) % 360) == [0, 90, 180, 270]
+
+
+@pytest.mark.parametrize("planar", [True, False])
+def test_box_on_slope_tips_at_the_analytic_angle(planar):
+    """Lying on its long face a box tips when tan(slope) > L/H; standing on its end when > H/L."""
+    lying, standing = np.degrees(np.arctan(L / H)), np.degrees(np.arctan(H / L))  # 63.43°, 26.57°
+    flat = np.zeros((1, 1 if planar else 2))
+    on_end = np.array([[np.pi / 2]]) if planar else np.array([[0.0, np.pi / 2]])
+    for slope, lying_ok, standing_ok in [(lying - 0.3, True, False), (lying + 0.3, False, False),
+                                         (standing - 0.3, True, True), (standing + 0.3, True, False)]:
+        F = StabilityFunction(box_robot(), slope, planar=planar)
+        assert F(NO_JOINTS, flat).stable[0] == lying_ok, slope
+        assert F(NO_JOINTS, on_end).stable[0] == standing_ok, slope
+
+
+def test_box_standing_on_end_falls_downhill_and_loses_the_analytic_energy():
+    slope = 30.0
+    F = StabilityFunction(box_robot(), slope)
+    res = F(NO_JOINTS, np.array([[np.pi / 2]]))
+    assert not res.stable[0] and res.tips[0] == 1
+    # it pivots on its downhill corner: the centre of mass goes from H/2 uphill of the corner and
+    # L/2 above the ground to L/2 downhill of it and H/2 above the ground (ground frame x, z)
+    s = np.radians(slope)
+    up = np.array([-np.sin(s), np.cos(s)])  # world vertical in the ground frame (x downhill, z normal)
+    before_rel = np.array([-H / 2, L / 2])
+    after_rel = np.array([L / 2, H / 2])
+    expected = M * 9.81 * (up @ before_rel - up @ after_rel)
+    assert res.energy[0] == pytest.approx(expected, rel=1e-9)
+    assert res.energy[0] > 0
+    # it lands on a long face (pitch 0 or 180°): top face when it falls forward, nose downhill
+    assert np.isclose(np.cos(res.rest[0, 0]), 1.0) or np.isclose(np.cos(res.rest[0, 0]), -1.0)
+
+
+def test_box_rolls_away_when_no_face_is_stable():
+    F = StabilityFunction(box_robot(), 70.0)
+    res = F(NO_JOINTS, np.zeros((1, 1)))
+    assert not res.stable[0] and np.isinf(res.energy[0]) and np.isnan(res.rest[0, 0])
+
+
+def test_flat_ground_stability_is_independent_of_hull_representation():
+    """A planar robot's 2-D hull (pitch) and 3-D hull (roll, pitch) agree state by state on flat ground."""
+    robot = load_robot("examples/robots/1dof.toml")
+    theta = np.radians(np.arange(-180, 180, 10.0))[:, None]
+    a = StabilityFunction(robot, 0.0).all_faces(theta)
+    b = StabilityFunction(robot, 0.0, planar=False).all_faces(theta)
+    na, nb = down_normals(a.start, True), down_normals(b.start, False)
+    ra, rb = down_normals(a.rest, True), down_normals(b.rest, False)
+    for i in range(len(a)):
+        j = np.flatnonzero((b.theta[:, 0] == a.theta[i, 0]) & (np.abs(nb - na[i]).max(axis=1) < 1e-6))
+        assert len(j) == 1
+        assert b.stable[j[0]] == a.stable[i]
+        assert np.allclose(rb[j[0]], ra[i], atol=1e-6)
+        assert b.energy[j[0]] == pytest.approx(a.energy[i], abs=1e-9)
+
+
+@pytest.mark.parametrize("planar", [True, False])
+def test_snapping_projects_a_query_onto_the_nearest_face(planar):
+    F = StabilityFunction(box_robot(), 0.0, planar=planar)
+    hull = F.hull(np.zeros(0))
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        q = rng.uniform(-np.pi, np.pi, 1) if planar else np.array([rng.uniform(-np.pi, np.pi), rng.uniform(-1.5, 1.5)])
+        f = F.snap(hull, q)
+        down = down_normals(q[None], planar)[0]
+        assert hull.normals[f] @ down == pytest.approx((hull.normals @ down).max())
+    # a query 40° nose-down snaps onto the bottom face, 50° onto the front face
+    angle = lambda deg: np.radians([[deg]]) if planar else np.radians([[0.0, deg]])  # noqa: E731
+    assert np.allclose(F(NO_JOINTS, angle(40)).start, angle(0)[0], atol=1e-12)
+    assert np.allclose(F(NO_JOINTS, angle(50)).start, angle(90)[0], atol=1e-12)
+    assert np.allclose(body_angles(down_normals(angle(50), planar), planar), angle(50))
+
+
+def test_one_dof_robot_rights_itself_with_its_arm():
+    """Upside down (pitch 180°) the robot is stable with its arm folded; swinging the arm tips it."""
+    robot = load_robot("examples/robots/1dof.toml")
+    F = StabilityFunction(robot, 0.0)
+    upright = F(robot.home[None], np.zeros((1, 1)))
+    assert upright.stable[0]
+    folded = F(np.zeros((1, 1)), np.array([[np.pi]]))
+    assert folded.stable[0]
+    swing = np.radians(np.arange(-180, 180, 2.0))[:, None]
+    res = F(swing, np.full((len(swing), 1), np.pi))
+    assert (~res.stable).any() and res.stable.any()
+    assert np.all(res.energy[~res.stable] > 0)
+    assert np.all(res.energy[res.stable] == 0)
+
+
+def test_robot_file_errors_name_the_field(tmp_path):
+    good = (tmp_path / "ok.toml")
+    good.write_text('[[link]]\nname = "b"\nmass = 1\nboxes = [{ size = [1, 1, 1] }]\n')
+    assert load_robot(good).dof == 0
+    cases = {
+        'name = "x"\n': "link:",
+        '[[link]]\nname = "b"\nmass = -1\nboxes = [{ size = [1, 1, 1] }]\n': "link[0].mass",
+        '[[link]]\nname = "b"\nmass = 1\nboxes = [{ size = [1, 0, 1] }]\n': "link[0].boxes[0].size",
+        '[[link]]\nname = "b"\nmass = 1\nboxes = [{ size = [1, 1, 1] }]\n[[joint]]\nname = "j"\nparent = "b"\n'
+        'child = "arm"\naxis = [0, 1, 0]\n': "joint[0].child",
+        '[[link]]\nname = "b"\nmass = 1\nboxes = [{ size = [1, 1, 1] }]\n[[link]]\nname = "a"\nmass = 1\n'
+        'boxes = [{ size = [1, 1, 1] }]\n[[joint]]\nname = "j"\nparent = "b"\nchild = "a"\naxis = [0, 0, 0]\n': "joint[0].axis",
+        '[[link]]\nname = "b"\nmass = 1\nboxes = [{ size = [1, 1, 1] }]\nwheels = 4\n': "wheels",
+    }
+    for text, field in cases.items():
+        bad = tmp_path / "bad.toml"
+        bad.write_text(text)
+        with pytest.raises(RobotFileError, match=field.replace("[", r"\[").replace("]", r"\]")):
+            load_robot(bad)
+
+
+def test_stl_mesh_link(tmp_path):
+    """An ASCII STL tetrahedron is read as its 4 vertices and joins the hull."""
+    tri = [((0, 0, 0), (1, 0, 0), (0, 1, 0)), ((0, 0, 0), (1, 0, 0), (0, 0, 1)),
+           ((0, 0, 0), (0, 1, 0), (0, 0, 1)), ((1, 0, 0), (0, 1, 0), (0, 0, 1))]
+    lines = ["solid t"] + [f"facet normal 0 0 0\nouter loop\n" + "".join(f"vertex {x} {y} {z}\n" for x, y, z in t)
+                           + "endloop\nendfacet" for t in tri] + ["endsolid t"]
+    (tmp_path / "t.stl").write_text("\n".join(lines))
+    assert read_stl(tmp_path / "t.stl").shape == (4, 3)
+    (tmp_path / "r.toml").write_text('[[link]]\nname = "b"\nmass = 1\nmesh = "t.stl"\n')
+    robot = load_robot(tmp_path / "r.toml")
+    hull = StabilityFunction(robot, 0.0, planar=False).hull(np.zeros(0))
+    assert hull.n_faces == 4
