@@ -112,6 +112,8 @@ class Robot:
 
     def __init__(self, name: str, links: list[Link], joints: list[Joint]):
         self.name = name
+        self.description = ""
+        self.slope = 0.0
         self.links = {link.name: link for link in links}
         if len(self.links) != len(links):
             raise RobotFileError("link: two links share a name; give each [[link]] a unique name")
@@ -276,7 +278,12 @@ def load_robot(path: str | Path) -> Robot:
         for key in ("parent", "child"):
             if getattr(j, key) not in names:
                 raise RobotFileError(f"joint[{i}].{key}: no link named {getattr(j, key)!r}; links: {', '.join(sorted(names))}")
-    return Robot(str(data.get("name", path.stem)), parsed_links, parsed_joints)
+    robot = Robot(str(data.get("name", path.stem)), parsed_links, parsed_joints)
+    robot.description = str(data.get("description", ""))
+    robot.slope = _number(data.get("slope", 0.0), "slope", 0.0)  # degrees, the default ground slope
+    if robot.slope >= 90:
+        raise RobotFileError(f"slope: expected degrees in [0, 90), got {robot.slope:g}")
+    return robot
 
 
 def read_stl(path: str | Path) -> np.ndarray:

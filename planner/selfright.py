@@ -1,0 +1,425 @@
+"""``rapt-plan selfright ROBOT.toml``: which tipped-over states can a robot right itself from, and how (chapter 5).
+
+Runs the manifold-constrained adaptive search (:mod:`rapt.manifold`) on the robot's
+stability function (:mod:`sim.robots`), builds the transition graph
+(:mod:`rapt.transitions`) and writes ``OUT/graph.json``, ``OUT/graph.graphml``,
+``OUT/states.png`` (state plots like Figures 5.4 and 5.7) and ``OUT/report.md``.
+The same study functions drive ``benchmarks/selfright.py`` (grid search included).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Annotated, Optional
+
+import numpy as np
+import typer
+from rich.console import Console
+
+from rapt.manifold import ManifoldSampler, angular_embedding, manifold_search
+from rapt.transitions import TransitionGraph, transition_graph
+from sim.robots import Robot, RobotFileError, StabilityFunction, load_robot
+
+__all__ = ["SelfRightStudy", "space_bounds", "adaptive_study", "grid_study", "analyse", "write_outputs",
+           "selfright_command"]
+
+err = Console(stderr=True)
+console = Console()
+
+
+def space_bounds(robot: Robot, planar: bool) -> np.ndarray:
+    """Radian ranges of ``[θ, φ]``: joint ranges, then pitch (planar) or roll and pitch."""
+    body = [[-np.pi, np.pi]] if planar else [[-np.pi, np.pi], [-np.pi / 2, np.pi / 2]]
+    return np.concatenate([robot.joint_bounds, np.asarray(body)]).reshape(-1, 2)
+
+
+def _to_unit(angles: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    span = hi - lo
+    a = np.asarray(angles, dtype=float)
+    full = span >= 2 * np.pi - 1e-9  # periodic coordinate: wrap into range
+    a = np.where(full, lo + np.mod(a - lo, 2 * np.pi), a)
+    return np.clip((a - lo) / span, 0.0, 1.0)
+
+
+@dataclass
+class SelfRightStudy:
+    """Every evaluated state of one search, in unit-cube coordinates of :func:`space_bounds`."""
+
+    robot: Robot
+    slope: float  # degrees
+    method: str
+    bounds: np.ndarray
+    n_free: int
+    X: np.ndarray  # (N, d) starting states
+    stable: np.ndarray
+    rest: np.ndarray  # (N, d), NaN rows where it rolls away
+    energy: np.ndarray
+    faces: list  # per state: (k, b) valid body angles, unit cube
+    queries: int
+    seconds: float
+    resolution: float | None = None  # grid spacing, radians
+    extra: dict = field(default_factory=dict)
+
+    def embed(self, U: np.ndarray) -> np.ndarray:
+        return angular_embedding(U, self.bounds)
+
+    def known_states(self) -> np.ndarray:
+        counts = np.array([len(f) for f in self.faces])
+        return np.column_stack([np.repeat(self.X[:, :self.n_free], counts, axis=0), np.concatenate(self.faces)])
+
+
+class _System:
+    """The stability function seen from the unit cube: queries in, used states, labels and faces out."""
+
+    def __init__(self, robot: Robot, slope: float):
+        self.F = StabilityFunction(robot, slope)
+        self.bounds = space_bounds(robot, self.F.planar)
+        self.m = robot.dof
+        self.lo, self.hi = self.bounds[:, 0], self.bounds[:, 1]
+        self.rows: list = []
+
+    def angles(self, U: np.ndarray) -> np.ndarray:
+        return self.lo + np.asarray(U, float) * (self.hi - self.lo)
+
+    def unit(self, angles: np.ndarray) -> np.ndarray:
+        return _to_unit(angles, self.lo, self.hi)
+
+    def record(self, res) -> tuple[np.ndarray, np.ndarray, list]:
+        m = self.m
+        X = self.unit(np.column_stack([res.theta, res.start]))
+        rest = np.column_stack([res.theta, res.rest])
+        R = np.where(np.isfinite(rest).all(axis=1, keepdims=True), self.unit(np.nan_to_num(rest)), np.nan)
+        faces = [self.unit(np.column_stack([np.broadcast_to(t, (len(f), m)), f]))[:, m:] for t, f in zip(res.theta, res.faces)]
+        self.rows.append((X, res.stable.copy(), R, res.energy.copy(), faces))
+        return X, res.stable.astype(float), faces
+
+    def __call__(self, U: np.ndarray):
+        a = self.angles(U)
+        return self.record(self.F(a[:, :self.m], a[:, self.m:]))
+
+    def study(self, robot, slope, method, seconds, **kw) -> SelfRightStudy:
+        X, s, R, e = (np.concatenate([r[i] for r in self.rows]) for i in range(4))
+        faces = [f for r in self.rows for f in r[4]]
+        return SelfRightStudy(robot, slope, method, self.bounds, self.m, X, s.astype(bool), R, e, faces,
+                              self.F.n_queries, seconds, **kw)
+
+
+def adaptive_study(robot: Robot, slope: float, budget: int, *, seed: int = 0, batch_size: int = 50,
+                   r_min_deg: float = 1.0, r_max_deg: float = 10.0, n_initial: int | None = None,
+                   progress=None, **options) -> SelfRightStudy:
+    """Algorithm 6 on ``robot`` at ``slope`` degrees, at most ``budget`` queries."""
+    system = _System(robot, slope)
+    if n_initial is None:
+        n_initial = min(max(20 * system.bounds.shape[0], 50), max(budget // 5, 10))
+    sampler = ManifoldSampler(robot.dof, system.bounds, seed=seed, r_min=np.radians(r_min_deg),
+                              r_max=np.radians(r_max_deg), n_initial=n_initial, **options)
+    t0 = time.perf_counter()
+    manifold_search(system, sampler, budget, batch_size, progress)
+    study = system.study(robot, slope, "adaptive", time.perf_counter() - t0)
+    study.extra.update(stopped_by_resolution=sampler.done, r_min_deg=r_min_deg, r_max_deg=r_max_deg)
+    return study
+
+
+def grid_study(robot: Robot, slope: float, resolution_deg: float) -> SelfRightStudy:
+    """The baseline: every hull face of every joint state on a grid of ``resolution_deg`` degrees."""
+    system = _System(robot, slope)
+    axes = []
+    for lo, hi in robot.joint_bounds:
+        n = int(round((hi - lo) / np.radians(resolution_deg)))
+        full = hi - lo >= 2 * np.pi - 1e-9
+        axes.append(lo + np.arange(n if full else n + 1) * (hi - lo) / n)
+    theta = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, robot.dof) if axes else np.zeros((1, 0))
+    t0 = time.perf_counter()
+    system.record(system.F.all_faces(theta))
+    return system.study(robot, slope, f"grid {resolution_deg:g}°", time.perf_counter() - t0,
+                        resolution=np.radians(resolution_deg))
+
+
+def home_state(study: SelfRightStudy) -> np.ndarray:
+    """The upright home state: home joint angles, resting on the face below the base (unit cube)."""
+    F = StabilityFunction(study.robot, study.slope)
+    res = F(study.robot.home[None], np.zeros((1, F.n_body)))
+    return _to_unit(np.concatenate([res.theta[0], res.start[0]]), study.bounds[:, 0], study.bounds[:, 1])
+
+
+def probe_states(robot: Robot, slope: float, n: int, seed: int) -> np.ndarray:
+    """Uniform random joint states with every hull face: the population 'self-rightable fraction' counts (unit cube)."""
+    F = StabilityFunction(robot, slope)
+    bounds = space_bounds(robot, F.planar)
+    theta = bounds[:robot.dof, 0] + np.random.default_rng(seed).random((n, robot.dof)) * np.ptp(bounds[:robot.dof], axis=1)
+    rows = []
+    for t in theta:
+        angles = F.hull(t).angles
+        rows.append(np.column_stack([np.broadcast_to(t, (len(angles), robot.dof)), angles]))
+    return _to_unit(np.concatenate(rows), bounds[:, 0], bounds[:, 1])
+
+
+def default_max_edge(study: SelfRightStudy) -> float:
+    """Gabriel ``d_max`` (embedded distance): 3 grid steps, or 2 interior resolutions for an adaptive study."""
+    if study.resolution is not None:
+        return 3.0 * study.resolution
+    return 2.0 * np.radians(study.extra.get("r_max_deg", 10.0))
+
+
+def analyse(study: SelfRightStudy, *, max_edge: float | None = None, probes: np.ndarray | None = None) -> dict:
+    """Transition graph and the chapter's figures of merit for one study."""
+    max_edge = default_max_edge(study) if max_edge is None else max_edge
+    t0 = time.perf_counter()
+    known = study.known_states()
+    graph = transition_graph(study.embed(study.X), study.stable, study.embed(study.rest), study.energy,
+                             study.embed(known), max_edge=max_edge)
+    seconds = time.perf_counter() - t0
+    home = int(graph.node_of(study.embed(home_state(study)[None]))[0])
+    cost, _ = graph.costs_to(home) if home >= 0 else (np.full(graph.n_nodes, np.inf), None)
+    if probes is None:
+        probes = probe_states(study.robot, study.slope, 500, 0)
+    ok, energy = graph.outcome(study.embed(probes), home) if home >= 0 else (np.zeros(len(probes), bool), None)
+    e = graph.edges
+    return {
+        "graph": graph, "home": home, "cost_to_home": cost, "graph_seconds": seconds, "max_edge": max_edge,
+        "queries": study.queries, "states": len(known), "nodes": graph.n_nodes, "edges": graph.n_edges,
+        "rightable": float(ok.mean()) if len(probes) else float("nan"),
+        "energy_to_home": float(energy[ok].mean()) if ok.any() else float("nan"),
+        "pair_length_deg": float(np.degrees(e["length"]).mean()) if graph.n_edges else float("nan"),
+        "transition_energy": float(e["energy"].mean()) if graph.n_edges else float("nan"),
+    }
+
+
+def compare_graphs(a: dict, study_a: SelfRightStudy, b: dict, study_b: SelfRightStudy, probes: np.ndarray,
+                   min_share: float = 0.01) -> dict:
+    """Is graph ``a`` the same as ``b``?  Judged on probe states, since node numbers are arbitrary.
+
+    Each probe state falls in one node of each graph (through its nearest known stable
+    state); a node of ``a`` maps to the node of ``b`` most of its probes fall in.  Nodes
+    holding fewer than ``min_share`` of the probes are ignored.  Reports nodes and edges
+    matched both ways, and the share of probe states whose self-rightability agrees.
+    """
+    ga, gb = a["graph"], b["graph"]
+    na = ga.node_of(study_a.embed(probes))
+    nb = gb.node_of(study_b.embed(probes))
+
+    def big(nodes, n):
+        share = np.bincount(nodes[nodes >= 0], minlength=n) / len(nodes)
+        return set(np.flatnonzero(share >= min_share).tolist())
+
+    big_a, big_b = big(na, ga.n_nodes), big(nb, gb.n_nodes)
+
+    def mapping(src, dst, keep):
+        out = {}
+        for n in keep:
+            d = dst[(src == n) & (dst >= 0)]
+            out[n] = int(np.bincount(d).argmax()) if d.size else -1
+        return out
+
+    ab, ba = mapping(na, nb, big_a), mapping(nb, na, big_b)
+    nodes_matched = sum(1 for n, m in ab.items() if ba.get(m) == n)
+
+    def edge_set(g, keep, remap=None):
+        es = set()
+        for s, d in zip(g.edges["src"], g.edges["dst"]):
+            if s in keep and d in keep:
+                es.add((remap[s], remap[d]) if remap else (int(s), int(d)))
+        return es
+
+    ea, eb = edge_set(ga, big_a, ab), edge_set(gb, big_b)
+    ra, _ = ga.outcome(study_a.embed(probes), a["home"]) if a["home"] >= 0 else (np.zeros(len(probes), bool), None)
+    rb, _ = gb.outcome(study_b.embed(probes), b["home"]) if b["home"] >= 0 else (np.zeros(len(probes), bool), None)
+    return {"nodes": (len(big_a), len(big_b)), "nodes_matched": nodes_matched, "edges": (len(ea), len(eb)),
+            "edges_matched": len(ea & eb), "same": nodes_matched == len(big_a) == len(big_b) and ea == eb,
+            "rightable_agreement": float((ra == rb).mean())}
+
+
+# -- outputs ------------------------------------------------------------------------------------
+def _state_degrees(study: SelfRightStudy, U: np.ndarray) -> dict:
+    a = np.degrees(study.bounds[:, 0] + np.asarray(U, float) * np.ptp(study.bounds, axis=1))
+    return {"joints_deg": [round(float(v), 3) for v in a[:study.n_free]],
+            "body_deg": [round(float(v), 3) for v in a[study.n_free:]]}
+
+
+def graph_document(study: SelfRightStudy, result: dict) -> dict:
+    """The transition graph as plain JSON: nodes, one-way transitions, righting paths and the headline figures."""
+    g: TransitionGraph = result["graph"]
+    home = result["home"]
+    cost = result["cost_to_home"]
+    P = np.concatenate([study.X, study.rest[np.isfinite(study.rest).all(axis=1)], study.known_states()])
+    nodes = []
+    for n in range(g.n_nodes):
+        members = np.flatnonzero(g.labels == n)
+        rep = members[np.argmin(np.linalg.norm(g.points[members] - g.points[members].mean(axis=0), axis=1))]
+        path = g.path(n, home) if home >= 0 and n != home else []
+        nodes.append({"id": n, "states": int(g.node_sizes[n]), "home": n == home,
+                      "can_right": bool(np.isfinite(cost[n])),
+                      "energy_to_home_J": None if not np.isfinite(cost[n]) else round(float(cost[n]), 4),
+                      "righting_path": [int(e) for e in path], "representative": _state_degrees(study, P[rep])})
+    edges = []
+    for e in range(g.n_edges):
+        w = int(g.edges["witness"][e])
+        edges.append({"id": e, "source": int(g.edges["src"][e]), "target": int(g.edges["dst"][e]),
+                      "energy_J": round(float(g.edges["energy"][e]), 4),
+                      "boundary_pair_deg": round(float(np.degrees(g.edges["length"][e])), 4),
+                      "start": _state_degrees(study, study.X[w]), "rest": _state_degrees(study, study.rest[w])})
+    return {"robot": study.robot.name, "slope_deg": study.slope, "method": study.method, "queries": study.queries,
+            "known_states": result["states"], "max_edge_deg": round(float(np.degrees(result["max_edge"])), 4),
+            "home_node": home, "self_rightable_fraction": round(result["rightable"], 4),
+            "mean_energy_to_home_J": None if not np.isfinite(result["energy_to_home"]) else round(result["energy_to_home"], 4),
+            "nodes": nodes, "edges": edges}
+
+
+def write_graphml(doc: dict, path: Path) -> None:
+    """GraphML (yEd, Gephi, networkx.read_graphml) of the node graph, written with xml.etree."""
+    ns = "http://graphml.graphdrawing.org/xmlns"
+    root = ET.Element("graphml", xmlns=ns)
+    keys = [("states", "node", "int"), ("home", "node", "boolean"), ("can_right", "node", "boolean"),
+            ("energy_to_home_J", "node", "double"), ("energy_J", "edge", "double"), ("boundary_pair_deg", "edge", "double")]
+    for name, kind, typ in keys:
+        ET.SubElement(root, "key", {"id": name, "for": kind, "attr.name": name, "attr.type": typ})
+    graph = ET.SubElement(root, "graph", id=doc["robot"], edgedefault="directed")
+    for n in doc["nodes"]:
+        el = ET.SubElement(graph, "node", id=f"n{n['id']}")
+        for name in ("states", "home", "can_right", "energy_to_home_J"):
+            v = n[name]
+            if v is not None:
+                ET.SubElement(el, "data", key=name).text = str(v).lower() if isinstance(v, bool) else str(v)
+    for e in doc["edges"]:
+        el = ET.SubElement(graph, "edge", id=f"e{e['id']}", source=f"n{e['source']}", target=f"n{e['target']}")
+        for name in ("energy_J", "boundary_pair_deg"):
+            ET.SubElement(el, "data", key=name).text = str(e[name])
+    ET.indent(root)
+    ET.ElementTree(root).write(path, encoding="utf-8", xml_declaration=True)
+
+
+def plot_states(study: SelfRightStudy, result: dict, path: Path, grid: SelfRightStudy | None = None) -> None:
+    """State plots in the manner of Figures 5.4 and 5.7: each joint against each body angle.
+
+    Blue: stable evaluated states; red: unstable ones; arrows: the graph's transitions
+    (from the unstable witness to where it comes to rest).  With ``grid``, its known
+    states are drawn underneath as black dots (Figure 5.4).
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    m, b = study.n_free, study.X.shape[1] - study.n_free
+    names = [j.name for j in study.robot.joints] + (["pitch"] if b == 1 else ["roll", "pitch"])
+    pairs = [(j, m + k) for k in range(b) for j in range(m)][:6] or [(m, m)]
+    if b == 2:
+        pairs = [(m, m + 1)] + pairs[:5]
+    cols = min(len(pairs), 3)
+    rows = int(np.ceil(len(pairs) / cols))
+    fig, axes = plt.subplots(rows, cols, figsize=(5.2 * cols, 4.4 * rows), squeeze=False)
+    deg = np.degrees(study.bounds[:, 0] + study.X * np.ptp(study.bounds, axis=1))
+    rest = np.degrees(study.bounds[:, 0] + study.rest * np.ptp(study.bounds, axis=1))
+    g = result["graph"]
+    for ax, (i, j) in zip(axes.flat, pairs):
+        if grid is not None:
+            gd = np.degrees(grid.bounds[:, 0] + grid.X * np.ptp(grid.bounds, axis=1))
+            ax.scatter(gd[:, i], gd[:, j], s=0.2, c="k", alpha=0.25, lw=0, label=f"{grid.method} ({grid.queries:,})")
+        for mask, colour, label in ((study.stable, "tab:blue", "stable"), (~study.stable, "tab:red", "unstable")):
+            ax.scatter(deg[mask, i], deg[mask, j], s=4, c=colour, lw=0, label=label)
+        for w in g.edges["witness"]:
+            if np.isfinite(rest[w]).all():
+                ax.annotate("", xy=(rest[w, i], rest[w, j]), xytext=(deg[w, i], deg[w, j]),
+                            arrowprops=dict(arrowstyle="->", color="m", lw=0.8))
+        ax.set_xlabel(f"{names[i]} (deg)")
+        ax.set_ylabel(f"{names[j]} (deg)")
+    for ax in list(axes.flat)[len(pairs):]:
+        ax.axis("off")
+    axes.flat[0].legend(loc="upper right", fontsize=7, markerscale=3)
+    fig.suptitle(f"{study.robot.name}, slope {study.slope:g}°: {study.queries:,} queries, "
+                 f"{g.n_nodes} nodes, {g.n_edges} transitions")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def report_text(study: SelfRightStudy, doc: dict) -> str:
+    lines = [f"# Self-righting study: {doc['robot']}", "",
+             f"{study.robot.description}".strip(), "",
+             f"- ground slope: {doc['slope_deg']:g}°",
+             f"- queries to the stability function: {doc['queries']:,} ({study.method}, {study.seconds:.1f} s)",
+             f"- known states (every hull face of every queried joint state): {doc['known_states']:,}",
+             f"- transition graph: {len(doc['nodes'])} nodes (stable regions), {len(doc['edges'])} one-way transitions "
+             f"(Gabriel d_max {doc['max_edge_deg']:g}°)",
+             f"- home node (upright, home joint angles): {doc['home_node']}",
+             f"- self-rightable fraction of states: {doc['self_rightable_fraction']:.1%}",
+             f"- mean transition energy to reach home: "
+             + ("n/a" if doc["mean_energy_to_home_J"] is None else f"{doc['mean_energy_to_home_J']:.2f} J"), "",
+             "![state plot](states.png)", "", "## Nodes", "",
+             "| node | states | can right | energy to home (J) | path (edges) | representative joints (deg) | body (deg) |",
+             "|---:|---:|:---:|---:|---|---|---|"]
+    for n in doc["nodes"]:
+        e = "-" if n["energy_to_home_J"] is None else f"{n['energy_to_home_J']:.2f}"
+        lines.append(f"| {n['id']}{' (home)' if n['home'] else ''} | {n['states']:,} | {'yes' if n['can_right'] else 'no'} "
+                     f"| {e} | {' → '.join(map(str, n['righting_path'])) or '-'} | {n['representative']['joints_deg']} "
+                     f"| {n['representative']['body_deg']} |")
+    lines += ["", "## Transitions (lowest-energy witness per pair of nodes)", "",
+              "| edge | from | to | energy (J) | boundary pair (deg) | joints at the tip (deg) | body start → rest (deg) |",
+              "|---:|---:|---:|---:|---:|---|---|"]
+    for e in doc["edges"]:
+        lines.append(f"| {e['id']} | {e['source']} | {e['target']} | {e['energy_J']:.2f} | {e['boundary_pair_deg']:.2f} "
+                     f"| {e['start']['joints_deg']} | {e['start']['body_deg']} → {e['rest']['body_deg']} |")
+    return "\n".join(lines) + "\n"
+
+
+def write_outputs(study: SelfRightStudy, result: dict, out_dir: Path) -> dict:
+    out_dir.mkdir(parents=True, exist_ok=True)
+    doc = graph_document(study, result)
+    (out_dir / "graph.json").write_text(json.dumps(doc, indent=1) + "\n")
+    write_graphml(doc, out_dir / "graph.graphml")
+    plot_states(study, result, out_dir / "states.png")
+    (out_dir / "report.md").write_text(report_text(study, doc))
+    return doc
+
+
+# -- command ------------------------------------------------------------------------------------
+def fail(message: str) -> None:
+    """One-line error, exit code 2, no traceback (same style as planner.cli.fail)."""
+    err.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True)
+    raise typer.Exit(code=2)
+
+
+def selfright_command(
+    robot_file: Annotated[Path, typer.Argument(metavar="ROBOT.toml", help="Robot file (TOML), e.g. examples/robots/1dof.toml.")],
+    out: Annotated[Path, typer.Option("--out", help="Directory for graph.json, graph.graphml, states.png, report.md.")],
+    slope: Annotated[Optional[float], typer.Option(help="Ground slope in degrees (default: the robot file's, else 0).")] = None,
+    budget: Annotated[int, typer.Option(help="Queries to the stability function at most.")] = 1000,
+    seed: Annotated[int, typer.Option(help="Seed of every random choice.")] = 0,
+    batch_size: Annotated[int, typer.Option("--batch-size", help="Queries per batch.")] = 50,
+    r_min: Annotated[float, typer.Option("--r-min", help="Boundary resolution, degrees (search ends below it).")] = 1.0,
+    r_max: Annotated[float, typer.Option("--r-max", help="Interior resolution, degrees.")] = 10.0,
+    max_edge: Annotated[Optional[float], typer.Option("--max-edge", help="Gabriel graph's longest edge, degrees "
+                                                      "(default: 2 x --r-max).")] = None,
+) -> None:
+    """Self-righting transition graph of a ground robot by manifold-constrained adaptive sampling (chapter 5)."""
+    try:
+        robot = load_robot(robot_file)
+    except RobotFileError as exc:
+        fail(str(exc))
+    slope = robot.slope if slope is None else slope
+    if not 0 <= slope < 90:
+        fail(f"--slope: expected degrees in [0, 90), got {slope:g}")
+    if budget < 10:
+        fail(f"--budget: expected at least 10 queries, got {budget}")
+    if batch_size < 1:
+        fail(f"--batch-size: expected a positive number of queries, got {batch_size}")
+    if not 0 < r_min <= r_max:
+        fail(f"--r-min/--r-max: expected 0 < r_min <= r_max degrees, got {r_min:g} and {r_max:g}")
+    if max_edge is not None and max_edge <= 0:
+        fail(f"--max-edge: expected degrees > 0, got {max_edge:g}")
+    if out.exists() and not out.is_dir():
+        fail(f"--out: {out} is a file; give a directory")
+    study = adaptive_study(robot, slope, budget, seed=seed, batch_size=batch_size, r_min_deg=r_min, r_max_deg=r_max)
+    result = analyse(study, max_edge=None if max_edge is None else np.radians(max_edge))
+    doc = write_outputs(study, result, out)
+    energy = doc["mean_energy_to_home_J"]
+    console.print(f"{robot.name} on a {slope:g}° slope: {study.queries:,} queries"
+              f"{' (resolution reached)' if study.extra.get('stopped_by_resolution') else ''}, "
+              f"{len(doc['nodes'])} nodes, {len(doc['edges'])} transitions; "
+              f"self-rightable {doc['self_rightable_fraction']:.1%}, mean energy to home "
+              f"{'n/a' if energy is None else f'{energy:.2f} J'}; wrote {out}/graph.json, graph.graphml, states.png, report.md",
+              soft_wrap=True, highlight=False)

@@ -1,0 +1,208 @@
+"""Manifold-constrained adaptive sampling (chapter 5, Algorithms 6 and 7).
+
+Some systems accept only states on unknown constraint manifolds: a tipped-over robot can
+rest only on a face of its convex hull, so of a state ``[θ, φ]`` (free joint angles θ,
+constrained body angles φ) only the φ in a finite set ``Z_θ`` are valid.  The system
+*projects* each query onto a valid state and reports it, the valid set ``Z_θ`` and the
+label (Algorithm 5).  :class:`ManifoldSampler` follows that protocol on rapt's ask/tell
+core:
+
+* it learns from the states the system *used* (``tell(X_start, Y, faces)``), not the ones
+  asked;
+* candidates come from a nearest-neighbour metamodel of ``θ → Z_θ``: random θ, each paired
+  with every valid φ of the nearest evaluated θ (Algorithm 7);
+* NNDV information (section 5.4.3): over the K nearest evaluated states, the label
+  variance σ and the volume ``V`` (distance to the farthest of the K); ``I = α σ/σ_max + β V``
+  (σ scaled to [0, 1] so that α and β weigh comparable terms);
+* resolution cut-offs end the search (Algorithm 6): a candidate whose neighbours all agree
+  is dropped once ``V < r_max``, one on a boundary once ``V < r_min``; when no candidate is
+  left :attr:`done` is set and :meth:`ask` returns no points.
+
+Distances are taken between angles embedded as ``(cos a, sin a)``: section 5.4.1's cosine
+distance ``|cos x₀ − cos x₁|`` is periodic but maps ``a`` and ``−a`` together; the
+embedding keeps its periodicity without that ambiguity, and its chord length equals the
+angle for small differences (so resolutions are in radians).
+"""
+
+from __future__ import annotations
+
+from typing import Callable, Sequence
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from rapt.candidates import select_batch
+from rapt.information import neighbour_variance
+from rapt.parallel import query_workers
+from rapt.samplers.base import Sampler
+
+__all__ = ["angular_embedding", "ManifoldSampler", "manifold_search"]
+
+
+def angular_embedding(U: np.ndarray, bounds: np.ndarray) -> np.ndarray:
+    """Unit-cube states (n, d) → ``(cos a, sin a)`` per coordinate (n, 2d), ``a = lo + u (hi − lo)`` radians."""
+    U = np.asarray(U, dtype=float)
+    bounds = np.asarray(bounds, dtype=float).reshape(-1, 2)
+    a = bounds[:, 0] + U * (bounds[:, 1] - bounds[:, 0])
+    out = np.empty(U.shape[:-1] + (2 * U.shape[-1],))
+    out[..., 0::2] = np.cos(a)
+    out[..., 1::2] = np.sin(a)
+    return out
+
+
+class ManifoldSampler(Sampler):
+    """Algorithms 6-7: NNDV search over states whose last coordinates lie on estimated manifolds.
+
+    Parameters
+    ----------
+    n_free: number of leading free coordinates (joint angles θ); the rest are constrained (φ).
+    bounds: (d, 2) angle range in radians of every coordinate (unit-cube ``u`` ↔ ``lo + u (hi − lo)``).
+    k: neighbours of the NNDV metamodel.
+    alpha, beta: weights of the variance (exploit the boundary) and volume (explore) terms.
+    r_min, r_max: boundary and interior resolutions (radians, embedded distance).
+    n_initial: uniform random queries before the search turns adaptive.
+    candidates_per_point, min_candidates: about ``max(candidates_per_point · n, min_candidates)`` candidates a batch.
+    separation: near-duplicate suppression inside a batch, a multiple of each candidate's ``V``.
+    """
+
+    name = "manifold-nndv"
+    adaptive = True
+
+    def __init__(self, n_free: int, bounds: Sequence[Sequence[float]], *, seed: int = 0, k: int = 6,
+                 alpha: float = 1.0, beta: float = 1.0, r_min: float = np.radians(1.0), r_max: float = np.radians(10.0),
+                 n_initial: int = 100, candidates_per_point: float = 10.0, min_candidates: int = 1000,
+                 separation: float = 0.5):
+        bounds = np.asarray(bounds, dtype=float)
+        if bounds.ndim != 2 or bounds.shape[1] != 2 or not np.all(bounds[:, 1] > bounds[:, 0]):
+            raise ValueError(f"bounds: expected (d, 2) ranges with lower < upper, got {bounds.tolist()}")
+        super().__init__(len(bounds), seed=seed, output_types=("binary",))
+        if not 0 <= n_free < self.dim:
+            raise ValueError(f"n_free: expected 0 <= n_free < {self.dim} (at least one constrained coordinate), got {n_free}")
+        for name, value in (("alpha", alpha), ("beta", beta), ("r_min", r_min), ("r_max", r_max),
+                            ("candidates_per_point", candidates_per_point), ("separation", separation)):
+            if not np.isfinite(value) or value < 0:
+                raise ValueError(f"{name}: expected a finite number >= 0, got {value!r}")
+        if r_min > r_max:
+            raise ValueError(f"r_min: the boundary resolution ({r_min}) must not exceed the interior one, r_max ({r_max})")
+        if k < 2:
+            raise ValueError(f"k: need at least 2 neighbours for a variance, got {k}")
+        self.n_free = int(n_free)
+        self.bounds = bounds
+        self.k = int(k)
+        self.alpha, self.beta = float(alpha), float(beta)
+        self.r_min, self.r_max = float(r_min), float(r_max)
+        self.n_initial = int(n_initial)
+        self.candidates_per_point = float(candidates_per_point)
+        self.min_candidates = int(min_candidates)
+        self.separation = float(separation)
+        self.done = False
+        self._faces: list[np.ndarray] = []
+        self.last_information: np.ndarray | None = None
+
+    # -- data --------------------------------------------------------------------------------
+    def tell(self, X: np.ndarray, Y: np.ndarray, faces: Sequence[np.ndarray] | None = None) -> None:
+        """Record the states the system used, their labels and, per state, its valid constrained values.
+
+        ``faces[i]`` is a (k_i, d − n_free) array of unit-cube constrained coordinates valid
+        at ``X[i]``'s free coordinates (``Z_θ``); without it only ``X[i]`` itself is known.
+        """
+        X = np.asarray(X, dtype=float).reshape(-1, self.dim)
+        if faces is None:
+            faces = [x[None, self.n_free:] for x in X]
+        if len(faces) != len(X):
+            raise ValueError(f"faces: expected one face set per state ({len(X)}), got {len(faces)}")
+        faces = [np.asarray(f, dtype=float).reshape(-1, self.dim - self.n_free) for f in faces]
+        super().tell(X, Y)
+        self._faces.extend(faces)
+
+    @property
+    def faces(self) -> list[np.ndarray]:
+        """Valid constrained values told with each state, in tell order."""
+        return self._faces
+
+    def embed(self, U: np.ndarray) -> np.ndarray:
+        """The metric space of the search: :func:`angular_embedding` with this sampler's bounds."""
+        return angular_embedding(U, self.bounds)
+
+    def known_states(self) -> np.ndarray:
+        """``X^Z``: every told free state paired with each of its valid constrained values (unit cube)."""
+        X = self.X
+        if not len(X):
+            return np.empty((0, self.dim))
+        counts = np.array([len(f) for f in self._faces])
+        return np.column_stack([np.repeat(X[:, :self.n_free], counts, axis=0), np.concatenate(self._faces)])
+
+    # -- Algorithm 7 ---------------------------------------------------------------------------
+    def candidates(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        """Random free states, each with every valid constrained value of the nearest told free state."""
+        X = self.X
+        mean_faces = max(np.mean([len(f) for f in self._faces]), 1.0)
+        p = max(int(np.ceil(max(self.candidates_per_point * n, self.min_candidates) / mean_faces)), 1)
+        theta = rng.random((p, self.n_free))
+        if self.n_free:
+            tree = cKDTree(angular_embedding(X[:, :self.n_free], self.bounds[:self.n_free]))
+            _, nn = tree.query(angular_embedding(theta, self.bounds[:self.n_free]), k=1, workers=query_workers(p))
+        else:
+            nn = np.zeros(p, dtype=int)
+        sets = [self._faces[i] for i in nn]
+        counts = np.array([len(s) for s in sets])
+        return np.column_stack([np.repeat(theta, counts, axis=0), np.concatenate(sets)])
+
+    def information(self, candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """NNDV: (information I, label variance σ, volume V) per candidate."""
+        tree = cKDTree(self.embed(self.X))
+        k = min(self.k, self.n_told)
+        dist, nbr = tree.query(self.embed(candidates), k=k, workers=query_workers(len(candidates)))
+        dist, nbr = dist.reshape(len(candidates), k), nbr.reshape(len(candidates), k)
+        sigma = neighbour_variance(self.Y[:, 0][nbr])
+        volume = dist.max(axis=1)
+        return self.alpha * sigma / 0.25 + self.beta * volume, sigma, volume
+
+    # -- Algorithm 6's selection and stopping rule --------------------------------------------
+    def ask(self, n: int) -> np.ndarray:
+        """Up to ``n`` queries; fewer (or none, with :attr:`done` set) once the resolution cut-offs bite."""
+        if not isinstance(n, (int, np.integer)) or n < 1:
+            raise ValueError(f"n: expected a positive integer number of points, got {n!r}")
+        rng = np.random.default_rng(np.random.SeedSequence([self.seed, self.n_batches]))
+        if self.n_told < max(self.n_initial, self.k + 1):
+            points = rng.random((n, self.dim))
+            self.last_information = None
+        else:
+            cand = self.candidates(n, rng)
+            info, sigma, volume = self.information(cand)
+            live = ~(((sigma == 0) & (volume < self.r_max)) | ((sigma > 0) & (volume < self.r_min)))
+            cand, info, volume = cand[live], info[live], volume[live]
+            if not len(cand):
+                self.done = True
+                return np.empty((0, self.dim))
+            m = min(int(n), len(cand))
+            idx = select_batch(cand, info, m, self.separation * volume, self.embed(cand))
+            points = cand[idx]
+            self.last_information = info[idx]
+        self.n_batches += 1
+        self.n_asked += len(points)
+        return np.clip(points, 0.0, 1.0)
+
+    def _propose(self, n: int, rng: np.random.Generator) -> np.ndarray:  # pragma: no cover - ask() is overridden
+        raise NotImplementedError
+
+
+def manifold_search(fn: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, Sequence[np.ndarray]]],
+                    sampler: ManifoldSampler, budget: int, batch_size: int = 50,
+                    progress: Callable[[int, int], None] | None = None) -> ManifoldSampler:
+    """Algorithm 6's loop: ask, evaluate, tell, until ``budget`` evaluations or the cut-offs end it.
+
+    ``fn(queries) -> (used_states, labels, faces)`` evaluates unit-cube queries and returns
+    the states actually used (after projection), their 0/1 labels and valid constrained values.
+    """
+    if budget < 1 or batch_size < 1:
+        raise ValueError(f"budget, batch_size: expected positive integers, got {budget}, {batch_size}")
+    while sampler.n_told < budget and not sampler.done:
+        q = sampler.ask(min(batch_size, budget - sampler.n_told))
+        if not len(q):
+            break
+        X, Y, faces = fn(q)
+        sampler.tell(X, Y, faces)
+        if progress is not None:
+            progress(sampler.n_told, budget)
+    return sampler

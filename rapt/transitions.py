@@ -1,0 +1,230 @@
+"""Transition graphs (Algorithm 8): stable regions as nodes, one-way transitions between them as edges.
+
+Generic over the system: it takes labelled states in a metric space (the caller embeds
+angles, e.g. with :func:`rapt.manifold.angular_embedding`), whether each is stable, the
+state each unstable one comes to rest in, and the energy lost on the way.  Section 5.4.4:
+
+1. All known states ``X^Z`` = the evaluated states, their resting states and any extra
+   states known to lie on the constraint manifolds (the other hull faces at each joint
+   state).  Labels of extra states come from their nearest evaluated state; resting
+   states are stable by definition.
+2. A Gabriel graph over ``X^Z`` with edges no longer than ``max_edge`` (which keeps
+   parallel manifolds apart).  Candidates are all pairs within ``max_edge``
+   (``cKDTree.query_pairs``); a pair is Gabriel when no third state lies strictly inside
+   the ball it spans — exact, and cheaper than a Delaunay triangulation in 6+ dimensions.
+3. The stable subgraph's connected components are the nodes.
+4. Each unstable evaluated state adds an edge from the node of its nearest stable Gabriel
+   neighbour (where the robot moved from, the other end of its *boundary pair*) to the
+   node of its resting state, weighted by the energy lost; of duplicate edges between two
+   nodes the lowest-energy one is kept.
+
+:meth:`TransitionGraph.costs_to` runs Dijkstra on the reversed edges, giving every node's
+lowest total energy to a goal node (infinite when it cannot reach it) and the path.
+"""
+
+from __future__ import annotations
+
+import heapq
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+from scipy.spatial import cKDTree
+
+from rapt.parallel import query_workers
+
+__all__ = ["gabriel_graph", "TransitionGraph", "transition_graph"]
+
+
+def gabriel_graph(X: np.ndarray, max_edge: float, chunk: int = 200_000) -> tuple[np.ndarray, np.ndarray]:
+    """Edges ``(i, j)``, ``i < j``, of the Gabriel graph of ``X`` no longer than ``max_edge``.
+
+    ``(i, j)`` is an edge when no other point lies strictly inside the ball with diameter
+    ``x_i x_j``; any such point would be nearer the midpoint than ``x_i`` and ``x_j``, so it
+    is among the 3 nearest neighbours of the midpoint.
+    """
+    X = np.asarray(X, dtype=float)
+    if X.ndim != 2:
+        raise ValueError(f"X: expected a 2-D array of states, got shape {X.shape}")
+    if not np.isfinite(max_edge) or max_edge <= 0:
+        raise ValueError(f"max_edge: expected a length > 0, got {max_edge}")
+    if len(X) < 2:
+        return np.empty(0, dtype=int), np.empty(0, dtype=int)
+    tree = cKDTree(X)
+    pairs = tree.query_pairs(max_edge, output_type="ndarray")
+    keep = np.zeros(len(pairs), dtype=bool)
+    for s in range(0, len(pairs), chunk):
+        p = pairs[s:s + chunk]
+        a, b = X[p[:, 0]], X[p[:, 1]]
+        r = np.linalg.norm(a - b, axis=1) / 2.0
+        d, idx = tree.query((a + b) / 2.0, k=min(3, len(X)), workers=query_workers(len(p)))
+        other = (idx != p[:, :1]) & (idx != p[:, 1:2])
+        inside = other & (d < r[:, None] * (1.0 - 1e-9) - 1e-15)
+        keep[s:s + chunk] = ~inside.any(axis=1)
+    pairs = pairs[keep]
+    return pairs[:, 0].astype(int), pairs[:, 1].astype(int)
+
+
+@dataclass
+class TransitionGraph:
+    """Algorithm 8's ``G_N``: nodes are stable regions, directed edges one-way transitions.
+
+    Attributes over all known states ``points`` (evaluated ``[:n_evaluated]``, then resting
+    states, then extra states): ``stable``, ``labels`` (node of a stable state, else -1) and
+    ``end_node`` (the node a state ends up in: its own, or its resting state's; -1 when
+    unknown or when it never comes to rest).  ``edges`` has one row per kept transition:
+    ``src``, ``dst``, ``energy``, ``witness`` (the evaluated unstable state) and ``length``
+    (its boundary pair's length: distance to the stable state it was reached from).
+    """
+
+    points: np.ndarray
+    stable: np.ndarray
+    labels: np.ndarray
+    end_node: np.ndarray
+    n_evaluated: int
+    node_sizes: np.ndarray
+    edges: dict = field(default_factory=dict)
+    all_transitions: dict = field(default_factory=dict)  # before de-duplication
+    n_gabriel_edges: int = 0
+    max_edge: float = 0.0
+
+    @property
+    def n_nodes(self) -> int:
+        return len(self.node_sizes)
+
+    @property
+    def n_edges(self) -> int:
+        return len(self.edges["src"])
+
+    def node_of(self, points: np.ndarray, stable_only: bool = True) -> np.ndarray:
+        """Node of the nearest known (stable, by default) state to each of ``points``."""
+        pts = np.atleast_2d(np.asarray(points, dtype=float))
+        pool = np.flatnonzero(self.labels >= 0) if stable_only else np.arange(len(self.points))
+        if pool.size == 0:
+            return -np.ones(len(pts), dtype=int)
+        _, i = cKDTree(self.points[pool]).query(pts, k=1)
+        src = self.labels if stable_only else self.end_node
+        return src[pool[i]]
+
+    def costs_to(self, goal: int) -> tuple[np.ndarray, np.ndarray]:
+        """Lowest total transition energy from every node to ``goal`` and the next edge on that path.
+
+        Returns ``(cost, next_edge)``: ``cost[goal] = 0``, ``inf`` where ``goal`` is
+        unreachable; ``next_edge[n]`` indexes :attr:`edges` (-1 at the goal or unreachable).
+        """
+        if not 0 <= goal < self.n_nodes:
+            raise ValueError(f"goal: expected a node in [0, {self.n_nodes}), got {goal}")
+        into: dict[int, list[int]] = {}
+        for e, d in enumerate(self.edges["dst"]):
+            into.setdefault(int(d), []).append(e)
+        cost = np.full(self.n_nodes, np.inf)
+        nxt = -np.ones(self.n_nodes, dtype=int)
+        cost[goal] = 0.0
+        heap = [(0.0, goal)]
+        while heap:
+            c, n = heapq.heappop(heap)
+            if c > cost[n]:
+                continue
+            for e in into.get(n, []):
+                s = int(self.edges["src"][e])
+                new = c + float(self.edges["energy"][e])
+                if new < cost[s]:
+                    cost[s], nxt[s] = new, e
+                    heapq.heappush(heap, (new, s))
+        return cost, nxt
+
+    def path(self, start: int, goal: int) -> list[int]:
+        """Edge indices of the lowest-energy path from node ``start`` to ``goal`` ([] if none or already there)."""
+        cost, nxt = self.costs_to(goal)
+        out, n = [], start
+        while n != goal and nxt[n] >= 0:
+            out.append(int(nxt[n]))
+            n = int(self.edges["dst"][nxt[n]])
+        return out if n == goal else []
+
+    def outcome(self, points: np.ndarray, goal: int) -> tuple[np.ndarray, np.ndarray]:
+        """For states ``points``: can each reach ``goal`` (via its nearest known state's end node), and at what energy.
+
+        The energy is the path's total from the node the state ends up in, the first fall
+        of an unstable state excluded.
+        """
+        cost, _ = self.costs_to(goal)
+        end = self.node_of(points, stable_only=False)
+        c = np.where(end >= 0, cost[np.maximum(end, 0)], np.inf)
+        return np.isfinite(c), c
+
+
+def transition_graph(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, energy: np.ndarray,
+                     extra: np.ndarray | None = None, *, max_edge: float) -> TransitionGraph:
+    """Build Algorithm 8's transition graph.
+
+    Parameters
+    ----------
+    X: (N, d) evaluated starting states, in the metric space of the search.
+    stable: (N,) whether each is stable.
+    rest: (N, d) the state each comes to rest in (itself when stable; NaN rows when it never does).
+    energy: (N,) energy lost between start and rest.
+    extra: (M, d) further states known to lie on the manifolds (e.g. the other hull faces).
+    max_edge: the Gabriel graph's maximum edge length ``d_max``.
+    """
+    X = np.asarray(X, dtype=float)
+    N, d = X.shape if X.ndim == 2 else (-1, -1)
+    if N < 0:
+        raise ValueError(f"X: expected a 2-D array of states, got shape {np.shape(X)}")
+    stable = np.asarray(stable, dtype=bool).reshape(-1)
+    rest = np.asarray(rest, dtype=float).reshape(N, d)
+    energy = np.asarray(energy, dtype=float).reshape(-1)
+    if stable.shape != (N,) or energy.shape != (N,):
+        raise ValueError(f"stable, energy: expected one value per state ({N}), got {stable.shape}, {energy.shape}")
+    extra = np.empty((0, d)) if extra is None else np.asarray(extra, dtype=float).reshape(-1, d)
+    settled = np.all(np.isfinite(rest), axis=1)
+    rest_idx = np.flatnonzero(settled)
+    points = np.concatenate([X, rest[rest_idx], extra])
+    R0, E0 = N, N + len(rest_idx)
+    lab = np.empty(len(points), dtype=bool)
+    lab[:N] = stable
+    lab[R0:E0] = True
+    if len(extra):
+        _, nn = cKDTree(X).query(extra, k=1)
+        lab[E0:] = stable[nn]
+    # 2-3: Gabriel graph, stable subgraph, components
+    i, j = gabriel_graph(points, max_edge)
+    both = lab[i] & lab[j]
+    n_pts = len(points)
+    adj = coo_matrix((np.ones(both.sum()), (i[both], j[both])), shape=(n_pts, n_pts))
+    _, comp = connected_components(adj, directed=False)
+    comp = np.where(lab, comp, -1)
+    uniq, counts = np.unique(comp[comp >= 0], return_counts=True)
+    order = np.argsort(-counts, kind="stable")  # node 0 is the largest region
+    relabel = -np.ones(comp.max() + 2 if comp.size else 1, dtype=int)
+    relabel[uniq[order]] = np.arange(len(uniq))
+    labels = np.where(comp >= 0, relabel[np.maximum(comp, 0)], -1)
+    # 4: transitions from each unstable evaluated state's nearest stable Gabriel neighbour
+    length = np.linalg.norm(points[i] - points[j], axis=1)
+    a = np.concatenate([i, j])
+    b = np.concatenate([j, i])
+    ln = np.concatenate([length, length])
+    sel = (a < N) & ~lab[a] & lab[b]
+    a, b, ln = a[sel], b[sel], ln[sel]
+    o = np.lexsort((ln, a))
+    a, b, ln = a[o], b[o], ln[o]
+    first = np.r_[True, a[1:] != a[:-1]] if a.size else np.empty(0, dtype=bool)
+    u, nb, pair_len = a[first], b[first], ln[first]
+    rest_node = -np.ones(N, dtype=int)
+    rest_node[rest_idx] = labels[R0:E0]
+    keep = settled[u]
+    u, nb, pair_len = u[keep], nb[keep], pair_len[keep]
+    src, dst = labels[nb], rest_node[u]
+    ok = (src >= 0) & (dst >= 0) & (src != dst)
+    trans = {"src": src[ok], "dst": dst[ok], "energy": energy[u[ok]], "witness": u[ok], "length": pair_len[ok]}
+    o = np.lexsort((trans["energy"], trans["dst"], trans["src"]))
+    t = {k: v[o] for k, v in trans.items()}
+    firstpair = np.r_[True, (t["src"][1:] != t["src"][:-1]) | (t["dst"][1:] != t["dst"][:-1])] if len(o) else np.empty(0, bool)
+    edges = {k: v[firstpair] for k, v in t.items()}
+    # where every known state ends up
+    end = labels.copy()
+    end[:N] = np.where(stable, labels[:N], rest_node)
+    if len(extra):
+        end[E0:] = np.where(lab[E0:], labels[E0:], end[:N][nn])
+    return TransitionGraph(points, lab, labels, end, N, counts[order], edges, trans, int(len(i)), float(max_edge))

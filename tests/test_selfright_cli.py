@@ -1,0 +1,67 @@
+"""``rapt-plan selfright`` through typer's CliRunner on a one-command app."""
+
+from __future__ import annotations
+
+import json
+import xml.etree.ElementTree as ET
+
+import typer
+from typer.testing import CliRunner
+
+from planner.selfright import selfright_command
+
+app = typer.Typer()
+app.command()(selfright_command)
+runner = CliRunner()
+
+
+def test_selfright_writes_graph_plots_and_report(tmp_path):
+    out = tmp_path / "one"
+    res = runner.invoke(app, ["examples/robots/1dof.toml", "--budget", "300", "--out", str(out), "--seed", "2"])
+    assert res.exit_code == 0, res.output
+    assert "300 queries" in res.output and "self-rightable" in res.output
+    doc = json.loads((out / "graph.json").read_text())
+    assert doc["robot"] == "1dof" and doc["slope_deg"] == 20.0 and doc["queries"] == 300  # slope from the robot file
+    assert 0 <= doc["home_node"] < len(doc["nodes"]) and doc["nodes"][doc["home_node"]]["home"]
+    assert 0.0 < doc["self_rightable_fraction"] < 1.0
+    for e in doc["edges"]:
+        assert e["energy_J"] > 0 and e["source"] != e["target"]
+    reach = [n for n in doc["nodes"] if n["can_right"] and not n["home"]]
+    for n in reach:  # a righting path ends at home and its energy is the sum of its edges
+        path = [doc["edges"][i] for i in n["righting_path"]]
+        assert path[0]["source"] == n["id"] and path[-1]["target"] == doc["home_node"]
+        assert abs(sum(p["energy_J"] for p in path) - n["energy_to_home_J"]) < 1e-3
+    g = ET.parse(out / "graph.graphml").getroot()
+    ns = {"g": "http://graphml.graphdrawing.org/xmlns"}
+    assert len(g.findall(".//g:node", ns)) == len(doc["nodes"])
+    assert len(g.findall(".//g:edge", ns)) == len(doc["edges"])
+    assert (out / "states.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+    report = (out / "report.md").read_text()
+    assert "self-rightable fraction" in report and "states.png" in report
+    # same seed, same graph
+    res2 = runner.invoke(app, ["examples/robots/1dof.toml", "--budget", "300", "--out", str(tmp_path / "two"), "--seed", "2"])
+    assert res2.exit_code == 0
+    assert json.loads((tmp_path / "two" / "graph.json").read_text()) == doc
+
+
+def test_slope_option_overrides_the_robot_file(tmp_path):
+    res = runner.invoke(app, ["examples/robots/1dof.toml", "--budget", "120", "--slope", "0", "--out", str(tmp_path)])
+    assert res.exit_code == 0, res.output
+    assert json.loads((tmp_path / "graph.json").read_text())["slope_deg"] == 0.0
+
+
+def test_bad_inputs_are_one_line_errors(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[[link]]\nname = "body"\nmass = 1\nboxes = [{ size = [0.5, -1, 0.2] }]\n')
+    cases = [
+        ([str(bad)], "link[0].boxes[0].size"),
+        ([str(tmp_path / "missing.toml")], "does not exist"),
+        (["examples/robots/1dof.toml", "--slope", "95"], "--slope"),
+        (["examples/robots/1dof.toml", "--budget", "3"], "--budget"),
+        (["examples/robots/1dof.toml", "--r-min", "5", "--r-max", "1"], "--r-min"),
+    ]
+    for args, field in cases:
+        res = runner.invoke(app, args + ["--out", str(tmp_path / "o")])
+        assert res.exit_code == 2, (args, res.output)
+        assert field in res.output and "Traceback" not in res.output
+        assert len([line for line in res.output.strip().splitlines() if line.strip()]) == 1

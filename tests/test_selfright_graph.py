@@ -1,0 +1,150 @@
+"""Algorithm 8 on hand-built state sets, Gabriel graphs, and Algorithms 6-7 on the 1-DOF robot."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rapt.manifold import ManifoldSampler, angular_embedding, manifold_search
+from rapt.transitions import gabriel_graph, transition_graph
+
+
+def brute_gabriel(X):
+    edges = set()
+    for a in range(len(X)):
+        for b in range(a + 1, len(X)):
+            mid, r = (X[a] + X[b]) / 2, np.linalg.norm(X[a] - X[b]) / 2
+            d = np.linalg.norm(X - mid, axis=1)
+            d[[a, b]] = np.inf
+            if not (d < r).any():
+                edges.add((a, b))
+    return edges
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_gabriel_graph_matches_brute_force(dim):
+    X = np.random.default_rng(dim).random((120, dim))
+    i, j = gabriel_graph(X, 10.0)
+    assert set(zip(i.tolist(), j.tolist())) == brute_gabriel(X)
+    i2, j2 = gabriel_graph(X, 0.1)  # the length cap only removes edges
+    L = np.linalg.norm(X[i2] - X[j2], axis=1)
+    assert np.all(L <= 0.1) and set(zip(i2.tolist(), j2.tolist())) == {e for e in brute_gabriel(X)
+                                                                       if np.linalg.norm(X[e[0]] - X[e[1]]) <= 0.1}
+
+
+def two_manifolds():
+    """Free coordinate t in [0, 1]; manifolds A (phi = 0) and B (phi = 1), one unit apart.
+
+    A is stable except on 0.3 <= t < 0.6, where it falls onto B losing energy 1 + t;
+    B is stable for t > 0.2 and falls onto A below, losing energy 2.
+    """
+    t = np.round(np.arange(0, 1.0001, 0.05), 10)
+    X = np.concatenate([np.column_stack([t, np.zeros_like(t)]), np.column_stack([t, np.ones_like(t)])])
+    stable = np.concatenate([(t < 0.3) | (t >= 0.6), t > 0.2])
+    rest = X.copy()
+    rest[:len(t)][~stable[:len(t)], 1] = 1.0
+    rest[len(t):][~stable[len(t):], 1] = 0.0
+    energy = np.concatenate([np.where(stable[:len(t)], 0.0, 1.0 + t), np.where(stable[len(t):], 0.0, 2.0)])
+    return t, X, stable, rest, energy
+
+
+def test_transition_graph_on_a_hand_built_state_set():
+    t, X, stable, rest, energy = two_manifolds()
+    g = transition_graph(X, stable, rest, energy, max_edge=0.12)
+    # nodes: A below the band, A above it, B above 0.2 (the largest)
+    assert g.n_nodes == 3
+    node = lambda tt, phi: int(g.node_of([[tt, phi]])[0])  # noqa: E731
+    a_low, a_high, b = node(0.1, 0), node(0.8, 0), node(0.5, 1)
+    assert len({a_low, a_high, b}) == 3 and b == 0
+    assert g.labels[np.flatnonzero((X[:, 1] == 0) & (X[:, 0] >= 0.3) & (X[:, 0] < 0.6))].max() == -1
+    edges = {(int(s), int(d)): (float(e), int(w), float(L)) for s, d, e, w, L in
+             zip(g.edges["src"], g.edges["dst"], g.edges["energy"], g.edges["witness"], g.edges["length"])}
+    # A's lower region tips onto B from t = 0.3 (energy 1.3); the upper one from t = 0.55 (energy 1.55);
+    # B tips onto A's lower region from t = 0.2; duplicates keep their lowest energy
+    assert set(edges) == {(a_low, b), (a_high, b), (b, a_low)}
+    assert edges[(a_low, b)][0] == pytest.approx(1.3)
+    assert edges[(a_high, b)][0] == pytest.approx(1.55)
+    assert edges[(b, a_low)][0] == pytest.approx(2.0)
+    assert all(v[2] == pytest.approx(0.05) for v in edges.values())  # boundary pairs one step apart
+    # only unstable states next to a stable one are transitions (deeper ones cannot be reached without tipping)
+    assert sorted(np.round(X[g.all_transitions["witness"], 0], 6).tolist()) == [0.2, 0.3, 0.55]
+    # reachability and lowest-energy paths
+    cost, _ = g.costs_to(b)
+    assert cost[b] == 0 and cost[a_low] == pytest.approx(1.3) and cost[a_high] == pytest.approx(1.55)
+    cost, _ = g.costs_to(a_high)
+    assert np.isinf(cost[a_low]) and np.isinf(cost[b])
+    assert [(int(g.edges["src"][e]), int(g.edges["dst"][e])) for e in g.path(b, a_low)] == [(b, a_low)]
+    ok, c = g.outcome(np.array([[0.4, 0.0], [0.9, 1.0]]), a_low)  # an unstable state ends on B, which reaches a_low
+    assert ok.all() and c[0] == pytest.approx(2.0) and c[1] == pytest.approx(2.0)
+
+
+def test_parallel_manifolds_stay_apart_and_extra_states_fill_gaps():
+    t, X, stable, rest, energy = two_manifolds()
+    # evaluate only every other state of B; the rest are "extra" known states labelled by their nearest neighbour
+    keep = np.ones(len(X), dtype=bool)
+    keep[len(t) + 1::2] = False
+    g = transition_graph(X[keep], stable[keep], rest[keep], energy[keep], X[~keep], max_edge=0.07)
+    assert g.n_nodes == 3  # 0.1-spaced evaluated B states connect only through the extra ones
+    g2 = transition_graph(X[keep], stable[keep], rest[keep], energy[keep], max_edge=0.07)
+    assert g2.n_nodes > 3  # without the extra states, B falls apart
+    g3 = transition_graph(X, stable, rest, energy, max_edge=1.5)  # a cap above the gap joins A and B
+    assert g3.n_nodes < 3
+
+
+def test_manifold_sampler_learns_from_projected_states_and_stops_at_resolution():
+    """Valid states: phi in {0.25, 0.75} (a projection snaps phi to the nearer); stable iff t < 0.5 on the lower one."""
+    bounds = [[0.0, np.pi], [0.0, np.pi]]
+
+    def system(Q):
+        X = Q.copy()
+        X[:, 1] = np.where(Q[:, 1] < 0.5, 0.25, 0.75)
+        y = ((X[:, 1] > 0.5) | (X[:, 0] < 0.5)).astype(float)
+        return X, y, [np.array([[0.25], [0.75]])] * len(X)
+
+    s = ManifoldSampler(1, bounds, seed=1, r_min=np.radians(0.5), r_max=np.radians(5.0), n_initial=30)
+    manifold_search(system, s, budget=3000, batch_size=20)
+    assert s.done and s.n_told < 3000  # the cut-offs ended the search
+    assert set(np.round(s.X[:, 1], 6)) == {0.25, 0.75}  # it only ever learned valid states
+    t_on_boundary = s.X[(s.X[:, 1] == 0.25), 0]
+    gap = np.abs(t_on_boundary - 0.5).min() * np.pi
+    assert gap < np.radians(1.0)  # refined to the boundary resolution
+    # the boundary is sampled far more densely than the interior
+    near = np.mean(np.abs(t_on_boundary - 0.5) < 0.05)  # share of samples in 10 % of the length
+    assert near / 0.1 > 1.5 * (1 - near) / 0.9
+    # deterministic under its seed
+    s2 = ManifoldSampler(1, bounds, seed=1, r_min=np.radians(0.5), r_max=np.radians(5.0), n_initial=30)
+    manifold_search(system, s2, budget=3000, batch_size=20)
+    assert np.array_equal(s.X, s2.X)
+
+
+def test_angular_embedding_is_periodic():
+    b = [[-np.pi, np.pi]]
+    e = angular_embedding(np.array([[0.0], [1.0], [0.5]]), b)
+    assert np.allclose(e[0], e[1]) and np.allclose(e[2], [1.0, 0.0])
+    # chord length ~ angle for small differences
+    u = np.array([[0.5], [0.5 + 0.01 / (2 * np.pi)]])
+    d = np.linalg.norm(np.diff(angular_embedding(u, b), axis=0))
+    assert d == pytest.approx(0.01, rel=1e-4)
+
+
+def test_one_dof_robot_graph_agrees_with_a_grid_search():
+    from planner.selfright import adaptive_study, analyse, compare_graphs, grid_study, probe_states
+    from sim.robots import load_robot
+
+    robot = load_robot("examples/robots/1dof.toml")
+    probes = probe_states(robot, 20.0, 150, 1)
+    grid = grid_study(robot, 20.0, 3.0)
+    g = analyse(grid, probes=probes)
+    study = adaptive_study(robot, 20.0, 600, seed=0)
+    a = analyse(study, probes=probes)
+    assert study.queries == 600 < grid.queries
+    assert a["home"] >= 0 and g["home"] >= 0
+    G = a["graph"]
+    assert G.n_edges >= 3 and np.all(G.edges["energy"] > 0)
+    assert (G.edges["dst"] == a["home"]).any()  # some region rights itself onto the home node
+    assert 0.3 < a["rightable"] < 0.7 and abs(a["rightable"] - g["rightable"]) < 0.1
+    c = compare_graphs(a, study, g, grid, probes)
+    assert c["rightable_agreement"] > 0.9
+    assert c["nodes_matched"] >= 4
+    # the adaptive search puts its boundary pairs closer than the grid's 3° spacing
+    assert a["pair_length_deg"] < g["pair_length_deg"]
