@@ -71,6 +71,7 @@ class Observation:
     current_e: np.ndarray | None = None  # predicted tide (m/s); None: look it up from the tide table
     current_n: np.ndarray | None = None
     nogo_distance: np.ndarray | None = None  # (N, Z) from the estimated position; None: computed here
+    scan: np.ndarray | None = None  # (N, beams) 360-degree sonar ranges (m), when the world scans
 
 
 @dataclass

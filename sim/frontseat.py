@@ -4,8 +4,8 @@ It flies one scenario's vehicle (:class:`sim.world.World` with N = 1) behind a p
 endpoint, so the back-seat autonomy, a ground station or the bridge talk to it exactly
 as to a vehicle: HEARTBEAT (MAV_TYPE_SUBMARINE), SYS_STATUS, BATTERY_STATUS,
 LOCAL_POSITION_NED, GLOBAL_POSITION_INT, ATTITUDE, GPS_RAW_INT (a fix only on the
-surface), OBSTACLE_DISTANCE (the sonar fan) and OBSTACLE_DISTANCE_3D (one closest point
-per contact), SYSTEM_TIME; arming and mode changes (COMMAND_LONG, SET_MODE); GUIDED
+surface), OBSTACLE_DISTANCE (a 360-beam sonar scan, five messages) and OBSTACLE_DISTANCE_3D
+(one closest point per contact), SYSTEM_TIME; arming and mode changes (COMMAND_LONG, SET_MODE); GUIDED
 velocity+yaw set-points (SET_POSITION_TARGET_LOCAL_NED / _GLOBAL_INT, type mask 2503);
 and the mission upload and download protocol.
 
@@ -35,6 +35,7 @@ from sim.interface import DEPTH_M, decode_command  # noqa: E402
 from sim.mission import Mission  # noqa: E402
 from sim.scenario import make_scenarios  # noqa: E402
 from sim.scoring import Scorer  # noqa: E402
+from sim.sonar import BEAMS_PER_MESSAGE, SCAN_BEAMS  # noqa: E402
 from sim.world import Telemetry, World, scenario_generators  # noqa: E402
 
 __all__ = ["FrontSeat", "GUIDED", "MANUAL", "SURFACE", "VELOCITY_YAW_MASK"]
@@ -47,7 +48,6 @@ MODES = {"STABILIZE": 0, "ACRO": 1, "ALT_HOLD": 2, "AUTO": 3, "GUIDED": 4, "CIRC
 VELOCITY_YAW_MASK = 2503
 #: ArduSub zeroes a velocity target not refreshed within this many seconds.
 SETPOINT_TIMEOUT_S = 3.0
-SONAR_BINS, SONAR_INCREMENT_DEG = 72, 5
 
 
 @dataclass
@@ -88,7 +88,7 @@ class FrontSeat:
         # a biased vehicle (sim.bias) flies like a real one whose speed, tide, compass or
         # battery differ from the model; the back-seat on the far side does not know
         self.bias = bias
-        self.world = World(scen, scenario_generators(self.u, seed) if stochastic else None, bias)
+        self.world = World(scen, scenario_generators(self.u, seed) if stochastic else None, bias, SCAN_BEAMS)
         self.referee = Scorer(scen)
         self.frame = LocalFrame(mission.origin_lat, mission.origin_lon)
         self.lockstep, self.speedup, self.failsafe_s = lockstep, float(speedup), float(failsafe_s)
@@ -231,20 +231,20 @@ class FrontSeat:
         m.system_time_send(int(time.time() * 1e6), ms)  # closes this step's telemetry
 
     def _send_sonar(self, ms: int) -> None:
+        """Each contact's closest point (OBSTACLE_DISTANCE_3D, LOCAL_NED, what the expert reads)
+        and the 360-beam scan in five OBSTACLE_DISTANCE messages (BODY_FRD, 1 degree apart,
+        ``angle_offset`` 0, 72, ... 288; uint16 cm, max + 1 where nothing is seen)."""
         tel, m = self.tel, self.conn.mav
         rng = self.mission.vehicle.sonar_range_m
-        bins = np.full(SONAR_BINS, int(rng * 100) + 1, dtype=np.int64)  # max + 1: nothing there
-        seen = np.flatnonzero(tel.detected[0])
-        for j in seen:
+        for j in np.flatnonzero(tel.detected[0]):
             cx, cy = float(tel.contact_x[0, j]), float(tel.contact_y[0, j])
-            # the closest point, in LOCAL_NED, exactly as the sonar placed it
             m.obstacle_distance_3d_send(ms, mav.MAV_DISTANCE_SENSOR_ULTRASOUND, mav.MAV_FRAME_LOCAL_NED, int(j),
                                         cy, cx, 0.0, 0.0, rng)
-            bearing = np.degrees(np.arctan2(cx - tel.est_x[0], cy - tel.est_y[0])) % 360
-            b = int(bearing // SONAR_INCREMENT_DEG) % SONAR_BINS
-            bins[b] = min(bins[b], int(max(tel.contact_distance[0, j], 0.0) * 100))
-        m.obstacle_distance_send(ms * 1000, mav.MAV_DISTANCE_SENSOR_ULTRASOUND, bins.tolist(), SONAR_INCREMENT_DEG,
-                                 0, int(rng * 100), 0.0, 0.0, mav.MAV_FRAME_GLOBAL)
+        cm = np.round(tel.scan[0] * 100.0).astype(np.int64)
+        for start in range(0, SCAN_BEAMS, BEAMS_PER_MESSAGE):
+            m.obstacle_distance_send(ms * 1000, mav.MAV_DISTANCE_SENSOR_ULTRASOUND,
+                                     cm[start:start + BEAMS_PER_MESSAGE].tolist(), 0, 0, int(rng * 100),
+                                     1.0, float(start), mav.MAV_FRAME_BODY_FRD)
 
     # -- MAVLink in ------------------------------------------------------------------
     def _handle(self, msg) -> None:

@@ -19,7 +19,7 @@ from sim.environment import tidal_current
 from sim.interface import battery_fraction, energy_consumed_hj, report_heading, report_position
 from sim.navigation import Navigation
 from sim.scenario import Scenarios
-from sim.sonar import sense
+from sim.sonar import scan, sense
 from sim.vehicle import VehicleState, step_vehicle
 
 __all__ = ["World", "Telemetry", "NoiseStreams", "scenario_generators"]
@@ -47,6 +47,7 @@ class Telemetry:
     contact_y: np.ndarray
     contact_distance: np.ndarray
     detected: np.ndarray
+    scan: np.ndarray | None = None  # (N, beams) 360-degree ranges in metres (cm steps), when asked
 
 
 def scenario_generators(X: np.ndarray, seed: int) -> list[np.random.Generator]:
@@ -89,10 +90,12 @@ class World:
     """Vehicles of the scenarios ``scen`` at their launch point, at rest, submerged.
 
     ``bias`` (one :class:`sim.bias.Bias`, or one per scenario) makes the vehicles behave
-    like biased real ones; the autonomy never sees it.
+    like biased real ones; the autonomy never sees it.  ``scan_beams`` > 0 adds a
+    360-degree range scan to the telemetry (what a learned back-seat sees, section 6.5.3).
     """
 
-    def __init__(self, scen: Scenarios, rngs: list[np.random.Generator] | None = None, bias=None):
+    def __init__(self, scen: Scenarios, rngs: list[np.random.Generator] | None = None, bias=None,
+                 scan_beams: int = 0):
         m = scen.mission
         self.scen, self.mission, self.spec = scen, m, m.vehicle
         n = scen.n
@@ -107,6 +110,7 @@ class World:
         self.drift_e = np.zeros(n)
         self.drift_n = np.zeros(n)
         self.bias = bias_arrays(bias, n)
+        self.scan_beams = int(scan_beams)
 
     def take(self, keep: np.ndarray) -> None:
         """Keep only the vehicles ``keep`` (finished runs are dropped from a batch)."""
@@ -134,8 +138,10 @@ class World:
             ex, ey = report_position(ex), report_position(ey)
             cx = report_position(contacts.x + (ex - qx)[:, None])
             cy = report_position(contacts.y + (ey - qy)[:, None])
+        ranges = (scan(qx, qy, qh, scen.obstacle_edges, scen.barriers, self.spec.sonar_range_m, self.scan_beams)
+                  if self.scan_beams else None)
         return Telemetry(t, qx, qy, ex, ey, qh, hj, battery, self.surfaced.copy(), cx, cy, contacts.distance,
-                         contacts.detected)
+                         contacts.detected, ranges)
 
     def advance(self, t: float, heading: np.ndarray, speed: np.ndarray, surface: np.ndarray,
                 moving: np.ndarray) -> None:
