@@ -52,14 +52,15 @@ class Result:
 
 
 def simulate(mission: Mission, X: np.ndarray, seed: int = 0, stochastic: bool = False,
-             trajectories: bool = False, bias=None) -> Result:
+             trajectories: bool = False, bias=None, surrogate=None) -> Result:
     """Simulate unit-cube scenarios ``X`` (N, mission.dim) of ``mission``.
 
     ``stochastic`` switches on navigation drift and current perturbations, seeded per
     scenario from ``seed`` and the row's own values, so a row gives the same run alone or
     in any batch.  ``bias`` (a :class:`sim.bias.Bias`, or one per row) flies the scenarios
     with a biased vehicle and range while the autonomy plans unbiased; None or the
-    neutral bias gives exactly the unbiased results.
+    neutral bias gives exactly the unbiased results.  ``surrogate`` (a
+    :class:`sim.imitation.surrogate.Surrogate`) flies the vehicles in place of the expert.
     """
     scen = make_scenarios(mission, X)
     names, types = metric_names(mission), metric_types(mission)
@@ -69,7 +70,8 @@ def simulate(mission: Mission, X: np.ndarray, seed: int = 0, stochastic: bool = 
     if rows.size:
         sub = scen.select(rows)
         rngs = scenario_generators(np.asarray(X, dtype=float)[rows], seed) if stochastic else None
-        got, tr = run_scenarios(sub, rngs, trajectories, bias_arrays(bias, scen.n).select(rows))
+        got, tr = run_scenarios(sub, rngs, trajectories, bias_arrays(bias, scen.n).select(rows),
+                                **({} if surrogate is None else surrogate.driver_options()))
         scores[rows] = got
         if trajectories:
             for r, t in zip(rows.tolist(), tr):
@@ -91,17 +93,20 @@ def _take_rows(obj, keep: np.ndarray, n: int) -> None:
         obj._rows = np.arange(keep.size)
 
 
-def run_scenarios(scen: Scenarios, rngs: list[np.random.Generator] | None, record: bool, bias=None
-                  ) -> tuple[np.ndarray, list[np.ndarray]]:
+def run_scenarios(scen: Scenarios, rngs: list[np.random.Generator] | None, record: bool, bias=None, *,
+                  driver=None, scan_beams: int = 0, on_step=None) -> tuple[np.ndarray, list[np.ndarray]]:
     """Step valid scenarios to the end; returns (scores, trajectories).
 
     Per step: the world reports telemetry at MAVLink precision, the autonomy decides on it,
     the referee scores it, and the set-point — rounded as MAVLink carries it — moves the world.
+    ``driver(scen)`` builds another back-seat in place of the expert :class:`Autonomy`
+    (a learned one needs ``scan_beams``); ``on_step(obs, cmd, active, driver)`` sees every
+    decision (the batch is then never compacted, so rows keep their place).
     """
     m = scen.mission
     dt, n = m.dt, scen.n
-    world = World(scen, rngs, bias)
-    autonomy = Autonomy(scen)
+    world = World(scen, rngs, bias, scan_beams)
+    autonomy = Autonomy(scen) if driver is None else driver(scen)
     scorer = Scorer(scen)
     active = np.ones(n, dtype=bool)
     frames: list[np.ndarray] = []
@@ -109,7 +114,7 @@ def run_scenarios(scen: Scenarios, rngs: list[np.random.Generator] | None, recor
     out = np.full((n, len(metric_names(m))), np.nan)
     where = np.arange(n)  # original row of each row still stepped
     for k in range(steps + 1):
-        if not record and active.size >= 64 and active.sum() < COMPACT_BELOW * active.size:
+        if not record and on_step is None and active.size >= 64 and active.sum() < COMPACT_BELOW * active.size:
             # drop finished runs so the rest step faster: score them now, keep their rows
             done = ~active
             out[where[done]] = scorer.scores(autonomy.wp_aborted, autonomy.return_reason)[done]
@@ -123,7 +128,10 @@ def run_scenarios(scen: Scenarios, rngs: list[np.random.Generator] | None, recor
         t = k * dt
         tel = world.telemetry(t)
         nogo = rect_signed_distance(tel.x, tel.y, world.scen.nogo) if world.scen.nogo.shape[1] else None
-        cmd = autonomy.step(observation(tel, world.scen, nogo if tel.est_x is tel.x else None), dt, active)
+        obs = observation(tel, world.scen, nogo if tel.est_x is tel.x else None)
+        cmd = autonomy.step(obs, dt, active)
+        if on_step is not None:
+            on_step(obs, cmd, active, autonomy)
         ended = scorer.update_from(tel, active, nogo)
         if record:
             frames.append(np.column_stack([np.full(tel.x.shape, t), tel.x, tel.y, tel.heading, tel.energy_hj,
@@ -152,4 +160,4 @@ def observation(tel: Telemetry, scen: Scenarios, nogo: np.ndarray | None = None)
     if nogo is None and scen.nogo.shape[1]:
         nogo = rect_signed_distance(tel.est_x, tel.est_y, scen.nogo)
     return Observation(tel.t, tel.est_x, tel.est_y, tel.heading, tel.battery, tel.contact_x, tel.contact_y,
-                       tel.contact_distance, tel.detected, ce, cn, nogo)
+                       tel.contact_distance, tel.detected, ce, cn, nogo, tel.scan)

@@ -1,0 +1,56 @@
+"""A learned policy in the back seat: the expert's interface, the surrogate's decisions.
+
+:class:`PolicyAutonomy` has the :class:`sim.autonomy.Autonomy` interface (``step(obs, dt,
+active)`` returns a :class:`~sim.autonomy.Command`), so the batch simulator, the software-
+in-the-loop back-seat and the scorer drive it exactly as they drive the expert.  Its
+decisions are the policy's velocity vector (section 6.5.3); it surfaces on arrival at the
+recovery point once it has been away from it (reaching the recovery point is what the
+dissertation's surrogate is scored on).  It keeps no account of aborted waypoints or why
+it turned home — a surrogate has no such internal state — so those score leaves read
+"none".
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sim.autonomy import GOAL_RETURN, GOAL_WAYPOINT, Command, Observation
+from sim.imitation.features import FeatureSpec, action_command, advance_waypoints, features, waypoint_target
+from sim.scenario import Scenarios
+
+__all__ = ["PolicyAutonomy", "AWAY_RADII"]
+
+#: The vehicle has "been away" from the recovery point beyond this many recovery radii.
+AWAY_RADII = 3.0
+
+
+class PolicyAutonomy:
+    """N vehicles of ``scen`` flown by ``policy`` (features -> actions) under ``spec``."""
+
+    def __init__(self, scen: Scenarios, policy, spec: FeatureSpec):
+        m = scen.mission
+        self.scen, self.mission, self.policy, self.spec = scen, m, policy, spec
+        n = scen.n
+        self.wp_next = np.zeros(n, dtype=np.int64)
+        self.away = np.zeros(n, dtype=bool)
+        self.wp_aborted = np.zeros((n, len(m.waypoints)), dtype=bool)
+        self.return_reason = np.zeros(n, dtype=np.int64)
+        self.goal_kind = np.full(n, GOAL_WAYPOINT, dtype=np.int64)
+        self.last_features: np.ndarray | None = None
+
+    def step(self, obs: Observation, dt: float, active: np.ndarray | None = None) -> Command:
+        if obs.scan is None:
+            raise ValueError("obs.scan: a learned back-seat needs the 360-degree sonar scan (World(scan_beams=...))")
+        m = self.mission
+        self.wp_next = advance_waypoints(m, self.wp_next, obs.x, obs.y)
+        target = waypoint_target(m, self.wp_next)
+        F = features(self.spec, m, obs.t, obs.x, obs.y, obs.heading, obs.battery, obs.scan, target)
+        self.last_features = F
+        action = self.policy(F, quiet=slice(7, 7 + self.spec.beams))  # open water: the scan reads +1
+        heading, speed = action_command(self.spec, obs.heading, action)
+        rx, ry = m.recovery
+        home = np.hypot(obs.x - rx, obs.y - ry)
+        self.away |= home > AWAY_RADII * m.recovery_radius
+        surface = self.away & (home <= m.recovery_radius)
+        self.goal_kind = np.where(target[2], GOAL_WAYPOINT, GOAL_RETURN)
+        return Command(heading, speed, surface)

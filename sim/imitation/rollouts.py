@@ -1,0 +1,98 @@
+"""Annotated runs for imitation learning: who flies, and what the expert would have done.
+
+With no policy the expert flies (behavioural cloning data); with a policy the policy
+flies and the expert rides along in the shadow, deciding on the very same reports at
+every step — the DAgger annotation, and what the bus does when a surrogate commands the
+vehicle while the expert's commands are recorded (Figure 6.3).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from rapt.imitation import MLPPolicy, Trajectory
+from sim.autonomy import Autonomy
+from sim.imitation.driver import PolicyAutonomy
+from sim.imitation.features import FeatureSpec, advance_waypoints, expert_action, features, waypoint_target
+from sim.mission import Mission
+from sim.scenario import make_scenarios
+from sim.simulate import Result, run_scenarios
+from sim.metrics import metric_names, metric_types
+from sim.scoring import modes_from_scores
+from sim.world import scenario_generators
+
+__all__ = ["annotated_runs", "make_rollout", "draw_valid"]
+
+
+def annotated_runs(mission: Mission, X: np.ndarray, spec: FeatureSpec, policy: MLPPolicy | None = None,
+                   seed: int = 0, stochastic: bool = False) -> tuple[Result, list[Trajectory]]:
+    """Fly the valid scenarios ``X`` and return their scores and per-run (features, expert actions)."""
+    scen = make_scenarios(mission, X)
+    rows = np.flatnonzero(scen.valid)
+    names = metric_names(mission)
+    scores = np.full((scen.n, len(names)), np.nan)
+    trajs = [Trajectory(np.zeros((0, spec.size), np.float32), np.zeros((0, 2), np.float32)) for _ in range(scen.n)]
+    if rows.size == 0:
+        return Result(scores, modes_from_scores(scores), scen.valid.copy(), list(scen.invalid_reason), names,
+                      metric_types(mission)), trajs
+    sub = scen.select(rows)
+    shadow = Autonomy(sub) if policy is not None else None
+    nxt = np.zeros(sub.n, dtype=np.int64)
+    got_F: list[np.ndarray] = []
+    got_A: list[np.ndarray] = []
+    got_r: list[np.ndarray] = []
+
+    def on_step(obs, cmd, active, driver):
+        nonlocal nxt
+        if shadow is not None:
+            label = shadow.step(obs, mission.dt, active)
+            F = driver.last_features
+        else:
+            label = cmd
+            nxt = advance_waypoints(mission, nxt, obs.x, obs.y)
+            F = features(spec, mission, obs.t, obs.x, obs.y, obs.heading, obs.battery, obs.scan,
+                         waypoint_target(mission, nxt))
+        idx = np.flatnonzero(active)
+        got_F.append(F[idx])
+        got_A.append(expert_action(spec, obs.heading[idx], label.heading[idx], label.speed[idx]))
+        got_r.append(idx)
+
+    rngs = scenario_generators(np.asarray(X, dtype=float)[rows], seed) if stochastic else None
+    driver = (lambda s: PolicyAutonomy(s, policy, spec)) if policy is not None else None
+    out, _ = run_scenarios(sub, rngs, False, None, driver=driver, scan_beams=spec.beams, on_step=on_step)
+    scores[rows] = out
+    F, A, r = np.concatenate(got_F), np.concatenate(got_A), np.concatenate(got_r)
+    order = np.argsort(r, kind="stable")
+    F, A, r = F[order], A[order], r[order]
+    cuts = np.searchsorted(r, np.arange(sub.n + 1))
+    for k, row in enumerate(rows.tolist()):
+        trajs[row] = Trajectory(F[cuts[k]:cuts[k + 1]], A[cuts[k]:cuts[k + 1]])
+    return Result(scores, modes_from_scores(scores), scen.valid.copy(), list(scen.invalid_reason), names,
+                  metric_types(mission)), trajs
+
+
+def draw_valid(mission: Mission, k: int, rng: np.random.Generator) -> np.ndarray:
+    """``k`` uniformly random valid scenarios of ``mission`` (unit-cube rows)."""
+    out = np.empty((0, mission.dim))
+    for _ in range(100):
+        X = rng.random((max(2 * k, 8), mission.dim))
+        out = np.vstack([out, X[make_scenarios(mission, X).valid]])
+        if out.shape[0] >= k:
+            return out[:k]
+    raise ValueError(f"mission: fewer than {k} valid scenarios in {100 * max(2 * k, 8)} random draws")
+
+
+def make_rollout(mission: Mission, spec: FeatureSpec, seed: int = 0, stochastic: bool = False, log=None):
+    """A ``rollout(policy, k, iteration)`` for :func:`rapt.imitation.imitate` on random valid scenarios.
+
+    Iteration ``i`` draws its scenarios from a generator seeded by ``(seed, i)``, so every
+    learner sees the same scenarios at the same iteration.  ``log`` (a list) collects the
+    scenarios and modes of every annotated run.
+    """
+    def rollout(policy, k, iteration):
+        X = draw_valid(mission, k, np.random.default_rng([int(seed), int(iteration)]))
+        result, trajs = annotated_runs(mission, X, spec, policy, seed=seed, stochastic=stochastic)
+        if log is not None:
+            log.append((X, result.modes))
+        return trajs
+    return rollout
