@@ -68,8 +68,26 @@ class SelfRightStudy:
         return angular_embedding(U, self.bounds)
 
     def known_states(self) -> np.ndarray:
+        """``X^Z``: every hull face of every evaluated joint state, each once (unit cube)."""
         counts = np.array([len(f) for f in self.faces])
-        return np.column_stack([np.repeat(self.X[:, :self.n_free], counts, axis=0), np.concatenate(self.faces)])
+        K = np.column_stack([np.repeat(self.X[:, :self.n_free], counts, axis=0), np.concatenate(self.faces)])
+        return _unique_rows(K)
+
+    def extra_states(self) -> np.ndarray:
+        """Known states that were not themselves evaluated (Algorithm 8 labels them by nearest neighbour)."""
+        K = self.known_states()
+        return K[~np.isin(_row_keys(K), _row_keys(self.X))]
+
+
+def _row_keys(A: np.ndarray) -> np.ndarray:
+    """Hashable keys of rows, equal for rows equal to ~1e-9."""
+    R = np.ascontiguousarray(np.round(np.asarray(A, float), 9) + 0.0)
+    return R.view(np.dtype((np.void, R.dtype.itemsize * R.shape[1]))).ravel()
+
+
+def _unique_rows(A: np.ndarray) -> np.ndarray:
+    _, first = np.unique(_row_keys(A), return_index=True)
+    return A[np.sort(first)]
 
 
 class _System:
@@ -159,9 +177,9 @@ def probe_states(robot: Robot, slope: float, n: int, seed: int) -> np.ndarray:
 
 
 def default_max_edge(study: SelfRightStudy) -> float:
-    """Gabriel ``d_max`` (embedded distance): 3 grid steps, or 2 interior resolutions for an adaptive study."""
+    """Gabriel ``d_max`` (embedded distance): 2.5 grid steps, or 2 interior resolutions for an adaptive study."""
     if study.resolution is not None:
-        return 3.0 * study.resolution
+        return 2.5 * study.resolution
     return 2.0 * np.radians(study.extra.get("r_max_deg", 10.0))
 
 
@@ -171,7 +189,7 @@ def analyse(study: SelfRightStudy, *, max_edge: float | None = None, probes: np.
     t0 = time.perf_counter()
     known = study.known_states()
     graph = transition_graph(study.embed(study.X), study.stable, study.embed(study.rest), study.energy,
-                             study.embed(known), max_edge=max_edge)
+                             study.embed(study.extra_states()), max_edge=max_edge)
     seconds = time.perf_counter() - t0
     home = int(graph.node_of(study.embed(home_state(study)[None]))[0])
     cost, _ = graph.costs_to(home) if home >= 0 else (np.full(graph.n_nodes, np.inf), None)
@@ -245,7 +263,7 @@ def graph_document(study: SelfRightStudy, result: dict) -> dict:
     g: TransitionGraph = result["graph"]
     home = result["home"]
     cost = result["cost_to_home"]
-    P = np.concatenate([study.X, study.rest[np.isfinite(study.rest).all(axis=1)], study.known_states()])
+    P = np.concatenate([study.X, study.rest[np.isfinite(study.rest).all(axis=1)], study.extra_states()])
     nodes = []
     for n in range(g.n_nodes):
         members = np.flatnonzero(g.labels == n)

@@ -32,6 +32,7 @@ mean of its vertices).  A bad file raises :class:`RobotFileError` naming the fie
 
 from __future__ import annotations
 
+import copy
 import struct
 import tomllib
 from dataclasses import dataclass, field
@@ -132,7 +133,10 @@ class Robot:
                 order.append(j)
                 placed.add(j.child)
                 pending.remove(j)
-        self.joints = order
+        self.all_joints = order
+        self.joints = order  # the active joints, the coordinates of θ
+        self.locked: dict[str, float] = {}
+        self.planar_override: bool | None = None
         self.mass = float(sum(link.mass for link in links))
         if self.mass <= 0:
             raise RobotFileError("link.mass: the robot's total mass must be > 0")
@@ -154,8 +158,28 @@ class Robot:
 
     @property
     def planar(self) -> bool:
-        """All joints turn about the base's y axis: the robot moves in the x-z plane (Figure 5.2)."""
-        return all(abs(abs(j.axis[1]) - 1.0) < 1e-9 for j in self.joints)
+        """All joints turn about the base's y axis: the robot moves in the x-z plane (Figure 5.2).
+
+        A robot file's ``planar = false`` forces the 3-D treatment (rolling sideways included).
+        """
+        if self.planar_override is not None:
+            return self.planar_override
+        return all(abs(abs(j.axis[1]) - 1.0) < 1e-9 for j in self.all_joints)
+
+    def lock(self, values: dict[str, float]) -> "Robot":
+        """A copy with the named joints held at ``values`` (radians); the others stay active.
+
+        Joints already locked stay locked.  Used to study a manipulator with fewer active
+        joints (Figure 5.6).
+        """
+        names = {j.name for j in self.all_joints}
+        for name in values:
+            if name not in names:
+                raise ValueError(f"lock: no joint named {name!r}; joints: {', '.join(sorted(names))}")
+        new = copy.copy(self)
+        new.locked = {**self.locked, **{k: float(v) for k, v in values.items()}}
+        new.joints = [j for j in self.all_joints if j.name not in new.locked]
+        return new
 
     def geometry(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Vertices (k, 3) and centre of mass (3,) in the base frame for joint state ``theta``."""
@@ -164,7 +188,9 @@ class Robot:
             raise ValueError(f"theta: expected {self.dof} joint angles, got {theta.size}")
         R = {self.base: np.eye(3)}
         t = {self.base: np.zeros(3)}
-        for j, angle in zip(self.joints, theta):
+        active = iter(theta)
+        for j in self.all_joints:
+            angle = self.locked[j.name] if j.name in self.locked else next(active)
             Rp, tp = R[j.parent], t[j.parent]
             R[j.child] = Rp @ _rotation(np.asarray(j.axis), angle)
             t[j.child] = tp + Rp @ np.asarray(j.origin)
@@ -262,9 +288,10 @@ def load_robot(path: str | Path) -> Robot:
         raise RobotFileError(f"ROBOT_FILE: {path} does not exist; give a robot TOML file") from None
     except tomllib.TOMLDecodeError as exc:
         raise RobotFileError(f"ROBOT_FILE: {path} is not valid TOML ({exc})") from None
-    unknown = set(data) - {"name", "description", "link", "joint", "slope"}
+    unknown = set(data) - {"name", "description", "link", "joint", "slope", "planar"}
     if unknown:
-        raise RobotFileError(f"{sorted(unknown)[0]}: unknown top-level field; allowed: name, description, link, joint, slope")
+        raise RobotFileError(f"{sorted(unknown)[0]}: unknown top-level field; allowed: name, description, link, joint, "
+                             "slope, planar")
     links = data.get("link")
     if not isinstance(links, list) or not links:
         raise RobotFileError("link: expected at least one [[link]] table")
@@ -281,6 +308,10 @@ def load_robot(path: str | Path) -> Robot:
     robot = Robot(str(data.get("name", path.stem)), parsed_links, parsed_joints)
     robot.description = str(data.get("description", ""))
     robot.slope = _number(data.get("slope", 0.0), "slope", 0.0)  # degrees, the default ground slope
+    if "planar" in data:
+        if not isinstance(data["planar"], bool):
+            raise RobotFileError(f"planar: expected true or false, got {data['planar']!r}")
+        robot.planar_override = data["planar"]
     if robot.slope >= 90:
         raise RobotFileError(f"slope: expected degrees in [0, 90), got {robot.slope:g}")
     return robot

@@ -74,12 +74,24 @@ class Hull:
     com: np.ndarray
     normals: np.ndarray  # (k, 3) outward unit normals
     offsets: np.ndarray  # (k,) plane offsets: normal · x + offset = 0 on the face
-    face_vertices: list  # per face: indices into points, ordered around the face
+    face_vertices: list  # per face: indices into points (ordered around the face for planar hulls)
     angles: np.ndarray  # (k, b) body angles
+    ordered: bool = True
+
+    def __post_init__(self):
+        self._rings: dict[int, np.ndarray] = {}
 
     @property
     def n_faces(self) -> int:
         return len(self.normals)
+
+    def ring(self, f: int) -> np.ndarray:
+        """Vertices of face ``f`` counter-clockwise seen from outside; ordered on first use (few faces ever are)."""
+        if self.ordered:
+            return self.face_vertices[f]
+        if f not in self._rings:
+            self._rings[f] = StabilityFunction._ordered(self.points, self.face_vertices[f], self.normals[f])
+        return self._rings[f]
 
 
 @dataclass
@@ -154,17 +166,14 @@ class StabilityFunction:
         remap = -np.ones(len(verts), dtype=int)
         remap[used] = np.arange(len(used))
         pts = verts[used]
-        normals, offsets, faces = [], [], []
-        for g in range(n_groups):
-            rows = group == g
-            n = eq[rows, :3].mean(axis=0)
-            n /= np.linalg.norm(n)
-            idx = np.unique(remap[h.simplices[rows]])
-            normals.append(n)
-            offsets.append(-float(np.mean(pts[idx] @ n)))
-            faces.append(self._ordered(pts, idx, n))
-        normals = np.asarray(normals)
-        return Hull(np.asarray(theta, float), pts, com, normals, np.asarray(offsets), faces, body_angles(normals, False))
+        sums = np.zeros((n_groups, 4))
+        np.add.at(sums, group, eq)
+        normals = sums[:, :3] / np.linalg.norm(sums[:, :3], axis=1, keepdims=True)
+        offsets = sums[:, 3] / np.bincount(group, minlength=n_groups)
+        pairs = np.unique(np.column_stack([np.repeat(group, 3), remap[h.simplices].ravel()]), axis=0)
+        faces = np.split(pairs[:, 1], np.flatnonzero(np.diff(pairs[:, 0])) + 1)
+        return Hull(np.asarray(theta, float), pts, com, normals, np.asarray(offsets), faces, body_angles(normals, False),
+                    ordered=False)
 
     @staticmethod
     def _ordered(pts: np.ndarray, idx: np.ndarray, n: np.ndarray) -> np.ndarray:
@@ -201,7 +210,7 @@ class StabilityFunction:
         energy, tips = 0.0, 0
         while True:
             n = hull.normals[face]
-            ring = hull.face_vertices[face]
+            ring = hull.ring(face)
             g_b = R.T @ self.gravity
             t = (-hull.offsets[face] - n @ c) / (n @ g_b)
             cp = c + t * g_b  # centre of mass projected along gravity onto the face plane

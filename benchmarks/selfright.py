@@ -1,0 +1,173 @@
+"""Self-righting (chapter 5): adaptive manifold sampling against grid search, Gabriel clustering against PRM.
+
+Three parts, each printed as a table:
+
+1. Figure 5.3 — the 1-, 2- and 3-DOF robots of Figure 5.2 (1-DOF on a 20° slope, the
+   others flat): a grid search (every hull face of every joint state on a grid) against
+   the manifold-constrained adaptive search (Algorithms 6-7).  Per method: queries, graph
+   size, how much of the grid's graph the adaptive one reproduces (nodes and transitions
+   matched through 1,500+ probe states; nodes under 1 % of the probes ignored), the share
+   of probe states whose self-rightability agrees, the mean boundary-pair length and the
+   mean transition energy of the graph's edges.
+2. Table 5.1 — building the graph from the adaptive sample sets: Gabriel-graph
+   clustering (Algorithm 8) against PRM-style connection, in which every pair of stable
+   states within the same ``d_max`` is checked with a linear local planner (stability
+   evaluated every 1° along the straight line).  PRM time beyond ``--prm-edges`` checked
+   edges is extrapolated from a seeded random subset (marked ``*``).
+3. Figure 5.6 — the 5-DOF manipulator robot (Figure 5.5) with 1 to 5 active joints
+   (shoulder pitch; + shoulder yaw; + elbow; + wrist; + jaw; inactive joints held at 0,
+   the elbow straight): queries until the resolution cut-offs end the search, the
+   self-rightable fraction, the mean transition energy to the home state, and the
+   queries a 5° grid would need (mean hull faces × grid points, as in section 5.5.2).
+
+Run:  python benchmarks/selfright.py [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from planner.selfright import adaptive_study, analyse, compare_graphs, grid_study, probe_states
+from rapt.transitions import transition_graph
+from sim.robots import StabilityFunction, load_robot
+
+ROBOTS = "examples/robots"
+
+
+def fig53(quick: bool, seed: int) -> list:
+    # robot, slope, grid resolution (deg), adaptive options
+    cases = [("1dof", 20.0, 1.0, dict(budget=3000, r_min_deg=1.0, r_max_deg=10.0)),
+             ("2dof", 0.0, 3.0 if quick else 1.0, dict(budget=6000, r_min_deg=1.0, r_max_deg=10.0)),
+             ("3dof", 0.0, 9.0 if quick else 6.0, dict(budget=12000, r_min_deg=2.0, r_max_deg=15.0))]
+    if quick:
+        cases = [(n, s, r, {**o, "budget": o["budget"] // 3}) for n, s, r, o in cases]
+    print("1. Figure 5.3: grid search against adaptive manifold sampling (graphs compared on probe states)")
+    head = (f"{'robot':>5} {'method':>9} {'queries':>8} {'time s':>7} {'nodes':>5} {'edges':>5} {'matched n/e':>11} "
+            f"{'rightable':>9} {'agree':>6} {'pair deg':>8} {'energy J':>8} {'graph s':>7}")
+    print(head)
+    studies = []
+    for name, slope, res, opts in cases:
+        robot = load_robot(f"{ROBOTS}/{name}.toml")
+        probes = probe_states(robot, slope, 300 if quick else 500, seed + 1)
+        grid = grid_study(robot, slope, res)
+        g = analyse(grid, probes=probes)
+        budget = opts.pop("budget")
+        ad = adaptive_study(robot, slope, budget, seed=seed, **opts)
+        a = analyse(ad, probes=probes)
+        c = compare_graphs(a, ad, g, grid, probes)
+        for study, r, label in ((grid, g, grid.method), (ad, a, "adaptive")):
+            matched = "" if study is grid else f"{c['nodes_matched']}/{c['nodes'][1]} {c['edges_matched']}/{c['edges'][1]}"
+            agree = "" if study is grid else f"{c['rightable_agreement']:.1%}"
+            print(f"{name:>5} {label:>9} {r['queries']:>8,} {study.seconds:>7.1f} {r['nodes']:>5} {r['edges']:>5} "
+                  f"{matched:>11} {r['rightable']:>9.1%} {agree:>6} {r['pair_length_deg']:>8.2f} "
+                  f"{r['transition_energy']:>8.2f} {r['graph_seconds']:>7.2f}", flush=True)
+        stop = "resolution reached" if ad.extra.get("stopped_by_resolution") else "budget spent"
+        print(f"{'':>5} {'ratio':>9} {g['queries'] / a['queries']:>7.1f}x {'':>7} {'':>5} {'':>5} {'':>11} {'':>9} {'':>6} "
+              f"{g['pair_length_deg'] / a['pair_length_deg']:>7.1f}x {g['transition_energy'] / a['transition_energy']:>7.2f}x"
+              f"   grid/adaptive ({stop})")
+        studies.append((name, ad, a))
+    return studies
+
+
+def prm_components(study, result, step_deg: float = 1.0, max_edges: int | None = None, seed: int = 0):
+    """PRM-style connection of the stable known states: a linear local planner on every pair within d_max.
+
+    A pair is connected when every state on the straight line between them (in angle
+    space, every ``step_deg``) is stable when evaluated; returns (components, seconds,
+    edges checked, edges in total, evaluations).
+    """
+    g = result["graph"]
+    stable_pts = np.flatnonzero(g.labels >= 0)
+    P = g.points[stable_pts]
+    pairs = cKDTree(P).query_pairs(result["max_edge"], output_type="ndarray")
+    total = len(pairs)
+    if max_edges is not None and total > max_edges:
+        pairs = pairs[np.sort(np.random.default_rng(seed).choice(total, max_edges, replace=False))]
+    # angles of the stable known states, from their unit-cube coordinates
+    known = np.concatenate([study.X, study.rest[np.isfinite(study.rest).all(axis=1)], study.extra_states()])[stable_pts]
+    ang = study.bounds[:, 0] + known * np.ptp(study.bounds, axis=1)
+    F = StabilityFunction(study.robot, study.slope)
+    m = study.n_free
+    t0 = time.perf_counter()
+    ok = np.zeros(len(pairs), dtype=bool)
+    evals = 0
+    for e, (i, j) in enumerate(pairs):
+        d = np.angle(np.exp(1j * (ang[j] - ang[i])))  # shortest way round for periodic angles
+        n = max(int(np.ceil(np.degrees(np.abs(d).max()) / step_deg)), 1)
+        s = (np.arange(1, n) / n)[:, None]
+        if len(s) == 0:
+            ok[e] = True
+            continue
+        path = ang[i] + s * d
+        res = F(path[:, :m], path[:, m:])
+        evals += len(s)
+        on_manifold = np.abs(np.angle(np.exp(1j * (res.start - path[:, m:])))).max(axis=1) < 2 * np.radians(step_deg) + np.abs(d[m:]).max()
+        ok[e] = bool(np.all(res.stable & on_manifold))
+    seconds = time.perf_counter() - t0
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+    adj = coo_matrix((np.ones(ok.sum()), (pairs[ok, 0], pairs[ok, 1])), shape=(len(P), len(P)))
+    n_comp, labels = connected_components(adj, directed=False)
+    big = int((np.bincount(labels) >= max(2, len(P) // 200)).sum())
+    return big, seconds, len(pairs), total, evals
+
+
+def table51(studies, quick: bool, seed: int) -> None:
+    cap = 3000 if quick else 20000
+    print("\n2. Table 5.1: building the graph from the adaptive sample sets: Gabriel clustering against PRM edge checking")
+    print(f"{'robot':>5} {'known states':>12} {'Gabriel s':>9} {'nodes':>5} {'PRM s':>9} {'PRM edges':>10} "
+          f"{'evaluations':>11} {'PRM regions':>11} {'PRM/Gabriel':>11}")
+    for name, study, result in studies:
+        t0 = time.perf_counter()
+        transition_graph(study.embed(study.X), study.stable, study.embed(study.rest), study.energy,
+                         study.embed(study.extra_states()), max_edge=result["max_edge"])
+        gab = time.perf_counter() - t0
+        regions, prm_s, checked, total, evals = prm_components(study, result, max_edges=cap, seed=seed)
+        est = prm_s * total / max(checked, 1)
+        mark = "*" if checked < total else " "
+        print(f"{name:>5} {result['states']:>12,} {gab:>9.2f} {result['nodes']:>5} {est:>8.1f}{mark} {total:>10,} "
+              f"{int(evals * total / max(checked, 1)):>11,} {regions if checked == total else '-':>11} "
+              f"{est / gab:>10.0f}x", flush=True)
+
+
+def fig56(quick: bool, seed: int) -> None:
+    robot = load_robot(f"{ROBOTS}/5dof.toml")
+    order = ["shoulder_pitch", "shoulder_yaw", "elbow", "wrist", "jaw"]
+    budget = 1500 if quick else 5000
+    print(f"\n3. Figure 5.6: 5-DOF manipulator robot, flat ground, active joints added one at a time "
+          f"(adaptive: r_min 3°, r_max 20°, at most {budget:,} queries)")
+    print(f"{'active':>6} {'joints':<52} {'queries':>8} {'stopped by':>10} {'time s':>7} {'nodes':>5} "
+          f"{'rightable':>9} {'energy to home J':>16} {'5° grid (est.)':>14}")
+    for m in range(1, 6 if not quick else 4):
+        r = robot.lock({n: 0.0 for n in order[m:]})
+        study = adaptive_study(r, 0.0, budget, seed=seed, r_min_deg=3.0, r_max_deg=20.0, batch_size=100)
+        res = analyse(study, probes=probe_states(r, 0.0, 150 if quick else 300, seed + 1))
+        faces = np.mean([len(f) for f in study.faces])
+        grid = faces * np.prod([np.ptp(b) / np.radians(5.0) for b in r.joint_bounds])
+        stop = "resolution" if study.extra.get("stopped_by_resolution") else "budget"
+        energy = res["energy_to_home"]
+        print(f"{m:>6} {', '.join(j.name for j in r.joints):<52} {study.queries:>8,} {stop:>10} {study.seconds:>7.1f} "
+              f"{res['nodes']:>5} {res['rightable']:>9.1%} {energy:>16.2f} {grid:>14,.0f}", flush=True)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true", help="smaller budgets and coarser grids (about a minute)")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--skip", nargs="*", default=[], choices=["fig53", "table51", "fig56"])
+    args = ap.parse_args()
+    t0 = time.perf_counter()
+    studies = fig53(args.quick, args.seed) if "fig53" not in args.skip else []
+    if "table51" not in args.skip and studies:
+        table51(studies, args.quick, args.seed)
+    if "fig56" not in args.skip:
+        fig56(args.quick, args.seed)
+    print(f"\ntotal {time.perf_counter() - t0:.0f} s")
+
+
+if __name__ == "__main__":
+    main()
