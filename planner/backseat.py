@@ -9,6 +9,10 @@ vehicle is the bus's choice (the ``control/active`` key), so another autonomy ca
 while this one's commands are still recorded.  It also publishes its own account of the
 run — aborted waypoints, why it turned home — which no track shows.
 
+With a trained surrogate (:class:`sim.imitation.surrogate.Surrogate`) the same process
+flies the learned policy instead, on the features of section 6.5.3; the 360-beam scan
+arrives as five OBSTACLE_DISTANCE messages per step.
+
 This module is where planner wires ``sim`` to ``bridge``: neither imports the other.
 """
 
@@ -25,7 +29,8 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from bridge import keys  # noqa: E402
-from sim.autonomy import Autonomy, Observation  # noqa: E402
+from sim.autonomy import GOAL_RETURN, Autonomy, Observation  # noqa: E402
+from sim.imitation.driver import PolicyAutonomy  # noqa: E402
 from sim.interface import battery_fraction, encode_command  # noqa: E402
 from sim.mission import Mission  # noqa: E402
 from sim.scenario import make_scenarios  # noqa: E402
@@ -36,12 +41,18 @@ __all__ = ["BackSeat"]
 class BackSeat:
     """Fly scenario ``u`` of ``mission`` from the bus of ``session`` as ``source``."""
 
-    def __init__(self, session, vehicle: str, mission: Mission, u, source: str = "autonomy"):
+    def __init__(self, session, vehicle: str, mission: Mission, u, source: str = "autonomy", surrogate=None):
         scen = make_scenarios(mission, np.asarray(u, dtype=float).reshape(1, -1))
         if not scen.valid[0]:
             raise ValueError(f"scenario: invalid for mission '{mission.name}' ({scen.invalid_reason[0]})")
         self.mission, self.scen, self.vehicle, self.source = mission, scen, vehicle, source
-        self.autonomy = Autonomy(scen)
+        if surrogate is not None:
+            surrogate.check(mission)
+            self.autonomy = PolicyAutonomy(scen, surrogate.policy, surrogate.spec)
+            self.beams = surrogate.spec.beams
+        else:
+            self.autonomy = Autonomy(scen)
+            self.beams = 0
         self.start_wh = scen.battery0 * mission.vehicle.battery_wh
         self.n_contacts = scen.obstacles.shape[1] + scen.barriers.shape[1]
         self.session = session
@@ -94,6 +105,11 @@ class BackSeat:
             self._tick = {}
         elif kind == "OBSTACLE_DISTANCE_3D":
             self._tick.setdefault("contacts", {})[int(msg.obstacle_id)] = (float(msg.y), float(msg.x))
+        elif kind == "OBSTACLE_DISTANCE" and self.beams and msg.frame == mavlink.MAV_FRAME_BODY_FRD:
+            scan = self._tick.setdefault("scan", np.full(self.beams, np.nan))
+            start = int(round(msg.angle_offset / msg.increment_f)) if msg.increment_f > 0 else 0
+            cm = np.asarray(msg.distances, dtype=float)[:max(0, min(len(msg.distances), self.beams - start))]
+            scan[start:start + cm.size] = cm / 100.0
         elif kind in ("LOCAL_POSITION_NED", "ATTITUDE", "BATTERY_STATUS"):
             self._tick[kind] = msg
 
@@ -101,8 +117,9 @@ class BackSeat:
         if tick_ms in self._answered:  # the front-seat repeated a step: same answer again
             self._pub.put(json.dumps(self._answered[tick_ms]))
             return
-        if tick_ms < self.last_tick_ms or not all(k in self._tick for k in
-                                                 ("LOCAL_POSITION_NED", "ATTITUDE", "BATTERY_STATUS")):
+        needed = ("LOCAL_POSITION_NED", "ATTITUDE", "BATTERY_STATUS") + (("scan",) if self.beams else ())
+        if tick_ms < self.last_tick_ms or not all(k in self._tick for k in needed) or (
+                self.beams and np.isnan(self._tick["scan"]).any()):
             return  # a stale or incomplete step (joined mid-step): wait for the next one
         obs = self._observation(tick_ms)
         cmd = self.autonomy.step(obs, self.mission.dt, np.ones(1, dtype=bool))
@@ -115,7 +132,7 @@ class BackSeat:
         self._pub.put(json.dumps(answer))
         a = self.autonomy
         self._status.put(json.dumps({
-            "tick_ms": tick_ms, "goal": int(a.goal_kind[0]), "returning": bool(a.returning[0]),
+            "tick_ms": tick_ms, "goal": int(a.goal_kind[0]), "returning": bool(a.goal_kind[0] == GOAL_RETURN),
             "return_reason": int(a.return_reason[0]), "wp_aborted": [bool(v) for v in a.wp_aborted[0]],
         }))
 
@@ -127,5 +144,6 @@ class BackSeat:
             if 0 <= j < k:
                 cx[0, j], cy[0, j], seen[0, j] = east, north, True
         battery = battery_fraction(self.start_wh, np.array([bat.energy_consumed]), self.mission.vehicle.battery_wh)
+        scan = self._tick["scan"][None, :] if self.beams else None
         return Observation(tick_ms / 1000.0, np.array([float(lp.y)]), np.array([float(lp.x)]),
-                           np.array([float(att.yaw)]), battery, cx, cy, np.zeros((1, k)), seen)
+                           np.array([float(att.yaw)]), battery, cx, cy, np.zeros((1, k)), seen, scan=scan)

@@ -212,6 +212,23 @@ def _bus_session(connect: list[str], config_file: Optional[Path]):
         fail(str(exc))
 
 
+SurrogateOpt = Annotated[Optional[Path], typer.Option(
+    "--surrogate", help="A trained surrogate (.npz from `rapt-plan surrogate`) flies instead of the expert "
+                        "autonomy; it must have been trained for this mission.")]
+
+
+def _load_surrogate(path: Optional[Path], mission):
+    """The surrogate file for ``mission``, or a one-line error naming --surrogate."""
+    if path is None:
+        return None
+    from sim.imitation.surrogate import Surrogate
+
+    try:
+        return Surrogate.load(path, mission)
+    except (ValueError, OSError) as exc:
+        fail(f"--surrogate: {exc}")
+
+
 ScenarioOpt = Annotated[str, typer.Option("--scenario", help="Row number of the mission's Sobol design, or a "
                                                               "JSON file with 'u' or 'parameters'.")]
 ZenohListen = Annotated[list[str], typer.Option("--zenoh-listen", help="Zenoh endpoints to listen on.")]
@@ -236,8 +253,13 @@ def run(
                               "Not written to the log.")] = None,
     stochastic: Annotated[bool, typer.Option(help="Navigation drift and current perturbations on (seeded).")] = False,
     seed: Annotated[int, typer.Option(help="Seed of the stochastic effects.")] = 0,
+    surrogate: SurrogateOpt = None,
 ) -> None:
-    """Fly one scenario software-in-the-loop: front-seat, bridge, autonomy (and logger)."""
+    """Fly one scenario software-in-the-loop: front-seat, bridge, autonomy (and logger).
+
+    With --surrogate the learned policy commands the vehicle while the expert autonomy
+    keeps running beside it; the expert's commands are on the bus and in the log.
+    """
     import numpy as np
 
     import sim
@@ -263,12 +285,14 @@ def run(
         source = str(mission_file)
     if speedup is not None and speedup <= 0:
         fail(f"--speedup: expected a factor > 0, got {speedup}")
+    learned = _load_surrogate(surrogate, mission)
     try:
         result = run_sil(mission, u, log_path=log, speedup=speedup, timeout_s=timeout, scenario_id=sid,
-                         mission_file=source, plan_id=pid, bias=bias, stochastic=stochastic, seed=seed)
+                         mission_file=source, plan_id=pid, bias=bias, stochastic=stochastic, seed=seed,
+                         surrogate=learned)
     except (ValueError, RuntimeError, TimeoutError) as exc:
         fail(str(exc))
-    batch = sim.simulate(mission, u[None, :], bias=bias, seed=seed, stochastic=stochastic)
+    batch = sim.simulate(mission, u[None, :], bias=bias, seed=seed, stochastic=stochastic, surrogate=learned)
     same = bool(np.array_equal(result.scores, batch.scores[0]))
     names = batch.names
     mode = ("TF", "SS", "MS", "TS")[int(2 * result.scores[0] + result.scores[1])]
@@ -276,6 +300,8 @@ def run(
     table.add_column("", justify="left")
     table.add_column("value", justify="right")
     table.add_row("ended", result.ended)
+    if learned is not None:
+        table.add_row("flown by", f"surrogate {surrogate.name} (expert commands recorded)")
     table.add_row("mode", mode)
     if bias is not None:
         table.add_row("injected bias", str(bias))
@@ -310,6 +336,12 @@ def generate(
     refine: Annotated[bool, typer.Option("--refine", help="Sharpen each pair with a focused second search "
                                                          "on its own sub-scores.")] = False,
     refine_runs: Annotated[int, typer.Option("--refine-runs", help="Runs per pair of --refine.")] = 12,
+    surrogate: Annotated[Optional[Path], typer.Option(
+        "--surrogate", help="Search with a learned surrogate of the autonomy (section 6.2.3): load this .npz "
+                            "(trained for this mission), or train one on 75 expert runs and save it here; the "
+                            "expert then confirms the candidate pairs.")] = None,
+    confirm_runs: Annotated[int, typer.Option("--confirm-runs", help="Expert runs that check the surrogate's "
+                                                                     "candidate pairs (two per pair).")] = 100,
 ) -> None:
     """Search a mission, choose boundary pairs, dither them and write a field plan."""
     from planner.generate import GenerateConfig, generate as run_generate, make_executor
@@ -322,15 +354,25 @@ def generate(
         mission = sim.load_mission(mission_file)
     except ValueError as exc:
         fail(str(exc))
-    store = out_dir / "study.db"
+    store = out_dir / ("study.db" if surrogate is None else "study-surrogate.db")
     if store.exists() and not resume:
         fail(f"--out: {store} already holds a study; add --resume to continue it or choose another directory")
     cfg = GenerateConfig(budget=budget, pairs=pairs, global_fraction=global_fraction, seed=seed,
-                         batch_size=batch_size, dithers=dithers, store=store, refine=refine_runs if refine else 0)
+                         batch_size=batch_size, dithers=dithers, store=store, refine=refine_runs if refine else 0,
+                         confirm_runs=confirm_runs, surrogate_file=str(surrogate or ""))
     try:
         cfg.check()
     except ValueError as exc:
         fail(str(exc))
+    if surrogate is not None:
+        from planner.surrogate import load_or_train
+
+        try:
+            if not surrogate.exists():
+                err.print(f"training a surrogate of {mission.name}'s autonomy into {surrogate} ...")
+            cfg.surrogate, _ = load_or_train(surrogate, mission, seed=seed)
+        except (ValueError, OSError) as exc:
+            fail(f"--surrogate: {exc}")
     try:
         cfg.executor, close_executor = make_executor(executor)
     except (ValueError, OSError) as exc:
@@ -366,6 +408,71 @@ def generate(
     out.print(table)
     out.print(f"{plan['study']['valid_runs']:,} valid runs; plan.json and {len(plan['scenarios'])} scenarios "
               f"(.plan, .waypoints, .geojson) written", soft_wrap=True, highlight=False)
+    if surrogate is not None:
+        s = plan["study"]["surrogate"]
+        out.print(f"surrogate search: {s['confirmed']} of {s['candidates']} candidate pairs confirmed by the expert; "
+                  f"expert runs: {s['expert_runs']['training']} training + {s['expert_runs']['confirmation']} "
+                  "confirmation", soft_wrap=True, highlight=False)
+
+
+@app.command("surrogate")
+def surrogate_cmd(
+    mission_file: Annotated[Path, typer.Argument(help="Mission file (TOML).")],
+    out_file: Annotated[Path, typer.Option("--out", help="Surrogate file to write (.npz).")],
+    method: Annotated[str, typer.Option(help="qdagger, dagger or supervised (behavioural cloning).")] = "qdagger",
+    quantile: Annotated[float, typer.Option(help="Q-DAgger: aggregate the states predicted worse than this "
+                                                 "quantile of each new set (0.5, 0.75).")] = 0.5,
+    runs: Annotated[int, typer.Option(help="Annotated expert runs in all.")] = 75,
+    runs_per_iteration: Annotated[int, typer.Option("--runs-per-iteration", help="New runs per update.")] = 5,
+    epochs: Annotated[int, typer.Option(help="Training epochs per update (warm-started).")] = 30,
+    validate: Annotated[int, typer.Option(help="Sobol scenarios to measure mode accuracy on after each update "
+                                               "(0: none).")] = 256,
+    seed: Annotated[int, typer.Option(help="Seed of every random choice.")] = 0,
+) -> None:
+    """Train a surrogate of a mission's back-seat autonomy by imitation learning (chapter 6)."""
+    import numpy as np
+    from scipy.stats import qmc
+
+    import sim
+    from planner.surrogate import train_surrogate
+
+    if not mission_file.is_file():
+        fail(f"MISSION_FILE: {mission_file} does not exist; give the path of a mission TOML file")
+    try:
+        mission = sim.load_mission(mission_file)
+    except ValueError as exc:
+        fail(str(exc))
+    if out_file.suffix != ".npz":
+        fail(f"--out: a surrogate file ends in .npz, got {out_file}")
+    if validate < 0:
+        fail(f"--validate: expected a number of scenarios >= 0, got {validate}")
+    Xv = qmc.Sobol(mission.dim, seed=seed).random(validate) if validate else None
+    expert = sim.simulate(mission, Xv) if validate else None
+    table = Table(title=f"{mission.name}: {method} imitation of the autonomy")
+    for col in ("iteration", "expert runs", "samples", "fit (s)", "train MSE") + (("mode accuracy",) if validate else ()):
+        table.add_column(col, justify="right")
+
+    def on_iteration(rec, policy):
+        row = [str(rec.iteration), str(rec.runs), f"{rec.samples:,}", f"{rec.fit_s:.1f}", f"{rec.loss:.4f}"]
+        if validate:
+            from sim.imitation.surrogate import Surrogate
+
+            mine = sim.simulate(mission, Xv, surrogate=Surrogate.for_mission(mission, policy))
+            ok = mine.valid & expert.valid
+            row.append(f"{np.mean(mine.modes[ok] == expert.modes[ok]):.1%}")
+        table.add_row(*row)
+        err.print(" ".join(row), highlight=False)
+
+    try:
+        sur = train_surrogate(mission, method=method, quantile=quantile, runs=runs,
+                              runs_per_iteration=runs_per_iteration, epochs=epochs, seed=seed,
+                              on_iteration=on_iteration)
+    except ValueError as exc:
+        fail(f"--{str(exc)}" if str(exc).split(":")[0] in ("method", "quantile", "epochs") else str(exc))
+    sur.save(out_file)
+    out.print(table)
+    out.print(f"surrogate of {mission.name} written to {out_file} ({sur.training['runs']} expert runs, "
+              f"{sur.spec.size} features)", soft_wrap=True, highlight=False)
 
 
 @app.command()
@@ -531,14 +638,16 @@ def autonomy(
     source: Annotated[str, typer.Option(help="Name this autonomy publishes its set-points under.")] = "autonomy",
     zenoh_connect: ZenohConnect = ["tcp/127.0.0.1:7447"],
     zenoh_config: ZenohConfig = None,
+    surrogate: SurrogateOpt = None,
 ) -> None:
-    """Run the back-seat autonomy of one scenario on the bus."""
+    """Run the back-seat autonomy of one scenario on the bus (or a trained surrogate of it)."""
     from planner.backseat import BackSeat
 
     mission, u, _ = _mission_and_scenario(mission_file, scenario)
+    learned = _load_surrogate(surrogate, mission)
     session = _bus_session(zenoh_connect, zenoh_config)
     try:
-        with BackSeat(session, vehicle, mission, u, source=source):
+        with BackSeat(session, vehicle, mission, u, source=source, surrogate=learned):
             _wait_for_signal()
     finally:
         session.close()

@@ -72,6 +72,9 @@ class GenerateConfig:
     refine: int = 0  # runs per pair of the focused second search (0: off)
     refine_min_distance: float = 0.02  # refined pairs stay at least this far apart (unit cube)
     fragile_below: float = 0.8  # P(predicted mode) under which a scenario gets a robust variant
+    surrogate: Any = None  # a sim.imitation Surrogate: search and dither with it, confirm pairs with the expert
+    surrogate_file: str = ""
+    confirm_runs: int = 100  # expert runs that check candidate pairs (two per pair)
 
     def __post_init__(self) -> None:
         if self.batch_size is None and isinstance(self.budget, int):
@@ -90,6 +93,9 @@ class GenerateConfig:
             raise ValueError(f"--refine-runs: expected runs per pair >= 0, got {self.refine}")
         if not isinstance(self.dithers, int) or self.dithers < 0:
             raise ValueError(f"--dithers: expected a number of runs >= 0, got {self.dithers}")
+        if not isinstance(self.confirm_runs, int) or self.confirm_runs < 2 * self.pairs:
+            raise ValueError(f"--confirm-runs: expected at least two runs per pair ({2 * self.pairs}), "
+                             f"got {self.confirm_runs}")
 
 
 # -- 1. search --------------------------------------------------------------------------
@@ -98,9 +104,10 @@ class MissionScores:
     """Every score of unit-cube scenarios (NaN rows for invalid ones); picklable, so it runs on any executor."""
 
     mission: Mission
+    surrogate: Any = None  # fly a learned copy of the autonomy instead of the expert
 
     def __call__(self, U: np.ndarray) -> np.ndarray:
-        return sim.simulate(self.mission, U).scores
+        return sim.simulate(self.mission, U, surrogate=self.surrogate).scores
 
 
 ROOT_COLUMNS = (0, 1)  # mission and safety success: what the search steers on
@@ -137,7 +144,7 @@ def search_mission(mission: Mission, cfg: GenerateConfig, progress: Callable[[in
 
     Every score is stored with its run, so the sub-boundary analysis needs no second run.
     """
-    return rapt.search(MissionScores(mission), mission.space, cfg.budget, method="s-ndv",
+    return rapt.search(MissionScores(mission, cfg.surrogate), mission.space, cfg.budget, method="s-ndv",
                        batch_size=cfg.batch_size, seed=cfg.seed, store=cfg.store, executor=cfg.executor,
                        output_types=("binary", "binary"), steer=ROOT_COLUMNS,
                        sampler_options={"max_reference": SEARCH_REFERENCE},
@@ -156,10 +163,10 @@ class Analysis:
     boundary_types: list[dict] = field(default_factory=list)
 
 
-def analyse(mission: Mission, study: rapt.Study) -> Analysis:
+def analyse(mission: Mission, study: rapt.Study, surrogate=None) -> Analysis:
     X, Y = study.X, study.Y
     names, types = metric_names(mission), metric_types(mission)
-    spot = sim.simulate(mission, X[:SPOT_CHECK_RUNS])
+    spot = sim.simulate(mission, X[:SPOT_CHECK_RUNS], surrogate=surrogate)
     if Y.shape[1] != len(names) or not np.array_equal(spot.scores, Y[:SPOT_CHECK_RUNS], equal_nan=True):
         raise RuntimeError("study: the stored runs do not match the mission file (was it edited?); "
                            "plan into a new --out directory")
@@ -226,7 +233,7 @@ def select_pairs(a: Analysis, k: int, min_cluster: int = 3) -> list[dict]:
 
 # -- 4. dithering ---------------------------------------------------------------------------
 def dither_many(mission: Mission, centres: np.ndarray, predicted: Sequence[int], elements: Sequence[list[str]],
-                n: int, sigma: float, seed: int) -> tuple[list[dict], np.ndarray, np.ndarray]:
+                n: int, sigma: float, seed: int, surrogate=None) -> tuple[list[dict], np.ndarray, np.ndarray]:
     """Stochastic runs of ``n`` Gaussian dithers around each centre, all in one batch.
 
     Returns per centre the statistics of :func:`dither_stats`, and the dithers' unit-cube
@@ -238,7 +245,7 @@ def dither_many(mission: Mission, centres: np.ndarray, predicted: Sequence[int],
     rng = np.random.default_rng(seed)
     U = np.clip(centres[:, None, :] + sigma * rng.standard_normal((k, n, d)), 0.0, 1.0)
     U[:, 0] = centres
-    r = sim.simulate(mission, U.reshape(k * n, d), seed=seed, stochastic=True)
+    r = sim.simulate(mission, U.reshape(k * n, d), seed=seed, stochastic=True, surrogate=surrogate)
     stats = []
     for c in range(k):
         rows = slice(c * n, (c + 1) * n)
@@ -289,7 +296,8 @@ VARIANT_COORDINATES = 2  # the most sensitive coordinates tried
 
 
 def robust_variants(mission: Mission, fragile: np.ndarray, partners: np.ndarray, modes: Sequence[int],
-                    sensitivity: np.ndarray, n: int, sigma: float, target: float, seed: int) -> list[dict | None]:
+                    sensitivity: np.ndarray, n: int, sigma: float, target: float, seed: int,
+                    surrogate=None) -> list[dict | None]:
     """Move fragile scenarios away from their boundary along their most sensitive coordinates.
 
     For each scenario the candidates step away from the pair's other scenario along the
@@ -315,11 +323,12 @@ def robust_variants(mission: Mission, fragile: np.ndarray, partners: np.ndarray,
     if not cands:
         return out
     V, owner = np.array(cands), np.array(owner)
-    det = sim.simulate(mission, V)
+    det = sim.simulate(mission, V, surrogate=surrogate)
     keep = np.flatnonzero(det.valid & (det.modes == np.asarray(modes)[owner]))
     if keep.size == 0:
         return out
-    stats, _, _ = dither_many(mission, V[keep], np.asarray(modes)[owner[keep]], [[]] * keep.size, n, sigma, seed)
+    stats, _, _ = dither_many(mission, V[keep], np.asarray(modes)[owner[keep]], [[]] * keep.size, n, sigma, seed,
+                              surrogate)
     for idx, st in zip(keep.tolist(), stats):
         s = owner[idx]
         if out[s] is None and st.get("p_predicted_mode", 0.0) >= target:
@@ -330,7 +339,8 @@ def robust_variants(mission: Mission, fragile: np.ndarray, partners: np.ndarray,
 
 
 # -- 6. refinement ----------------------------------------------------------------------------
-def refine_pairs(mission: Mission, a: Analysis, pairs: list[dict], runs: int, min_distance: float = 0.02) -> list[dict]:
+def refine_pairs(mission: Mission, a: Analysis, pairs: list[dict], runs: int, min_distance: float = 0.02,
+                 surrogate=None) -> list[dict]:
     """Sharpen pairs with a search focused on their own sub-scores (section 4.3.6).
 
     Bisection on the segment between each pair's two scenarios: each run is scored on the
@@ -354,7 +364,7 @@ def refine_pairs(mission: Mission, a: Analysis, pairs: list[dict], runs: int, mi
         if rows.size == 0:
             break
         mid = (lo[rows] + hi[rows]) / 2
-        r = sim.simulate(mission, mid)
+        r = sim.simulate(mission, mid, surrogate=surrogate)
         for k, row in enumerate(rows.tolist()):
             y = r.scores[k, cols[row]]
             if r.valid[k] and np.array_equal(y, side_lo[row]):
@@ -367,11 +377,34 @@ def refine_pairs(mission: Mission, a: Analysis, pairs: list[dict], runs: int, mi
     better = np.flatnonzero(d < np.array([p["distance"] for p in pairs]))
     out = list(pairs)
     if better.size:
-        r = sim.simulate(mission, np.vstack([lo[better], hi[better]]))
+        r = sim.simulate(mission, np.vstack([lo[better], hi[better]]), surrogate=surrogate)
         for k, row in enumerate(better.tolist()):
             out[row] = {**pairs[row], "distance": float(d[row]), "refined": True, "u_override": [lo[row], hi[row]],
                         "modes": [MODE_NAMES[r.modes[k]], MODE_NAMES[r.modes[better.size + k]]]}
     return out
+
+
+# -- 7. expert confirmation (surrogate workflow) ------------------------------------------------
+def confirm_with_expert(mission: Mission, a: Analysis, candidates: list[dict], k: int) -> tuple[list[dict], int]:
+    """Run the expert on both scenarios of each candidate pair; keep the first ``k`` it confirms.
+
+    Section 6.2.3, step 3: a pair found on the surrogate is a boundary of the real autonomy
+    when the expert's modes differ across it too.  The pair's ``modes`` become the expert's
+    (the surrogate's are kept as ``surrogate_modes``).  Returns (pairs, expert runs).
+    """
+    if not candidates:
+        return [], 0
+    U = np.vstack([np.asarray(p.get("u_override", [a.X[r] for r in p["rows"]])) for p in candidates])
+    r = sim.simulate(mission, U)
+    out = []
+    for c, pair in enumerate(candidates):
+        ma, mb = int(r.modes[2 * c]), int(r.modes[2 * c + 1])
+        if r.valid[2 * c] and r.valid[2 * c + 1] and ma != mb:
+            out.append({**pair, "confirmed_by_expert": True, "surrogate_modes": pair["modes"],
+                        "modes": [MODE_NAMES[ma], MODE_NAMES[mb]]})
+            if len(out) == k:
+                break
+    return out, int(len(U))
 
 
 # -- everything ------------------------------------------------------------------------------
@@ -393,15 +426,22 @@ def generate(mission: Mission, mission_path: Path, out_dir: Path, cfg: GenerateC
     searched = None if status is None else lambda done, total: progress("search", done, total, status.summary())
     study = search_mission(mission, cfg, searched, on_batch=status)
     clock.lap("search")
-    a = analyse(mission, study)
+    sur = cfg.surrogate
+    a = analyse(mission, study, sur)
     clock.lap("analysis")
-    pairs = select_pairs(a, cfg.pairs)
+    pairs = select_pairs(a, cfg.pairs if sur is None else cfg.confirm_runs // 2)
     clock.lap("selection")
     if cfg.refine:
-        pairs = refine_pairs(mission, a, pairs, cfg.refine, cfg.refine_min_distance)
+        pairs = refine_pairs(mission, a, pairs, cfg.refine, cfg.refine_min_distance, sur)
         if progress is not None:
             progress("refine", len(pairs), len(pairs), "")
         clock.lap("refinement")
+    if sur is not None:
+        candidates = len(pairs)
+        pairs, confirm_runs = confirm_with_expert(mission, a, pairs, cfg.pairs)
+        if progress is not None:
+            progress("confirm", len(pairs), candidates, f"{len(pairs)} of {candidates} candidate pairs confirmed")
+        clock.lap("confirmation")
     sens = _coordinate_sensitivity(mission, a.sensitivity)
     U = (np.vstack([np.asarray(p.get("u_override", [a.X[r] for r in p["rows"]])) for p in pairs])
          if pairs else np.zeros((0, mission.dim)))
@@ -413,7 +453,7 @@ def generate(mission: Mission, mission_path: Path, out_dir: Path, cfg: GenerateC
     dither_runs: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     if cfg.dithers and len(U):
         stats, dU, dmodes = dither_many(mission, U, chosen.modes, elements, cfg.dithers // 2, cfg.dither_sigma,
-                                        cfg.seed)
+                                        cfg.seed, sur)
         dither_runs = {sid: (dU[k], dmodes[k]) for k, sid in enumerate(ids)}
         if progress is not None:
             progress("dither", len(ids), len(ids), "")
@@ -421,7 +461,7 @@ def generate(mission: Mission, mission_path: Path, out_dir: Path, cfg: GenerateC
     fragile = [k for k, st in enumerate(stats) if st.get("p_predicted_mode", 1.0) < cfg.fragile_below]
     found = robust_variants(mission, U[fragile], partners[fragile], chosen.modes[fragile], sens,
                             max(cfg.dithers // 10, 20), cfg.dither_sigma, cfg.fragile_below,
-                            cfg.seed + 1) if fragile and cfg.dithers else []
+                            cfg.seed + 1, sur) if fragile and cfg.dithers else []
     clock.lap("variants")
     level_cols = set(a.tree.levels[0]) | set(a.tree.levels[min(1, len(a.tree.levels) - 1)])
     scenarios = []
@@ -451,7 +491,9 @@ def generate(mission: Mission, mission_path: Path, out_dir: Path, cfg: GenerateC
                                    write_scenario_files(mission, np.array(v["u"]), out_dir, vid).items()}})
     plan_pairs = [{"id": p, "level": pair["level"], "elements": pair["elements"], "modes": pair["modes"],
                    "distance": pair["distance"], "scenarios": [f"pair{p}a", f"pair{p}b"],
-                   "refined": bool(pair.get("refined", False))} for p, pair in enumerate(pairs, start=1)]
+                   "refined": bool(pair.get("refined", False)),
+                   **({"confirmed_by_expert": True, "surrogate_modes": pair["surrogate_modes"]} if sur is not None
+                      else {})} for p, pair in enumerate(pairs, start=1)]
     modes = a.result.modes
     plan = {
         "schema": PLAN_SCHEMA,
@@ -460,7 +502,11 @@ def generate(mission: Mission, mission_path: Path, out_dir: Path, cfg: GenerateC
         "study": {"budget": cfg.budget, "seed": cfg.seed, "global_fraction": cfg.global_fraction,
                   "valid_runs": int(len(a.X)), "invalid_runs": int(len(a.X_invalid)),
                   "modes": {MODE_NAMES[m]: int(c) for m, c in zip(*np.unique(modes, return_counts=True))},
-                  "boundary_types": a.boundary_types[:30]},
+                  "boundary_types": a.boundary_types[:30],
+                  **({"surrogate": {"file": cfg.surrogate_file, "method": str(sur.training.get("method", "")),
+                                    "expert_runs": {"training": int(sur.training.get("runs", 0)),
+                                                    "confirmation": confirm_runs},
+                                    "candidates": candidates, "confirmed": len(pairs)}} if sur is not None else {})},
         "sensitivity": a.sensitivity,
         "pairs": plan_pairs,
         "scenarios": scenarios,

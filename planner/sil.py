@@ -31,7 +31,10 @@ from sim.frontseat import FrontSeat  # noqa: E402
 from sim.mission import Mission  # noqa: E402
 from sim.replay import TrackBuilder, score_track  # noqa: E402
 
-__all__ = ["SilResult", "run_sil", "free_port"]
+__all__ = ["SilResult", "run_sil", "free_port", "SURROGATE_SOURCE"]
+
+#: The back-seat source name a surrogate commands under.
+SURROGATE_SOURCE = "surrogate"
 
 
 def free_port(kind: int = socket.SOCK_DGRAM) -> int:
@@ -89,7 +92,7 @@ class _Recorder:
 def run_sil(mission: Mission, u, *, vehicle: str = "uuv1", log_path: str | Path | None = None,
             speedup: float | None = None, timeout_s: float = 600.0, scenario_id: str = "",
             mission_file: str = "", plan_id: str = "", bias=None, stochastic: bool = False,
-            seed: int = 0) -> SilResult:
+            seed: int = 0, surrogate=None) -> SilResult:
     """Fly scenario ``u`` through front-seat, bridge, back-seat (and logger); return its scores.
 
     ``speedup=None`` runs lock-step (as fast as the back-seat answers); a number runs the
@@ -99,14 +102,21 @@ def run_sil(mission: Mission, u, *, vehicle: str = "uuv1", log_path: str | Path 
     blind, as from a real vehicle.  ``stochastic`` turns on the front-seat's navigation
     drift and current perturbations (seeded by ``seed``): the vehicle then reports where
     its navigation thinks it is, as a real one does.
+
+    ``surrogate`` (:class:`sim.imitation.surrogate.Surrogate`) flies the vehicle as back-seat
+    source ``"surrogate"``, made active on the bus, while the expert still runs as source
+    ``"autonomy"`` and its commands are published (and logged) but not obeyed — the testbed
+    of Figure 6.3.  The scores are then the surrogate's.
     """
     u = np.asarray(u, dtype=float)
+    if surrogate is not None:
+        surrogate.check(mission)
     port = free_port()
     fs = FrontSeat(mission, u, f"udpin:127.0.0.1:{port}", lockstep=speedup is None, speedup=speedup or 1.0,
                    bias=bias, stochastic=stochastic, seed=seed)
     fs_thread = threading.Thread(target=fs.serve, name="frontseat", daemon=True)
     session = open_session(listen=[f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"])
-    logger = bridge = backseat = recorder = None
+    logger = bridge = backseat = recorder = learned = None
     started = time.perf_counter()
     try:
         fs_thread.start()
@@ -120,12 +130,20 @@ def run_sil(mission: Mission, u, *, vehicle: str = "uuv1", log_path: str | Path 
             "plan_id": plan_id, "u": u.tolist(), "parameters": _jsonable(mission.space.decode(u[None, :])[0]),
         }))
         backseat = BackSeat(session, vehicle, mission, u).start()
+        if surrogate is not None:
+            learned = BackSeat(session, vehicle, mission, u, source=SURROGATE_SOURCE, surrogate=surrogate).start()
         bridge = MavlinkBridge(f"udpout:127.0.0.1:{port}", session, vehicle=vehicle, allow_commands=True).start()
         deadline = time.monotonic() + 10
         while bridge.target is None and time.monotonic() < deadline:
             time.sleep(0.01)
         if bridge.target is None:
             raise RuntimeError("front-seat: no HEARTBEAT on the MAVLink link within 10 s")
+        if surrogate is not None:
+            session.put(keys.active(vehicle), SURROGATE_SOURCE)
+            while bridge.active != SURROGATE_SOURCE and time.monotonic() < deadline:
+                time.sleep(0.01)
+            if bridge.active != SURROGATE_SOURCE:
+                raise RuntimeError("bridge: did not take the surrogate as the active source within 10 s")
         bridge.set_mode("GUIDED")
         bridge.arm(True)
         deadline = time.monotonic() + timeout_s
@@ -135,13 +153,13 @@ def run_sil(mission: Mission, u, *, vehicle: str = "uuv1", log_path: str | Path 
             raise TimeoutError(f"timeout_s: the run did not end within {timeout_s} s of wall time")
         time.sleep(0.3)  # let the last step's telemetry reach the recorder and the logger
         wall = time.perf_counter() - started
-        status = backseat.autonomy
+        status = (learned if surrogate is not None else backseat).autonomy
         wp_aborted = [bool(v) for v in status.wp_aborted[0]]
         reason = int(status.return_reason[0])
         track = recorder.builder.track()
         stats = dict(bridge.stats)
     finally:
-        for part in (backseat, bridge, recorder, logger):
+        for part in (learned, backseat, bridge, recorder, logger):
             if part is not None:
                 part.close()
         fs.stop()

@@ -15,7 +15,7 @@ is None — and returns, per run, the features seen and the expert's action at e
 The policy is the multilayer perceptron of Table 6.1 (sigmoid hidden layers 150 and 50,
 linear output, mean squared error, Adam), trained with scikit-learn and evaluated by
 :class:`MLPPolicy` in plain numpy float32, so a decision inside a vectorised simulator is
-three matrix products.  PolicyUpdate continues from the previous weights (warm start).
+three matrix products whose result for a row is exact, hence batch-independent.  PolicyUpdate continues from the previous weights (warm start).
 """
 
 from __future__ import annotations
@@ -27,6 +27,15 @@ from typing import Callable, Sequence
 
 import numpy as np
 from scipy.special import expit
+
+#: Inputs and hidden activations are rounded to multiples of 2**-INPUT_BITS (see MLPPolicy.__call__).
+INPUT_BITS = 16
+
+
+def _grid(a: np.ndarray, bits: int) -> np.ndarray:
+    """``a`` rounded to multiples of 2**-bits (exactly, in float64)."""
+    return np.round(np.asarray(a, np.float64) * 2.0 ** bits) / 2.0 ** bits
+
 
 __all__ = ["MLPPolicy", "Trajectory", "IterationRecord", "ImitationResult", "imitate", "METHODS", "HIDDEN"]
 
@@ -53,46 +62,60 @@ class MLPPolicy:
         return int(self.weights[0].shape[0])
 
     def __call__(self, F: np.ndarray, quiet: slice | None = None, quiet_value: float = 1.0) -> np.ndarray:
-        """Actions for features ``F`` (n, features).
+        """Actions for features ``F`` (n, features) in [-1, 1]; a row's action never depends on the other rows.
 
+        BLAS sums a row in an order that depends on the batch around it, so float products
+        differ in the last bits from batch to batch.  Here the inputs and every hidden
+        activation are rounded to multiples of 2^-16 and each layer's weights to a power of
+        two small enough that every partial sum is exact in float64: the products are then
+        exact whatever the order, and a scenario flown alone (on the bus) decides bit for
+        bit as inside any batch.  (The rounding is far below what the network resolves.)
         ``quiet`` names a block of columns that mostly all read ``quiet_value`` (a range
-        scan seeing nothing): rows where they do skip that block of the first product,
-        which is most of the work when the block is most of the input.
+        scan seeing nothing): rows where they do skip that block of the first product, most
+        of the work when the block is most of the input.
         """
-        h = np.asarray(F, dtype=np.float32)
-        last = len(self.weights) - 1
-        for k, (W, b) in enumerate(zip(self.weights, self.biases)):
+        layers = self._exact()
+        h = _grid(np.asarray(F, dtype=np.float64), INPUT_BITS)
+        last = len(layers) - 1
+        for k, (W, b) in enumerate(layers):
             if k == 0 and quiet is not None:
-                h = self._first_layer(h, quiet, quiet_value)
+                h = self._first_layer(h, W, b, quiet, quiet_value)
             else:
                 h = h @ W + b
             if k < last:
-                if self.activation == "logistic":
-                    h = expit(h)
-                elif self.activation == "relu":
-                    np.maximum(h, 0, out=h)
-                elif self.activation == "tanh":
-                    np.tanh(h, out=h)
-                else:
-                    raise ValueError(f"activation: unknown {self.activation!r}")
-        return h
+                h = _grid(expit(h) if self.activation == "logistic" else np.tanh(h), INPUT_BITS)
+        return h.astype(np.float32)
 
-    def _first_layer(self, F: np.ndarray, quiet: slice, value: float) -> np.ndarray:
+    def _exact(self) -> list[tuple[np.ndarray, np.ndarray]]:
+        """Float64 layers with weights on the grid that keeps every partial sum exact (cached)."""
+        cached = self.__dict__.get("_layers")
+        if cached is None:
+            if self.activation not in ("logistic", "tanh"):
+                raise ValueError(f"activation: expected 'logistic' or 'tanh' (bounded), got {self.activation!r}")
+            cached = []
+            for k, (W, b) in enumerate(zip(self.weights, self.biases)):
+                W = np.asarray(W, np.float64)
+                input_max = 2.0 if k == 0 else 1.0  # a quiet block enters as (x - value), |.| <= 2
+                bound = float(np.abs(W).sum(axis=0).max() * input_max) + 1.0
+                bits = int(min(24, np.floor(52 - INPUT_BITS - np.log2(bound))))
+                cached.append((_grid(W, bits), np.asarray(b, np.float64)))
+            self.__dict__["_layers"] = cached
+        return cached
+
+    def _first_layer(self, F: np.ndarray, W: np.ndarray, b: np.ndarray, quiet: slice, value: float) -> np.ndarray:
         key = (quiet.start, quiet.stop, value)
         cache = self.__dict__.setdefault("_split", {})
         if key not in cache:
-            W, b = self.weights[0], self.biases[0]
             cols = np.zeros(W.shape[0], dtype=bool)
             cols[quiet] = True
             Wq = np.ascontiguousarray(W[cols])
-            cache[key] = (np.flatnonzero(~cols), np.ascontiguousarray(W[~cols]), Wq,
-                          (b + value * Wq.sum(axis=0)).astype(np.float32))
+            cache[key] = (np.flatnonzero(~cols), np.ascontiguousarray(W[~cols]), Wq, b + value * Wq.sum(axis=0))
         rest, W_rest, Wq, b_rest = cache[key]
         Fq = F[:, quiet]
         h = F[:, rest] @ W_rest + b_rest
         busy = np.flatnonzero(np.any(Fq != value, axis=1))
         if busy.size:
-            h[busy] += (Fq[busy] - np.float32(value)) @ Wq
+            h[busy] += (Fq[busy] - value) @ Wq
         return h
 
     def to_arrays(self) -> dict[str, np.ndarray]:

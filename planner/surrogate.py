@@ -1,0 +1,71 @@
+"""Train, keep and reuse a surrogate of a mission's back-seat autonomy (chapter 6).
+
+:func:`train_surrogate` runs Q-DAgger (or DAgger, or behavioural cloning) against the
+batch simulator's expert on random valid scenarios of the mission and returns a
+:class:`~sim.imitation.surrogate.Surrogate`; :func:`load_or_train` reuses a saved one
+when it was trained for this very mission and trains (and saves) one otherwise.  The
+expert-run counts it records are what the surrogate workflow of ``rapt-plan generate
+--surrogate`` spends on training.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from rapt.imitation import IterationRecord, MLPPolicy, imitate
+from sim.imitation.features import feature_spec
+from sim.imitation.rollouts import make_rollout
+from sim.imitation.surrogate import Surrogate
+from sim.mission import Mission
+
+__all__ = ["train_surrogate", "load_or_train", "TRAINING_DEFAULTS"]
+
+#: Section 6.6.1: 5 expert runs, then 5 annotated runs per iteration; 50-75 runs converge.
+TRAINING_DEFAULTS = {"method": "qdagger", "quantile": 0.5, "runs": 75, "runs_per_iteration": 5, "epochs": 30}
+
+
+def train_surrogate(mission: Mission, *, method: str = "qdagger", quantile: float = 0.5, runs: int = 75,
+                    runs_per_iteration: int = 5, epochs: int = 30, seed: int = 0,
+                    on_iteration: Callable[[IterationRecord, MLPPolicy], None] | None = None) -> Surrogate:
+    """Imitate the mission's expert with ``runs`` annotated runs (``runs_per_iteration`` at a time)."""
+    if int(runs_per_iteration) != runs_per_iteration or runs_per_iteration < 1:
+        raise ValueError(f"--runs-per-iteration: expected a positive whole number, got {runs_per_iteration!r}")
+    if int(runs) != runs or runs < runs_per_iteration:
+        raise ValueError(f"--runs: expected at least {runs_per_iteration} annotated runs, got {runs!r}")
+    spec = feature_spec(mission)
+    result = imitate(make_rollout(mission, spec, seed=seed), method=method, quantile=quantile,
+                     iterations=runs // runs_per_iteration - 1, runs_per_iteration=runs_per_iteration,
+                     epochs=epochs, seed=seed, on_iteration=on_iteration)
+    h = result.history[-1]
+    training = {"method": method if method != "qdagger" else f"qdagger({int(round(quantile * 100))})",
+                "runs": result.runs, "samples": h.samples, "seed": seed, "epochs": epochs,
+                "fit_s": round(sum(r.fit_s for r in result.history), 2), "iterations": len(result.history)}
+    return Surrogate.for_mission(mission, result.policy, training)
+
+
+def load_or_train(path: Path, mission: Mission, seed: int = 0, on_iteration=None, **options) -> tuple[Surrogate, bool]:
+    """The surrogate saved at ``path`` (refused unless trained for ``mission``), or a new one saved there.
+
+    Returns (surrogate, trained_now).
+    """
+    path = Path(path)
+    if path.exists():
+        return Surrogate.load(path, mission), False
+    if path.suffix != ".npz":
+        raise ValueError(f"--surrogate: a surrogate file ends in .npz, got {str(path)!r}")
+    sur = train_surrogate(mission, seed=seed, on_iteration=on_iteration, **{**TRAINING_DEFAULTS, **options})
+    sur.save(path)
+    return sur, True
+
+
+def mode_agreement(mission: Mission, surrogate: Surrogate, X: np.ndarray, expert=None) -> float:
+    """Share of the valid scenarios ``X`` where the surrogate shows the expert's mode."""
+    import sim
+
+    expert = sim.simulate(mission, X) if expert is None else expert
+    mine = sim.simulate(mission, X, surrogate=surrogate)
+    ok = expert.valid & mine.valid
+    return float(np.mean(mine.modes[ok] == expert.modes[ok])) if ok.any() else float("nan")
