@@ -124,7 +124,7 @@ def test_same_plan_with_processes_and_a_dask_cluster(range2017, tmp_path):
 
     from planner.generate import make_executor
 
-    cfg = dict(budget=1000, batch_size=250, dithers=0, pairs=3)
+    cfg = dict(budget=500, batch_size=250, dithers=0, pairs=3)
     base = generate(range2017, EXAMPLES / "range2017.toml", tmp_path / "local", GenerateConfig(**cfg))
     pool, close = make_executor("processes")
     try:

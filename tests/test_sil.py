@@ -11,7 +11,7 @@ from planner.sil import run_sil
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
 
-@pytest.mark.parametrize("name,count", [("range2017", 10), ("imitation7", 10)])
+@pytest.mark.parametrize("name,count", [("range2017", 4), ("imitation7", 6)])
 def test_sil_scores_equal_the_batch_simulator(name, count):
     m = sim.load_mission(EXAMPLES / f"{name}.toml")
     X = np.random.default_rng(11).random((3 * count, m.dim))
@@ -22,6 +22,6 @@ def test_sil_scores_equal_the_batch_simulator(name, count):
     for i in rows:
         result = run_sil(m, X[i])
         np.testing.assert_array_equal(result.scores, batch.scores[i], err_msg=f"{name} scenario {i}")
-        assert result.speedup > 100  # lock-step runs far faster than real time
+        assert result.speedup > 10  # lock-step does not wait for the clock (benchmarks/sil.py measures it)
         modes.add(int(batch.modes[i]))
     assert len(modes) >= 2  # not only one kind of run

@@ -195,7 +195,7 @@ def test_a_scenario_scores_the_same_alone_as_in_a_batch(name):
     m = sim.load_mission(EXAMPLES / f"{name}.toml")
     X = np.random.default_rng(1).random((200, m.dim))
     batch = sim.simulate(m, X)
-    for i in np.flatnonzero(batch.valid)[:12]:
+    for i in np.flatnonzero(batch.valid)[:6]:
         alone = sim.simulate(m, X[i:i + 1])
         np.testing.assert_array_equal(alone.scores[0], batch.scores[i])
 
