@@ -125,12 +125,7 @@ def study(
 
     if baseline != "none" and baseline not in rapt.METHODS:
         fail(f"--baseline: unknown method {baseline!r}; choose one of: {', '.join(rapt.METHODS)}, none")
-    if not mission_file.is_file():
-        fail(f"MISSION_FILE: {mission_file} does not exist; give the path of a mission TOML file")
-    try:
-        mission = sim.load_mission(mission_file)
-    except ValueError as exc:
-        fail(str(exc))
+    mission = _load_mission(mission_file)
 
     def run_root_scores(X):  # the search steers on mission and safety success (section 4.3.6)
         return sim.simulate(mission, X, seed=seed, stochastic=stochastic).scores[:, :2]
@@ -209,6 +204,18 @@ def _bus_session(connect: list[str], config_file: Optional[Path]):
     try:
         return open_session(config_file=config_file) if config_file is not None else open_session(connect=connect)
     except (ValueError, OSError) as exc:
+        fail(str(exc))
+
+
+def _load_mission(mission_file: Path):
+    """The mission file, loaded and validated, or a one-line error naming it."""
+    import sim
+
+    if not mission_file.is_file():
+        fail(f"MISSION_FILE: {mission_file} does not exist; give the path of a mission TOML file")
+    try:
+        return sim.load_mission(mission_file)
+    except ValueError as exc:
         fail(str(exc))
 
 
@@ -346,14 +353,7 @@ def generate(
     """Search a mission, choose boundary pairs, dither them and write a field plan."""
     from planner.generate import GenerateConfig, generate as run_generate, make_executor
 
-    import sim
-
-    if not mission_file.is_file():
-        fail(f"MISSION_FILE: {mission_file} does not exist; give the path of a mission TOML file")
-    try:
-        mission = sim.load_mission(mission_file)
-    except ValueError as exc:
-        fail(str(exc))
+    mission = _load_mission(mission_file)
     store = out_dir / ("study.db" if surrogate is None else "study-surrogate.db")
     if store.exists() and not resume:
         fail(f"--out: {store} already holds a study; add --resume to continue it or choose another directory")
@@ -425,6 +425,8 @@ def surrogate_cmd(
     runs: Annotated[int, typer.Option(help="Annotated expert runs in all.")] = 75,
     runs_per_iteration: Annotated[int, typer.Option("--runs-per-iteration", help="New runs per update.")] = 5,
     epochs: Annotated[int, typer.Option(help="Training epochs per update (warm-started).")] = 30,
+    mixing: Annotated[float, typer.Option(help="Update i's runs obey the expert on a share mixing**i of their steps "
+                                               "(DAgger's beta; 0: the learner flies every step).")] = 0.5,
     validate: Annotated[int, typer.Option(help="Sobol scenarios to measure mode accuracy on after each update "
                                                "(0: none).")] = 256,
     seed: Annotated[int, typer.Option(help="Seed of every random choice.")] = 0,
@@ -436,12 +438,7 @@ def surrogate_cmd(
     import sim
     from planner.surrogate import train_surrogate
 
-    if not mission_file.is_file():
-        fail(f"MISSION_FILE: {mission_file} does not exist; give the path of a mission TOML file")
-    try:
-        mission = sim.load_mission(mission_file)
-    except ValueError as exc:
-        fail(str(exc))
+    mission = _load_mission(mission_file)
     if out_file.suffix != ".npz":
         fail(f"--out: a surrogate file ends in .npz, got {out_file}")
     if validate < 0:
@@ -465,7 +462,7 @@ def surrogate_cmd(
 
     try:
         sur = train_surrogate(mission, method=method, quantile=quantile, runs=runs,
-                              runs_per_iteration=runs_per_iteration, epochs=epochs, seed=seed,
+                              runs_per_iteration=runs_per_iteration, epochs=epochs, mixing=mixing, seed=seed,
                               on_iteration=on_iteration)
     except ValueError as exc:
         fail(f"--{str(exc)}" if str(exc).split(":")[0] in ("method", "quantile", "epochs") else str(exc))

@@ -24,24 +24,31 @@ from sim.mission import Mission
 __all__ = ["train_surrogate", "load_or_train", "TRAINING_DEFAULTS"]
 
 #: Section 6.6.1: 5 expert runs, then 5 annotated runs per iteration; 50-75 runs converge.
-TRAINING_DEFAULTS = {"method": "qdagger", "quantile": 0.5, "runs": 75, "runs_per_iteration": 5, "epochs": 30}
+TRAINING_DEFAULTS = {"method": "qdagger", "quantile": 0.5, "runs": 75, "runs_per_iteration": 5, "epochs": 30,
+                     "mixing": 0.5}
 
 
 def train_surrogate(mission: Mission, *, method: str = "qdagger", quantile: float = 0.5, runs: int = 75,
-                    runs_per_iteration: int = 5, epochs: int = 30, seed: int = 0,
+                    runs_per_iteration: int = 5, epochs: int = 30, mixing: float = 0.5, seed: int = 0,
                     on_iteration: Callable[[IterationRecord, MLPPolicy], None] | None = None) -> Surrogate:
-    """Imitate the mission's expert with ``runs`` annotated runs (``runs_per_iteration`` at a time)."""
+    """Imitate the mission's expert with ``runs`` annotated runs (``runs_per_iteration`` at a time).
+
+    ``mixing`` p: update i's runs obey the expert on a share p**i of their steps (DAgger's
+    beta; 0 follows Algorithm 9 to the letter, the learner flying every step from update 1).
+    """
+    if not 0.0 <= mixing < 1.0:
+        raise ValueError(f"--mixing: expected a share in [0, 1), got {mixing!r}")
     if int(runs_per_iteration) != runs_per_iteration or runs_per_iteration < 1:
         raise ValueError(f"--runs-per-iteration: expected a positive whole number, got {runs_per_iteration!r}")
     if int(runs) != runs or runs < runs_per_iteration:
         raise ValueError(f"--runs: expected at least {runs_per_iteration} annotated runs, got {runs!r}")
     spec = feature_spec(mission)
-    result = imitate(make_rollout(mission, spec, seed=seed), method=method, quantile=quantile,
+    result = imitate(make_rollout(mission, spec, seed=seed, mixing=mixing), method=method, quantile=quantile,
                      iterations=runs // runs_per_iteration - 1, runs_per_iteration=runs_per_iteration,
                      epochs=epochs, seed=seed, on_iteration=on_iteration)
     h = result.history[-1]
     training = {"method": method if method != "qdagger" else f"qdagger({int(round(quantile * 100))})",
-                "runs": result.runs, "samples": h.samples, "seed": seed, "epochs": epochs,
+                "runs": result.runs, "samples": h.samples, "seed": seed, "epochs": epochs, "mixing": mixing,
                 "fit_s": round(sum(r.fit_s for r in result.history), 2), "iterations": len(result.history)}
     return Surrogate.for_mission(mission, result.policy, training)
 

@@ -176,7 +176,7 @@ def _stack(trajs: Sequence[Trajectory]) -> tuple[np.ndarray, np.ndarray]:
 
 def imitate(rollout: Rollout, *, method: str = "qdagger", quantile: float = 0.5, iterations: int = 15,
             runs_per_iteration: int = 5, initial_runs: int | None = None, hidden: Sequence[int] = HIDDEN,
-            epochs: int = 20, learning_rate: float = 1e-3, batch_size: int = 256, seed: int = 0,
+            epochs: int = 20, learning_rate: float = 3e-3, batch_size: int = 256, seed: int = 0,
             on_iteration: Callable[[IterationRecord, MLPPolicy], None] | None = None) -> ImitationResult:
     """Train a policy imitating the expert behind ``rollout`` (see the module docstring).
 

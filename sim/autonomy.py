@@ -122,6 +122,7 @@ class Autonomy:
         op = m.operational_area
         self._op_bounds = (op.x - op.width / 2, op.x + op.width / 2, op.y - op.height / 2, op.y + op.height / 2)
         self._rows = np.arange(n)
+        self.stuck_s = STUCK_S  # seconds without progress before a goal is given up
         cruise = self.spec.cruise_speed
         self._wh_per_m = float(propulsion_power(self.spec, np.asarray(cruise))) / cruise / 3600.0
 
@@ -251,7 +252,7 @@ class Autonomy:
         self.best_dist = np.where(progressed, dist, self.best_dist)
         loitering = in_area | in_tx
         self.since_progress = np.where(progressed | loitering, 0.0, self.since_progress + dt)
-        stuck = active & (self.since_progress >= STUCK_S) & (kind != GOAL_RETURN)
+        stuck = active & (self.since_progress >= self.stuck_s) & (kind != GOAL_RETURN)
         if np.any(stuck):
             sw = stuck & (kind == GOAL_WAYPOINT)
             self.wp_aborted[self._rows[sw], np.minimum(self.wp[sw], self.n_waypoints - 1)] = True

@@ -1,0 +1,257 @@
+"""Surrogate agents on the chapter 6 mission (issue 8): speed, learners, agreement, expert runs saved.
+
+Four tables, measured side by side in one run on ``examples/imitation7.toml``:
+
+1. Decision time of the expert autonomy and of the surrogate network, same process,
+   100 decisions: one vehicle a call (as a back-seat decides on the vehicle) and one call
+   for 100 vehicles (as the batch simulator decides); ratios (Table 6.2: 115x).
+2. Learners with the same expert-annotated runs: behavioural cloning, DAgger, Q-DAgger(50)
+   and Q-DAgger(75); mode accuracy on a tracking design after every update, cumulative
+   training time, and the training time each needs to reach the same accuracy
+   (Table 6.3: Q-DAgger(50) trained 3.0x faster than DAgger).
+3. The Q-DAgger(50) surrogate against the expert on the same Sobol validation set
+   (5,000 scenarios as in section 6.6.4): mode accuracy and confusion matrix, path error,
+   boundary accuracy (regions, and pairs the expert straddles), distance error, share of
+   mismatches next to a boundary (the paper: 84-85%, 86.8%, 0.0096, 95%).
+4. The surrogate workflow of section 6.2.3 against an expert-only search of the same
+   budget: expert runs spent, pairs confirmed, and whether the expert-only search finds
+   boundaries of the confirmed types.
+
+Run:  python benchmarks/surrogate.py [--runs 75] [--validation 5000] [--methods ...] [--quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+from pathlib import Path
+
+import numpy as np
+from scipy.stats import qmc
+
+import sim
+from planner.generate import GenerateConfig, analyse, confirm_with_expert, search_mission, select_pairs
+from rapt.agreement import agreement, path_error
+from rapt.imitation import imitate
+from sim.autonomy import Autonomy
+from sim.imitation.driver import PolicyAutonomy
+from sim.imitation.features import feature_spec
+from sim.imitation.rollouts import make_rollout
+from sim.imitation.surrogate import Surrogate
+from sim.scenario import make_scenarios
+from sim.scoring import MODE_NAMES
+from sim.simulate import observation
+from sim.world import World
+
+MISSION = Path(__file__).resolve().parents[1] / "examples" / "imitation7.toml"
+METHODS = {"supervised": ("supervised", 0.0), "dagger": ("dagger", 0.0), "qdagger50": ("qdagger", 0.5),
+           "qdagger75": ("qdagger", 0.75)}
+
+
+def decision_time(mission, surrogate: Surrogate, repeats: int = 5) -> None:
+    X = qmc.Sobol(mission.dim, seed=3).random(256)
+    X = X[make_scenarios(mission, X).valid][:100]
+    scen = make_scenarios(mission, X)
+    world = World(scen, scan_beams=surrogate.spec.beams)
+    for _ in range(150):  # fly 300 s so that some vehicles see obstacles
+        tel = world.telemetry(0.0)
+        obs = observation(tel, scen)
+        cmd = PolicyAutonomy(scen, surrogate.policy, surrogate.spec).step(obs, mission.dt)
+        world.advance(0.0, cmd.heading, cmd.speed, cmd.surface, np.ones(scen.n, dtype=bool))
+    tel = world.telemetry(300.0)
+    obs = observation(tel, scen)
+    singles = [(scen.select(np.array([i])), observation(_row(tel, i), scen.select(np.array([i]))))
+               for i in range(scen.n)]
+    seen = int(np.sum(np.any(tel.scan <= surrogate.spec.sonar_range_m, axis=1)))
+
+    def best(fn) -> float:
+        times = []
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            fn()
+            times.append(time.perf_counter() - t0)
+        return min(times)
+
+    from threadpoolctl import threadpool_limits
+
+    limit = threadpool_limits(1)  # a back-seat process on one core; threads only add noise here
+    experts = [Autonomy(s) for s, _ in singles]
+    learned = [PolicyAutonomy(s, surrogate.policy, surrogate.spec) for s, _ in singles]
+    batch_e, batch_l = Autonomy(scen), PolicyAutonomy(scen, surrogate.policy, surrogate.spec)
+    batch_l.step(obs, mission.dt)
+    F = batch_l.last_features
+    quiet = slice(7, 7 + surrogate.spec.beams)
+    rows = [
+        ("expert autonomy", "1 vehicle a call x 100", best(lambda: [a.step(o, mission.dt) for a, (_, o) in
+                                                                   zip(experts, singles)])),
+        ("surrogate back-seat (features + network)", "1 vehicle a call x 100",
+         best(lambda: [a.step(o, mission.dt) for a, (_, o) in zip(learned, singles)])),
+        ("surrogate network alone", "1 vehicle a call x 100",
+         best(lambda: [surrogate.policy(F[i:i + 1], quiet) for i in range(F.shape[0])])),
+        ("expert autonomy", "100 vehicles in 1 call", best(lambda: batch_e.step(obs, mission.dt))),
+        ("surrogate back-seat (features + network)", "100 vehicles in 1 call",
+         best(lambda: batch_l.step(obs, mission.dt))),
+        ("surrogate network alone", "100 vehicles in 1 call", best(lambda: surrogate.policy(F, quiet))),
+    ]
+    print(f"1. Decision time, 100 decisions, same process, one BLAS thread ({seen} of {scen.n} vehicles with "
+          f"sonar returns; best of {repeats})")
+    print(f"{'decider':<42} {'how':<24} {'ms per 100':>10} {'expert / this':>14}")
+    for who, how, t in rows:
+        ref = rows[0][2] if how.startswith("1 vehicle") else rows[3][2]
+        print(f"{who:<42} {how:<24} {t * 1e3:>10.2f} {ref / t:>13.1f}x")
+    limit.restore_original_limits()
+    print(f"   expert one vehicle a call / network batch of 100: {rows[0][2] / rows[5][2]:.0f}x "
+          "(Table 6.2 compares 100 evaluations: 0.487 s against 0.00421 s, 115x)\n")
+
+
+def _row(tel, i):
+    from dataclasses import fields, replace
+
+    sel = {}
+    for f in fields(tel):
+        v = getattr(tel, f.name)
+        if isinstance(v, np.ndarray) and v.ndim:
+            sel[f.name] = v[i:i + 1]
+    return replace(tel, **sel)
+
+
+def learners(mission, methods: list[str], runs: int, per: int, epochs: int, track: int, seed: int,
+             mixing: float = 0.5) -> dict[str, tuple[Surrogate, list]]:
+    spec = feature_spec(mission)
+    Xt = qmc.Sobol(mission.dim, seed=seed + 1).random(track)
+    expert = sim.simulate(mission, Xt)
+    out = {}
+    print(f"2. Learners: {runs} expert-annotated runs ({per} per update), {epochs} epochs per update, "
+          f"DAgger mixing {mixing:g}**i; mode accuracy on {track} Sobol scenarios after each update")
+    for name in methods:
+        method, q = METHODS[name]
+        curve = []
+
+        def on_iteration(rec, policy):
+            mine = sim.simulate(mission, Xt, surrogate=Surrogate.for_mission(mission, policy))
+            ok = mine.valid & expert.valid
+            curve.append((rec.runs, rec.samples, rec.fit_s, rec.rollout_s, float(np.mean(mine.modes[ok] ==
+                                                                                        expert.modes[ok]))))
+            print(f"   {name:<10} runs {rec.runs:>3} samples {rec.samples:>6,} fit {rec.fit_s:6.1f} s "
+                  f"accuracy {curve[-1][-1]:.1%}", flush=True)
+
+        res = imitate(make_rollout(mission, spec, seed=seed, mixing=mixing if method != "supervised" else 0.0),
+                      method=method, quantile=q,
+                      iterations=runs // per - 1, runs_per_iteration=per, epochs=epochs, seed=seed,
+                      on_iteration=on_iteration)
+        out[name] = (Surrogate.for_mission(mission, res.policy, {"method": name, "runs": res.runs}), curve)
+    finals = {n: c[-1][-1] for n, (_, c) in out.items()}
+    contenders = [n for n in ("dagger", "qdagger50", "qdagger75") if n in out]
+    target = min(max(c[-1] for c in out[n][1]) for n in contenders) if contenders else 0.0
+    print(f"\n{'learner':<11} {'runs':>5} {'final acc':>9} {'best acc':>9} {'samples':>8} {'fit (s)':>8} "
+          f"{'fit to ' + format(target, '.0%'):>10} {'all to ' + format(target, '.0%'):>10}")
+    reach = {}
+    for n, (_, c) in out.items():
+        fit = np.cumsum([r[2] for r in c])
+        total = np.cumsum([r[2] + r[3] for r in c])
+        hit = next((k for k, r in enumerate(c) if r[-1] >= target), None)
+        reach[n] = (fit[hit], total[hit]) if hit is not None else (np.nan, np.nan)
+        print(f"{n:<11} {c[-1][0]:>5} {finals[n]:>9.1%} {max(r[-1] for r in c):>9.1%} {c[-1][1]:>8,} "
+              f"{fit[-1]:>8.1f} {reach[n][0]:>10.1f} {reach[n][1]:>10.1f}")
+    for q in ("qdagger50", "qdagger75"):
+        if q in reach and "dagger" in reach:
+            print(f"   DAgger / {q} training time to {target:.0%} accuracy: {reach['dagger'][0] / reach[q][0]:.1f}x "
+                  f"(fit only), {reach['dagger'][1] / reach[q][1]:.1f}x (with rollouts); Table 6.3: 3.0x")
+    print()
+    return out
+
+
+def validation(mission, surrogate: Surrogate, n: int, paths: int, seed: int) -> None:
+    X = qmc.Sobol(mission.dim, seed=seed).random(n)
+    t0 = time.perf_counter()
+    expert = sim.simulate(mission, X)
+    te = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    mine = sim.simulate(mission, X, surrogate=surrogate)
+    ts = time.perf_counter() - t0
+    ok = expert.valid & mine.valid
+    a = agreement(X[ok], expert.modes[ok], mine.modes[ok])
+    rows = np.flatnonzero(ok)[:paths]
+    tr_e = sim.simulate(mission, X[rows], trajectories=True).trajectories
+    tr_s = sim.simulate(mission, X[rows], surrogate=surrogate, trajectories=True).trajectories
+    perr = path_error([t[:, 1:3] for t in tr_e], [t[:, 1:3] for t in tr_s])
+    print(f"3. {surrogate.training.get('method', 'surrogate')} against the expert on {a.n:,} valid Sobol scenarios "
+          f"(expert {te:.1f} s, surrogate {ts:.1f} s to simulate them)")
+    print(f"{'figure':<46} {'measured':>10} {'dissertation':>13}")
+    for name, value, paper in (("mode accuracy", f"{a.mode_accuracy:.1%}", "84-85%"),
+                               (f"path error (first {len(rows)} runs, m per step)", f"{perr:.1f}", "61-70 m"),
+                               ("boundary accuracy (regions)", f"{a.boundary_accuracy:.1%}", "86.8%"),
+                               ("surrogate pairs the expert straddles", f"{a.straddled:.1%}", "-"),
+                               ("distance error (unit cube)", f"{a.distance_error:.4f}", "0.0096"),
+                               ("mismatches next to a boundary", f"{a.mismatches_near_boundary:.1%}", "95%")):
+        print(f"{name:<46} {value:>10} {paper:>13}")
+    print(f"   boundary pairs: surrogate {a.surrogate_pairs:,}, expert {a.system_pairs:,}")
+    print("   confusion (rows: expert mode, columns: surrogate mode)")
+    print("        " + "".join(f"{m:>7}" for m in MODE_NAMES))
+    for k, m in enumerate(MODE_NAMES):
+        print(f"   {m:>4} " + "".join(f"{v:>7}" for v in a.confusion[k]))
+    print()
+
+
+def workflow(mission, surrogate: Surrogate, budget: int, confirm: int, pairs: int, seed: int) -> None:
+    cfg_e = GenerateConfig(budget=budget, pairs=pairs, seed=seed, dithers=0)
+    cfg_s = GenerateConfig(budget=budget, pairs=pairs, seed=seed, dithers=0, surrogate=surrogate, confirm_runs=confirm)
+    t0 = time.perf_counter()
+    a_e = analyse(mission, search_mission(mission, cfg_e))
+    te = time.perf_counter() - t0
+    t0 = time.perf_counter()
+    a_s = analyse(mission, search_mission(mission, cfg_s), surrogate)
+    candidates = select_pairs(a_s, confirm // 2)
+    confirmed, runs = confirm_with_expert(mission, a_s, candidates, len(candidates))
+    ts = time.perf_counter() - t0
+    expert_types = {tuple(sorted(t["elements"])) for t in a_e.boundary_types}
+    confirmed_types = {tuple(sorted(p["elements"])) for p in confirmed}
+    found = sum(t in expert_types for t in confirmed_types)
+    train = int(surrogate.training.get("runs", 0))
+    print(f"4. Workflow (section 6.2.3): S-NDV search of {budget:,} runs on the expert, and on the surrogate "
+          f"followed by {confirm} expert runs on its best {len(candidates)} candidate pairs")
+    print(f"{'':<34} {'expert runs':>11} {'wall (s)':>9} {'boundary pairs':>15}")
+    print(f"{'expert-only search':<34} {budget:>11,} {te:>9.1f} {len(a_e.tree.pairs()[0]):>15,}")
+    print(f"{'surrogate search + confirmation':<34} {train + runs:>11,} {ts:>9.1f} "
+          f"{str(len(confirmed)) + ' confirmed of ' + str(len(candidates)):>15}")
+    print(f"   expert runs saved: {budget / (train + runs):.0f}x ({budget:,} against {train} training + {runs} "
+          f"confirmation); confirmed sub-boundary types the expert-only search also found: "
+          f"{found} of {len(confirmed_types)}\n")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--runs", type=int, default=75, help="expert-annotated runs per learner")
+    ap.add_argument("--per", type=int, default=5, help="runs per update")
+    ap.add_argument("--epochs", type=int, default=30)
+    ap.add_argument("--mixing", type=float, default=0.5, help="DAgger's beta = mixing**iteration")
+    ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
+    ap.add_argument("--track", type=int, default=256, help="Sobol scenarios tracking accuracy during training")
+    ap.add_argument("--validation", type=int, default=5000)
+    ap.add_argument("--paths", type=int, default=500, help="validation runs whose paths are compared")
+    ap.add_argument("--budget", type=int, default=6000, help="search budget of section 4 (the paper: 6,000)")
+    ap.add_argument("--confirm", type=int, default=100)
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--save", type=Path, help="save the Q-DAgger(50) surrogate here (.npz)")
+    ap.add_argument("--load", type=Path, help="skip training: use this surrogate for tables 1, 3 and 4")
+    ap.add_argument("--quick", action="store_true", help="small settings for a smoke run")
+    args = ap.parse_args()
+    if args.quick:
+        args.runs, args.track, args.validation, args.paths, args.budget, args.confirm = 20, 64, 500, 50, 1000, 20
+        args.epochs, args.methods = 10, ["dagger", "qdagger50"]
+    mission = sim.load_mission(MISSION)
+    if args.load is not None:
+        main_surrogate = Surrogate.load(args.load, mission)
+    else:
+        trained = learners(mission, args.methods, args.runs, args.per, args.epochs, args.track, args.seed,
+                           args.mixing)
+        main_surrogate = trained.get("qdagger50", next(iter(trained.values())))[0]
+        if args.save is not None:
+            main_surrogate.save(args.save)
+    decision_time(mission, main_surrogate)
+    validation(mission, main_surrogate, args.validation, args.paths, args.seed)
+    workflow(mission, main_surrogate, args.budget, args.confirm, 5, args.seed)
+
+
+if __name__ == "__main__":
+    main()
