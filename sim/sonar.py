@@ -58,17 +58,16 @@ BEAMS_PER_MESSAGE = 72
 
 
 def _ray_hits(px, py, bearing, ax, ay, ex, ey) -> np.ndarray:
-    """Distance along rays (P, B) from (px, py) to segments (P, E) a + s e; inf where missed."""
-    dx, dy = np.sin(bearing)[:, :, None], np.cos(bearing)[:, :, None]  # (P, B, 1)
-    wx, wy = (ax - px[:, None])[:, None, :], (ay - py[:, None])[:, None, :]  # (P, 1, E)
-    ex, ey = ex[:, None, :], ey[:, None, :]
+    """Distance along rays (M,) from (px, py) to the first of segments (M, E) a + s e; inf where missed."""
+    dx, dy = np.sin(bearing)[:, None], np.cos(bearing)[:, None]  # (M, 1)
+    wx, wy = ax - px[:, None], ay - py[:, None]  # (M, E)
     den = dx * ey - dy * ex
     ok = np.abs(den) > 1e-12
     den = np.where(ok, den, 1.0)
     t = (wx * ey - wy * ex) / den
     s = (wx * dy - wy * dx) / den
     hit = ok & (t >= 0.0) & (s >= 0.0) & (s <= 1.0)
-    return np.where(hit, t, np.inf).min(axis=2)
+    return np.where(hit, t, np.inf).min(axis=1)
 
 
 def scan(x: np.ndarray, y: np.ndarray, heading: np.ndarray, obstacles, barriers: np.ndarray, range_m: float,
@@ -97,14 +96,27 @@ def scan(x: np.ndarray, y: np.ndarray, heading: np.ndarray, obstacles, barriers:
         ex = np.roll(ax, -1, axis=-1) - ax
         ey = np.roll(ay, -1, axis=-1) - ay
         shapes.append((rect_signed_distance(x, y, barriers), ax, ay, ex, ey))
+    step = 2.0 * np.pi / beams
     for d, ax, ay, ex, ey in shapes:
         inside |= np.any(d <= 0, axis=1)
         rows, ks = np.nonzero((d <= range_m) & (d > 0))
         if rows.size == 0:
             continue
-        bearing = heading[rows, None] + rel[None, :]
-        hits = _ray_hits(x[rows], y[rows], bearing, ax[rows, ks], ay[rows, ks], ex[rows, ks], ey[rows, ks])
-        np.minimum.at(out, rows, hits)
+        # only the beams that can meet the shape: within its angular radius of its centre's bearing
+        vx, vy = ax[rows, ks], ay[rows, ks]  # (P, E) vertices
+        cx, cy = vx.mean(axis=1), vy.mean(axis=1)
+        radius = np.hypot(vx - cx[:, None], vy - cy[:, None]).max(axis=1)
+        dist = np.hypot(cx - x[rows], cy - y[rows])
+        half = np.where(dist > radius, np.arcsin(np.clip(radius / np.maximum(dist, 1e-9), 0.0, 1.0)) + 2 * step,
+                        np.pi)  # inside the shape's circumcircle it may fill any beam
+        off = np.mod(np.arctan2(cx - x[rows], cy - y[rows]) - heading[rows], 2 * np.pi)  # centre, from the bow
+        gap = np.abs(np.mod(rel[None, :] - off[:, None] + np.pi, 2 * np.pi) - np.pi)  # (P, beams)
+        pi, bi = np.nonzero(gap <= half[:, None])
+        if pi.size == 0:
+            continue
+        hits = _ray_hits(x[rows[pi]], y[rows[pi]], heading[rows[pi]] + rel[bi], vx[pi], vy[pi],
+                         ex[rows[pi], ks[pi]], ey[rows[pi], ks[pi]])
+        np.minimum.at(out, (rows[pi], bi), hits)
     cm = np.where(out <= range_m, np.round(out * 100.0), np.floor(range_m * 100.0) + 1.0)
     cm[inside] = 0.0
     return cm / 100.0  # as a receiver of OBSTACLE_DISTANCE's uint16 centimetres computes it

@@ -285,3 +285,35 @@ def test_a_decision_does_not_depend_on_the_batch_it_is_in():
         part = policy(F[rows], quiet=slice(7, 7 + SPEC.beams))
         np.testing.assert_array_equal(part, full[rows])
     np.testing.assert_allclose(policy(F), full, rtol=1e-5, atol=1e-6)
+
+
+def test_the_scan_matches_a_brute_force_ray_cast():
+    from sim.geometry import triangle_vertices
+
+    rng = np.random.default_rng(4)
+    n = 60
+    x, y, h = rng.uniform(-120, 120, n), rng.uniform(-120, 120, n), rng.uniform(-np.pi, np.pi, n)
+    tri = triangle_vertices(rng.uniform(-90, 90, (n, 2)), rng.uniform(-90, 90, (n, 2)), 80.0)
+    bar = np.tile(np.array([[[-30.0, 30.0, 60.0, 80.0]]]), (n, 1, 1))
+    got = scan(x, y, h, tri, bar, 100.0)
+    x0, x1, y0, y1 = -30.0, 30.0, 60.0, 80.0
+    rect = np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
+    for i in range(n):
+        polys = [tri[i, 0], tri[i, 1], rect]
+        segs = [(p[k], p[(k + 1) % len(p)]) for p in polys for k in range(len(p))]
+        for b in range(0, 360, 7):
+            d = np.array([np.sin(h[i] + np.deg2rad(b)), np.cos(h[i] + np.deg2rad(b))])
+            best = np.inf
+            for a, c in segs:
+                e = c - a
+                den = d[0] * e[1] - d[1] * e[0]
+                if abs(den) < 1e-12:
+                    continue
+                w = a - np.array([x[i], y[i]])
+                t, s = (w[0] * e[1] - w[1] * e[0]) / den, (w[0] * d[1] - w[1] * d[0]) / den
+                if t >= 0 and 0 <= s <= 1:
+                    best = min(best, t)
+            expect = np.round(best * 100) / 100 if best <= 100 else 100.01
+            if got[i].max() == 0:  # inside an obstacle
+                continue
+            assert got[i, b] == pytest.approx(expect, abs=0.011), (i, b)
