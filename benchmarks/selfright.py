@@ -3,12 +3,14 @@
 Three parts, each printed as a table:
 
 1. Figure 5.3 — the 1-, 2- and 3-DOF robots of Figure 5.2 (1-DOF on a 20° slope, the
-   others flat): a grid search (every hull face of every joint state on a grid) against
-   the manifold-constrained adaptive search (Algorithms 6-7).  Per method: queries, graph
+   others flat): a grid search (every hull face of every joint state on a grid: 1° for
+   1 and 2 DOF; 12° for 3 DOF, because a 3° grid is 1.45 million hulls, about 25 minutes
+   here, and its 10^7 states are beyond the Gabriel graph's memory) against the
+   manifold-constrained adaptive search (Algorithms 6-7).  Per method: queries, graph
    size, how much of the grid's graph the adaptive one reproduces (nodes and transitions
-   matched through 1,500+ probe states; nodes under 1 % of the probes ignored), the share
-   of probe states whose self-rightability agrees, the mean boundary-pair length and the
-   mean transition energy of the graph's edges.
+   matched through the hull faces of 500 random joint states, "probe states"; nodes
+   under 1 % of the probes ignored), the share of probe states whose self-rightability
+   agrees, the mean boundary-pair length and the mean transition energy of the edges.
 2. Table 5.1 — building the graph from the adaptive sample sets: Gabriel-graph
    clustering (Algorithm 8) against PRM-style connection, in which every pair of stable
    states within the same ``d_max`` is checked with a linear local planner (stability
@@ -20,7 +22,7 @@ Three parts, each printed as a table:
    self-rightable fraction, the mean transition energy to the home state, and the
    queries a 5° grid would need (mean hull faces × grid points, as in section 5.5.2).
 
-Run:  python benchmarks/selfright.py [--quick]
+Run:  python benchmarks/selfright.py [--quick]     (full: about 10 minutes on 2 cores; quick: 2-3)
 """
 
 from __future__ import annotations
@@ -40,11 +42,9 @@ ROBOTS = "examples/robots"
 
 def fig53(quick: bool, seed: int) -> list:
     # robot, slope, grid resolution (deg), adaptive options
-    cases = [("1dof", 20.0, 1.0, dict(budget=3000, r_min_deg=1.0, r_max_deg=10.0)),
-             ("2dof", 0.0, 3.0 if quick else 1.0, dict(budget=6000, r_min_deg=1.0, r_max_deg=10.0)),
-             ("3dof", 0.0, 9.0 if quick else 6.0, dict(budget=12000, r_min_deg=2.0, r_max_deg=15.0))]
-    if quick:
-        cases = [(n, s, r, {**o, "budget": o["budget"] // 3}) for n, s, r, o in cases]
+    cases = [("1dof", 20.0, 1.0, dict(budget=600, r_min_deg=1.0, r_max_deg=10.0)),
+             ("2dof", 0.0, 3.0 if quick else 1.0, dict(budget=2000 if quick else 5000, r_min_deg=1.0, r_max_deg=10.0)),
+             ("3dof", 0.0, 18.0 if quick else 12.0, dict(budget=3000 if quick else 10000, r_min_deg=2.0, r_max_deg=15.0))]
     print("1. Figure 5.3: grid search against adaptive manifold sampling (graphs compared on probe states)")
     head = (f"{'robot':>5} {'method':>9} {'queries':>8} {'time s':>7} {'nodes':>5} {'edges':>5} {'matched n/e':>11} "
             f"{'rightable':>9} {'agree':>6} {'pair deg':>8} {'energy J':>8} {'graph s':>7}")
@@ -117,7 +117,7 @@ def prm_components(study, result, step_deg: float = 1.0, max_edges: int | None =
 
 
 def table51(studies, quick: bool, seed: int) -> None:
-    cap = 3000 if quick else 20000
+    cap = 1000 if quick else 2500
     print("\n2. Table 5.1: building the graph from the adaptive sample sets: Gabriel clustering against PRM edge checking")
     print(f"{'robot':>5} {'known states':>12} {'Gabriel s':>9} {'nodes':>5} {'PRM s':>9} {'PRM edges':>10} "
           f"{'evaluations':>11} {'PRM regions':>11} {'PRM/Gabriel':>11}")
@@ -137,12 +137,12 @@ def table51(studies, quick: bool, seed: int) -> None:
 def fig56(quick: bool, seed: int) -> None:
     robot = load_robot(f"{ROBOTS}/5dof.toml")
     order = ["shoulder_pitch", "shoulder_yaw", "elbow", "wrist", "jaw"]
-    budget = 1500 if quick else 5000
+    budget = 1000 if quick else 4000
     print(f"\n3. Figure 5.6: 5-DOF manipulator robot, flat ground, active joints added one at a time "
           f"(adaptive: r_min 3°, r_max 20°, at most {budget:,} queries)")
     print(f"{'active':>6} {'joints':<52} {'queries':>8} {'stopped by':>10} {'time s':>7} {'nodes':>5} "
           f"{'rightable':>9} {'energy to home J':>16} {'5° grid (est.)':>14}")
-    for m in range(1, 6 if not quick else 4):
+    for m in range(1, 6):
         r = robot.lock({n: 0.0 for n in order[m:]})
         study = adaptive_study(r, 0.0, budget, seed=seed, r_min_deg=3.0, r_max_deg=20.0, batch_size=100)
         res = analyse(study, probes=probe_states(r, 0.0, 150 if quick else 300, seed + 1))

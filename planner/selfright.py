@@ -177,19 +177,20 @@ def probe_states(robot: Robot, slope: float, n: int, seed: int) -> np.ndarray:
 
 
 def default_max_edge(study: SelfRightStudy) -> float:
-    """Gabriel ``d_max`` (embedded distance): 2.5 grid steps, or 2 interior resolutions for an adaptive study."""
+    """Gabriel ``d_max`` (embedded distance): 2.5 grid steps (faces tilt with the joints, so neighbours on one face can be more than a step apart), or 2 interior resolutions for an adaptive study."""
     if study.resolution is not None:
         return 2.5 * study.resolution
     return 2.0 * np.radians(study.extra.get("r_max_deg", 10.0))
 
 
-def analyse(study: SelfRightStudy, *, max_edge: float | None = None, probes: np.ndarray | None = None) -> dict:
+def analyse(study: SelfRightStudy, *, max_edge: float | None = None, probes: np.ndarray | None = None,
+            label_radius: float | None = None) -> dict:
     """Transition graph and the chapter's figures of merit for one study."""
     max_edge = default_max_edge(study) if max_edge is None else max_edge
     t0 = time.perf_counter()
     known = study.known_states()
     graph = transition_graph(study.embed(study.X), study.stable, study.embed(study.rest), study.energy,
-                             study.embed(study.extra_states()), max_edge=max_edge)
+                             study.embed(study.extra_states()), max_edge=max_edge, label_radius=label_radius)
     seconds = time.perf_counter() - t0
     home = int(graph.node_of(study.embed(home_state(study)[None]))[0])
     cost, _ = graph.costs_to(home) if home >= 0 else (np.full(graph.n_nodes, np.inf), None)

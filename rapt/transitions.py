@@ -156,7 +156,8 @@ class TransitionGraph:
 
 
 def transition_graph(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, energy: np.ndarray,
-                     extra: np.ndarray | None = None, *, max_edge: float) -> TransitionGraph:
+                     extra: np.ndarray | None = None, *, max_edge: float,
+                     label_radius: float | None = None) -> TransitionGraph:
     """Build Algorithm 8's transition graph.
 
     Parameters
@@ -167,6 +168,10 @@ def transition_graph(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, energy
     energy: (N,) energy lost between start and rest.
     extra: (M, d) further states known to lie on the manifolds (e.g. the other hull faces).
     max_edge: the Gabriel graph's maximum edge length ``d_max``.
+    label_radius: extra states farther than this from every evaluated state are left out
+        (None: the paper's rule, every extra state takes its nearest neighbour's label).
+        Sparse data near a crossing of two manifolds otherwise labels one manifold with the
+        other's stability, which can bridge separate stable regions.
     """
     X = np.asarray(X, dtype=float)
     N, d = X.shape if X.ndim == 2 else (-1, -1)
@@ -178,6 +183,9 @@ def transition_graph(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, energy
     if stable.shape != (N,) or energy.shape != (N,):
         raise ValueError(f"stable, energy: expected one value per state ({N}), got {stable.shape}, {energy.shape}")
     extra = np.empty((0, d)) if extra is None else np.asarray(extra, dtype=float).reshape(-1, d)
+    if len(extra) and label_radius is not None:
+        dist, _ = cKDTree(X).query(extra, k=1)
+        extra = extra[dist <= label_radius]
     settled = np.all(np.isfinite(rest), axis=1)
     rest_idx = np.flatnonzero(settled)
     points = np.concatenate([X, rest[rest_idx], extra])
