@@ -668,5 +668,11 @@ def log_cmd(
         session.close()
 
 
+# Chapter 5's second system under test: self-righting ground robots (planner/selfright.py).
+from planner.selfright import selfright_command  # noqa: E402
+
+app.command("selfright")(selfright_command)
+
+
 if __name__ == "__main__":  # pragma: no cover
     sys.exit(app())

@@ -112,3 +112,14 @@ def test_each_piece_runs_as_its_own_process_and_stops_cleanly(tmp_path):
     north = [m["x"] for t, _, m in rows if t == "rapt/uuv1/mavlink/LOCAL_POSITION_NED"]
     commands = [m for t, _, m in rows if t == "rapt/uuv1/command/autonomy"]
     assert len(commands) > 50 and max(north) - min(north) > 50  # the autonomy flew the vehicle
+
+
+def test_selfright_is_a_rapt_plan_command_with_one_line_errors(tmp_path):
+    bad = tmp_path / "robot.toml"
+    bad.write_text("[robot]\nname = 'x'\n")
+    result = runner.invoke(app, ["selfright", str(bad), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2 and "Traceback" not in result.output
+    assert len([line for line in result.output.splitlines() if line.strip()]) == 1
+    robot = str(Path(__file__).resolve().parents[1] / "examples" / "robots" / "1dof.toml")
+    result = runner.invoke(app, ["selfright", robot, "--out", str(tmp_path / "out"), "--slope", "95"])
+    assert result.exit_code == 2 and "--slope" in result.output
