@@ -20,6 +20,8 @@ import numpy as np
 import typer
 from rich.console import Console
 
+from scipy.spatial import cKDTree
+
 from rapt.manifold import ManifoldSampler, angular_embedding, manifold_search
 from rapt.transitions import TransitionGraph, transition_graph
 from sim.robots import Robot, RobotFileError, StabilityFunction, load_robot
@@ -177,10 +179,24 @@ def probe_states(robot: Robot, slope: float, n: int, seed: int) -> np.ndarray:
 
 
 def default_max_edge(study: SelfRightStudy) -> float:
-    """Gabriel ``d_max`` (embedded distance): 2.5 grid steps (faces tilt with the joints, so neighbours on one face can be more than a step apart), or 2 interior resolutions for an adaptive study."""
+    """Gabriel ``d_max`` (embedded distance).
+
+    A grid: 2.5 steps (faces tilt with the joints, so neighbours on one face can be more
+    than a step apart).  An adaptive study: twice the interior resolution, widened to twice
+    the median distance from a known state to its (2m + 2)-th nearest (m joints) when the
+    data are sparser than that — a budget-limited search in several joints otherwise falls
+    apart into hundreds of one-state regions — but at most four interior resolutions, so
+    that nearly parallel faces stay apart.
+    """
     if study.resolution is not None:
         return 2.5 * study.resolution
-    return 2.0 * np.radians(study.extra.get("r_max_deg", 10.0))
+    r_max = np.radians(study.extra.get("r_max_deg", 10.0))
+    E = study.embed(study.known_states())
+    k = min(len(E) - 1, 2 * study.n_free + 2)
+    if k < 1:
+        return 2.0 * r_max
+    d, _ = cKDTree(E).query(E, k=k + 1)
+    return float(min(max(2.0 * r_max, 2.0 * np.median(d[:, -1])), 4.0 * r_max))
 
 
 def analyse(study: SelfRightStudy, *, max_edge: float | None = None, probes: np.ndarray | None = None,
@@ -412,7 +428,7 @@ def selfright_command(
     r_min: Annotated[float, typer.Option("--r-min", help="Boundary resolution, degrees (search ends below it).")] = 1.0,
     r_max: Annotated[float, typer.Option("--r-max", help="Interior resolution, degrees.")] = 10.0,
     max_edge: Annotated[Optional[float], typer.Option("--max-edge", help="Gabriel graph's longest edge, degrees "
-                                                      "(default: 2 x --r-max).")] = None,
+                                                      "(default: 2 to 4 x --r-max, by sample density).")] = None,
 ) -> None:
     """Self-righting transition graph of a ground robot by manifold-constrained adaptive sampling (chapter 5)."""
     try:
