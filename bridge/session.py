@@ -27,7 +27,7 @@ DEFAULT_HUB = "tcp/127.0.0.1:7447"
 
 #: How long a client waits for its hub by default. Processes of one vehicle start in any
 #: order (a systemd unit, a launch script, a test); Zenoh's client default (0) fails at once.
-CONNECT_TIMEOUT_S = 10.0
+CONNECT_TIMEOUT_S = 30.0
 
 _LOOPBACK_HOSTS = ("127.", "[::1]", "localhost")
 
