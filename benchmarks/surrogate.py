@@ -31,6 +31,7 @@ from scipy.stats import qmc
 
 import sim
 from planner.generate import GenerateConfig, analyse, confirm_with_expert, search_mission, select_pairs
+from planner.surrogate import mode_agreement
 from rapt.agreement import agreement, path_error
 from rapt.imitation import imitate
 from sim.autonomy import Autonomy
@@ -80,7 +81,7 @@ def decision_time(mission, surrogate: Surrogate, repeats: int = 5) -> None:
     batch_e, batch_l = Autonomy(scen), PolicyAutonomy(scen, surrogate.policy, surrogate.spec)
     batch_l.step(obs, mission.dt)
     F = batch_l.last_features
-    quiet = slice(7, 7 + surrogate.spec.beams)
+    quiet = surrogate.spec.sonar
     rows = [
         ("expert autonomy", "1 vehicle a call x 100", best(lambda: [a.step(o, mission.dt) for a, (_, o) in
                                                                    zip(experts, singles)])),
@@ -128,10 +129,8 @@ def learners(mission, methods: list[str], runs: int, per: int, epochs: int, trac
         curve = []
 
         def on_iteration(rec, policy):
-            mine = sim.simulate(mission, Xt, surrogate=Surrogate.for_mission(mission, policy))
-            ok = mine.valid & expert.valid
-            curve.append((rec.runs, rec.samples, rec.fit_s, rec.rollout_s, float(np.mean(mine.modes[ok] ==
-                                                                                        expert.modes[ok]))))
+            accuracy = mode_agreement(mission, Surrogate.for_mission(mission, policy), Xt, expert)
+            curve.append((rec.runs, rec.samples, rec.fit_s, rec.rollout_s, accuracy))
             print(f"   {name:<10} runs {rec.runs:>3} samples {rec.samples:>6,} fit {rec.fit_s:6.1f} s "
                   f"accuracy {curve[-1][-1]:.1%}", flush=True)
 

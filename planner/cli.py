@@ -14,23 +14,15 @@ from pathlib import Path
 from typing import Annotated, Optional
 
 import typer
-from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 import rapt
+from planner.console import err, fail, out
 from rapt.metrics import quality_table
 from rapt.testfunctions import REFERENCE_SETTINGS, SYSTEMS, get_system, search_output_types
 
 app = typer.Typer(no_args_is_help=True, add_completion=False, help=__doc__.splitlines()[0])
-err = Console(stderr=True)
-out = Console()
-
-
-def fail(message: str) -> None:
-    """One-line error, exit code 2, no traceback."""
-    err.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True)
-    raise typer.Exit(code=2)
 
 
 def run_search(label: str, fn, bounds, budget: int, **kwargs):
@@ -171,10 +163,8 @@ def _mission_and_scenario(mission_file: Path, scenario: str):
     import sim
     from planner.scenarios import resolve_scenario
 
-    if not mission_file.is_file():
-        fail(f"MISSION_FILE: {mission_file} does not exist; give the path of a mission TOML file")
+    mission = _load_mission(mission_file)
     try:
-        mission = sim.load_mission(mission_file)
         u, sid = resolve_scenario(mission, scenario)
         scen = sim.scenario.make_scenarios(mission, u[None, :])
     except ValueError as exc:
@@ -432,11 +422,10 @@ def surrogate_cmd(
     seed: Annotated[int, typer.Option(help="Seed of every random choice.")] = 0,
 ) -> None:
     """Train a surrogate of a mission's back-seat autonomy by imitation learning (chapter 6)."""
-    import numpy as np
     from scipy.stats import qmc
 
     import sim
-    from planner.surrogate import train_surrogate
+    from planner.surrogate import mode_agreement, train_surrogate
 
     mission = _load_mission(mission_file)
     if out_file.suffix != ".npz":
@@ -454,9 +443,7 @@ def surrogate_cmd(
         if validate:
             from sim.imitation.surrogate import Surrogate
 
-            mine = sim.simulate(mission, Xv, surrogate=Surrogate.for_mission(mission, policy))
-            ok = mine.valid & expert.valid
-            row.append(f"{np.mean(mine.modes[ok] == expert.modes[ok]):.1%}")
+            row.append(f"{mode_agreement(mission, Surrogate.for_mission(mission, policy), Xv, expert):.1%}")
         table.add_row(*row)
         err.print(" ".join(row), highlight=False)
 

@@ -438,7 +438,7 @@ def generate(mission: Mission, mission_path: Path, out_dir: Path, cfg: GenerateC
         clock.lap("refinement")
     if sur is not None:
         candidates = len(pairs)
-        pairs, confirm_runs = confirm_with_expert(mission, a, pairs, cfg.pairs)
+        pairs, confirm_spent = confirm_with_expert(mission, a, pairs, cfg.pairs)
         if progress is not None:
             progress("confirm", len(pairs), candidates, f"{len(pairs)} of {candidates} candidate pairs confirmed")
         clock.lap("confirmation")
@@ -505,7 +505,7 @@ def generate(mission: Mission, mission_path: Path, out_dir: Path, cfg: GenerateC
                   "boundary_types": a.boundary_types[:30],
                   **({"surrogate": {"file": cfg.surrogate_file, "method": str(sur.training.get("method", "")),
                                     "expert_runs": {"training": int(sur.training.get("runs", 0)),
-                                                    "confirmation": confirm_runs},
+                                                    "confirmation": confirm_spent},
                                     "candidates": candidates, "confirmed": len(pairs)}} if sur is not None else {})},
         "sensitivity": a.sensitivity,
         "pairs": plan_pairs,

@@ -18,20 +18,15 @@ from typing import Annotated, Optional
 
 import numpy as np
 import typer
-from rich.console import Console
-
 from scipy.spatial import cKDTree
 
+from planner.console import fail, out as console
 from rapt.manifold import ManifoldSampler, angular_embedding, manifold_search
 from rapt.transitions import TransitionGraph, transition_graph
 from sim.robots import Robot, RobotFileError, StabilityFunction, load_robot
 
 __all__ = ["SelfRightStudy", "space_bounds", "adaptive_study", "grid_study", "analyse", "write_outputs",
            "selfright_command"]
-
-err = Console(stderr=True)
-console = Console()
-
 
 def space_bounds(robot: Robot, planar: bool) -> np.ndarray:
     """Radian ranges of ``[θ, φ]``: joint ranges, then pitch (planar) or roll and pitch."""
@@ -382,7 +377,7 @@ def report_text(study: SelfRightStudy, doc: dict) -> str:
              f"(Gabriel d_max {doc['max_edge_deg']:g}°)",
              f"- home node (upright, home joint angles): {doc['home_node']}",
              f"- self-rightable fraction of states: {doc['self_rightable_fraction']:.1%}",
-             f"- mean transition energy to reach home: "
+             "- mean transition energy to reach home: "
              + ("n/a" if doc["mean_energy_to_home_J"] is None else f"{doc['mean_energy_to_home_J']:.2f} J"), "",
              "![state plot](states.png)", "", "## Nodes", "",
              "| node | states | can right | energy to home (J) | path (edges) | representative joints (deg) | body (deg) |",
@@ -412,12 +407,6 @@ def write_outputs(study: SelfRightStudy, result: dict, out_dir: Path) -> dict:
 
 
 # -- command ------------------------------------------------------------------------------------
-def fail(message: str) -> None:
-    """One-line error, exit code 2, no traceback (same style as planner.cli.fail)."""
-    err.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True)
-    raise typer.Exit(code=2)
-
-
 def selfright_command(
     robot_file: Annotated[Path, typer.Argument(metavar="ROBOT.toml", help="Robot file (TOML), e.g. examples/robots/1dof.toml.")],
     out: Annotated[Path, typer.Option("--out", help="Directory for graph.json, graph.graphml, states.png, report.md.")],

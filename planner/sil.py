@@ -140,6 +140,7 @@ def run_sil(mission: Mission, u, *, vehicle: str = "uuv1", log_path: str | Path 
             raise RuntimeError("front-seat: no HEARTBEAT on the MAVLink link within 10 s")
         if surrogate is not None:
             session.put(keys.active(vehicle), SURROGATE_SOURCE)
+            deadline = time.monotonic() + 10
             while bridge.active != SURROGATE_SOURCE and time.monotonic() < deadline:
                 time.sleep(0.01)
             if bridge.active != SURROGATE_SOURCE:

@@ -14,8 +14,9 @@ is None — and returns, per run, the features seen and the expert's action at e
 
 The policy is the multilayer perceptron of Table 6.1 (sigmoid hidden layers 150 and 50,
 linear output, mean squared error, Adam), trained with scikit-learn and evaluated by
-:class:`MLPPolicy` in plain numpy float32, so a decision inside a vectorised simulator is
-three matrix products whose result for a row is exact, hence batch-independent.  PolicyUpdate continues from the previous weights (warm start).
+:class:`MLPPolicy` in numpy on exact grids, so a decision inside a vectorised simulator is
+three matrix products whose result for a row never depends on the batch around it.
+PolicyUpdate continues from the previous weights (warm start).
 """
 
 from __future__ import annotations
@@ -28,6 +29,8 @@ from typing import Callable, Sequence
 import numpy as np
 from scipy.special import expit
 
+__all__ = ["MLPPolicy", "Trajectory", "IterationRecord", "ImitationResult", "imitate", "METHODS", "HIDDEN"]
+
 #: Inputs and hidden activations are rounded to multiples of 2**-INPUT_BITS (see MLPPolicy.__call__).
 INPUT_BITS = 16
 
@@ -36,8 +39,6 @@ def _grid(a: np.ndarray, bits: int) -> np.ndarray:
     """``a`` rounded to multiples of 2**-bits (exactly, in float64)."""
     return np.round(np.asarray(a, np.float64) * 2.0 ** bits) / 2.0 ** bits
 
-
-__all__ = ["MLPPolicy", "Trajectory", "IterationRecord", "ImitationResult", "imitate", "METHODS", "HIDDEN"]
 
 METHODS = ("supervised", "dagger", "qdagger")
 #: Hidden layers of Table 6.1 (input is the feature vector, output the action).

@@ -124,7 +124,7 @@ def test_bad_learner_settings_are_named():
 def _steering_policy():
     """A hand-made linear policy: ahead at 80% of max speed, turning away from sonar returns ahead."""
     W = np.zeros((SPEC.size, 2), np.float32)
-    sonar = 7 + np.arange(SPEC.beams)
+    sonar = np.arange(SPEC.size)[SPEC.sonar]
     ahead_stbd, ahead_port = sonar[1:30], sonar[331:360]
     W[ahead_stbd, 1] = 0.05  # a return to starboard (feature < 1) lowers the starboard command: turn to port
     W[ahead_port, 1] = -0.05
@@ -279,10 +279,10 @@ def test_a_decision_does_not_depend_on_the_batch_it_is_in():
                        [rng.normal(size=150).astype(np.float32), rng.normal(size=50).astype(np.float32),
                         rng.normal(size=2).astype(np.float32)])
     F = rng.uniform(-1, 1, (300, SPEC.size)).astype(np.float32)
-    F[::3, 7:7 + SPEC.beams] = 1.0  # open water on a third of the rows
-    full = policy(F, quiet=slice(7, 7 + SPEC.beams))
+    F[::3, SPEC.sonar] = 1.0  # open water on a third of the rows
+    full = policy(F, quiet=SPEC.sonar)
     for rows in (np.arange(1), np.arange(5, 6), np.arange(17, 120), rng.permutation(300)[:77]):
-        part = policy(F[rows], quiet=slice(7, 7 + SPEC.beams))
+        part = policy(F[rows], quiet=SPEC.sonar)
         np.testing.assert_array_equal(part, full[rows])
     np.testing.assert_allclose(policy(F), full, rtol=1e-5, atol=1e-6)
 

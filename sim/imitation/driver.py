@@ -46,7 +46,7 @@ class PolicyAutonomy:
         target = waypoint_target(m, self.wp_next)
         F = features(self.spec, m, obs.t, obs.x, obs.y, obs.heading, obs.battery, obs.scan, target)
         self.last_features = F
-        action = self.policy(F, quiet=slice(7, 7 + self.spec.beams))  # open water: the scan reads +1
+        action = self.policy(F, quiet=self.spec.sonar)  # open water: the scan reads +1
         heading, speed = action_command(self.spec, obs.heading, action)
         rx, ry = m.recovery
         home = np.hypot(obs.x - rx, obs.y - ry)

@@ -55,6 +55,11 @@ class FeatureSpec:
     def size(self) -> int:
         return 1 + 6 + self.beams + 1
 
+    @property
+    def sonar(self) -> slice:
+        """The scan's columns (each reads +1 when its beam sees nothing)."""
+        return slice(7, 7 + self.beams)
+
     def names(self) -> list[str]:
         return (["fuel", "waypoint_fwd", "waypoint_stbd", "waypoint_distance", "recovery_fwd", "recovery_stbd",
                  "recovery_distance"] + [f"sonar_{b}" for b in range(self.beams)] + ["clock"])
@@ -118,7 +123,7 @@ def features(spec: FeatureSpec, mission: Mission, t: float, x: np.ndarray, y: np
         out[:, col] = np.where(on, fwd / near, 0.0)
         out[:, col + 1] = np.where(on, stbd / near, 0.0)
         out[:, col + 2] = np.where(on, np.clip(2.0 * dist / spec.map_scale_m - 1.0, -1.0, 1.0), 0.0)
-    out[:, 7:7 + spec.beams] = 2.0 * np.minimum(scan, spec.sonar_range_m) / spec.sonar_range_m - 1.0
+    out[:, spec.sonar] = 2.0 * np.minimum(scan, spec.sonar_range_m) / spec.sonar_range_m - 1.0
     out[:, -1] = np.clip(2.0 * t / spec.time_limit_s - 1.0, -1.0, 1.0)
     return out
 

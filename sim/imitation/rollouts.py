@@ -11,7 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from rapt.imitation import MLPPolicy, Trajectory
-from sim.autonomy import Autonomy
+from sim.autonomy import Autonomy, Command
 from sim.imitation.driver import PolicyAutonomy
 from sim.imitation.features import FeatureSpec, advance_waypoints, expert_action, features, waypoint_target
 from sim.mission import Mission
@@ -50,8 +50,8 @@ class MixedDriver(PolicyAutonomy):
         if self.beta <= 0.0:
             return mine
         obey = self.rng.random(mine.heading.shape[0]) < self.beta
-        return type(mine)(np.where(obey, theirs.heading, mine.heading), np.where(obey, theirs.speed, mine.speed),
-                          np.where(obey, theirs.surface, mine.surface))
+        return Command(np.where(obey, theirs.heading, mine.heading), np.where(obey, theirs.speed, mine.speed),
+                       np.where(obey, theirs.surface, mine.surface))
 
 
 def annotated_runs(mission: Mission, X: np.ndarray, spec: FeatureSpec, policy: MLPPolicy | None = None,
@@ -116,21 +116,18 @@ def draw_valid(mission: Mission, k: int, rng: np.random.Generator) -> np.ndarray
     raise ValueError(f"mission: fewer than {k} valid scenarios in {100 * max(2 * k, 8)} random draws")
 
 
-def make_rollout(mission: Mission, spec: FeatureSpec, seed: int = 0, stochastic: bool = False, log=None,
+def make_rollout(mission: Mission, spec: FeatureSpec, seed: int = 0, stochastic: bool = False,
                  mixing: float = 0.0):
     """A ``rollout(policy, k, iteration)`` for :func:`rapt.imitation.imitate` on random valid scenarios.
 
     Iteration ``i`` draws its scenarios from a generator seeded by ``(seed, i)``, so every
-    learner sees the same scenarios at the same iteration.  ``log`` (a list) collects the
-    scenarios and modes of every annotated run.  ``mixing`` p makes iteration i obey the
+    learner sees the same scenarios at the same iteration.  ``mixing`` p makes iteration i obey the
     expert on a share p**i of its steps (DAgger's decaying beta; 0: Algorithm 9 as written).
     """
     def rollout(policy, k, iteration):
         X = draw_valid(mission, k, np.random.default_rng([int(seed), int(iteration)]))
         beta = float(mixing) ** int(iteration) if mixing > 0 else 0.0
-        result, trajs = annotated_runs(mission, X, spec, policy, seed=seed + int(iteration),
-                                       stochastic=stochastic, beta=beta)
-        if log is not None:
-            log.append((X, result.modes))
+        _, trajs = annotated_runs(mission, X, spec, policy, seed=seed + int(iteration), stochastic=stochastic,
+                                  beta=beta)
         return trajs
     return rollout

@@ -69,7 +69,7 @@ class Surrogate:
         if path.suffix != ".npz":
             raise ValueError(f"path: a surrogate file ends in .npz, got {str(path)!r}")
         header = {"format": FORMAT, "mission": self.mission_name, "mission_sha": self.mission_sha,
-                  "features": self.spec.to_dict(), "feature_names": "see sim.imitation.features",
+                  "features": self.spec.to_dict(), "feature_names": self.spec.names(),
                   "training": self.training}
         arrays = self.policy.to_arrays()
         path.parent.mkdir(parents=True, exist_ok=True)
