@@ -62,6 +62,10 @@ class MLPPolicy:
     def n_features(self) -> int:
         return int(self.weights[0].shape[0])
 
+    @property
+    def n_outputs(self) -> int:
+        return int(self.weights[-1].shape[1])
+
     def __call__(self, F: np.ndarray, quiet: slice | None = None, quiet_value: float = 1.0) -> np.ndarray:
         """Actions for features ``F`` (n, features) in [-1, 1]; a row's action never depends on the other rows.
 

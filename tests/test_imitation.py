@@ -13,7 +13,10 @@ from rapt.imitation import MLPPolicy, Trajectory, imitate
 from sim.imitation.features import action_command, expert_action, feature_spec, features
 from sim.imitation.rollouts import annotated_runs
 from sim.imitation.surrogate import Surrogate
+from sim.scenario import make_scenarios
+from sim.simulate import observation
 from sim.sonar import scan
+from sim.world import World
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 IMITATION7 = sim.load_mission(EXAMPLES / "imitation7.toml")
@@ -67,8 +70,10 @@ def test_actions_round_trip_through_the_vehicle_frame():
     np.testing.assert_allclose(np.angle(np.exp(1j * (h2 - cmd))), 0, atol=1e-5)
     np.testing.assert_allclose(s2, speed, rtol=1e-5)
     # straight ahead at cruise is (cruise / max, 0); hard to starboard is positive y
-    np.testing.assert_allclose(expert_action(SPEC, [0.0], [0.0], [2.0]), [[2 / 3, 0.0]], atol=1e-7)
+    # straight ahead at cruise, still pursuing the waypoint, is (cruise / max, 0, -1)
+    np.testing.assert_allclose(expert_action(SPEC, [0.0], [0.0], [2.0]), [[2 / 3, 0.0, -1.0]], atol=1e-7)
     assert expert_action(SPEC, [0.0], [np.pi / 2], [3.0])[0, 1] == pytest.approx(1.0)
+    assert expert_action(SPEC, [0.0, 0.0], [0.0, 0.0], [1.0, 1.0], home=[True, False])[:, 2].tolist() == [1, -1]
 
 
 # -- the learners on a tiny problem ------------------------------------------------------------------
@@ -121,14 +126,17 @@ def test_bad_learner_settings_are_named():
 
 
 # -- surrogate files --------------------------------------------------------------------------------
-def _steering_policy():
-    """A hand-made linear policy: ahead at 80% of max speed, turning away from sonar returns ahead."""
-    W = np.zeros((SPEC.size, 2), np.float32)
+def _steering_policy(home_below: float = 0.15):
+    """A hand-made linear policy: ahead at 80% of max speed, turning away from sonar returns ahead,
+    homing on the waypoint, and giving it up when the charge is below ``home_below``."""
+    W = np.zeros((SPEC.size, 3), np.float32)
     sonar = np.arange(SPEC.size)[SPEC.sonar]
     ahead_stbd, ahead_port = sonar[1:30], sonar[331:360]
     W[ahead_stbd, 1] = 0.05  # a return to starboard (feature < 1) lowers the starboard command: turn to port
     W[ahead_port, 1] = -0.05
-    b = np.array([0.8, -0.05 * 29 + 0.05 * 29], np.float32)
+    W[2, 1] = W[5, 1] = 0.5  # steer towards the waypoint (or, with none pending, the recovery point)
+    W[0, 2] = -10.0  # the goal output is positive below the charge home_below (fuel feature 2 b - 1)
+    b = np.array([0.8, -0.05 * 29 + 0.05 * 29, 10.0 * (2 * home_below - 1)], np.float32)
     return MLPPolicy([W], [b], "logistic")
 
 
@@ -166,6 +174,40 @@ def test_a_surrogate_flies_the_batch_simulator_and_the_expert_annotates_it():
     # the expert's labels are not the policy's actions: the policy flies straight on, the expert steers
     t = trajs[int(np.flatnonzero(result.valid)[0])]
     assert np.abs(t.expert - sur.policy(t.features)).max() > 0.1
+
+
+def test_the_learned_goal_decision_latches_and_the_expert_labels_the_learners_goal():
+    """A learner that gives the waypoint up at once (its goal output is positive at any charge):
+    from then on it sees no waypoint and flies home; the expert, asked in that state, heads
+    home too (+1), and a second shadow that still pursues the waypoint says the learner
+    should not have turned (-1) -- both sets of labels go with the features they describe."""
+    from sim.imitation.driver import PolicyAutonomy
+
+    quitter = _steering_policy(home_below=1.1)
+    X = np.random.default_rng(4).random((16, IMITATION7.dim))
+    X[:, 6] = 1.0  # full starting charge (40%): the expert never turns back for fuel early on
+    result, trajs = annotated_runs(IMITATION7, X, SPEC, quitter)
+    wp = slice(1, 4)
+    for row in np.flatnonzero(result.valid)[:4]:
+        t = trajs[row]
+        shown = np.any(t.features[:, wp] != 0, axis=1)
+        # learner's own states: no waypoint, the expert (in the learner's goal) heads home
+        assert np.all(t.expert[~shown, 2] == 1.0) and (~shown).sum() > 10
+        # the first step (not yet turned) and the pursuing shadow's labels, one a step after it,
+        # with the waypoint in view: keep going
+        assert shown.sum() == (~shown).sum() + 1 and np.mean(t.expert[shown, 2] == -1.0) > 0.9
+        assert np.mean(t.expert[shown, 0] * t.features[shown, 1] + t.expert[shown, 1] * t.features[shown, 2]) > 0
+    scen = make_scenarios(IMITATION7, X[:4])
+    driver = PolicyAutonomy(scen, quitter, SPEC)
+    world = World(scen, scan_beams=SPEC.beams)
+    for step in range(3):  # the decision is taken on the waypoint's features, then they are gone
+        obs = observation(world.telemetry(0.0), scen)
+        driver.step(obs, IMITATION7.dt)
+        assert np.all(driver.home) and np.all(np.any(driver.last_features[:, wp] != 0, axis=1) == (step == 0))
+    # a policy that keeps going never latches
+    keeper = PolicyAutonomy(scen, _steering_policy(home_below=-0.1), SPEC)
+    keeper.step(obs, IMITATION7.dt)
+    assert not keeper.home.any() and np.all(np.any(keeper.last_features[:, wp] != 0, axis=1))
 
 
 def test_on_the_bus_the_surrogate_flies_while_the_expert_commands_are_logged(tmp_path):

@@ -5,11 +5,11 @@ Features, all in the vehicle frame (x along the bow, y to starboard) and in [-1,
 * ``fuel`` — remaining charge, 2 b - 1;
 * ``map`` — vectors to the next mission waypoint and to the recovery point, each as a
   direction (the vector over ``max(distance, near_m)``: a unit vector when far, shrinking
-  to zero on arrival) and a distance (over the operational area's half diagonal, 2 d / D
-  - 1).  Splitting direction from distance keeps the direction legible at any range,
-  which is what steering needs, while the distance carries the fuel decision.  The
-  waypoint's three are zero once every waypoint has been reached (the vehicle knows which
-  it has reached);
+  to zero on arrival) and a distance (over the operational area's diagonal D, as far apart
+  as two points in it can be: 2 d / D - 1).  Splitting direction from distance keeps the
+  direction legible at any range, which is what steering needs, while the distance
+  carries the fuel decision.  The waypoint's three are zero once every waypoint has been
+  reached (the vehicle knows which it has reached) or given up (see the goal decision);
 * ``sonar`` — a 360-beam, 1-degree range scan out to the sonar range (-1 touching, +1
   nothing within range);
 * ``clock`` — mission time used, 2 t / limit - 1.  Not in the dissertation's list: our
@@ -17,8 +17,17 @@ Features, all in the vehicle frame (x along the bow, y to starboard) and in [-1,
 
 Actions: the desired through-water velocity in the vehicle frame over the maximum speed,
 ``a = (speed / max_speed) (cos r, sin r)`` with ``r`` the commanded heading relative to
-the bow.  Every input is what the front-seat reports over MAVLink at MAVLink precision,
-so features computed in the batch simulator and on the bus are the same numbers.
+the bow; and a third output, the goal decision: +1 when the expert has given the mission
+waypoint up and heads home (waypoints done, not enough fuel, not enough time), -1 while
+it still pursues it.  The expert latches that decision, and a memoryless regressor cannot
+imitate a latch from the state alone: moments after turning on fuel the vehicle has the
+same charge and distance from home as one that carries on, and averaging "go on" with
+"go home" stalls it.  So the learned back-seat latches its own decision too (as the
+expert's goal state does) and, once home-bound, sees no waypoint pending, exactly the
+features of a vehicle that has reached every waypoint.
+
+Every input is what the front-seat reports over MAVLink at MAVLink precision, so
+features computed in the batch simulator and on the bus are the same numbers.
 """
 
 from __future__ import annotations
@@ -32,9 +41,11 @@ from sim.sonar import SCAN_BEAMS
 from sim.vehicle import wrap_angle
 
 __all__ = ["FeatureSpec", "feature_spec", "features", "expert_action", "action_command", "advance_waypoints",
-           "waypoint_target"]
+           "waypoint_target", "ACTIONS"]
 
-FEATURE_VERSION = 1
+FEATURE_VERSION = 2
+#: Network outputs: through-water velocity (forward, starboard) and the goal decision.
+ACTIONS = 3
 #: Within this distance a map vector shrinks linearly to zero (metres).
 NEAR_M = 10.0
 
@@ -50,6 +61,7 @@ class FeatureSpec:
     near_m: float
     time_limit_s: float
     max_speed: float
+    actions: int = ACTIONS
 
     @property
     def size(self) -> int:
@@ -75,7 +87,7 @@ class FeatureSpec:
 def feature_spec(mission: Mission, beams: int = SCAN_BEAMS) -> FeatureSpec:
     op = mission.operational_area
     return FeatureSpec(FEATURE_VERSION, beams, float(mission.vehicle.sonar_range_m),
-                       float(np.hypot(op.width, op.height) / 2.0), NEAR_M, float(mission.time_limit_s),
+                       float(np.hypot(op.width, op.height)), NEAR_M, float(mission.time_limit_s),
                        float(mission.vehicle.max_speed))
 
 
@@ -128,16 +140,17 @@ def features(spec: FeatureSpec, mission: Mission, t: float, x: np.ndarray, y: np
     return out
 
 
-def expert_action(spec: FeatureSpec, heading: np.ndarray, cmd_heading: np.ndarray, cmd_speed: np.ndarray
-                  ) -> np.ndarray:
-    """(N, 2) float32 action for a commanded through-water heading and speed."""
+def expert_action(spec: FeatureSpec, heading: np.ndarray, cmd_heading: np.ndarray, cmd_speed: np.ndarray,
+                  home: np.ndarray | bool = False) -> np.ndarray:
+    """(N, 3) float32 action for a commanded through-water heading and speed and the goal decision."""
     rel = wrap_angle(np.asarray(cmd_heading, float) - np.asarray(heading, float))
     mag = np.clip(np.asarray(cmd_speed, float) / spec.max_speed, 0.0, 1.0)
-    return np.column_stack([mag * np.cos(rel), mag * np.sin(rel)]).astype(np.float32)
+    goal = np.broadcast_to(np.where(np.asarray(home, bool), 1.0, -1.0), mag.shape)
+    return np.column_stack([mag * np.cos(rel), mag * np.sin(rel), goal]).astype(np.float32)
 
 
 def action_command(spec: FeatureSpec, heading: np.ndarray, action: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(heading, speed) a front-seat is asked for by actions (N, 2)."""
+    """(heading, speed) a front-seat is asked for by actions (N, 3); the goal column is not a command."""
     a = np.asarray(action, dtype=float)
     speed = np.clip(np.hypot(a[:, 0], a[:, 1]), 0.0, 1.0) * spec.max_speed
     return wrap_angle(np.asarray(heading, float) + np.arctan2(a[:, 1], a[:, 0])), speed

@@ -29,24 +29,45 @@ class MixedDriver(PolicyAutonomy):
 
     ``beta`` is DAgger's mixing weight (Ross et al. 2011: pi_i = beta pi* + (1 - beta) pi_hat):
     early iterations stay near the expert's own states while the policy is still poor.
-    ``last_expert`` is the expert's command at the last step (the label).
 
-    The annotating expert never gives a goal up for lack of progress: that clock would time
+    The expert is asked what it would do in the learner's state, and its goal (heading home
+    or not) is part of that state: before each step the shadow expert takes the learner's
+    goal, then decides — its command, and whether it turns home now, label the learner's
+    features (:attr:`labels`).  A second shadow, always still pursuing the waypoint, labels
+    the states of a learner that has turned home with what the expert would do there with
+    the waypoint pending: without it a learner that turned too early would be told so once,
+    at the turn, while one that turned too late hears it every step until it turns.
+
+    The annotating experts never give a goal up for lack of progress: that clock would time
     the learner's wobbles, which no feature shows, and turn its labels home mid-leg (the
     expert's own runs abort a waypoint so in 0.2% of the chapter 6 mission's scenarios).
     """
 
     def __init__(self, scen, policy, spec: FeatureSpec, beta: float = 0.0, rng: np.random.Generator | None = None):
         super().__init__(scen, policy, spec)
-        self.expert = Autonomy(scen)
-        self.expert.stuck_s = np.inf
+        self.expert, self.pursuer = Autonomy(scen), Autonomy(scen)
+        self.expert.stuck_s = self.pursuer.stuck_s = np.inf
         self.beta, self.rng = float(beta), rng if rng is not None else np.random.default_rng(0)
-        self.last_expert = None
+        self.labels: tuple[np.ndarray, ...] | None = None
 
     def step(self, obs, dt, active=None):
         mine = super().step(obs, dt, active)
+        self.expert.returning[:] = self.was_home
         theirs = self.expert.step(obs, dt, active)
-        self.last_expert = theirs
+        self.pursuer.returning[:] = False
+        other = self.pursuer.step(obs, dt, active)
+        F, rows = self.last_features, np.arange(obs.x.shape[0])
+        heading, speed, home = theirs.heading, theirs.speed, self.expert.returning.copy()
+        wx, wy, pending = self.last_target
+        extra = np.flatnonzero(self.was_home & pending)  # turned home with the waypoint still to reach
+        if extra.size:
+            G = features(self.spec, self.mission, obs.t, obs.x[extra], obs.y[extra], obs.heading[extra],
+                         obs.battery[extra], obs.scan[extra], (wx[extra], wy[extra], pending[extra]))
+            F, rows = np.concatenate([F, G]), np.concatenate([rows, extra])
+            heading = np.concatenate([heading, other.heading[extra]])
+            speed = np.concatenate([speed, other.speed[extra]])
+            home = np.concatenate([home, self.pursuer.returning[extra]])
+        self.labels = (F, rows, heading, speed, home)
         if self.beta <= 0.0:
             return mine
         obey = self.rng.random(mine.heading.shape[0]) < self.beta
@@ -75,20 +96,26 @@ def annotated_runs(mission: Mission, X: np.ndarray, spec: FeatureSpec, policy: M
     got_A: list[np.ndarray] = []
     got_r: list[np.ndarray] = []
 
+    expert_home = np.zeros(sub.n, dtype=bool)  # the flying expert's return latch before the step
+
     def on_step(obs, cmd, active, driver):
+        # Each state is recorded with the goal it was decided under, labelled with the
+        # expert's command and whether it heads home after deciding (sim.imitation.features).
         nonlocal nxt
         if policy is not None:
-            label = driver.last_expert
-            F = driver.last_features
+            F, rows, heading, speed, home = driver.labels
         else:
-            label = cmd
             nxt = advance_waypoints(mission, nxt, obs.x, obs.y)
+            wx, wy, pending = waypoint_target(mission, nxt)
             F = features(spec, mission, obs.t, obs.x, obs.y, obs.heading, obs.battery, obs.scan,
-                         waypoint_target(mission, nxt))
-        idx = np.flatnonzero(active)
-        got_F.append(F[idx])
-        got_A.append(expert_action(spec, obs.heading[idx], label.heading[idx], label.speed[idx]))
-        got_r.append(idx)
+                         (wx, wy, pending & ~expert_home))
+            rows, heading, speed, home = np.arange(sub.n), cmd.heading, cmd.speed, driver.returning.copy()
+            expert_home[:] = home
+        keep = np.flatnonzero(active[rows])
+        rows = rows[keep]
+        got_F.append(F[keep])
+        got_A.append(expert_action(spec, obs.heading[rows], heading[keep], speed[keep], home[keep]))
+        got_r.append(rows)
 
     rngs = scenario_generators(np.asarray(X, dtype=float)[rows], seed) if stochastic else None
     mixing = np.random.default_rng([int(seed), 0x6D6978])

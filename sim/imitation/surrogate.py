@@ -47,6 +47,9 @@ class Surrogate:
         spec = feature_spec(mission)
         if policy.n_features != spec.size:
             raise ValueError(f"policy: takes {policy.n_features} features, the mission's definition has {spec.size}")
+        if policy.n_outputs != spec.actions:
+            raise ValueError(f"policy: gives {policy.n_outputs} outputs, a back-seat needs {spec.actions} "
+                             "(velocity forward and starboard, and the goal decision)")
         return cls(policy, spec, mission.name, mission_digest(mission), dict(training or {}))
 
     def check(self, mission: Mission) -> None:
