@@ -417,6 +417,9 @@ def surrogate_cmd(
     epochs: Annotated[int, typer.Option(help="Training epochs per update (warm-started).")] = 30,
     mixing: Annotated[float, typer.Option(help="Update i's runs obey the expert on a share mixing**i of their steps "
                                                "(DAgger's beta; 0: the learner flies every step).")] = 0.5,
+    select_runs: Annotated[int, typer.Option("--select-runs", help="Held-out expert runs that choose which update's "
+                                                                 "policy to keep (best mode accuracy; 0: the last).")]
+        = 25,
     validate: Annotated[int, typer.Option(help="Sobol scenarios to measure mode accuracy on after each update "
                                                "(0: none).")] = 256,
     seed: Annotated[int, typer.Option(help="Seed of every random choice.")] = 0,
@@ -449,14 +452,18 @@ def surrogate_cmd(
 
     try:
         sur = train_surrogate(mission, method=method, quantile=quantile, runs=runs,
-                              runs_per_iteration=runs_per_iteration, epochs=epochs, mixing=mixing, seed=seed,
-                              on_iteration=on_iteration)
+                              runs_per_iteration=runs_per_iteration, epochs=epochs, mixing=mixing,
+                              select_runs=select_runs, seed=seed, on_iteration=on_iteration)
     except ValueError as exc:
         fail(f"--{str(exc)}" if str(exc).split(":")[0] in ("method", "quantile", "epochs") else str(exc))
     sur.save(out_file)
     out.print(table)
-    out.print(f"surrogate of {mission.name} written to {out_file} ({sur.training['runs']} expert runs, "
-              f"{sur.spec.size} features)", soft_wrap=True, highlight=False)
+    t = sur.training
+    kept = (f"update {t['chosen_iteration']} kept ({t['selection_accuracy']:.1%} on {t['select_runs']} held-out runs)"
+            if t["select_runs"] else "last update kept")
+    out.print(f"surrogate of {mission.name} written to {out_file} ({t['runs']} expert runs: {t['annotated_runs']} "
+              f"annotated + {t['select_runs']} held out; {kept}; {sur.spec.size} features)",
+              soft_wrap=True, highlight=False)
 
 
 @app.command()

@@ -17,7 +17,7 @@ import numpy as np
 
 from rapt.imitation import IterationRecord, MLPPolicy, imitate
 from sim.imitation.features import feature_spec
-from sim.imitation.rollouts import make_rollout
+from sim.imitation.rollouts import draw_valid, make_rollout
 from sim.imitation.surrogate import Surrogate
 from sim.mission import Mission
 
@@ -25,16 +25,20 @@ __all__ = ["train_surrogate", "load_or_train", "TRAINING_DEFAULTS"]
 
 #: Section 6.6.1: 5 expert runs, then 5 annotated runs per iteration; 50-75 runs converge.
 TRAINING_DEFAULTS = {"method": "qdagger", "quantile": 0.5, "runs": 75, "runs_per_iteration": 5, "epochs": 30,
-                     "mixing": 0.5}
+                     "mixing": 0.5, "select_runs": 25}
 
 
 def train_surrogate(mission: Mission, *, method: str = "qdagger", quantile: float = 0.5, runs: int = 75,
-                    runs_per_iteration: int = 5, epochs: int = 30, mixing: float = 0.5, seed: int = 0,
+                    runs_per_iteration: int = 5, epochs: int = 30, mixing: float = 0.5, select_runs: int = 25,
+                    seed: int = 0,
                     on_iteration: Callable[[IterationRecord, MLPPolicy], None] | None = None) -> Surrogate:
     """Imitate the mission's expert with ``runs`` annotated runs (``runs_per_iteration`` at a time).
 
     ``mixing`` p: update i's runs obey the expert on a share p**i of their steps (DAgger's
     beta; 0 follows Algorithm 9 to the letter, the learner flying every step from update 1).
+    ``select_runs`` held-out expert runs choose the update whose policy is kept (the best
+    mode accuracy on them; 0 keeps the last).  The surrogate's ``training["runs"]`` counts
+    every expert run spent: annotated and held out.
     """
     if not 0.0 <= mixing < 1.0:
         raise ValueError(f"--mixing: expected a share in [0, 1), got {mixing!r}")
@@ -42,14 +46,26 @@ def train_surrogate(mission: Mission, *, method: str = "qdagger", quantile: floa
         raise ValueError(f"--runs-per-iteration: expected a positive whole number, got {runs_per_iteration!r}")
     if int(runs) != runs or runs < runs_per_iteration:
         raise ValueError(f"--runs: expected at least {runs_per_iteration} annotated runs, got {runs!r}")
+    if int(select_runs) != select_runs or select_runs < 0:
+        raise ValueError(f"--select-runs: expected a number of held-out expert runs >= 0, got {select_runs!r}")
     spec = feature_spec(mission)
+    select = None
+    if select_runs:
+        import sim
+
+        Xs = draw_valid(mission, int(select_runs), np.random.default_rng([int(seed), 0x73656C]))
+        expert = sim.simulate(mission, Xs)
+        select = lambda policy: mode_agreement(mission, Surrogate.for_mission(mission, policy), Xs, expert)  # noqa: E731
     result = imitate(make_rollout(mission, spec, seed=seed, mixing=mixing), method=method, quantile=quantile,
                      iterations=runs // runs_per_iteration - 1, runs_per_iteration=runs_per_iteration,
-                     epochs=epochs, seed=seed, on_iteration=on_iteration)
-    h = result.history[-1]
+                     epochs=epochs, seed=seed, select=select, on_iteration=on_iteration)
+    h = result.history[result.chosen]
     training = {"method": method if method != "qdagger" else f"qdagger({int(round(quantile * 100))})",
-                "runs": result.runs, "samples": h.samples, "seed": seed, "epochs": epochs, "mixing": mixing,
-                "fit_s": round(sum(r.fit_s for r in result.history), 2), "iterations": len(result.history)}
+                "runs": result.runs + int(select_runs), "annotated_runs": result.runs,
+                "select_runs": int(select_runs), "chosen_iteration": result.chosen,
+                "selection_accuracy": h.extra.get("selection"), "samples": h.samples, "seed": seed,
+                "epochs": epochs, "mixing": mixing, "fit_s": round(sum(r.fit_s for r in result.history), 2),
+                "iterations": len(result.history)}
     return Surrogate.for_mission(mission, result.policy, training)
 
 

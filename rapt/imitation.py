@@ -40,6 +40,14 @@ def _grid(a: np.ndarray, bits: int) -> np.ndarray:
     return np.round(np.asarray(a, np.float64) * 2.0 ** bits) / 2.0 ** bits
 
 
+def _grid_inplace(h: np.ndarray, bits: int) -> np.ndarray:
+    """:func:`_grid` of a float64 work array, in place (scaling by a power of two is exact)."""
+    h *= 2.0 ** bits
+    np.rint(h, out=h)
+    h *= 2.0 ** -bits
+    return h
+
+
 METHODS = ("supervised", "dagger", "qdagger")
 #: Hidden layers of Table 6.1 (input is the feature vector, output the action).
 HIDDEN = (150, 50)
@@ -80,15 +88,16 @@ class MLPPolicy:
         of the work when the block is most of the input.
         """
         layers = self._exact()
-        h = _grid(np.asarray(F, dtype=np.float64), INPUT_BITS)
+        h = _grid_inplace(np.array(F, dtype=np.float64), INPUT_BITS)
         last = len(layers) - 1
         for k, (W, b) in enumerate(layers):
             if k == 0 and quiet is not None:
                 h = self._first_layer(h, W, b, quiet, quiet_value)
             else:
-                h = h @ W + b
+                h = h @ W
+                h += b
             if k < last:
-                h = _grid(expit(h) if self.activation == "logistic" else np.tanh(h), INPUT_BITS)
+                _grid_inplace(expit(h, out=h) if self.activation == "logistic" else np.tanh(h, out=h), INPUT_BITS)
         return h.astype(np.float32)
 
     def _exact(self) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -153,6 +162,7 @@ class IterationRecord:
     fit_s: float
     elapsed_s: float
     loss: float  # mean squared error of the updated policy on its training set
+    fit_cpu_s: float = 0.0  # CPU seconds of the fit (all threads): the fair figure on a shared machine
     extra: dict = field(default_factory=dict)
 
 
@@ -162,6 +172,7 @@ class ImitationResult:
     method: str
     quantile: float | None
     history: list[IterationRecord]
+    chosen: int = -1  # the iteration whose policy this is (the best on ``select``, else the last)
 
     @property
     def runs(self) -> int:
@@ -182,6 +193,7 @@ def _stack(trajs: Sequence[Trajectory]) -> tuple[np.ndarray, np.ndarray]:
 def imitate(rollout: Rollout, *, method: str = "qdagger", quantile: float = 0.5, iterations: int = 15,
             runs_per_iteration: int = 5, initial_runs: int | None = None, hidden: Sequence[int] = HIDDEN,
             epochs: int = 20, learning_rate: float = 3e-3, batch_size: int = 256, seed: int = 0,
+            select: Callable[[MLPPolicy], float] | None = None,
             on_iteration: Callable[[IterationRecord, MLPPolicy], None] | None = None) -> ImitationResult:
     """Train a policy imitating the expert behind ``rollout`` (see the module docstring).
 
@@ -191,6 +203,13 @@ def imitate(rollout: Rollout, *, method: str = "qdagger", quantile: float = 0.5,
     ``runs_per_iteration``); each of the ``iterations`` after it adds
     ``runs_per_iteration`` annotated runs.  ``on_iteration(record, policy)`` may evaluate
     the policy and put figures in ``record.extra``.
+
+    ``select(policy)`` scores each update's policy on held-out expert runs (higher is
+    better) and the best is returned, as DAgger itself prescribes (Ross et al. 2011,
+    Algorithm 3.1: "return best pi_i on validation"): a closed-loop figure such as mode
+    accuracy swings from update to update although the loss falls, and the last policy
+    is not the best one; ties go to the later, better-fed policy.  Without it the last
+    policy is returned.
     """
     from sklearn.exceptions import ConvergenceWarning
     from sklearn.neural_network import MLPRegressor
@@ -210,6 +229,7 @@ def imitate(rollout: Rollout, *, method: str = "qdagger", quantile: float = 0.5,
     policy: MLPPolicy | None = None
     F = A = None
     runs = 0
+    best: tuple[float, int, MLPPolicy] | None = None
     for it in range(iterations + 1):
         t0 = time.perf_counter()
         k = (initial_runs or runs_per_iteration) if it == 0 else runs_per_iteration
@@ -225,15 +245,22 @@ def imitate(rollout: Rollout, *, method: str = "qdagger", quantile: float = 0.5,
             F, A = np.concatenate([F, Fi[keep]]), np.concatenate([A, Ai[keep]])
         else:
             F, A = np.concatenate([F, Fi]), np.concatenate([A, Ai])
+        c1 = time.process_time()
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)
             model.set_params(batch_size=min(batch_size, F.shape[0]))
             model.fit(F, A if A.shape[1] > 1 else A[:, 0])
         policy = MLPPolicy.from_sklearn(model)
-        t2 = time.perf_counter()
+        t2, c2 = time.perf_counter(), time.process_time()
         mse = float(np.mean((policy(F) - A) ** 2))
-        record = IterationRecord(it, runs, int(F.shape[0]), t1 - t0, t2 - t1, t2 - started, mse)
+        record = IterationRecord(it, runs, int(F.shape[0]), t1 - t0, t2 - t1, t2 - started, mse, c2 - c1)
+        if select is not None:
+            score = float(select(policy))
+            record.extra["selection"] = score
+            if best is None or score >= best[0]:
+                best = (score, it, policy)
         if on_iteration is not None:
             on_iteration(record, policy)
         history.append(record)
-    return ImitationResult(policy, method, quantile if method == "qdagger" else None, history)
+    chosen, policy = (best[1], best[2]) if best is not None else (len(history) - 1, policy)
+    return ImitationResult(policy, method, quantile if method == "qdagger" else None, history, chosen)

@@ -118,6 +118,17 @@ def test_each_learner_learns_a_tiny_expert(method):
     assert result.history[-1].loss < 0.01
 
 
+def test_the_best_policy_on_validation_is_returned():
+    """DAgger returns the best policy of the sequence on held-out runs, not the last (ties: the later)."""
+    scores = iter([0.1, 0.5, 0.3, 0.5, 0.2])
+    seen = []
+    result = imitate(_point_mass_rollout([]), method="dagger", iterations=4, runs_per_iteration=2, hidden=(8,),
+                     epochs=5, select=lambda p: (seen.append(p), next(scores))[1])
+    assert result.chosen == 3 and result.policy is seen[3] and result.history[3].extra["selection"] == 0.5
+    last = imitate(_point_mass_rollout([]), method="dagger", iterations=2, runs_per_iteration=2, hidden=(8,), epochs=5)
+    assert last.chosen == 2
+
+
 def test_bad_learner_settings_are_named():
     with pytest.raises(ValueError, match="method"):
         imitate(lambda *a: [], method="dagger2")
@@ -282,9 +293,9 @@ def test_cli_trains_a_surrogate_and_generate_searches_with_it_and_confirms_with_
     model = tmp_path / "imitation7.npz"
     mission = str(EXAMPLES / "imitation7.toml")
     result = runner.invoke(app, ["surrogate", mission, "--out", str(model), "--runs", "4", "--runs-per-iteration",
-                                 "2", "--epochs", "3", "--validate", "16"])
+                                 "2", "--epochs", "3", "--validate", "16", "--select-runs", "4"])
     assert result.exit_code == 0, result.output
-    assert model.is_file() and "mode accuracy" in result.output and "4 expert runs" in result.output
+    assert model.is_file() and "mode accuracy" in result.output and "8 expert runs: 4 annotated + 4 held out" in result.output
     out = tmp_path / "plan"
     args = ["generate", mission, "--out", str(out), "--budget", "500", "--batch-size", "250", "--pairs", "2",
             "--dithers", "40", "--surrogate", str(model), "--confirm-runs", "20"]
@@ -292,7 +303,7 @@ def test_cli_trains_a_surrogate_and_generate_searches_with_it_and_confirms_with_
     assert result.exit_code == 0, result.output
     plan = json.loads((out / "plan.json").read_text())
     s = plan["study"]["surrogate"]
-    assert s["expert_runs"] == {"training": 4, "confirmation": 2 * s["candidates"]} and s["candidates"] <= 10
+    assert s["expert_runs"] == {"training": 8, "confirmation": 2 * s["candidates"]} and s["candidates"] <= 10
     assert s["confirmed"] == len(plan["pairs"]) <= 2
     for pair in plan["pairs"]:  # the expert changes mode across every planned pair
         assert pair["confirmed_by_expert"] and pair["modes"][0] != pair["modes"][1]
