@@ -137,7 +137,8 @@ def test_one_dof_robot_graph_agrees_with_a_grid_search():
     g = analyse(grid, probes=probes)
     study = adaptive_study(robot, 20.0, 600, seed=0)
     a = analyse(study, probes=probes)
-    assert study.queries == 600 < grid.queries
+    # whole hulls: every face of a queried joint state is a query; the last batch may overshoot by a hull
+    assert 600 <= study.queries <= 600 + 12 and study.queries < grid.queries
     assert a["home"] >= 0 and g["home"] >= 0
     G = a["graph"]
     assert G.n_edges >= 3 and np.all(G.edges["energy"] > 0)
