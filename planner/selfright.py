@@ -120,7 +120,11 @@ class _System:
         X = self.unit(np.column_stack([res.theta, res.start]))
         rest = np.column_stack([res.theta, res.rest])
         R = np.where(np.isfinite(rest).all(axis=1, keepdims=True), self.unit(np.nan_to_num(rest)), np.nan)
-        faces = [self.unit(np.column_stack([np.broadcast_to(t, (len(f), m)), f]))[:, m:] for t, f in zip(res.theta, res.faces)]
+        faces, done = [], {}
+        for t, f in zip(res.theta, res.faces):  # the states of one hull share its face array: convert it once
+            if id(f) not in done:
+                done[id(f)] = self.unit(np.column_stack([np.broadcast_to(t, (len(f), m)), f]))[:, m:]
+            faces.append(done[id(f)])
         self.rows.append((X, res.stable.copy(), R, res.energy.copy(), res.start_id, res.rest_id, faces, res.face_ids))
         return X, res.stable.astype(float), faces, res.start_id, res.face_ids
 
@@ -174,8 +178,77 @@ def grid_study(robot: Robot, slope: float, resolution_deg: float) -> SelfRightSt
     theta = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, robot.dof) if axes else np.zeros((1, 0))
     t0 = time.perf_counter()
     system.record(system.F.all_faces(theta))
-    return system.study(robot, slope, f"grid {resolution_deg:g}°", time.perf_counter() - t0,
-                        resolution=np.radians(resolution_deg))
+    study = system.study(robot, slope, f"grid {resolution_deg:g}°", time.perf_counter() - t0,
+                         resolution=np.radians(resolution_deg))
+    study.extra.update(grid_shape=[len(a) for a in axes],
+                       grid_periodic=[bool(hi - lo >= 2 * np.pi - 1e-9) for lo, hi in robot.joint_bounds])
+    return study
+
+
+def grid_connections(study: SelfRightStudy) -> tuple[np.ndarray, np.ndarray]:
+    """A grid search's own connectivity (the original framework, section 5.2), for Algorithm 8.
+
+    States on the same face (identity) at neighbouring grid joint states are connected, as
+    is a face to the one replacing it at the neighbour (neither exists at the other joint
+    state and the body angle moved no more than the joints: a continuation, as in
+    :mod:`rapt.transitions`); each resting state is the evaluated state it names.  Indices
+    run over ``[X, settled rest states]`` (a grid has no unevaluated known states).
+    """
+    shape, periodic = study.extra["grid_shape"], study.extra["grid_periodic"]
+    m = study.n_free
+    U = study.X[:, :m]
+    idx = np.empty((len(U), m), dtype=np.int64)
+    for a in range(m):
+        div = shape[a] if periodic[a] else shape[a] - 1
+        idx[:, a] = np.rint(U[:, a] * div).astype(np.int64) % (shape[a] if periodic[a] else div + 1)
+    flat = np.ravel_multi_index(tuple(idx.T), shape)
+    settled = np.flatnonzero(np.isfinite(study.rest).all(axis=1))
+    _, rank = np.unique(np.concatenate([study.ids, study.rest_ids[settled]]), return_inverse=True)
+    rank = rank.reshape(-1).astype(np.int64)
+    n_id = int(rank.max()) + 1
+    key = flat * n_id + rank[:len(U)]
+    order = np.argsort(key, kind="stable")
+    skey = key[order]
+
+    def find(k):
+        at = np.clip(np.searchsorted(skey, k), 0, len(skey) - 1)
+        return np.where(skey[at] == k, order[at], -1)
+
+    N = len(U)
+    src, dst = [np.arange(len(settled)) + N], [find(flat[settled] * n_id + rank[N:])]  # rest state = evaluated state
+    by_flat = np.argsort(flat, kind="stable")
+    first = np.searchsorted(flat[by_flat], np.arange(int(np.prod(shape))))
+    count = np.bincount(flat, minlength=int(np.prod(shape)))
+    body = study.embed(study.X)[:, 2 * m:]
+    step = 2 * np.sin(np.radians(np.degrees(study.resolution)) / 2)
+    for a in range(m):
+        nb = idx.copy()
+        nb[:, a] += 1
+        ok = nb[:, a] < shape[a]
+        if periodic[a]:
+            nb[:, a] %= shape[a]
+            ok[:] = True
+        s = np.flatnonzero(ok)
+        nflat = np.ravel_multi_index(tuple(nb[s].T), shape)
+        same = find(nflat * n_id + rank[s])
+        src.append(s[same >= 0])
+        dst.append(same[same >= 0])
+        gone = s[same < 0]  # this face has no namesake at the neighbour: look for what replaced it
+        g_flat = nflat[same < 0]
+        best, best_d = -np.ones(len(gone), dtype=np.int64), np.full(len(gone), np.inf)
+        for o in range(int(count.max())):
+            has = o < count[g_flat]
+            c = by_flat[np.minimum(first[g_flat] + o, len(by_flat) - 1)]
+            back = find(flat[gone] * n_id + rank[c])  # the replacement must not exist here either
+            d = np.linalg.norm(body[c] - body[gone], axis=1)
+            take = has & (back < 0) & (d <= step + 1e-9) & (d < best_d)
+            best = np.where(take, c, best)
+            best_d = np.where(take, d, best_d)
+        src.append(gone[best >= 0])
+        dst.append(best[best >= 0])
+    i, j = np.concatenate(src), np.concatenate(dst)
+    keep = (i >= 0) & (j >= 0)
+    return i[keep], j[keep]
 
 
 def home_state(study: SelfRightStudy, with_id: bool = False):
@@ -251,9 +324,10 @@ def analyse(study: SelfRightStudy, *, max_edge: float | None = None, probes=None
     t0 = time.perf_counter()
     known = study.known_states()
     ids = study.graph_ids() if use_ids else None
+    connections = grid_connections(study) if use_ids and "grid_shape" in study.extra else None
     graph = transition_graph(study.embed(study.X), study.stable, study.embed(study.rest), study.energy,
                              study.embed(study.extra_states()), max_edge=max_edge, label_radius=label_radius, ids=ids,
-                             free_dims=2 * study.n_free)
+                             free_dims=2 * study.n_free, connections=connections)
     seconds = time.perf_counter() - t0
     home_U, home_id = home_state(study, with_id=True)
     home = int(graph.node_of(study.embed(home_U[None]), ids=[home_id])[0])

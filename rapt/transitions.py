@@ -107,7 +107,8 @@ class TransitionGraph:
     ``end_node`` (the node a state ends up in: its own, or its resting state's; -1 when
     unknown or when it never comes to rest).  ``edges`` has one row per kept transition:
     ``src``, ``dst``, ``energy``, ``witness`` (the evaluated unstable state) and ``length``
-    (its boundary pair's length: distance to the stable state it was reached from).
+    (its boundary pair's length: distance to the stable state it was reached from, in the
+    free coordinates when ``free_dims`` is given — section 5.3's "distance in joint space").
     """
 
     points: np.ndarray
@@ -238,7 +239,7 @@ def transition_graph(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, energy
                      extra: np.ndarray | None = None, *, max_edge: float,
                      label_radius: float | None = None, ids: tuple | None = None,
                      free_dims: int | None = None, rate: float = 1.0,
-                     continuation_edge: float | None = None) -> TransitionGraph:
+                     continuation_edge: float | None = None, connections: tuple | None = None) -> TransitionGraph:
     """Build Algorithm 8's transition graph.
 
     Parameters
@@ -255,6 +256,9 @@ def transition_graph(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, energy
         other's stability, which can bridge separate stable regions.
     ids: optional manifold identities ``(of X (N,), of rest (N,), of extra (M,))``; see the module docstring.
     free_dims, rate, continuation_edge: with ``ids``, allow continuations between identities (module docstring).
+    connections: ``(i, j)`` index arrays into ``[X, settled rest states, extra]`` used instead of
+        the Gabriel graph — a grid search's own neighbours (the original framework, section 5.2),
+        which a million-state grid can afford where a Gabriel graph cannot.
     """
     X = np.asarray(X, dtype=float)
     N, d = X.shape if X.ndim == 2 else (-1, -1)
@@ -294,8 +298,13 @@ def transition_graph(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, energy
                 _, nn[lost] = cKDTree(X).query(extra[lost], k=1)
         lab[E0:] = stable[nn]
     # 2-3: Gabriel graph, stable subgraph, components
-    i, j = gabriel_graph(space, max_edge)
-    if all_ids is not None and free_dims is not None:
+    if connections is not None:
+        i, j = (np.asarray(v, dtype=int).reshape(-1) for v in connections)
+        if i.shape != j.shape or (i.size and (min(i.min(), j.min()) < 0 or max(i.max(), j.max()) >= len(points))):
+            raise ValueError(f"connections: expected two equal-length index arrays into the {len(points)} known states")
+    else:
+        i, j = gabriel_graph(space, max_edge)
+    if connections is None and all_ids is not None and free_dims is not None:
         ci, cj = _continuations(points, all_ids, free_dims,
                                 max_edge / 2 if continuation_edge is None else min(continuation_edge, max_edge), rate)
         i, j = np.concatenate([i, ci]), np.concatenate([j, cj])
@@ -310,7 +319,8 @@ def transition_graph(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, energy
     relabel[uniq[order]] = np.arange(len(uniq))
     labels = np.where(comp >= 0, relabel[np.maximum(comp, 0)], -1)
     # 4: transitions from each unstable evaluated state's nearest stable Gabriel neighbour
-    length = np.linalg.norm(points[i] - points[j], axis=1)
+    cols = slice(None) if free_dims is None else slice(0, free_dims)  # section 5.3: pair length in joint space
+    length = np.linalg.norm(points[i, cols] - points[j, cols], axis=1)
     a = np.concatenate([i, j])
     b = np.concatenate([j, i])
     ln = np.concatenate([length, length])

@@ -374,6 +374,8 @@ class StabilityFunction:
         """Every hull face of every joint state as a starting state (the grid search's queries)."""
         theta = np.asarray(theta, dtype=float)
         theta = theta.reshape(theta.shape[0] if theta.ndim == 2 else -1, self.robot.dof)
+        if self.planar and len(theta):
+            return self._all_faces_planar(theta)
         rows, start, rest, energy, tips, faces = [], [], [], [], [], []
         start_id, rest_id, face_ids = [], [], []
         for th in theta:
@@ -396,3 +398,18 @@ class StabilityFunction:
         self.n_queries += len(tips)
         ids = [np.concatenate(v).astype(np.int64) if v else np.empty(0, dtype=np.int64) for v in (start_id, rest_id)]
         return StabilityResult(rows, start, tips == 0, rest, energy, faces, tips, ids[0], ids[1], face_ids)
+
+    def _all_faces_planar(self, theta: np.ndarray) -> StabilityResult:
+        """:meth:`all_faces` for a planar robot, in bulk (:mod:`sim.robots.planar`); same results."""
+        from sim.robots.planar import planar_all_faces
+
+        b = planar_all_faces(self, theta)
+        self.n_hulls += len(theta)
+        self.n_queries += len(b["row"])
+        cuts = np.cumsum(b["count"])[:-1]
+        per_hull = np.split(b["start"][:, None], cuts)
+        ids = np.split(b["start_id"], cuts)
+        faces = [f for f, k in zip(per_hull, b["count"]) for _ in range(k)]
+        face_ids = [f for f, k in zip(ids, b["count"]) for _ in range(k)]
+        return StabilityResult(theta[b["row"]], b["start"][:, None], b["stable"].astype(bool), b["rest"][:, None],
+                               b["energy"], faces, b["tips"].astype(int), b["start_id"], b["rest_id"], face_ids)
