@@ -144,17 +144,21 @@ class _System:
 
 def adaptive_study(robot: Robot, slope: float, budget: int, *, seed: int = 0, batch_size: int = 50,
                    r_min_deg: float = 1.0, r_max_deg: float = 10.0, n_initial: int | None = None,
-                   whole_hulls: bool = True, progress=None, **options) -> SelfRightStudy:
+                   whole_hulls: bool | None = None, progress=None, **options) -> SelfRightStudy:
     """Algorithm 6 on ``robot`` at ``slope`` degrees, about ``budget`` queries.
 
     A query is the stability of one state ``[θ, face]``, as the grid search counts them.
-    ``whole_hulls`` (default) labels every face of each queried joint state — the hull is
-    computed anyway and settling a face is cheap next to it — and counts each face as a
-    query; otherwise only the snapped face is labelled (the other faces are known states
-    labelled by their nearest neighbour in Algorithm 8).  The last batch may overshoot the
-    budget by a few faces.
+    ``whole_hulls`` labels every face of each queried joint state and counts each face as
+    a query; otherwise only the snapped face is labelled (the other faces are known states
+    labelled by their nearest neighbour in Algorithm 8).  Default: on for planar robots,
+    whose faces are all settled in one table lookup once the hull is known (and whose
+    nodes are otherwise mislabelled by sparse neighbours), off for 3-D hulls, where each
+    face is its own tipping simulation with tens to hundreds of faces per hull.  The last
+    batch may overshoot the budget by a few faces.
     """
-    system = _System(robot, slope, whole_hulls)
+    system = _System(robot, slope, False)
+    whole_hulls = system.F.planar if whole_hulls is None else bool(whole_hulls)
+    system.whole_hulls = whole_hulls
     if n_initial is None:
         n_initial = min(max(20 * system.bounds.shape[0], 50), max(budget // 5, 10))
     sampler = ManifoldSampler(robot.dof, system.bounds, seed=seed, r_min=np.radians(r_min_deg),
@@ -264,7 +268,8 @@ class Probes:
     """Reference states for scoring graphs: every hull face of uniform random joint states, with the truth.
 
     ``U`` unit-cube states, ``ids`` their face identities, ``stable`` their true stability
-    (evaluated outside any search, so they cost the searches nothing).
+    (evaluated outside any search, so they cost the searches nothing; planar robots only —
+    settling every face of a 3-D hull is slow — else all True).
     """
 
     U: np.ndarray
@@ -280,9 +285,17 @@ def probe_states(robot: Robot, slope: float, n: int, seed: int) -> Probes:
     F = StabilityFunction(robot, slope)
     bounds = space_bounds(robot, F.planar)
     theta = bounds[:robot.dof, 0] + np.random.default_rng(seed).random((n, robot.dof)) * np.ptp(bounds[:robot.dof], axis=1)
-    res = F.all_faces(theta)
-    U = _to_unit(np.column_stack([res.theta, res.start]), bounds[:, 0], bounds[:, 1])
-    return Probes(U, res.start_id, res.stable)
+    if F.planar:
+        res = F.all_faces(theta)
+        U = _to_unit(np.column_stack([res.theta, res.start]), bounds[:, 0], bounds[:, 1])
+        return Probes(U, res.start_id, res.stable)
+    rows, ids = [], []
+    for t in theta:
+        hull = F.hull(t)
+        rows.append(np.column_stack([np.broadcast_to(t, (hull.n_faces, robot.dof)), hull.angles]))
+        ids.append(hull.ids)
+    U = _to_unit(np.concatenate(rows), bounds[:, 0], bounds[:, 1])
+    return Probes(U, np.concatenate(ids), np.ones(len(U), dtype=bool))
 
 
 def _probes(probes) -> Probes:
@@ -297,29 +310,36 @@ def default_max_edge(study: SelfRightStudy) -> float:
     """Gabriel ``d_max`` (embedded distance).
 
     A grid: 2.5 steps (faces tilt with the joints, so neighbours on one face can be more
-    than a step apart).  An adaptive study: three interior resolutions (face identities
-    keep different faces apart, so ``d_max`` need only bridge the sparse interior), widened
+    than a step apart).  An adaptive study: three interior resolutions for planar robots
+    (face identities keep different faces apart, so ``d_max`` need only bridge the sparse
+    interior), two for 3-D hulls (body angles alone must keep faces apart), widened
     to twice the median distance from a known state to its (2m + 2)-th nearest (m joints)
     when the data are sparser than that, but at most four interior resolutions.
     """
     if study.resolution is not None:
         return 2.5 * study.resolution
     r_max = np.radians(study.extra.get("r_max_deg", 10.0))
+    base = 3.0 if study.X.shape[1] - study.n_free == 1 else 2.0
     E = study.embed(study.known_states())
     k = min(len(E) - 1, 2 * study.n_free + 2)
     if k < 1:
-        return 3.0 * r_max
+        return base * r_max
     d, _ = cKDTree(E).query(E, k=k + 1)
-    return float(min(max(3.0 * r_max, 2.0 * np.median(d[:, -1])), 4.0 * r_max))
+    return float(min(max(base * r_max, 2.0 * np.median(d[:, -1])), 4.0 * r_max))
 
 
 def analyse(study: SelfRightStudy, *, max_edge: float | None = None, probes=None,
-            label_radius: float | None = None, use_ids: bool = True) -> dict:
+            label_radius: float | None = None, use_ids: bool | None = None) -> dict:
     """Transition graph and the chapter's figures of merit for one study.
 
-    ``use_ids`` (default) keeps different hull faces apart by their vertex identity
-    (section 5.2's unique-vertex faces); without it only ``max_edge`` does (body angles alone).
+    ``use_ids`` keeps different hull faces apart by their vertex identity (section 5.2's
+    unique-vertex faces); without it only ``max_edge`` does (body angles alone).  Default:
+    on for planar robots (a face is a pair of corners), off for 3-D hulls, whose faces
+    change identity with every mesh vertex that rises through them — the reason the
+    chapter moved to body angles.
     """
+    if use_ids is None:
+        use_ids = study.X.shape[1] - study.n_free == 1
     max_edge = default_max_edge(study) if max_edge is None else max_edge
     t0 = time.perf_counter()
     known = study.known_states()
