@@ -27,7 +27,7 @@ Three parts, each printed as a table:
    self-rightable fraction, the mean transition energy to the home state, and the
    queries a 5° grid would need (mean hull faces × grid points, as in section 5.5.2).
 
-Run:  python benchmarks/selfright.py [--quick]     (full: about 8 minutes on 2 cores; quick: 1-2)
+Run:  python benchmarks/selfright.py [--quick]     (full: about 10 minutes on 2 cores; quick: about 2)
 """
 
 from __future__ import annotations

@@ -192,3 +192,27 @@ def test_whole_hull_sampling_labels_every_face_of_distinct_joint_states():
     assert np.abs(t - 0.5).min() * np.pi < np.radians(1.0)  # refined to the boundary on face 1
     with pytest.raises(ValueError, match="whole_hulls"):
         ManifoldSampler(0, [[0.0, 1.0]], whole_hulls=True)
+
+
+def test_grid_connections_join_neighbouring_joint_states_on_one_face_or_its_replacement():
+    from planner.selfright import grid_connections, grid_study
+    from sim.robots import load_robot
+
+    grid = grid_study(load_robot("examples/robots/1dof.toml"), 20.0, 3.0)
+    i, j = grid_connections(grid)
+    N = len(grid.X)
+    k = np.rint(grid.X[:, 0] * 120).astype(int) % 120  # 3° steps round a full turn
+    faces_at = {}
+    for n in range(N):
+        faces_at.setdefault(k[n], set()).add(int(grid.ids[n]))
+    ev = (i < N) & (j < N)
+    a, b = i[ev], j[ev]
+    assert np.all((k[b] - k[a]) % 120 == 1)  # only the next grid joint state
+    same = grid.ids[a] == grid.ids[b]
+    assert same.mean() > 0.9
+    for x, y in zip(a[~same], b[~same]):  # continuations: each face is gone where the other one is
+        assert int(grid.ids[y]) not in faces_at[k[x]] and int(grid.ids[x]) not in faces_at[k[y]]
+    # a resting state is the evaluated state on its resting face
+    settled = np.flatnonzero(np.isfinite(grid.rest).all(axis=1))
+    r = i[i >= N] - N
+    assert np.array_equal(grid.ids[j[i >= N]], grid.rest_ids[settled[r]])
