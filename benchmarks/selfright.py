@@ -4,17 +4,22 @@ Three parts, each printed as a table:
 
 1. Figure 5.3 — the 1-, 2- and 3-DOF robots of Figure 5.2 (1-DOF on a 20° slope, the
    others flat): a grid search (every hull face of every joint state on a grid: 1° for
-   1 and 2 DOF; 12° for 3 DOF, because a 3° grid is 1.45 million hulls, about 25 minutes
-   here, and its 10^7 states are beyond the Gabriel graph's memory) against the
-   manifold-constrained adaptive search (Algorithms 6-7).  Per method: queries, graph
-   size, how much of the grid's graph the adaptive one reproduces (nodes and transitions
-   matched through the hull faces of 500 random joint states, "probe states"; nodes
-   under 1 % of the probes ignored), the share of probe states whose self-rightability
-   agrees, the mean boundary-pair length and the mean transition energy of the edges.
+   1 and 2 DOF; 6° for 3 DOF, see the README for why not 3°) against the
+   manifold-constrained adaptive search (Algorithms 6-7).  A query is the stability of one
+   state [θ, face] — the grid's ``||Z_θ|| (π/r)^m`` of section 5.5.2 — for both: the
+   adaptive search labels every face of each joint state it picks (whole hulls).  Graphs:
+   the grid's from its own neighbours (same face, or the face replacing it, at the next
+   grid joint state: the original framework), the adaptive one's from a Gabriel graph
+   with face identities (Algorithm 8).  Matched through the truly stable hull faces of
+   500 random joint states ("probe states": a node of one graph maps to the node of the
+   other most of its probes fall in; nodes under 1 % of the probes ignored).  Per method:
+   queries, graph size, nodes/edges matched, the self-rightable share of probe states
+   (and the share whose verdict agrees), the mean boundary-pair length (joint space) and
+   transition energy over all boundary pairs, and both again over the matched edges.
 2. Table 5.1 — building the graph from the adaptive sample sets: Gabriel-graph
    clustering (Algorithm 8) against PRM-style connection, in which every pair of stable
    states within the same ``d_max`` is checked with a linear local planner (stability
-   evaluated every 1° along the straight line).  PRM time beyond ``--prm-edges`` checked
+   evaluated every 1° along the straight line).  PRM time beyond 1,000 checked
    edges is extrapolated from a seeded random subset (marked ``*``).
 3. Figure 5.6 — the 5-DOF manipulator robot (Figure 5.5) with 1 to 5 active joints
    (shoulder pitch; + shoulder yaw; + elbow; + wrist; + jaw; inactive joints held at 0,
@@ -22,7 +27,7 @@ Three parts, each printed as a table:
    self-rightable fraction, the mean transition energy to the home state, and the
    queries a 5° grid would need (mean hull faces × grid points, as in section 5.5.2).
 
-Run:  python benchmarks/selfright.py [--quick]     (full: about 10 minutes on 2 cores; quick: 2-3)
+Run:  python benchmarks/selfright.py [--quick]     (full: about 10 minutes on 2 cores; quick: about 2)
 """
 
 from __future__ import annotations
@@ -42,33 +47,44 @@ ROBOTS = "examples/robots"
 
 def fig53(quick: bool, seed: int) -> list:
     # robot, slope, grid resolution (deg), adaptive options
-    cases = [("1dof", 20.0, 1.0, dict(budget=600, r_min_deg=1.0, r_max_deg=10.0)),
-             ("2dof", 0.0, 3.0 if quick else 1.0, dict(budget=2000 if quick else 5000, r_min_deg=1.0, r_max_deg=10.0)),
-             ("3dof", 0.0, 18.0 if quick else 12.0, dict(budget=3000 if quick else 10000, r_min_deg=2.0, r_max_deg=15.0))]
-    print("1. Figure 5.3: grid search against adaptive manifold sampling (graphs compared on probe states)")
-    head = (f"{'robot':>5} {'method':>9} {'queries':>8} {'time s':>7} {'nodes':>5} {'edges':>5} {'matched n/e':>11} "
-            f"{'rightable':>9} {'agree':>6} {'pair deg':>8} {'energy J':>8} {'graph s':>7}")
-    print(head)
+    cases = [("1dof", 20.0, 1.0, dict(budget=700, r_min_deg=0.5, r_max_deg=10.0)),
+             ("2dof", 0.0, 3.0 if quick else 1.0, dict(budget=10000 if quick else 30000, r_min_deg=0.5, r_max_deg=10.0)),
+             ("3dof", 0.0, 12.0 if quick else 6.0, dict(budget=10000 if quick else 40000, r_min_deg=2.0, r_max_deg=15.0,
+                                                       batch_size=100))]
+    print("1. Figure 5.3: grid search against adaptive manifold sampling (a query = one [joint state, face]; "
+          "graphs matched on probe states)")
+    print(f"{'robot':>5} {'method':>9} {'queries':>9} {'time s':>7} {'nodes':>5} {'edges':>5} {'matched n/e':>13} "
+          f"{'rightable':>9} {'agree':>6} {'pairs':>6} {'pair deg':>8} {'energy J':>8} {'m.pair deg':>10} {'m.energy J':>10}")
     studies = []
     for name, slope, res, opts in cases:
         robot = load_robot(f"{ROBOTS}/{name}.toml")
         probes = probe_states(robot, slope, 300 if quick else 500, seed + 1)
         grid = grid_study(robot, slope, res)
+        t0 = time.perf_counter()
         g = analyse(grid, probes=probes)
+        grid_seconds = grid.seconds + time.perf_counter() - t0
         budget = opts.pop("budget")
         ad = adaptive_study(robot, slope, budget, seed=seed, **opts)
+        t0 = time.perf_counter()
         a = analyse(ad, probes=probes)
+        ad_seconds = ad.seconds + time.perf_counter() - t0
         c = compare_graphs(a, ad, g, grid, probes)
-        for study, r, label in ((grid, g, grid.method), (ad, a, "adaptive")):
-            matched = "" if study is grid else f"{c['nodes_matched']}/{c['nodes'][1]} {c['edges_matched']}/{c['edges'][1]}"
-            agree = "" if study is grid else f"{c['rightable_agreement']:.1%}"
-            print(f"{name:>5} {label:>9} {r['queries']:>8,} {study.seconds:>7.1f} {r['nodes']:>5} {r['edges']:>5} "
-                  f"{matched:>11} {r['rightable']:>9.1%} {agree:>6} {r['pair_length_deg']:>8.2f} "
-                  f"{r['transition_energy']:>8.2f} {r['graph_seconds']:>7.2f}", flush=True)
+        for k, (study, r, label, secs) in enumerate(((grid, g, grid.method, grid_seconds), (ad, a, "adaptive", ad_seconds))):
+            T = r["graph"].all_transitions
+            matched = (f"{c['nodes_matched']}/{c['nodes'][0]}/{c['nodes'][1]} {c['edges_matched']}/{c['edges'][0]}/{c['edges'][1]}"
+                       if k else "")  # matched / adaptive's / grid's (nodes over 1 % of probes, edges between them)
+            agree = f"{c['rightable_agreement']:.1%}" if k else ""
+            print(f"{name:>5} {label:>9} {r['queries']:>9,} {secs:>7.1f} {r['nodes']:>5} {r['edges']:>5} {matched:>13} "
+                  f"{r['rightable']:>9.1%} {agree:>6} {len(T['length']):>6,} {np.degrees(T['length']).mean():>8.2f} "
+                  f"{T['energy'].mean():>8.2f} {c['pair_length_deg'][1 - k]:>10.2f} {c['transition_energy'][1 - k]:>10.2f}",
+                  flush=True)
         stop = "resolution reached" if ad.extra.get("stopped_by_resolution") else "budget spent"
-        print(f"{'':>5} {'ratio':>9} {g['queries'] / a['queries']:>7.1f}x {'':>7} {'':>5} {'':>5} {'':>11} {'':>9} {'':>6} "
-              f"{g['pair_length_deg'] / a['pair_length_deg']:>7.1f}x {g['transition_energy'] / a['transition_energy']:>7.2f}x"
-              f"   grid/adaptive ({stop})")
+        pg = np.degrees(g["graph"].all_transitions["length"]).mean() / np.degrees(a["graph"].all_transitions["length"]).mean()
+        eg = g["graph"].all_transitions["energy"].mean() / a["graph"].all_transitions["energy"].mean()
+        print(f"{'':>5} {'ratio':>9} {g['queries'] / a['queries']:>8.1f}x {'':>7} {'':>5} {'':>5} "
+              f"{'same' if c['same'] else 'differs':>13} {'':>9} {'':>6} {'':>6} {pg:>7.2f}x {eg:>7.2f}x "
+              f"{c['pair_length_deg'][1] / c['pair_length_deg'][0]:>9.2f}x {c['transition_energy'][1] / c['transition_energy'][0]:>9.2f}x"
+              f"   grid/adaptive ({stop}, {ad.extra['joint_states']:,} joint states)", flush=True)
         studies.append((name, ad, a))
     return studies
 
@@ -117,14 +133,15 @@ def prm_components(study, result, step_deg: float = 1.0, max_edges: int | None =
 
 
 def table51(studies, quick: bool, seed: int) -> None:
-    cap = 1000 if quick else 2500
+    cap = 500 if quick else 1000
     print("\n2. Table 5.1: building the graph from the adaptive sample sets: Gabriel clustering against PRM edge checking")
     print(f"{'robot':>5} {'known states':>12} {'Gabriel s':>9} {'nodes':>5} {'PRM s':>9} {'PRM edges':>10} "
           f"{'evaluations':>11} {'PRM regions':>11} {'PRM/Gabriel':>11}")
     for name, study, result in studies:
         t0 = time.perf_counter()
         transition_graph(study.embed(study.X), study.stable, study.embed(study.rest), study.energy,
-                         study.embed(study.extra_states()), max_edge=result["max_edge"])
+                         study.embed(study.extra_states()), max_edge=result["max_edge"], ids=study.graph_ids(),
+                         free_dims=2 * study.n_free)  # as analyse() builds it (planar robots: face identities)
         gab = time.perf_counter() - t0
         regions, prm_s, checked, total, evals = prm_components(study, result, max_edges=cap, seed=seed)
         est = prm_s * total / max(checked, 1)

@@ -60,20 +60,36 @@ class SelfRightStudy:
     seconds: float
     resolution: float | None = None  # grid spacing, radians
     extra: dict = field(default_factory=dict)
+    ids: np.ndarray | None = None  # (N,) face identity of each starting state
+    rest_ids: np.ndarray | None = None  # (N,) face identity of each resting state (-1: none)
+    face_ids: list | None = None  # per state: (k,) identities of ``faces``
 
     def embed(self, U: np.ndarray) -> np.ndarray:
         return angular_embedding(U, self.bounds)
 
-    def known_states(self) -> np.ndarray:
-        """``X^Z``: every hull face of every evaluated joint state, each once (unit cube)."""
+    def known_states(self, with_ids: bool = False):
+        """``X^Z``: every hull face of every evaluated joint state, each once (unit cube); and their identities."""
         counts = np.array([len(f) for f in self.faces])
         K = np.column_stack([np.repeat(self.X[:, :self.n_free], counts, axis=0), np.concatenate(self.faces)])
-        return _unique_rows(K)
+        _, first = np.unique(_row_keys(K), return_index=True)
+        first = np.sort(first)
+        if not with_ids:
+            return K[first]
+        return K[first], (np.concatenate(self.face_ids)[first] if self.face_ids is not None else None)
 
-    def extra_states(self) -> np.ndarray:
+    def extra_states(self, with_ids: bool = False):
         """Known states that were not themselves evaluated (Algorithm 8 labels them by nearest neighbour)."""
-        K = self.known_states()
-        return K[~np.isin(_row_keys(K), _row_keys(self.X))]
+        K, ids = self.known_states(with_ids=True) if self.face_ids is not None else (self.known_states(), None)
+        new = ~np.isin(_row_keys(K), _row_keys(self.X))
+        if not with_ids:
+            return K[new]
+        return K[new], (ids[new] if ids is not None else None)
+
+    def graph_ids(self) -> tuple | None:
+        """Face identities of ``(X, rest, extra states)`` for :func:`rapt.transitions.transition_graph`."""
+        if self.ids is None:
+            return None
+        return self.ids, self.rest_ids, self.extra_states(with_ids=True)[1]
 
 
 def _row_keys(A: np.ndarray) -> np.ndarray:
@@ -82,16 +98,12 @@ def _row_keys(A: np.ndarray) -> np.ndarray:
     return R.view(np.dtype((np.void, R.dtype.itemsize * R.shape[1]))).ravel()
 
 
-def _unique_rows(A: np.ndarray) -> np.ndarray:
-    _, first = np.unique(_row_keys(A), return_index=True)
-    return A[np.sort(first)]
-
-
 class _System:
     """The stability function seen from the unit cube: queries in, used states, labels and faces out."""
 
-    def __init__(self, robot: Robot, slope: float):
+    def __init__(self, robot: Robot, slope: float, whole_hulls: bool = False):
         self.F = StabilityFunction(robot, slope)
+        self.whole_hulls = whole_hulls  # label every face of each queried joint state (one query per face)
         self.bounds = space_bounds(robot, self.F.planar)
         self.m = robot.dof
         self.lo, self.hi = self.bounds[:, 0], self.bounds[:, 1]
@@ -108,34 +120,54 @@ class _System:
         X = self.unit(np.column_stack([res.theta, res.start]))
         rest = np.column_stack([res.theta, res.rest])
         R = np.where(np.isfinite(rest).all(axis=1, keepdims=True), self.unit(np.nan_to_num(rest)), np.nan)
-        faces = [self.unit(np.column_stack([np.broadcast_to(t, (len(f), m)), f]))[:, m:] for t, f in zip(res.theta, res.faces)]
-        self.rows.append((X, res.stable.copy(), R, res.energy.copy(), faces))
-        return X, res.stable.astype(float), faces
+        faces, done = [], {}
+        for t, f in zip(res.theta, res.faces):  # the states of one hull share its face array: convert it once
+            if id(f) not in done:
+                done[id(f)] = self.unit(np.column_stack([np.broadcast_to(t, (len(f), m)), f]))[:, m:]
+            faces.append(done[id(f)])
+        self.rows.append((X, res.stable.copy(), R, res.energy.copy(), res.start_id, res.rest_id, faces, res.face_ids))
+        return X, res.stable.astype(float), faces, res.start_id, res.face_ids
 
     def __call__(self, U: np.ndarray):
         a = self.angles(U)
+        if self.whole_hulls:
+            return self.record(self.F.all_faces(np.unique(a[:, :self.m], axis=0)))
         return self.record(self.F(a[:, :self.m], a[:, self.m:]))
 
     def study(self, robot, slope, method, seconds, **kw) -> SelfRightStudy:
-        X, s, R, e = (np.concatenate([r[i] for r in self.rows]) for i in range(4))
-        faces = [f for r in self.rows for f in r[4]]
+        X, s, R, e, ids, rest_ids = (np.concatenate([r[i] for r in self.rows]) for i in range(6))
+        faces = [f for r in self.rows for f in r[6]]
+        face_ids = [f for r in self.rows for f in r[7]]
         return SelfRightStudy(robot, slope, method, self.bounds, self.m, X, s.astype(bool), R, e, faces,
-                              self.F.n_queries, seconds, **kw)
+                              self.F.n_queries, seconds, ids=ids, rest_ids=rest_ids, face_ids=face_ids, **kw)
 
 
 def adaptive_study(robot: Robot, slope: float, budget: int, *, seed: int = 0, batch_size: int = 50,
                    r_min_deg: float = 1.0, r_max_deg: float = 10.0, n_initial: int | None = None,
-                   progress=None, **options) -> SelfRightStudy:
-    """Algorithm 6 on ``robot`` at ``slope`` degrees, at most ``budget`` queries."""
-    system = _System(robot, slope)
+                   whole_hulls: bool | None = None, progress=None, **options) -> SelfRightStudy:
+    """Algorithm 6 on ``robot`` at ``slope`` degrees, about ``budget`` queries.
+
+    A query is the stability of one state ``[θ, face]``, as the grid search counts them.
+    ``whole_hulls`` labels every face of each queried joint state and counts each face as
+    a query; otherwise only the snapped face is labelled (the other faces are known states
+    labelled by their nearest neighbour in Algorithm 8).  Default: on for planar robots,
+    whose faces are all settled in one table lookup once the hull is known (and whose
+    nodes are otherwise mislabelled by sparse neighbours), off for 3-D hulls, where each
+    face is its own tipping simulation with tens to hundreds of faces per hull.  The last
+    batch may overshoot the budget by a few faces.
+    """
+    system = _System(robot, slope, False)
+    whole_hulls = system.F.planar if whole_hulls is None else bool(whole_hulls)
+    system.whole_hulls = whole_hulls
     if n_initial is None:
         n_initial = min(max(20 * system.bounds.shape[0], 50), max(budget // 5, 10))
     sampler = ManifoldSampler(robot.dof, system.bounds, seed=seed, r_min=np.radians(r_min_deg),
-                              r_max=np.radians(r_max_deg), n_initial=n_initial, **options)
+                              r_max=np.radians(r_max_deg), n_initial=n_initial, whole_hulls=whole_hulls, **options)
     t0 = time.perf_counter()
     manifold_search(system, sampler, budget, batch_size, progress)
     study = system.study(robot, slope, "adaptive", time.perf_counter() - t0)
-    study.extra.update(stopped_by_resolution=sampler.done, r_min_deg=r_min_deg, r_max_deg=r_max_deg)
+    study.extra.update(stopped_by_resolution=sampler.done, r_min_deg=r_min_deg, r_max_deg=r_max_deg,
+                       whole_hulls=whole_hulls, joint_states=system.F.n_hulls)
     return study
 
 
@@ -150,64 +182,179 @@ def grid_study(robot: Robot, slope: float, resolution_deg: float) -> SelfRightSt
     theta = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, robot.dof) if axes else np.zeros((1, 0))
     t0 = time.perf_counter()
     system.record(system.F.all_faces(theta))
-    return system.study(robot, slope, f"grid {resolution_deg:g}°", time.perf_counter() - t0,
-                        resolution=np.radians(resolution_deg))
+    study = system.study(robot, slope, f"grid {resolution_deg:g}°", time.perf_counter() - t0,
+                         resolution=np.radians(resolution_deg))
+    study.extra.update(grid_shape=[len(a) for a in axes],
+                       grid_periodic=[bool(hi - lo >= 2 * np.pi - 1e-9) for lo, hi in robot.joint_bounds])
+    return study
 
 
-def home_state(study: SelfRightStudy) -> np.ndarray:
-    """The upright home state: home joint angles, resting on the face below the base (unit cube)."""
+def grid_connections(study: SelfRightStudy) -> tuple[np.ndarray, np.ndarray]:
+    """A grid search's own connectivity (the original framework, section 5.2), for Algorithm 8.
+
+    States on the same face (identity) at neighbouring grid joint states are connected, as
+    is a face to the one replacing it at the neighbour (neither exists at the other joint
+    state and the body angle moved no more than the joints: a continuation, as in
+    :mod:`rapt.transitions`); each resting state is the evaluated state it names.  Indices
+    run over ``[X, settled rest states]`` (a grid has no unevaluated known states).
+    """
+    shape, periodic = study.extra["grid_shape"], study.extra["grid_periodic"]
+    m = study.n_free
+    U = study.X[:, :m]
+    idx = np.empty((len(U), m), dtype=np.int64)
+    for a in range(m):
+        div = shape[a] if periodic[a] else shape[a] - 1
+        idx[:, a] = np.rint(U[:, a] * div).astype(np.int64) % (shape[a] if periodic[a] else div + 1)
+    flat = np.ravel_multi_index(tuple(idx.T), shape)
+    settled = np.flatnonzero(np.isfinite(study.rest).all(axis=1))
+    _, rank = np.unique(np.concatenate([study.ids, study.rest_ids[settled]]), return_inverse=True)
+    rank = rank.reshape(-1).astype(np.int64)
+    n_id = int(rank.max()) + 1
+    key = flat * n_id + rank[:len(U)]
+    order = np.argsort(key, kind="stable")
+    skey = key[order]
+
+    def find(k):
+        at = np.clip(np.searchsorted(skey, k), 0, len(skey) - 1)
+        return np.where(skey[at] == k, order[at], -1)
+
+    N = len(U)
+    src, dst = [np.arange(len(settled)) + N], [find(flat[settled] * n_id + rank[N:])]  # rest state = evaluated state
+    by_flat = np.argsort(flat, kind="stable")
+    first = np.searchsorted(flat[by_flat], np.arange(int(np.prod(shape))))
+    count = np.bincount(flat, minlength=int(np.prod(shape)))
+    body = study.embed(study.X)[:, 2 * m:]
+    step = 2 * np.sin(np.radians(np.degrees(study.resolution)) / 2)
+    for a in range(m):
+        nb = idx.copy()
+        nb[:, a] += 1
+        ok = nb[:, a] < shape[a]
+        if periodic[a]:
+            nb[:, a] %= shape[a]
+            ok[:] = True
+        s = np.flatnonzero(ok)
+        nflat = np.ravel_multi_index(tuple(nb[s].T), shape)
+        same = find(nflat * n_id + rank[s])
+        src.append(s[same >= 0])
+        dst.append(same[same >= 0])
+        gone = s[same < 0]  # this face has no namesake at the neighbour: look for what replaced it
+        g_flat = nflat[same < 0]
+        best, best_d = -np.ones(len(gone), dtype=np.int64), np.full(len(gone), np.inf)
+        for o in range(int(count.max())):
+            has = o < count[g_flat]
+            c = by_flat[np.minimum(first[g_flat] + o, len(by_flat) - 1)]
+            back = find(flat[gone] * n_id + rank[c])  # the replacement must not exist here either
+            d = np.linalg.norm(body[c] - body[gone], axis=1)
+            take = has & (back < 0) & (d <= step + 1e-9) & (d < best_d)
+            best = np.where(take, c, best)
+            best_d = np.where(take, d, best_d)
+        src.append(gone[best >= 0])
+        dst.append(best[best >= 0])
+    i, j = np.concatenate(src), np.concatenate(dst)
+    keep = (i >= 0) & (j >= 0)
+    return i[keep], j[keep]
+
+
+def home_state(study: SelfRightStudy, with_id: bool = False):
+    """The upright home state: home joint angles, resting on the face below the base (unit cube); and its face id."""
     F = StabilityFunction(study.robot, study.slope)
     res = F(study.robot.home[None], np.zeros((1, F.n_body)))
-    return _to_unit(np.concatenate([res.theta[0], res.start[0]]), study.bounds[:, 0], study.bounds[:, 1])
+    U = _to_unit(np.concatenate([res.theta[0], res.start[0]]), study.bounds[:, 0], study.bounds[:, 1])
+    return (U, int(res.start_id[0])) if with_id else U
 
 
-def probe_states(robot: Robot, slope: float, n: int, seed: int) -> np.ndarray:
-    """Uniform random joint states with every hull face: the population 'self-rightable fraction' counts (unit cube)."""
+@dataclass
+class Probes:
+    """Reference states for scoring graphs: every hull face of uniform random joint states, with the truth.
+
+    ``U`` unit-cube states, ``ids`` their face identities, ``stable`` their true stability
+    (evaluated outside any search, so they cost the searches nothing; planar robots only —
+    settling every face of a 3-D hull is slow — else all True).
+    """
+
+    U: np.ndarray
+    ids: np.ndarray
+    stable: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.U)
+
+
+def probe_states(robot: Robot, slope: float, n: int, seed: int) -> Probes:
+    """Uniform random joint states with every hull face: the population 'self-rightable fraction' counts."""
     F = StabilityFunction(robot, slope)
     bounds = space_bounds(robot, F.planar)
     theta = bounds[:robot.dof, 0] + np.random.default_rng(seed).random((n, robot.dof)) * np.ptp(bounds[:robot.dof], axis=1)
-    rows = []
+    if F.planar:
+        res = F.all_faces(theta)
+        U = _to_unit(np.column_stack([res.theta, res.start]), bounds[:, 0], bounds[:, 1])
+        return Probes(U, res.start_id, res.stable)
+    rows, ids = [], []
     for t in theta:
-        angles = F.hull(t).angles
-        rows.append(np.column_stack([np.broadcast_to(t, (len(angles), robot.dof)), angles]))
-    return _to_unit(np.concatenate(rows), bounds[:, 0], bounds[:, 1])
+        hull = F.hull(t)
+        rows.append(np.column_stack([np.broadcast_to(t, (hull.n_faces, robot.dof)), hull.angles]))
+        ids.append(hull.ids)
+    U = _to_unit(np.concatenate(rows), bounds[:, 0], bounds[:, 1])
+    return Probes(U, np.concatenate(ids), np.ones(len(U), dtype=bool))
+
+
+def _probes(probes) -> Probes:
+    """Accept a bare array of unit-cube states too (no identities, all taken as stable)."""
+    if isinstance(probes, Probes):
+        return probes
+    U = np.asarray(probes, dtype=float)
+    return Probes(U, None, np.ones(len(U), dtype=bool))
 
 
 def default_max_edge(study: SelfRightStudy) -> float:
     """Gabriel ``d_max`` (embedded distance).
 
     A grid: 2.5 steps (faces tilt with the joints, so neighbours on one face can be more
-    than a step apart).  An adaptive study: twice the interior resolution, widened to twice
-    the median distance from a known state to its (2m + 2)-th nearest (m joints) when the
-    data are sparser than that — a budget-limited search in several joints otherwise falls
-    apart into hundreds of one-state regions — but at most four interior resolutions, so
-    that nearly parallel faces stay apart.
+    than a step apart).  An adaptive study: three interior resolutions for planar robots
+    (face identities keep different faces apart, so ``d_max`` need only bridge the sparse
+    interior), two for 3-D hulls (body angles alone must keep faces apart), widened
+    to twice the median distance from a known state to its (2m + 2)-th nearest (m joints)
+    when the data are sparser than that, but at most four interior resolutions.
     """
     if study.resolution is not None:
         return 2.5 * study.resolution
     r_max = np.radians(study.extra.get("r_max_deg", 10.0))
+    base = 3.0 if study.X.shape[1] - study.n_free == 1 else 2.0
     E = study.embed(study.known_states())
     k = min(len(E) - 1, 2 * study.n_free + 2)
     if k < 1:
-        return 2.0 * r_max
+        return base * r_max
     d, _ = cKDTree(E).query(E, k=k + 1)
-    return float(min(max(2.0 * r_max, 2.0 * np.median(d[:, -1])), 4.0 * r_max))
+    return float(min(max(base * r_max, 2.0 * np.median(d[:, -1])), 4.0 * r_max))
 
 
-def analyse(study: SelfRightStudy, *, max_edge: float | None = None, probes: np.ndarray | None = None,
-            label_radius: float | None = None) -> dict:
-    """Transition graph and the chapter's figures of merit for one study."""
+def analyse(study: SelfRightStudy, *, max_edge: float | None = None, probes=None,
+            label_radius: float | None = None, use_ids: bool | None = None) -> dict:
+    """Transition graph and the chapter's figures of merit for one study.
+
+    ``use_ids`` keeps different hull faces apart by their vertex identity (section 5.2's
+    unique-vertex faces); without it only ``max_edge`` does (body angles alone).  Default:
+    on for planar robots (a face is a pair of corners), off for 3-D hulls, whose faces
+    change identity with every mesh vertex that rises through them — the reason the
+    chapter moved to body angles.
+    """
+    if use_ids is None:
+        use_ids = study.X.shape[1] - study.n_free == 1
     max_edge = default_max_edge(study) if max_edge is None else max_edge
     t0 = time.perf_counter()
     known = study.known_states()
+    ids = study.graph_ids() if use_ids else None
+    connections = grid_connections(study) if use_ids and "grid_shape" in study.extra else None
     graph = transition_graph(study.embed(study.X), study.stable, study.embed(study.rest), study.energy,
-                             study.embed(study.extra_states()), max_edge=max_edge, label_radius=label_radius)
+                             study.embed(study.extra_states()), max_edge=max_edge, label_radius=label_radius, ids=ids,
+                             free_dims=2 * study.n_free, connections=connections)
     seconds = time.perf_counter() - t0
-    home = int(graph.node_of(study.embed(home_state(study)[None]))[0])
+    home_U, home_id = home_state(study, with_id=True)
+    home = int(graph.node_of(study.embed(home_U[None]), ids=[home_id])[0])
     cost, _ = graph.costs_to(home) if home >= 0 else (np.full(graph.n_nodes, np.inf), None)
-    if probes is None:
-        probes = probe_states(study.robot, study.slope, 500, 0)
-    ok, energy = graph.outcome(study.embed(probes), home) if home >= 0 else (np.zeros(len(probes), bool), None)
+    probes = _probes(probe_states(study.robot, study.slope, 500, 0) if probes is None else probes)
+    ok, energy = (graph.outcome(study.embed(probes.U), home, ids=probes.ids) if home >= 0
+                  else (np.zeros(len(probes), bool), None))
     e = graph.edges
     return {
         "graph": graph, "home": home, "cost_to_home": cost, "graph_seconds": seconds, "max_edge": max_edge,
@@ -219,18 +366,23 @@ def analyse(study: SelfRightStudy, *, max_edge: float | None = None, probes: np.
     }
 
 
-def compare_graphs(a: dict, study_a: SelfRightStudy, b: dict, study_b: SelfRightStudy, probes: np.ndarray,
+def compare_graphs(a: dict, study_a: SelfRightStudy, b: dict, study_b: SelfRightStudy, probes,
                    min_share: float = 0.01) -> dict:
     """Is graph ``a`` the same as ``b``?  Judged on probe states, since node numbers are arbitrary.
 
-    Each probe state falls in one node of each graph (through its nearest known stable
-    state); a node of ``a`` maps to the node of ``b`` most of its probes fall in.  Nodes
-    holding fewer than ``min_share`` of the probes are ignored.  Reports nodes and edges
-    matched both ways, and the share of probe states whose self-rightability agrees.
+    Each truly stable probe state falls in one node of each graph (through its nearest
+    known stable state on the same hull face); a node of ``a`` maps to the node of ``b``
+    most of its probes fall in.  Nodes holding fewer than ``min_share`` of the stable
+    probes are ignored.  Reports nodes and edges matched both ways, and the share of all
+    probe states whose self-rightability agrees, and — over the edges matched in both
+    graphs — the mean boundary-pair length and transition energy of each.
     """
+    probes = _probes(probes)
     ga, gb = a["graph"], b["graph"]
-    na = ga.node_of(study_a.embed(probes))
-    nb = gb.node_of(study_b.embed(probes))
+    st = probes.stable
+    pid = None if probes.ids is None else probes.ids[st]
+    na = ga.node_of(study_a.embed(probes.U[st]), ids=pid)
+    nb = gb.node_of(study_b.embed(probes.U[st]), ids=pid)
 
     def big(nodes, n):
         share = np.bincount(nodes[nodes >= 0], minlength=n) / len(nodes)
@@ -249,18 +401,30 @@ def compare_graphs(a: dict, study_a: SelfRightStudy, b: dict, study_b: SelfRight
     nodes_matched = sum(1 for n, m in ab.items() if ba.get(m) == n)
 
     def edge_set(g, keep, remap=None):
-        es = set()
-        for s, d in zip(g.edges["src"], g.edges["dst"]):
+        """{(src, dst): (energy, boundary-pair length)}, the lowest-energy edge per mapped pair."""
+        es = {}
+        for s, d, e, L in zip(g.edges["src"], g.edges["dst"], g.edges["energy"], g.edges["length"]):
             if s in keep and d in keep:
-                es.add((remap[s], remap[d]) if remap else (int(s), int(d)))
+                key = (remap[s], remap[d]) if remap else (int(s), int(d))
+                if key not in es or e < es[key][0]:
+                    es[key] = (float(e), float(L))
         return es
 
     ea, eb = edge_set(ga, big_a, ab), edge_set(gb, big_b)
-    ra, _ = ga.outcome(study_a.embed(probes), a["home"]) if a["home"] >= 0 else (np.zeros(len(probes), bool), None)
-    rb, _ = gb.outcome(study_b.embed(probes), b["home"]) if b["home"] >= 0 else (np.zeros(len(probes), bool), None)
+    both = sorted(set(ea) & set(eb))
+    pair = np.array([[ea[k][1], eb[k][1]] for k in both]).reshape(-1, 2)
+    energy = np.array([[ea[k][0], eb[k][0]] for k in both]).reshape(-1, 2)
+    ra, _ = (ga.outcome(study_a.embed(probes.U), a["home"], ids=probes.ids) if a["home"] >= 0
+             else (np.zeros(len(probes), bool), None))
+    rb, _ = (gb.outcome(study_b.embed(probes.U), b["home"], ids=probes.ids) if b["home"] >= 0
+             else (np.zeros(len(probes), bool), None))
+    mean = lambda v: float(v.mean()) if v.size else float("nan")  # noqa: E731
     return {"nodes": (len(big_a), len(big_b)), "nodes_matched": nodes_matched, "edges": (len(ea), len(eb)),
-            "edges_matched": len(ea & eb), "same": nodes_matched == len(big_a) == len(big_b) and ea == eb,
-            "rightable_agreement": float((ra == rb).mean())}
+            "edges_matched": len(both), "same": nodes_matched == len(big_a) == len(big_b) and set(ea) == set(eb),
+            "rightable_agreement": float((ra == rb).mean()),
+            # on the matched edges (the same transitions in both graphs): a's and b's means
+            "pair_length_deg": (mean(np.degrees(pair[:, 0])), mean(np.degrees(pair[:, 1]))),
+            "transition_energy": (mean(energy[:, 0]), mean(energy[:, 1]))}
 
 
 # -- outputs ------------------------------------------------------------------------------------

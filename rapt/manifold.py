@@ -17,6 +17,10 @@ core:
 * resolution cut-offs end the search (Algorithm 6): a candidate whose neighbours all agree
   is dropped once ``V < r_max``, one on a boundary once ``V < r_min``; when no candidate is
   left :attr:`done` is set and :meth:`ask` returns no points.
+* ``whole_hulls=True`` is for systems that label *every* valid φ of each asked θ (one hull
+  computation settles every face): candidates are then ranked per free state θ (its best
+  face's information), a batch holds distinct θ, and ``ask(n)`` returns about
+  ``n / mean faces`` of them so that ``n`` stays the number of labelled states.
 
 Distances are taken between angles embedded as ``(cos a, sin a)``: section 5.4.1's cosine
 distance ``|cos x₀ − cos x₁|`` is periodic but maps ``a`` and ``−a`` together; the
@@ -63,6 +67,8 @@ class ManifoldSampler(Sampler):
     n_initial: uniform random queries before the search turns adaptive.
     candidates_per_point, min_candidates: about ``max(candidates_per_point · n, min_candidates)`` candidates a batch.
     separation: near-duplicate suppression inside a batch, a multiple of each candidate's ``V``.
+    whole_hulls: the system labels every valid constrained value of each asked free state;
+        rank and batch free states, not single states (see the module docstring).
     """
 
     name = "manifold-nndv"
@@ -71,7 +77,7 @@ class ManifoldSampler(Sampler):
     def __init__(self, n_free: int, bounds: Sequence[Sequence[float]], *, seed: int = 0, k: int = 6,
                  alpha: float = 1.0, beta: float = 1.0, r_min: float = np.radians(1.0), r_max: float = np.radians(10.0),
                  n_initial: int = 100, candidates_per_point: float = 10.0, min_candidates: int = 1000,
-                 separation: float = 0.5):
+                 separation: float = 0.5, whole_hulls: bool = False):
         bounds = np.asarray(bounds, dtype=float)
         if bounds.ndim != 2 or bounds.shape[1] != 2 or not np.all(bounds[:, 1] > bounds[:, 0]):
             raise ValueError(f"bounds: expected (d, 2) ranges with lower < upper, got {bounds.tolist()}")
@@ -95,16 +101,27 @@ class ManifoldSampler(Sampler):
         self.candidates_per_point = float(candidates_per_point)
         self.min_candidates = int(min_candidates)
         self.separation = float(separation)
+        self.whole_hulls = bool(whole_hulls)
+        if self.whole_hulls and self.n_free < 1:
+            raise ValueError("whole_hulls: needs at least one free coordinate (n_free >= 1) to group faces by")
         self.done = False
         self._faces: list[np.ndarray] = []
+        self._ids: list[int] = []
+        self._face_ids: list[np.ndarray] | None = []
+        self._candidate_ids: np.ndarray | None = None
         self.last_information: np.ndarray | None = None
 
     # -- data --------------------------------------------------------------------------------
-    def tell(self, X: np.ndarray, Y: np.ndarray, faces: Sequence[np.ndarray] | None = None) -> None:
+    def tell(self, X: np.ndarray, Y: np.ndarray, faces: Sequence[np.ndarray] | None = None,
+             ids: np.ndarray | None = None, face_ids: Sequence[np.ndarray] | None = None) -> None:
         """Record the states the system used, their labels and, per state, its valid constrained values.
 
         ``faces[i]`` is a (k_i, d − n_free) array of unit-cube constrained coordinates valid
         at ``X[i]``'s free coordinates (``Z_θ``); without it only ``X[i]`` itself is known.
+        ``ids[i]`` and ``face_ids[i]`` (k_i,) optionally name the manifolds (a hull face's
+        vertices): whole-hull information then follows a face by name, and a face that has
+        disappeared at a neighbour counts as a change there (section 5.2: a face ceasing to
+        exist ends its node), so the search resolves where faces appear and vanish too.
         """
         X = np.asarray(X, dtype=float).reshape(-1, self.dim)
         if faces is None:
@@ -112,8 +129,15 @@ class ManifoldSampler(Sampler):
         if len(faces) != len(X):
             raise ValueError(f"faces: expected one face set per state ({len(X)}), got {len(faces)}")
         faces = [np.asarray(f, dtype=float).reshape(-1, self.dim - self.n_free) for f in faces]
+        if (ids is None) != (face_ids is None) or (ids is not None and (len(ids) != len(X) or len(face_ids) != len(X))):
+            raise ValueError(f"ids, face_ids: give both, one per state ({len(X)}), or neither")
+        if ids is None or self._face_ids is None or (self.n_told and not self._ids):
+            self._face_ids = None  # identities only help when every state has them
         super().tell(X, Y)
         self._faces.extend(faces)
+        if self._face_ids is not None:
+            self._ids.extend(int(v) for v in ids)
+            self._face_ids.extend(np.asarray(f, dtype=np.int64).reshape(-1) for f in face_ids)
 
     @property
     def faces(self) -> list[np.ndarray]:
@@ -146,6 +170,8 @@ class ManifoldSampler(Sampler):
             nn = np.zeros(p, dtype=int)
         sets = [self._faces[i] for i in nn]
         counts = np.array([len(s) for s in sets])
+        self._candidate_groups = np.repeat(np.arange(p), counts)  # which random θ each candidate belongs to
+        self._candidate_ids = np.concatenate([self._face_ids[i] for i in nn]) if self._face_ids else None
         return np.column_stack([np.repeat(theta, counts, axis=0), np.concatenate(sets)])
 
     def information(self, candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -165,8 +191,12 @@ class ManifoldSampler(Sampler):
             raise ValueError(f"n: expected a positive integer number of points, got {n!r}")
         rng = np.random.default_rng(np.random.SeedSequence([self.seed, self.n_batches]))
         if self.n_told < max(self.n_initial, self.k + 1):
-            points = rng.random((n, self.dim))
+            points = rng.random((self._hull_count(n) if self.whole_hulls else n, self.dim))
             self.last_information = None
+        elif self.whole_hulls:
+            points = self._ask_hulls(n, rng)
+            if not len(points):
+                return points
         else:
             cand = self.candidates(n, rng)
             info, sigma, volume = self.information(cand)
@@ -183,6 +213,106 @@ class ManifoldSampler(Sampler):
         self.n_asked += len(points)
         return np.clip(points, 0.0, 1.0)
 
+    def _hull_count(self, n: int) -> int:
+        """Free states whose faces make about ``n`` labelled states (before any is told, a guess of 8 faces each)."""
+        mean_faces = np.mean([len(f) for f in self._faces]) if self._faces else 8.0
+        return max(int(round(n / max(mean_faces, 1.0))), 1)
+
+    def hull_information(self, candidates: np.ndarray,
+                         cand_ids: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """NNDV along the manifolds: (I, σ, V) per candidate when every face of each told θ is labelled.
+
+        The K = 2 n_free nearest told free states θ_i are the neighbours; at each, the face
+        nearest the candidate's φ stands for the candidate's manifold (the metamodel Π of
+        Algorithm 7 applied to labels), so σ is the label variance *along* one manifold and
+        is not raised by a parallel face nearby.  V is the distance in θ to the farthest of the K.
+        """
+        X, Y = self.X, self.Y[:, 0]
+        f = self.n_free
+        thetas, inv = np.unique(X[:, :f], axis=0, return_inverse=True)
+        inv = inv.reshape(-1)
+        order = np.argsort(inv, kind="stable")
+        counts = np.bincount(inv, minlength=len(thetas))
+        slot = np.arange(len(X)) - np.repeat(np.cumsum(counts) - counts, counts)
+        body = self.embed(X)[:, 2 * f:]
+        faces = np.full((len(thetas), counts.max(), body.shape[1]), np.inf)
+        labels = np.zeros((len(thetas), counts.max()))
+        faces[inv[order], slot] = body[order]
+        labels[inv[order], slot] = Y[order]
+        k = min(max(2 * f, 2), len(thetas))
+        emb = self.embed(candidates)
+        tree = cKDTree(angular_embedding(thetas, self.bounds[:f]))
+        dist, nbr = tree.query(emb[:, :2 * f], k=k, workers=query_workers(len(candidates)))
+        dist, nbr = dist.reshape(len(candidates), k), nbr.reshape(len(candidates), k)
+        if self._face_ids and cand_ids is not None:  # follow the face by name; absent counts as unstable
+            _, rank = np.unique(np.concatenate([np.asarray(self._ids), cand_ids]), return_inverse=True)
+            rank = rank.reshape(-1).astype(np.int64)
+            key = inv.astype(np.int64) * (rank.max() + 1) + rank[:len(X)]
+            o = np.argsort(key)
+            want = nbr.astype(np.int64) * (rank.max() + 1) + rank[len(X):][:, None]
+            at = np.clip(np.searchsorted(key[o], want), 0, len(key) - 1)
+            found = key[o][at] == want
+            lab = np.where(found, Y[o][at], 0.0)
+        else:
+            gap = np.linalg.norm(faces[nbr] - emb[:, None, None, 2 * f:], axis=-1)  # (p, k, faces)
+            gap = np.where(np.isfinite(gap), gap, np.inf)
+            lab = np.take_along_axis(labels[nbr], gap.argmin(axis=2)[..., None], axis=2)[..., 0]
+        sigma = neighbour_variance(lab)
+        volume = dist.max(axis=1)
+        return self.alpha * sigma / 0.25 + self.beta * volume, sigma, volume
+
+    def _hull_candidates(self, m_theta: int, rng: np.random.Generator) -> np.ndarray:
+        """Algorithm 7's uniform random θ, plus as many told θ jittered by their own spacing.
+
+        Uniform candidates alone almost never land inside a sub-degree boundary interval;
+        the jittered ones do, at every scale the data already has.
+        """
+        cand = self.candidates(m_theta, rng)
+        groups = self._candidate_groups
+        f = self.n_free
+        thetas = np.unique(self.X[:, :f], axis=0)
+        q = min(int(groups.max()) + 1, len(thetas))
+        pick = rng.choice(len(thetas), q, replace=False)
+        E = angular_embedding(thetas, self.bounds[:f])
+        d, _ = cKDTree(E).query(E[pick], k=2)
+        scale = d[:, 1:2] / np.ptp(self.bounds[:f], axis=1)  # chord ≈ radians → unit-cube units
+        local = thetas[pick] + rng.normal(size=(q, f)) * scale
+        span = np.ptp(self.bounds[:f], axis=1)
+        periodic = span >= 2 * np.pi - 1e-9
+        local = np.where(periodic, np.mod(local, 1.0), np.clip(local, 0.0, 1.0))
+        tree = cKDTree(angular_embedding(self.X[:, :f], self.bounds[:f]))
+        _, nn = tree.query(angular_embedding(local, self.bounds[:f]), k=1)
+        sets = [self._faces[i] for i in nn]
+        c2 = np.array([len(s) for s in sets])
+        extra = np.column_stack([np.repeat(local, c2, axis=0), np.concatenate(sets)])
+        self._candidate_groups = np.concatenate([groups, groups.max() + 1 + np.repeat(np.arange(q), c2)])
+        if self._candidate_ids is not None:
+            self._candidate_ids = np.concatenate([self._candidate_ids] + [self._face_ids[i] for i in nn])
+        return np.concatenate([cand, extra])
+
+    def _ask_hulls(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        """Whole-hull batch: distinct free states ranked by their best live face; each returned with that face."""
+        m_theta = self._hull_count(n)
+        cand = self._hull_candidates(m_theta, rng)
+        groups = self._candidate_groups
+        info, sigma, volume = self.hull_information(cand, self._candidate_ids)
+        live = ~(((sigma == 0) & (volume < self.r_max)) | ((sigma > 0) & (volume < self.r_min)))
+        info = np.where(live, info, -np.inf)
+        best = np.full(groups.max() + 1, -np.inf)
+        np.maximum.at(best, groups, info)
+        order = np.lexsort((-info, groups))  # per group, its best face first
+        first = order[np.r_[True, groups[order][1:] != groups[order][:-1]]]
+        first = first[np.isfinite(info[first])]
+        if not len(first):
+            self.done = True
+            return np.empty((0, self.dim))
+        rep = cand[first]
+        m = min(m_theta, len(rep))
+        free = self.embed(rep)[:, :2 * self.n_free] if self.n_free else self.embed(rep)
+        idx = select_batch(rep, info[first], m, self.separation * volume[first], free)
+        self.last_information = info[first][idx]
+        return rep[idx]
+
     def _propose(self, n: int, rng: np.random.Generator) -> np.ndarray:  # pragma: no cover - ask() is overridden
         raise NotImplementedError
 
@@ -192,8 +322,9 @@ def manifold_search(fn: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, Seq
                     progress: Callable[[int, int], None] | None = None) -> ManifoldSampler:
     """Algorithm 6's loop: ask, evaluate, tell, until ``budget`` evaluations or the cut-offs end it.
 
-    ``fn(queries) -> (used_states, labels, faces)`` evaluates unit-cube queries and returns
-    the states actually used (after projection), their 0/1 labels and valid constrained values.
+    ``fn(queries) -> (used_states, labels, faces[, ids, face_ids])`` evaluates unit-cube
+    queries and returns the states actually used (after projection), their 0/1 labels,
+    valid constrained values and, optionally, manifold identities (see :meth:`ManifoldSampler.tell`).
     """
     if budget < 1 or batch_size < 1:
         raise ValueError(f"budget, batch_size: expected positive integers, got {budget}, {batch_size}")
@@ -201,8 +332,8 @@ def manifold_search(fn: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, Seq
         q = sampler.ask(min(batch_size, budget - sampler.n_told))
         if not len(q):
             break
-        X, Y, faces = fn(q)
-        sampler.tell(X, Y, faces)
+        out = fn(q)
+        sampler.tell(*out)
         if progress is not None:
             progress(sampler.n_told, budget)
     return sampler

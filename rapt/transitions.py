@@ -20,6 +20,23 @@ state each unstable one comes to rest in, and the energy lost on the way.  Secti
 
 :meth:`TransitionGraph.costs_to` runs Dijkstra on the reversed edges, giving every node's
 lowest total energy to a goal node (infinite when it cannot reach it) and the path.
+
+Manifold identities (optional).  When the system can name the manifold a state lies on
+(a robot's hull face by its vertices), ``ids`` keeps states with different identities
+apart: they are never Gabriel neighbours, never block each other's Gabriel edges, and an
+extra state takes its label from the nearest evaluated state *of its own identity*.  This
+is done by giving each identity its own far-apart slot in one extra coordinate, so the
+same k-d tree code serves both cases.  Section 5.2 defines a node as continuously stable
+states on one face; without identities ``max_edge`` alone must keep parallel faces apart.
+
+A manifold can also *continue* as another: when a vertex rises through a resting face the
+face is replaced by one with the same body angle at the crossing, and the robot turns
+onto it without tipping.  With ``free_dims`` (the leading free coordinates, e.g. joint
+angles), a Gabriel edge between different identities is kept when neither identity
+exists at the other state's free coordinates (one face replaced the other in between)
+and the constrained coordinates moved no more than the free ones (``rate`` 1), and the
+edge is no longer than ``continuation_edge`` (default ``max_edge / 2``): the crossing must
+be resolved, or a long edge could step over an unstable band between two faces.
 """
 
 from __future__ import annotations
@@ -53,17 +70,32 @@ def gabriel_graph(X: np.ndarray, max_edge: float, chunk: int = 200_000) -> tuple
         return np.empty(0, dtype=int), np.empty(0, dtype=int)
     tree = cKDTree(X)
     pairs = tree.query_pairs(max_edge, output_type="ndarray")
+    pairs = pairs[_empty_balls(tree, X, pairs, chunk)]
+    return pairs[:, 0].astype(int), pairs[:, 1].astype(int)
+
+
+def _empty_balls(tree: cKDTree, X: np.ndarray, pairs: np.ndarray, chunk: int = 200_000) -> np.ndarray:
+    """Per pair ``(i, j)``: is the ball with diameter ``x_i x_j`` free of other points (the Gabriel test)?"""
     keep = np.zeros(len(pairs), dtype=bool)
     for s in range(0, len(pairs), chunk):
         p = pairs[s:s + chunk]
         a, b = X[p[:, 0]], X[p[:, 1]]
         r = np.linalg.norm(a - b, axis=1) / 2.0
         d, idx = tree.query((a + b) / 2.0, k=min(3, len(X)), workers=query_workers(len(p)))
+        d, idx = d.reshape(len(p), -1), idx.reshape(len(p), -1)
         other = (idx != p[:, :1]) & (idx != p[:, 1:2])
         inside = other & (d < r[:, None] * (1.0 - 1e-9) - 1e-15)
         keep[s:s + chunk] = ~inside.any(axis=1)
-    pairs = pairs[keep]
-    return pairs[:, 0].astype(int), pairs[:, 1].astype(int)
+    return keep
+
+
+def separate(X: np.ndarray, ids: np.ndarray | None, gap: float) -> np.ndarray:
+    """``X`` with one more coordinate putting each identity ``gap`` from the next (unchanged without ids)."""
+    X = np.asarray(X, dtype=float)
+    if ids is None:
+        return X
+    _, rank = np.unique(np.asarray(ids).reshape(-1), return_inverse=True)
+    return np.column_stack([X, rank.reshape(-1) * float(gap)])
 
 
 @dataclass
@@ -75,7 +107,8 @@ class TransitionGraph:
     ``end_node`` (the node a state ends up in: its own, or its resting state's; -1 when
     unknown or when it never comes to rest).  ``edges`` has one row per kept transition:
     ``src``, ``dst``, ``energy``, ``witness`` (the evaluated unstable state) and ``length``
-    (its boundary pair's length: distance to the stable state it was reached from).
+    (its boundary pair's length: distance to the stable state it was reached from, in the
+    free coordinates when ``free_dims`` is given — section 5.3's "distance in joint space").
     """
 
     points: np.ndarray
@@ -88,6 +121,7 @@ class TransitionGraph:
     all_transitions: dict = field(default_factory=dict)  # before de-duplication
     n_gabriel_edges: int = 0
     max_edge: float = 0.0
+    ids: np.ndarray | None = None  # manifold identity of each of ``points`` (None: not known)
 
     @property
     def n_nodes(self) -> int:
@@ -97,15 +131,30 @@ class TransitionGraph:
     def n_edges(self) -> int:
         return len(self.edges["src"])
 
-    def node_of(self, points: np.ndarray, stable_only: bool = True) -> np.ndarray:
-        """Node of the nearest known (stable, by default) state to each of ``points``."""
+    def node_of(self, points: np.ndarray, stable_only: bool = True, ids: np.ndarray | None = None) -> np.ndarray:
+        """Node of the nearest known (stable, by default) state to each of ``points``.
+
+        With ``ids`` (and a graph built with identities) the nearest state of the same
+        identity is used when there is one, else the nearest of any.
+        """
         pts = np.atleast_2d(np.asarray(points, dtype=float))
         pool = np.flatnonzero(self.labels >= 0) if stable_only else np.arange(len(self.points))
         if pool.size == 0:
             return -np.ones(len(pts), dtype=int)
-        _, i = cKDTree(self.points[pool]).query(pts, k=1)
         src = self.labels if stable_only else self.end_node
-        return src[pool[i]]
+        _, i = cKDTree(self.points[pool]).query(pts, k=1)
+        out = src[pool[i]]
+        if ids is not None and self.ids is not None:
+            ids = np.asarray(ids).reshape(-1)
+            gap = _gap(pts.shape[1], self.max_edge)
+            known = np.unique(self.ids[pool])
+            same = np.isin(ids, known)
+            if same.any():
+                allid = np.concatenate([self.ids[pool], ids[same]])
+                sep = separate(np.concatenate([self.points[pool], pts[same]]), allid, gap)
+                d, j = cKDTree(sep[:len(pool)]).query(sep[len(pool):], k=1)
+                out[np.flatnonzero(same)] = src[pool[j]]
+        return out
 
     def costs_to(self, goal: int) -> tuple[np.ndarray, np.ndarray]:
         """Lowest total transition energy from every node to ``goal`` and the next edge on that path.
@@ -143,21 +192,54 @@ class TransitionGraph:
             n = int(self.edges["dst"][nxt[n]])
         return out if n == goal else []
 
-    def outcome(self, points: np.ndarray, goal: int) -> tuple[np.ndarray, np.ndarray]:
+    def outcome(self, points: np.ndarray, goal: int, ids: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """For states ``points``: can each reach ``goal`` (via its nearest known state's end node), and at what energy.
 
         The energy is the path's total from the node the state ends up in, the first fall
         of an unstable state excluded.
         """
         cost, _ = self.costs_to(goal)
-        end = self.node_of(points, stable_only=False)
+        end = self.node_of(points, stable_only=False, ids=ids)
         c = np.where(end >= 0, cost[np.maximum(end, 0)], np.inf)
         return np.isfinite(c), c
 
 
+def _gap(d: int, max_edge: float) -> float:
+    """A separation between identities larger than any distance in the (embedded) space and than ``max_edge``."""
+    return 4.0 * np.sqrt(max(d, 1)) + 2.0 * max_edge + 1.0
+
+
+def _continuations(points: np.ndarray, ids: np.ndarray, free_dims: int, max_edge: float,
+                   rate: float) -> tuple[np.ndarray, np.ndarray]:
+    """Gabriel edges between states of different identities where one manifold replaced the other."""
+    tree = cKDTree(points)
+    pairs = tree.query_pairs(max_edge, output_type="ndarray")
+    i, j = pairs[:, 0].astype(int), pairs[:, 1].astype(int)
+    cross = ids[i] != ids[j]
+    i, j = i[cross], j[cross]
+    if not len(i):
+        return i, j
+    _, group = np.unique(np.round(points[:, :free_dims], 12), axis=0, return_inverse=True)
+    group = group.reshape(-1)
+    _, rank = np.unique(ids, return_inverse=True)
+    rank = rank.reshape(-1).astype(np.int64)
+    n_id = int(rank.max()) + 1
+    present = np.unique(group.astype(np.int64) * n_id + rank)  # (free state, identity) pairs that exist
+    gone_j = ~np.isin(group[i].astype(np.int64) * n_id + rank[j], present)  # j's face absent at i's free state
+    gone_i = ~np.isin(group[j].astype(np.int64) * n_id + rank[i], present)
+    d = np.abs(points[i] - points[j])
+    slow = np.linalg.norm(d[:, free_dims:], axis=1) <= rate * np.linalg.norm(d[:, :free_dims], axis=1) + 1e-9
+    keep = gone_i & gone_j & slow
+    i, j = i[keep], j[keep]
+    gab = _empty_balls(tree, points, np.column_stack([i, j]))
+    return i[gab], j[gab]
+
+
 def transition_graph(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, energy: np.ndarray,
                      extra: np.ndarray | None = None, *, max_edge: float,
-                     label_radius: float | None = None) -> TransitionGraph:
+                     label_radius: float | None = None, ids: tuple | None = None,
+                     free_dims: int | None = None, rate: float = 1.0,
+                     continuation_edge: float | None = None, connections: tuple | None = None) -> TransitionGraph:
     """Build Algorithm 8's transition graph.
 
     Parameters
@@ -172,6 +254,11 @@ def transition_graph(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, energy
         (None: the paper's rule, every extra state takes its nearest neighbour's label).
         Sparse data near a crossing of two manifolds otherwise labels one manifold with the
         other's stability, which can bridge separate stable regions.
+    ids: optional manifold identities ``(of X (N,), of rest (N,), of extra (M,))``; see the module docstring.
+    free_dims, rate, continuation_edge: with ``ids``, allow continuations between identities (module docstring).
+    connections: ``(i, j)`` index arrays into ``[X, settled rest states, extra]`` used instead of
+        the Gabriel graph — a grid search's own neighbours (the original framework, section 5.2),
+        which a million-state grid can afford where a Gabriel graph cannot.
     """
     X = np.asarray(X, dtype=float)
     N, d = X.shape if X.ndim == 2 else (-1, -1)
@@ -183,21 +270,44 @@ def transition_graph(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, energy
     if stable.shape != (N,) or energy.shape != (N,):
         raise ValueError(f"stable, energy: expected one value per state ({N}), got {stable.shape}, {energy.shape}")
     extra = np.empty((0, d)) if extra is None else np.asarray(extra, dtype=float).reshape(-1, d)
+    gap = _gap(d, max_edge)
+    if ids is not None:
+        x_id, r_id, e_id = (np.asarray(v, dtype=np.int64).reshape(-1) for v in ids)
+        if x_id.shape != (N,) or r_id.shape != (N,) or e_id.shape != (len(extra),):
+            raise ValueError(f"ids: expected identities for X ({N}), rest ({N}) and extra ({len(extra)}), "
+                             f"got {x_id.shape}, {r_id.shape}, {e_id.shape}")
     if len(extra) and label_radius is not None:
         dist, _ = cKDTree(X).query(extra, k=1)
         extra = extra[dist <= label_radius]
+        if ids is not None:
+            e_id = e_id[dist <= label_radius]
     settled = np.all(np.isfinite(rest), axis=1)
     rest_idx = np.flatnonzero(settled)
     points = np.concatenate([X, rest[rest_idx], extra])
+    all_ids = None if ids is None else np.concatenate([x_id, r_id[rest_idx], e_id])
+    space = separate(points, all_ids, gap)
     R0, E0 = N, N + len(rest_idx)
     lab = np.empty(len(points), dtype=bool)
     lab[:N] = stable
     lab[R0:E0] = True
     if len(extra):
-        _, nn = cKDTree(X).query(extra, k=1)
+        dist, nn = cKDTree(space[:N]).query(space[E0:], k=1)
+        if ids is not None:  # an identity never evaluated: fall back to the nearest state of any identity
+            lost = dist > gap / 2
+            if lost.any():
+                _, nn[lost] = cKDTree(X).query(extra[lost], k=1)
         lab[E0:] = stable[nn]
     # 2-3: Gabriel graph, stable subgraph, components
-    i, j = gabriel_graph(points, max_edge)
+    if connections is not None:
+        i, j = (np.asarray(v, dtype=int).reshape(-1) for v in connections)
+        if i.shape != j.shape or (i.size and (min(i.min(), j.min()) < 0 or max(i.max(), j.max()) >= len(points))):
+            raise ValueError(f"connections: expected two equal-length index arrays into the {len(points)} known states")
+    else:
+        i, j = gabriel_graph(space, max_edge)
+    if connections is None and all_ids is not None and free_dims is not None:
+        ci, cj = _continuations(points, all_ids, free_dims,
+                                max_edge / 2 if continuation_edge is None else min(continuation_edge, max_edge), rate)
+        i, j = np.concatenate([i, ci]), np.concatenate([j, cj])
     both = lab[i] & lab[j]
     n_pts = len(points)
     adj = coo_matrix((np.ones(both.sum()), (i[both], j[both])), shape=(n_pts, n_pts))
@@ -209,7 +319,8 @@ def transition_graph(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, energy
     relabel[uniq[order]] = np.arange(len(uniq))
     labels = np.where(comp >= 0, relabel[np.maximum(comp, 0)], -1)
     # 4: transitions from each unstable evaluated state's nearest stable Gabriel neighbour
-    length = np.linalg.norm(points[i] - points[j], axis=1)
+    cols = slice(None) if free_dims is None else slice(0, free_dims)  # section 5.3: pair length in joint space
+    length = np.linalg.norm(points[i, cols] - points[j, cols], axis=1)
     a = np.concatenate([i, j])
     b = np.concatenate([j, i])
     ln = np.concatenate([length, length])
@@ -235,4 +346,5 @@ def transition_graph(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, energy
     end[:N] = np.where(stable, labels[:N], rest_node)
     if len(extra):
         end[E0:] = np.where(lab[E0:], labels[E0:], end[:N][nn])
-    return TransitionGraph(points, lab, labels, end, N, counts[order], edges, trans, int(len(i)), float(max_edge))
+    return TransitionGraph(points, lab, labels, end, N, counts[order], edges, trans, int(len(i)), float(max_edge),
+                           all_ids)

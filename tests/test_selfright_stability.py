@@ -148,3 +148,38 @@ def test_stl_mesh_link(tmp_path):
     robot = load_robot(tmp_path / "r.toml")
     hull = StabilityFunction(robot, 0.0, planar=False).hull(np.zeros(0))
     assert hull.n_faces == 4
+
+
+@pytest.mark.parametrize("name, slope", [("1dof", 20.0), ("2dof", 0.0), ("3dof", 0.0), ("2dof", 25.0)])
+def test_bulk_planar_faces_equal_the_per_state_path(name, slope):
+    """sim.robots.planar (the grid's bulk path) gives every face, label, resting face, energy and identity of the per-hull path."""
+    from sim.robots.planar import planar_all_faces
+
+    robot = load_robot(f"examples/robots/{name}.toml")
+    F = StabilityFunction(robot, slope)
+    rng = np.random.default_rng(7)
+    theta = robot.joint_bounds[:, 0] + rng.random((40, robot.dof)) * np.ptp(robot.joint_bounds, axis=1)
+    theta = np.unique(np.concatenate([theta, np.radians(np.round(np.degrees(theta) / 45) * 45)]), axis=0)  # special angles too
+    bulk = planar_all_faces(F, theta, chunk=17)
+    for i, th in enumerate(theta):
+        hull = F.hull(th)
+        rest, energy, tips = F.settle_all(hull)
+        want = sorted(zip(np.round(hull.angles[:, 0], 9), tips == 0, np.round(np.where(np.isfinite(energy), energy, -1), 9),
+                          hull.ids, np.where(rest >= 0, hull.ids[np.maximum(rest, 0)], -1)))
+        m = bulk["row"] == i
+        got = sorted(zip(np.round(bulk["start"][m], 9), bulk["stable"][m], np.round(np.where(np.isfinite(bulk["energy"][m]),
+                     bulk["energy"][m], -1), 9), bulk["start_id"][m], bulk["rest_id"][m]))
+        assert got == want, np.degrees(th)
+
+
+def test_face_identities_name_a_face_across_joint_states():
+    robot = load_robot("examples/robots/2dof.toml")
+    F = StabilityFunction(robot, 0.0)
+    a, b = F.hull(np.radians([30.0, -60.0])), F.hull(np.radians([30.5, -60.5]))
+    assert len(set(a.ids.tolist())) == a.n_faces  # distinct faces, distinct names
+    bottom = lambda h: h.ids[np.argmin(np.abs(h.angles[:, 0]))]  # noqa: E731  (the body's underside, pitch 0)
+    assert bottom(a) == bottom(b)
+    assert set(a.ids.tolist()) == set(b.ids.tolist())  # half a degree moves no vertex onto or off the hull here
+    # a query reports the identities of its starting and resting faces
+    res = F(np.radians([[30.0, -60.0]]), np.zeros((1, 1)))
+    assert res.start_id[0] == bottom(a) and res.rest_id[0] == bottom(a) and res.stable[0]

@@ -16,6 +16,12 @@ yaw relative to the fall line is not a state (it is 0 at the start of a tip).
 * Other robots have two, ``(roll, pitch)`` with the base orientation ``Ry(pitch) Rx(roll)``:
   the face normal is ``(sin p, -sin r cos p, -cos r cos p)``, pitch in [-90°, 90°].
 
+Face identity.  Each face also gets an integer id naming the robot vertices that span it
+(box corners and mesh vertices keep their index for every θ; in a planar robot the two
+corners that differ only in y count as one).  The same id at two joint states is the same
+face — section 5.2's "pair of unique vertices" — which Algorithm 8 uses to keep
+neighbouring but different faces apart.
+
 Potential energy lost is ``M g Δh`` of the centre of mass, measured with every pivot edge
 held fixed on the ground, so a tip downhill on a slope loses more than the same tip uphill.
 """
@@ -77,6 +83,7 @@ class Hull:
     face_vertices: list  # per face: indices into points (ordered around the face for planar hulls)
     angles: np.ndarray  # (k, b) body angles
     ordered: bool = True
+    ids: np.ndarray | None = None  # (k,) face identities (see the module docstring)
 
     def __post_init__(self):
         self._rings: dict[int, np.ndarray] = {}
@@ -105,6 +112,9 @@ class StabilityResult:
     energy: np.ndarray  # (n,) potential energy lost, J
     faces: list  # per query: (k_i, b) hull faces Z_θ as body angles
     tips: np.ndarray  # (n,) number of tips until rest
+    start_id: np.ndarray | None = None  # (n,) face identity of the starting face
+    rest_id: np.ndarray | None = None  # (n,) face identity of the resting face (-1 when it never rests)
+    face_ids: list | None = None  # per query: (k_i,) identities of the faces in ``faces``
 
     def __len__(self) -> int:
         return len(self.stable)
@@ -127,6 +137,34 @@ class StabilityFunction:
         self.gravity = np.array([np.sin(self.slope), 0.0, -np.cos(self.slope)])  # ground frame
         self.n_queries = 0
         self.n_hulls = 0
+        self._vertex_id = self._canonical_vertices()
+
+    def _canonical_vertices(self) -> np.ndarray:
+        """Per robot vertex, the index of the first vertex it always coincides with in the hull's plane.
+
+        A planar hull sees a box corner and its mirror in y as one point, so both get one id;
+        in 3-D every vertex is its own.  Checked at two joint states so chance overlaps do not merge.
+        """
+        rng = np.random.default_rng(0)
+        lo_hi = self.robot.joint_bounds
+        keys = []
+        for _ in range(2):
+            th = lo_hi[:, 0] + rng.random(self.robot.dof) * (lo_hi[:, 1] - lo_hi[:, 0])
+            v, _ = self.robot.geometry(th)
+            keys.append(np.round(v[:, [0, 2]] if self.planar else v, 9))
+        key = np.concatenate(keys, axis=1)
+        _, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
+        return first[inv.reshape(-1)]
+
+    def _face_ids(self, vertex_sets) -> np.ndarray:
+        """Integer identity of each face from the (canonical) robot vertices spanning it."""
+        out = np.empty(len(vertex_sets), dtype=np.int64)
+        for i, vs in enumerate(vertex_sets):
+            h = 0
+            for v in (vs if self.planar else sorted(set(vs))):  # planar: ordered pair (its direction matters)
+                h = (h * 1_000_003 + int(v) + 1) % (2 ** 61 - 1)
+            out[i] = h
+        return out
 
     # -- hull ------------------------------------------------------------------------------
     def hull(self, theta: np.ndarray) -> Hull:
@@ -147,8 +185,10 @@ class StabilityFunction:
         offsets = -(normals * a).sum(axis=1)
         k = len(ring)
         faces = [np.array([i, (i + 1) % k]) for i in range(k)]
+        vid = self._vertex_id[ring]
+        ids = self._face_ids([(vid[i], vid[(i + 1) % k]) for i in range(k)])
         return Hull(np.asarray(theta, float), pts, np.array([com[0], 0.0, com[2]]), normals, offsets, faces,
-                    body_angles(normals, True))
+                    body_angles(normals, True), ids=ids)
 
     def _hull3d(self, theta, verts, com) -> Hull:
         h = ConvexHull(verts)
@@ -172,8 +212,9 @@ class StabilityFunction:
         offsets = sums[:, 3] / np.bincount(group, minlength=n_groups)
         pairs = np.unique(np.column_stack([np.repeat(group, 3), remap[h.simplices].ravel()]), axis=0)
         faces = np.split(pairs[:, 1], np.flatnonzero(np.diff(pairs[:, 0])) + 1)
+        ids = self._face_ids([self._vertex_id[used[f]] for f in faces])
         return Hull(np.asarray(theta, float), pts, com, normals, np.asarray(offsets), faces, body_angles(normals, False),
-                    ordered=False)
+                    ordered=False, ids=ids)
 
     @staticmethod
     def _ordered(pts: np.ndarray, idx: np.ndarray, n: np.ndarray) -> np.ndarray:
@@ -311,7 +352,8 @@ class StabilityFunction:
         rest = np.empty((n, self.n_body))
         energy = np.empty(n)
         tips = np.empty(n, dtype=int)
-        faces = []
+        start_id, rest_id = np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64)
+        faces, face_ids = [], []
         for i in range(n):
             hull = self.hull(theta[i])
             f0 = self.snap(hull, phi[i])
@@ -322,15 +364,20 @@ class StabilityFunction:
                 f1, energy[i], tips[i] = self.settle(hull, f0)
             start[i] = hull.angles[f0]
             rest[i] = hull.angles[f1] if f1 >= 0 else np.nan
+            start_id[i], rest_id[i] = hull.ids[f0], hull.ids[f1] if f1 >= 0 else -1
             faces.append(hull.angles)
+            face_ids.append(hull.ids)
         self.n_queries += n
-        return StabilityResult(theta, start, tips == 0, rest, energy, faces, tips)
+        return StabilityResult(theta, start, tips == 0, rest, energy, faces, tips, start_id, rest_id, face_ids)
 
     def all_faces(self, theta: np.ndarray) -> StabilityResult:
         """Every hull face of every joint state as a starting state (the grid search's queries)."""
         theta = np.asarray(theta, dtype=float)
         theta = theta.reshape(theta.shape[0] if theta.ndim == 2 else -1, self.robot.dof)
+        if self.planar and len(theta):
+            return self._all_faces_planar(theta)
         rows, start, rest, energy, tips, faces = [], [], [], [], [], []
+        start_id, rest_id, face_ids = [], [], []
         for th in theta:
             hull = self.hull(th)
             r_all, e_all, t_all = self.settle_all(hull)
@@ -341,9 +388,28 @@ class StabilityFunction:
             energy.append(e_all)
             tips.append(t_all)
             faces.extend([hull.angles] * k)
+            start_id.append(hull.ids)
+            rest_id.append(np.where(r_all >= 0, hull.ids[np.maximum(r_all, 0)], -1))
+            face_ids.extend([hull.ids] * k)
         rows, start, rest = (np.concatenate(v) if v else np.empty((0, w))
                              for v, w in ((rows, self.robot.dof), (start, self.n_body), (rest, self.n_body)))
         energy = np.concatenate(energy) if energy else np.empty(0)
         tips = np.concatenate(tips).astype(int) if tips else np.empty(0, dtype=int)
         self.n_queries += len(tips)
-        return StabilityResult(rows, start, tips == 0, rest, energy, faces, tips)
+        ids = [np.concatenate(v).astype(np.int64) if v else np.empty(0, dtype=np.int64) for v in (start_id, rest_id)]
+        return StabilityResult(rows, start, tips == 0, rest, energy, faces, tips, ids[0], ids[1], face_ids)
+
+    def _all_faces_planar(self, theta: np.ndarray) -> StabilityResult:
+        """:meth:`all_faces` for a planar robot, in bulk (:mod:`sim.robots.planar`); same results."""
+        from sim.robots.planar import planar_all_faces
+
+        b = planar_all_faces(self, theta)
+        self.n_hulls += len(theta)
+        self.n_queries += len(b["row"])
+        cuts = np.cumsum(b["count"])[:-1]
+        per_hull = np.split(b["start"][:, None], cuts)
+        ids = np.split(b["start_id"], cuts)
+        faces = [f for f, k in zip(per_hull, b["count"]) for _ in range(k)]
+        face_ids = [f for f, k in zip(ids, b["count"]) for _ in range(k)]
+        return StabilityResult(theta[b["row"]], b["start"][:, None], b["stable"].astype(bool), b["rest"][:, None],
+                               b["energy"], faces, b["tips"].astype(int), b["start_id"], b["rest_id"], face_ids)

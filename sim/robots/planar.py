@@ -1,0 +1,159 @@
+"""Every hull face of many joint states of a planar robot at once (the grid search's inner loop).
+
+:meth:`StabilityFunction.all_faces` on a planar robot (Figure 5.2: every joint turns about
+the base's y axis) spends about a millisecond per joint state in Python: forward
+kinematics, a Qhull call and the tipping table.  A grid of a million joint states needs
+all three in bulk, so here they are array operations over a chunk of joint states:
+
+* kinematics: in the x-z plane a link's rotation is the sum of its joints' angles;
+* hull: edge ``a → b`` of the (deduplicated) vertices is a counter-clockwise hull edge when
+  no vertex lies to its right and every vertex on its line lies between ``a`` and ``b``
+  (so, as with Qhull, collinear middle points are not vertices); the edges are walked
+  into a ring;
+* settling: the same quasi-static tipping table as :meth:`StabilityFunction.settle_all`,
+  followed for every face in step.
+
+The results equal the per-state path's (checked in the tests) up to the order of faces.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sim.robots.stability import GRAVITY, _TOL
+
+__all__ = ["planar_all_faces"]
+
+
+def _kinematics(F, theta: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(n, V, 2) x-z positions of the kept robot vertices and (n, 2) centre of mass."""
+    robot = F.robot
+    n = len(theta)
+    ang = {robot.base: np.zeros(n)}
+    pos = {robot.base: np.zeros((n, 2))}
+    active = iter(range(robot.dof))
+    for j in robot.all_joints:
+        a = np.full(n, robot.locked[j.name]) if j.name in robot.locked else theta[:, next(active)]
+        sign = 1.0 if j.axis[1] > 0 else -1.0
+        pa, pp = ang[j.parent], pos[j.parent]
+        c, s = np.cos(pa), np.sin(pa)
+        ox, oz = j.origin[0], j.origin[2]
+        pos[j.child] = pp + np.column_stack([c * ox + s * oz, -s * ox + c * oz])
+        ang[j.child] = pa + sign * a
+    verts, com = [], np.zeros((n, 2))
+    for name, link in robot.links.items():
+        v = robot._verts[name][:, [0, 2]]
+        c, s = np.cos(ang[name])[:, None], np.sin(ang[name])[:, None]
+        t = pos[name]
+        verts.append(np.stack([c * v[:, 0] + s * v[:, 1] + t[:, :1], -s * v[:, 0] + c * v[:, 1] + t[:, 1:]], axis=-1))
+        m = robot._com[name][[0, 2]]
+        com += link.mass * np.column_stack([np.cos(ang[name]) * m[0] + np.sin(ang[name]) * m[1] + t[:, 0],
+                                            -np.sin(ang[name]) * m[0] + np.cos(ang[name]) * m[1] + t[:, 1]])
+    return np.concatenate(verts, axis=1)[:, keep], com / robot.mass
+
+
+def _rings(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Counter-clockwise hull rings (n, V) of vertex indices (-1 padded) and their lengths (n,)."""
+    n, V, _ = P.shape
+    scale = np.abs(P).max(axis=(1, 2))[:, None, None, None]
+    d = P[:, None, :, :] - P[:, :, None, :]  # d[s, a, b] = P_b - P_a
+    r = P[:, None, None, :, :] - P[:, :, None, None, :]  # r[s, a, _, p] = P_p - P_a
+    cross = d[:, :, :, None, 0] * r[..., 1] - d[:, :, :, None, 1] * r[..., 0]  # (n, a, b, p); > 0: p left of a→b
+    L2 = (d ** 2).sum(axis=-1)[..., None]
+    t = (d[:, :, :, None, 0] * r[..., 0] + d[:, :, :, None, 1] * r[..., 1]) / np.maximum(L2, 1e-300)
+    tol = 1e-9 * np.maximum(scale, 1.0) * np.sqrt(L2)
+    right = cross < -tol  # a vertex outside: a→b is no hull edge (counter-clockwise: interior on the left)
+    beyond = (np.abs(cross) <= tol) & ((t < -1e-9) | (t > 1 + 1e-9))  # on the line but past an end
+    edge = ~(right | beyond).any(axis=3) & (L2[..., 0] > (1e-12 * np.maximum(scale[..., 0], 1.0)) ** 2)
+    has = edge.any(axis=2)
+    succ = np.where(has, edge.argmax(axis=2), -1)
+    start = has.argmax(axis=1)
+    ring = -np.ones((n, V), dtype=int)
+    cur = start.copy()
+    length = np.zeros(n, dtype=int)
+    alive = has.any(axis=1)
+    rows = np.arange(n)
+    for i in range(V):
+        ring[alive, i] = cur[alive]
+        length += alive
+        nxt = succ[rows, cur]
+        alive &= (nxt >= 0) & (nxt != start)
+        cur = np.maximum(nxt, 0)
+    return ring, length
+
+
+def planar_all_faces(F, theta: np.ndarray, chunk: int = 2000) -> dict:
+    """Every face of every joint state in ``theta`` (n, m): flat arrays in joint-state order, faces in ring order.
+
+    Keys: ``row`` (joint-state index), ``start``, ``rest`` (body angles, NaN when it rolls
+    away), ``stable``, ``energy``, ``tips``, ``start_id``, ``rest_id``, ``count`` (faces per joint state).
+    """
+    uniq = np.unique(F._vertex_id)
+    gx, gz = F.gravity[0], F.gravity[2]
+    up = -F.gravity[[0, 2]]
+    mg = F.robot.mass * GRAVITY
+    out = {k: [] for k in ("row", "start", "rest", "stable", "energy", "tips", "start_id", "rest_id", "count")}
+    for s0 in range(0, len(theta), chunk):
+        th = theta[s0:s0 + chunk]
+        P, com = _kinematics(F, th, uniq)
+        ring, k = _rings(P)
+        n, K = ring.shape
+        f = np.arange(K)[None, :]
+        valid = f < k[:, None]
+        kk = np.maximum(k, 1)[:, None]
+        ia = np.where(valid, ring, 0)
+        ib = np.take_along_axis(ring, (f + 1) % kk, axis=1)
+        ib = np.where(valid, ib, 0)
+        rows = np.arange(n)[:, None]
+        A, B = P[rows, ia], P[rows, ib]
+        d = B - A
+        nx, nz = d[..., 1], -d[..., 0]  # outward normal (x, z) of a counter-clockwise edge
+        p = np.arctan2(nx, -nz)
+        c, s = np.cos(p), np.sin(p)
+
+        def rot(v, cc, ss):
+            return np.stack([cc * v[..., 0] + ss * v[..., 1], -ss * v[..., 0] + cc * v[..., 1]], axis=-1)
+
+        qa, qb, qc = rot(A, c, s), rot(B, c, s), rot(np.broadcast_to(com[:, None, :], A.shape), c, s)
+        xs = qc[..., 0] + (qa[..., 1] - qc[..., 1]) / gz * gx
+        lo, hi = np.minimum(qa[..., 0], qb[..., 0]), np.maximum(qa[..., 0], qb[..., 0])
+        hull_max = np.where(valid[..., None], np.abs(A), 0.0).max(axis=(1, 2))
+        tol = (_TOL * np.maximum(1.0, hull_max))[:, None]
+        over_hi, under_lo = xs > hi + tol, xs < lo - tol
+        b_is_hi = qb[..., 0] >= qa[..., 0]
+        pivot_b = np.where(over_hi, b_is_hi, ~b_is_hi)
+        nxt = np.where((over_hi | under_lo) & valid, np.where(pivot_b, (f + 1) % kk, (f - 1) % kk), -1)
+        pivot = np.where(pivot_b[..., None], B, A)
+        j = np.maximum(nxt, 0)
+        rel = com[:, None, :] - pivot
+        h0 = rot(rel, c, s) @ up
+        cj, sj = np.take_along_axis(c, j, axis=1), np.take_along_axis(s, j, axis=1)
+        h1 = rot(rel, cj, sj) @ up
+        step = np.where(nxt >= 0, mg * (h0 - h1), 0.0)
+        g = np.broadcast_to(f, (n, K)).copy()
+        energy = np.zeros((n, K))
+        tips = np.zeros((n, K), dtype=int)
+        for _ in range(K + 2):
+            ng = np.take_along_axis(nxt, g, axis=1)
+            go = (ng >= 0) & (tips <= k[:, None])
+            if not go.any():
+                break
+            energy += np.where(go, np.take_along_axis(step, g, axis=1), 0.0)
+            g = np.where(go, ng, g)
+            tips += go
+        rolls = np.take_along_axis(nxt, g, axis=1) >= 0
+        vid = uniq
+        fid = (vid[ia] + 1) * 1_000_003 + vid[ib] + 1  # the same identity as StabilityFunction._face_ids
+        rest_p = np.where(rolls, np.nan, np.take_along_axis(p, g, axis=1))
+        rest_id = np.where(rolls, -1, np.take_along_axis(fid, g, axis=1))
+        m = valid
+        out["row"].append(np.broadcast_to(np.arange(s0, s0 + n)[:, None], (n, K))[m])
+        out["start"].append(p[m])
+        out["rest"].append(rest_p[m])
+        out["stable"].append((tips == 0)[m])
+        out["energy"].append(np.where(rolls, np.inf, energy)[m])
+        out["tips"].append(tips[m])
+        out["start_id"].append(fid[m].astype(np.int64))
+        out["rest_id"].append(rest_id[m].astype(np.int64))
+        out["count"].append(k)
+    return {key: np.concatenate(v) if v else np.empty(0) for key, v in out.items()}
