@@ -129,7 +129,7 @@ def learners(mission, methods: list[str], runs: int, per: int, epochs: int, trac
 
         def on_iteration(rec, policy):
             accuracy = mode_agreement(mission, Surrogate.for_mission(mission, policy), Xt, expert)
-            curve.append((rec.runs, rec.samples, rec.fit_cpu_s, rec.rollout_s, accuracy))
+            curve.append((rec.runs, rec.samples, rec.fit_cpu_s, accuracy))
             print(f"   {name:<10} runs {rec.runs:>3} samples {rec.samples:>6,} fit {rec.fit_cpu_s:6.1f} CPU s "
                   f"accuracy {curve[-1][-1]:.1%}", flush=True)
 
@@ -139,8 +139,9 @@ def learners(mission, methods: list[str], runs: int, per: int, epochs: int, trac
                                   select_runs=select_runs, seed=seed, on_iteration=on_iteration)
         sur.training["method"] = name
         out[name] = (sur, curve)
+        chosen = sur.training["selection_accuracy"]
         print(f"   {name}: update {sur.training['chosen_iteration']} kept (best on {select_runs} held-out expert "
-              f"runs: {sur.training['selection_accuracy'] or float('nan'):.1%})", flush=True)
+              f"runs: {float('nan') if chosen is None else chosen:.1%})", flush=True)
     finals = {n: c[out[n][0].training["chosen_iteration"]][-1] for n, (_, c) in out.items()}
     contenders = [n for n in ("dagger", "qdagger50", "qdagger75") if n in out]
     # the accuracy every contender reaches (its best), less 2 points of tracking-set noise

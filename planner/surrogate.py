@@ -15,6 +15,7 @@ from typing import Callable
 
 import numpy as np
 
+import sim
 from rapt.imitation import IterationRecord, MLPPolicy, imitate
 from sim.imitation.features import feature_spec
 from sim.imitation.rollouts import draw_valid, make_rollout
@@ -51,8 +52,6 @@ def train_surrogate(mission: Mission, *, method: str = "qdagger", quantile: floa
     spec = feature_spec(mission)
     select = None
     if select_runs:
-        import sim
-
         Xs = draw_valid(mission, int(select_runs), np.random.default_rng([int(seed), 0x73656C]))
         expert = sim.simulate(mission, Xs)
         select = lambda policy: mode_agreement(mission, Surrogate.for_mission(mission, policy), Xs, expert)  # noqa: E731
@@ -86,8 +85,6 @@ def load_or_train(path: Path, mission: Mission, seed: int = 0, on_iteration=None
 
 def mode_agreement(mission: Mission, surrogate: Surrogate, X: np.ndarray, expert=None) -> float:
     """Share of the valid scenarios ``X`` where the surrogate shows the expert's mode."""
-    import sim
-
     expert = sim.simulate(mission, X) if expert is None else expert
     mine = sim.simulate(mission, X, surrogate=surrogate)
     ok = expert.valid & mine.valid

@@ -86,7 +86,8 @@ def annotated_runs(mission: Mission, X: np.ndarray, spec: FeatureSpec, policy: M
     rows = np.flatnonzero(scen.valid)
     names = metric_names(mission)
     scores = np.full((scen.n, len(names)), np.nan)
-    trajs = [Trajectory(np.zeros((0, spec.size), np.float32), np.zeros((0, 2), np.float32)) for _ in range(scen.n)]
+    trajs = [Trajectory(np.zeros((0, spec.size), np.float32), np.zeros((0, spec.actions), np.float32))
+             for _ in range(scen.n)]
     if rows.size == 0:
         return Result(scores, modes_from_scores(scores), scen.valid.copy(), list(scen.invalid_reason), names,
                       metric_types(mission)), trajs
@@ -103,19 +104,19 @@ def annotated_runs(mission: Mission, X: np.ndarray, spec: FeatureSpec, policy: M
         # expert's command and whether it heads home after deciding (sim.imitation.features).
         nonlocal nxt
         if policy is not None:
-            F, rows, heading, speed, home = driver.labels
+            F, who, heading, speed, home = driver.labels
         else:
             nxt = advance_waypoints(mission, nxt, obs.x, obs.y)
             wx, wy, pending = waypoint_target(mission, nxt)
             F = features(spec, mission, obs.t, obs.x, obs.y, obs.heading, obs.battery, obs.scan,
                          (wx, wy, pending & ~expert_home))
-            rows, heading, speed, home = np.arange(sub.n), cmd.heading, cmd.speed, driver.returning.copy()
+            who, heading, speed, home = np.arange(sub.n), cmd.heading, cmd.speed, driver.returning.copy()
             expert_home[:] = home
-        keep = np.flatnonzero(active[rows])
-        rows = rows[keep]
+        keep = np.flatnonzero(active[who])
+        who = who[keep]
         got_F.append(F[keep])
-        got_A.append(expert_action(spec, obs.heading[rows], heading[keep], speed[keep], home[keep]))
-        got_r.append(rows)
+        got_A.append(expert_action(spec, obs.heading[who], heading[keep], speed[keep], home[keep]))
+        got_r.append(who)
 
     rngs = scenario_generators(np.asarray(X, dtype=float)[rows], seed) if stochastic else None
     mixing = np.random.default_rng([int(seed), 0x6D6978])
