@@ -335,8 +335,8 @@ def generate(
     refine_runs: Annotated[int, typer.Option("--refine-runs", help="Runs per pair of --refine.")] = 12,
     surrogate: Annotated[Optional[Path], typer.Option(
         "--surrogate", help="Search with a learned surrogate of the autonomy (section 6.2.3): load this .npz "
-                            "(trained for this mission), or train one on 75 expert runs and save it here; the "
-                            "expert then confirms the candidate pairs.")] = None,
+                            "(trained for this mission), or train one (75 annotated + 25 held-out expert runs) "
+                            "and save it here; the expert then confirms the candidate pairs.")] = None,
     confirm_runs: Annotated[int, typer.Option("--confirm-runs", help="Expert runs that check the surrogate's "
                                                                      "candidate pairs (two per pair).")] = 100,
 ) -> None:

@@ -204,7 +204,7 @@ def grid_connections(study: SelfRightStudy) -> tuple[np.ndarray, np.ndarray]:
     idx = np.empty((len(U), m), dtype=np.int64)
     for a in range(m):
         div = shape[a] if periodic[a] else shape[a] - 1
-        idx[:, a] = np.rint(U[:, a] * div).astype(np.int64) % (shape[a] if periodic[a] else div + 1)
+        idx[:, a] = np.rint(U[:, a] * div).astype(np.int64) % shape[a]
     flat = np.ravel_multi_index(tuple(idx.T), shape)
     settled = np.flatnonzero(np.isfinite(study.rest).all(axis=1))
     _, rank = np.unique(np.concatenate([study.ids, study.rest_ids[settled]]), return_inverse=True)
@@ -224,7 +224,7 @@ def grid_connections(study: SelfRightStudy) -> tuple[np.ndarray, np.ndarray]:
     first = np.searchsorted(flat[by_flat], np.arange(int(np.prod(shape))))
     count = np.bincount(flat, minlength=int(np.prod(shape)))
     body = study.embed(study.X)[:, 2 * m:]
-    step = 2 * np.sin(np.radians(np.degrees(study.resolution)) / 2)
+    step = 2 * np.sin(study.resolution / 2)
     for a in range(m):
         nb = idx.copy()
         nb[:, a] += 1

@@ -298,8 +298,6 @@ class ManifoldSampler(Sampler):
         info, sigma, volume = self.hull_information(cand, self._candidate_ids)
         live = ~(((sigma == 0) & (volume < self.r_max)) | ((sigma > 0) & (volume < self.r_min)))
         info = np.where(live, info, -np.inf)
-        best = np.full(groups.max() + 1, -np.inf)
-        np.maximum.at(best, groups, info)
         order = np.lexsort((-info, groups))  # per group, its best face first
         first = order[np.r_[True, groups[order][1:] != groups[order][:-1]]]
         first = first[np.isfinite(info[first])]
