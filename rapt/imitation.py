@@ -63,8 +63,10 @@ class MLPPolicy:
 
     @classmethod
     def from_sklearn(cls, model) -> "MLPPolicy":
-        return cls([np.asarray(w, np.float32) for w in model.coefs_],
-                   [np.asarray(b, np.float32) for b in model.intercepts_], model.activation)
+        """A copy of ``model``'s weights: a warm-started model trained on float32 keeps float32 weights
+        and updates them in place, which would retrain every policy taken from it before."""
+        return cls([np.array(w, np.float32) for w in model.coefs_],
+                   [np.array(b, np.float32) for b in model.intercepts_], model.activation)
 
     @property
     def n_features(self) -> int:

@@ -121,10 +121,15 @@ def test_each_learner_learns_a_tiny_expert(method):
 def test_the_best_policy_on_validation_is_returned():
     """DAgger returns the best policy of the sequence on held-out runs, not the last (ties: the later)."""
     scores = iter([0.1, 0.5, 0.3, 0.5, 0.2])
-    seen = []
+    seen, weights = [], []
     result = imitate(_point_mass_rollout([]), method="dagger", iterations=4, runs_per_iteration=2, hidden=(8,),
-                     epochs=5, select=lambda p: (seen.append(p), next(scores))[1])
+                     epochs=5, select=lambda p: (seen.append(p), weights.append([w.copy() for w in p.weights]),
+                                                 next(scores))[2])
     assert result.chosen == 3 and result.policy is seen[3] and result.history[3].extra["selection"] == 0.5
+    # the kept policy's weights are those it was scored with: later updates do not train it on
+    for kept, scored in zip(result.policy.weights, weights[3]):
+        np.testing.assert_array_equal(kept, scored)
+    assert any(not np.array_equal(a, b) for a, b in zip(weights[3], weights[4]))
     last = imitate(_point_mass_rollout([]), method="dagger", iterations=2, runs_per_iteration=2, hidden=(8,), epochs=5)
     assert last.chosen == 2
 
