@@ -17,7 +17,7 @@ import numpy as np
 
 import sim
 from rapt.imitation import IterationRecord, MLPPolicy, imitate
-from sim.imitation.features import feature_spec
+from sim.imitation.features import feature_spec, policy_heads
 from sim.imitation.rollouts import draw_valid, make_rollout
 from sim.imitation.surrogate import Surrogate
 from sim.mission import Mission
@@ -57,7 +57,8 @@ def train_surrogate(mission: Mission, *, method: str = "qdagger", quantile: floa
         select = lambda policy: mode_agreement(mission, Surrogate.for_mission(mission, policy), Xs, expert)  # noqa: E731
     result = imitate(make_rollout(mission, spec, seed=seed, mixing=mixing), method=method, quantile=quantile,
                      iterations=runs // runs_per_iteration - 1, runs_per_iteration=runs_per_iteration,
-                     epochs=epochs, seed=seed, select=select, on_iteration=on_iteration)
+                     epochs=epochs, seed=seed, select=select, on_iteration=on_iteration,
+                     heads=policy_heads(spec))
     h = result.history[result.chosen]
     training = {"method": method if method != "qdagger" else f"qdagger({int(round(quantile * 100))})",
                 "runs": result.runs + int(select_runs), "annotated_runs": result.runs,

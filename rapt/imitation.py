@@ -17,6 +17,11 @@ linear output, mean squared error, Adam), trained with scikit-learn and evaluate
 :class:`MLPPolicy` in numpy on exact grids, so a decision inside a vectorised simulator is
 three matrix products whose result for a row never depends on the batch around it.
 PolicyUpdate continues from the previous weights (warm start).
+
+``heads`` splits the action between networks of that shape, each reading only some
+features (:class:`HeadsPolicy`): a decision the expert takes on a few features, learned
+by the network that also steers on hundreds, picks up dependence on the rest that the
+expert does not have.
 """
 
 from __future__ import annotations
@@ -29,7 +34,8 @@ from typing import Callable, Sequence
 import numpy as np
 from scipy.special import expit
 
-__all__ = ["MLPPolicy", "Trajectory", "IterationRecord", "ImitationResult", "imitate", "METHODS", "HIDDEN"]
+__all__ = ["MLPPolicy", "HeadsPolicy", "policy_from_arrays", "Trajectory", "IterationRecord", "ImitationResult",
+           "imitate", "METHODS", "HIDDEN"]
 
 #: Inputs and hidden activations are rounded to multiples of 2**-INPUT_BITS (see MLPPolicy.__call__).
 INPUT_BITS = 16
@@ -148,6 +154,70 @@ class MLPPolicy:
 
 
 @dataclass
+class HeadsPolicy:
+    """Networks that each read some feature columns and write some action columns (``heads``).
+
+    Why: the expert may take part of its action on a few features (whether to abort on
+    charge and distance) and the rest on many (steering on a range scan).  One network
+    for both learns the first part with spurious weight on the other features, and a
+    latched decision fires on the first spike; a head that never sees those features
+    cannot.  Each head is an :class:`MLPPolicy`, so a row still never depends on its batch.
+    """
+
+    n_features: int
+    heads: list[tuple[np.ndarray, np.ndarray, MLPPolicy]]  # (input columns, output columns, network)
+
+    @property
+    def n_outputs(self) -> int:
+        return int(sum(outs.size for _, outs, _ in self.heads))
+
+    def __call__(self, F: np.ndarray, quiet: slice | None = None, quiet_value: float = 1.0) -> np.ndarray:
+        F = np.asarray(F)
+        out = np.empty((F.shape[0], self.n_outputs), dtype=np.float32)
+        for cols, outs, net in self.heads:
+            x = F if _all_columns(cols, self.n_features) else F[:, cols]
+            out[:, outs] = net(x, _local(cols, quiet, self.n_features), quiet_value)
+        return out
+
+    def to_arrays(self) -> dict[str, np.ndarray]:
+        arrays: dict[str, np.ndarray] = {"n_features": np.array(self.n_features)}
+        for j, (cols, outs, net) in enumerate(self.heads):
+            arrays[f"h{j}_inputs"], arrays[f"h{j}_outputs"] = cols, outs
+            arrays.update({f"h{j}_{k}": v for k, v in net.to_arrays().items()})
+        return arrays
+
+    @classmethod
+    def from_arrays(cls, arrays) -> "HeadsPolicy":
+        heads, j = [], 0
+        while f"h{j}_inputs" in arrays:
+            own = {k[len(f"h{j}_"):]: v for k, v in arrays.items() if k.startswith(f"h{j}_")}
+            heads.append((np.asarray(own.pop("inputs"), np.int64), np.asarray(own.pop("outputs"), np.int64),
+                          MLPPolicy.from_arrays(own)))
+            j += 1
+        return cls(int(arrays["n_features"]), heads)
+
+
+def _all_columns(cols: np.ndarray, n: int) -> bool:
+    return cols.size == n and bool(np.all(cols == np.arange(n)))
+
+
+def _local(cols: np.ndarray, quiet: slice | None, n_features: int) -> slice | None:
+    """``quiet`` (columns of the full features) as columns of a head reading ``cols``, if all in one run."""
+    if quiet is None:
+        return None
+    inside = np.flatnonzero((cols >= quiet.start) & (cols < quiet.stop))
+    span = len(range(*quiet.indices(n_features)))
+    if inside.size != span or (inside.size and inside[-1] - inside[0] + 1 != span):
+        return None
+    return slice(int(inside[0]), int(inside[-1]) + 1) if inside.size else None
+
+
+def policy_from_arrays(arrays) -> MLPPolicy | HeadsPolicy:
+    """The policy saved by ``to_arrays`` (one network, or heads)."""
+    return HeadsPolicy.from_arrays(arrays) if "h0_inputs" in arrays else MLPPolicy.from_arrays(arrays)
+
+
+@dataclass
 class Trajectory:
     """One run's annotated states: features (M, F) and the expert's actions there (M, A)."""
 
@@ -196,7 +266,8 @@ def imitate(rollout: Rollout, *, method: str = "qdagger", quantile: float = 0.5,
             runs_per_iteration: int = 5, initial_runs: int | None = None, hidden: Sequence[int] = HIDDEN,
             epochs: int = 20, learning_rate: float = 3e-3, batch_size: int = 256, seed: int = 0,
             select: Callable[[MLPPolicy], float] | None = None,
-            on_iteration: Callable[[IterationRecord, MLPPolicy], None] | None = None) -> ImitationResult:
+            on_iteration: Callable[[IterationRecord, MLPPolicy], None] | None = None,
+            heads: Sequence[tuple[Sequence[int] | None, Sequence[int]]] | None = None) -> ImitationResult:
     """Train a policy imitating the expert behind ``rollout`` (see the module docstring).
 
     ``rollout(policy, k, iteration)`` flies ``k`` new runs (the expert flies when ``policy``
@@ -212,6 +283,10 @@ def imitate(rollout: Rollout, *, method: str = "qdagger", quantile: float = 0.5,
     accuracy swings from update to update although the loss falls, and the last policy
     is not the best one; ties go to the later, better-fed policy.  Without it the last
     policy is returned.
+
+    ``heads`` — (input columns or None for all, output columns) pairs covering every
+    action column once — trains one network per head on its own columns
+    (:class:`HeadsPolicy`); by default one network maps all features to all actions.
     """
     from sklearn.exceptions import ConvergenceWarning
     from sklearn.neural_network import MLPRegressor
@@ -223,9 +298,12 @@ def imitate(rollout: Rollout, *, method: str = "qdagger", quantile: float = 0.5,
     for name, value in (("iterations", iterations), ("runs_per_iteration", runs_per_iteration), ("epochs", epochs)):
         if int(value) != value or value < (0 if name == "iterations" else 1):
             raise ValueError(f"{name}: expected a positive whole number, got {value!r}")
-    model = MLPRegressor(hidden_layer_sizes=tuple(hidden), activation="logistic", solver="adam",
-                         learning_rate_init=learning_rate, batch_size=batch_size, max_iter=epochs,
-                         warm_start=True, shuffle=True, random_state=seed, tol=0.0, n_iter_no_change=10 ** 9)
+    def network(j: int) -> MLPRegressor:
+        return MLPRegressor(hidden_layer_sizes=tuple(hidden), activation="logistic", solver="adam",
+                            learning_rate_init=learning_rate, batch_size=batch_size, max_iter=epochs,
+                            warm_start=True, shuffle=True, random_state=seed + j, tol=0.0, n_iter_no_change=10 ** 9)
+
+    models = [network(j) for j in range(len(heads) if heads else 1)]
     started = time.perf_counter()
     history: list[IterationRecord] = []
     policy: MLPPolicy | None = None
@@ -248,11 +326,20 @@ def imitate(rollout: Rollout, *, method: str = "qdagger", quantile: float = 0.5,
         else:
             F, A = np.concatenate([F, Fi]), np.concatenate([A, Ai])
         c1 = time.process_time()
+        split = _heads(heads, F.shape[1], A.shape[1]) if heads else None
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)
-            model.set_params(batch_size=min(batch_size, F.shape[0]))
-            model.fit(F, A if A.shape[1] > 1 else A[:, 0])
-        policy = MLPPolicy.from_sklearn(model)
+            for j, model in enumerate(models):
+                cols, outs = (None, None) if split is None else split[j]
+                x = F if cols is None or _all_columns(cols, F.shape[1]) else F[:, cols]
+                y = A if outs is None else A[:, outs]
+                model.set_params(batch_size=min(batch_size, F.shape[0]))
+                model.fit(x, y if y.shape[1] > 1 else y[:, 0])
+        if split is None:
+            policy = MLPPolicy.from_sklearn(models[0])
+        else:
+            policy = HeadsPolicy(F.shape[1], [(cols, outs, MLPPolicy.from_sklearn(m))
+                                              for (cols, outs), m in zip(split, models)])
         t2, c2 = time.perf_counter(), time.process_time()
         mse = float(np.mean((policy(F) - A) ** 2))
         record = IterationRecord(it, runs, int(F.shape[0]), t1 - t0, t2 - t1, t2 - started, mse, c2 - c1)
@@ -266,3 +353,18 @@ def imitate(rollout: Rollout, *, method: str = "qdagger", quantile: float = 0.5,
         history.append(record)
     chosen, policy = (best[1], best[2]) if best is not None else (len(history) - 1, policy)
     return ImitationResult(policy, method, quantile if method == "qdagger" else None, history, chosen)
+
+
+def _heads(heads, n_features: int, n_actions: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``heads`` as column arrays, checked: inputs within the features, outputs covering each action once."""
+    out, seen = [], []
+    for j, (inputs, outputs) in enumerate(heads):
+        cols = np.arange(n_features) if inputs is None else np.asarray(inputs, np.int64)
+        outs = np.asarray(outputs, np.int64)
+        if cols.size == 0 or cols.min() < 0 or cols.max() >= n_features or np.unique(cols).size != cols.size:
+            raise ValueError(f"heads[{j}]: input columns must be distinct features 0..{n_features - 1}")
+        out.append((cols, outs))
+        seen.extend(outs.tolist())
+    if sorted(seen) != list(range(n_actions)):
+        raise ValueError(f"heads: output columns must cover the {n_actions} action columns once each, got {seen}")
+    return out

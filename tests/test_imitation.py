@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import sim
-from rapt.imitation import MLPPolicy, Trajectory, imitate
+from rapt.imitation import HeadsPolicy, MLPPolicy, Trajectory, imitate, policy_from_arrays
 from sim.imitation.features import action_command, expert_action, feature_spec, features
 from sim.imitation.rollouts import annotated_runs
 from sim.imitation.surrogate import Surrogate
@@ -132,6 +132,56 @@ def test_the_best_policy_on_validation_is_returned():
     assert any(not np.array_equal(a, b) for a, b in zip(weights[3], weights[4]))
     last = imitate(_point_mass_rollout([]), method="dagger", iterations=2, runs_per_iteration=2, hidden=(8,), epochs=5)
     assert last.chosen == 2
+
+
+def _net(rng, n_in, n_out, hidden=(12, 6)):
+    sizes = [n_in, *hidden, n_out]
+    return MLPPolicy([rng.normal(0, 0.5, (a, b)).astype(np.float32) for a, b in zip(sizes, sizes[1:])],
+                     [rng.normal(0, 0.5, b).astype(np.float32) for b in sizes[1:]])
+
+
+def test_a_head_reads_only_its_columns_and_heads_round_trip():
+    rng = np.random.default_rng(3)
+    policy = HeadsPolicy(10, [(np.arange(10), np.array([0, 1]), _net(rng, 10, 2)),
+                              (np.array([0, 1, 9]), np.array([2]), _net(rng, 3, 1))])
+    F = rng.uniform(-1, 1, (40, 10)).astype(np.float32)
+    G = F.copy()
+    G[:, 2:9] = rng.uniform(-1, 1, (40, 7))
+    a, b = policy(F), policy(G)
+    assert a.shape == (40, 3) and policy.n_outputs == 3
+    assert np.abs(a[:, :2] - b[:, :2]).max() > 1e-3  # the first head reads columns 2-8 ...
+    np.testing.assert_array_equal(a[:, 2], b[:, 2])  # ... the second never does
+    F[::2, 2:9] = 1.0  # the quiet shortcut of the head that reads the block gives the same numbers
+    np.testing.assert_array_equal(policy(F, quiet=slice(2, 9)), policy(F))
+    back = policy_from_arrays(policy.to_arrays())
+    assert isinstance(back, HeadsPolicy)
+    np.testing.assert_array_equal(back(F), policy(F))
+
+
+def test_heads_learn_their_parts_and_a_decision_ignores_what_it_cannot_see():
+    """The point mass with a second action, the sign of the goal, learned by a head reading the goal
+    alone: a third feature that tracks the decision in training (a spurious cue) cannot move it."""
+    inner = _point_mass_rollout([])
+
+    def rollout(policy, k, iteration):
+        wrapped = None if policy is None else (lambda f: policy(np.column_stack([f, np.sign(f[:, 1:2])]))[:, :1])
+        out = []
+        for t in inner(wrapped, k, iteration):
+            cue = np.sign(t.features[:, 1:2])  # in training the cue equals the decision
+            out.append(Trajectory(np.column_stack([t.features, cue]), np.column_stack([t.expert, cue])))
+        return out
+
+    result = imitate(rollout, method="dagger", iterations=3, runs_per_iteration=4, hidden=(16,), epochs=60,
+                     learning_rate=0.01, batch_size=64, seed=1, heads=((None, [0]), ([1], [1])))
+    policy = result.policy
+    assert isinstance(policy, HeadsPolicy) and policy.n_outputs == 2
+    F = np.array([[0.0, 0.6, 1.0], [0.0, 0.6, -1.0], [0.0, -0.6, -1.0], [0.0, -0.6, 1.0]], np.float32)
+    decision = policy(F)[:, 1]
+    assert decision[0] == decision[1] > 0.5 and decision[2] == decision[3] < -0.5
+    with pytest.raises(ValueError, match="heads: output columns must cover"):
+        imitate(rollout, method="supervised", iterations=0, runs_per_iteration=2, heads=((None, [0]),))
+    with pytest.raises(ValueError, match=r"heads\[1\]: input columns"):
+        imitate(rollout, method="supervised", iterations=0, runs_per_iteration=2, heads=((None, [0]), ([7], [1])))
 
 
 def test_bad_learner_settings_are_named():
@@ -301,6 +351,10 @@ def test_cli_trains_a_surrogate_and_generate_searches_with_it_and_confirms_with_
                                  "2", "--epochs", "3", "--validate", "16", "--select-runs", "4"])
     assert result.exit_code == 0, result.output
     assert model.is_file() and "mode accuracy" in result.output and "8 expert runs: 4 annotated + 4 held out" in result.output
+    policy = Surrogate.load(model, IMITATION7).policy  # the goal decision is its own network, blind to the scan
+    (steer_in, steer_out, _), (goal_in, goal_out, _) = policy.heads
+    assert steer_in.size == SPEC.size and steer_out.tolist() == [0, 1] and goal_out.tolist() == [2]
+    assert goal_in.tolist() == [0, 1, 2, 3, 4, 5, 6, SPEC.size - 1]
     out = tmp_path / "plan"
     args = ["generate", mission, "--out", str(out), "--budget", "500", "--batch-size", "250", "--pairs", "2",
             "--dithers", "40", "--surrogate", str(model), "--confirm-runs", "20"]

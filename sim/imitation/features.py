@@ -24,7 +24,8 @@ imitate a latch from the state alone: moments after turning on fuel the vehicle 
 same charge and distance from home as one that carries on, and averaging "go on" with
 "go home" stalls it.  So the learned back-seat latches its own decision too (as the
 expert's goal state does) and, once home-bound, sees no waypoint pending, exactly the
-features of a vehicle that has reached every waypoint.
+features of a vehicle that has reached every waypoint.  The decision is learned from the
+features the expert takes it on, not the scan (:func:`policy_heads`).
 
 Every input is what the front-seat reports over MAVLink at MAVLink precision, so
 features computed in the batch simulator and on the bus are the same numbers.
@@ -41,7 +42,7 @@ from sim.sonar import SCAN_BEAMS
 from sim.vehicle import wrap_angle
 
 __all__ = ["FeatureSpec", "feature_spec", "features", "expert_action", "action_command", "advance_waypoints",
-           "waypoint_target", "ACTIONS"]
+           "waypoint_target", "policy_heads", "ACTIONS"]
 
 FEATURE_VERSION = 2
 #: Network outputs: through-water velocity (forward, starboard) and the goal decision.
@@ -82,6 +83,18 @@ class FeatureSpec:
     @classmethod
     def from_dict(cls, d: dict) -> "FeatureSpec":
         return cls(**d)
+
+
+def policy_heads(spec: FeatureSpec) -> tuple[tuple[list[int] | None, list[int]], ...]:
+    """Which features each network of a learned back-seat reads (``rapt.imitation.imitate(heads=)``).
+
+    Velocity from every feature; the goal decision from the charge, the map vectors and the
+    clock only — what the expert's goal selection reads.  Learned by the steering network,
+    the decision leaned on the range scan (in the chapter 6 mission most early aborts of a
+    single network fired on a sonar spike, its output with the scan cleared far below 0).
+    """
+    mission_level = list(range(spec.sonar.start)) + list(range(spec.sonar.stop, spec.size))
+    return ((None, [0, 1]), (mission_level, [2]))
 
 
 def feature_spec(mission: Mission, beams: int = SCAN_BEAMS) -> FeatureSpec:

@@ -3,7 +3,7 @@
 A surrogate learned on one mission knows nothing of another's obstacles, waypoints or
 battery: loading it for a different mission (any change to the mission file's content)
 is refused with the two missions named.  The file is a numpy ``.npz`` archive holding
-the network's float32 weights and a JSON header (format, mission name and digest,
+the networks' float32 weights and a JSON header (format, mission name and digest,
 feature definition, how it was trained).
 """
 
@@ -17,13 +17,15 @@ from pathlib import Path
 
 import numpy as np
 
-from rapt.imitation import MLPPolicy
+from rapt.imitation import HeadsPolicy, MLPPolicy, policy_from_arrays
 from sim.imitation.features import FeatureSpec, feature_spec
 from sim.mission import Mission
 
 __all__ = ["Surrogate", "mission_digest", "FORMAT"]
 
-FORMAT = "rapt.surrogate/1"
+FORMAT = "rapt.surrogate/2"
+#: Formats this version reads: /1 held one network, /2 may hold several heads.
+READS = ("rapt.surrogate/1", FORMAT)
 
 
 def mission_digest(mission: Mission) -> str:
@@ -36,14 +38,15 @@ def mission_digest(mission: Mission) -> str:
 class Surrogate:
     """A learned back-seat for ``mission_name`` (digest ``mission_sha``)."""
 
-    policy: MLPPolicy
+    policy: MLPPolicy | HeadsPolicy
     spec: FeatureSpec
     mission_name: str
     mission_sha: str
     training: dict = field(default_factory=dict)
 
     @classmethod
-    def for_mission(cls, mission: Mission, policy: MLPPolicy, training: dict | None = None) -> "Surrogate":
+    def for_mission(cls, mission: Mission, policy: MLPPolicy | HeadsPolicy,
+                    training: dict | None = None) -> "Surrogate":
         spec = feature_spec(mission)
         if policy.n_features != spec.size:
             raise ValueError(f"policy: takes {policy.n_features} features, the mission's definition has {spec.size}")
@@ -90,11 +93,12 @@ class Surrogate:
         try:
             with np.load(path, allow_pickle=False) as z:
                 header = json.loads(str(z["header"]))
-                policy = MLPPolicy.from_arrays({k: z[k] for k in z.files if k != "header"})
+                policy = policy_from_arrays({k: z[k] for k in z.files if k != "header"})
         except (OSError, ValueError, KeyError) as exc:
             raise ValueError(f"surrogate: {str(path)!r} is not a surrogate file ({exc})") from exc
-        if header.get("format") != FORMAT:
-            raise ValueError(f"surrogate: {str(path)!r} has format {header.get('format')!r}, expected {FORMAT!r}")
+        if header.get("format") not in READS:
+            raise ValueError(f"surrogate: {str(path)!r} has format {header.get('format')!r}, expected one of "
+                             f"{', '.join(READS)}; retrain it with `rapt-plan surrogate`")
         out = cls(policy, FeatureSpec.from_dict(header["features"]), header["mission"], header["mission_sha"],
                   header.get("training", {}))
         if mission is not None:
