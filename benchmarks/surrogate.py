@@ -34,7 +34,6 @@ from planner.generate import GenerateConfig, analyse, confirm_with_expert, searc
 from planner.surrogate import mode_agreement, train_surrogate
 from rapt.agreement import agreement, path_error
 from sim.autonomy import Autonomy
-from sim.imitation.driver import PolicyAutonomy
 from sim.imitation.surrogate import Surrogate
 from sim.scenario import make_scenarios
 from sim.scoring import MODE_NAMES
@@ -54,7 +53,7 @@ def decision_time(mission, surrogate: Surrogate, repeats: int = 5) -> None:
     for _ in range(150):  # fly 300 s so that some vehicles see obstacles
         tel = world.telemetry(0.0)
         obs = observation(tel, scen)
-        cmd = PolicyAutonomy(scen, surrogate.policy, surrogate.spec).step(obs, mission.dt)
+        cmd = surrogate.autonomy(scen).step(obs, mission.dt)
         world.advance(0.0, cmd.heading, cmd.speed, cmd.surface, np.ones(scen.n, dtype=bool))
     tel = world.telemetry(300.0)
     obs = observation(tel, scen)
@@ -74,8 +73,8 @@ def decision_time(mission, surrogate: Surrogate, repeats: int = 5) -> None:
 
     limit = threadpool_limits(1)  # a back-seat process on one core; threads only add noise here
     experts = [Autonomy(s) for s, _ in singles]
-    learned = [PolicyAutonomy(s, surrogate.policy, surrogate.spec) for s, _ in singles]
-    batch_e, batch_l = Autonomy(scen), PolicyAutonomy(scen, surrogate.policy, surrogate.spec)
+    learned = [surrogate.autonomy(s) for s, _ in singles]
+    batch_e, batch_l = Autonomy(scen), surrogate.autonomy(scen)
     batch_l.step(obs, mission.dt)
     F = batch_l.last_features
     quiet = surrogate.spec.sonar
@@ -114,7 +113,7 @@ def _row(tel, i):
 
 
 def learners(mission, methods: list[str], runs: int, per: int, epochs: int, track: int, seed: int,
-             mixing: float = 0.5, select_runs: int = 25) -> dict[str, tuple[Surrogate, list]]:
+             mixing: float = 0.5, select_runs: int = 50) -> dict[str, tuple[Surrogate, list]]:
     Xt = qmc.Sobol(mission.dim, seed=seed + 1).random(track)
     expert = sim.simulate(mission, Xt)
     out = {}
@@ -141,7 +140,8 @@ def learners(mission, methods: list[str], runs: int, per: int, epochs: int, trac
         out[name] = (sur, curve)
         chosen = sur.training["selection_accuracy"]
         print(f"   {name}: update {sur.training['chosen_iteration']} kept (best on {select_runs} held-out expert "
-              f"runs: {float('nan') if chosen is None else chosen:.1%})", flush=True)
+              f"runs: {float('nan') if chosen is None else chosen:.1%}; goal threshold {sur.goal_threshold:+.1f})",
+              flush=True)
     finals = {n: c[out[n][0].training["chosen_iteration"]][-1] for n, (_, c) in out.items()}
     contenders = [n for n in ("dagger", "qdagger50", "qdagger75") if n in out]
     # the accuracy every contender reaches (its best), less 2 points of tracking-set noise
@@ -228,7 +228,8 @@ def main() -> None:
     ap.add_argument("--per", type=int, default=5, help="runs per update")
     ap.add_argument("--epochs", type=int, default=30)
     ap.add_argument("--mixing", type=float, default=0.5, help="DAgger's beta = mixing**iteration")
-    ap.add_argument("--select-runs", type=int, default=25, help="held-out expert runs choosing the policy kept")
+    ap.add_argument("--select-runs", type=int, default=50,
+                    help="held-out expert runs choosing the policy kept and its goal threshold")
     ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
     ap.add_argument("--track", type=int, default=256, help="Sobol scenarios tracking accuracy during training")
     ap.add_argument("--validation", type=int, default=5000)

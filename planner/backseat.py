@@ -30,7 +30,6 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from bridge import keys  # noqa: E402
 from sim.autonomy import GOAL_RETURN, Autonomy, Observation  # noqa: E402
-from sim.imitation.driver import PolicyAutonomy  # noqa: E402
 from sim.interface import battery_fraction, encode_command  # noqa: E402
 from sim.mission import Mission  # noqa: E402
 from sim.scenario import make_scenarios  # noqa: E402
@@ -48,7 +47,7 @@ class BackSeat:
         self.mission, self.scen, self.vehicle, self.source = mission, scen, vehicle, source
         if surrogate is not None:
             surrogate.check(mission)
-            self.autonomy = PolicyAutonomy(scen, surrogate.policy, surrogate.spec)
+            self.autonomy = surrogate.autonomy(scen)
             self.beams = surrogate.spec.beams
         else:
             self.autonomy = Autonomy(scen)

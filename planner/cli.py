@@ -335,7 +335,7 @@ def generate(
     refine_runs: Annotated[int, typer.Option("--refine-runs", help="Runs per pair of --refine.")] = 12,
     surrogate: Annotated[Optional[Path], typer.Option(
         "--surrogate", help="Search with a learned surrogate of the autonomy (section 6.2.3): load this .npz "
-                            "(trained for this mission), or train one (75 annotated + 25 held-out expert runs) "
+                            "(trained for this mission), or train one (75 annotated + 50 held-out expert runs) "
                             "and save it here; the expert then confirms the candidate pairs.")] = None,
     confirm_runs: Annotated[int, typer.Option("--confirm-runs", help="Expert runs that check the surrogate's "
                                                                      "candidate pairs (two per pair).")] = 100,
@@ -418,8 +418,9 @@ def surrogate_cmd(
     mixing: Annotated[float, typer.Option(help="Update i's runs obey the expert on a share mixing**i of their steps "
                                                "(DAgger's beta; 0: the learner flies every step).")] = 0.5,
     select_runs: Annotated[int, typer.Option("--select-runs", help="Held-out expert runs that choose which update's "
-                                                                 "policy to keep (best mode accuracy; 0: the last).")]
-        = 25,
+                                                                 "policy to keep (best mode accuracy; 0: the last) "
+                                                                 "and its goal threshold.")]
+        = 50,
     validate: Annotated[int, typer.Option(help="Sobol scenarios to measure mode accuracy on after each update "
                                                "(0: none).")] = 256,
     seed: Annotated[int, typer.Option(help="Seed of every random choice.")] = 0,
@@ -459,8 +460,8 @@ def surrogate_cmd(
     sur.save(out_file)
     out.print(table)
     t = sur.training
-    kept = (f"update {t['chosen_iteration']} kept ({t['selection_accuracy']:.1%} on {t['select_runs']} held-out runs)"
-            if t["select_runs"] else "last update kept")
+    kept = (f"update {t['chosen_iteration']} kept ({t['selection_accuracy']:.1%} on {t['select_runs']} held-out runs), "
+            f"goal threshold {sur.goal_threshold:+.1f}" if t["select_runs"] else "last update kept")
     out.print(f"surrogate of {mission.name} written to {out_file} ({t['runs']} expert runs: {t['annotated_runs']} "
               f"annotated + {t['select_runs']} held out; {kept}; {sur.spec.size} features)",
               soft_wrap=True, highlight=False)

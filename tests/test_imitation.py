@@ -207,12 +207,12 @@ def _steering_policy(home_below: float = 0.15):
 
 
 def test_surrogate_files_round_trip_and_refuse_another_mission(tmp_path):
-    sur = Surrogate.for_mission(IMITATION7, _steering_policy(), {"method": "hand-made", "runs": 0})
+    sur = Surrogate.for_mission(IMITATION7, _steering_policy(), {"method": "hand-made", "runs": 0}, goal_threshold=-0.4)
     path = sur.save(tmp_path / "s.npz")
     back = Surrogate.load(path, IMITATION7)
     F = np.random.default_rng(0).uniform(-1, 1, (10, SPEC.size)).astype(np.float32)
     np.testing.assert_array_equal(back.policy(F), sur.policy(F))
-    assert back.spec == SPEC and back.training["method"] == "hand-made"
+    assert back.spec == SPEC and back.training["method"] == "hand-made" and back.goal_threshold == -0.4
     other = sim.load_mission(EXAMPLES / "range2017.toml")
     with pytest.raises(ValueError, match=r"trained for mission 'imitation7' \(\w+\), not for 'range2017'"):
         Surrogate.load(path, other)
@@ -274,6 +274,36 @@ def test_the_learned_goal_decision_latches_and_the_expert_labels_the_learners_go
     keeper = PolicyAutonomy(scen, _steering_policy(home_below=-0.1), SPEC)
     keeper.step(obs, IMITATION7.dt)
     assert not keeper.home.any() and np.all(np.any(keeper.last_features[:, wp] != 0, axis=1))
+
+
+def test_the_goal_threshold_moves_the_abort_and_is_calibrated_on_held_out_expert_runs():
+    """The hand-made policy's goal output is 20 (0.15 - charge): a threshold t turns it home below a
+    charge of 0.15 - t / 20.  Per vehicle, one batch flies every threshold; the calibration keeps the
+    middle of the thresholds that best reproduce the expert's modes."""
+    from planner.surrogate import calibrate_goal_threshold
+    from sim.imitation.rollouts import draw_valid
+
+    sur = Surrogate.for_mission(IMITATION7, _steering_policy(home_below=0.15))
+    X = np.tile(np.random.default_rng(6).random((1, IMITATION7.dim)), (3, 1))
+    X[:, 6] = (0.13 - 0.05) / 0.35  # 13% charge
+    scen = make_scenarios(IMITATION7, X)
+    driver = sur.autonomy(scen, np.array([-1.0, 0.5, 1.0]))  # gives up below 20%, 12.5%, 10% charge
+    world = World(scen, scan_beams=SPEC.beams)
+    driver.step(observation(world.telemetry(0.0), scen), IMITATION7.dt)
+    assert driver.home.tolist() == [True, False, False]
+    with pytest.raises(ValueError, match="goal_threshold: expected one value or 3"):
+        sur.autonomy(scen, np.zeros(2))
+
+    Xs = draw_valid(IMITATION7, 6, np.random.default_rng(8))
+    expert = sim.simulate(IMITATION7, Xs)
+    grid = (-4.0, -2.0, 0.0, 2.0, 20.0)
+    threshold, accuracy = calibrate_goal_threshold(IMITATION7, sur, Xs, expert, grid)
+    for t, a in zip(grid, accuracy):  # each threshold's accuracy is the surrogate's flown with it alone
+        alone = Surrogate.for_mission(IMITATION7, sur.policy, goal_threshold=t)
+        mine = sim.simulate(IMITATION7, Xs, surrogate=alone)
+        assert a == pytest.approx(np.mean(mine.modes == expert.modes))
+    best = [t for t, a in zip(grid, accuracy) if a == max(accuracy)]
+    assert len(set(accuracy)) > 1 and threshold == best[len(best) // 2]
 
 
 def test_on_the_bus_the_surrogate_flies_while_the_expert_commands_are_logged(tmp_path):

@@ -43,17 +43,20 @@ class Surrogate:
     mission_name: str
     mission_sha: str
     training: dict = field(default_factory=dict)
+    #: The goal output above which the back-seat gives the waypoint up (calibrated on held-out
+    #: expert runs: a decision seen once per aborted run is learned late, see planner.surrogate).
+    goal_threshold: float = 0.0
 
     @classmethod
     def for_mission(cls, mission: Mission, policy: MLPPolicy | HeadsPolicy,
-                    training: dict | None = None) -> "Surrogate":
+                    training: dict | None = None, goal_threshold: float = 0.0) -> "Surrogate":
         spec = feature_spec(mission)
         if policy.n_features != spec.size:
             raise ValueError(f"policy: takes {policy.n_features} features, the mission's definition has {spec.size}")
         if policy.n_outputs != spec.actions:
             raise ValueError(f"policy: gives {policy.n_outputs} outputs, a back-seat needs {spec.actions} "
                              "(velocity forward and starboard, and the goal decision)")
-        return cls(policy, spec, mission.name, mission_digest(mission), dict(training or {}))
+        return cls(policy, spec, mission.name, mission_digest(mission), dict(training or {}), float(goal_threshold))
 
     def check(self, mission: Mission) -> None:
         """Refuse a mission this surrogate was not trained for."""
@@ -64,11 +67,16 @@ class Surrogate:
         if feature_spec(mission, self.spec.beams) != self.spec:
             raise ValueError("surrogate: its feature definition does not match this mission's; retrain it")
 
-    def driver_options(self) -> dict:
-        """Keyword arguments for :func:`sim.simulate.run_scenarios` to fly this surrogate."""
+    def autonomy(self, scen, goal_threshold: float | np.ndarray | None = None):
+        """The back-seat flying ``scen`` (``goal_threshold`` overrides the surrogate's own)."""
         from sim.imitation.driver import PolicyAutonomy
 
-        return {"driver": lambda scen: PolicyAutonomy(scen, self.policy, self.spec), "scan_beams": self.spec.beams}
+        threshold = self.goal_threshold if goal_threshold is None else goal_threshold
+        return PolicyAutonomy(scen, self.policy, self.spec, threshold)
+
+    def driver_options(self) -> dict:
+        """Keyword arguments for :func:`sim.simulate.run_scenarios` to fly this surrogate."""
+        return {"driver": self.autonomy, "scan_beams": self.spec.beams}
 
     def save(self, path: str | Path) -> Path:
         path = Path(path)
@@ -76,7 +84,7 @@ class Surrogate:
             raise ValueError(f"path: a surrogate file ends in .npz, got {str(path)!r}")
         header = {"format": FORMAT, "mission": self.mission_name, "mission_sha": self.mission_sha,
                   "features": self.spec.to_dict(), "feature_names": self.spec.names(),
-                  "training": self.training}
+                  "training": self.training, "goal_threshold": self.goal_threshold}
         arrays = self.policy.to_arrays()
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_name(path.name + ".part.npz")
@@ -100,7 +108,7 @@ class Surrogate:
             raise ValueError(f"surrogate: {str(path)!r} has format {header.get('format')!r}, expected one of "
                              f"{', '.join(READS)}; retrain it with `rapt-plan surrogate`")
         out = cls(policy, FeatureSpec.from_dict(header["features"]), header["mission"], header["mission_sha"],
-                  header.get("training", {}))
+                  header.get("training", {}), float(header.get("goal_threshold", 0.0)))
         if mission is not None:
             out.check(mission)
         return out
