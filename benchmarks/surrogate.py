@@ -113,7 +113,7 @@ def _row(tel, i):
 
 
 def learners(mission, methods: list[str], runs: int, per: int, epochs: int, track: int, seed: int,
-             mixing: float = 0.5, select_runs: int = 50) -> dict[str, tuple[Surrogate, list]]:
+             mixing: float = 0.5, select_runs: int = 25) -> dict[str, tuple[Surrogate, list]]:
     Xt = qmc.Sobol(mission.dim, seed=seed + 1).random(track)
     expert = sim.simulate(mission, Xt)
     out = {}
@@ -228,7 +228,7 @@ def main() -> None:
     ap.add_argument("--per", type=int, default=5, help="runs per update")
     ap.add_argument("--epochs", type=int, default=30)
     ap.add_argument("--mixing", type=float, default=0.5, help="DAgger's beta = mixing**iteration")
-    ap.add_argument("--select-runs", type=int, default=50,
+    ap.add_argument("--select-runs", type=int, default=25,
                     help="held-out expert runs choosing the policy kept and its goal threshold")
     ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
     ap.add_argument("--track", type=int, default=256, help="Sobol scenarios tracking accuracy during training")

@@ -335,7 +335,7 @@ def generate(
     refine_runs: Annotated[int, typer.Option("--refine-runs", help="Runs per pair of --refine.")] = 12,
     surrogate: Annotated[Optional[Path], typer.Option(
         "--surrogate", help="Search with a learned surrogate of the autonomy (section 6.2.3): load this .npz "
-                            "(trained for this mission), or train one (75 annotated + 50 held-out expert runs) "
+                            "(trained for this mission), or train one (75 annotated + 25 held-out expert runs) "
                             "and save it here; the expert then confirms the candidate pairs.")] = None,
     confirm_runs: Annotated[int, typer.Option("--confirm-runs", help="Expert runs that check the surrogate's "
                                                                      "candidate pairs (two per pair).")] = 100,
@@ -420,7 +420,7 @@ def surrogate_cmd(
     select_runs: Annotated[int, typer.Option("--select-runs", help="Held-out expert runs that choose which update's "
                                                                  "policy to keep (best mode accuracy; 0: the last) "
                                                                  "and its goal threshold.")]
-        = 50,
+        = 25,
     validate: Annotated[int, typer.Option(help="Sobol scenarios to measure mode accuracy on after each update "
                                                "(0: none).")] = 256,
     seed: Annotated[int, typer.Option(help="Seed of every random choice.")] = 0,

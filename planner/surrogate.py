@@ -18,12 +18,9 @@ import numpy as np
 import sim
 from rapt.imitation import IterationRecord, MLPPolicy, imitate
 from sim.imitation.features import feature_spec, policy_heads
-from sim.imitation.rollouts import draw_valid, make_rollout
+from sim.imitation.rollouts import annotated_runs, draw_valid, make_rollout
 from sim.imitation.surrogate import Surrogate
 from sim.mission import Mission
-from sim.scenario import make_scenarios
-from sim.scoring import modes_from_scores
-from sim.simulate import run_scenarios
 
 __all__ = ["train_surrogate", "load_or_train", "calibrate_goal_threshold", "TRAINING_DEFAULTS", "GOAL_THRESHOLDS"]
 
@@ -32,11 +29,11 @@ GOAL_THRESHOLDS = tuple(round(t, 1) for t in np.arange(-0.9, 0.91, 0.1))
 
 #: Section 6.6.1: 5 expert runs, then 5 annotated runs per iteration; 50-75 runs converge.
 TRAINING_DEFAULTS = {"method": "qdagger", "quantile": 0.5, "runs": 75, "runs_per_iteration": 5, "epochs": 30,
-                     "mixing": 0.5, "select_runs": 50}
+                     "mixing": 0.5, "select_runs": 25}
 
 
 def train_surrogate(mission: Mission, *, method: str = "qdagger", quantile: float = 0.5, runs: int = 75,
-                    runs_per_iteration: int = 5, epochs: int = 30, mixing: float = 0.5, select_runs: int = 50,
+                    runs_per_iteration: int = 5, epochs: int = 30, mixing: float = 0.5, select_runs: int = 25,
                     seed: int = 0,
                     on_iteration: Callable[[IterationRecord, MLPPolicy], None] | None = None) -> Surrogate:
     """Imitate the mission's expert with ``runs`` annotated runs (``runs_per_iteration`` at a time).
@@ -60,7 +57,7 @@ def train_surrogate(mission: Mission, *, method: str = "qdagger", quantile: floa
     select = None
     if select_runs:
         Xs = draw_valid(mission, int(select_runs), np.random.default_rng([int(seed), 0x73656C]))
-        expert = sim.simulate(mission, Xs)
+        expert, held_out = annotated_runs(mission, Xs, spec)
         select = lambda policy: mode_agreement(mission, Surrogate.for_mission(mission, policy), Xs, expert)  # noqa: E731
     result = imitate(make_rollout(mission, spec, seed=seed, mixing=mixing), method=method, quantile=quantile,
                      iterations=runs // runs_per_iteration - 1, runs_per_iteration=runs_per_iteration,
@@ -69,43 +66,51 @@ def train_surrogate(mission: Mission, *, method: str = "qdagger", quantile: floa
     h = result.history[result.chosen]
     threshold, calibration = 0.0, None
     if select_runs:
-        threshold, accuracy = calibrate_goal_threshold(mission, Surrogate.for_mission(mission, result.policy), Xs,
-                                                       expert)
-        calibration = [round(a, 4) for a in accuracy]
+        threshold, share = calibrate_goal_threshold(result.policy, spec, held_out)
+        calibration = [round(a, 4) for a in share]
     training = {"method": method if method != "qdagger" else f"qdagger({int(round(quantile * 100))})",
                 "runs": result.runs + int(select_runs), "annotated_runs": result.runs,
                 "select_runs": int(select_runs), "chosen_iteration": result.chosen,
                 "selection_accuracy": h.extra.get("selection"), "samples": h.samples, "seed": seed,
                 "epochs": epochs, "mixing": mixing, "fit_s": round(sum(r.fit_s for r in result.history), 2),
                 "iterations": len(result.history), "goal_threshold": threshold,
-                "threshold_accuracy": calibration}
+                "threshold_reproduced": calibration}
     return Surrogate.for_mission(mission, result.policy, training, threshold)
 
 
-def calibrate_goal_threshold(mission: Mission, surrogate: Surrogate, X: np.ndarray, expert,
-                             thresholds=GOAL_THRESHOLDS) -> tuple[float, list[float]]:
-    """The goal threshold under which ``surrogate`` shows the expert's mode on most of ``X``.
+def calibrate_goal_threshold(policy, spec, trajectories, thresholds=GOAL_THRESHOLDS,
+                             within_steps: int = 5) -> tuple[float, list[float]]:
+    """The goal threshold under which ``policy`` gives the waypoint up where the expert did.
 
     Why: the expert gives its waypoint up once per aborted run, so beside a pending waypoint a
     +1 goal label is rare (0.14% of such states in the chapter 6 mission's expert runs) and a
-    regression on +-1 learns an output that crosses 0 late; on that mission most of the
-    surrogate's remaining errors were aborts the expert took and it did not.  Every threshold
-    flies all of ``X`` in one batch (a threshold per vehicle).  Ties go to the middle of the
-    best thresholds.  Returns (threshold, mode accuracy per threshold).
+    regression on +-1 learns an output that crosses 0 late.  On held-out expert runs
+    (``trajectories`` of :func:`~sim.imitation.rollouts.annotated_runs`, the expert flying), a
+    run counts as reproduced under a threshold when the goal output first exceeds it at most
+    ``within_steps`` steps before the expert's turn (or never, if the expert never turned).
+    Every run weighs in, not only the few whose mode a threshold flips.  Ties go to the middle
+    of the best thresholds.  Returns (threshold, share of runs reproduced per threshold).
     """
-    k = len(thresholds)
-    rep = np.tile(np.asarray(X, float), (k, 1))
-    scen = make_scenarios(mission, rep)
-    if not scen.valid.all():
-        raise ValueError("X: calibration needs valid scenarios (see sim.imitation.rollouts.draw_valid)")
-    per_row = np.repeat(np.asarray(thresholds, float), len(X))
-    scores, _ = run_scenarios(scen, None, False, None, driver=lambda sc: surrogate.autonomy(sc, per_row),
-                              scan_beams=surrogate.spec.beams)
-    modes = modes_from_scores(scores).reshape(k, len(X))
-    ok = expert.valid & (modes >= 0)
-    accuracy = [float(np.mean(modes[i][ok[i]] == expert.modes[ok[i]])) if ok[i].any() else 0.0 for i in range(k)]
-    best = np.flatnonzero(np.isclose(accuracy, max(accuracy)))
-    return float(thresholds[int(best[len(best) // 2])]), accuracy
+    thresholds = np.asarray(thresholds, float)
+    hits = np.zeros(thresholds.size)
+    runs = 0
+    waypoint = slice(1, 4)  # direction and distance of the pending waypoint (all 0 when none)
+    for t in trajectories:
+        pending = np.flatnonzero(np.any(t.features[:, waypoint] != 0, axis=1))
+        if pending.size == 0:
+            continue
+        runs += 1
+        goal = policy(t.features[pending], quiet=spec.sonar)[:, 2]
+        turned = np.flatnonzero(t.expert[pending, 2] > 0)
+        above = goal[:, None] > thresholds[None, :]
+        first = np.where(above.any(axis=0), above.argmax(axis=0), -1)
+        if turned.size:
+            hits += (first >= 0) & (first >= turned[0] - within_steps) & (first <= turned[0])
+        else:
+            hits += first < 0
+    share = (hits / max(runs, 1)).tolist()
+    best = np.flatnonzero(np.isclose(share, max(share)))
+    return float(thresholds[int(best[len(best) // 2])]), share
 
 
 def load_or_train(path: Path, mission: Mission, seed: int = 0, on_iteration=None, **options) -> tuple[Surrogate, bool]:

@@ -276,34 +276,48 @@ def test_the_learned_goal_decision_latches_and_the_expert_labels_the_learners_go
     assert not keeper.home.any() and np.all(np.any(keeper.last_features[:, wp] != 0, axis=1))
 
 
-def test_the_goal_threshold_moves_the_abort_and_is_calibrated_on_held_out_expert_runs():
+def test_the_goal_threshold_moves_the_abort():
     """The hand-made policy's goal output is 20 (0.15 - charge): a threshold t turns it home below a
-    charge of 0.15 - t / 20.  Per vehicle, one batch flies every threshold; the calibration keeps the
-    middle of the thresholds that best reproduce the expert's modes."""
-    from planner.surrogate import calibrate_goal_threshold
-    from sim.imitation.rollouts import draw_valid
-
-    sur = Surrogate.for_mission(IMITATION7, _steering_policy(home_below=0.15))
-    X = np.tile(np.random.default_rng(6).random((1, IMITATION7.dim)), (3, 1))
-    X[:, 6] = (0.13 - 0.05) / 0.35  # 13% charge
+    charge of 0.15 - t / 20, here 20%, 12.5% and 10% at 13% charge."""
+    X = np.random.default_rng(6).random((1, IMITATION7.dim))
+    X[:, 6] = (0.13 - 0.05) / 0.35
     scen = make_scenarios(IMITATION7, X)
-    driver = sur.autonomy(scen, np.array([-1.0, 0.5, 1.0]))  # gives up below 20%, 12.5%, 10% charge
-    world = World(scen, scan_beams=SPEC.beams)
-    driver.step(observation(world.telemetry(0.0), scen), IMITATION7.dt)
-    assert driver.home.tolist() == [True, False, False]
-    with pytest.raises(ValueError, match="goal_threshold: expected one value or 3"):
-        sur.autonomy(scen, np.zeros(2))
+    obs = observation(World(scen, scan_beams=SPEC.beams).telemetry(0.0), scen)
+    turned = []
+    for threshold in (-1.0, 0.5, 1.0):
+        driver = Surrogate.for_mission(IMITATION7, _steering_policy(0.15), goal_threshold=threshold).autonomy(scen)
+        driver.step(obs, IMITATION7.dt)
+        turned.append(bool(driver.home[0]))
+    assert turned == [True, False, False]
 
-    Xs = draw_valid(IMITATION7, 6, np.random.default_rng(8))
-    expert = sim.simulate(IMITATION7, Xs)
-    grid = (-4.0, -2.0, 0.0, 2.0, 20.0)
-    threshold, accuracy = calibrate_goal_threshold(IMITATION7, sur, Xs, expert, grid)
-    for t, a in zip(grid, accuracy):  # each threshold's accuracy is the surrogate's flown with it alone
-        alone = Surrogate.for_mission(IMITATION7, sur.policy, goal_threshold=t)
-        mine = sim.simulate(IMITATION7, Xs, surrogate=alone)
-        assert a == pytest.approx(np.mean(mine.modes == expert.modes))
-    best = [t for t, a in zip(grid, accuracy) if a == max(accuracy)]
-    assert len(set(accuracy)) > 1 and threshold == best[len(best) // 2]
+
+def test_the_goal_threshold_is_calibrated_where_the_expert_turned():
+    """Run A: the expert turns at step 10, the goal output rises -1, -0.9, ... and reaches 0 there;
+    run B: the expert never turns, the output stays at -0.3.  Thresholds in [-0.3, 0) reproduce
+    both (A first crosses within 5 steps before the turn, B never); -0.9 turns both too early,
+    +0.9 never turns A."""
+    from planner.surrogate import calibrate_goal_threshold
+
+    def run(goal, turn_at):
+        F = np.zeros((len(goal), 4), np.float32)
+        F[:, 0], F[:, 1:4] = goal, 0.5  # column 0 carries the goal output; a waypoint is pending
+        A = np.full((len(goal), 3), -1.0, np.float32)
+        if turn_at is not None:
+            A[turn_at, 2] = 1.0
+            F = F[:turn_at + 1]
+            A = A[:turn_at + 1]
+        return Trajectory(F, A)
+
+    class Reader:  # a policy whose goal output is feature 0
+        def __call__(self, F, quiet=None):
+            return np.column_stack([np.zeros(len(F)), np.zeros(len(F)), F[:, 0]])
+
+    spec = dataclasses.replace(SPEC, beams=0)
+    trajs = [run(-1.0 + 0.1 * np.arange(30), 10), run(np.full(30, -0.3), None)]
+    grid = np.round(np.arange(-0.9, 0.91, 0.1), 1)
+    threshold, share = calibrate_goal_threshold(Reader(), spec, trajs, grid)
+    assert share[0] == 0.0 and share[-1] == 0.5 and max(share) == 1.0
+    assert -0.3 <= threshold < 0.0 and share[int(np.argmin(np.abs(grid - threshold)))] == 1.0
 
 
 def test_on_the_bus_the_surrogate_flies_while_the_expert_commands_are_logged(tmp_path):

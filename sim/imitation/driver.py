@@ -28,14 +28,11 @@ AWAY_RADII = 3.0
 class PolicyAutonomy:
     """N vehicles of ``scen`` flown by ``policy`` (features -> actions) under ``spec``."""
 
-    def __init__(self, scen: Scenarios, policy, spec: FeatureSpec, goal_threshold: float | np.ndarray = 0.0):
+    def __init__(self, scen: Scenarios, policy, spec: FeatureSpec, goal_threshold: float = 0.0):
         m = scen.mission
         self.scen, self.mission, self.policy, self.spec = scen, m, policy, spec
         n = scen.n
-        # the goal output above which the waypoint is given up: one for all, or one per vehicle
-        self.goal_threshold = goal_threshold if np.ndim(goal_threshold) == 0 else np.asarray(goal_threshold, float)
-        if np.ndim(self.goal_threshold) and self.goal_threshold.shape != (n,):
-            raise ValueError(f"goal_threshold: expected one value or {n}, got shape {self.goal_threshold.shape}")
+        self.goal_threshold = float(goal_threshold)  # the goal output above which the waypoint is given up
         self.wp_next = np.zeros(n, dtype=np.int64)
         self.away = np.zeros(n, dtype=bool)
         self.wp_aborted = np.zeros((n, len(m.waypoints)), dtype=bool)

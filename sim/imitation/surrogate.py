@@ -67,12 +67,11 @@ class Surrogate:
         if feature_spec(mission, self.spec.beams) != self.spec:
             raise ValueError("surrogate: its feature definition does not match this mission's; retrain it")
 
-    def autonomy(self, scen, goal_threshold: float | np.ndarray | None = None):
-        """The back-seat flying ``scen`` (``goal_threshold`` overrides the surrogate's own)."""
+    def autonomy(self, scen):
+        """The back-seat flying ``scen``."""
         from sim.imitation.driver import PolicyAutonomy
 
-        threshold = self.goal_threshold if goal_threshold is None else goal_threshold
-        return PolicyAutonomy(scen, self.policy, self.spec, threshold)
+        return PolicyAutonomy(scen, self.policy, self.spec, self.goal_threshold)
 
     def driver_options(self) -> dict:
         """Keyword arguments for :func:`sim.simulate.run_scenarios` to fly this surrogate."""
