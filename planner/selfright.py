@@ -21,7 +21,7 @@ import typer
 from scipy.spatial import cKDTree
 
 from planner.console import fail, out as console
-from rapt.manifold import ManifoldSampler, angular_embedding, manifold_search
+from rapt.manifold import ManifoldSampler, angular_embedding, full_turn, manifold_search
 from rapt.transitions import TransitionGraph, transition_graph
 from sim.robots import Robot, RobotFileError, StabilityFunction, load_robot
 
@@ -37,7 +37,7 @@ def space_bounds(robot: Robot, planar: bool) -> np.ndarray:
 def _to_unit(angles: np.ndarray, lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
     span = hi - lo
     a = np.asarray(angles, dtype=float)
-    full = span >= 2 * np.pi - 1e-9  # periodic coordinate: wrap into range
+    full = full_turn(lo, hi)  # periodic coordinate: wrap into range
     a = np.where(full, lo + np.mod(a - lo, 2 * np.pi), a)
     return np.clip((a - lo) / span, 0.0, 1.0)
 
@@ -177,7 +177,7 @@ def grid_study(robot: Robot, slope: float, resolution_deg: float) -> SelfRightSt
     axes = []
     for lo, hi in robot.joint_bounds:
         n = int(round((hi - lo) / np.radians(resolution_deg)))
-        full = hi - lo >= 2 * np.pi - 1e-9
+        full = full_turn(lo, hi)
         axes.append(lo + np.arange(n if full else n + 1) * (hi - lo) / n)
     theta = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, robot.dof) if axes else np.zeros((1, 0))
     t0 = time.perf_counter()
@@ -185,7 +185,7 @@ def grid_study(robot: Robot, slope: float, resolution_deg: float) -> SelfRightSt
     study = system.study(robot, slope, f"grid {resolution_deg:g}°", time.perf_counter() - t0,
                          resolution=np.radians(resolution_deg))
     study.extra.update(grid_shape=[len(a) for a in axes],
-                       grid_periodic=[bool(hi - lo >= 2 * np.pi - 1e-9) for lo, hi in robot.joint_bounds])
+                       grid_periodic=[bool(full_turn(lo, hi)) for lo, hi in robot.joint_bounds])
     return study
 
 
@@ -329,7 +329,7 @@ def default_max_edge(study: SelfRightStudy) -> float:
 
 
 def analyse(study: SelfRightStudy, *, max_edge: float | None = None, probes=None,
-            label_radius: float | None = None, use_ids: bool | None = None) -> dict:
+            use_ids: bool | None = None) -> dict:
     """Transition graph and the chapter's figures of merit for one study.
 
     ``use_ids`` keeps different hull faces apart by their vertex identity (section 5.2's
@@ -346,7 +346,7 @@ def analyse(study: SelfRightStudy, *, max_edge: float | None = None, probes=None
     ids = study.graph_ids() if use_ids else None
     connections = grid_connections(study) if use_ids and "grid_shape" in study.extra else None
     graph = transition_graph(study.embed(study.X), study.stable, study.embed(study.rest), study.energy,
-                             study.embed(study.extra_states()), max_edge=max_edge, label_radius=label_radius, ids=ids,
+                             study.embed(study.extra_states()), max_edge=max_edge, ids=ids,
                              free_dims=2 * study.n_free, connections=connections)
     seconds = time.perf_counter() - t0
     home_U, home_id = home_state(study, with_id=True)

@@ -40,7 +40,12 @@ from rapt.information import neighbour_variance
 from rapt.parallel import query_workers
 from rapt.samplers.base import Sampler
 
-__all__ = ["angular_embedding", "ManifoldSampler", "manifold_search"]
+__all__ = ["angular_embedding", "full_turn", "ManifoldSampler", "manifold_search"]
+
+
+def full_turn(lo, hi) -> np.ndarray | bool:
+    """Whether a radian range ``[lo, hi]`` is a whole turn: such a coordinate wraps around."""
+    return np.asarray(hi) - np.asarray(lo) >= 2 * np.pi - 1e-9
 
 
 def angular_embedding(U: np.ndarray, bounds: np.ndarray) -> np.ndarray:
@@ -277,8 +282,7 @@ class ManifoldSampler(Sampler):
         d, _ = cKDTree(E).query(E[pick], k=2)
         scale = d[:, 1:2] / np.ptp(self.bounds[:f], axis=1)  # chord ≈ radians → unit-cube units
         local = thetas[pick] + rng.normal(size=(q, f)) * scale
-        span = np.ptp(self.bounds[:f], axis=1)
-        periodic = span >= 2 * np.pi - 1e-9
+        periodic = full_turn(self.bounds[:f, 0], self.bounds[:f, 1])
         local = np.where(periodic, np.mod(local, 1.0), np.clip(local, 0.0, 1.0))
         tree = cKDTree(angular_embedding(self.X[:, :f], self.bounds[:f]))
         _, nn = tree.query(angular_embedding(local, self.bounds[:f]), k=1)

@@ -236,8 +236,7 @@ def _continuations(points: np.ndarray, ids: np.ndarray, free_dims: int, max_edge
 
 
 def transition_graph(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, energy: np.ndarray,
-                     extra: np.ndarray | None = None, *, max_edge: float,
-                     label_radius: float | None = None, ids: tuple | None = None,
+                     extra: np.ndarray | None = None, *, max_edge: float, ids: tuple | None = None,
                      free_dims: int | None = None, rate: float = 1.0,
                      continuation_edge: float | None = None, connections: tuple | None = None) -> TransitionGraph:
     """Build Algorithm 8's transition graph.
@@ -250,10 +249,6 @@ def transition_graph(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, energy
     energy: (N,) energy lost between start and rest.
     extra: (M, d) further states known to lie on the manifolds (e.g. the other hull faces).
     max_edge: the Gabriel graph's maximum edge length ``d_max``.
-    label_radius: extra states farther than this from every evaluated state are left out
-        (None: the paper's rule, every extra state takes its nearest neighbour's label).
-        Sparse data near a crossing of two manifolds otherwise labels one manifold with the
-        other's stability, which can bridge separate stable regions.
     ids: optional manifold identities ``(of X (N,), of rest (N,), of extra (M,))``; see the module docstring.
     free_dims, rate, continuation_edge: with ``ids``, allow continuations between identities (module docstring).
     connections: ``(i, j)`` index arrays into ``[X, settled rest states, extra]`` used instead of
@@ -276,11 +271,6 @@ def transition_graph(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, energy
         if x_id.shape != (N,) or r_id.shape != (N,) or e_id.shape != (len(extra),):
             raise ValueError(f"ids: expected identities for X ({N}), rest ({N}) and extra ({len(extra)}), "
                              f"got {x_id.shape}, {r_id.shape}, {e_id.shape}")
-    if len(extra) and label_radius is not None:
-        dist, _ = cKDTree(X).query(extra, k=1)
-        extra = extra[dist <= label_radius]
-        if ids is not None:
-            e_id = e_id[dist <= label_radius]
     settled = np.all(np.isfinite(rest), axis=1)
     rest_idx = np.flatnonzero(settled)
     points = np.concatenate([X, rest[rest_idx], extra])
