@@ -174,10 +174,18 @@ class HeadsPolicy:
     def __call__(self, F: np.ndarray, quiet: slice | None = None, quiet_value: float = 1.0) -> np.ndarray:
         F = np.asarray(F)
         out = np.empty((F.shape[0], self.n_outputs), dtype=np.float32)
-        for cols, outs, net in self.heads:
-            x = F if _all_columns(cols, self.n_features) else F[:, cols]
-            out[:, outs] = net(x, _local(cols, quiet, self.n_features), quiet_value)
+        for (cols, outs, net), (everything, local) in zip(self.heads, self._plan(quiet)):
+            out[:, outs] = net(F if everything else F[:, cols], local, quiet_value)
         return out
+
+    def _plan(self, quiet: slice | None) -> list[tuple[bool, slice | None]]:
+        """Per head: whether it reads every column, and ``quiet`` in its own columns (cached: a hot path)."""
+        key = None if quiet is None else (quiet.start, quiet.stop, quiet.step)
+        cache = self.__dict__.setdefault("_plans", {})
+        if key not in cache:
+            cache[key] = [(_all_columns(cols, self.n_features), _local(cols, quiet, self.n_features))
+                          for cols, _, _ in self.heads]
+        return cache[key]
 
     def to_arrays(self) -> dict[str, np.ndarray]:
         arrays: dict[str, np.ndarray] = {"n_features": np.array(self.n_features)}
