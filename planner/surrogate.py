@@ -17,7 +17,7 @@ import numpy as np
 
 import sim
 from rapt.imitation import IterationRecord, MLPPolicy, imitate
-from sim.imitation.features import feature_spec, policy_heads
+from sim.imitation.features import GOAL, feature_spec, policy_heads
 from sim.imitation.rollouts import annotated_runs, draw_valid, make_rollout
 from sim.imitation.surrogate import Surrogate
 from sim.mission import Mission
@@ -94,14 +94,13 @@ def calibrate_goal_threshold(policy, spec, trajectories, thresholds=GOAL_THRESHO
     thresholds = np.asarray(thresholds, float)
     hits = np.zeros(thresholds.size)
     runs = 0
-    waypoint = slice(1, 4)  # direction and distance of the pending waypoint (all 0 when none)
     for t in trajectories:
-        pending = np.flatnonzero(np.any(t.features[:, waypoint] != 0, axis=1))
+        pending = np.flatnonzero(np.any(t.features[:, spec.waypoint] != 0, axis=1))
         if pending.size == 0:
             continue
         runs += 1
-        goal = policy(t.features[pending], quiet=spec.sonar)[:, 2]
-        turned = np.flatnonzero(t.expert[pending, 2] > 0)
+        goal = policy(t.features[pending], quiet=spec.sonar)[:, GOAL]
+        turned = np.flatnonzero(t.expert[pending, GOAL] > 0)
         above = goal[:, None] > thresholds[None, :]
         first = np.where(above.any(axis=0), above.argmax(axis=0), -1)
         if turned.size:

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 
 from sim.autonomy import GOAL_RETURN, GOAL_WAYPOINT, Command, Observation
-from sim.imitation.features import FeatureSpec, action_command, advance_waypoints, features, waypoint_target
+from sim.imitation.features import GOAL, FeatureSpec, action_command, advance_waypoints, features, waypoint_target
 from sim.scenario import Scenarios
 
 __all__ = ["PolicyAutonomy", "AWAY_RADII"]
@@ -54,7 +54,7 @@ class PolicyAutonomy:
         F = features(self.spec, m, obs.t, obs.x, obs.y, obs.heading, obs.battery, obs.scan, (wx, wy, pending))
         self.last_features = F  # what the goal decision was taken on
         action = self.policy(F, quiet=self.spec.sonar)  # open water: the scan reads +1
-        turn = pending & (action[:, 2] > self.goal_threshold)
+        turn = pending & (action[:, GOAL] > self.goal_threshold)
         if np.any(turn):  # the decision takes effect at once: steer again with no waypoint pending
             rows = np.flatnonzero(turn)
             G = features(self.spec, m, obs.t, obs.x[rows], obs.y[rows], obs.heading[rows], obs.battery[rows],

@@ -42,11 +42,13 @@ from sim.sonar import SCAN_BEAMS
 from sim.vehicle import wrap_angle
 
 __all__ = ["FeatureSpec", "feature_spec", "features", "expert_action", "action_command", "advance_waypoints",
-           "waypoint_target", "policy_heads", "ACTIONS"]
+           "waypoint_target", "policy_heads", "ACTIONS", "GOAL"]
 
 FEATURE_VERSION = 2
 #: Network outputs: through-water velocity (forward, starboard) and the goal decision.
 ACTIONS = 3
+#: The action column of the goal decision (+1: give the waypoint up and head home).
+GOAL = 2
 #: Within this distance a map vector shrinks linearly to zero (metres).
 NEAR_M = 10.0
 
@@ -67,6 +69,11 @@ class FeatureSpec:
     @property
     def size(self) -> int:
         return 1 + 6 + self.beams + 1
+
+    @property
+    def waypoint(self) -> slice:
+        """The pending waypoint's columns (direction and distance; all 0 when none is pending)."""
+        return slice(1, 4)
 
     @property
     def sonar(self) -> slice:
@@ -94,7 +101,7 @@ def policy_heads(spec: FeatureSpec) -> tuple[tuple[list[int] | None, list[int]],
     single network fired on a sonar spike, its output with the scan cleared far below 0).
     """
     mission_level = list(range(spec.sonar.start)) + list(range(spec.sonar.stop, spec.size))
-    return ((None, [0, 1]), (mission_level, [2]))
+    return ((None, [0, 1]), (mission_level, [GOAL]))
 
 
 def feature_spec(mission: Mission, beams: int = SCAN_BEAMS) -> FeatureSpec:
