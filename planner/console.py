@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import typer
 from rich.console import Console
+from rich.markup import escape
 
 __all__ = ["err", "out", "fail"]
 
@@ -16,6 +17,6 @@ out = Console()
 
 
 def fail(message: str) -> None:
-    """One-line error, exit code 2, no traceback."""
-    err.print(f"[bold red]error:[/] {message}", highlight=False, soft_wrap=True)
+    """One-line error, exit code 2, no traceback.  ``message`` is printed as written (brackets are not rich markup)."""
+    err.print(f"[bold red]error:[/] {escape(message)}", highlight=False, soft_wrap=True)
     raise typer.Exit(code=2)
