@@ -1,4 +1,4 @@
-"""``rapt-plan selfright ROBOT.toml``: which tipped-over states can a robot right itself from, and how (chapter 5).
+"""``rapt-plan selfright ROBOT.toml|ROBOT.urdf``: which tipped-over states can a robot right itself from, and how (chapter 5).
 
 Runs the manifold-constrained adaptive search (:mod:`rapt.manifold`) on the robot's
 stability function (:mod:`sim.robots`), builds the transition graph
@@ -572,7 +572,8 @@ def write_outputs(study: SelfRightStudy, result: dict, out_dir: Path) -> dict:
 
 # -- command ------------------------------------------------------------------------------------
 def selfright_command(
-    robot_file: Annotated[Path, typer.Argument(metavar="ROBOT.toml", help="Robot file (TOML), e.g. examples/robots/1dof.toml.")],
+    robot_file: Annotated[Path, typer.Argument(metavar="ROBOT_FILE", help="Robot file, TOML or URDF (by suffix: .toml, "
+                                               ".urdf), e.g. examples/robots/1dof.toml.")],
     out: Annotated[Path, typer.Option("--out", help="Directory for graph.json, graph.graphml, states.png, report.md.")],
     slope: Annotated[Optional[float], typer.Option(help="Ground slope in degrees (default: the robot file's, else 0).")] = None,
     budget: Annotated[int, typer.Option(help="Queries to the stability function at most.")] = 1000,

@@ -50,12 +50,27 @@ def test_slope_option_overrides_the_robot_file(tmp_path):
     assert json.loads((tmp_path / "graph.json").read_text())["slope_deg"] == 0.0
 
 
+def test_selfright_reads_a_urdf_robot(tmp_path):
+    """The URDF twin of 1dof.toml (URDF has no slope, so --slope gives the TOML file's 20°) gives the same graph."""
+    docs = []
+    for robot in ("examples/robots/1dof.urdf", "examples/robots/1dof.toml"):
+        out = tmp_path / robot.rsplit(".", 1)[1]
+        res = runner.invoke(app, [robot, "--slope", "20", "--budget", "60", "--out", str(out)])
+        assert res.exit_code == 0, res.output
+        docs.append(json.loads((out / "graph.json").read_text()))
+    assert docs[0] == docs[1] and docs[0]["queries"] >= 60
+
+
 def test_bad_inputs_are_one_line_errors(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text('[[link]]\nname = "body"\nmass = 1\nboxes = [{ size = [0.5, -1, 0.2] }]\n')
+    bad_urdf = tmp_path / "bad.urdf"
+    bad_urdf.write_text('<robot name="r"><link name="b"/><joint name="j" type="prismatic"/></robot>')
     cases = [
         ([str(bad)], "link[0].boxes[0].size"),
         ([str(tmp_path / "missing.toml")], "does not exist"),
+        ([str(tmp_path / "robot.yaml")], "neither .toml nor .urdf"),
+        ([str(bad_urdf)], "joint[@name='j']/@type"),
         (["examples/robots/1dof.toml", "--slope", "95"], "--slope"),
         (["examples/robots/1dof.toml", "--budget", "3"], "--budget"),
         (["examples/robots/1dof.toml", "--r-min", "5", "--r-max", "1"], "--r-min"),

@@ -183,3 +183,76 @@ def test_face_identities_name_a_face_across_joint_states():
     # a query reports the identities of its starting and resting faces
     res = F(np.radians([[30.0, -60.0]]), np.zeros((1, 1)))
     assert res.start_id[0] == bottom(a) and res.rest_id[0] == bottom(a) and res.stable[0]
+
+
+def test_urdf_one_dof_robot_equals_the_toml_one():
+    """examples/robots/1dof.urdf is 1dof.toml in URDF: same vertices, centre of mass, ranges and stability answers."""
+    toml, urdf = load_robot("examples/robots/1dof.toml"), load_robot("examples/robots/1dof.urdf")
+    assert (urdf.name, urdf.dof, urdf.mass, urdf.planar) == (toml.name, toml.dof, toml.mass, toml.planar)
+    assert np.array_equal(urdf.joint_bounds, toml.joint_bounds) and np.array_equal(urdf.home, toml.home)
+    theta = np.radians([[-180.0], [-97.5], [0.0], [33.0], [150.0]])
+    for th in theta:
+        (va, ca), (vb, cb) = toml.geometry(th), urdf.geometry(th)
+        assert np.array_equal(va, vb) and np.array_equal(ca, cb)
+    phi = np.radians([[180.0], [10.0], [0.0], [-90.0], [120.0]])
+    a, b = StabilityFunction(toml, 20.0)(theta, phi), StabilityFunction(urdf, 20.0)(theta, phi)
+    for key in ("start", "stable", "rest", "energy", "tips", "start_id", "rest_id"):
+        assert np.array_equal(getattr(a, key), getattr(b, key), equal_nan=key != "stable"), key
+
+
+_URDF = open("examples/robots/1dof.urdf").read()
+
+
+@pytest.mark.parametrize("old, new, where", [
+    ('type="revolute"', 'type="prismatic"', "joint[@name='shoulder']/@type"),
+    ('<origin xyz="-0.22 0 0.10" rpy="0 0 0"/>', '<origin xyz="-0.22 0 0.10" rpy="0 0.5 0"/>',
+     "joint[@name='shoulder']/origin/@rpy"),
+    ('<origin xyz="0.275 0 0" rpy="0 0 0"/>', '<origin xyz="0.275 0 0" rpy="0.1 0 0"/>',
+     "link[@name='arm']/collision[1]/origin/@rpy"),
+    ('<mass value="10.0"/>', '', "link[@name='body']/inertial/mass/@value"),
+    ('<parent link="body"/>', '<parent link="bodyy"/>', "joint[@name='shoulder']/parent/@link"),
+    ('<box size="0.60 0.40 0.20"/>', '<box size="0.60 -0.40 0.20"/>', "link[@name='body']/collision[1]/geometry/box/@size"),
+    ('<box size="0.55 0.06 0.04"/>', '<cylinder radius="0.03" length="0.55"/>', "link[@name='arm']/collision[1]/geometry/cylinder"),
+    ('<mass value="0.0"/>', '<mass value="-1"/>', "link[@name='arm']/inertial/mass/@value"),
+    ('lower="-3.141592653589793" ', '', "joint[@name='shoulder']/limit"),
+    ('<axis xyz="0 1 0"/>', '<axis xyz="0 0 0"/>', "joint[@name='shoulder']/axis/@xyz"),
+    ('</robot>', '<joint name="j2" type="revolute"><parent link="arm"/><child link="arm"/></joint></robot>',
+     "joint[@name='j2']/limit"),
+    ('<robot name="1dof">', '<robot name="1dof"', "not valid XML"),
+])
+def test_urdf_errors_name_the_element_and_attribute(tmp_path, old, new, where):
+    assert old in _URDF
+    bad = tmp_path / "bad.urdf"
+    bad.write_text(_URDF.replace(old, new))
+    with pytest.raises(RobotFileError) as err:
+        load_robot(bad)
+    assert where in str(err.value) and "\n" not in str(err.value)
+
+
+def test_robot_files_are_read_by_suffix(tmp_path):
+    (tmp_path / "robot.yaml").write_text("name: x\n")
+    with pytest.raises(RobotFileError, match="neither .toml nor .urdf"):
+        load_robot(tmp_path / "robot.yaml")
+    with pytest.raises(RobotFileError, match="does not exist"):
+        load_robot(tmp_path / "missing.urdf")
+
+
+def test_urdf_fixed_and_continuous_joints_and_an_offset_stl_mesh(tmp_path):
+    """A fixed joint is a joint locked at 0 (no coordinate); a continuous one turns fully; a mesh sits at its collision origin."""
+    (tmp_path / "tet.stl").write_text("solid t\nfacet normal 0 0 0\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 0 1\n"
+                                      "endloop\nendfacet\nendsolid t\n")
+    (tmp_path / "r.urdf").write_text("""<robot name="r">
+      <link name="base"><inertial><mass value="2"/></inertial>
+        <collision><geometry><box size="1 1 1"/></geometry></collision></link>
+      <link name="plate"><collision><origin xyz="0 0 0.5"/><geometry><box size="1 1 0.1"/></geometry></collision></link>
+      <link name="wheel"><inertial><mass value="1"/><origin xyz="0.1 0 0" rpy="0 1 0"/></inertial>
+        <collision><origin xyz="0 0 2"/><geometry><mesh filename="tet.stl" scale="0.5 0.5 0.5"/></geometry></collision></link>
+      <joint name="bolt" type="fixed"><parent link="base"/><child link="plate"/><origin xyz="0 0 1"/></joint>
+      <joint name="spin" type="continuous"><parent link="plate"/><child link="wheel"/><axis xyz="0 1 0"/></joint>
+    </robot>""")
+    robot = load_robot(tmp_path / "r.urdf")
+    assert robot.dof == 1 and [j.name for j in robot.joints] == ["spin"] and robot.locked == {"bolt": 0.0}
+    assert robot.planar and np.allclose(np.degrees(robot.joint_bounds), [[-180, 180]])
+    verts, com = robot.geometry(np.zeros(1))
+    assert np.allclose(verts[-3:], [[0, 0, 3], [0, 0, 3.5], [0.5, 0, 3]])  # joint at z 1, mesh origin z 2, scale 0.5
+    assert np.allclose(com, [0.1 / 3, 0, 1 / 3])  # wheel com at (0.1, 0, 1); the plate has no <inertial>: massless

@@ -1,6 +1,6 @@
 """Ground robots for self-righting studies (chapter 5): rigid-link models and their stability function.
 
-``load_robot(path)`` reads a robot TOML file; ``StabilityFunction(robot, slope_deg)`` is
+``load_robot(path)`` reads a robot TOML file (or a URDF subset, ``.urdf``); ``StabilityFunction(robot, slope_deg)`` is
 Algorithm 5: hull faces as body angles, snapping a queried body angle to the nearest face,
 quasi-static tipping until a stable face is reached, and the potential energy lost.
 """

@@ -28,6 +28,8 @@ Robots are read from a small TOML file (see ``examples/robots/*.toml``)::
 
 A link's mass is spread over its boxes by volume (a mesh link takes ``com``, default the
 mean of its vertices).  A bad file raises :class:`RobotFileError` naming the field.
+``load_robot`` also reads a URDF subset (``.urdf``, :mod:`sim.robots.urdf`) into the same
+model, through the same validation (:func:`parse_parts`).
 """
 
 from __future__ import annotations
@@ -37,7 +39,7 @@ import struct
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Callable
 
 import numpy as np
 
@@ -117,7 +119,7 @@ class Robot:
         self.slope = 0.0
         self.links = {link.name: link for link in links}
         if len(self.links) != len(links):
-            raise RobotFileError("link: two links share a name; give each [[link]] a unique name")
+            raise RobotFileError("link.name: two links share a name; give each link a unique name")
         children = {j.child for j in joints}
         roots = [link.name for link in links if link.name not in children]
         if len(roots) != 1:
@@ -224,64 +226,93 @@ def _number(value: Any, where: str, minimum: float | None = None) -> float:
     return float(value)
 
 
-def _link(spec: Any, i: int, folder: Path) -> Link:
-    where = f"link[{i}]"
+def _link(spec: Any, at: Callable[[str], str], folder: Path) -> Link:
+    """A link from a TOML-shaped table; ``at(field)`` names a field in error messages (TOML or URDF spelling)."""
     if not isinstance(spec, dict):
-        raise RobotFileError(f"{where}: expected a table with name, mass and boxes")
+        raise RobotFileError(f"{at('')}: expected a table with name, mass and boxes")
     unknown = set(spec) - {"name", "mass", "boxes", "mesh", "mesh_scale", "com"}
     if unknown:
-        raise RobotFileError(f"{where}.{sorted(unknown)[0]}: unknown field; allowed: name, mass, boxes, mesh, mesh_scale, com")
+        raise RobotFileError(f"{at(sorted(unknown)[0])}: unknown field; allowed: name, mass, boxes, mesh, mesh_scale, com")
     name = spec.get("name")
     if not isinstance(name, str) or not name:
-        raise RobotFileError(f"{where}.name: expected a non-empty string, got {name!r}")
-    mass = _number(spec.get("mass"), f"{where}.mass", 0.0)
+        raise RobotFileError(f"{at('name')}: expected a non-empty string, got {name!r}")
+    mass = _number(spec.get("mass"), at("mass"), 0.0)
     boxes = []
     raw = spec.get("boxes", [])
     if not isinstance(raw, list):
-        raise RobotFileError(f"{where}.boxes: expected a list of {{size, center}} tables")
+        raise RobotFileError(f"{at('boxes')}: expected a list of {{size, center}} tables")
     for b, box in enumerate(raw):
         if not isinstance(box, dict) or "size" not in box:
-            raise RobotFileError(f"{where}.boxes[{b}]: expected a table with size = [x, y, z] (metres)")
-        boxes.append(Box(_vec(box["size"], f"{where}.boxes[{b}].size", positive=True),
-                         _vec(box.get("center", [0, 0, 0]), f"{where}.boxes[{b}].center")))
+            raise RobotFileError(f"{at(f'boxes[{b}]')}: expected a table with size = [x, y, z] (metres)")
+        boxes.append(Box(_vec(box["size"], at(f"boxes[{b}].size"), positive=True),
+                         _vec(box.get("center", [0, 0, 0]), at(f"boxes[{b}].center"))))
     mesh = None
     if "mesh" in spec:
         path = folder / str(spec["mesh"])
         if not path.is_file():
-            raise RobotFileError(f"{where}.mesh: {path} does not exist; give an STL path relative to the robot file")
-        mesh = read_stl(path) * _number(spec.get("mesh_scale", 1.0), f"{where}.mesh_scale", 0.0)
+            raise RobotFileError(f"{at('mesh')}: {path} does not exist; give an STL path relative to the robot file")
+        mesh = read_stl(path) * _number(spec.get("mesh_scale", 1.0), at("mesh_scale"), 0.0)
     if not boxes and mesh is None:
-        raise RobotFileError(f"{where}.boxes: link {name!r} has no geometry; give boxes or a mesh")
-    com = None if "com" not in spec else np.asarray(_vec(spec["com"], f"{where}.com"))
+        raise RobotFileError(f"{at('boxes')}: link {name!r} has no geometry; give boxes or a mesh")
+    com = None if "com" not in spec else np.asarray(_vec(spec["com"], at("com")))
     return Link(name, mass, boxes, mesh, com)
 
 
-def _joint(spec: Any, i: int) -> Joint:
-    where = f"joint[{i}]"
+def _joint(spec: Any, at: Callable[[str], str]) -> Joint:
+    """A joint from a TOML-shaped table (range and home in degrees); ``at`` as for :func:`_link`."""
     if not isinstance(spec, dict):
-        raise RobotFileError(f"{where}: expected a table with name, parent, child, origin, axis, range")
+        raise RobotFileError(f"{at('')}: expected a table with name, parent, child, origin, axis, range")
     unknown = set(spec) - {"name", "parent", "child", "origin", "axis", "range", "home"}
     if unknown:
-        raise RobotFileError(f"{where}.{sorted(unknown)[0]}: unknown field; allowed: name, parent, child, origin, axis, range, home")
+        raise RobotFileError(f"{at(sorted(unknown)[0])}: unknown field; allowed: name, parent, child, origin, axis, range, home")
     for key in ("name", "parent", "child"):
         if not isinstance(spec.get(key), str) or not spec[key]:
-            raise RobotFileError(f"{where}.{key}: expected a link name (string), got {spec.get(key)!r}")
-    axis = np.asarray(_vec(spec.get("axis"), f"{where}.axis"))
+            raise RobotFileError(f"{at(key)}: expected a link name (string), got {spec.get(key)!r}")
+    axis = np.asarray(_vec(spec.get("axis"), at("axis")))
     if np.linalg.norm(axis) < 1e-12:
-        raise RobotFileError(f"{where}.axis: expected a non-zero vector, got {spec.get('axis')!r}")
-    lo, hi = _vec(spec.get("range", [-180, 180]), f"{where}.range", 2)
+        raise RobotFileError(f"{at('axis')}: expected a non-zero vector, got {spec.get('axis')!r}")
+    lo, hi = _vec(spec.get("range", [-180, 180]), at("range"), 2)
     if not (-360 <= lo < hi <= 360):
-        raise RobotFileError(f"{where}.range: expected [lower, upper] degrees with lower < upper within ±360, got {spec.get('range')!r}")
-    home = _number(spec.get("home", 0.0), f"{where}.home")
+        raise RobotFileError(f"{at('range')}: expected [lower, upper] degrees with lower < upper within ±360, got {spec.get('range')!r}")
+    home = _number(spec.get("home", 0.0), at("home"))
     if not lo <= home <= hi:
-        raise RobotFileError(f"{where}.home: {home:g} lies outside range [{lo:g}, {hi:g}]")
-    return Joint(spec["name"], spec["parent"], spec["child"], _vec(spec.get("origin", [0, 0, 0]), f"{where}.origin"),
+        raise RobotFileError(f"{at('home')}: {home:g} lies outside range [{lo:g}, {hi:g}]")
+    return Joint(spec["name"], spec["parent"], spec["child"], _vec(spec.get("origin", [0, 0, 0]), at("origin")),
                  tuple(axis / np.linalg.norm(axis)), np.radians(lo), np.radians(hi), np.radians(home))
 
 
+def _toml_at(table: str, i: int) -> Callable[[str], str]:
+    """TOML spelling of a field in error messages: ``link[0].boxes[1].size``."""
+    return lambda key: f"{table}[{i}]" + (f".{key}" if key else "")
+
+
+def parse_parts(link_specs: list, joint_specs: list, folder: Path, link_at: Callable[[int], Callable[[str], str]],
+                joint_at: Callable[[int], Callable[[str], str]]) -> tuple[list[Link], list[Joint]]:
+    """Links and joints from TOML-shaped tables, validated, every joint's parent and child a known link.
+
+    Shared by the TOML and URDF readers (:mod:`sim.robots.urdf`); ``link_at(i)`` and
+    ``joint_at(i)`` give the field naming of the i-th table in error messages.
+    """
+    links = [_link(s, link_at(i), folder) for i, s in enumerate(link_specs)]
+    joints = [_joint(s, joint_at(i)) for i, s in enumerate(joint_specs)]
+    names = {link.name for link in links}
+    for i, j in enumerate(joints):
+        for key in ("parent", "child"):
+            if getattr(j, key) not in names:
+                raise RobotFileError(f"{joint_at(i)(key)}: no link named {getattr(j, key)!r}; links: {', '.join(sorted(names))}")
+    return links, joints
+
+
 def load_robot(path: str | Path) -> Robot:
-    """Read a robot TOML file; :class:`RobotFileError` names the offending field."""
+    """Read a robot file, TOML or (by its ``.urdf`` suffix) URDF; :class:`RobotFileError` names the offending field."""
     path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix == ".urdf":
+        from sim.robots.urdf import load_urdf
+
+        return load_urdf(path)
+    if suffix != ".toml":
+        raise RobotFileError(f"ROBOT_FILE: {path} is neither .toml nor .urdf; give a robot TOML or URDF file")
     try:
         data = tomllib.loads(path.read_text())
     except FileNotFoundError:
@@ -298,13 +329,8 @@ def load_robot(path: str | Path) -> Robot:
     joints = data.get("joint", [])
     if not isinstance(joints, list):
         raise RobotFileError("joint: expected [[joint]] tables")
-    parsed_links = [_link(s, i, path.parent) for i, s in enumerate(links)]
-    parsed_joints = [_joint(s, i) for i, s in enumerate(joints)]
-    names = {link.name for link in parsed_links}
-    for i, j in enumerate(parsed_joints):
-        for key in ("parent", "child"):
-            if getattr(j, key) not in names:
-                raise RobotFileError(f"joint[{i}].{key}: no link named {getattr(j, key)!r}; links: {', '.join(sorted(names))}")
+    parsed_links, parsed_joints = parse_parts(links, joints, path.parent, lambda i: _toml_at("link", i),
+                                              lambda i: _toml_at("joint", i))
     robot = Robot(str(data.get("name", path.stem)), parsed_links, parsed_joints)
     robot.description = str(data.get("description", ""))
     robot.slope = _number(data.get("slope", 0.0), "slope", 0.0)  # degrees, the default ground slope
