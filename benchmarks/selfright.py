@@ -103,7 +103,7 @@ def prm_components(study, result, step_deg: float = 1.0, max_edges: int | None =
     if max_edges is not None and total > max_edges:
         pairs = pairs[np.sort(np.random.default_rng(seed).choice(total, max_edges, replace=False))]
     # angles of the stable known states, from their unit-cube coordinates
-    known = np.concatenate([study.X, study.rest[np.isfinite(study.rest).all(axis=1)], study.extra_states()])[stable_pts]
+    known = np.concatenate([study.X, study.rest[np.isfinite(study.rest).all(axis=1)], result["extra_states"]])[stable_pts]
     ang = study.bounds[:, 0] + known * np.ptp(study.bounds, axis=1)
     F = StabilityFunction(study.robot, study.slope)
     m = study.n_free

@@ -77,19 +77,16 @@ class SelfRightStudy:
             return K[first]
         return K[first], (np.concatenate(self.face_ids)[first] if self.face_ids is not None else None)
 
-    def extra_states(self, with_ids: bool = False):
-        """Known states that were not themselves evaluated (Algorithm 8 labels them by nearest neighbour)."""
-        K, ids = self.known_states(with_ids=True) if self.face_ids is not None else (self.known_states(), None)
+    def extra_states(self, with_ids: bool = False, known: tuple | None = None):
+        """Known states that were not themselves evaluated (Algorithm 8 labels them by nearest neighbour).
+
+        ``known``: :meth:`known_states` ``(with_ids=True)`` when the caller already has it.
+        """
+        K, ids = self.known_states(with_ids=True) if known is None else known
         new = ~np.isin(_row_keys(K), _row_keys(self.X))
         if not with_ids:
             return K[new]
         return K[new], (ids[new] if ids is not None else None)
-
-    def graph_ids(self) -> tuple | None:
-        """Face identities of ``(X, rest, extra states)`` for :func:`rapt.transitions.transition_graph`."""
-        if self.ids is None:
-            return None
-        return self.ids, self.rest_ids, self.extra_states(with_ids=True)[1]
 
 
 def _row_keys(A: np.ndarray) -> np.ndarray:
@@ -306,7 +303,7 @@ def _probes(probes) -> Probes:
     return Probes(U, None, np.ones(len(U), dtype=bool))
 
 
-def default_max_edge(study: SelfRightStudy) -> float:
+def default_max_edge(study: SelfRightStudy, known: np.ndarray | None = None) -> float:
     """Gabriel ``d_max`` (embedded distance).
 
     A grid: 2.5 steps (faces tilt with the joints, so neighbours on one face can be more
@@ -315,12 +312,13 @@ def default_max_edge(study: SelfRightStudy) -> float:
     interior), two for 3-D hulls (body angles alone must keep faces apart), widened
     to twice the median distance from a known state to its (2m + 2)-th nearest (m joints)
     when the data are sparser than that, but at most four interior resolutions.
+    ``known``: the study's :meth:`~SelfRightStudy.known_states` when the caller already has them.
     """
     if study.resolution is not None:
         return 2.5 * study.resolution
     r_max = np.radians(study.extra.get("r_max_deg", 10.0))
     base = 3.0 if study.X.shape[1] - study.n_free == 1 else 2.0
-    E = study.embed(study.known_states())
+    E = study.embed(study.known_states() if known is None else known)
     k = min(len(E) - 1, 2 * study.n_free + 2)
     if k < 1:
         return base * r_max
@@ -340,13 +338,14 @@ def analyse(study: SelfRightStudy, *, max_edge: float | None = None, probes=None
     """
     if use_ids is None:
         use_ids = study.X.shape[1] - study.n_free == 1
-    max_edge = default_max_edge(study) if max_edge is None else max_edge
+    known = study.known_states(with_ids=True)  # X^Z, once for d_max, the extra states and their identities
+    max_edge = default_max_edge(study, known[0]) if max_edge is None else max_edge
     t0 = time.perf_counter()
-    known = study.known_states()
-    ids = study.graph_ids() if use_ids else None
+    extra, extra_ids = study.extra_states(with_ids=True, known=known)
+    ids = (study.ids, study.rest_ids, extra_ids) if use_ids and study.ids is not None else None
     connections = grid_connections(study) if use_ids and "grid_shape" in study.extra else None
     graph = transition_graph(study.embed(study.X), study.stable, study.embed(study.rest), study.energy,
-                             study.embed(study.extra_states()), max_edge=max_edge, ids=ids,
+                             study.embed(extra), max_edge=max_edge, ids=ids,
                              free_dims=2 * study.n_free, connections=connections)
     seconds = time.perf_counter() - t0
     home_U, home_id = home_state(study, with_id=True)
@@ -358,12 +357,23 @@ def analyse(study: SelfRightStudy, *, max_edge: float | None = None, probes=None
     e = graph.edges
     return {
         "graph": graph, "home": home, "cost_to_home": cost, "graph_seconds": seconds, "max_edge": max_edge,
-        "queries": study.queries, "states": len(known), "nodes": graph.n_nodes, "edges": graph.n_edges,
+        "extra_states": extra,  # unit cube, in the graph's order (after the evaluated and resting states)
+        "probes": probes, "probe_rightable": ok,  # compare_graphs reuses these for the same probes
+        "queries": study.queries, "states": len(known[0]), "nodes": graph.n_nodes, "edges": graph.n_edges,
         "rightable": float(ok.mean()) if len(probes) else float("nan"),
         "energy_to_home": float(energy[ok].mean()) if ok.any() else float("nan"),
         "pair_length_deg": float(np.degrees(e["length"]).mean()) if graph.n_edges else float("nan"),
         "transition_energy": float(e["energy"].mean()) if graph.n_edges else float("nan"),
     }
+
+
+def _rightable(result: dict, study: SelfRightStudy, probes: Probes) -> np.ndarray:
+    """Which probe states can reach the home node: :func:`analyse`'s own answer when it scored these probes."""
+    if result.get("probes") is probes:
+        return result["probe_rightable"]
+    if result["home"] < 0:
+        return np.zeros(len(probes), dtype=bool)
+    return result["graph"].outcome(study.embed(probes.U), result["home"], ids=probes.ids)[0]
 
 
 def compare_graphs(a: dict, study_a: SelfRightStudy, b: dict, study_b: SelfRightStudy, probes,
@@ -414,10 +424,7 @@ def compare_graphs(a: dict, study_a: SelfRightStudy, b: dict, study_b: SelfRight
     both = sorted(set(ea) & set(eb))
     pair = np.array([[ea[k][1], eb[k][1]] for k in both]).reshape(-1, 2)
     energy = np.array([[ea[k][0], eb[k][0]] for k in both]).reshape(-1, 2)
-    ra, _ = (ga.outcome(study_a.embed(probes.U), a["home"], ids=probes.ids) if a["home"] >= 0
-             else (np.zeros(len(probes), bool), None))
-    rb, _ = (gb.outcome(study_b.embed(probes.U), b["home"], ids=probes.ids) if b["home"] >= 0
-             else (np.zeros(len(probes), bool), None))
+    ra, rb = (_rightable(r, study, probes) for r, study in ((a, study_a), (b, study_b)))
     mean = lambda v: float(v.mean()) if v.size else float("nan")  # noqa: E731
     return {"nodes": (len(big_a), len(big_b)), "nodes_matched": nodes_matched, "edges": (len(ea), len(eb)),
             "edges_matched": len(both), "same": nodes_matched == len(big_a) == len(big_b) and set(ea) == set(eb),
@@ -439,7 +446,7 @@ def graph_document(study: SelfRightStudy, result: dict) -> dict:
     g: TransitionGraph = result["graph"]
     home = result["home"]
     cost = result["cost_to_home"]
-    P = np.concatenate([study.X, study.rest[np.isfinite(study.rest).all(axis=1)], study.extra_states()])
+    P = np.concatenate([study.X, study.rest[np.isfinite(study.rest).all(axis=1)], result["extra_states"]])
     nodes = []
     for n in range(g.n_nodes):
         members = np.flatnonzero(g.labels == n)
