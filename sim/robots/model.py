@@ -183,6 +183,16 @@ class Robot:
         new.joints = [j for j in self.all_joints if j.name not in new.locked]
         return new
 
+    def joint_angles(self, theta: np.ndarray) -> np.ndarray:
+        """Angles (..., len(all_joints)) of every joint in :attr:`all_joints` order: the active ones
+        from joint states ``theta`` (..., dof), the locked ones at their held values."""
+        theta = np.asarray(theta, dtype=float)
+        out = np.empty(theta.shape[:-1] + (len(self.all_joints),))
+        active = iter(range(self.dof))
+        for k, j in enumerate(self.all_joints):
+            out[..., k] = self.locked[j.name] if j.name in self.locked else theta[..., next(active)]
+        return out
+
     def geometry(self, theta: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Vertices (k, 3) and centre of mass (3,) in the base frame for joint state ``theta``."""
         theta = np.asarray(theta, dtype=float).reshape(-1)
@@ -190,9 +200,7 @@ class Robot:
             raise ValueError(f"theta: expected {self.dof} joint angles, got {theta.size}")
         R = {self.base: np.eye(3)}
         t = {self.base: np.zeros(3)}
-        active = iter(theta)
-        for j in self.all_joints:
-            angle = self.locked[j.name] if j.name in self.locked else next(active)
+        for j, angle in zip(self.all_joints, self.joint_angles(theta)):
             Rp, tp = R[j.parent], t[j.parent]
             R[j.child] = Rp @ _rotation(np.asarray(j.axis), angle)
             t[j.child] = tp + Rp @ np.asarray(j.origin)

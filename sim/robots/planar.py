@@ -31,9 +31,7 @@ def _kinematics(F, theta: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.
     n = len(theta)
     ang = {robot.base: np.zeros(n)}
     pos = {robot.base: np.zeros((n, 2))}
-    active = iter(range(robot.dof))
-    for j in robot.all_joints:
-        a = np.full(n, robot.locked[j.name]) if j.name in robot.locked else theta[:, next(active)]
+    for j, a in zip(robot.all_joints, robot.joint_angles(theta).T):
         sign = 1.0 if j.axis[1] > 0 else -1.0
         pa, pp = ang[j.parent], pos[j.parent]
         c, s = np.cos(pa), np.sin(pa)
