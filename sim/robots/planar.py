@@ -10,8 +10,8 @@ all three in bulk, so here they are array operations over a chunk of joint state
   no vertex lies to its right and every vertex on its line lies between ``a`` and ``b``
   (so, as with Qhull, collinear middle points are not vertices); the edges are walked
   into a ring;
-* settling: the same quasi-static tipping table as :meth:`StabilityFunction.settle_all`,
-  followed for every face in step.
+* settling: the quasi-static tipping table :meth:`StabilityFunction.settle_all` uses
+  (:func:`sim.robots.stability.planar_tip_table`), followed for every face in step.
 
 The results equal the per-state path's (checked in the tests) up to the order of faces.
 """
@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from sim.robots.stability import GRAVITY, _TOL
+from sim.robots.stability import planar_face_ids, planar_tip_table
 
 __all__ = ["planar_all_faces"]
 
@@ -87,9 +87,6 @@ def planar_all_faces(F, theta: np.ndarray, chunk: int = 2000) -> dict:
     away), ``stable``, ``energy``, ``tips``, ``start_id``, ``rest_id``, ``count`` (faces per joint state).
     """
     uniq = np.unique(F._vertex_id)
-    gx, gz = F.gravity[0], F.gravity[2]
-    up = -F.gravity[[0, 2]]
-    mg = F.robot.mass * GRAVITY
     out = {k: [] for k in ("row", "start", "rest", "stable", "energy", "tips", "start_id", "rest_id", "count")}
     for s0 in range(0, len(theta), chunk):
         th = theta[s0:s0 + chunk]
@@ -107,28 +104,8 @@ def planar_all_faces(F, theta: np.ndarray, chunk: int = 2000) -> dict:
         d = B - A
         nx, nz = d[..., 1], -d[..., 0]  # outward normal (x, z) of a counter-clockwise edge
         p = np.arctan2(nx, -nz)
-        c, s = np.cos(p), np.sin(p)
-
-        def rot(v, cc, ss):
-            return np.stack([cc * v[..., 0] + ss * v[..., 1], -ss * v[..., 0] + cc * v[..., 1]], axis=-1)
-
-        qa, qb, qc = rot(A, c, s), rot(B, c, s), rot(np.broadcast_to(com[:, None, :], A.shape), c, s)
-        xs = qc[..., 0] + (qa[..., 1] - qc[..., 1]) / gz * gx
-        lo, hi = np.minimum(qa[..., 0], qb[..., 0]), np.maximum(qa[..., 0], qb[..., 0])
-        hull_max = np.where(valid[..., None], np.abs(A), 0.0).max(axis=(1, 2))
-        tol = (_TOL * np.maximum(1.0, hull_max))[:, None]
-        over_hi, under_lo = xs > hi + tol, xs < lo - tol
-        b_is_hi = qb[..., 0] >= qa[..., 0]
-        pivot_b = np.where(over_hi, b_is_hi, ~b_is_hi)
-        nxt = np.where((over_hi | under_lo) & valid, np.where(pivot_b, (f + 1) % kk, (f - 1) % kk), -1)
-        pivot = np.where(pivot_b[..., None], B, A)
-        j = np.maximum(nxt, 0)
-        rel = com[:, None, :] - pivot
-        h0 = rot(rel, c, s) @ up
-        cj, sj = np.take_along_axis(c, j, axis=1), np.take_along_axis(s, j, axis=1)
-        h1 = rot(rel, cj, sj) @ up
-        step = np.where(nxt >= 0, mg * (h0 - h1), 0.0)
-        g = np.broadcast_to(f, (n, K)).copy()
+        nxt, step = planar_tip_table(A, B, p, com, k, F.gravity, F.robot.mass)
+        g = np.broadcast_to(f, (n, K)).copy()  # follow the table for every face in step
         energy = np.zeros((n, K))
         tips = np.zeros((n, K), dtype=int)
         for _ in range(K + 2):
@@ -140,8 +117,7 @@ def planar_all_faces(F, theta: np.ndarray, chunk: int = 2000) -> dict:
             g = np.where(go, ng, g)
             tips += go
         rolls = np.take_along_axis(nxt, g, axis=1) >= 0
-        vid = uniq
-        fid = (vid[ia] + 1) * 1_000_003 + vid[ib] + 1  # the same identity as StabilityFunction._face_ids
+        fid = planar_face_ids(uniq[ia], uniq[ib])
         rest_p = np.where(rolls, np.nan, np.take_along_axis(p, g, axis=1))
         rest_id = np.where(rolls, -1, np.take_along_axis(fid, g, axis=1))
         m = valid

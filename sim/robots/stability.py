@@ -40,6 +40,57 @@ __all__ = ["GRAVITY", "Hull", "StabilityResult", "StabilityFunction", "body_angl
 
 GRAVITY = 9.81
 _TOL = 1e-9
+_HASH_BASE, _HASH_MOD = 1_000_003, 2 ** 61 - 1  # face identities: a polynomial hash of the spanning vertices
+
+
+def planar_face_ids(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Identity of the planar face from canonical vertex ``a`` to ``b`` (an ordered pair: its direction matters).
+
+    The same hash as :meth:`StabilityFunction._face_ids` gives the vertex sequence ``(a, b)``.
+    """
+    return ((np.asarray(a, dtype=np.int64) + 1) * _HASH_BASE + np.asarray(b, dtype=np.int64) + 1) % _HASH_MOD
+
+
+def _rot_xz(v: np.ndarray, c: np.ndarray, s: np.ndarray) -> np.ndarray:
+    """Ground-frame (x, z) of base-frame (x, z) points ``v`` (..., 2) under Ry(p), ``c = cos p``, ``s = sin p``."""
+    return np.stack([c * v[..., 0] + s * v[..., 1], -s * v[..., 0] + c * v[..., 1]], axis=-1)
+
+
+def planar_tip_table(A: np.ndarray, B: np.ndarray, p: np.ndarray, com: np.ndarray, k: np.ndarray,
+                     gravity: np.ndarray, mass: float) -> tuple[np.ndarray, np.ndarray]:
+    """Quasi-static tipping table of n planar hulls: the face each face tips onto and the energy lost, each (n, K).
+
+    Face ``f < k[i]`` of hull ``i`` runs counter-clockwise from ``A[i, f]`` to ``B[i, f]`` (x-z,
+    base frame, the next face's start) at body angle ``p[i, f]``; ``com`` (n, 2) is each hull's
+    centre of mass; entries ``f >= k[i]`` are padding.  ``next`` is -1 where the face is stable;
+    otherwise the robot pivots on the end the centre of mass has crossed onto the neighbouring
+    face.  A planar tip depends only on the face it starts from, so following the table from a
+    face is the whole quasi-static settling (:meth:`StabilityFunction.settle_all` for one hull,
+    :func:`sim.robots.planar.planar_all_faces` for many).
+    """
+    n, K = p.shape
+    f = np.arange(K)[None, :]
+    valid = f < k[:, None]
+    kk = np.maximum(k, 1)[:, None]
+    c, s = np.cos(p), np.sin(p)
+    qa, qb, qc = _rot_xz(A, c, s), _rot_xz(B, c, s), _rot_xz(com[:, None, :], c, s)
+    gx, gz = gravity[0], gravity[2]
+    xs = qc[..., 0] + (qa[..., 1] - qc[..., 1]) / gz * gx  # where the centre of mass meets the ground along gravity
+    lo, hi = np.minimum(qa[..., 0], qb[..., 0]), np.maximum(qa[..., 0], qb[..., 0])
+    hull_max = np.where(valid[..., None], np.abs(A), 0.0).max(axis=(1, 2))
+    tol = (_TOL * np.maximum(1.0, hull_max))[:, None]
+    over_hi, under_lo = xs > hi + tol, xs < lo - tol
+    b_is_hi = qb[..., 0] >= qa[..., 0]
+    pivot_b = np.where(over_hi, b_is_hi, ~b_is_hi)  # pivot on vertex b (the next face) or a (the previous)
+    nxt = np.where((over_hi | under_lo) & valid, np.where(pivot_b, (f + 1) % kk, (f - 1) % kk), -1)
+    pivot = np.where(pivot_b[..., None], B, A)
+    j = np.maximum(nxt, 0)
+    rows = np.arange(n)[:, None]
+    rel = com[:, None, :] - pivot
+    up = -gravity[[0, 2]]
+    h0 = _rot_xz(rel, c, s) @ up
+    h1 = _rot_xz(rel, c[rows, j], s[rows, j]) @ up
+    return nxt, np.where(nxt >= 0, mass * GRAVITY * (h0 - h1), 0.0)
 
 
 def body_angles(normals: np.ndarray, planar: bool) -> np.ndarray:
@@ -156,13 +207,17 @@ class StabilityFunction:
         _, first, inv = np.unique(key, axis=0, return_index=True, return_inverse=True)
         return first[inv.reshape(-1)]
 
-    def _face_ids(self, vertex_sets) -> np.ndarray:
-        """Integer identity of each face from the (canonical) robot vertices spanning it."""
+    @staticmethod
+    def _face_ids(vertex_sets) -> np.ndarray:
+        """Integer identity of each 3-D face from the set of (canonical) robot vertices spanning it.
+
+        Planar faces are ordered pairs: :func:`planar_face_ids`, the same hash of the pair.
+        """
         out = np.empty(len(vertex_sets), dtype=np.int64)
         for i, vs in enumerate(vertex_sets):
             h = 0
-            for v in (vs if self.planar else sorted(set(vs))):  # planar: ordered pair (its direction matters)
-                h = (h * 1_000_003 + int(v) + 1) % (2 ** 61 - 1)
+            for v in sorted(set(vs)):
+                h = (h * _HASH_BASE + int(v) + 1) % _HASH_MOD
             out[i] = h
         return out
 
@@ -186,7 +241,7 @@ class StabilityFunction:
         k = len(ring)
         faces = [np.array([i, (i + 1) % k]) for i in range(k)]
         vid = self._vertex_id[ring]
-        ids = self._face_ids([(vid[i], vid[(i + 1) % k]) for i in range(k)])
+        ids = planar_face_ids(vid, np.concatenate([vid[1:], vid[:1]]))  # each face runs from vertex i to i + 1
         return Hull(np.asarray(theta, float), pts, np.array([com[0], 0.0, com[2]]), normals, offsets, faces,
                     body_angles(normals, True), ids=ids)
 
@@ -293,34 +348,13 @@ class StabilityFunction:
             return (np.array([o[0] for o in out]), np.array([o[1] for o in out], dtype=float),
                     np.array([o[2] for o in out]))
         P = hull.points[:, [0, 2]]
-        A, B = P, np.roll(P, -1, axis=0)
-        p = hull.angles[:, 0]
-        c, s = np.cos(p), np.sin(p)
-
-        def rot(v, cc, ss):  # ground-frame (x, z) of base-frame (x, z) points under Ry(p)
-            return np.stack([cc * v[..., 0] + ss * v[..., 1], -ss * v[..., 0] + cc * v[..., 1]], axis=-1)
-
-        com = hull.com[[0, 2]]
-        qa, qb, qc = rot(A, c, s), rot(B, c, s), rot(np.broadcast_to(com, A.shape), c, s)
-        gx, gz = self.gravity[0], self.gravity[2]
-        xs = qc[:, 0] + (qa[:, 1] - qc[:, 1]) / gz * gx
-        lo, hi = np.minimum(qa[:, 0], qb[:, 0]), np.maximum(qa[:, 0], qb[:, 0])
-        tol = _TOL * max(1.0, np.abs(P).max())
-        over_hi, under_lo = xs > hi + tol, xs < lo - tol
-        b_is_hi = qb[:, 0] >= qa[:, 0]
-        pivot_b = np.where(over_hi, b_is_hi, ~b_is_hi)  # pivot on vertex b (the next face) or a (the previous)
-        nxt = np.where(over_hi | under_lo, np.where(pivot_b, (np.arange(k) + 1) % k, (np.arange(k) - 1) % k), -1)
-        pivot = np.where(pivot_b[:, None], B, A)
-        up = -self.gravity[[0, 2]]
-        j = np.maximum(nxt, 0)
-        rel = com - pivot
-        h0 = rot(rel, c, s) @ up
-        h1 = rot(rel, c[j], s[j]) @ up
-        step = np.where(nxt >= 0, self.robot.mass * GRAVITY * (h0 - h1), 0.0)
+        nxt, step = planar_tip_table(P[None], np.concatenate([P[1:], P[:1]])[None], hull.angles[None, :, 0],
+                                     hull.com[None, [0, 2]], np.array([k]), self.gravity, self.robot.mass)
+        nxt, step = nxt[0].tolist(), step[0].tolist()
         rest = np.empty(k, dtype=int)
         energy = np.empty(k)
         tips = np.empty(k, dtype=int)
-        for f in range(k):
+        for f in range(k):  # follow the table (planar_all_faces does the same in bulk)
             g, e, t = f, 0.0, 0
             while nxt[g] >= 0 and t <= k:
                 e += step[g]
