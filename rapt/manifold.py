@@ -113,7 +113,6 @@ class ManifoldSampler(Sampler):
         self._faces: list[np.ndarray] = []
         self._ids: list[int] = []
         self._face_ids: list[np.ndarray] | None = []
-        self._candidate_ids: np.ndarray | None = None
         self.last_information: np.ndarray | None = None
 
     # -- data --------------------------------------------------------------------------------
@@ -164,20 +163,35 @@ class ManifoldSampler(Sampler):
     # -- Algorithm 7 ---------------------------------------------------------------------------
     def candidates(self, n: int, rng: np.random.Generator) -> np.ndarray:
         """Random free states, each with every valid constrained value of the nearest told free state."""
-        X = self.X
+        return self._candidates(n, rng, self._free_tree())[0]
+
+    def _free_tree(self) -> cKDTree | None:
+        """k-d tree of the told free states (embedded), for :meth:`_on_nearest_faces`; None without free coordinates."""
+        return cKDTree(angular_embedding(self.X[:, :self.n_free], self.bounds[:self.n_free])) if self.n_free else None
+
+    def _candidates(self, n: int, rng: np.random.Generator, tree: cKDTree | None):
+        """:meth:`candidates` with their groups and identities (see :meth:`_on_nearest_faces`)."""
         mean_faces = max(np.mean([len(f) for f in self._faces]), 1.0)
         p = max(int(np.ceil(max(self.candidates_per_point * n, self.min_candidates) / mean_faces)), 1)
-        theta = rng.random((p, self.n_free))
+        return self._on_nearest_faces(rng.random((p, self.n_free)), tree)
+
+    def _on_nearest_faces(self, theta: np.ndarray, tree: cKDTree | None):
+        """Algorithm 7's metamodel Π: each free state of ``theta`` (p, n_free) with every valid constrained value of
+        the nearest told free state (``tree``: :meth:`_free_tree`).
+
+        Returns the candidates, which row of ``theta`` each belongs to, and their manifold
+        identities (None when the states were told without them).
+        """
+        p = len(theta)
         if self.n_free:
-            tree = cKDTree(angular_embedding(X[:, :self.n_free], self.bounds[:self.n_free]))
             _, nn = tree.query(angular_embedding(theta, self.bounds[:self.n_free]), k=1, workers=query_workers(p))
         else:
             nn = np.zeros(p, dtype=int)
         sets = [self._faces[i] for i in nn]
         counts = np.array([len(s) for s in sets])
-        self._candidate_groups = np.repeat(np.arange(p), counts)  # which random θ each candidate belongs to
-        self._candidate_ids = np.concatenate([self._face_ids[i] for i in nn]) if self._face_ids else None
-        return np.column_stack([np.repeat(theta, counts, axis=0), np.concatenate(sets)])
+        groups = np.repeat(np.arange(p), counts)
+        ids = np.concatenate([self._face_ids[i] for i in nn]) if self._face_ids else None
+        return np.column_stack([np.repeat(theta, counts, axis=0), np.concatenate(sets)]), groups, ids
 
     def information(self, candidates: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """NNDV: (information I, label variance σ, volume V) per candidate."""
@@ -266,14 +280,15 @@ class ManifoldSampler(Sampler):
         volume = dist.max(axis=1)
         return self.alpha * sigma / 0.25 + self.beta * volume, sigma, volume
 
-    def _hull_candidates(self, m_theta: int, rng: np.random.Generator) -> np.ndarray:
+    def _hull_candidates(self, m_theta: int, rng: np.random.Generator):
         """Algorithm 7's uniform random θ, plus as many told θ jittered by their own spacing.
 
         Uniform candidates alone almost never land inside a sub-degree boundary interval;
-        the jittered ones do, at every scale the data already has.
+        the jittered ones do, at every scale the data already has.  Returns the candidates,
+        their groups (one per θ) and identities, as :meth:`_on_nearest_faces` does.
         """
-        cand = self.candidates(m_theta, rng)
-        groups = self._candidate_groups
+        tree = self._free_tree()
+        cand, groups, ids = self._candidates(m_theta, rng, tree)
         f = self.n_free
         thetas = np.unique(self.X[:, :f], axis=0)
         q = min(int(groups.max()) + 1, len(thetas))
@@ -284,22 +299,15 @@ class ManifoldSampler(Sampler):
         local = thetas[pick] + rng.normal(size=(q, f)) * scale
         periodic = full_turn(self.bounds[:f, 0], self.bounds[:f, 1])
         local = np.where(periodic, np.mod(local, 1.0), np.clip(local, 0.0, 1.0))
-        tree = cKDTree(angular_embedding(self.X[:, :f], self.bounds[:f]))
-        _, nn = tree.query(angular_embedding(local, self.bounds[:f]), k=1)
-        sets = [self._faces[i] for i in nn]
-        c2 = np.array([len(s) for s in sets])
-        extra = np.column_stack([np.repeat(local, c2, axis=0), np.concatenate(sets)])
-        self._candidate_groups = np.concatenate([groups, groups.max() + 1 + np.repeat(np.arange(q), c2)])
-        if self._candidate_ids is not None:
-            self._candidate_ids = np.concatenate([self._candidate_ids] + [self._face_ids[i] for i in nn])
-        return np.concatenate([cand, extra])
+        extra, extra_groups, extra_ids = self._on_nearest_faces(local, tree)
+        return (np.concatenate([cand, extra]), np.concatenate([groups, groups.max() + 1 + extra_groups]),
+                None if ids is None else np.concatenate([ids, extra_ids]))
 
     def _ask_hulls(self, n: int, rng: np.random.Generator) -> np.ndarray:
         """Whole-hull batch: distinct free states ranked by their best live face; each returned with that face."""
         m_theta = self._hull_count(n)
-        cand = self._hull_candidates(m_theta, rng)
-        groups = self._candidate_groups
-        info, sigma, volume = self.hull_information(cand, self._candidate_ids)
+        cand, groups, cand_ids = self._hull_candidates(m_theta, rng)
+        info, sigma, volume = self.hull_information(cand, cand_ids)
         live = ~(((sigma == 0) & (volume < self.r_max)) | ((sigma > 0) & (volume < self.r_min)))
         info = np.where(live, info, -np.inf)
         order = np.lexsort((-info, groups))  # per group, its best face first
