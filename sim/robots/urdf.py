@@ -63,7 +63,7 @@ def _element_name(el: ET.Element, i: int) -> str:
     return f"{el.tag}[@name='{name}']" if name else f"{el.tag}[{i + 1}]"
 
 
-def _link_table(el: ET.Element, where: str, folder: Path) -> tuple[dict, Callable[[str], str], np.ndarray]:
+def _link_table(el: ET.Element, where: str) -> tuple[dict, Callable[[str], str], np.ndarray]:
     """A TOML-shaped link table, its field naming in URDF terms, and the mesh offset (collision origin)."""
     spec: dict = {"name": el.get("name")}
     inertial = el.find("inertial")
@@ -175,7 +175,7 @@ def load_urdf(path: str | Path) -> Robot:
     link_els, joint_els = root.findall("link"), root.findall("joint")
     if not link_els:
         raise RobotFileError("robot/link: expected at least one <link>")
-    links = [_link_table(el, _element_name(el, i), path.parent) for i, el in enumerate(link_els)]
+    links = [_link_table(el, _element_name(el, i)) for i, el in enumerate(link_els)]
     joints = [_joint_table(el, _element_name(el, i)) for i, el in enumerate(joint_els)]
     parsed_links, parsed_joints = parse_parts([t[0] for t in links], [t[0] for t in joints], path.parent,
                                               lambda i: links[i][1], lambda i: joints[i][1])
