@@ -27,7 +27,8 @@ Three parts, each printed as a table:
    self-rightable fraction, the mean transition energy to the home state, and the
    queries a 5° grid would need (mean hull faces × grid points, as in section 5.5.2).
 
-Run:  python benchmarks/selfright.py [--quick]     (full: about 10 minutes on 2 cores; quick: about 2)
+Run:  python benchmarks/selfright.py [--quick] [--robots 1dof ...] [--skip fig56 ...]
+      (full: about 10 minutes on 2 cores; quick: about 2; ``--robots 1dof --skip fig56``: seconds)
 """
 
 from __future__ import annotations
@@ -44,7 +45,7 @@ from sim.robots import StabilityFunction, load_robot
 ROBOTS = "examples/robots"
 
 
-def fig53(quick: bool, seed: int) -> list:
+def fig53(quick: bool, seed: int, robots: list[str] | None = None) -> list:
     # robot, slope, grid resolution (deg), adaptive options
     cases = [("1dof", 20.0, 1.0, dict(budget=700, r_min_deg=0.5, r_max_deg=10.0)),
              ("2dof", 0.0, 3.0 if quick else 1.0, dict(budget=10000 if quick else 30000, r_min_deg=0.5, r_max_deg=10.0)),
@@ -55,7 +56,7 @@ def fig53(quick: bool, seed: int) -> list:
     print(f"{'robot':>5} {'method':>9} {'queries':>9} {'time s':>7} {'nodes':>5} {'edges':>5} {'matched n/e':>13} "
           f"{'rightable':>9} {'agree':>6} {'pairs':>6} {'pair deg':>8} {'energy J':>8} {'m.pair deg':>10} {'m.energy J':>10}")
     studies = []
-    for name, slope, res, opts in cases:
+    for name, slope, res, opts in [c for c in cases if robots is None or c[0] in robots]:
         robot = load_robot(f"{ROBOTS}/{name}.toml")
         probes = probe_states(robot, slope, 300 if quick else 500, seed + 1)
         grid = grid_study(robot, slope, res)
@@ -171,9 +172,11 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="smaller budgets and coarser grids (about a minute)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--skip", nargs="*", default=[], choices=["fig53", "table51", "fig56"])
+    ap.add_argument("--robots", nargs="+", default=None, choices=["1dof", "2dof", "3dof"],
+                    help="Figure 5.3 and Table 5.1 on these robots only (1dof alone takes seconds)")
     args = ap.parse_args()
     t0 = time.perf_counter()
-    studies = fig53(args.quick, args.seed) if "fig53" not in args.skip else []
+    studies = fig53(args.quick, args.seed, args.robots) if "fig53" not in args.skip else []
     if "table51" not in args.skip and studies:
         table51(studies, args.quick, args.seed)
     if "fig56" not in args.skip:
