@@ -73,8 +73,7 @@ def train_surrogate(mission: Mission, *, method: str = "qdagger", quantile: floa
                 "select_runs": int(select_runs), "chosen_iteration": result.chosen,
                 "selection_accuracy": h.extra.get("selection"), "samples": h.samples, "seed": seed,
                 "epochs": epochs, "mixing": mixing, "fit_s": round(sum(r.fit_s for r in result.history), 2),
-                "iterations": len(result.history), "goal_threshold": threshold,
-                "threshold_reproduced": calibration}
+                "iterations": len(result.history), "threshold_reproduced": calibration}
     return Surrogate.for_mission(mission, result.policy, training, threshold)
 
 
