@@ -222,19 +222,23 @@ def grid_connections(study: SelfRightStudy) -> tuple[np.ndarray, np.ndarray]:
     count = np.bincount(flat, minlength=int(np.prod(shape)))
     body = study.embed(study.X)[:, 2 * m:]
     step = 2 * np.sin(study.resolution / 2)
-    for a in range(m):
+    for a, direction in ((a, direction) for a in range(m) for direction in (1, -1)):
         nb = idx.copy()
-        nb[:, a] += 1
-        ok = nb[:, a] < shape[a]
+        nb[:, a] += direction
+        ok = (nb[:, a] >= 0) & (nb[:, a] < shape[a])
         if periodic[a]:
             nb[:, a] %= shape[a]
             ok[:] = True
         s = np.flatnonzero(ok)
         nflat = np.ravel_multi_index(tuple(nb[s].T), shape)
         same = find(nflat * n_id + rank[s])
-        src.append(s[same >= 0])
-        dst.append(same[same >= 0])
-        gone = s[same < 0]  # this face has no namesake at the neighbour: look for what replaced it
+        if direction == 1:  # the same face at both: once per pair of neighbours
+            src.append(s[same >= 0])
+            dst.append(same[same >= 0])
+        # this face has no namesake at the neighbour: look for what replaced it there.  Both ways,
+        # because a face that splits in two is replaced by the nearer half, which may be the
+        # unstable one; the stable half, looking back, finds the face it came from.
+        gone = s[same < 0]
         g_flat = nflat[same < 0]
         best, best_d = -np.ones(len(gone), dtype=np.int64), np.full(len(gone), np.inf)
         for o in range(int(count.max())):

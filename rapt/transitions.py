@@ -209,7 +209,7 @@ def _gap(d: int, max_edge: float) -> float:
     return 4.0 * np.sqrt(max(d, 1)) + 2.0 * max_edge + 1.0
 
 
-def _continuations(points: np.ndarray, ids: np.ndarray, free_dims: int, max_edge: float,
+def _continuations(points: np.ndarray, ids: np.ndarray, stable: np.ndarray, free_dims: int, max_edge: float,
                    rate: float) -> tuple[np.ndarray, np.ndarray]:
     """Gabriel edges between states of different identities where one manifold replaced the other."""
     tree = cKDTree(points)
@@ -231,8 +231,32 @@ def _continuations(points: np.ndarray, ids: np.ndarray, free_dims: int, max_edge
     slow = np.linalg.norm(d[:, free_dims:], axis=1) <= rate * np.linalg.norm(d[:, :free_dims], axis=1) + 1e-9
     keep = gone_i & gone_j & slow
     i, j = i[keep], j[keep]
-    gab = _empty_balls(tree, points, np.column_stack([i, j]))
-    return i[gab], j[gab]
+    blocked = _blocked_continuations(tree, points, i, j, ids, stable, group * np.int64(n_id), rank, present)
+    return i[~blocked], j[~blocked]
+
+
+def _blocked_continuations(tree, points, i, j, ids, stable, group_key, rank, present) -> np.ndarray:
+    """Per pair: does a known state inside the ball spanned by ``i`` and ``j`` stand between the two faces?
+
+    A state of either identity does (the edge should go through it: it may be unstable),
+    and so does one at a free state where neither face exists (an unstable band, or a third
+    face between them), and a stable state of a third face (the robot may settle on it on
+    the way, as on a base face the moving face rotates past).  An unstable state of a third
+    face where one of the two faces also exists does not: the robot never rests on it (when
+    a vertex pierces a resting face the face splits in two and the robot settles on the
+    stable half), so unlike in the Gabriel test it does not block.
+    """
+    mid = (points[i] + points[j]) / 2.0
+    r = np.linalg.norm(points[i] - points[j], axis=1) / 2.0
+    found = tree.query_ball_point(mid, r) if len(i) else []
+    pair = np.repeat(np.arange(len(i)), [len(f) for f in found])
+    k = np.fromiter((x for f in found for x in f), dtype=np.int64, count=len(pair))
+    a, b = i[pair], j[pair]
+    inside = (k != a) & (k != b) & (np.linalg.norm(points[k] - mid[pair], axis=1) < r[pair] * (1.0 - 1e-9) - 1e-15)
+    pair, k, a, b = pair[inside], k[inside], a[inside], b[inside]
+    namesake = (ids[k] == ids[a]) | (ids[k] == ids[b])
+    beside = np.isin(group_key[k] + rank[a], present) | np.isin(group_key[k] + rank[b], present)
+    return np.bincount(pair[namesake | ~beside | stable[k]], minlength=len(i)) > 0
 
 
 def transition_graph(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, energy: np.ndarray,
@@ -295,7 +319,7 @@ def transition_graph(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, energy
     else:
         i, j = gabriel_graph(space, max_edge)
     if connections is None and all_ids is not None and free_dims is not None:
-        ci, cj = _continuations(points, all_ids, free_dims,
+        ci, cj = _continuations(points, all_ids, lab, free_dims,
                                 max_edge / 2 if continuation_edge is None else min(continuation_edge, max_edge), rate)
         i, j = np.concatenate([i, ci]), np.concatenate([j, cj])
     both = lab[i] & lab[j]
