@@ -192,7 +192,8 @@ def grid_connections(study: SelfRightStudy) -> tuple[np.ndarray, np.ndarray]:
     States on the same face (identity) at neighbouring grid joint states are connected, as
     is a face to the one replacing it at the neighbour (neither exists at the other joint
     state and the body angle moved no more than the joints: a continuation, as in
-    :mod:`rapt.transitions`); each resting state is the evaluated state it names.  Indices
+    :mod:`rapt.transitions`; the nearest such face, stable ones first when the face is
+    stable); each resting state is the evaluated state it names.  Indices
     run over ``[X, settled rest states]`` (a grid has no unevaluated known states).
     """
     shape, periodic = study.extra["grid_shape"], study.extra["grid_periodic"]
@@ -222,22 +223,22 @@ def grid_connections(study: SelfRightStudy) -> tuple[np.ndarray, np.ndarray]:
     count = np.bincount(flat, minlength=int(np.prod(shape)))
     body = study.embed(study.X)[:, 2 * m:]
     step = 2 * np.sin(study.resolution / 2)
-    for a, direction in ((a, direction) for a in range(m) for direction in (1, -1)):
+    unsettled = 10.0 * step  # ranks an unstable replacement of a stable face after every stable one
+    for a in range(m):
         nb = idx.copy()
-        nb[:, a] += direction
-        ok = (nb[:, a] >= 0) & (nb[:, a] < shape[a])
+        nb[:, a] += 1
+        ok = nb[:, a] < shape[a]
         if periodic[a]:
             nb[:, a] %= shape[a]
             ok[:] = True
         s = np.flatnonzero(ok)
         nflat = np.ravel_multi_index(tuple(nb[s].T), shape)
         same = find(nflat * n_id + rank[s])
-        if direction == 1:  # the same face at both: once per pair of neighbours
-            src.append(s[same >= 0])
-            dst.append(same[same >= 0])
-        # this face has no namesake at the neighbour: look for what replaced it there.  Both ways,
-        # because a face that splits in two is replaced by the nearer half, which may be the
-        # unstable one; the stable half, looking back, finds the face it came from.
+        src.append(s[same >= 0])
+        dst.append(same[same >= 0])
+        # this face has no namesake at the neighbour: look for what replaced it there.  A stable
+        # face continues on the nearest stable replacement: when a corner pierces it, it splits
+        # in two and the robot settles on the stable half, however near the other half lies.
         gone = s[same < 0]
         g_flat = nflat[same < 0]
         best, best_d = -np.ones(len(gone), dtype=np.int64), np.full(len(gone), np.inf)
@@ -246,9 +247,10 @@ def grid_connections(study: SelfRightStudy) -> tuple[np.ndarray, np.ndarray]:
             c = by_flat[np.minimum(first[g_flat] + o, len(by_flat) - 1)]
             back = find(flat[gone] * n_id + rank[c])  # the replacement must not exist here either
             d = np.linalg.norm(body[c] - body[gone], axis=1)
-            take = has & (back < 0) & (d <= step + 1e-9) & (d < best_d)
+            preference = d + unsettled * (study.stable[gone] & ~study.stable[c])
+            take = has & (back < 0) & (d <= step + 1e-9) & (preference < best_d)
             best = np.where(take, c, best)
-            best_d = np.where(take, d, best_d)
+            best_d = np.where(take, preference, best_d)
         src.append(gone[best >= 0])
         dst.append(best[best >= 0])
     i, j = np.concatenate(src), np.concatenate(dst)
