@@ -32,11 +32,15 @@ states on one face; without identities ``max_edge`` alone must keep parallel fac
 A manifold can also *continue* as another: when a vertex rises through a resting face the
 face is replaced by one with the same body angle at the crossing, and the robot turns
 onto it without tipping.  With ``free_dims`` (the leading free coordinates, e.g. joint
-angles), a Gabriel edge between different identities is kept when neither identity
-exists at the other state's free coordinates (one face replaced the other in between)
-and the constrained coordinates moved no more than the free ones (``rate`` 1), and the
-edge is no longer than ``continuation_edge`` (default ``max_edge / 2``): the crossing must
-be resolved, or a long edge could step over an unstable band between two faces.
+angles), an edge between different identities is kept when neither identity exists at
+the other state's free coordinates (one face replaced the other in between), the
+constrained coordinates moved no more than the free ones (``rate`` 1), the edge is no
+longer than ``continuation_edge`` (default ``max_edge / 2``: the crossing must be
+resolved, or a long edge could step over an unstable band between two faces), and no
+known state inside the ball it spans stands between the two faces — a Gabriel test in
+which an unstable state of a third face, where one of the two faces also exists, does
+not count (when a vertex splits a resting face in two, the robot settles on the stable
+half and never rests on the other).
 """
 
 from __future__ import annotations
@@ -231,7 +235,10 @@ def _continuations(points: np.ndarray, ids: np.ndarray, stable: np.ndarray, free
     slow = np.linalg.norm(d[:, free_dims:], axis=1) <= rate * np.linalg.norm(d[:, :free_dims], axis=1) + 1e-9
     keep = gone_i & gone_j & slow
     i, j = i[keep], j[keep]
-    blocked = _blocked_continuations(tree, points, i, j, ids, stable, group * np.int64(n_id), rank, present)
+    blocked = ~_empty_balls(tree, points, np.column_stack([i, j]))  # most balls are empty: a cheap first pass
+    if blocked.any():
+        blocked[blocked] = _blocked_continuations(tree, points, i[blocked], j[blocked], ids, stable,
+                                                  group * np.int64(n_id), rank, present)
     return i[~blocked], j[~blocked]
 
 
