@@ -235,11 +235,32 @@ def _continuations(points: np.ndarray, ids: np.ndarray, stable: np.ndarray, free
     slow = np.linalg.norm(d[:, free_dims:], axis=1) <= rate * np.linalg.norm(d[:, :free_dims], axis=1) + 1e-9
     keep = gone_i & gone_j & slow
     i, j = i[keep], j[keep]
-    blocked = ~_empty_balls(tree, points, np.column_stack([i, j]))  # most balls are empty: a cheap first pass
+    # cheap passes first: most balls are empty, and most others hold a state of one of the two faces
+    blocked = ~_empty_balls(tree, points, np.column_stack([i, j]))
     if blocked.any():
-        blocked[blocked] = _blocked_continuations(tree, points, i[blocked], j[blocked], ids, stable,
-                                                  group * np.int64(n_id), rank, present)
+        b = np.flatnonzero(blocked)
+        namesake = _namesake_inside(points, rank, i[b], j[b], max_edge)
+        rest = b[~namesake]
+        blocked[rest] = _blocked_continuations(tree, points, i[rest], j[rest], ids, stable,
+                                               group * np.int64(n_id), rank, present)
     return i[~blocked], j[~blocked]
+
+
+def _namesake_inside(points: np.ndarray, rank: np.ndarray, i: np.ndarray, j: np.ndarray, max_edge: float) -> np.ndarray:
+    """Per pair: does a state of ``i``'s or ``j``'s own identity lie strictly inside the ball they span?"""
+    gap = _gap(points.shape[1], max_edge)
+    space = separate(points, rank, gap)
+    tree = cKDTree(space)
+    mid = (points[i] + points[j]) / 2.0
+    r = np.linalg.norm(points[i] - points[j], axis=1) / 2.0
+    out = np.zeros(len(i), dtype=bool)
+    k = min(3, len(points))
+    for side in (i, j):
+        d, idx = tree.query(np.column_stack([mid, rank[side] * gap]), k=k, workers=query_workers(len(i)))
+        d, idx = d.reshape(len(i), -1), idx.reshape(len(i), -1)
+        other = (idx != i[:, None]) & (idx != j[:, None])
+        out |= (other & (d < r[:, None] * (1.0 - 1e-9) - 1e-15)).any(axis=1)
+    return out
 
 
 def _blocked_continuations(tree, points, i, j, ids, stable, group_key, rank, present) -> np.ndarray:
