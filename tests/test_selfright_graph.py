@@ -224,7 +224,8 @@ def test_a_continuation_is_blocked_by_a_stable_third_face_between_not_by_an_unst
     """
     t = np.round(np.arange(0, 1.0001, 0.05), 10)
     low = t < 0.5
-    X = np.concatenate([np.column_stack([t[low], np.full(low.sum(), 0.01)]), np.column_stack([t[~low], np.zeros((~low).sum())]),
+    X = np.concatenate([np.column_stack([t[low], np.full(low.sum(), 0.01)]),
+                        np.column_stack([t[~low], np.zeros((~low).sum())]),
                         np.column_stack([t[low], np.full(low.sum(), 0.002)])])
     ids = np.concatenate([np.full(low.sum(), 1), np.full((~low).sum(), 3), np.full(low.sum(), 4)])
     d = ids == 4
