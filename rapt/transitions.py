@@ -239,20 +239,19 @@ def _continuations(points: np.ndarray, ids: np.ndarray, stable: np.ndarray, free
     blocked = ~_empty_balls(tree, points, np.column_stack([i, j]))
     if blocked.any():
         b = np.flatnonzero(blocked)
-        namesake = _namesake_inside(points, rank, i[b], j[b], max_edge)
-        rest = b[~namesake]
-        blocked[rest] = _blocked_continuations(tree, points, i[rest], j[rest], ids, stable,
-                                               group * np.int64(n_id), rank, present)
+        mid, r = (points[i[b]] + points[j[b]]) / 2.0, np.linalg.norm(points[i[b]] - points[j[b]], axis=1) / 2.0
+        namesake = _namesake_inside(points, rank, i[b], j[b], mid, r, max_edge)
+        rest = ~namesake
+        blocked[b[rest]] = _blocked_continuations(tree, points, i[b[rest]], j[b[rest]], mid[rest], r[rest], ids,
+                                                  stable, group * np.int64(n_id), rank, present)
     return i[~blocked], j[~blocked]
 
 
-def _namesake_inside(points: np.ndarray, rank: np.ndarray, i: np.ndarray, j: np.ndarray, max_edge: float) -> np.ndarray:
-    """Per pair: does a state of ``i``'s or ``j``'s own identity lie strictly inside the ball they span?"""
+def _namesake_inside(points: np.ndarray, rank: np.ndarray, i: np.ndarray, j: np.ndarray, mid: np.ndarray,
+                     r: np.ndarray, max_edge: float) -> np.ndarray:
+    """Per pair: does a state of ``i``'s or ``j``'s own identity lie strictly inside the ball (``mid``, ``r``) they span?"""
     gap = _gap(points.shape[1], max_edge)
-    space = separate(points, rank, gap)
-    tree = cKDTree(space)
-    mid = (points[i] + points[j]) / 2.0
-    r = np.linalg.norm(points[i] - points[j], axis=1) / 2.0
+    tree = cKDTree(separate(points, rank, gap))
     out = np.zeros(len(i), dtype=bool)
     k = min(3, len(points))
     for side in (i, j):
@@ -263,8 +262,8 @@ def _namesake_inside(points: np.ndarray, rank: np.ndarray, i: np.ndarray, j: np.
     return out
 
 
-def _blocked_continuations(tree, points, i, j, ids, stable, group_key, rank, present) -> np.ndarray:
-    """Per pair: does a known state inside the ball spanned by ``i`` and ``j`` stand between the two faces?
+def _blocked_continuations(tree, points, i, j, mid, r, ids, stable, group_key, rank, present) -> np.ndarray:
+    """Per pair: does a known state inside the ball (``mid``, ``r``) spanned by ``i`` and ``j`` stand between the faces?
 
     A state of either identity does (the edge should go through it: it may be unstable),
     and so does one at a free state where neither face exists (an unstable band, or a third
@@ -274,8 +273,6 @@ def _blocked_continuations(tree, points, i, j, ids, stable, group_key, rank, pre
     a vertex pierces a resting face the face splits in two and the robot settles on the
     stable half), so unlike in the Gabriel test it does not block.
     """
-    mid = (points[i] + points[j]) / 2.0
-    r = np.linalg.norm(points[i] - points[j], axis=1) / 2.0
     found = tree.query_ball_point(mid, r) if len(i) else []
     pair = np.repeat(np.arange(len(i)), [len(f) for f in found])
     k = np.fromiter((x for f in found for x in f), dtype=np.int64, count=len(pair))

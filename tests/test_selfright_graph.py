@@ -172,19 +172,19 @@ def test_quasi_static_sweep_confirms_the_one_dof_righting_path():
     stable half without losing energy, then tips onto the home face at about -56° (38.6 J).
     Both graphs must say the same: one node from -10° to -56°, an edge of 38.6 J home.
     """
-    from planner.selfright import analyse, grid_study, home_state
+    from planner.selfright import _to_unit, analyse, grid_study, home_state
     from sim.robots import StabilityFunction, load_robot
 
     robot = load_robot("examples/robots/1dof.toml")
     F = StabilityFunction(robot, 20.0)
-    events, face = _sweep(F, -10.0, -170.0, -70.0)
+    events, _ = _sweep(F, -10.0, -170.0, -70.0)
     assert len(events) == 1 and -57.0 < events[0][0] < -55.0 and abs(events[0][1] - 38.58) < 0.05
     grid = grid_study(robot, 20.0, 1.0)
     home_U, home_id = home_state(grid, with_id=True)
     g = analyse(grid, probes=np.zeros((0, 2)))
     G = g["graph"]
     start = F(np.radians([[-10.0]]), np.radians([[-170.0]]))
-    U = grid.embed(np.array([[(np.radians(-10.0) + np.pi) / (2 * np.pi), (start.start[0][0] + np.pi) / (2 * np.pi)]]))
+    U = grid.embed(_to_unit([np.radians(-10.0), start.start[0][0]], grid.bounds[:, 0], grid.bounds[:, 1])[None])
     n = G.node_of(U, ids=[start.start_id[0]])[0]
     cost, _ = G.costs_to(g["home"])
     assert G.node_of(grid.embed(home_U[None]), ids=[home_id])[0] == g["home"] != n
