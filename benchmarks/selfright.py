@@ -158,7 +158,7 @@ def fig56(quick: bool, seed: int) -> None:
           f"{'rightable':>9} {'energy to home J':>16} {'5° grid (est.)':>14}")
     for m in range(1, 6):
         r = robot.lock({n: 0.0 for n in order[m:]})
-        study = adaptive_study(r, 0.0, budget, seed=seed, r_min_deg=3.0, r_max_deg=20.0, batch_size=100)
+        study = adaptive_study(r, 0.0, budget, seed=seed, r_min_deg=3.0, r_max_deg=20.0, batch_size=100, refine=0.0)
         res = analyse(study, probes=probe_states(r, 0.0, 150 if quick else 300, seed + 1))
         faces = np.mean([len(f) for f in study.faces])
         grid = faces * np.prod([np.ptp(b) / np.radians(5.0) for b in r.joint_bounds])

@@ -141,10 +141,12 @@ class _System:
 
 def adaptive_study(robot: Robot, slope: float, budget: int, *, seed: int = 0, batch_size: int = 50,
                    r_min_deg: float = 1.0, r_max_deg: float = 10.0, n_initial: int | None = None,
-                   whole_hulls: bool | None = None, progress=None, **options) -> SelfRightStudy:
-    """Algorithm 6 on ``robot`` at ``slope`` degrees, about ``budget`` queries.
+                   whole_hulls: bool | None = None, refine: float = 0.1, progress=None, **options) -> SelfRightStudy:
+    """Algorithm 6 on ``robot`` at ``slope`` degrees, about ``budget`` queries, then the transitions refined.
 
     A query is the stability of one state ``[θ, face]``, as the grid search counts them.
+    ``refine`` is the share of the budget kept back for :func:`refine_transitions` (with
+    whatever the search leaves when its resolution cut-offs end it first); 0 turns it off.
     ``whole_hulls`` labels every face of each queried joint state and counts each face as
     a query; otherwise only the snapped face is labelled (the other faces are known states
     labelled by their nearest neighbour in Algorithm 8).  Default: on for planar robots,
@@ -160,12 +162,79 @@ def adaptive_study(robot: Robot, slope: float, budget: int, *, seed: int = 0, ba
         n_initial = min(max(20 * system.bounds.shape[0], 50), max(budget // 5, 10))
     sampler = ManifoldSampler(robot.dof, system.bounds, seed=seed, r_min=np.radians(r_min_deg),
                               r_max=np.radians(r_max_deg), n_initial=n_initial, whole_hulls=whole_hulls, **options)
+    if not 0 <= refine < 1:
+        raise ValueError(f"refine: expected a share of the budget in [0, 1), got {refine!r}")
     t0 = time.perf_counter()
-    manifold_search(system, sampler, budget, batch_size, progress)
+    manifold_search(system, sampler, budget - int(round(refine * budget)), batch_size, progress)
+    extra = dict(stopped_by_resolution=sampler.done, r_min_deg=r_min_deg, r_max_deg=r_max_deg,
+                 whole_hulls=whole_hulls)
+    rounds, spent = 0, 0
+    for turn in range(3 if refine > 0 else 0):
+        before = system.F.n_queries
+        rounds += refine_transitions(system, robot, slope, budget, np.radians(r_min_deg),
+                                     r_max=np.radians(r_max_deg), tell=sampler.tell)
+        cost = system.F.n_queries - before
+        spent += cost
+        if turn == 2 or sampler.done or budget - system.F.n_queries <= max(cost, batch_size):
+            break
+        # the pairs took less than was kept back: the search has the rest, bar what refining its finds may take
+        manifold_search(system, sampler, budget - cost, batch_size, progress)
+    extra.update(search_queries=system.F.n_queries - spent, refine_queries=spent, refine_rounds=rounds)
     study = system.study(robot, slope, "adaptive", time.perf_counter() - t0)
-    study.extra.update(stopped_by_resolution=sampler.done, r_min_deg=r_min_deg, r_max_deg=r_max_deg,
-                       whole_hulls=whole_hulls, joint_states=system.F.n_hulls)
+    study.extra.update(extra, joint_states=system.F.n_hulls)
     return study
+
+
+def refine_transitions(system: _System, robot: Robot, slope: float, budget: int, r_min: float, *,
+                       r_max: float | None = None, max_rounds: int = 12, splits: int = 2, tell=None) -> int:
+    """Cut every transition's boundary pair in ``splits`` parts (bisect it) until it is shorter than ``r_min`` (joint space).
+
+    Section 5.5.1 prizes close boundary pairs (the transition point is known better), but
+    the search spreads its budget over every boundary, most of them between faces no
+    path uses.  So each edge of the graph has the states between its witness and its
+    stable partner queried (equally spaced in joint angles, on the pair's face): the one
+    next to the boundary becomes the new witness or partner, or shows a transition the
+    search missed.  The graph is rebuilt each round; a state already asked is not asked
+    again, so a pair that cannot shrink is left as it is.  Stops when every pair is below
+    ``r_min``, ``system`` has answered ``budget`` queries, or after ``max_rounds``;
+    ``tell`` (e.g. the search's :meth:`~rapt.manifold.ManifoldSampler.tell`) hears every answer.
+    Returns the number of rounds run.
+    """
+    asked: set = set()
+    lo, span = system.lo, system.hi - system.lo
+    periodic = full_turn(system.lo, system.hi)
+    for rounds in range(max_rounds):
+        left = budget - system.F.n_queries
+        if left < 1:
+            return rounds
+        study = system.study(robot, slope, "adaptive", 0.0, extra={"r_max_deg": np.degrees(r_max)} if r_max else {})
+        graph, extra, _, _ = build_graph(study)
+        e = graph.edges
+        todo = np.flatnonzero(e["length"] > r_min) if graph.n_edges else np.empty(0, int)
+        # edges between the largest regions first (the paths most states take), then the longest pairs
+        size = graph.node_sizes[np.maximum(e["src"][todo], e["dst"][todo])]  # the smaller region (nodes go by size)
+        todo = todo[np.lexsort((-e["length"][todo], -size))]
+        settled = np.isfinite(study.rest).all(axis=1)
+        U = np.concatenate([study.X, study.rest[settled], extra])
+        w, p = lo + U[e["witness"][todo]] * span, lo + U[e["partner"][todo]] * span  # angles
+        d = np.where(periodic, np.mod(p - w + np.pi, 2 * np.pi) - np.pi, p - w)  # the shorter way round
+        frac = np.arange(1, splits) / splits
+        Q = _to_unit((w[:, None] + frac[None, :, None] * d[:, None]).reshape(-1, len(lo)), system.lo, system.hi)
+        keys = [k.tobytes() for k in _row_keys(Q[:, :study.n_free])]
+        new, seen = [], set(asked)
+        for i, k in enumerate(keys):
+            if k not in seen:
+                seen.add(k)
+                new.append(i)
+        if not new:
+            return rounds
+        cost = max(len(f) for f in study.faces) if system.whole_hulls else 1  # the most faces a hull has had
+        new = new[:max(left // max(cost, 1), 1)]  # like the search's last batch, it may overshoot by one hull
+        asked.update(keys[i] for i in new)
+        answer = system(Q[new])
+        if tell is not None:
+            tell(*answer)
+    return max_rounds
 
 
 def grid_study(robot: Robot, slope: float, resolution_deg: float) -> SelfRightStudy:
@@ -332,9 +401,8 @@ def default_max_edge(study: SelfRightStudy, known: np.ndarray | None = None) -> 
     return float(min(max(base * r_max, 2.0 * np.median(d[:, -1])), 4.0 * r_max))
 
 
-def analyse(study: SelfRightStudy, *, max_edge: float | None = None, probes=None,
-            use_ids: bool | None = None) -> dict:
-    """Transition graph and the chapter's figures of merit for one study.
+def build_graph(study: SelfRightStudy, *, max_edge: float | None = None, use_ids: bool | None = None):
+    """Algorithm 8 on a study: (transition graph, extra states (unit cube), d_max, number of known states).
 
     ``use_ids`` keeps different hull faces apart by their vertex identity (section 5.2's
     unique-vertex faces); without it only ``max_edge`` does (body angles alone).  Default:
@@ -346,13 +414,20 @@ def analyse(study: SelfRightStudy, *, max_edge: float | None = None, probes=None
         use_ids = study.X.shape[1] - study.n_free == 1
     known = study.known_states(with_ids=True)  # X^Z, once for d_max, the extra states and their identities
     max_edge = default_max_edge(study, known[0]) if max_edge is None else max_edge
-    t0 = time.perf_counter()
     extra, extra_ids = study.extra_states(with_ids=True, known=known)
     ids = (study.ids, study.rest_ids, extra_ids) if use_ids and study.ids is not None else None
     connections = grid_connections(study) if use_ids and "grid_shape" in study.extra else None
     graph = transition_graph(study.embed(study.X), study.stable, study.embed(study.rest), study.energy,
                              study.embed(extra), max_edge=max_edge, ids=ids,
                              free_dims=2 * study.n_free, connections=connections)
+    return graph, extra, max_edge, len(known[0])
+
+
+def analyse(study: SelfRightStudy, *, max_edge: float | None = None, probes=None,
+            use_ids: bool | None = None) -> dict:
+    """Transition graph (:func:`build_graph`) and the chapter's figures of merit for one study."""
+    t0 = time.perf_counter()
+    graph, extra, max_edge, n_known = build_graph(study, max_edge=max_edge, use_ids=use_ids)
     seconds = time.perf_counter() - t0
     home_U, home_id = home_state(study, with_id=True)
     home = int(graph.node_of(study.embed(home_U[None]), ids=[home_id])[0])
@@ -365,7 +440,7 @@ def analyse(study: SelfRightStudy, *, max_edge: float | None = None, probes=None
         "graph": graph, "home": home, "cost_to_home": cost, "graph_seconds": seconds, "max_edge": max_edge,
         "extra_states": extra,  # unit cube, in the graph's order (after the evaluated and resting states)
         "probes": probes, "probe_rightable": ok,  # compare_graphs reuses these for the same probes
-        "queries": study.queries, "states": len(known[0]), "nodes": graph.n_nodes, "edges": graph.n_edges,
+        "queries": study.queries, "states": n_known, "nodes": graph.n_nodes, "edges": graph.n_edges,
         "rightable": float(ok.mean()) if len(probes) else float("nan"),
         "energy_to_home": float(energy[ok].mean()) if ok.any() else float("nan"),
         "pair_length_deg": float(np.degrees(e["length"]).mean()) if graph.n_edges else float("nan"),
@@ -589,11 +664,13 @@ def selfright_command(
                                                ".urdf), e.g. examples/robots/1dof.toml.")],
     out: Annotated[Path, typer.Option("--out", help="Directory for graph.json, graph.graphml, states.png, report.md.")],
     slope: Annotated[Optional[float], typer.Option(help="Ground slope in degrees (default: the robot file's, else 0).")] = None,
-    budget: Annotated[int, typer.Option(help="Queries to the stability function at most.")] = 1000,
+    budget: Annotated[int, typer.Option(help="Queries to the stability function (a planar robot's last hull may add a few faces).")] = 1000,
     seed: Annotated[int, typer.Option(help="Seed of every random choice.")] = 0,
     batch_size: Annotated[int, typer.Option("--batch-size", help="Queries per batch.")] = 50,
     r_min: Annotated[float, typer.Option("--r-min", help="Boundary resolution, degrees (search ends below it).")] = 1.0,
     r_max: Annotated[float, typer.Option("--r-max", help="Interior resolution, degrees.")] = 10.0,
+    refine: Annotated[float, typer.Option("--refine", help="Share of the budget kept to bisect each transition's "
+                                          "boundary pair below --r-min (0: off).")] = 0.1,
     max_edge: Annotated[Optional[float], typer.Option("--max-edge", help="Gabriel graph's longest edge, degrees "
                                                       "(default: 2 to 4 x --r-max, by sample density).")] = None,
 ) -> None:
@@ -611,11 +688,14 @@ def selfright_command(
         fail(f"--batch-size: expected a positive number of queries, got {batch_size}")
     if not 0 < r_min <= r_max:
         fail(f"--r-min/--r-max: expected 0 < r_min <= r_max degrees, got {r_min:g} and {r_max:g}")
+    if not 0 <= refine < 1:
+        fail(f"--refine: expected a share of the budget in [0, 1), got {refine:g}")
     if max_edge is not None and max_edge <= 0:
         fail(f"--max-edge: expected degrees > 0, got {max_edge:g}")
     if out.exists() and not out.is_dir():
         fail(f"--out: {out} is a file; give a directory")
-    study = adaptive_study(robot, slope, budget, seed=seed, batch_size=batch_size, r_min_deg=r_min, r_max_deg=r_max)
+    study = adaptive_study(robot, slope, budget, seed=seed, batch_size=batch_size, r_min_deg=r_min, r_max_deg=r_max,
+                           refine=refine)
     result = analyse(study, max_edge=None if max_edge is None else np.radians(max_edge))
     doc = write_outputs(study, result, out)
     energy = doc["mean_energy_to_home_J"]

@@ -110,9 +110,10 @@ class TransitionGraph:
     states, then extra states): ``stable``, ``labels`` (node of a stable state, else -1) and
     ``end_node`` (the node a state ends up in: its own, or its resting state's; -1 when
     unknown or when it never comes to rest).  ``edges`` has one row per kept transition:
-    ``src``, ``dst``, ``energy``, ``witness`` (the evaluated unstable state) and ``length``
-    (its boundary pair's length: distance to the stable state it was reached from, in the
-    free coordinates when ``free_dims`` is given — section 5.3's "distance in joint space").
+    ``src``, ``dst``, ``energy``, ``witness`` (the evaluated unstable state), ``partner`` (the
+    stable state it was reached from, an index into ``points``) and ``length`` (the boundary
+    pair's length: witness to partner, in the free coordinates when ``free_dims`` is given —
+    section 5.3's "distance in joint space").
     """
 
     points: np.ndarray
@@ -375,7 +376,8 @@ def transition_graph(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, energy
     u, nb, pair_len = u[keep], nb[keep], pair_len[keep]
     src, dst = labels[nb], rest_node[u]
     ok = (src >= 0) & (dst >= 0) & (src != dst)
-    trans = {"src": src[ok], "dst": dst[ok], "energy": energy[u[ok]], "witness": u[ok], "length": pair_len[ok]}
+    trans = {"src": src[ok], "dst": dst[ok], "energy": energy[u[ok]], "witness": u[ok], "partner": nb[ok],
+             "length": pair_len[ok]}
     o = np.lexsort((trans["energy"], trans["dst"], trans["src"]))
     t = {k: v[o] for k, v in trans.items()}
     firstpair = np.r_[True, (t["src"][1:] != t["src"][:-1]) | (t["dst"][1:] != t["dst"][:-1])] if len(o) else np.empty(0, bool)

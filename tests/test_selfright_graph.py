@@ -66,6 +66,10 @@ def test_transition_graph_on_a_hand_built_state_set():
     assert edges[(a_high, b)][0] == pytest.approx(1.55)
     assert edges[(b, a_low)][0] == pytest.approx(2.0)
     assert all(v[2] == pytest.approx(0.05) for v in edges.values())  # boundary pairs one step apart
+    # each pair's other end is the stable state of the source node it was reached from
+    P = g.points[g.edges["partner"]]
+    assert g.stable[g.edges["partner"]].all() and np.array_equal(g.labels[g.edges["partner"]], g.edges["src"])
+    assert np.allclose(np.abs(P[:, 0] - X[g.edges["witness"], 0]), 0.05) and np.allclose(P[:, 1], X[g.edges["witness"], 1])
     # only unstable states next to a stable one are transitions (deeper ones cannot be reached without tipping)
     assert sorted(np.round(X[g.all_transitions["witness"], 0], 6).tolist()) == [0.2, 0.3, 0.55]
     # reachability and lowest-energy paths
@@ -149,6 +153,24 @@ def test_one_dof_robot_graph_agrees_with_a_grid_search():
     assert a["rightable"] == g["rightable"] == 1.0 and c["rightable_agreement"] == 1.0
     # the adaptive search puts its boundary pairs closer than the grid's 3° spacing
     assert a["pair_length_deg"] < g["pair_length_deg"]
+
+
+def test_refinement_bisects_every_transition_pair_below_the_boundary_resolution():
+    """Same budget, with and without the refinement: only with it is every edge's pair under r_min."""
+    from planner.selfright import adaptive_study, analyse
+    from sim.robots import load_robot
+
+    robot = load_robot("examples/robots/1dof.toml")
+    plain = adaptive_study(robot, 20.0, 700, seed=0, r_min_deg=0.5, refine=0.0)
+    refined = adaptive_study(robot, 20.0, 700, seed=0, r_min_deg=0.5, refine=0.1)
+    assert abs(refined.queries - plain.queries) <= 12  # one hull either way
+    assert refined.extra["refine_rounds"] >= 2 and 0 < refined.extra["refine_queries"] <= 70 + 12
+    a, b = analyse(plain), analyse(refined)
+    la, lb = np.degrees(a["graph"].edges["length"]), np.degrees(b["graph"].edges["length"])
+    assert la.max() > 0.5 and lb.max() <= 0.5
+    assert b["edges"] >= a["edges"] and b["pair_length_deg"] < a["pair_length_deg"]
+    with pytest.raises(ValueError, match="refine"):
+        adaptive_study(robot, 20.0, 100, refine=1.0)
 
 
 def _sweep(F, theta0: float, phi0: float, theta1: float, step: float = 0.05):
