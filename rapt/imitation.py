@@ -32,26 +32,27 @@ from dataclasses import dataclass, field
 from typing import Callable, Sequence
 
 import numpy as np
-from scipy.special import expit
 
 __all__ = ["MLPPolicy", "HeadsPolicy", "policy_from_arrays", "Trajectory", "IterationRecord", "ImitationResult",
            "imitate", "METHODS", "HIDDEN"]
 
 #: Inputs and hidden activations are rounded to multiples of 2**-INPUT_BITS (see MLPPolicy.__call__).
 INPUT_BITS = 16
+_UNIT = 2.0 ** INPUT_BITS
+#: exp's argument is capped here: 2^16 / (1 + e^40) already rounds to 0 units, and e^710 overflows.
+_EXP_CAP = 40.0
+
+
+def _units(F: np.ndarray) -> np.ndarray:
+    """Inputs in whole units of 2**-INPUT_BITS, as a new float64 array."""
+    k = np.array(F, dtype=np.float64)
+    k *= _UNIT
+    return np.rint(k, out=k)
 
 
 def _grid(a: np.ndarray, bits: int) -> np.ndarray:
     """``a`` rounded to multiples of 2**-bits (exactly, in float64)."""
     return np.round(np.asarray(a, np.float64) * 2.0 ** bits) / 2.0 ** bits
-
-
-def _grid_inplace(h: np.ndarray, bits: int) -> np.ndarray:
-    """:func:`_grid` of a float64 work array, in place (scaling by a power of two is exact)."""
-    h *= 2.0 ** bits
-    np.rint(h, out=h)
-    h *= 2.0 ** -bits
-    return h
 
 
 METHODS = ("supervised", "dagger", "qdagger")
@@ -94,50 +95,73 @@ class MLPPolicy:
         ``quiet`` names a block of columns that mostly all read ``quiet_value`` (a range
         scan seeing nothing): rows where they do skip that block of the first product, most
         of the work when the block is most of the input.
+
+        The work arrays hold activations in units of 2^-16 (whole numbers) against weights
+        scaled by 2^-16, and a logistic layer's weights are negated so that its product is
+        already the exponent of ``1 / (1 + exp(-z))``: the same exact sums, with no pass
+        spent rescaling or negating (this is the hot path of every learned decision).
         """
-        layers = self._exact()
-        h = _grid_inplace(np.array(F, dtype=np.float64), INPUT_BITS)
-        last = len(layers) - 1
-        for k, (W, b) in enumerate(layers):
-            if k == 0 and quiet is not None:
-                h = self._first_layer(h, W, b, quiet, quiet_value)
-            else:
-                h = h @ W
-                h += b
-            if k < last:
-                _grid_inplace(expit(h, out=h) if self.activation == "logistic" else np.tanh(h, out=h), INPUT_BITS)
+        (W, b), *deeper = self._exact()
+        h = _units(F) @ W + b if quiet is None else self._first_layer(F, W, b, quiet, quiet_value)
+        for W, b in deeper:
+            self._activate(h)
+            h = h @ W
+            h += b
         return h.astype(np.float32)
 
+    def _activate(self, h: np.ndarray) -> None:
+        """The hidden activation of ``h`` in place, in units of 2^-16 rounded to whole units."""
+        if self.activation == "logistic":  # h holds -z (negated weights): 2^16 / (1 + exp(-z))
+            np.minimum(h, _EXP_CAP, out=h)
+            np.exp(h, out=h)
+            h += 1.0
+            np.divide(_UNIT, h, out=h)
+        else:
+            np.tanh(h, out=h)
+            h *= _UNIT
+        np.rint(h, out=h)
+
     def _exact(self) -> list[tuple[np.ndarray, np.ndarray]]:
-        """Float64 layers with weights on the grid that keeps every partial sum exact (cached)."""
+        """Float64 layers with weights on the grid that keeps every partial sum exact, scaled by
+        2^-16 to take activations in whole units, negated where a logistic follows (cached)."""
         cached = self.__dict__.get("_layers")
         if cached is None:
             if self.activation not in ("logistic", "tanh"):
                 raise ValueError(f"activation: expected 'logistic' or 'tanh' (bounded), got {self.activation!r}")
             cached = []
+            last = len(self.weights) - 1
             for k, (W, b) in enumerate(zip(self.weights, self.biases)):
                 W = np.asarray(W, np.float64)
                 input_max = 2.0 if k == 0 else 1.0  # a quiet block enters as (x - value), |.| <= 2
                 bound = float(np.abs(W).sum(axis=0).max() * input_max) + 1.0
                 bits = int(min(24, np.floor(52 - INPUT_BITS - np.log2(bound))))
-                cached.append((_grid(W, bits), np.asarray(b, np.float64)))
+                sign = -1.0 if k < last and self.activation == "logistic" else 1.0
+                cached.append((_grid(W, bits) * (sign / _UNIT), sign * np.asarray(b, np.float64)))
             self.__dict__["_layers"] = cached
         return cached
 
     def _first_layer(self, F: np.ndarray, W: np.ndarray, b: np.ndarray, quiet: slice, value: float) -> np.ndarray:
+        """The first product, skipping the quiet block of rows where it reads ``value``: only the rest
+        of the input is put on the grid.  (A row compared busy whose block rounds to ``value``
+        anyway adds exact zeros, so the answer is the same.)"""
         key = (quiet.start, quiet.stop, value)
         cache = self.__dict__.setdefault("_split", {})
         if key not in cache:
+            if value * _UNIT != np.rint(value * _UNIT):  # else a quiet row would differ from its grid value
+                raise ValueError(f"quiet_value: {value!r} is not a multiple of 2**-{INPUT_BITS}; use such a value")
             cols = np.zeros(W.shape[0], dtype=bool)
             cols[quiet] = True
             Wq = np.ascontiguousarray(W[cols])
-            cache[key] = (np.flatnonzero(~cols), np.ascontiguousarray(W[~cols]), Wq, b + value * Wq.sum(axis=0))
+            cache[key] = (np.flatnonzero(~cols), np.ascontiguousarray(W[~cols]), Wq,
+                          b + (value * _UNIT) * Wq.sum(axis=0))
         rest, W_rest, Wq, b_rest = cache[key]
-        Fq = F[:, quiet]
-        h = F[:, rest] @ W_rest + b_rest
-        busy = np.flatnonzero(np.any(Fq != value, axis=1))
+        h = _units(F[:, rest]) @ W_rest
+        h += b_rest
+        busy = np.flatnonzero(np.any(F[:, quiet] != value, axis=1))
         if busy.size:
-            h[busy] += (Fq[busy] - value) @ Wq
+            d = _units(F[busy, quiet])
+            d -= value * _UNIT
+            h[busy] += d @ Wq
         return h
 
     def to_arrays(self) -> dict[str, np.ndarray]:

@@ -473,3 +473,28 @@ def test_the_scan_matches_a_brute_force_ray_cast():
             if got[i].max() == 0:  # inside an obstacle
                 continue
             assert got[i, b] == pytest.approx(expect, abs=0.011), (i, b)
+
+
+def test_the_exact_forward_pass_is_the_plain_network_and_saturates_without_warnings():
+    from scipy.special import expit
+
+    rng = np.random.default_rng(3)
+    sizes = (SPEC.size, 150, 50, 3)
+    for scale in (0.3, 600.0):  # 600: pre-activations past 710, where exp(-z) overflows
+        W = [rng.normal(0, scale / np.sqrt(a), (a, b)).astype(np.float32) for a, b in zip(sizes, sizes[1:])]
+        B = [rng.normal(0, scale, b).astype(np.float32) for b in sizes[1:]]
+        F = rng.uniform(-1, 1, (200, SPEC.size)).astype(np.float32)
+        F[::2, SPEC.sonar] = 1.0
+        F[1::4, SPEC.sonar] = np.float32(1.0 - 2.0 ** -20)  # off "quiet", yet on the 2^-16 grid it is quiet
+        h = np.round(F.astype(np.float64) * 2 ** 16) / 2 ** 16  # the plain network on the same input grid
+        for k, (w, b) in enumerate(zip(W, B)):
+            h = h @ w.astype(np.float64) + b
+            if k < len(W) - 1:
+                h = np.round(expit(h) * 2 ** 16) / 2 ** 16
+        with np.errstate(over="raise", divide="raise", invalid="raise"):  # what numpy warns of by default
+            got = MLPPolicy(W, B, "logistic")(F, quiet=SPEC.sonar)
+        # weights on their exact grid move an output by far less than the 2^-16 activation grid
+        np.testing.assert_allclose(got, h, rtol=0, atol=1e-4 * scale)
+        nearly_quiet = F[1::4].copy()
+        nearly_quiet[:, SPEC.sonar] = 1.0
+        np.testing.assert_array_equal(got[1::4], MLPPolicy(W, B, "logistic")(nearly_quiet, quiet=SPEC.sonar))
