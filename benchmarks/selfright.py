@@ -1,6 +1,7 @@
 """Self-righting (chapter 5): adaptive manifold sampling against grid search, Gabriel clustering against PRM.
 
-Three parts, each printed as a table:
+Three parts, each printed as a table (and 1b: the 1-DOF graph over eight seeds at the
+benchmark's setting and at a tenth of the grid's queries):
 
 1. Figure 5.3 — the 1-, 2- and 3-DOF robots of Figure 5.2 (1-DOF on a 20° slope, the
    others flat): a grid search (every hull face of every joint state on a grid: 1° for
@@ -88,6 +89,35 @@ def fig53(quick: bool, seed: int, robots: list[str] | None = None, fine: bool = 
               f"   grid/adaptive ({stop}, {ad.extra['joint_states']:,} joint states)", flush=True)
         studies.append((name, ad, a))
     return studies
+
+
+def one_dof_seeds(seeds: int = 8) -> None:
+    """Figure 5.3's 1-DOF check over seeds: the benchmark's setting against one at a tenth of the grid's queries."""
+    robot = load_robot(f"{ROBOTS}/1dof.toml")
+    probes = probe_states(robot, 20.0, 500, 1)
+    grid = grid_study(robot, 20.0, 1.0)
+    g = analyse(grid, probes=probes)
+    print(f"\n1b. 1 DOF over seeds 0-{seeds - 1} against the 1° grid ({g['queries']:,} queries): how often the graph is "
+          "the same, and the matched pairs and energies when it is")
+    print(f"{'setting':<58} {'queries':>8} {'ratio':>6} {'same':>5} {'m.pair deg':>10} {'m.energy/grid':>13}")
+    settings = (("budget 700, r_min 0.5°, r_max 10°, batch 50, refine 0.1 (1.)", dict(budget=700, r_min_deg=0.5)),
+                ("budget 210, r_max 20°, batch 10, no refinement", dict(budget=210, r_max_deg=20.0, batch_size=10,
+                                                                       refine=0.0)))
+    for label, opts in settings:
+        queries, same, pair, energy = [], 0, [], []
+        for seed in range(seeds):
+            ad = adaptive_study(robot, 20.0, seed=seed, **opts)
+            a = analyse(ad, probes=probes)
+            c = compare_graphs(a, ad, g, grid, probes)
+            queries.append(a["queries"])
+            if c["same"]:
+                same += 1
+                pair.append(c["pair_length_deg"][0])
+                energy.append(c["transition_energy"][0] / c["transition_energy"][1])
+        q = float(np.mean(queries))
+        print(f"{label:<58} {q:>8.0f} {g['queries'] / q:>5.1f}x {same:>2}/{seeds} "
+              f"{np.mean(pair) if pair else float('nan'):>10.2f} {np.mean(energy) if energy else float('nan'):>12.3f}x",
+              flush=True)
 
 
 def prm_components(study, result, step_deg: float = 1.0, max_edges: int | None = None, seed: int = 0):
@@ -181,6 +211,8 @@ def main() -> None:
     if args.quick and args.fine:
         ap.error("--quick and --fine: choose one")
     studies = fig53(args.quick, args.seed, args.robots, args.fine) if "fig53" not in args.skip else []
+    if "fig53" not in args.skip and not args.quick and (args.robots is None or "1dof" in args.robots):
+        one_dof_seeds()
     if "table51" not in args.skip and studies:
         table51(studies, args.quick, args.seed)
     if "fig56" not in args.skip:
