@@ -125,9 +125,10 @@ class _System:
         self.rows.append((X, res.stable.copy(), R, res.energy.copy(), res.start_id, res.rest_id, faces, res.face_ids))
         return X, res.stable.astype(float), faces, res.start_id, res.face_ids
 
-    def __call__(self, U: np.ndarray):
+    def __call__(self, U: np.ndarray, whole_hulls: bool | None = None):
+        """Label the states ``U``; ``whole_hulls`` (default: the system's) labels every face of their joint states."""
         a = self.angles(U)
-        if self.whole_hulls:
+        if self.whole_hulls if whole_hulls is None else whole_hulls:
             return self.record(self.F.all_faces(np.unique(a[:, :self.m], axis=0)))
         return self.record(self.F(a[:, :self.m], a[:, self.m:]))
 
@@ -175,10 +176,11 @@ def adaptive_study(robot: Robot, slope: float, budget: int, *, seed: int = 0, ba
                                      r_max=np.radians(r_max_deg), tell=sampler.tell)
         cost = system.F.n_queries - before
         spent += cost
-        if turn == 2 or sampler.done or budget - system.F.n_queries <= max(cost, batch_size):
+        if sampler.done or system.F.n_queries >= budget:
             break
-        # the pairs took less than was kept back: the search has the rest, bar what refining its finds may take
-        manifold_search(system, sampler, budget - cost, batch_size, progress)
+        # the pairs took less than was kept back: the search has the rest, bar what refining its finds may
+        # take (after the last refinement, all of it)
+        manifold_search(system, sampler, budget - (cost if turn < 2 else 0), batch_size, progress)
     extra.update(search_queries=system.F.n_queries - spent, refine_queries=spent, refine_rounds=rounds)
     study = system.study(robot, slope, "adaptive", time.perf_counter() - t0)
     study.extra.update(extra, joint_states=system.F.n_hulls)
@@ -194,7 +196,11 @@ def refine_transitions(system: _System, robot: Robot, slope: float, budget: int,
     path uses.  So each edge of the graph has the states between its witness and its
     stable partner queried (equally spaced in joint angles, on the pair's face): the one
     next to the boundary becomes the new witness or partner, or shows a transition the
-    search missed.  The graph is rebuilt each round; a state already asked is not asked
+    search missed.  Each such state is asked alone, on the pair's face, even where the search
+    labels whole hulls: the pair lies on that one face, and the hull's other faces (6 on
+    the 1-DOF robot, more on 3 DOF) would cost a query each and tell the pair nothing (on
+    3 DOF that took the matched pairs from 8.5° to 1.2° for the same budget).  The graph is
+    rebuilt each round; a state already asked is not asked
     again, so a pair that cannot shrink is left as it is.  Stops when every pair is below
     ``r_min``, ``system`` has answered ``budget`` queries, or after ``max_rounds``;
     ``tell`` (e.g. the search's :meth:`~rapt.manifold.ManifoldSampler.tell`) hears every answer.
@@ -228,10 +234,9 @@ def refine_transitions(system: _System, robot: Robot, slope: float, budget: int,
                 new.append(i)
         if not new:
             return rounds
-        cost = max(len(f) for f in study.faces) if system.whole_hulls else 1  # the most faces a hull has had
-        new = new[:max(left // max(cost, 1), 1)]  # like the search's last batch, it may overshoot by one hull
+        new = new[:left]
         asked.update(keys[i] for i in new)
-        answer = system(Q[new])
+        answer = system(Q[new], whole_hulls=False)
         if tell is not None:
             tell(*answer)
     return max_rounds
