@@ -1,7 +1,7 @@
 """Self-righting (chapter 5): adaptive manifold sampling against grid search, Gabriel clustering against PRM.
 
 Three parts, each printed as a table (and 1b: the 1-DOF graph over eight seeds at the
-benchmark's setting and at a tenth of the grid's queries):
+benchmark's setting and at a tenth of the grid's queries, without and with refinement):
 
 1. Figure 5.3 — the 1-, 2- and 3-DOF robots of Figure 5.2 (1-DOF on a 20° slope, the
    others flat): a grid search (every hull face of every joint state on a grid: 1° for
@@ -102,7 +102,10 @@ def one_dof_seeds(seeds: int = 8) -> None:
     print(f"{'setting':<58} {'queries':>8} {'ratio':>6} {'same':>5} {'m.pair deg':>10} {'m.energy/grid':>13}")
     settings = (("budget 700, r_min 0.5°, r_max 10°, batch 50, refine 0.1 (1.)", dict(budget=700, r_min_deg=0.5)),
                 ("budget 210, r_max 20°, batch 10, no refinement", dict(budget=210, r_max_deg=20.0, batch_size=10,
-                                                                       refine=0.0)))
+                                                                       refine=0.0)),
+                ("budget 210, r_min 0.5°, r_max 30°, batch 5, refine 0.3", dict(budget=210, r_min_deg=0.5,
+                                                                               r_max_deg=30.0, batch_size=5,
+                                                                               refine=0.3)))
     for label, opts in settings:
         queries, same, pair, energy = [], 0, [], []
         for seed in range(seeds):
