@@ -200,8 +200,8 @@ def refine_transitions(system: _System, robot: Robot, slope: float, budget: int,
     labels whole hulls: the pair lies on that one face, and the hull's other faces (6 on
     the 1-DOF robot, more on 3 DOF) would cost a query each and tell the pair nothing (on
     3 DOF that took the matched pairs from 8.5° to 1.2° for the same budget).  The graph is
-    rebuilt each round; a state already asked is not asked
-    again, so a pair that cannot shrink is left as it is.  Stops when every pair is below
+    rebuilt each round; a state already asked is not asked again, so a pair that cannot
+    shrink is left as it is.  Stops when every pair is below
     ``r_min``, ``system`` has answered ``budget`` queries, or after ``max_rounds``;
     ``tell`` (e.g. the search's :meth:`~rapt.manifold.ManifoldSampler.tell`) hears every answer.
     Returns the number of rounds run.
