@@ -1,7 +1,8 @@
 """Self-righting (chapter 5): adaptive manifold sampling against grid search, Gabriel clustering against PRM.
 
 Three parts, each printed as a table (and 1b: the 1-DOF graph over eight seeds at the
-benchmark's setting and at a tenth of the grid's queries, without and with refinement):
+benchmark's setting, run on until the resolution cut-offs end it, and at a tenth of the
+grid's queries without and with refinement):
 
 1. Figure 5.3 — the 1-, 2- and 3-DOF robots of Figure 5.2 (1-DOF on a 20° slope, the
    others flat): a grid search (every hull face of every joint state on a grid: 1° for
@@ -17,7 +18,11 @@ benchmark's setting and at a tenth of the grid's queries, without and with refin
    other most of its probes fall in; nodes under 1 % of the probes ignored).  Per method:
    queries, graph size, nodes/edges matched, the self-rightable share of probe states
    (and the share whose verdict agrees), the mean boundary-pair length (joint space) and
-   transition energy over all boundary pairs, and both again over the matched edges.
+   transition energy over all boundary pairs, and both again over the matched edges; then
+   the matched edges' energies at the boundary itself (each method's pairs bisected to
+   0.01° by :func:`~planner.selfright.crossing_energies`, "m.bdy") and how far the reported
+   energy lies from it ("m.err"): a witness up to a grid step past the boundary stands on a
+   face that has turned, and can lose less (or more) than the crossing does.
 2. Table 5.1 — building the graph from the adaptive sample sets: Gabriel-graph
    clustering (Algorithm 8) against PRM-style connection, in which every pair of stable
    states within the same ``d_max`` is checked with a linear local planner (stability
@@ -41,7 +46,7 @@ import time
 import numpy as np
 from scipy.spatial import cKDTree
 
-from planner.selfright import adaptive_study, analyse, compare_graphs, grid_study, probe_states
+from planner.selfright import adaptive_study, analyse, compare_graphs, crossing_energies, grid_study, probe_states
 from sim.robots import StabilityFunction, load_robot
 
 ROBOTS = "examples/robots"
@@ -56,7 +61,8 @@ def fig53(quick: bool, seed: int, robots: list[str] | None = None, fine: bool = 
     print("1. Figure 5.3: grid search against adaptive manifold sampling (a query = one [joint state, face]; "
           "graphs matched on probe states)")
     print(f"{'robot':>5} {'method':>9} {'queries':>9} {'time s':>7} {'nodes':>5} {'edges':>5} {'matched n/e':>13} "
-          f"{'rightable':>9} {'agree':>6} {'pairs':>6} {'pair deg':>8} {'energy J':>8} {'m.pair deg':>10} {'m.energy J':>10}")
+          f"{'rightable':>9} {'agree':>6} {'pairs':>6} {'pair deg':>8} {'energy J':>8} {'m.pair deg':>10} {'m.energy J':>10} "
+          f"{'m.bdy J':>8} {'m.err J':>7}")
     studies = []
     for name, slope, res, opts in [c for c in cases if robots is None or c[0] in robots]:
         robot = load_robot(f"{ROBOTS}/{name}.toml")
@@ -71,6 +77,14 @@ def fig53(quick: bool, seed: int, robots: list[str] | None = None, fine: bool = 
         a = analyse(ad, probes=probes)
         ad_seconds = ad.seconds + time.perf_counter() - t0
         c = compare_graphs(a, ad, g, grid, probes)
+        # the matched edges' energies at the boundary itself (each method's pairs bisected to 0.01°), and how far
+        # what each method reports lies from its own boundary figure
+        ce = [crossing_energies(study, r) for study, r in ((ad, a), (grid, g))]
+        at = c["matched_edges"].T
+        both = np.isfinite(ce[0]["energy"][at[0]]) & np.isfinite(ce[1]["energy"][at[1]])  # resolved in both
+        mean = lambda v: float(v.mean()) if v.size else float("nan")  # noqa: E731
+        bdy = [mean(x["energy"][i][both]) for x, i in zip(ce, at)]
+        err = [mean(np.abs(x["reported"][i] - x["energy"][i])[both]) for x, i in zip(ce, at)]
         for k, (study, r, label, secs) in enumerate(((grid, g, grid.method, grid_seconds), (ad, a, "adaptive", ad_seconds))):
             T = r["graph"].all_transitions
             matched = (f"{c['nodes_matched']}/{c['nodes'][0]}/{c['nodes'][1]} {c['edges_matched']}/{c['edges'][0]}/{c['edges'][1]}"
@@ -78,38 +92,43 @@ def fig53(quick: bool, seed: int, robots: list[str] | None = None, fine: bool = 
             agree = f"{c['rightable_agreement']:.1%}" if k else ""
             print(f"{name:>5} {label:>9} {r['queries']:>9,} {secs:>7.1f} {r['nodes']:>5} {r['edges']:>5} {matched:>13} "
                   f"{r['rightable']:>9.1%} {agree:>6} {len(T['length']):>6,} {np.degrees(T['length']).mean():>8.2f} "
-                  f"{T['energy'].mean():>8.2f} {c['pair_length_deg'][1 - k]:>10.2f} {c['transition_energy'][1 - k]:>10.2f}",
-                  flush=True)
+                  f"{T['energy'].mean():>8.2f} {c['pair_length_deg'][1 - k]:>10.2f} {c['transition_energy'][1 - k]:>10.2f} "
+                  f"{bdy[1 - k]:>8.3f} {err[1 - k]:>7.3f}", flush=True)
         stop = "resolution reached" if ad.extra.get("stopped_by_resolution") else "budget spent"
         pg = np.degrees(g["graph"].all_transitions["length"]).mean() / np.degrees(a["graph"].all_transitions["length"]).mean()
         eg = g["graph"].all_transitions["energy"].mean() / a["graph"].all_transitions["energy"].mean()
         print(f"{'':>5} {'ratio':>9} {g['queries'] / a['queries']:>8.1f}x {'':>7} {'':>5} {'':>5} "
               f"{'same' if c['same'] else 'differs':>13} {'':>9} {'':>6} {'':>6} {pg:>7.2f}x {eg:>7.2f}x "
               f"{c['pair_length_deg'][1] / c['pair_length_deg'][0]:>9.2f}x {c['transition_energy'][1] / c['transition_energy'][0]:>9.2f}x"
+              f" {bdy[1] / bdy[0]:>7.3f}x {err[1] / err[0] if err[0] else float('inf'):>6.0f}x"
               f"   grid/adaptive ({stop}, {ad.extra['joint_states']:,} joint states)", flush=True)
         studies.append((name, ad, a))
     return studies
 
 
 def one_dof_seeds(seeds: int = 8) -> None:
-    """Figure 5.3's 1-DOF check over seeds: the benchmark's setting against one at a tenth of the grid's queries."""
+    """Figure 5.3's 1-DOF check over seeds: the benchmark's setting, the same run until its cut-offs end it
+    (what makes the graph come out the same on every seed), and two at a tenth of the grid's queries."""
     robot = load_robot(f"{ROBOTS}/1dof.toml")
     probes = probe_states(robot, 20.0, 500, 1)
     grid = grid_study(robot, 20.0, 1.0)
     g = analyse(grid, probes=probes)
     print(f"\n1b. 1 DOF over seeds 0-{seeds - 1} against the 1° grid ({g['queries']:,} queries): how often the graph is "
           "the same, and the matched pairs and energies when it is")
-    print(f"{'setting':<58} {'queries':>8} {'ratio':>6} {'same':>5} {'m.pair deg':>10} {'m.energy/grid':>13}")
+    print(f"{'setting':<58} {'queries':>8} {'ratio':>6} {'same':>5} {'m.pair deg':>10} {'m.energy/grid':>13} "
+          f"{'ended by':>10}")
     settings = (("budget 700, r_min 0.5°, r_max 10°, batch 50, refine 0.1 (1.)", dict(budget=700, r_min_deg=0.5)),
+                ("as 1., until the resolution cut-offs end it (budget 5,000)", dict(budget=5000, r_min_deg=0.5)),
                 ("budget 210, r_max 20°, batch 10, no refinement", dict(budget=210, r_max_deg=20.0, batch_size=10,
                                                                        refine=0.0)),
                 ("budget 210, r_min 0.5°, r_max 30°, batch 5, refine 0.3", dict(budget=210, r_min_deg=0.5,
                                                                                r_max_deg=30.0, batch_size=5,
                                                                                refine=0.3)))
     for label, opts in settings:
-        queries, same, pair, energy = [], 0, [], []
+        queries, same, pair, energy, converged = [], 0, [], [], 0
         for seed in range(seeds):
             ad = adaptive_study(robot, 20.0, seed=seed, **opts)
+            converged += bool(ad.extra["stopped_by_resolution"])
             a = analyse(ad, probes=probes)
             c = compare_graphs(a, ad, g, grid, probes)
             queries.append(a["queries"])
@@ -119,8 +138,8 @@ def one_dof_seeds(seeds: int = 8) -> None:
                 energy.append(c["transition_energy"][0] / c["transition_energy"][1])
         q = float(np.mean(queries))
         print(f"{label:<58} {q:>8.0f} {g['queries'] / q:>5.1f}x {same:>2}/{seeds} "
-              f"{np.mean(pair) if pair else float('nan'):>10.2f} {np.mean(energy) if energy else float('nan'):>12.3f}x",
-              flush=True)
+              f"{np.mean(pair) if pair else float('nan'):>10.2f} {np.mean(energy) if energy else float('nan'):>12.3f}x "
+              f"{f'cut-offs {converged}' if converged else 'budget':>10}", flush=True)
 
 
 def prm_components(study, result, step_deg: float = 1.0, max_edges: int | None = None, seed: int = 0):

@@ -242,6 +242,73 @@ def refine_transitions(system: _System, robot: Robot, slope: float, budget: int,
     return max_rounds
 
 
+def crossing_energies(study: SelfRightStudy, result: dict, tol_deg: float = 0.01) -> dict:
+    """What each edge's transition loses at the boundary itself: its boundary pairs bisected to ``tol_deg``.
+
+    A witness lies up to a pair's length past the boundary, where the face has already
+    turned, so its energy is not what the robot loses when its joints carry it across: on
+    the 2-DOF robot's edge 1 -> 0 the 1° grid's cheapest witness loses 4.65 J, the boundary
+    it stands for 5.05 J.  So every transition of every edge is bisected in joint space, on
+    the pair's faces (the witness's, or for a continuation the partner's; partner stable,
+    witness tipping onto the same resting face), until the pair is under ``tol_deg``; a
+    pair whose midpoint leaves both faces or tips elsewhere is left out (the robot moving
+    from the partner would meet something else first).  A measurement, as a quasi-static sweep is:
+    its queries go to a stability function of its own, not the study's.  Returns, aligned
+    with ``result["graph"].edges``: ``energy`` (the lowest at the boundary; NaN when no pair
+    resolved), ``pairs`` (how many resolved) and ``reported`` (the edge's own energy).
+    """
+    G: TransitionGraph = result["graph"]
+    T, e = G.all_transitions, G.edges
+    settled = np.isfinite(study.rest).all(axis=1)
+    U = np.concatenate([study.X, study.rest[settled], result["extra_states"]])
+    lo, hi = study.bounds[:, 0], study.bounds[:, 1]
+    periodic = full_turn(lo, hi)
+    m = study.n_free
+    w = lo + U[T["witness"]] * (hi - lo)
+    p = lo + U[T["partner"]] * (hi - lo)
+    face, rest_face = study.ids[T["witness"]], study.rest_ids[T["witness"]]
+    other = face if G.ids is None else G.ids[T["partner"]]  # a continuation's partner is on the face replacing it
+    energy = study.energy[T["witness"]].astype(float).copy()
+    ok = np.ones(len(w), dtype=bool)
+    F = StabilityFunction(study.robot, study.slope)
+
+    def toward(a, b):  # b - a, the shorter way round on periodic coordinates
+        return np.where(periodic, np.mod(b - a + np.pi, 2 * np.pi) - np.pi, b - a)
+
+    tol = np.radians(tol_deg)
+    active = ok & (np.linalg.norm(toward(w, p)[:, :m], axis=1) > tol)
+    while active.any():
+        k = np.flatnonzero(active)
+        mid = w[k] + 0.5 * toward(w[k], p[k])
+        r = F(mid[:, :m], mid[:, m:])
+        start, stable, rest, lost = r.start.copy(), r.stable.copy(), r.rest_id.copy(), r.energy.copy()
+        for i in np.flatnonzero((r.start_id != face[k]) & (r.start_id != other[k])):  # a neighbouring face: ask
+            on = np.flatnonzero(r.face_ids[i] == face[k[i]])                          # for the pair's own
+            if not on.size:
+                on = np.flatnonzero(r.face_ids[i] == other[k[i]])
+            if not on.size:
+                ok[k[i]] = False  # both faces are gone between partner and witness
+                continue
+            again = F(mid[i:i + 1, :m], r.faces[i][on[:1]])
+            start[i], stable[i], rest[i], lost[i] = again.start[0], again.stable[0], again.rest_id[0], again.energy[0]
+        here = ok[k]
+        s = here & stable
+        u = here & ~stable & (rest == rest_face[k])
+        ok[k[here & ~s & ~u]] = False  # tips somewhere else: another transition lies between
+        p[k[s], :m], p[k[s], m:] = mid[s, :m], start[s]
+        w[k[u], :m], w[k[u], m:] = mid[u, :m], start[u]
+        energy[k[u]] = lost[u]
+        active = ok & (np.linalg.norm(toward(w, p)[:, :m], axis=1) > tol)
+    best = np.full(G.n_edges, np.nan)
+    pairs = np.zeros(G.n_edges, dtype=int)
+    for n, (s_, d_) in enumerate(zip(e["src"], e["dst"])):
+        sel = ok & (T["src"] == s_) & (T["dst"] == d_)
+        pairs[n] = int(sel.sum())
+        if pairs[n]:
+            best[n] = float(energy[sel].min())
+    return {"energy": best, "pairs": pairs, "reported": np.asarray(e["energy"], float)}
+
+
 def grid_study(robot: Robot, slope: float, resolution_deg: float) -> SelfRightStudy:
     """The baseline: every hull face of every joint state on a grid of ``resolution_deg`` degrees."""
     system = _System(robot, slope)
@@ -471,7 +538,8 @@ def compare_graphs(a: dict, study_a: SelfRightStudy, b: dict, study_b: SelfRight
     most of its probes fall in.  Nodes holding fewer than ``min_share`` of the stable
     probes are ignored.  Reports nodes and edges matched both ways, and the share of all
     probe states whose self-rightability agrees, and — over the edges matched in both
-    graphs — the mean boundary-pair length and transition energy of each.
+    graphs — the mean boundary-pair length and transition energy of each, and which edge of
+    each they are (``matched_edges``: rows of indices into ``a``'s and ``b``'s edges).
     """
     probes = _probes(probes)
     ga, gb = a["graph"], b["graph"]
@@ -497,13 +565,13 @@ def compare_graphs(a: dict, study_a: SelfRightStudy, b: dict, study_b: SelfRight
     nodes_matched = sum(1 for n, m in ab.items() if ba.get(m) == n)
 
     def edge_set(g, keep, remap=None):
-        """{(src, dst): (energy, boundary-pair length)}, the lowest-energy edge per mapped pair."""
+        """{(src, dst): (energy, boundary-pair length, edge index)}, the lowest-energy edge per mapped pair."""
         es = {}
-        for s, d, e, L in zip(g.edges["src"], g.edges["dst"], g.edges["energy"], g.edges["length"]):
+        for k, (s, d, e, L) in enumerate(zip(g.edges["src"], g.edges["dst"], g.edges["energy"], g.edges["length"])):
             if s in keep and d in keep:
                 key = (remap[s], remap[d]) if remap else (int(s), int(d))
                 if key not in es or e < es[key][0]:
-                    es[key] = (float(e), float(L))
+                    es[key] = (float(e), float(L), k)
         return es
 
     ea, eb = edge_set(ga, big_a, ab), edge_set(gb, big_b)
@@ -517,7 +585,8 @@ def compare_graphs(a: dict, study_a: SelfRightStudy, b: dict, study_b: SelfRight
             "rightable_agreement": float((ra == rb).mean()),
             # on the matched edges (the same transitions in both graphs): a's and b's means
             "pair_length_deg": (mean(np.degrees(pair[:, 0])), mean(np.degrees(pair[:, 1]))),
-            "transition_energy": (mean(energy[:, 0]), mean(energy[:, 1]))}
+            "transition_energy": (mean(energy[:, 0]), mean(energy[:, 1])),
+            "matched_edges": np.array([[ea[k][2], eb[k][2]] for k in both], dtype=int).reshape(-1, 2)}
 
 
 # -- outputs ------------------------------------------------------------------------------------

@@ -316,3 +316,27 @@ def test_grid_connections_join_neighbouring_joint_states_on_one_face_or_its_repl
     settled = np.flatnonzero(np.isfinite(grid.rest).all(axis=1))
     r = i[i >= N] - N
     assert np.array_equal(grid.ids[j[i >= N]], grid.rest_ids[settled[r]])
+
+
+def test_crossing_energies_are_the_boundary_s_whatever_the_grid_spacing():
+    """A witness lies up to a grid step past the boundary, so a coarse grid reports other energies;
+    bisected to the boundary, the 3° and the 10° grids' transitions lose the same, and the one home
+    from the region the sweep starts in loses what the sweep does (38.58 J)."""
+    from planner.selfright import analyse, crossing_energies, grid_study
+    from sim.robots import load_robot
+
+    robot = load_robot("examples/robots/1dof.toml")
+    out = {}
+    for res in (3.0, 10.0):
+        grid = grid_study(robot, 20.0, res)
+        g = analyse(grid, probes=np.zeros((0, 2)))
+        c = crossing_energies(grid, g, tol_deg=0.01)
+        assert len(c["energy"]) == g["edges"] and np.all(c["pairs"] <= len(g["graph"].all_transitions["src"]))
+        assert np.isfinite(c["energy"]).sum() >= 5 and np.array_equal(c["reported"], g["graph"].edges["energy"])
+        out[res] = c
+    fine, coarse = out[3.0], out[10.0]
+    at = np.isfinite(coarse["energy"])
+    nearest = lambda v, ref: np.min(np.abs(ref[np.isfinite(ref)][None, :] - v[:, None]), axis=1)  # noqa: E731
+    assert np.all(nearest(coarse["energy"][at], fine["energy"]) < 0.01)
+    assert np.max(nearest(coarse["reported"][at], fine["reported"])) > 0.5  # what the grids report disagrees
+    assert np.any(np.abs(fine["energy"] - 38.58) < 0.01)
