@@ -14,6 +14,11 @@ core:
 * NNDV information (section 5.4.3): over the K nearest evaluated states, the label
   variance σ and the volume ``V`` (distance to the farthest of the K); ``I = α σ/σ_max + β V``
   (σ scaled to [0, 1] so that α and β weigh comparable terms);
+* outcomes (optional, ``tell(..., outcomes=...)``): where each unstable state ends up.
+  Neighbours on one manifold that tip to different places then disagree too, and σ is their
+  impurity (half the Gini index: the label variance when there are two classes).  A stable
+  island on a face, narrower than the sample spacing, reads "unstable" on both sides, but
+  its two sides tip over opposite edges of the face: different outcomes bracket it.
 * resolution cut-offs end the search (Algorithm 6): a candidate whose neighbours all agree
   is dropped once ``V < r_max``, one on a boundary once ``V < r_min``; when no candidate is
   left :attr:`done` is set and :meth:`ask` returns no points.
@@ -113,11 +118,13 @@ class ManifoldSampler(Sampler):
         self._faces: list[np.ndarray] = []
         self._ids: list[int] = []
         self._face_ids: list[np.ndarray] | None = []
+        self._outcomes: list[float] | None = []
         self.last_information: np.ndarray | None = None
 
     # -- data --------------------------------------------------------------------------------
     def tell(self, X: np.ndarray, Y: np.ndarray, faces: Sequence[np.ndarray] | None = None,
-             ids: np.ndarray | None = None, face_ids: Sequence[np.ndarray] | None = None) -> None:
+             ids: np.ndarray | None = None, face_ids: Sequence[np.ndarray] | None = None,
+             outcomes: np.ndarray | None = None) -> None:
         """Record the states the system used, their labels and, per state, its valid constrained values.
 
         ``faces[i]`` is a (k_i, d − n_free) array of unit-cube constrained coordinates valid
@@ -126,6 +133,9 @@ class ManifoldSampler(Sampler):
         vertices): whole-hull information then follows a face by name, and a face that has
         disappeared at a neighbour counts as a change there (section 5.2: a face ceasing to
         exist ends its node), so the search resolves where faces appear and vanish too.
+        ``outcomes[i]`` optionally names where an unstable ``X[i]`` ends up (any number, e.g.
+        its resting face's identity; ignored for stable states); see the module docstring.
+        Like identities they count only when every state has them.
         """
         X = np.asarray(X, dtype=float).reshape(-1, self.dim)
         if faces is None:
@@ -137,7 +147,13 @@ class ManifoldSampler(Sampler):
             raise ValueError(f"ids, face_ids: give both, one per state ({len(X)}), or neither")
         if ids is None or self._face_ids is None or (self.n_told and not self._ids):
             self._face_ids = None  # identities only help when every state has them
+        if outcomes is not None and len(outcomes) != len(X):
+            raise ValueError(f"outcomes: expected one per state ({len(X)}), got {len(outcomes)}")
+        if outcomes is None or self._outcomes is None or (self.n_told and not self._outcomes):
+            self._outcomes = None  # as identities: every state's, or none
         super().tell(X, Y)
+        if self._outcomes is not None:
+            self._outcomes.extend(np.asarray(outcomes, dtype=float).reshape(-1).tolist())
         self._faces.extend(faces)
         if self._face_ids is not None:
             self._ids.extend(int(v) for v in ids)
@@ -199,9 +215,25 @@ class ManifoldSampler(Sampler):
         k = min(self.k, self.n_told)
         dist, nbr = tree.query(self.embed(candidates), k=k, workers=query_workers(len(candidates)))
         dist, nbr = dist.reshape(len(candidates), k), nbr.reshape(len(candidates), k)
-        sigma = neighbour_variance(self.Y[:, 0][nbr])
+        sigma = self._spread(self._codes()[nbr])
         volume = dist.max(axis=1)
         return self.alpha * sigma / 0.25 + self.beta * volume, sigma, volume
+
+    _STABLE, _ABSENT = -3.0, -2.0  # classes beside the told outcomes: stable, face gone at a neighbour
+
+    def _codes(self) -> np.ndarray:
+        """Each told state's class: its 0/1 label, or with outcomes "stable" or where it ends up."""
+        Y = self.Y[:, 0]
+        if not self._outcomes:
+            return Y
+        return np.where(Y > 0.5, self._STABLE, np.asarray(self._outcomes, dtype=float))
+
+    def _spread(self, codes: np.ndarray) -> np.ndarray:
+        """σ of each row of neighbour classes: the label variance, or with outcomes half the Gini impurity."""
+        if not self._outcomes:
+            return neighbour_variance(codes)
+        same = (codes[:, :, None] == codes[:, None, :]).mean(axis=(1, 2))
+        return (1.0 - same) / 2.0  # two classes: p (1 - p), the variance of 0/1 labels
 
     # -- Algorithm 6's selection and stopping rule --------------------------------------------
     def ask(self, n: int) -> np.ndarray:
@@ -246,7 +278,8 @@ class ManifoldSampler(Sampler):
         Algorithm 7 applied to labels), so σ is the label variance *along* one manifold and
         is not raised by a parallel face nearby.  V is the distance in θ to the farthest of the K.
         """
-        X, Y = self.X, self.Y[:, 0]
+        X, Y = self.X, self._codes()
+        absent = self._ABSENT if self._outcomes else 0.0  # a face gone at a neighbour: unstable, or its own class
         f = self.n_free
         thetas, inv = np.unique(X[:, :f], axis=0, return_inverse=True)
         inv = inv.reshape(-1)
@@ -271,12 +304,12 @@ class ManifoldSampler(Sampler):
             want = nbr.astype(np.int64) * (rank.max() + 1) + rank[len(X):][:, None]
             at = np.clip(np.searchsorted(key[o], want), 0, len(key) - 1)
             found = key[o][at] == want
-            lab = np.where(found, Y[o][at], 0.0)
+            lab = np.where(found, Y[o][at], absent)
         else:
             gap = np.linalg.norm(faces[nbr] - emb[:, None, None, 2 * f:], axis=-1)  # (p, k, faces)
             gap = np.where(np.isfinite(gap), gap, np.inf)
             lab = np.take_along_axis(labels[nbr], gap.argmin(axis=2)[..., None], axis=2)[..., 0]
-        sigma = neighbour_variance(lab)
+        sigma = self._spread(lab)
         volume = dist.max(axis=1)
         return self.alpha * sigma / 0.25 + self.beta * volume, sigma, volume
 
@@ -332,9 +365,10 @@ def manifold_search(fn: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, Seq
                     progress: Callable[[int, int], None] | None = None) -> ManifoldSampler:
     """Algorithm 6's loop: ask, evaluate, tell, until ``budget`` evaluations or the cut-offs end it.
 
-    ``fn(queries) -> (used_states, labels, faces[, ids, face_ids])`` evaluates unit-cube
-    queries and returns the states actually used (after projection), their 0/1 labels,
-    valid constrained values and, optionally, manifold identities (see :meth:`ManifoldSampler.tell`).
+    ``fn(queries) -> (used_states, labels, faces[, ids, face_ids[, outcomes]])`` evaluates
+    unit-cube queries and returns the states actually used (after projection), their 0/1
+    labels, valid constrained values and, optionally, manifold identities and where each
+    unstable state ends up (see :meth:`ManifoldSampler.tell`).
     """
     if budget < 1 or batch_size < 1:
         raise ValueError(f"budget, batch_size: expected positive integers, got {budget}, {batch_size}")

@@ -340,3 +340,52 @@ def test_crossing_energies_are_the_boundary_s_whatever_the_grid_spacing():
     assert np.all(nearest(coarse["energy"][at], fine["energy"]) < 0.01)
     assert np.max(nearest(coarse["reported"][at], fine["reported"])) > 0.5  # what the grids report disagrees
     assert np.any(np.abs(fine["energy"] - 38.58) < 0.01)
+
+
+def test_outcomes_bracket_a_stable_island_narrower_than_the_interior_resolution():
+    """Face 1 is stable only on t in [0.48, 0.52] (7°) and tips to 10 below it, to 20 above; face 2 is stable.
+
+    Every sample off the island reads "unstable" on face 1, so the label variance cannot see
+    it between two samples 20° apart; where they tip can, and the search then finds the island.
+    """
+    bounds = [[0.0, np.pi], [0.0, np.pi]]
+    faces = np.array([[0.25], [0.75]])
+
+    def system(Q, with_outcomes=True):
+        t = np.unique(Q[:, 0])
+        X = np.column_stack([np.repeat(t, 2), np.tile(faces[:, 0], len(t))])
+        y = ((X[:, 1] > 0.5) | (np.abs(X[:, 0] - 0.5) <= 0.02)).astype(float)
+        ids = np.where(X[:, 1] > 0.5, 2, 1)
+        rest = np.where(y > 0, ids, np.where(X[:, 0] < 0.5, 10, 20)).astype(float)
+        out = (X, y, [faces] * len(X), ids, [np.array([1, 2])] * len(X))
+        return out + (rest,) if with_outcomes else out
+
+    def sampler(seed):
+        return ManifoldSampler(1, bounds, seed=seed, r_min=np.radians(0.5), r_max=np.radians(20.0), n_initial=6,
+                               whole_hulls=True)
+
+    # σ at t = 0.5 on face 1, between samples 36° apart that all read unstable there
+    told = np.array([[0.1, 0.25], [0.3, 0.25], [0.7, 0.25], [0.9, 0.25]])
+    plain, steered = sampler(0), sampler(0)
+    plain.tell(*system(told, with_outcomes=False))
+    steered.tell(*system(told))
+    at = np.array([[0.5, 0.25]])
+    assert plain.hull_information(at, np.array([1]))[1][0] == 0.0
+    assert steered.hull_information(at, np.array([1]))[1][0] > 0.0
+    with pytest.raises(ValueError, match="outcomes"):
+        sampler(0).tell(*system(told)[:5], outcomes=np.zeros(3))
+    # the search, told where states tip, samples the island and resolves both its edges on every
+    # seed; without, it finds the island only where a sample happens to land on it
+    found_blind = 0
+    for seed in range(8):
+        s = sampler(seed)
+        manifold_search(system, s, budget=200, batch_size=4)
+        on_face = s.X[:, 1] == 0.25
+        assert (on_face & (s.Y[:, 0] > 0)).any(), f"seed {seed}: island not found"
+        t = s.X[on_face, 0]
+        for edge in (0.48, 0.52):
+            assert np.abs(t - edge).min() * np.pi < np.radians(1.0), f"seed {seed}: edge {edge} not resolved"
+        blind = sampler(seed)
+        manifold_search(lambda Q: system(Q, with_outcomes=False), blind, budget=200, batch_size=4)
+        found_blind += bool(((blind.X[:, 1] == 0.25) & (blind.Y[:, 0] > 0)).any())
+    assert found_blind <= 4
