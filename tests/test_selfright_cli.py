@@ -56,6 +56,23 @@ def test_slope_option_overrides_the_robot_file(tmp_path):
     assert json.loads((tmp_path / "graph.json").read_text())["slope_deg"] == 0.0
 
 
+def test_outcomes_option_steers_the_search_by_where_states_tip(tmp_path):
+    """--outcomes at a tenth of the 1° grid's queries and a coarse r_max: the 1-DOF graph's five regions and seven
+    transitions (this seed without it: four and five, a narrow stable island stepped over)."""
+    args = ["examples/robots/1dof.toml", "--budget", "210", "--r-min", "0.5", "--r-max", "45", "--batch-size", "10",
+            "--refine", "0.4", "--seed", "1"]
+    docs = []
+    for extra in ([], ["--outcomes"]):
+        out = tmp_path / ("steered" if extra else "plain")
+        res = runner.invoke(app, args + extra + ["--out", str(out)])
+        assert res.exit_code == 0, res.output
+        docs.append(json.loads((out / "graph.json").read_text()))
+    plain, steered = docs
+    assert steered["queries"] <= 210 + 12 and steered["self_rightable_fraction"] == 1.0
+    assert len(steered["nodes"]) >= 5 and len(steered["edges"]) >= 7
+    assert len(plain["nodes"]) < len(steered["nodes"]) and len(plain["edges"]) < len(steered["edges"])
+
+
 def test_selfright_reads_a_urdf_robot(tmp_path):
     """The URDF twin of 1dof.toml (URDF has no slope, so --slope gives the TOML file's 20°) gives the same graph."""
     docs = []
