@@ -2,7 +2,7 @@
 
 Three parts, each printed as a table (and 1b: the 1-DOF graph over eight seeds at the
 benchmark's setting, run on until the resolution cut-offs end it, and at a tenth of the
-grid's queries without and with refinement):
+grid's queries without and with refinement, and told where states tip):
 
 1. Figure 5.3 — the 1-, 2- and 3-DOF robots of Figure 5.2 (1-DOF on a 20° slope, the
    others flat): a grid search (every hull face of every joint state on a grid: 1° for
@@ -108,7 +108,8 @@ def fig53(quick: bool, seed: int, robots: list[str] | None = None, fine: bool = 
 
 def one_dof_seeds(seeds: int = 8) -> None:
     """Figure 5.3's 1-DOF check over seeds: the benchmark's setting, the same run until its cut-offs end it
-    (what makes the graph come out the same on every seed), and two at a tenth of the grid's queries."""
+    (what makes the graph come out the same on every seed), and four at a tenth of the grid's queries (the
+    last with the search told where states tip)."""
     robot = load_robot(f"{ROBOTS}/1dof.toml")
     probes = probe_states(robot, 20.0, 500, 1)
     grid = grid_study(robot, 20.0, 1.0)
@@ -123,7 +124,12 @@ def one_dof_seeds(seeds: int = 8) -> None:
                                                                        refine=0.0)),
                 ("budget 210, r_min 0.5°, r_max 30°, batch 5, refine 0.3", dict(budget=210, r_min_deg=0.5,
                                                                                r_max_deg=30.0, batch_size=5,
-                                                                               refine=0.3)))
+                                                                               refine=0.3)),
+                ("budget 210, r_min 0.5°, r_max 45°, batch 10, refine 0.4", dict(budget=210, r_min_deg=0.5,
+                                                                                r_max_deg=45.0, batch_size=10,
+                                                                                refine=0.4)),
+                ("the same, told where states tip (outcomes)", dict(budget=210, r_min_deg=0.5, r_max_deg=45.0,
+                                                                      batch_size=10, refine=0.4, outcomes=True)))
     for label, opts in settings:
         queries, same, pair, energy, converged = [], 0, [], [], 0
         for seed in range(seeds):
