@@ -108,8 +108,8 @@ def fig53(quick: bool, seed: int, robots: list[str] | None = None, fine: bool = 
 
 def one_dof_seeds(seeds: int = 8) -> None:
     """Figure 5.3's 1-DOF check over seeds: the benchmark's setting, the same run until its cut-offs end it
-    (what makes the graph come out the same on every seed), and four at a tenth of the grid's queries (the
-    last with the search told where states tip)."""
+    (what makes the graph come out the same on every seed), and five at a tenth of the grid's queries (the
+    last two with the search told where states tip)."""
     robot = load_robot(f"{ROBOTS}/1dof.toml")
     probes = probe_states(robot, 20.0, 500, 1)
     grid = grid_study(robot, 20.0, 1.0)
@@ -129,7 +129,9 @@ def one_dof_seeds(seeds: int = 8) -> None:
                                                                                 r_max_deg=45.0, batch_size=10,
                                                                                 refine=0.4)),
                 ("the same, told where states tip (outcomes)", dict(budget=210, r_min_deg=0.5, r_max_deg=45.0,
-                                                                      batch_size=10, refine=0.4, outcomes=True)))
+                                                                      batch_size=10, refine=0.4, outcomes=True)),
+                ("the same with refine 0.5", dict(budget=210, r_min_deg=0.5, r_max_deg=45.0, batch_size=10,
+                                                  refine=0.5, outcomes=True)))
     for label, opts in settings:
         queries, same, pair, energy, converged = [], 0, [], [], 0
         for seed in range(seeds):
