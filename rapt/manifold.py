@@ -16,7 +16,8 @@ core:
   (σ scaled to [0, 1] so that α and β weigh comparable terms);
 * outcomes (optional, ``tell(..., outcomes=...)``): where each unstable state ends up.
   Neighbours on one manifold that tip to different places then disagree too, and σ is their
-  impurity (half the Gini index: the label variance when there are two classes).  A stable
+  unalikeability (eq. 3.6) on the variance's scale (the label variance when there are two
+  classes).  A stable
   island on a face, narrower than the sample spacing, reads "unstable" on both sides, but
   its two sides tip over opposite edges of the face: different outcomes bracket it.
 * resolution cut-offs end the search (Algorithm 6): a candidate whose neighbours all agree
@@ -41,7 +42,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from rapt.candidates import select_batch
-from rapt.information import neighbour_variance
+from rapt.information import neighbour_variance, unalikeability
 from rapt.parallel import query_workers
 from rapt.samplers.base import Sampler
 
@@ -229,11 +230,13 @@ class ManifoldSampler(Sampler):
         return np.where(Y > 0.5, self._STABLE, np.asarray(self._outcomes, dtype=float))
 
     def _spread(self, codes: np.ndarray) -> np.ndarray:
-        """σ of each row of neighbour classes: the label variance, or with outcomes half the Gini impurity."""
+        """σ of each row of neighbour classes: the label variance, or with outcomes their unalikeability
+        (eq. 3.6) times (k − 1) / 2k, half the Gini impurity: for two classes exactly the 0/1 variance."""
         if not self._outcomes:
             return neighbour_variance(codes)
-        same = (codes[:, :, None] == codes[:, None, :]).mean(axis=(1, 2))
-        return (1.0 - same) / 2.0  # two classes: p (1 - p), the variance of 0/1 labels
+        k = codes.shape[1]
+        _, classes = np.unique(codes, return_inverse=True)
+        return unalikeability(classes.reshape(codes.shape)) * (k - 1) / (2 * k)
 
     # -- Algorithm 6's selection and stopping rule --------------------------------------------
     def ask(self, n: int) -> np.ndarray:
