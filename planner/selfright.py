@@ -89,6 +89,11 @@ class SelfRightStudy:
         return K[new], (ids[new] if ids is not None else None)
 
 
+def _toward(a: np.ndarray, b: np.ndarray, periodic) -> np.ndarray:
+    """``b − a`` in angles, the shorter way round on the ``periodic`` coordinates."""
+    return np.where(periodic, np.mod(b - a + np.pi, 2 * np.pi) - np.pi, b - a)
+
+
 def _row_keys(A: np.ndarray) -> np.ndarray:
     """Hashable keys of rows, equal for rows equal to ~1e-9."""
     R = np.ascontiguousarray(np.round(np.asarray(A, float), 9) + 0.0)
@@ -232,7 +237,7 @@ def refine_transitions(system: _System, robot: Robot, slope: float, budget: int,
         settled = np.isfinite(study.rest).all(axis=1)
         U = np.concatenate([study.X, study.rest[settled], extra])
         w, p = lo + U[e["witness"][todo]] * span, lo + U[e["partner"][todo]] * span  # angles
-        d = np.where(periodic, np.mod(p - w + np.pi, 2 * np.pi) - np.pi, p - w)  # the shorter way round
+        d = _toward(w, p, periodic)
         frac = np.arange(1, splits) / splits
         Q = _to_unit((w[:, None] + frac[None, :, None] * d[:, None]).reshape(-1, len(lo)), system.lo, system.hi)
         keys = [k.tobytes() for k in _row_keys(Q[:, :study.n_free])]
@@ -280,15 +285,11 @@ def crossing_energies(study: SelfRightStudy, result: dict, tol_deg: float = 0.01
     energy = study.energy[T["witness"]].astype(float).copy()
     ok = np.ones(len(w), dtype=bool)
     F = StabilityFunction(study.robot, study.slope)
-
-    def toward(a, b):  # b - a, the shorter way round on periodic coordinates
-        return np.where(periodic, np.mod(b - a + np.pi, 2 * np.pi) - np.pi, b - a)
-
     tol = np.radians(tol_deg)
-    active = ok & (np.linalg.norm(toward(w, p)[:, :m], axis=1) > tol)
+    active = ok & (np.linalg.norm(_toward(w, p, periodic)[:, :m], axis=1) > tol)
     while active.any():
         k = np.flatnonzero(active)
-        mid = w[k] + 0.5 * toward(w[k], p[k])
+        mid = w[k] + 0.5 * _toward(w[k], p[k], periodic)
         r = F(mid[:, :m], mid[:, m:])
         start, stable, rest, lost = r.start.copy(), r.stable.copy(), r.rest_id.copy(), r.energy.copy()
         for i in np.flatnonzero((r.start_id != face[k]) & (r.start_id != other[k])):  # a neighbouring face: ask
@@ -307,7 +308,7 @@ def crossing_energies(study: SelfRightStudy, result: dict, tol_deg: float = 0.01
         p[k[s], :m], p[k[s], m:] = mid[s, :m], start[s]
         w[k[u], :m], w[k[u], m:] = mid[u, :m], start[u]
         energy[k[u]] = lost[u]
-        active = ok & (np.linalg.norm(toward(w, p)[:, :m], axis=1) > tol)
+        active = ok & (np.linalg.norm(_toward(w, p, periodic)[:, :m], axis=1) > tol)
     best = np.full(G.n_edges, np.nan)
     pairs = np.zeros(G.n_edges, dtype=int)
     for n, (s_, d_) in enumerate(zip(e["src"], e["dst"])):
