@@ -95,6 +95,24 @@ def test_parallel_manifolds_stay_apart_and_extra_states_fill_gaps():
     assert g3.n_nodes < 3
 
 
+def test_an_extra_state_guessed_unstable_does_not_hide_a_transition():
+    """A's states at t = 0.25 and 0.3 are not evaluated; an extra state at 0.3 takes its label from the nearest
+    evaluated one (0.35, unstable).  That guess lies inside the ball of the real boundary pair (0.2 stable,
+    0.35 unstable), and if it blocked the pair, A's lower region would have no transition at all."""
+    t, X, stable, rest, energy = two_manifolds()
+    on_a = X[:, 1] == 0
+    gone = on_a & np.isin(np.round(X[:, 0], 6), [0.25, 0.3])
+    extra = np.array([[0.3, 0.0]])
+    g = transition_graph(X[~gone], stable[~gone], rest[~gone], energy[~gone], extra, max_edge=0.2)
+    assert not g.stable[-1] and g.end_node[-1] == int(g.node_of([[0.5, 1.0]])[0])  # still guessed unstable
+    a_low, b = int(g.node_of([[0.1, 0.0]])[0]), int(g.node_of([[0.5, 1.0]])[0])
+    e = g.edges
+    k = np.flatnonzero((e["src"] == a_low) & (e["dst"] == b))
+    assert k.size == 1, "A's lower region lost its transition onto B"
+    assert X[~gone][e["witness"][k[0]], 0] == pytest.approx(0.35)
+    assert g.points[e["partner"][k[0]], 0] == pytest.approx(0.2) and e["length"][k[0]] == pytest.approx(0.15)
+
+
 def test_manifold_sampler_learns_from_projected_states_and_stops_at_resolution():
     """Valid states: phi in {0.25, 0.75} (a projection snaps phi to the nearer); stable iff t < 0.5 on the lower one."""
     bounds = [[0.0, np.pi], [0.0, np.pi]]
