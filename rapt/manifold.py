@@ -26,7 +26,10 @@ core:
 * ``whole_hulls=True`` is for systems that label *every* valid φ of each asked θ (one hull
   computation settles every face): candidates are then ranked per free state θ (its best
   face's information), a batch holds distinct θ, and ``ask(n)`` returns about
-  ``n / mean faces`` of them so that ``n`` stays the number of labelled states.
+  ``n / mean faces`` of them so that ``n`` stays the number of labelled states.  A θ told
+  with one face only (a single-face query, as the transition refinement asks) still names
+  its hull's other faces: there they are present, not gone, and read as the nearest θ
+  that labelled them.
 
 Distances are taken between angles embedded as ``(cos a, sin a)``: section 5.4.1's cosine
 distance ``|cos x₀ − cos x₁|`` is periodic but maps ``a`` and ``−a`` together; the
@@ -300,14 +303,30 @@ class ManifoldSampler(Sampler):
         dist, nbr = tree.query(emb[:, :2 * f], k=k, workers=query_workers(len(candidates)))
         dist, nbr = dist.reshape(len(candidates), k), nbr.reshape(len(candidates), k)
         if self._face_ids and cand_ids is not None:  # follow the face by name; absent counts as unstable
-            _, rank = np.unique(np.concatenate([np.asarray(self._ids), cand_ids]), return_inverse=True)
+            first = np.unique(inv, return_index=True)[1]  # one told state per θ names every face of its hull
+            hull_ids = np.concatenate([self._face_ids[i] for i in first])
+            owner = np.repeat(np.arange(len(thetas)), [len(self._face_ids[i]) for i in first])
+            _, rank = np.unique(np.concatenate([np.asarray(self._ids), hull_ids, cand_ids]), return_inverse=True)
             rank = rank.reshape(-1).astype(np.int64)
-            key = inv.astype(np.int64) * (rank.max() + 1) + rank[:len(X)]
+            n_id = rank.max() + 1
+            key = inv.astype(np.int64) * n_id + rank[:len(X)]
             o = np.argsort(key)
-            want = nbr.astype(np.int64) * (rank.max() + 1) + rank[len(X):][:, None]
+            want = nbr.astype(np.int64) * n_id + rank[len(X) + len(hull_ids):][:, None]
             at = np.clip(np.searchsorted(key[o], want), 0, len(key) - 1)
             found = key[o][at] == want
             lab = np.where(found, Y[o][at], absent)
+            # where the face exists but was not labelled (a single-face query of another face there) it is not
+            # gone: it reads as the face at the nearest joint state that labelled it (as Algorithm 8's extra states)
+            unlabelled = ~found & np.isin(want, owner * n_id + rank[len(X):len(X) + len(hull_ids)])
+            if unlabelled.any():
+                r, c = np.nonzero(unlabelled)
+                slot = 4.0 * np.sqrt(f)  # farther than any two joint states: the nearest is of the same face
+                own = cKDTree(np.column_stack([angular_embedding(X[:, :f], self.bounds[:f]), rank[:len(X)] * slot]))
+                at_face = np.column_stack([angular_embedding(thetas[nbr[r, c]], self.bounds[:f]),
+                                           rank[len(X) + len(hull_ids) + r] * slot])
+                d, nn = own.query(at_face, k=1)
+                said = np.argmax(~unlabelled[r], axis=1)  # a face never labelled: the nearest neighbour that said
+                lab[r, c] = np.where(d <= slot / 2, Y[nn], lab[r, said])
         else:
             gap = np.linalg.norm(faces[nbr] - emb[:, None, None, 2 * f:], axis=-1)  # (p, k, faces)
             gap = np.where(np.isfinite(gap), gap, np.inf)

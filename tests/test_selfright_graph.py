@@ -360,6 +360,23 @@ def test_crossing_energies_are_the_boundary_s_whatever_the_grid_spacing():
     assert np.any(np.abs(fine["energy"] - 38.58) < 0.01)
 
 
+def test_a_face_not_asked_at_a_neighbour_is_not_read_as_gone():
+    """Faces 1 and 2 exist at every t and face 1 is stable everywhere.  At t = 0.5 only face 2 was asked
+    (as the transition refinement asks single faces): face 1 is still there, so the search must see no
+    boundary on it; at t = 0.6, where face 1 is truly gone, it must."""
+    bounds = [[0.0, np.pi], [0.0, np.pi]]
+    faces = np.array([[0.25], [0.75]])
+    both = np.array([1, 2])
+    s = ManifoldSampler(1, bounds, seed=0, n_initial=2, whole_hulls=True)
+    t = np.array([0.1, 0.1, 0.9, 0.9])
+    s.tell(np.column_stack([t, np.tile(faces[:, 0], 2)]), np.ones(4), [faces] * 4, np.tile(both, 2), [both] * 4)
+    s.tell(np.array([[0.5, 0.75]]), np.ones(1), [faces], np.array([2]), [both])  # face 2 alone
+    at = np.array([[0.45, 0.25]])
+    assert s.hull_information(at, np.array([1]))[1][0] == 0.0
+    s.tell(np.array([[0.6, 0.75]]), np.ones(1), [faces[1:]], np.array([2]), [np.array([2])])  # face 1 gone
+    assert s.hull_information(np.array([[0.58, 0.25]]), np.array([1]))[1][0] > 0.0
+
+
 def test_outcomes_bracket_a_stable_island_narrower_than_the_interior_resolution():
     """Face 1 is stable only on t in [0.48, 0.52] (7°) and tips to 10 below it, to 20 above; face 2 is stable.
 
