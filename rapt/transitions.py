@@ -9,10 +9,11 @@ state each unstable one comes to rest in, and the energy lost on the way.  Secti
    state).  Labels of extra states come from their nearest evaluated state; resting
    states are stable by definition.
 2. A Gabriel graph over ``X^Z`` with edges no longer than ``max_edge`` (which keeps
-   parallel manifolds apart).  An extra state labelled unstable is left out of it: no edge
-   from it counts, and its label is a guess, so it must not block the boundary pair of the
-   evaluated states around it (a single-face query of another face at that joint state put
-   it there).  Candidates are all pairs within ``max_edge``
+   parallel manifolds apart).  An extra state labelled unstable takes no part in a boundary
+   pair and blocks none: no edge from it counts, and its label is a guess, which must not
+   hide the boundary pair of the evaluated states around it (a single-face query of another
+   face at that joint state put it there); between two stable states it still stands, as
+   any unstable state does.  Candidates are all pairs within ``max_edge``
    (``cKDTree.query_pairs``); a pair is Gabriel when no third state lies strictly inside
    the ball it spans — exact, and cheaper than a Delaunay triangulation in 6+ dimensions.
 3. The stable subgraph's connected components are the nodes.
@@ -345,10 +346,16 @@ def transition_graph(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, energy
         i, j = (np.asarray(v, dtype=int).reshape(-1) for v in connections)
         if i.shape != j.shape or (i.size and (min(i.min(), j.min()) < 0 or max(i.max(), j.max()) >= len(points))):
             raise ValueError(f"connections: expected two equal-length index arrays into the {len(points)} known states")
-    else:  # an extra state labelled unstable neither joins nor blocks: its label is a guess, and no edge from it counts
+    else:
+        # an extra state labelled unstable is a guess, and no edge from it counts: it neither takes part in a
+        # boundary pair nor blocks one, but it still stands between two stable states, as any unstable state does
         keep = np.flatnonzero(np.r_[np.ones(E0, dtype=bool), lab[E0:]])
         i, j = gabriel_graph(space[keep], max_edge)
         i, j = keep[i], keep[j]
+        if len(keep) < len(points):
+            both = np.flatnonzero(lab[i] & lab[j])
+            apart = ~_empty_balls(cKDTree(space), space, np.column_stack([i[both], j[both]]))
+            i, j = np.delete(i, both[apart]), np.delete(j, both[apart])
     if connections is None and all_ids is not None and free_dims is not None:
         ci, cj = _continuations(points, all_ids, lab, free_dims,
                                 max_edge / 2 if continuation_edge is None else min(continuation_edge, max_edge), rate)

@@ -111,6 +111,12 @@ def test_an_extra_state_guessed_unstable_does_not_hide_a_transition():
     assert k.size == 1, "A's lower region lost its transition onto B"
     assert X[~gone][e["witness"][k[0]], 0] == pytest.approx(0.35)
     assert g.points[e["partner"][k[0]], 0] == pytest.approx(0.2) and e["length"][k[0]] == pytest.approx(0.15)
+    # between two stable states such a guess still stands, as any unstable state does: S1 (0, 0) and S2 (1, 0)
+    # span a ball that holds only the guess E (0.5, 0.45), whose nearest evaluated state U (0.5, 0.56) lies outside
+    X2 = np.array([[0.0, 0.0], [1.0, 0.0], [0.5, 0.56]])
+    g2 = transition_graph(X2, np.array([True, True, False]), np.full((3, 2), np.nan), np.zeros(3),
+                          np.array([[0.5, 0.45]]), max_edge=2.0)
+    assert not g2.stable[-1] and g2.labels[0] != g2.labels[1] and g2.n_nodes == 2
 
 
 def test_manifold_sampler_learns_from_projected_states_and_stops_at_resolution():
