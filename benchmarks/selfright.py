@@ -121,12 +121,11 @@ def one_dof_seeds(seeds: int = 8, held_out: range = range(24, 120)) -> None:
           "matched pairs and energies when it is")
     print(f"{'setting':<66} {'seeds':>7} {'queries':>8} {'ratio':>6} {'same':>7} {'m.pair deg':>10} "
           f"{'m.energy/grid':>13} {'ended by':>10}")
-    coarse = dict(r_min_deg=0.5, r_max_deg=45.0, batch_size=10, refine=0.4)
     first = range(seeds)
     settings = (("budget 700, r_min 0.5°, r_max 10°, batch 50, refine 0.1", first, dict(budget=700, r_min_deg=0.5)),
                 ("the same, until the resolution cut-offs end it (budget 5,000)", first,
                  dict(budget=5000, r_min_deg=0.5)),
-                ("budget 210, r_min 0.5°, r_max 45°, batch 10, refine 0.4", first, dict(coarse, budget=210)),
+                ("budget 210, r_min 0.5°, r_max 45°, batch 10, refine 0.4", first, dict(ONE_DOF_TENTH, outcomes=False)),
                 ("the same, told where states tip (outcomes): part 1's setting", first, dict(ONE_DOF_TENTH)),
                 ("the same with refine 0.5", first, dict(ONE_DOF_TENTH, refine=0.5)),
                 ("part 1's setting with budget 300", first, dict(ONE_DOF_TENTH, budget=300)),
@@ -198,14 +197,15 @@ def prm_components(study, result, step_deg: float = 1.0, max_edges: int | None =
 def table51(studies, quick: bool, seed: int) -> None:
     cap = 500 if quick else 1000
     print("\n2. Table 5.1: building the graph from the adaptive sample sets: Gabriel clustering against PRM edge checking")
-    print(f"{'robot':>5} {'known states':>12} {'Gabriel s':>9} {'nodes':>5} {'PRM s':>9} {'PRM edges':>10} "
+    print(f"{'robot':>5} {'known states':>12} {'d_max deg':>9} {'Gabriel s':>9} {'nodes':>5} {'PRM s':>9} {'PRM edges':>10} "
           f"{'evaluations':>11} {'PRM regions':>11} {'PRM/Gabriel':>11}")
     for name, study, result in studies:
         gab = result["graph_seconds"]  # analyse() built the graph (with its face identities) and timed it
         regions, prm_s, checked, total, evals = prm_components(study, result, max_edges=cap, seed=seed)
         est = prm_s * total / max(checked, 1)
         mark = "*" if checked < total else " "
-        print(f"{name:>5} {result['states']:>12,} {gab:>9.2f} {result['nodes']:>5} {est:>8.1f}{mark} {total:>10,} "
+        print(f"{name:>5} {result['states']:>12,} {np.degrees(result['max_edge']):>9.1f} {gab:>9.2f} {result['nodes']:>5} "
+              f"{est:>8.1f}{mark} {total:>10,} "
               f"{int(evals * total / max(checked, 1)):>11,} {regions if checked == total else '-':>11} "
               f"{est / gab:>10.0f}x", flush=True)
 
