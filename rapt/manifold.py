@@ -48,6 +48,7 @@ from rapt.candidates import select_batch
 from rapt.information import neighbour_variance, unalikeability
 from rapt.parallel import query_workers
 from rapt.samplers.base import Sampler
+from rapt.transitions import separate
 
 __all__ = ["angular_embedding", "full_turn", "ManifoldSampler", "manifold_search"]
 
@@ -321,10 +322,9 @@ class ManifoldSampler(Sampler):
             if unlabelled.any():
                 r, c = np.nonzero(unlabelled)
                 slot = 4.0 * np.sqrt(f)  # farther than any two joint states: the nearest is of the same face
-                own = cKDTree(np.column_stack([angular_embedding(X[:, :f], self.bounds[:f]), rank[:len(X)] * slot]))
-                at_face = np.column_stack([angular_embedding(thetas[nbr[r, c]], self.bounds[:f]),
-                                           rank[len(X) + len(hull_ids) + r] * slot])
-                d, nn = own.query(at_face, k=1)
+                P = separate(angular_embedding(np.concatenate([X[:, :f], thetas[nbr[r, c]]]), self.bounds[:f]),
+                             np.concatenate([self._ids, np.asarray(cand_ids)[r]]), slot)
+                d, nn = cKDTree(P[:len(X)]).query(P[len(X):], k=1)
                 said = np.argmax(~unlabelled[r], axis=1)  # a face never labelled: the nearest neighbour that said
                 lab[r, c] = np.where(d <= slot / 2, Y[nn], lab[r, said])
         else:
