@@ -23,9 +23,9 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-import sim  # noqa: E402
+import sim.uuv  # noqa: E402
 from planner.generate import GenerateConfig, generate  # noqa: E402
-from sim.bias import BIAS_NAMES, Bias, parse_bias  # noqa: E402
+from sim.uuv.bias import BIAS_NAMES, Bias, parse_bias  # noqa: E402
 
 CASES = {  # label: (--inject-bias, stochastic effects on)
     "issue 7: faster vehicle, tide offset": ("speed=1.15,current_offset=0.3", False),
@@ -52,7 +52,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         t0 = time.perf_counter()
-        plan = generate(sim.load_mission(mission_file), mission_file, tmp / "plan",
+        plan = generate(sim.uuv.load_mission(mission_file), mission_file, tmp / "plan",
                         GenerateConfig(budget=args.budget, batch_size=250, pairs=args.pairs, dithers=0, seed=args.seed))
         ids = [s["id"] for s in plan["scenarios"]]
         print(f"plan: {len(ids)} scenarios in {len(plan['pairs'])} pairs ({time.perf_counter() - t0:.0f} s)")

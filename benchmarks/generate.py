@@ -17,7 +17,7 @@ import tempfile
 import time
 from pathlib import Path
 
-import sim
+import sim.uuv
 from planner.generate import GenerateConfig, auto_batch_size, generate, make_executor
 
 MISSION = Path(__file__).resolve().parents[1] / "examples" / "range2017.toml"
@@ -34,7 +34,7 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=0)
     args = ap.parse_args()
 
-    mission = sim.load_mission(MISSION)
+    mission = sim.uuv.load_mission(MISSION)
     batch = args.batch_size or auto_batch_size(args.budget)
     executor, close = make_executor(args.executor)
     timings: dict[str, float] = {}

@@ -26,7 +26,7 @@ import numpy as np
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
-import sim  # noqa: E402
+import sim.uuv  # noqa: E402
 from bridge import keys  # noqa: E402
 from bridge.logger import McapLogger, read_log  # noqa: E402
 from bridge.mavlink_bridge import MavlinkBridge  # noqa: E402
@@ -39,7 +39,7 @@ MISSION = Path(__file__).resolve().parents[1] / "examples" / "range2017.toml"
 
 def lockstep(mission, n: int) -> None:
     X = np.random.default_rng(0).random((4 * n, mission.dim))
-    batch = sim.simulate(mission, X)
+    batch = sim.uuv.simulate(mission, X)
     rows = np.flatnonzero(batch.valid)[:n]
     print(f"1. Lock-step SIL of {mission.name} with MCAP logging ({n} scenarios)")
     print(f"{'scenario':>8} {'ended':>12} {'simulated s':>11} {'wall s':>7} {'x real time':>11} {'= batch':>7}")
@@ -56,7 +56,7 @@ def lockstep(mission, n: int) -> None:
 def round_trip(mission, trips: int) -> None:
     """Time from the last frame of a telemetry step leaving the vehicle to its set-point arriving."""
     X = np.random.default_rng(0).random((40, mission.dim))
-    u = X[np.flatnonzero(sim.simulate(mission, X).valid)[0]]
+    u = X[np.flatnonzero(sim.uuv.simulate(mission, X).valid)[0]]
     port = free_port()
     vehicle = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=1, source_component=1,
                                          dialect="ardupilotmega")
@@ -127,7 +127,7 @@ def main() -> None:
     ap.add_argument("--rate", type=int, default=5000)
     ap.add_argument("--seconds", type=float, default=60.0)
     args = ap.parse_args()
-    mission = sim.load_mission(MISSION)
+    mission = sim.uuv.load_mission(MISSION)
     lockstep(mission, args.scenarios)
     round_trip(mission, args.trips)
     sustained(args.rate, args.seconds)

@@ -23,8 +23,8 @@ import numpy as np
 from scipy.stats import qmc
 
 import rapt
-import sim
-from sim.scoring import MODE_NAMES
+import sim.uuv
+from sim.uuv.scoring import MODE_NAMES
 
 MISSION = Path(__file__).resolve().parents[1] / "examples" / "range2017.toml"
 
@@ -38,17 +38,17 @@ def throughput(mission, sizes: list[int], loop_n: int) -> None:
     for n in sizes:
         for stochastic in (False, True) if n == sizes[-1] else (False,):
             t0 = time.perf_counter()
-            r = sim.simulate(mission, X[:n], seed=1, stochastic=stochastic)
+            r = sim.uuv.simulate(mission, X[:n], seed=1, stochastic=stochastic)
             t = time.perf_counter() - t0
             rate = r.valid.sum() / t
             if not stochastic:
                 best = max(best, rate)
             print(f"{n:>7,} {'stochastic' if stochastic else 'deterministic':>13} {t:>8.2f} {r.valid.sum():>10,} "
                   f"{rate:>8.0f} {1e6 / rate / 60:>16.1f}")
-    rows = np.flatnonzero(sim.simulate(mission, X[:loop_n * 2]).valid)[:loop_n]
+    rows = np.flatnonzero(sim.uuv.simulate(mission, X[:loop_n * 2]).valid)[:loop_n]
     t0 = time.perf_counter()
     for i in rows:
-        sim.simulate(mission, X[i:i + 1])
+        sim.uuv.simulate(mission, X[i:i + 1])
     t = time.perf_counter() - t0
     loop_rate = rows.size / t
     print(f"\n2. The same code one scenario at a time ({rows.size} scenarios): {loop_rate:.1f} runs/s; "
@@ -58,7 +58,7 @@ def throughput(mission, sizes: list[int], loop_n: int) -> None:
 
 def modes_and_boundaries(mission, n: int) -> None:
     X = qmc.Sobol(mission.dim, seed=1).random(n)
-    r = sim.simulate(mission, X)
+    r = sim.uuv.simulate(mission, X)
     Xv, modes = X[r.valid], r.modes[r.valid]
     print(f"\n3. Sobol study of {n:,} {mission.name} scenarios: {r.valid.sum():,} valid "
           f"({(~r.valid).sum():,} invalid, e.g. {_top_reason(r)})")
@@ -88,7 +88,7 @@ def main() -> None:
     ap.add_argument("--loop", type=int, default=20, help="scenarios run one at a time")
     ap.add_argument("--study", type=int, default=4096, help="Sobol scenarios for the mode distribution")
     args = ap.parse_args()
-    mission = sim.load_mission(MISSION)
+    mission = sim.uuv.load_mission(MISSION)
     throughput(mission, sorted(args.sizes), args.loop)
     modes_and_boundaries(mission, args.study)
 

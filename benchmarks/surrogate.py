@@ -29,16 +29,16 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import qmc
 
-import sim
+import sim.uuv
 from planner.generate import GenerateConfig, analyse, confirm_with_expert, search_mission, select_pairs
 from planner.surrogate import mode_agreement, train_surrogate
 from rapt.agreement import agreement, path_error
-from sim.autonomy import Autonomy
-from sim.imitation.surrogate import Surrogate
-from sim.scenario import make_scenarios
-from sim.scoring import MODE_NAMES
-from sim.simulate import observation
-from sim.world import World
+from sim.uuv.autonomy import Autonomy
+from sim.uuv.imitation.surrogate import Surrogate
+from sim.uuv.scenario import make_scenarios
+from sim.uuv.scoring import MODE_NAMES
+from sim.uuv.simulate import observation
+from sim.uuv.world import World
 
 MISSION = Path(__file__).resolve().parents[1] / "examples" / "imitation7.toml"
 METHODS = {"supervised": ("supervised", 0.0), "dagger": ("dagger", 0.0), "qdagger50": ("qdagger", 0.5),
@@ -148,7 +148,7 @@ def _row(tel, i):
 def learners(mission, methods: list[str], runs: int, per: int, epochs: int, track: int, seed: int,
              mixing: float = 0.5, select_runs: int = 25) -> dict[str, tuple[Surrogate, list]]:
     Xt = qmc.Sobol(mission.dim, seed=seed + 1).random(track)
-    expert = sim.simulate(mission, Xt)
+    expert = sim.uuv.simulate(mission, Xt)
     out = {}
     print(f"2. Learners: {runs} expert-annotated runs ({per} per update), {epochs} epochs per update, "
           f"DAgger mixing {mixing:g}**i; mode accuracy on {track} Sobol scenarios after each update; "
@@ -200,16 +200,16 @@ def learners(mission, methods: list[str], runs: int, per: int, epochs: int, trac
 def validation(mission, surrogate: Surrogate, n: int, paths: int, seed: int) -> None:
     X = qmc.Sobol(mission.dim, seed=seed).random(n)
     t0 = time.perf_counter()
-    expert = sim.simulate(mission, X)
+    expert = sim.uuv.simulate(mission, X)
     te = time.perf_counter() - t0
     t0 = time.perf_counter()
-    mine = sim.simulate(mission, X, surrogate=surrogate)
+    mine = sim.uuv.simulate(mission, X, surrogate=surrogate)
     ts = time.perf_counter() - t0
     ok = expert.valid & mine.valid
     a = agreement(X[ok], expert.modes[ok], mine.modes[ok])
     rows = np.flatnonzero(ok)[:paths]
-    tr_e = sim.simulate(mission, X[rows], trajectories=True).trajectories
-    tr_s = sim.simulate(mission, X[rows], surrogate=surrogate, trajectories=True).trajectories
+    tr_e = sim.uuv.simulate(mission, X[rows], trajectories=True).trajectories
+    tr_s = sim.uuv.simulate(mission, X[rows], surrogate=surrogate, trajectories=True).trajectories
     perr = path_error([t[:, 1:3] for t in tr_e], [t[:, 1:3] for t in tr_s])
     print(f"3. {surrogate.training.get('method', 'surrogate')} against the expert on {a.n:,} valid Sobol scenarios "
           f"(expert {te:.1f} s, surrogate {ts:.1f} s to simulate them)")
@@ -277,7 +277,7 @@ def main() -> None:
     if args.quick:
         args.runs, args.track, args.validation, args.paths, args.budget, args.confirm = 20, 64, 500, 50, 1000, 20
         args.epochs, args.methods = 10, ["dagger", "qdagger50"]
-    mission = sim.load_mission(MISSION)
+    mission = sim.uuv.load_mission(MISSION)
     if args.load is not None:
         main_surrogate = Surrogate.load(args.load, mission)
     else:

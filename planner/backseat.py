@@ -1,6 +1,6 @@
 """The back-seat autonomy as a process on the bus: telemetry in, set-points out.
 
-It runs the very autonomy of the batch simulator (:class:`sim.autonomy.Autonomy`, one
+It runs the very autonomy of the batch simulator (:class:`sim.uuv.autonomy.Autonomy`, one
 vehicle) on what the front-seat reports over MAVLink, relayed by the bridge on Zenoh:
 it reads the ordered raw frame stream, gathers one step's telemetry until SYSTEM_TIME
 closes it, decides once per step (a repeated step gets the same answer again), and
@@ -9,7 +9,7 @@ vehicle is the bus's choice (the ``control/active`` key), so another autonomy ca
 while this one's commands are still recorded.  It also publishes its own account of the
 run — aborted waypoints, why it turned home — which no track shows.
 
-With a trained surrogate (:class:`sim.imitation.surrogate.Surrogate`) the same process
+With a trained surrogate (:class:`sim.uuv.imitation.surrogate.Surrogate`) the same process
 flies the learned policy instead, on the features of section 6.5.3; the 360-beam scan
 arrives as five OBSTACLE_DISTANCE messages per step.
 
@@ -29,10 +29,10 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from bridge import keys  # noqa: E402
-from sim.autonomy import GOAL_RETURN, Autonomy, Observation  # noqa: E402
-from sim.interface import battery_fraction, encode_command  # noqa: E402
-from sim.mission import Mission  # noqa: E402
-from sim.scenario import make_scenarios  # noqa: E402
+from sim.uuv.autonomy import GOAL_RETURN, Autonomy, Observation  # noqa: E402
+from sim.uuv.interface import battery_fraction, encode_command  # noqa: E402
+from sim.uuv.mission import Mission  # noqa: E402
+from sim.uuv.scenario import make_scenarios  # noqa: E402
 
 __all__ = ["BackSeat"]
 

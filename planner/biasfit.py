@@ -1,4 +1,4 @@
-"""Estimate the execution bias (:mod:`sim.bias`) from logged runs, jointly, with an uncertainty.
+"""Estimate the execution bias (:mod:`sim.uuv.bias`) from logged runs, jointly, with an uncertainty.
 
 Why replay rather than re-fly.  Re-simulating each scenario closed loop under a trial
 bias and matching its trajectory is what a range team does by eye, but as a function of
@@ -8,8 +8,8 @@ The log holds more than the track, though: it holds the set-point the back-seat 
 every step.  So each run is cut into short segments (:data:`SEGMENT_STEPS` steps); each
 segment starts from the logged state (position, heading, speed, turn rate; the sway is
 rebuilt from the logged speed and turn rate) and is flown *open loop* on the logged
-set-points through the simulator's own vehicle and tide models (:func:`sim.vehicle.
-step_vehicle`, :func:`sim.environment.tidal_current`) under the trial bias.  The predicted
+set-points through the simulator's own vehicle and tide models (:func:`sim.uuv.vehicle.
+step_vehicle`, :func:`sim.uuv.environment.tidal_current`) under the trial bias.  The predicted
 positions and energy used are compared with the logged ones.  No autonomy decision sits
 inside the residual, so it is smooth in the bias, every log of every scenario counts,
 and a truncated log counts as far as it goes.  Segments are short so that a real
@@ -33,10 +33,10 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
-from sim.bias import BIAS_LIMITS, BIAS_NAMES, NEUTRAL, Bias
-from sim.environment import tidal_current
-from sim.mission import Mission
-from sim.vehicle import SWAY_COUPLING, VehicleState, step_vehicle
+from sim.uuv.bias import BIAS_LIMITS, BIAS_NAMES, NEUTRAL, Bias
+from sim.uuv.environment import tidal_current
+from sim.uuv.mission import Mission
+from sim.uuv.vehicle import SWAY_COUPLING, VehicleState, step_vehicle
 
 __all__ = ["BiasFit", "fit_bias", "segment_batch", "SEGMENT_STEPS"]
 

@@ -112,15 +112,15 @@ def study(
     """Search a mission's scenarios for performance boundaries; print modes and boundary types."""
     import numpy as np
 
-    import sim
-    from sim.scoring import MODE_NAMES
+    import sim.uuv
+    from sim.uuv.scoring import MODE_NAMES
 
     if baseline != "none" and baseline not in rapt.METHODS:
         fail(f"--baseline: unknown method {baseline!r}; choose one of: {', '.join(rapt.METHODS)}, none")
     mission = _load_mission(mission_file)
 
     def run_root_scores(X):  # the search steers on mission and safety success (section 4.3.6)
-        return sim.simulate(mission, X, seed=seed, stochastic=stochastic).scores[:, :2]
+        return sim.uuv.simulate(mission, X, seed=seed, stochastic=stochastic).scores[:, :2]
 
     results = []
     methods = [method] + ([baseline] if baseline not in ("none", method) else [])
@@ -160,13 +160,13 @@ def study(
 
 
 def _mission_and_scenario(mission_file: Path, scenario: str):
-    import sim
+    import sim.uuv
     from planner.scenarios import resolve_scenario
 
     mission = _load_mission(mission_file)
     try:
         u, sid = resolve_scenario(mission, scenario)
-        scen = sim.scenario.make_scenarios(mission, u[None, :])
+        scen = sim.uuv.scenario.make_scenarios(mission, u[None, :])
     except ValueError as exc:
         fail(str(exc))
     if not scen.valid[0]:
@@ -199,12 +199,12 @@ def _bus_session(connect: list[str], config_file: Optional[Path]):
 
 def _load_mission(mission_file: Path):
     """The mission file, loaded and validated, or a one-line error naming it."""
-    import sim
+    import sim.uuv
 
     if not mission_file.is_file():
         fail(f"MISSION_FILE: {mission_file} does not exist; give the path of a mission TOML file")
     try:
-        return sim.load_mission(mission_file)
+        return sim.uuv.load_mission(mission_file)
     except ValueError as exc:
         fail(str(exc))
 
@@ -218,7 +218,7 @@ def _load_surrogate(path: Optional[Path], mission):
     """The surrogate file for ``mission``, or a one-line error naming --surrogate."""
     if path is None:
         return None
-    from sim.imitation.surrogate import Surrogate
+    from sim.uuv.imitation.surrogate import Surrogate
 
     try:
         return Surrogate.load(path, mission)
@@ -246,7 +246,7 @@ def run(
     timeout: Annotated[float, typer.Option(help="Give up after this many wall seconds.")] = 600.0,
     inject_bias: Annotated[Optional[str], typer.Option(
         "--inject-bias", help="Fly a biased vehicle for rehearsal, e.g. speed=1.15,current_offset=0.3 "
-                              "(speed, current_scale, current_offset, heading, battery, start_time; see sim.bias). "
+                              "(speed, current_scale, current_offset, heading, battery, start_time; see sim.uuv.bias). "
                               "Not written to the log.")] = None,
     stochastic: Annotated[bool, typer.Option(help="Navigation drift and current perturbations on (seeded).")] = False,
     seed: Annotated[int, typer.Option(help="Seed of the stochastic effects.")] = 0,
@@ -259,9 +259,9 @@ def run(
     """
     import numpy as np
 
-    import sim
+    import sim.uuv
     from planner.sil import run_sil
-    from sim.bias import parse_bias
+    from sim.uuv.bias import parse_bias
 
     try:
         bias = parse_bias(inject_bias) if inject_bias is not None else None
@@ -289,7 +289,7 @@ def run(
                          surrogate=learned)
     except (ValueError, RuntimeError, TimeoutError) as exc:
         fail(str(exc))
-    batch = sim.simulate(mission, u[None, :], bias=bias, seed=seed, stochastic=stochastic, surrogate=learned)
+    batch = sim.uuv.simulate(mission, u[None, :], bias=bias, seed=seed, stochastic=stochastic, surrogate=learned)
     same = bool(np.array_equal(result.scores, batch.scores[0]))
     names = batch.names
     mode = ("TF", "SS", "MS", "TS")[int(2 * result.scores[0] + result.scores[1])]
@@ -428,7 +428,7 @@ def surrogate_cmd(
     """Train a surrogate of a mission's back-seat autonomy by imitation learning (chapter 6)."""
     from scipy.stats import qmc
 
-    import sim
+    import sim.uuv
     from planner.surrogate import mode_agreement, train_surrogate
 
     mission = _load_mission(mission_file)
@@ -437,7 +437,7 @@ def surrogate_cmd(
     if validate < 0:
         fail(f"--validate: expected a number of scenarios >= 0, got {validate}")
     Xv = qmc.Sobol(mission.dim, seed=seed).random(validate) if validate else None
-    expert = sim.simulate(mission, Xv) if validate else None
+    expert = sim.uuv.simulate(mission, Xv) if validate else None
     table = Table(title=f"{mission.name}: {method} imitation of the autonomy")
     for col in ("iteration", "expert runs", "samples", "fit (s)", "train MSE") + (("mode accuracy",) if validate else ()):
         table.add_column(col, justify="right")
@@ -445,7 +445,7 @@ def surrogate_cmd(
     def on_iteration(rec, policy):
         row = [str(rec.iteration), str(rec.runs), f"{rec.samples:,}", f"{rec.fit_s:.1f}", f"{rec.loss:.4f}"]
         if validate:
-            from sim.imitation.surrogate import Surrogate
+            from sim.uuv.imitation.surrogate import Surrogate
 
             row.append(f"{mode_agreement(mission, Surrogate.for_mission(mission, policy), Xv, expert):.1%}")
         table.add_row(*row)
@@ -481,7 +481,7 @@ def compare(
 ) -> None:
     """Compare run logs with the plan: predicted vs observed, execution bias, re-plan."""
     from planner.compare import CompareConfig, compare as run_compare
-    from sim.bias import BIAS_NAMES
+    from sim.uuv.bias import BIAS_NAMES
 
     names = BIAS_NAMES
     if fit is not None:
@@ -560,7 +560,7 @@ def frontseat(
     speedup: Annotated[Optional[float], typer.Option(help="Real time times this factor (default: lock-step).")] = None,
 ) -> None:
     """Serve the simulated front-seat of one scenario on a MAVLink connection."""
-    from sim.frontseat import FrontSeat
+    from sim.uuv.frontseat import FrontSeat
 
     mission, u, _ = _mission_and_scenario(mission_file, scenario)
     try:

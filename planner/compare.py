@@ -7,10 +7,10 @@ to identify and apply this bias to our predictions").  :func:`compare`
    and matches it to its plan scenario by the recorded metadata — a log of another
    mission or plan is refused with a one-line error;
 2. rebuilds each run's track, scores it with the mission's own scorer and score tree
-   (:func:`sim.replay.score_track`), and sets predicted against observed mode and
+   (:func:`sim.uuv.replay.score_track`), and sets predicted against observed mode and
    sub-scores per scenario and per pair (did the pair straddle its boundary?), with the
    path error in metres against the predicted trajectory;
-3. fits the execution bias (:mod:`sim.bias`) to all logs jointly (:mod:`planner.biasfit`),
+3. fits the execution bias (:mod:`sim.uuv.bias`) to all logs jointly (:mod:`planner.biasfit`),
    with a standard error per parameter;
 4. re-predicts every run and every plan scenario under the fitted bias — the corrected
    predictions — and flags the pairs that no longer straddle their boundary, with an
@@ -27,15 +27,15 @@ from typing import Callable
 
 import numpy as np
 
-import sim
+import sim.uuv
 from planner.biasfit import fit_bias
 from planner.logs import LogError, LoggedRun, read_run
 from planner.plans import Plan, load_plan
 from planner.replan import adjust_for_bias
-from sim.bias import BIAS_NAMES, BIAS_UNITS, NEUTRAL
-from sim.replay import score_track
-from sim.scenario import make_scenarios
-from sim.scoring import MODE_NAMES
+from sim.uuv.bias import BIAS_NAMES, BIAS_UNITS, NEUTRAL
+from sim.uuv.replay import score_track
+from sim.uuv.scenario import make_scenarios
+from sim.uuv.scoring import MODE_NAMES
 
 __all__ = ["compare", "CompareConfig", "COMPARISON_SCHEMA", "match_logs"]
 
@@ -121,7 +121,7 @@ def compare(plan_path: str | Path, log_paths: list[str | Path], out_dir: str | P
     # -- predictions of every plan scenario: unbiased, as planned -----------------------
     ids = [s["id"] for s in plan.scenarios + plan.variants]
     U_plan = np.array([plan.u(i) for i in ids]).reshape(-1, m.dim)
-    pred = sim.simulate(m, U_plan, trajectories=True)
+    pred = sim.uuv.simulate(m, U_plan, trajectories=True)
     names = pred.names
     row_of = {sid: k for k, sid in enumerate(ids)}
     for s in plan.scenarios + plan.variants:
@@ -146,7 +146,7 @@ def compare(plan_path: str | Path, log_paths: list[str | Path], out_dir: str | P
     bias = fit.bias
 
     say("re-predicting under the fitted bias")
-    corr = sim.simulate(m, U_plan, trajectories=True, bias=bias)
+    corr = sim.uuv.simulate(m, U_plan, trajectories=True, bias=bias)
 
     # -- per run / per scenario ---------------------------------------------------------
     scen_rows = []

@@ -27,7 +27,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.patches import Rectangle  # noqa: E402
 
-from sim.scenario import make_scenarios  # noqa: E402
+from sim.uuv.scenario import make_scenarios  # noqa: E402
 
 __all__ = ["write_comparison_report", "REPORT_NAME"]
 

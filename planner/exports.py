@@ -4,7 +4,7 @@ A field plan names scenarios as unit-cube rows; the range crew needs them in the
 they already run.  QGroundControl and Mission Planner load a mission (plus fence and
 rally point) to check and upload to the vehicle, and any GIS viewer shows the GeoJSON
 picture of the range with the simulator's predicted track.  All three are built from the
-same decoded scenario (:func:`sim.scenario.make_scenarios`) and the same list of mission
+same decoded scenario (:func:`sim.uuv.scenario.make_scenarios`) and the same list of mission
 items, so the files never disagree with each other or with what was simulated.
 
 Formats follow CONVENTIONS section 5: ``.plan`` version 1 with mission v2, geoFence v2
@@ -15,7 +15,7 @@ the autonomy means to fly them: waypoints, mission areas in the scenario's prior
 order (loiter for the dwell time), the transmission area (loiter for the transmission
 duration), then the recovery point.  The real autonomy transmits whenever the window is
 open, so the transmission item's place in the list is nominal.  Depth is
-:data:`sim.interface.DEPTH_M`, written as a negative relative altitude (ArduSub).
+:data:`sim.uuv.interface.DEPTH_M`, written as a negative relative altitude (ArduSub).
 """
 
 from __future__ import annotations
@@ -28,11 +28,11 @@ from typing import Any
 
 import numpy as np
 
-from sim.geo import LocalFrame
-from sim.interface import DEPTH_M
-from sim.mission import Mission
-from sim.scenario import Scenarios, make_scenarios
-from sim.simulate import TRAJECTORY_FIELDS
+from sim.uuv.geo import LocalFrame
+from sim.uuv.interface import DEPTH_M
+from sim.uuv.mission import Mission
+from sim.uuv.scenario import Scenarios, make_scenarios
+from sim.uuv.simulate import TRAJECTORY_FIELDS
 
 __all__ = ["qgc_plan", "wpl", "geojson", "write_scenario_files"]
 
@@ -206,7 +206,7 @@ def _check_track(track) -> np.ndarray:
 def geojson(mission: Mission, u, track=None) -> dict[str, Any]:
     """An RFC 7946 FeatureCollection of scenario ``u``, with the predicted ``track`` when given.
 
-    ``track`` is one trajectory of :func:`sim.simulate` (``trajectories=True``).
+    ``track`` is one trajectory of :func:`sim.uuv.simulate` (``trajectories=True``).
     """
     scen = _scenario(mission, u)
     tr = None if track is None else _check_track(track)

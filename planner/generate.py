@@ -33,11 +33,11 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 import rapt
-import sim
+import sim.uuv
 from rapt.importance import output_importance
-from sim.mission import Mission
-from sim.metrics import metric_names, metric_types
-from sim.scoring import MODE_NAMES, modes_from_scores
+from sim.uuv.mission import Mission
+from sim.uuv.metrics import metric_names, metric_types
+from sim.uuv.scoring import MODE_NAMES, modes_from_scores
 
 from planner.exports import write_scenario_files
 from planner.report import write_report
@@ -72,7 +72,7 @@ class GenerateConfig:
     refine: int = 0  # runs per pair of the focused second search (0: off)
     refine_min_distance: float = 0.02  # refined pairs stay at least this far apart (unit cube)
     fragile_below: float = 0.8  # P(predicted mode) under which a scenario gets a robust variant
-    surrogate: Any = None  # a sim.imitation Surrogate: search and dither with it, confirm pairs with the expert
+    surrogate: Any = None  # a sim.uuv.imitation Surrogate: search and dither with it, confirm pairs with the expert
     surrogate_file: str = ""
     confirm_runs: int = 100  # expert runs that check candidate pairs (two per pair)
 
@@ -107,7 +107,7 @@ class MissionScores:
     surrogate: Any = None  # fly a learned copy of the autonomy instead of the expert
 
     def __call__(self, U: np.ndarray) -> np.ndarray:
-        return sim.simulate(self.mission, U, surrogate=self.surrogate).scores
+        return sim.uuv.simulate(self.mission, U, surrogate=self.surrogate).scores
 
 
 ROOT_COLUMNS = (0, 1)  # mission and safety success: what the search steers on
@@ -156,7 +156,7 @@ def search_mission(mission: Mission, cfg: GenerateConfig, progress: Callable[[in
 @dataclass
 class Analysis:
     X: np.ndarray
-    result: sim.Result
+    result: sim.uuv.Result
     tree: rapt.SubBoundaryTree
     sensitivity: dict[str, dict[str, float]]
     X_invalid: np.ndarray
@@ -166,11 +166,11 @@ class Analysis:
 def analyse(mission: Mission, study: rapt.Study, surrogate=None) -> Analysis:
     X, Y = study.X, study.Y
     names, types = metric_names(mission), metric_types(mission)
-    spot = sim.simulate(mission, X[:SPOT_CHECK_RUNS], surrogate=surrogate)
+    spot = sim.uuv.simulate(mission, X[:SPOT_CHECK_RUNS], surrogate=surrogate)
     if Y.shape[1] != len(names) or not np.array_equal(spot.scores, Y[:SPOT_CHECK_RUNS], equal_nan=True):
         raise RuntimeError("study: the stored runs do not match the mission file (was it edited?); "
                            "plan into a new --out directory")
-    result = sim.Result(Y, modes_from_scores(Y), np.ones(len(Y), dtype=bool), [""] * len(Y), names, types)
+    result = sim.uuv.Result(Y, modes_from_scores(Y), np.ones(len(Y), dtype=bool), [""] * len(Y), names, types)
     tree = rapt.subboundary_tree(X, result.scores, mission.score_tree, output_types=result.output_types)
     imp = output_importance(X, result.scores[:, :2], ("binary", "binary"), random_state=0)
     sensitivity = {}
@@ -245,7 +245,7 @@ def dither_many(mission: Mission, centres: np.ndarray, predicted: Sequence[int],
     rng = np.random.default_rng(seed)
     U = np.clip(centres[:, None, :] + sigma * rng.standard_normal((k, n, d)), 0.0, 1.0)
     U[:, 0] = centres
-    r = sim.simulate(mission, U.reshape(k * n, d), seed=seed, stochastic=True, surrogate=surrogate)
+    r = sim.uuv.simulate(mission, U.reshape(k * n, d), seed=seed, stochastic=True, surrogate=surrogate)
     stats = []
     for c in range(k):
         rows = slice(c * n, (c + 1) * n)
@@ -323,7 +323,7 @@ def robust_variants(mission: Mission, fragile: np.ndarray, partners: np.ndarray,
     if not cands:
         return out
     V, owner = np.array(cands), np.array(owner)
-    det = sim.simulate(mission, V, surrogate=surrogate)
+    det = sim.uuv.simulate(mission, V, surrogate=surrogate)
     keep = np.flatnonzero(det.valid & (det.modes == np.asarray(modes)[owner]))
     if keep.size == 0:
         return out
@@ -364,7 +364,7 @@ def refine_pairs(mission: Mission, a: Analysis, pairs: list[dict], runs: int, mi
         if rows.size == 0:
             break
         mid = (lo[rows] + hi[rows]) / 2
-        r = sim.simulate(mission, mid, surrogate=surrogate)
+        r = sim.uuv.simulate(mission, mid, surrogate=surrogate)
         for k, row in enumerate(rows.tolist()):
             y = r.scores[k, cols[row]]
             if r.valid[k] and np.array_equal(y, side_lo[row]):
@@ -377,7 +377,7 @@ def refine_pairs(mission: Mission, a: Analysis, pairs: list[dict], runs: int, mi
     better = np.flatnonzero(d < np.array([p["distance"] for p in pairs]))
     out = list(pairs)
     if better.size:
-        r = sim.simulate(mission, np.vstack([lo[better], hi[better]]), surrogate=surrogate)
+        r = sim.uuv.simulate(mission, np.vstack([lo[better], hi[better]]), surrogate=surrogate)
         for k, row in enumerate(better.tolist()):
             out[row] = {**pairs[row], "distance": float(d[row]), "refined": True, "u_override": [lo[row], hi[row]],
                         "modes": [MODE_NAMES[r.modes[k]], MODE_NAMES[r.modes[better.size + k]]]}
@@ -395,7 +395,7 @@ def confirm_with_expert(mission: Mission, a: Analysis, candidates: list[dict], k
     if not candidates:
         return [], 0
     U = np.vstack([np.asarray(p.get("u_override", [a.X[r] for r in p["rows"]])) for p in candidates])
-    r = sim.simulate(mission, U)
+    r = sim.uuv.simulate(mission, U)
     out = []
     for c, pair in enumerate(candidates):
         ma, mb = int(r.modes[2 * c]), int(r.modes[2 * c + 1])
@@ -447,7 +447,7 @@ def generate(mission: Mission, mission_path: Path, out_dir: Path, cfg: GenerateC
          if pairs else np.zeros((0, mission.dim)))
     ids = [f"pair{p}{side}" for p in range(1, len(pairs) + 1) for side in "ab"]
     partners = U[np.arange(len(U)) ^ 1]  # a's partner is b and b's is a
-    chosen = sim.simulate(mission, U, trajectories=True)
+    chosen = sim.uuv.simulate(mission, U, trajectories=True)
     elements = [pair["elements"] for pair in pairs for _ in "ab"]
     stats: list[dict] = [{} for _ in ids]
     dither_runs: dict[str, tuple[np.ndarray, np.ndarray]] = {}

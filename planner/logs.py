@@ -31,11 +31,11 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from bridge import keys  # noqa: E402
 from bridge.logger import RAW_TOPIC  # noqa: E402
-from sim.interface import decode_command  # noqa: E402
+from sim.uuv.interface import decode_command  # noqa: E402
 
 __all__ = ["LoggedRun", "read_run", "STEP_FIELDS", "LogError"]
 
-#: Columns of :attr:`LoggedRun.steps`; the first six are :data:`sim.replay.TRACK_FIELDS`.
+#: Columns of :attr:`LoggedRun.steps`; the first six are :data:`sim.uuv.replay.TRACK_FIELDS`.
 STEP_FIELDS = ("t", "x", "y", "heading", "energy_hj", "surfaced", "surge", "yaw_rate")
 NEEDED = ("LOCAL_POSITION_NED", "ATTITUDE", "BATTERY_STATUS")
 
@@ -59,7 +59,7 @@ class LoggedRun:
 
     @property
     def track(self) -> np.ndarray:
-        """(n, TRACK_FIELDS) rows for :func:`sim.replay.score_track`."""
+        """(n, TRACK_FIELDS) rows for :func:`sim.uuv.replay.score_track`."""
         return self.steps[:, :6]
 
     @property

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-import sim
-from sim.mission import Mission
+import sim.uuv
+from sim.uuv.mission import Mission
 
 __all__ = ["Plan", "load_plan", "plan_id"]
 
@@ -98,7 +98,7 @@ def load_plan(path: str | Path) -> Plan:
     if found is None:
         raise ValueError(f"PLAN: {path} names mission file {str(file)!r}, which is not there; "
                          "put the mission file back or next to plan.json")
-    mission = sim.load_mission(found)
+    mission = sim.uuv.load_mission(found)
     if mission.name != data["mission"].get("name"):
         raise ValueError(f"PLAN: {found} holds mission {mission.name!r}, but the plan was made for "
                          f"{data['mission'].get('name')!r}; point the plan at its own mission file")

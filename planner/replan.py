@@ -17,10 +17,10 @@ from __future__ import annotations
 
 import numpy as np
 
-import sim
-from sim.bias import Bias
-from sim.mission import Mission
-from sim.scoring import MODE_NAMES
+import sim.uuv
+from sim.uuv.bias import Bias
+from sim.uuv.mission import Mission
+from sim.uuv.scoring import MODE_NAMES
 
 __all__ = ["adjust_for_bias", "STEPS"]
 
@@ -55,7 +55,7 @@ def adjust_for_bias(mission: Mission, u: np.ndarray, partner: np.ndarray, cols: 
     if not cands:
         return None
     U = np.array(cands)
-    r = sim.simulate(mission, U, bias=bias)
+    r = sim.uuv.simulate(mission, U, bias=bias)
     hit = r.valid & np.all(r.scores[:, cols] == np.asarray(target)[None, :], axis=1)
     ranked = sorted(np.flatnonzero(hit).tolist(), key=lambda i: (moves[i][0], -sensitivity[moves[i][1]]))
     if not ranked:
@@ -69,7 +69,7 @@ def adjust_for_bias(mission: Mission, u: np.ndarray, partner: np.ndarray, cols: 
     D = np.clip(np.repeat(U[first], dithers, axis=0) + sigma * rng.standard_normal((len(first) * dithers, u.size)),
                 0.0, 1.0)
     D[::dithers] = U[first]  # each candidate itself, with the stochastic effects on
-    d = sim.simulate(mission, D, seed=seed, stochastic=True, bias=bias)
+    d = sim.uuv.simulate(mission, D, seed=seed, stochastic=True, bias=bias)
     show = d.valid & np.all(d.scores[:, cols] == np.asarray(target)[None, :], axis=1)
     for j, entry in enumerate(entries):
         block = slice(j * dithers, (j + 1) * dithers)

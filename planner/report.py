@@ -41,7 +41,7 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 from matplotlib.patches import Polygon as MplPolygon  # noqa: E402
 
-from sim.geo import LocalFrame  # noqa: E402
+from sim.uuv.geo import LocalFrame  # noqa: E402
 
 __all__ = ["write_report", "REPORT_NAME", "FIGURES_DIR"]
 

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import qmc
 
-from sim.mission import Mission
+from sim.uuv.mission import Mission
 
 __all__ = ["resolve_scenario", "design_row"]
 

@@ -1,11 +1,11 @@
 """Software-in-the-loop: one scenario flown through the interfaces used on the water.
 
-The simulated front-seat (:class:`sim.frontseat.FrontSeat`) speaks MAVLink on loopback;
+The simulated front-seat (:class:`sim.uuv.frontseat.FrontSeat`) speaks MAVLink on loopback;
 the bridge puts it on a Zenoh bus; the back-seat autonomy (:class:`planner.backseat.
 BackSeat`) flies it from the bus; the MCAP logger records everything.  In lock-step the
 simulated clock advances when the back-seat answers each step, so a 45-minute mission
 flies in seconds.  The run is scored from its recorded telemetry, the way a range day's
-logs are (:func:`sim.replay.score_track`).
+logs are (:func:`sim.uuv.replay.score_track`).
 """
 
 from __future__ import annotations
@@ -27,9 +27,9 @@ from bridge import keys  # noqa: E402
 from bridge.mavlink_bridge import MavlinkBridge  # noqa: E402
 from bridge.session import open_session  # noqa: E402
 from planner.backseat import BackSeat  # noqa: E402
-from sim.frontseat import FrontSeat  # noqa: E402
-from sim.mission import Mission  # noqa: E402
-from sim.replay import TrackBuilder, score_track  # noqa: E402
+from sim.uuv.frontseat import FrontSeat  # noqa: E402
+from sim.uuv.mission import Mission  # noqa: E402
+from sim.uuv.replay import TrackBuilder, score_track  # noqa: E402
 
 __all__ = ["SilResult", "run_sil", "free_port", "SURROGATE_SOURCE"]
 
@@ -96,14 +96,14 @@ def run_sil(mission: Mission, u, *, vehicle: str = "uuv1", log_path: str | Path 
     """Fly scenario ``u`` through front-seat, bridge, back-seat (and logger); return its scores.
 
     ``speedup=None`` runs lock-step (as fast as the back-seat answers); a number runs the
-    front-seat in real time times that factor.  ``bias`` (:class:`sim.bias.Bias`) makes the
+    front-seat in real time times that factor.  ``bias`` (:class:`sim.uuv.bias.Bias`) makes the
     simulated front-seat a biased vehicle; it is not recorded in the log, whose metadata
     names only the mission, plan and scenario — ``rapt-plan compare`` estimates the bias
     blind, as from a real vehicle.  ``stochastic`` turns on the front-seat's navigation
     drift and current perturbations (seeded by ``seed``): the vehicle then reports where
     its navigation thinks it is, as a real one does.
 
-    ``surrogate`` (:class:`sim.imitation.surrogate.Surrogate`) flies the vehicle as back-seat
+    ``surrogate`` (:class:`sim.uuv.imitation.surrogate.Surrogate`) flies the vehicle as back-seat
     source ``"surrogate"``, made active on the bus, while the expert still runs as source
     ``"autonomy"`` and its commands are published (and logged) but not obeyed — the testbed
     of Figure 6.3.  The scores are then the surrogate's.

@@ -2,7 +2,7 @@
 
 :func:`train_surrogate` runs Q-DAgger (or DAgger, or behavioural cloning) against the
 batch simulator's expert on random valid scenarios of the mission and returns a
-:class:`~sim.imitation.surrogate.Surrogate`; :func:`load_or_train` reuses a saved one
+:class:`~sim.uuv.imitation.surrogate.Surrogate`; :func:`load_or_train` reuses a saved one
 when it was trained for this very mission and trains (and saves) one otherwise.  The
 expert-run counts it records are what the surrogate workflow of ``rapt-plan generate
 --surrogate`` spends on training.
@@ -15,12 +15,12 @@ from typing import Callable
 
 import numpy as np
 
-import sim
+import sim.uuv
 from rapt.imitation import IterationRecord, MLPPolicy, imitate
-from sim.imitation.features import GOAL, feature_spec, policy_heads
-from sim.imitation.rollouts import annotated_runs, draw_valid, make_rollout
-from sim.imitation.surrogate import Surrogate
-from sim.mission import Mission
+from sim.uuv.imitation.features import GOAL, feature_spec, policy_heads
+from sim.uuv.imitation.rollouts import annotated_runs, draw_valid, make_rollout
+from sim.uuv.imitation.surrogate import Surrogate
+from sim.uuv.mission import Mission
 
 __all__ = ["train_surrogate", "load_or_train", "calibrate_goal_threshold", "TRAINING_DEFAULTS", "GOAL_THRESHOLDS"]
 
@@ -84,7 +84,7 @@ def calibrate_goal_threshold(policy, spec, trajectories, thresholds=GOAL_THRESHO
     Why: the expert gives its waypoint up once per aborted run, so beside a pending waypoint a
     +1 goal label is rare (0.14% of such states in the chapter 6 mission's expert runs) and a
     regression on +-1 learns an output that crosses 0 late.  On held-out expert runs
-    (``trajectories`` of :func:`~sim.imitation.rollouts.annotated_runs`, the expert flying), a
+    (``trajectories`` of :func:`~sim.uuv.imitation.rollouts.annotated_runs`, the expert flying), a
     run counts as reproduced under a threshold when the goal output first exceeds it at most
     ``within_steps`` steps before the expert's turn (or never, if the expert never turned).
     Every run weighs in, not only the few whose mode a threshold flips.  Ties go to the middle
@@ -128,7 +128,7 @@ def load_or_train(path: Path, mission: Mission, seed: int = 0, on_iteration=None
 
 def mode_agreement(mission: Mission, surrogate: Surrogate, X: np.ndarray, expert=None) -> float:
     """Share of the valid scenarios ``X`` where the surrogate shows the expert's mode."""
-    expert = sim.simulate(mission, X) if expert is None else expert
-    mine = sim.simulate(mission, X, surrogate=surrogate)
+    expert = sim.uuv.simulate(mission, X) if expert is None else expert
+    mine = sim.uuv.simulate(mission, X, surrogate=surrogate)
     ok = expert.valid & mine.valid
     return float(np.mean(mine.modes[ok] == expert.modes[ok])) if ok.any() else float("nan")

@@ -1,17 +1,9 @@
-"""The UUV world: mission simulator, back-seat autonomy, scoring and a MAVLink front-seat.
+"""The simulated systems RAPT tests, one sub-package each.
 
-Depends on :mod:`rapt` for shared types only; never imports :mod:`bridge`.
+- :mod:`sim.uuv` — the UUV world: vectorized mission simulator, back-seat autonomy,
+  scoring and a MAVLink front-seat (chapters 3, 4 and 6 of the dissertation).
+- :mod:`sim.robots` — the self-righting ground robots (chapter 5).
+
+The two share nothing but :mod:`rapt`'s types and never import each other; neither
+imports :mod:`bridge` or :mod:`planner`.
 """
-
-from sim.bias import Bias, parse_bias
-from sim.mission import Mission
-from sim.simulate import Result, simulate
-
-__all__ = ["Bias", "Mission", "Result", "simulate", "load_mission", "parse_bias"]
-
-
-def load_mission(path) -> Mission:
-    """Load and validate a TOML mission file (see :mod:`sim.missionfile`)."""
-    from sim.missionfile import load_mission as _load
-
-    return _load(path)

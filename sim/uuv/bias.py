@@ -1,0 +1,164 @@
+"""Execution bias: how a real vehicle on a real range departs from the simulator (section 4.5).
+
+On the 2017 range day the vehicle ran faster than commanded and the tidal files were
+wrong, so every run shifted the same way — an *execution bias*, unlike stochastic effects
+a translation of all the performance boundaries.  A :class:`Bias` given to the world
+(:class:`sim.uuv.world.World`, hence :func:`sim.uuv.simulate` and :class:`sim.uuv.frontseat.FrontSeat`)
+makes the vehicle behave like such a vehicle, while the back-seat autonomy still plans
+with the unbiased model — the mission file's vehicle and tide table.  That is what makes
+it a bias, and why ``rapt-plan compare`` can estimate it from logs.
+
+==================  =======  ==========================================================
+name                neutral  meaning
+==================  =======  ==========================================================
+``speed``           1.0      through-water speed achieved per unit commanded
+                             (1.15: the vehicle runs 15 % faster than commanded)
+``current_scale``   1.0      true tidal current / the tide table's
+``current_offset``  0.0      m/s added to the tide along the mission's flood direction
+                             (``[current] direction_deg``; negative: towards the ebb)
+``heading``         0.0      degrees the track through water runs clockwise of the bow
+                             (fin trim, a misaligned compass or DVL): a crab the
+                             autonomy does not know about
+``battery``         1.0      energy the pack delivers per unit of charge the gauge shows
+                             (1.1: the charge drains 10 % slower than the model, as if
+                             the starting battery were higher)
+``start_time``      0.0      seconds the true tide runs ahead of the tide table (a wrong
+                             time zone or epoch in the tidal file)
+==================  =======  ==========================================================
+
+Written on the command line as ``speed=1.15,current_offset=0.3`` (:func:`parse_bias`);
+omitted fields stay neutral.  The neutral bias changes nothing: the simulator's results
+are bit-identical to a run without one.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import asdict, dataclass, fields
+from typing import Mapping, Sequence
+
+import numpy as np
+
+__all__ = ["Bias", "BiasArrays", "BIAS_NAMES", "BIAS_UNITS", "BIAS_LIMITS", "parse_bias", "bias_arrays"]
+
+
+@dataclass(frozen=True)
+class Bias:
+    """A vehicle's execution bias (see the module docstring for each field)."""
+
+    speed: float = 1.0
+    current_scale: float = 1.0
+    current_offset: float = 0.0
+    heading: float = 0.0
+    battery: float = 1.0
+    start_time: float = 0.0
+
+    def __post_init__(self):
+        for f in fields(self):
+            check_value(f.name, getattr(self, f.name))
+
+    @property
+    def is_neutral(self) -> bool:
+        return self == Bias()
+
+    def to_dict(self) -> dict[str, float]:
+        return {k: float(v) for k, v in asdict(self).items()}
+
+    def vector(self) -> np.ndarray:
+        """The fields in :data:`BIAS_NAMES` order."""
+        return np.array([getattr(self, n) for n in BIAS_NAMES], dtype=float)
+
+    @classmethod
+    def from_vector(cls, values: Sequence[float]) -> "Bias":
+        return cls(**{n: float(v) for n, v in zip(BIAS_NAMES, values)})
+
+    def __str__(self) -> str:
+        changed = [f"{n}={getattr(self, n):g}" for n in BIAS_NAMES if getattr(self, n) != NEUTRAL[n]]
+        return ",".join(changed) or "none"
+
+
+BIAS_NAMES: tuple[str, ...] = tuple(f.name for f in fields(Bias))
+NEUTRAL: dict[str, float] = {f.name: f.default for f in fields(Bias)}
+BIAS_UNITS: dict[str, str] = {"speed": "x", "current_scale": "x", "current_offset": "m/s", "heading": "deg",
+                              "battery": "x", "start_time": "s"}
+#: Accepted range of each field (inclusive): wider than any plausible range day, narrow
+#: enough to catch a value in the wrong unit (``heading=0.2`` rad is allowed, 90 is not).
+BIAS_LIMITS: dict[str, tuple[float, float]] = {
+    "speed": (0.5, 2.0), "current_scale": (0.0, 3.0), "current_offset": (-2.0, 2.0), "heading": (-45.0, 45.0),
+    "battery": (0.25, 4.0), "start_time": (-43200.0, 43200.0),
+}
+_EXAMPLE = "e.g. speed=1.15,current_offset=0.3"
+
+
+def check_value(name: str, value) -> float:
+    lo, hi = BIAS_LIMITS[name]
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ValueError(f"{name}: {value!r} is not a number; write {name}=<number>, {_EXAMPLE}") from None
+    if not math.isfinite(v) or not lo <= v <= hi:
+        raise ValueError(f"{name}: {value} is outside [{lo:g}, {hi:g}] {BIAS_UNITS[name]}; "
+                         f"give a value in that range (neutral: {NEUTRAL[name]:g})")
+    return v
+
+
+def parse_bias(text: str) -> Bias:
+    """``"speed=1.15,current_offset=0.3"`` -> :class:`Bias`; ValueError naming the bad field.
+
+    An empty string or ``none`` is the neutral bias.
+    """
+    text = (text or "").strip()
+    if text.lower() in ("", "none"):
+        return Bias()
+    values: dict[str, float] = {}
+    for item in text.split(","):
+        item = item.strip()
+        if not item:
+            raise ValueError(f"empty item in {text!r}; separate name=value items by single commas, {_EXAMPLE}")
+        name, eq, value = item.partition("=")
+        name, value = name.strip(), value.strip()
+        if name not in BIAS_NAMES:
+            raise ValueError(f"{name}: unknown bias parameter; choose from {', '.join(BIAS_NAMES)} ({_EXAMPLE})")
+        if not eq or not value:
+            raise ValueError(f"{name}: no value; write {name}=<number>, {_EXAMPLE}")
+        if name in values:
+            raise ValueError(f"{name}: given twice; give each parameter once")
+        values[name] = check_value(name, value)
+    return Bias(**values)
+
+
+@dataclass
+class BiasArrays:
+    """A bias per vehicle of a batch: each field an (N,) array; ``heading`` in radians."""
+
+    speed: np.ndarray
+    current_scale: np.ndarray
+    current_offset: np.ndarray
+    heading_rad: np.ndarray
+    battery: np.ndarray
+    start_time: np.ndarray
+
+    def select(self, rows: np.ndarray) -> "BiasArrays":
+        return BiasArrays(*(getattr(self, f.name)[rows] for f in fields(self)))
+
+
+def bias_arrays(bias: "Bias | BiasArrays | Sequence[Bias] | Mapping[str, np.ndarray] | None", n: int) -> BiasArrays:
+    """Broadcast one bias, one per vehicle, or arrays by field name over ``n`` vehicles."""
+    if bias is None:
+        bias = Bias()
+    if isinstance(bias, BiasArrays):
+        if bias.speed.shape != (n,):
+            raise ValueError(f"bias: expected arrays for {n} vehicles, got {bias.speed.shape}")
+        return bias
+    if isinstance(bias, Bias):
+        cols = {name: np.full(n, float(getattr(bias, name))) for name in BIAS_NAMES}
+    elif isinstance(bias, Mapping):
+        cols = {name: np.broadcast_to(np.asarray(bias.get(name, NEUTRAL[name]), dtype=float), (n,)).copy()
+                for name in BIAS_NAMES}
+    else:
+        items = list(bias)
+        if len(items) != n:
+            raise ValueError(f"bias: expected one Bias or {n} of them (one per scenario), got {len(items)}")
+        cols = {name: np.array([float(getattr(b, name)) for b in items]) for name in BIAS_NAMES}
+    return BiasArrays(cols["speed"], cols["current_scale"], cols["current_offset"], np.deg2rad(cols["heading"]),
+                      cols["battery"], cols["start_time"])

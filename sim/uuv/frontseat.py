@@ -1,0 +1,318 @@
+"""A simulated front-seat autopilot that speaks MAVLink 2, ArduSub style.
+
+It flies one scenario's vehicle (:class:`sim.uuv.world.World` with N = 1) behind a pymavlink
+endpoint, so the back-seat autonomy, a ground station or the bridge talk to it exactly
+as to a vehicle: HEARTBEAT (MAV_TYPE_SUBMARINE), SYS_STATUS, BATTERY_STATUS,
+LOCAL_POSITION_NED, GLOBAL_POSITION_INT, ATTITUDE, GPS_RAW_INT (a fix only on the
+surface), OBSTACLE_DISTANCE (a 360-beam sonar scan, five messages) and OBSTACLE_DISTANCE_3D
+(one closest point per contact), SYSTEM_TIME; arming and mode changes (COMMAND_LONG, SET_MODE); GUIDED
+velocity+yaw set-points (SET_POSITION_TARGET_LOCAL_NED / _GLOBAL_INT, type mask 2503);
+and the mission upload and download protocol.
+
+Clock: with ``lockstep`` the simulated time advances one step when the set-point for the
+current step arrives (its ``time_boot_ms`` names the step), so a one-hour mission flies as
+fast as the back-seat can answer; otherwise it runs in real time times ``speedup`` with
+the latest set-point.  SYSTEM_TIME closes every step's telemetry.  Failsafe: no set-point
+for ``failsafe_s`` wall seconds (lock-step) or simulated seconds (real time) -> hold
+position and surface, as an autopilot would.  A referee scorer ends the run (recovered,
+collision, out of the area, battery empty, time limit) and the vehicle disarms.
+"""
+
+from __future__ import annotations
+
+import os
+import threading
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavutil  # noqa: E402
+
+from sim.uuv.geo import LocalFrame  # noqa: E402
+from sim.uuv.interface import DEPTH_M, decode_command  # noqa: E402
+from sim.uuv.mission import Mission  # noqa: E402
+from sim.uuv.scenario import make_scenarios  # noqa: E402
+from sim.uuv.scoring import Scorer  # noqa: E402
+from sim.uuv.sonar import BEAMS_PER_MESSAGE, SCAN_BEAMS  # noqa: E402
+from sim.uuv.world import Telemetry, World, scenario_generators  # noqa: E402
+
+__all__ = ["FrontSeat", "GUIDED", "MANUAL", "SURFACE", "VELOCITY_YAW_MASK"]
+
+mav = mavutil.mavlink
+GUIDED, MANUAL, SURFACE = 4, 19, 9
+MODES = {"STABILIZE": 0, "ACRO": 1, "ALT_HOLD": 2, "AUTO": 3, "GUIDED": 4, "CIRCLE": 7, "SURFACE": 9,
+         "POSHOLD": 16, "MANUAL": 19}
+#: Velocity and yaw used; position, acceleration and yaw rate ignored.
+VELOCITY_YAW_MASK = 2503
+#: ArduSub zeroes a velocity target not refreshed within this many seconds.
+SETPOINT_TIMEOUT_S = 3.0
+
+
+@dataclass
+class _Setpoint:
+    heading: float = 0.0
+    speed: float = 0.0
+    surface: bool = False
+    tick_ms: int = -1
+    received: float = -1e9  # simulated time
+
+
+@dataclass
+class FrontSeatStats:
+    ticks: int = 0
+    setpoints: int = 0
+    ignored: int = 0
+    failsafes: int = 0
+    mission_items: int = 0
+    ended: str = ""
+    ticks_at_end: int = 0
+    log: list = field(default_factory=list)
+
+
+class FrontSeat:
+    """One simulated vehicle behind a MAVLink endpoint (see module docstring)."""
+
+    def __init__(self, mission: Mission, u, connection: str, *, lockstep: bool = True, speedup: float = 1.0,
+                 stochastic: bool = False, seed: int = 0, failsafe_s: float = 5.0, sysid: int = 1,
+                 telemetry_period_s: float = 0.5, bias=None):
+        self.mission = mission
+        self.u = np.asarray(u, dtype=float).reshape(1, -1)
+        scen = make_scenarios(mission, self.u)
+        if not scen.valid[0]:
+            raise ValueError(f"scenario: invalid for mission '{mission.name}' ({scen.invalid_reason[0]})")
+        if speedup <= 0:
+            raise ValueError(f"speedup: expected a factor > 0, got {speedup}")
+        self.scen = scen
+        # a biased vehicle (sim.uuv.bias) flies like a real one whose speed, tide, compass or
+        # battery differ from the model; the back-seat on the far side does not know
+        self.bias = bias
+        self.world = World(scen, scenario_generators(self.u, seed) if stochastic else None, bias, SCAN_BEAMS)
+        self.referee = Scorer(scen)
+        self.frame = LocalFrame(mission.origin_lat, mission.origin_lon)
+        self.lockstep, self.speedup, self.failsafe_s = lockstep, float(speedup), float(failsafe_s)
+        self.telemetry_period_s = telemetry_period_s
+        self.conn = mavutil.mavlink_connection(connection, source_system=sysid, source_component=1,
+                                               dialect="ardupilotmega")
+        self.armed = False
+        self.mode = MANUAL
+        self.k = 0
+        self.setpoint = _Setpoint()
+        self.stats = FrontSeatStats()
+        self.mission_items: list = []
+        self._upload_count = 0
+        self._stop = threading.Event()
+        self._boot = time.time()
+        self.tel: Telemetry = self.world.telemetry(0.0)
+        self._referee()  # the first report counts, as in a batch
+
+    # -- public ----------------------------------------------------------------------
+    @property
+    def t(self) -> float:
+        return self.k * self.mission.dt
+
+    @property
+    def ended(self) -> bool:
+        return bool(self.stats.ended)
+
+    def stop(self) -> None:
+        self._stop.set()
+
+    def close(self) -> None:
+        self._stop.set()
+        self.conn.close()
+
+    def serve(self, duration_s: float | None = None) -> None:
+        """Run until :meth:`stop` (or ``duration_s`` wall seconds)."""
+        deadline = None if duration_s is None else time.monotonic() + duration_s
+        last_hb = last_tel = 0.0
+        last_tick = time.monotonic()
+        waiting_since = time.monotonic()
+        while not self._stop.is_set() and (deadline is None or time.monotonic() < deadline):
+            now = time.monotonic()
+            if now - last_hb >= 1.0:
+                self._heartbeat()
+                last_hb = now
+            msg = self.conn.recv_match(blocking=True, timeout=0.02)
+            if msg is not None:
+                self._handle(msg)
+            flying = self.armed and self.mode == GUIDED and not self.ended
+            if self.lockstep:
+                if flying and self.setpoint.tick_ms == self._tick_ms():
+                    self._step(self.setpoint)
+                    waiting_since = time.monotonic()
+                elif flying and time.monotonic() - waiting_since > self.failsafe_s:
+                    self._failsafe()
+                    waiting_since = time.monotonic()
+                elif time.monotonic() - last_tel >= self.telemetry_period_s:
+                    self._send_telemetry()  # repeat the current step for late joiners
+                    last_tel = time.monotonic()
+            else:
+                period = self.mission.dt / self.speedup
+                if time.monotonic() - last_tick >= period:
+                    last_tick += period
+                    if flying:
+                        sp = self.setpoint
+                        if self.t - sp.received > self.failsafe_s:
+                            self._failsafe()
+                        else:
+                            if self.t - sp.received > SETPOINT_TIMEOUT_S:
+                                sp = _Setpoint(heading=sp.heading, surface=sp.surface)
+                            self._step(sp)
+                    else:
+                        self._send_telemetry()
+
+    # -- the vehicle -----------------------------------------------------------------
+    def _tick_ms(self) -> int:
+        return int(round(self.t * 1000))
+
+    def _step(self, sp: _Setpoint) -> None:
+        moving = np.ones(1, dtype=bool)
+        self.world.advance(self.t, np.array([sp.heading]), np.array([sp.speed]), np.array([sp.surface]), moving)
+        self.k += 1
+        self.stats.ticks += 1
+        self.tel = self.world.telemetry(self.t)
+        self._referee()
+        self._send_telemetry()
+
+    def _failsafe(self) -> None:
+        self.stats.failsafes += 1
+        self._status(mav.MAV_SEVERITY_WARNING, "failsafe: no back-seat set-point, holding on the surface")
+        self._step(_Setpoint(heading=float(self.tel.heading[0]), speed=0.0, surface=True,
+                             tick_ms=self._tick_ms(), received=self.t))
+
+    def _referee(self) -> None:
+        ended = self.referee.update_from(self.tel, np.ones(1, dtype=bool))[0]
+        reason = ""
+        if ended:
+            r = self.referee
+            reason = ("recovered" if r.recovered[0] else "collision" if r.collided[0]
+                      else "left the operational area" if r.left_area[0] else "battery empty")
+        elif self.t >= self.mission.time_limit_s:
+            reason = "time limit"
+        if reason:
+            self.stats.ended, self.stats.ticks_at_end = reason, self.k
+            self.armed = False
+            self._status(mav.MAV_SEVERITY_NOTICE, f"run ended: {reason}")
+
+    # -- MAVLink out -----------------------------------------------------------------
+    def _heartbeat(self) -> None:
+        base = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (mav.MAV_MODE_FLAG_SAFETY_ARMED if self.armed else 0)
+        state = mav.MAV_STATE_ACTIVE if self.armed else mav.MAV_STATE_STANDBY
+        self.conn.mav.heartbeat_send(mav.MAV_TYPE_SUBMARINE, mav.MAV_AUTOPILOT_ARDUPILOTMEGA, base, self.mode, state)
+
+    def _status(self, severity: int, text: str) -> None:
+        self.stats.log.append(text)
+        self.conn.mav.statustext_send(severity, text[:50].encode())
+
+    def _send_telemetry(self) -> None:
+        tel, ms, m = self.tel, self._tick_ms(), self.conn.mav
+        east, north = float(tel.est_x[0]), float(tel.est_y[0])
+        depth = 0.0 if tel.surfaced[0] else DEPTH_M
+        s = self.world.state
+        ve = float(s.surge[0] * np.sin(s.heading[0]))
+        vn = float(s.surge[0] * np.cos(s.heading[0]))
+        m.attitude_send(ms, 0.0, 0.0, float(tel.heading[0]), 0.0, 0.0, float(s.yaw_rate[0]))
+        m.local_position_ned_send(ms, north, east, depth, vn, ve, 0.0)
+        lat, lon = self.frame.to_latlon(east, north)
+        hdg = int(round(np.degrees(tel.heading[0]) % 360 * 100)) % 36000
+        m.global_position_int_send(ms, int(round(lat * 1e7)), int(round(lon * 1e7)), int(-depth * 1000),
+                                   int(-depth * 1000), int(vn * 100), int(ve * 100), 0, hdg)
+        percent = int(np.clip(round(tel.battery[0] * 100), 0, 100))
+        volts = [int(14800 * (0.85 + 0.15 * tel.battery[0]))] + [65535] * 9
+        m.battery_status_send(0, mav.MAV_BATTERY_FUNCTION_ALL, mav.MAV_BATTERY_TYPE_LION, 2000, volts, -1,
+                              int(tel.energy_hj[0] * 100 / 3600 / 14.8 * 1000), int(tel.energy_hj[0]), percent)
+        m.sys_status_send(0, 0, 0, 0, volts[0], -1, percent, 0, 0, 0, 0, 0, 0)
+        fix = 3 if tel.surfaced[0] else 0
+        m.gps_raw_int_send(ms * 1000, fix, int(round(lat * 1e7)) if fix else 0, int(round(lon * 1e7)) if fix else 0,
+                           0, 65535, 65535, 65535, 65535, 12 if fix else 0)
+        self._send_sonar(ms)
+        m.system_time_send(int(time.time() * 1e6), ms)  # closes this step's telemetry
+
+    def _send_sonar(self, ms: int) -> None:
+        """Each contact's closest point (OBSTACLE_DISTANCE_3D, LOCAL_NED, what the expert reads)
+        and the 360-beam scan in five OBSTACLE_DISTANCE messages (BODY_FRD, 1 degree apart,
+        ``angle_offset`` 0, 72, ... 288; uint16 cm, max + 1 where nothing is seen)."""
+        tel, m = self.tel, self.conn.mav
+        rng = self.mission.vehicle.sonar_range_m
+        for j in np.flatnonzero(tel.detected[0]):
+            cx, cy = float(tel.contact_x[0, j]), float(tel.contact_y[0, j])
+            m.obstacle_distance_3d_send(ms, mav.MAV_DISTANCE_SENSOR_ULTRASOUND, mav.MAV_FRAME_LOCAL_NED, int(j),
+                                        cy, cx, 0.0, 0.0, rng)
+        cm = np.round(tel.scan[0] * 100.0).astype(np.int64)
+        for start in range(0, SCAN_BEAMS, BEAMS_PER_MESSAGE):
+            m.obstacle_distance_send(ms * 1000, mav.MAV_DISTANCE_SENSOR_ULTRASOUND,
+                                     cm[start:start + BEAMS_PER_MESSAGE].tolist(), 0, 0, int(rng * 100),
+                                     1.0, float(start), mav.MAV_FRAME_BODY_FRD)
+
+    # -- MAVLink in ------------------------------------------------------------------
+    def _handle(self, msg) -> None:
+        kind = msg.get_type()
+        if kind == "BAD_DATA":
+            return
+        if kind == "COMMAND_LONG":
+            self._command(msg)
+        elif kind == "SET_MODE":
+            self.mode = int(msg.custom_mode)
+        elif kind in ("SET_POSITION_TARGET_LOCAL_NED", "SET_POSITION_TARGET_GLOBAL_INT"):
+            self._setpoint(msg, kind)
+        elif kind == "MISSION_COUNT":
+            self._upload_count = int(msg.count)
+            self.mission_items = []
+            self._request_item(0, msg)
+        elif kind in ("MISSION_ITEM_INT", "MISSION_ITEM"):
+            self._mission_item(msg)
+        elif kind == "MISSION_REQUEST_LIST":
+            self.conn.mav.mission_count_send(msg.get_srcSystem(), msg.get_srcComponent(), len(self.mission_items))
+        elif kind in ("MISSION_REQUEST_INT", "MISSION_REQUEST"):
+            self._send_item(msg)
+
+    def _command(self, msg) -> None:
+        cmd, result = int(msg.command), mav.MAV_RESULT_ACCEPTED
+        if cmd == mav.MAV_CMD_COMPONENT_ARM_DISARM:
+            if msg.param1 > 0.5 and self.ended:
+                result = mav.MAV_RESULT_DENIED  # the run is over
+            else:
+                self.armed = msg.param1 > 0.5
+        elif cmd == mav.MAV_CMD_DO_SET_MODE:
+            mode = int(msg.param2)
+            if mode in MODES.values():
+                self.mode = mode
+            else:
+                result = mav.MAV_RESULT_DENIED
+        else:
+            result = mav.MAV_RESULT_UNSUPPORTED
+        self.conn.mav.command_ack_send(cmd, result)
+
+    def _setpoint(self, msg, kind: str) -> None:
+        frames = ((mav.MAV_FRAME_LOCAL_NED,) if kind.endswith("LOCAL_NED")
+                  else (mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT))
+        if self.mode != GUIDED or msg.coordinate_frame not in frames or msg.type_mask != VELOCITY_YAW_MASK:
+            self.stats.ignored += 1  # ArduSub drops such set-points silently
+            return
+        heading, speed, surface = decode_command(msg.vx, msg.vy, msg.vz, msg.yaw)
+        self.setpoint = _Setpoint(float(heading), float(speed), bool(surface), int(msg.time_boot_ms), self.t)
+        self.stats.setpoints += 1
+
+    def _request_item(self, seq: int, msg) -> None:
+        self.conn.mav.mission_request_int_send(msg.get_srcSystem(), msg.get_srcComponent(), seq)
+
+    def _mission_item(self, msg) -> None:
+        if int(msg.seq) != len(self.mission_items):
+            return  # out of order: the ground station resends on its timeout
+        self.mission_items.append(msg)
+        self.stats.mission_items += 1
+        if len(self.mission_items) < self._upload_count:
+            self._request_item(len(self.mission_items), msg)
+        else:
+            self.conn.mav.mission_ack_send(msg.get_srcSystem(), msg.get_srcComponent(), mav.MAV_MISSION_ACCEPTED)
+
+    def _send_item(self, msg) -> None:
+        seq = int(msg.seq)
+        if 0 <= seq < len(self.mission_items):
+            it = self.mission_items[seq]
+            x, y = (it.x, it.y) if it.get_type() == "MISSION_ITEM_INT" else (int(it.x * 1e7), int(it.y * 1e7))
+            self.conn.mav.mission_item_int_send(msg.get_srcSystem(), msg.get_srcComponent(), seq, it.frame,
+                                                it.command, 0, 1, it.param1, it.param2, it.param3, it.param4,
+                                                x, y, it.z)

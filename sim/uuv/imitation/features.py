@@ -1,0 +1,176 @@
+"""What a learned back-seat sees and does: the features and actions of section 6.5.3.
+
+Features, all in the vehicle frame (x along the bow, y to starboard) and in [-1, 1]:
+
+* ``fuel`` — remaining charge, 2 b - 1;
+* ``map`` — vectors to the next mission waypoint and to the recovery point, each as a
+  direction (the vector over ``max(distance, near_m)``: a unit vector when far, shrinking
+  to zero on arrival) and a distance (over the operational area's diagonal D, as far apart
+  as two points in it can be: 2 d / D - 1).  Splitting direction from distance keeps the
+  direction legible at any range, which is what steering needs, while the distance
+  carries the fuel decision.  The waypoint's three are zero once every waypoint has been
+  reached (the vehicle knows which it has reached) or given up (see the goal decision);
+* ``sonar`` — a 360-beam, 1-degree range scan out to the sonar range (-1 touching, +1
+  nothing within range);
+* ``clock`` — mission time used, 2 t / limit - 1.  Not in the dissertation's list: our
+  expert turns home when it runs out of time as well as fuel, and only the clock says so.
+
+Actions: the desired through-water velocity in the vehicle frame over the maximum speed,
+``a = (speed / max_speed) (cos r, sin r)`` with ``r`` the commanded heading relative to
+the bow; and a third output, the goal decision: +1 when the expert has given the mission
+waypoint up and heads home (waypoints done, not enough fuel, not enough time), -1 while
+it still pursues it.  The expert latches that decision, and a memoryless regressor cannot
+imitate a latch from the state alone: moments after turning on fuel the vehicle has the
+same charge and distance from home as one that carries on, and averaging "go on" with
+"go home" stalls it.  So the learned back-seat latches its own decision too (as the
+expert's goal state does) and, once home-bound, sees no waypoint pending, exactly the
+features of a vehicle that has reached every waypoint.  The decision is learned from the
+features the expert takes it on, not the scan (:func:`policy_heads`).
+
+Every input is what the front-seat reports over MAVLink at MAVLink precision, so
+features computed in the batch simulator and on the bus are the same numbers.
+"""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass
+
+import numpy as np
+
+from sim.uuv.mission import Mission
+from sim.uuv.sonar import SCAN_BEAMS
+from sim.uuv.vehicle import wrap_angle
+
+__all__ = ["FeatureSpec", "feature_spec", "features", "expert_action", "action_command", "advance_waypoints",
+           "waypoint_target", "policy_heads", "ACTIONS", "GOAL"]
+
+FEATURE_VERSION = 2
+#: Network outputs: through-water velocity (forward, starboard) and the goal decision.
+ACTIONS = 3
+#: The action column of the goal decision (+1: give the waypoint up and head home).
+GOAL = 2
+#: Within this distance a map vector shrinks linearly to zero (metres).
+NEAR_M = 10.0
+
+
+@dataclass(frozen=True)
+class FeatureSpec:
+    """How features are built for one mission: saved with a surrogate, checked on load."""
+
+    version: int
+    beams: int
+    sonar_range_m: float
+    map_scale_m: float
+    near_m: float
+    time_limit_s: float
+    max_speed: float
+    actions: int = ACTIONS
+
+    @property
+    def size(self) -> int:
+        return 1 + 6 + self.beams + 1
+
+    @property
+    def waypoint(self) -> slice:
+        """The pending waypoint's columns (direction and distance; all 0 when none is pending)."""
+        return slice(1, 4)
+
+    @property
+    def sonar(self) -> slice:
+        """The scan's columns (each reads +1 when its beam sees nothing)."""
+        return slice(7, 7 + self.beams)
+
+    def names(self) -> list[str]:
+        return (["fuel", "waypoint_fwd", "waypoint_stbd", "waypoint_distance", "recovery_fwd", "recovery_stbd",
+                 "recovery_distance"] + [f"sonar_{b}" for b in range(self.beams)] + ["clock"])
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "FeatureSpec":
+        return cls(**d)
+
+
+def policy_heads(spec: FeatureSpec) -> tuple[tuple[list[int] | None, list[int]], ...]:
+    """Which features each network of a learned back-seat reads (``rapt.imitation.imitate(heads=)``).
+
+    Velocity from every feature; the goal decision from the charge, the map vectors and the
+    clock only — what the expert's goal selection reads.  Learned by the steering network,
+    the decision leaned on the range scan (in the chapter 6 mission most early aborts of a
+    single network fired on a sonar spike, its output with the scan cleared far below 0).
+    """
+    mission_level = list(range(spec.sonar.start)) + list(range(spec.sonar.stop, spec.size))
+    return ((None, [0, 1]), (mission_level, [GOAL]))
+
+
+def feature_spec(mission: Mission, beams: int = SCAN_BEAMS) -> FeatureSpec:
+    op = mission.operational_area
+    return FeatureSpec(FEATURE_VERSION, beams, float(mission.vehicle.sonar_range_m),
+                       float(np.hypot(op.width, op.height)), NEAR_M, float(mission.time_limit_s),
+                       float(mission.vehicle.max_speed))
+
+
+def advance_waypoints(mission: Mission, nxt: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
+    """Index of the next mission waypoint after a position report (reached within its radius)."""
+    points = np.asarray(mission.waypoints, dtype=float).reshape(-1, 2)
+    W = points.shape[0]
+    if W == 0:
+        return nxt
+    w = np.minimum(nxt, W - 1)
+    arrived = (nxt < W) & (np.hypot(points[w, 0] - x, points[w, 1] - y) <= mission.waypoint_radius)
+    return nxt + arrived
+
+
+def waypoint_target(mission: Mission, nxt: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(x, y, pending) of the next waypoint; ``pending`` is False once all are reached."""
+    points = np.asarray(mission.waypoints, dtype=float).reshape(-1, 2)
+    W = points.shape[0]
+    if W == 0:
+        z = np.zeros(nxt.shape[0])
+        return z, z, np.zeros(nxt.shape[0], dtype=bool)
+    w = np.minimum(nxt, W - 1)
+    return points[w, 0], points[w, 1], nxt < W
+
+
+def _body(dx: np.ndarray, dy: np.ndarray, heading: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """World (east, north) vector into the vehicle frame (forward, starboard)."""
+    s, c = np.sin(heading), np.cos(heading)
+    return dx * s + dy * c, dx * c - dy * s
+
+
+def features(spec: FeatureSpec, mission: Mission, t: float, x: np.ndarray, y: np.ndarray, heading: np.ndarray,
+             battery: np.ndarray, scan: np.ndarray, waypoint: tuple[np.ndarray, np.ndarray, np.ndarray]
+             ) -> np.ndarray:
+    """(N, spec.size) float32 features from one step's reports (see the module docstring)."""
+    n = x.shape[0]
+    out = np.empty((n, spec.size), dtype=np.float32)
+    out[:, 0] = 2.0 * np.clip(battery, 0.0, 1.0) - 1.0
+    wx, wy, pending = waypoint
+    rx, ry = mission.recovery
+    for col, (dx, dy, on) in ((1, (wx - x, wy - y, pending)), (4, (rx - x, ry - y, True))):
+        dist = np.hypot(dx, dy)
+        fwd, stbd = _body(dx, dy, heading)
+        near = np.maximum(dist, spec.near_m)
+        out[:, col] = np.where(on, fwd / near, 0.0)
+        out[:, col + 1] = np.where(on, stbd / near, 0.0)
+        out[:, col + 2] = np.where(on, np.clip(2.0 * dist / spec.map_scale_m - 1.0, -1.0, 1.0), 0.0)
+    out[:, spec.sonar] = 2.0 * np.minimum(scan, spec.sonar_range_m) / spec.sonar_range_m - 1.0
+    out[:, -1] = np.clip(2.0 * t / spec.time_limit_s - 1.0, -1.0, 1.0)
+    return out
+
+
+def expert_action(spec: FeatureSpec, heading: np.ndarray, cmd_heading: np.ndarray, cmd_speed: np.ndarray,
+                  home: np.ndarray | bool = False) -> np.ndarray:
+    """(N, 3) float32 action for a commanded through-water heading and speed and the goal decision."""
+    rel = wrap_angle(np.asarray(cmd_heading, float) - np.asarray(heading, float))
+    mag = np.clip(np.asarray(cmd_speed, float) / spec.max_speed, 0.0, 1.0)
+    goal = np.broadcast_to(np.where(np.asarray(home, bool), 1.0, -1.0), mag.shape)
+    return np.column_stack([mag * np.cos(rel), mag * np.sin(rel), goal]).astype(np.float32)
+
+
+def action_command(spec: FeatureSpec, heading: np.ndarray, action: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(heading, speed) a front-seat is asked for by actions (N, 3); the goal column is not a command."""
+    a = np.asarray(action, dtype=float)
+    speed = np.clip(np.hypot(a[:, 0], a[:, 1]), 0.0, 1.0) * spec.max_speed
+    return wrap_angle(np.asarray(heading, float) + np.arctan2(a[:, 1], a[:, 0])), speed

@@ -1,0 +1,136 @@
+import re
+from pathlib import Path
+
+from typer.testing import CliRunner
+
+from planner.cli import app
+
+runner = CliRunner()
+RANGE2017 = str(Path(__file__).resolve().parents[2] / "examples" / "range2017.toml")
+
+
+def test_search_prints_quality_against_sobol(tmp_path):
+    db = tmp_path / "study.db"
+    result = runner.invoke(app, ["search", "plates2d", "--budget", "600", "--store", str(db)])
+    assert result.exit_code == 0, result.output
+    assert "plates2d: 600 samples, D_eps = 0.01" in result.output
+    rows = {m.group(1): float(m.group(2)) for m in re.finditer(r"│ (s-ndv|sobol)\s+│\s+([\d.]+)%", result.output)}
+    assert rows["s-ndv"] > 2.5 * rows["sobol"]
+    assert db.exists() and "600 rows" in result.output
+    again = runner.invoke(app, ["search", "plates2d", "--budget", "600", "--store", str(db)])
+    assert again.exit_code == 0 and again.output.count("s-ndv") == result.output.count("s-ndv")
+
+
+def test_bad_input_is_one_line_and_exit_2():
+    for args, expect in [
+        (["search", "plates9d"], "SYSTEM: unknown system 'plates9d'"),
+        (["search", "plates2d", "--budget", "50"], "budget: 50 is smaller than batch_size 100"),
+        (["search", "plates2d", "--method", "lola"], "method: unknown method 'lola'"),
+        (["search", "plates2d", "--baseline", "grid"], "--baseline: unknown method 'grid'"),
+        (["search", "plates2d", "--d-eps", "0"], "--d-eps: must be > 0"),
+    ]:
+        result = runner.invoke(app, args)
+        assert result.exit_code == 2, (args, result.output)
+        assert expect in result.output
+        assert "Traceback" not in result.output
+        assert len([line for line in result.output.splitlines() if line.strip()]) == 1
+
+
+def test_study_of_a_mission_reports_modes_and_boundary_types(tmp_path):
+    db = tmp_path / "study.db"
+    args = ["study", RANGE2017, "--budget", "1000", "--batch-size", "250", "--store", str(db)]
+    result = runner.invoke(app, args)
+    assert result.exit_code == 0, result.output
+    assert "range2017: 1000 scenarios (15-D)" in result.output
+    shares = {m.group(1): float(m.group(2)) for m in re.finditer(r"mode (TF|SS|MS|TS)\s+│\s+([\d.]+)%", result.output)}
+    assert set(shares) == {"TF", "SS", "MS", "TS"} and sum(v > 0 for v in shares.values()) >= 3
+    assert "boundary TF/SS" in result.output and "1000 scenarios)" in result.output
+    again = runner.invoke(app, args)  # resumed from the store: same table
+    assert again.exit_code == 0
+    assert again.output.split("time (s)")[0] == result.output.split("time (s)")[0]
+
+
+def test_study_bad_mission_is_one_line_and_exit_2(tmp_path):
+    bad = tmp_path / "bad.toml"
+    bad.write_text('[mission]\nname = "x"\nbogus = 1\n')
+    for args, expect in [(["study", str(tmp_path / "missing.toml")], "MISSION_FILE: "),
+                         (["study", str(bad)], f"{bad}: "),
+                         (["study", RANGE2017, "--baseline", "grid"], "--baseline: unknown method")]:
+        result = runner.invoke(app, args)
+        assert result.exit_code == 2, (args, result.output)
+        assert expect in result.output and "Traceback" not in result.output
+        assert len([line for line in result.output.splitlines() if line.strip()]) == 1
+
+
+def test_run_flies_a_scenario_in_the_loop_and_logs_it(tmp_path):
+    log = tmp_path / "run.mcap"
+    result = runner.invoke(app, ["run", RANGE2017, "--scenario", "3", "--log", str(log)])
+    assert result.exit_code == 0, result.output
+    assert re.search(r"same scores as the batch simulator\s+│\s+yes", result.output)
+    from bridge.logger import read_log, read_metadata
+
+    topics = {t for t, _, _ in read_log(log)}
+    assert {"rapt/uuv1/mavlink/LOCAL_POSITION_NED", "rapt/uuv1/command/autonomy"} <= topics
+    assert read_metadata(log)["scenario"]["scenario_id"] == "sobol-3"
+
+
+def test_each_piece_runs_as_its_own_process_and_stops_cleanly(tmp_path):
+    import os
+    import signal
+    import socket
+    import subprocess
+    import sys
+    import time
+
+    def port(kind):
+        with socket.socket(socket.AF_INET, kind) as s:
+            s.bind(("127.0.0.1", 0))
+            return s.getsockname()[1]
+
+    udp, hub = port(socket.SOCK_DGRAM), port(socket.SOCK_STREAM)
+    log = tmp_path / "bus.mcap"
+    cli = [sys.executable, "-m", "planner.cli"]
+    zen = ["--zenoh-connect", f"tcp/127.0.0.1:{hub}"]
+    procs = [subprocess.Popen(cli + ["bridge", "--mavlink", f"udpout:127.0.0.1:{udp}", "--zenoh-listen",
+                                     f"tcp/127.0.0.1:{hub}", "--allow-commands", "--arm"])]
+    # No pause: the clients wait for the hub (bridge.session.CONNECT_TIMEOUT_S), in any start order.
+    procs += [subprocess.Popen(cli + ["log", "--out", str(log)] + zen),
+              subprocess.Popen(cli + ["autonomy", RANGE2017, "--scenario", "3"] + zen),
+              subprocess.Popen(cli + ["frontseat", RANGE2017, "--scenario", "3", "--mavlink",
+                                      f"udpin:127.0.0.1:{udp}"])]
+    from bridge.logger import read_log
+
+    def flown() -> tuple[list, list]:
+        try:
+            rows = read_log(log)
+        except Exception:  # not written yet
+            return [], [0.0]
+        north = [m["x"] for t, _, m in rows if t == "rapt/uuv1/mavlink/LOCAL_POSITION_NED"] or [0.0]
+        return [m for t, _, m in rows if t == "rapt/uuv1/command/autonomy"], north
+
+    try:
+        deadline = time.monotonic() + 90  # a loaded machine starts four Pythons slowly
+        while time.monotonic() < deadline:
+            assert all(p.poll() is None for p in procs), [p.returncode for p in procs]
+            commands, north = flown()
+            if len(commands) > 50 and max(north) - min(north) > 50:
+                break
+            time.sleep(1.0)
+    finally:
+        for p in reversed(procs):
+            p.send_signal(signal.SIGINT)
+        codes = [p.wait(timeout=20) for p in procs]
+    assert codes == [0, 0, 0, 0]
+    commands, north = flown()
+    assert len(commands) > 50 and max(north) - min(north) > 50  # the autonomy flew the vehicle
+
+
+def test_selfright_is_a_rapt_plan_command_with_one_line_errors(tmp_path):
+    bad = tmp_path / "robot.toml"
+    bad.write_text("[robot]\nname = 'x'\n")
+    result = runner.invoke(app, ["selfright", str(bad), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 2 and "Traceback" not in result.output
+    assert len([line for line in result.output.splitlines() if line.strip()]) == 1
+    robot = str(Path(__file__).resolve().parents[2] / "examples" / "robots" / "1dof.toml")
+    result = runner.invoke(app, ["selfright", robot, "--out", str(tmp_path / "out"), "--slope", "95"])
+    assert result.exit_code == 2 and "--slope" in result.output

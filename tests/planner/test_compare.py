@@ -1,0 +1,242 @@
+"""rapt-plan compare: a plan flown in SIL by a biased vehicle, read back, the bias recovered, re-planned.
+
+One small plan (2 pairs of the 2017 range mission) is generated and each scenario flown
+through the whole stack — `rapt-plan run PLAN --scenario ID --inject-bias ... --log`,
+real MAVLink on loopback and a real Zenoh session, two runs at a time — then compared,
+together with a truncated and a corrupted copy of one log.  The other tests reuse those
+logs.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+
+import numpy as np
+import pytest
+from mcap.reader import make_reader
+from typer.testing import CliRunner
+
+import sim.uuv
+from planner.cli import app
+from planner.generate import GenerateConfig, generate
+from planner.logs import read_run
+from planner.plans import load_plan
+from sim.uuv.bias import Bias, parse_bias
+
+ROOT = Path(__file__).resolve().parents[2]
+MISSION = ROOT / "examples" / "range2017.toml"
+INJECTED = {"speed": 1.15, "current_offset": 0.3}
+runner = CliRunner()
+
+
+def _rapt_plan() -> list[str]:
+    exe = Path(sys.executable).with_name("rapt-plan")
+    return [str(exe)] if exe.exists() else [sys.executable, "-m", "planner.cli"]
+
+
+def _fly(plan_json: Path, sid: str, log: Path) -> subprocess.CompletedProcess:
+    bias = ",".join(f"{k}={v}" for k, v in INJECTED.items())
+    return subprocess.run(_rapt_plan() + ["run", str(plan_json), "--scenario", sid, "--inject-bias", bias,
+                                          "--log", str(log), "--timeout", "240"],
+                          capture_output=True, text=True, timeout=300, cwd=ROOT,
+                          env={**os.environ, "COLUMNS": "200"})
+
+
+def _digests(paths) -> dict[str, str]:
+    return {str(p): hashlib.sha256(Path(p).read_bytes()).hexdigest() for p in paths}
+
+
+@pytest.fixture(scope="module")
+def flown(tmp_path_factory):
+    base = tmp_path_factory.mktemp("range_day")
+    plan_dir = base / "plan"
+    plan = generate(sim.uuv.load_mission(MISSION), MISSION, plan_dir,
+                    GenerateConfig(budget=500, batch_size=250, dithers=0, pairs=2, seed=0))
+    logs_dir = base / "logs"
+    logs_dir.mkdir()
+    ids = [s["id"] for s in plan["scenarios"]]
+    with ThreadPoolExecutor(max_workers=2) as pool:  # CI has two cores
+        done = list(pool.map(lambda sid: _fly(plan_dir / "plan.json", sid, logs_dir / f"{sid}.mcap"), ids))
+    for sid, proc in zip(ids, done):
+        assert proc.returncode == 0, (sid, proc.stdout, proc.stderr)
+        row = next(line for line in proc.stdout.splitlines() if "same scores as the batch simulator" in line)
+        assert "yes" in row, proc.stdout  # the SIL run equals the batch simulator under the same bias
+    logs = [logs_dir / f"{sid}.mcap" for sid in ids]
+    # a logger killed mid-run: the first 60 % of a log; a damaged disk: bytes overwritten mid-file
+    data = logs[0].read_bytes()
+    truncated = base / "killed.mcap"
+    truncated.write_bytes(data[: int(len(data) * 0.6)])
+    corrupt = base / "damaged.mcap"
+    bad = bytearray(logs[1].read_bytes())
+    with open(logs[1], "rb") as f:
+        chunks = sorted(make_reader(f).get_summary().chunk_indexes, key=lambda c: c.chunk_start_offset)
+    middle = chunks[len(chunks) // 2]
+    at = middle.chunk_start_offset + middle.chunk_length // 2
+    bad[at:at + 64] = bytes(64)  # inside one chunk's compressed records
+    corrupt.write_bytes(bytes(bad))
+    inputs = logs + [truncated, corrupt] + sorted(p for p in plan_dir.rglob("*") if p.is_file())
+    before = _digests(inputs)
+    out = base / "comparison"
+    result = runner.invoke(app, ["compare", str(plan_dir), *map(str, logs), str(truncated), str(corrupt),
+                                 "--out", str(out), "--dithers", "5"])
+    assert result.exit_code == 0, result.output
+    return {"plan_dir": plan_dir, "plan": plan, "logs": logs, "truncated": truncated, "corrupt": corrupt,
+            "out": out, "output": result.output, "inputs": inputs, "before": before,
+            "comparison": json.loads((out / "comparison.json").read_text())}
+
+
+def test_compare_recovers_the_injected_bias_and_corrects_the_predictions(flown):
+    c = flown["comparison"]
+    neutral = Bias()
+    for name, value in INJECTED.items():
+        est, se = c["bias"][name]["estimate"], c["bias"][name]["stderr"]
+        shift = value - getattr(neutral, name)
+        assert abs(est - value) <= 0.2 * abs(shift), (name, est, value)  # within 20 % of the injected bias
+        assert se is not None and se < 0.2 * abs(shift)
+    for name in ("current_scale", "heading", "battery"):  # not injected: found close to neutral
+        assert abs(c["bias"][name]["estimate"] - getattr(neutral, name)) < 0.05, (name, c["bias"][name])
+    ag = c["mode_agreement"]
+    assert ag["scenarios"] == len(flown["plan"]["scenarios"])
+    assert ag["corrected"] >= 0.9 and ag["corrected"] >= ag["uncorrected"]
+    for r in c["scenarios"]:
+        assert {"id", "predicted_mode", "observed_mode", "path_error_m"} <= set(r)
+        if r["log_complete"]:
+            assert r["observed_mode"] in ("TF", "SS", "MS", "TS")
+            assert r["path_error_corrected_m"] < max(r["path_error_m"], 1.0)
+    assert f"{ag['corrected']:.0%} with the fitted bias" in flown["output"]
+    html = (flown["out"] / "comparison.html").read_text()
+    assert "Execution bias" in html and "Re-plan" in html
+    assert len(list((flown["out"] / "figures").glob("*.png"))) >= len(c["scenarios"]) + 1
+
+
+def test_pairs_are_reported_and_fragile_ones_re_planned_under_the_bias(flown):
+    c = flown["comparison"]
+    plan = load_plan(flown["plan_dir"])
+    assert [p["id"] for p in c["pairs"]] == [p["id"] for p in plan.pairs]
+    for p in c["pairs"]:
+        assert p["observed_straddles"] is not None  # both sides flown to the end
+        if p["flagged"]:
+            assert p["moved_sides"] and p["reason"]
+    for q in c["proposals"]:
+        assert q["id"] == q["variant_of"] + "M"
+        if q["found"]:  # under the fitted bias the adjusted scenario shows what the plan intended
+            u = np.array(q["u"])
+            bias = Bias(**{k: v["estimate"] for k, v in c["bias"].items()})
+            r = sim.uuv.simulate(plan.mission, u[None, :], bias=bias)
+            for name, value in q["intended"].items():
+                assert r.column(name)[0] == value
+
+
+def test_truncated_and_damaged_logs_are_read_as_far_as_they_go(flown):
+    c = flown["comparison"]
+    rows = {r["log"]: r for r in c["scenarios"]}
+    killed, damaged = rows[flown["truncated"].name], rows[flown["corrupt"].name]
+    assert killed["observed_mode"] is None and not killed["log_complete"] and killed["steps"] > 100
+    assert any("footer" in p for p in killed["lost"]) and any("end is not in the log" in p for p in killed["lost"])
+    assert any("damaged chunk" in p for p in damaged["lost"])
+    full = read_run(flown["logs"][0])
+    part = read_run(flown["truncated"])
+    n = part.steps.shape[0]
+    assert 0 < n < full.steps.shape[0]
+    np.testing.assert_array_equal(part.steps, full.steps[:n])  # what survived is exactly what was logged
+    assert "warning:" in flown["output"] and flown["truncated"].name in flown["output"]
+
+
+def test_compare_never_modifies_its_inputs(flown):
+    assert _digests(flown["inputs"]) == flown["before"]
+
+
+def test_logs_name_plan_and_scenario_but_not_the_injected_bias(flown):
+    plan = load_plan(flown["plan_dir"])
+    run = read_run(flown["logs"][0])
+    assert run.meta["plan_id"] == plan.id and run.meta["scenario_id"] == plan.scenarios[0]["id"]
+    assert run.meta["mission"] == plan.mission.name
+    text = json.dumps(run.meta)
+    assert not any(name in text for name in ("speed", "current_offset", "bias"))
+
+
+def _rewrite_meta(src: Path, dst: Path, **changes) -> None:
+    """A copy of a log whose scenario metadata says something else (another mission or plan)."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    with open(src, "rb") as f, open(dst, "wb") as g:
+        reader = make_reader(f)
+        w = Writer(g)
+        w.start()
+        schemas, channels = {}, {}
+        for schema, channel, message in reader.iter_messages(log_time_order=False):
+            if schema is not None and schema.id not in schemas:
+                schemas[schema.id] = w.register_schema(schema.name, schema.encoding, schema.data)
+            if channel.id not in channels:
+                channels[channel.id] = w.register_channel(channel.topic, channel.message_encoding,
+                                                          schemas.get(channel.schema_id, 0))
+            data = message.data
+            if channel.topic.endswith("/meta/scenario"):
+                obj = {**json.loads(data), **changes}
+                data = json.dumps(obj).encode()
+                w.add_metadata("scenario", {k: v if isinstance(v, str) else json.dumps(v) for k, v in obj.items()})
+            w.add_message(channels[channel.id], log_time=message.log_time, data=data,
+                          publish_time=message.publish_time)
+        w.finish()
+
+
+def test_a_log_of_another_mission_or_plan_is_one_line_and_exit_2(flown, tmp_path):
+    other_mission = tmp_path / "imitation.mcap"
+    _rewrite_meta(flown["logs"][0], other_mission, mission="imitation7")
+    other_plan = tmp_path / "otherplan.mcap"
+    _rewrite_meta(flown["logs"][0], other_plan, plan_id="0123456789ab")
+    not_mcap = tmp_path / "notes.mcap"
+    not_mcap.write_text("range day notes, not a log\n")
+    for log, expect in [(other_mission, "was flown on mission 'imitation7'"), (other_plan, "flew plan 0123456789ab"),
+                        (not_mcap, "is not an MCAP file"), (tmp_path / "missing.mcap", "does not exist")]:
+        result = runner.invoke(app, ["compare", str(flown["plan_dir"]), str(flown["logs"][1]), str(log),
+                                     "--out", str(tmp_path / "cmp")])
+        assert result.exit_code == 2, (log, result.output)
+        assert expect in result.output and "Traceback" not in result.output
+        assert len([line for line in result.output.splitlines() if line.strip()]) == 1, result.output
+    assert not (tmp_path / "cmp" / "comparison.json").exists()
+
+
+@pytest.mark.parametrize("text,expect", [
+    ("sped=1.1", "sped: unknown bias parameter; choose from speed, current_scale"),
+    ("speed", "speed: no value; write speed=<number>"),
+    ("speed=fast", "speed: 'fast' is not a number"),
+    ("speed=9", "speed: 9 is outside [0.5, 2] x"),
+    ("heading=90", "heading: 90 is outside [-45, 45] deg"),
+    ("speed=1.1,speed=1.2", "speed: given twice"),
+    ("speed=1.1,,battery=1", "empty item"),
+    ("current_offset=nan", "current_offset: nan is outside"),
+])
+def test_inject_bias_parse_errors_name_the_field_and_the_fix(text, expect):
+    with pytest.raises(ValueError) as info:
+        parse_bias(text)
+    assert expect in str(info.value) and "\n" not in str(info.value)
+
+
+def test_inject_bias_on_the_command_line(flown):
+    plan_json = str(flown["plan_dir"] / "plan.json")
+    assert parse_bias(" speed=1.15, current_offset=0.3 ") == Bias(speed=1.15, current_offset=0.3)
+    assert parse_bias("none") == Bias() and str(Bias(battery=1.1)) == "battery=1.1"
+    for args, expect in [(["--scenario", "pair1a", "--inject-bias", "speeed=1.1"], "--inject-bias: speeed: unknown"),
+                         (["--scenario", "pair9z"], "--scenario: 'pair9z' is not a scenario of")]:
+        result = runner.invoke(app, ["run", plan_json, *args])
+        assert result.exit_code == 2 and expect in result.output, result.output
+        assert len([line for line in result.output.splitlines() if line.strip()]) == 1
+
+
+def test_neutral_bias_is_bit_identical_and_a_bias_is_per_row():
+    m = sim.uuv.load_mission(MISSION)
+    X = np.random.default_rng(5).random((16, m.dim))
+    plain = sim.uuv.simulate(m, X)
+    b = Bias(speed=1.1, heading=2.0, battery=0.9, current_scale=1.2, start_time=1800.0)
+    mixed = sim.uuv.simulate(m, np.vstack([X, X[:4]]), bias=[Bias()] * 16 + [b] * 4)  # one bias per row
+    np.testing.assert_array_equal(mixed.scores[:16], plain.scores)  # neutral: bit for bit
+    np.testing.assert_array_equal(sim.uuv.simulate(m, X[:4], bias=b).scores, mixed.scores[16:])
+    assert not np.array_equal(mixed.scores[16:], plain.scores[:4], equal_nan=True)

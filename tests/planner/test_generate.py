@@ -1,0 +1,224 @@
+"""rapt-plan generate on small budgets: each stage, the plan file, determinism, resume, errors."""
+
+import json
+import re
+from pathlib import Path
+
+import jsonschema
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+import planner
+import sim.uuv
+from planner.cli import app
+from planner.generate import PLAN_SCHEMA, GenerateConfig, analyse, generate, search_mission, select_pairs
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+SCHEMA = json.loads((Path(planner.__file__).parent / "plan.schema.json").read_text())
+PLAN_VALIDATOR = jsonschema.Draft202012Validator(SCHEMA)
+runner = CliRunner()
+
+
+def test_plan_schema_is_valid_and_rejects_what_the_planner_never_writes(plan_dir):
+    jsonschema.Draft202012Validator.check_schema(SCHEMA)
+    assert SCHEMA["properties"]["schema"]["const"] == PLAN_SCHEMA
+    _, plan = plan_dir
+    bad = json.loads(json.dumps(plan))
+    bad["scenarios"][0]["predicted"]["mode"] = "XX"
+    bad["pairs"][0]["extra"] = 1
+    bad["scenarios"][1]["u"][0] = 1.5
+    errors = {tuple(e.absolute_path) for e in PLAN_VALIDATOR.iter_errors(bad)}
+    assert errors == {("scenarios", 0, "predicted", "mode"), ("pairs", 0), ("scenarios", 1, "u", 0)}
+
+
+@pytest.fixture(scope="module")
+def range2017():
+    return sim.uuv.load_mission(EXAMPLES / "range2017.toml")
+
+
+def small(tmp_path, **kw):
+    base = dict(budget=1000, batch_size=250, dithers=60, pairs=4, store=tmp_path / "study.db")
+    base.update(kw)
+    return GenerateConfig(**base)
+
+
+def test_stages_search_analyse_and_select_distinct_sub_boundaries(range2017, tmp_path):
+    cfg = small(tmp_path)
+    study = search_mission(range2017, cfg)
+    assert study.n_evaluated == 1000 and len(study.X_failed) > 0  # invalid scenarios are kept out
+    a = analyse(range2017, study)
+    assert set(np.unique(a.result.modes)) >= {0, 1, 3}
+    assert set(a.sensitivity) == {"mission_success", "safety_success"}
+    assert max(a.sensitivity["mission_success"], key=a.sensitivity["mission_success"].get) in range2017.space.names
+    pairs = select_pairs(a, 4)
+    keys = {(p["level"], tuple(p["elements"])) for p in pairs}
+    assert len(pairs) == 4 and len(keys) == 4  # four different sub-boundaries
+    for p in pairs:
+        i, j = p["rows"]
+        assert p["modes"][0] != p["modes"][1] or p["level"] > 0
+        changed = [n for n in p["elements"] if a.result.column(n)[i] != a.result.column(n)[j]]
+        assert changed == p["elements"]  # the pair really flips these elements
+
+
+@pytest.fixture(scope="module")
+def plan_dir(range2017, tmp_path_factory):
+    out = tmp_path_factory.mktemp("plan")
+    plan = generate(range2017, EXAMPLES / "range2017.toml", out / "out", small(out, pairs=3, fragile_below=0.5))
+    return out, plan
+
+
+def test_generate_writes_a_plan_whose_predictions_hold(range2017, plan_dir):
+    tmp_path, plan = plan_dir
+    on_disk = json.loads((tmp_path / "out" / "plan.json").read_text())
+    assert on_disk == json.loads(json.dumps(plan)) and plan["schema"] == PLAN_SCHEMA
+    PLAN_VALIDATOR.validate(on_disk)  # the published schema describes what we write
+    assert {"mission", "study", "sensitivity", "pairs", "scenarios", "run_order"} <= set(plan)
+    assert len(plan["scenarios"]) == 2 * len(plan["pairs"])
+    assert plan["run_order"] == [s["id"] for s in plan["scenarios"]] + [v["id"] for v in plan["variants"]]
+    assert (tmp_path / "out" / "report.html").is_file()
+    U = np.array([s["u"] for s in plan["scenarios"]])
+    again = sim.uuv.simulate(range2017, U)
+    for s, mode in zip(plan["scenarios"], again.modes):
+        assert s["predicted"]["mode"] == ("TF", "SS", "MS", "TS")[mode]
+        d = s["dithering"]
+        assert 0 <= d["p_predicted_mode"] <= 1 and d["runs"] == 30
+        for kind, name in s["files"].items():
+            assert (tmp_path / "out" / name).is_file(), kind
+        assert set(s["parameters"]) == set(range2017.space.names)
+
+
+def test_same_seed_same_plan(range2017, plan_dir, tmp_path):
+    _, plan = plan_dir
+    again = generate(range2017, EXAMPLES / "range2017.toml", tmp_path / "b", small(tmp_path, pairs=3, fragile_below=0.5))
+    assert again == plan
+
+
+def test_cli_generate_resume_and_errors(tmp_path):
+    out = tmp_path / "plan"
+    args = ["generate", str(EXAMPLES / "imitation7.toml"), "--out", str(out), "--budget", "600",
+            "--batch-size", "200", "--dithers", "40", "--pairs", "2"]
+    first = runner.invoke(app, args)
+    assert first.exit_code == 0, first.output
+    assert "field plan in" in first.output and (out / "plan.json").is_file()
+    refused = runner.invoke(app, args)
+    assert refused.exit_code == 2 and "--resume" in refused.output
+    plan_before = (out / "plan.json").read_text()
+    again = runner.invoke(app, args + ["--resume"])  # the stored runs are reused, not re-run
+    assert again.exit_code == 0, again.output
+    assert re.search(r"\d+ valid runs", again.output) and (out / "plan.json").read_text() == plan_before
+    bad = tmp_path / "bad.toml"
+    bad.write_text((EXAMPLES / "imitation7.toml").read_text().replace("[vehicle]", "[vehicle]\ncruize_speed = 2.0", 1))
+    for argv, expect in [(["generate", str(bad), "--out", str(tmp_path / "x")], "cruize_speed"),
+                         (["generate", str(tmp_path / "none.toml"), "--out", str(tmp_path / "x")], "MISSION_FILE"),
+                         (["generate", str(EXAMPLES / "imitation7.toml"), "--out", str(tmp_path / "y"),
+                           "--budget", "100"], "--budget")]:
+        result = runner.invoke(app, argv)
+        assert result.exit_code == 2, (argv, result.output)
+        assert expect in result.output and "Traceback" not in result.output
+        assert len([line for line in result.output.splitlines() if line.strip()]) == 1
+
+
+def test_same_plan_with_processes_and_a_dask_cluster(range2017, tmp_path):
+    from distributed import Client, LocalCluster
+
+    from planner.generate import make_executor
+
+    cfg = dict(budget=500, batch_size=250, dithers=0, pairs=3)
+    base = generate(range2017, EXAMPLES / "range2017.toml", tmp_path / "local", GenerateConfig(**cfg))
+    pool, close = make_executor("processes")
+    try:
+        procs = generate(range2017, EXAMPLES / "range2017.toml", tmp_path / "procs", GenerateConfig(**cfg, executor=pool))
+    finally:
+        close()
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+                      host="127.0.0.1") as cluster, Client(cluster) as client:
+        dask = generate(range2017, EXAMPLES / "range2017.toml", tmp_path / "dask", GenerateConfig(**cfg, executor=client))
+    assert base == procs == dask
+
+
+def test_refine_sharpens_pairs_and_variants_keep_their_mode(range2017, tmp_path):
+    from planner.generate import refine_pairs
+
+    cfg = small(tmp_path)
+    a = analyse(range2017, search_mission(range2017, cfg))
+    chosen = select_pairs(a, 4)
+    refined = list(zip(chosen, refine_pairs(range2017, a, chosen, runs=12, min_distance=0.02)))
+    refined = [(p, q) for p, q in refined if q.get("refined")]
+    assert refined  # bisection stops early only at a third behaviour or an invalid scenario
+    pair, sharp = refined[0]
+    assert 0.02 <= sharp["distance"] < pair["distance"] / 4
+    lo, hi = sharp["u_override"]
+    r = sim.uuv.simulate(range2017, np.vstack([lo, hi]))
+    cols = [r.names.index(e) for e in pair["elements"]]
+    i, j = pair["rows"]
+    np.testing.assert_array_equal(r.scores[0, cols], a.result.scores[i, cols])  # still the same sub-boundary
+    np.testing.assert_array_equal(r.scores[1, cols], a.result.scores[j, cols])
+    plan = generate(range2017, EXAMPLES / "range2017.toml", tmp_path / "out",
+                    small(tmp_path, dithers=60, refine=8, pairs=2, fragile_below=0.9))
+    for v in plan["variants"]:
+        assert v["p_predicted_mode"] >= 0.9 and v["variant_of"] in plan["run_order"]
+        mode = sim.uuv.simulate(range2017, np.array(v["u"])[None, :]).modes[0]
+        assert ("TF", "SS", "MS", "TS")[mode] == v["predicted"]["mode"]
+
+
+def test_generate_runs_end_to_end_on_the_chapter3_mission(tmp_path):
+    """uuv18: 18 parameters, the permutation of mission-area priorities, 62 leaf scores."""
+    mission = sim.uuv.load_mission(EXAMPLES / "uuv18.toml")
+    plan = generate(mission, EXAMPLES / "uuv18.toml", tmp_path / "out",
+                    GenerateConfig(budget=400, batch_size=200, dithers=20, pairs=2, store=tmp_path / "study.db"))
+    PLAN_VALIDATOR.validate(json.loads((tmp_path / "out" / "plan.json").read_text()))
+    assert len(plan["pairs"]) == 2 and plan["mission"]["name"] == mission.name
+    modes = sim.uuv.simulate(mission, np.array([s["u"] for s in plan["scenarios"]])).modes
+    assert [s["predicted"]["mode"] for s in plan["scenarios"]] == [("TF", "SS", "MS", "TS")[m] for m in modes]
+    for p in plan["pairs"]:
+        a, b = (next(s for s in plan["scenarios"] if s["id"] == sid) for sid in p["scenarios"])
+        assert any(a["predicted"]["scores"].get(e) != b["predicted"]["scores"].get(e) for e in p["elements"]) \
+            or p["level"] > 1  # deeper elements are not in the predicted top-level scores
+
+
+def test_search_status_counts_modes_and_cross_mode_links():
+    from planner.search_status import SearchStatus
+
+    status = SearchStatus(2)
+    status(np.array([[0.1, 0.1], [0.9, 0.9]]), np.array([[1.0, 1.0], [0.0, 0.0]]))  # TS, TF
+    assert status.links == 0 and status.modes_found == 2
+    # nearest earlier runs: (0.1, 0.1) is TS -> a link for the SS run; (0.9, 0.9) is TF -> none for the TF run
+    status(np.array([[0.12, 0.1], [0.88, 0.9]]), np.array([[0.0, 1.0], [0.0, 0.0]]))
+    assert status.links == 1 and status.modes_found == 3
+    assert status.summary() == "3 modes, 1 boundary links"
+
+
+def test_generate_killed_mid_search_resumes_to_the_uninterrupted_plan(tmp_path):
+    import os
+    import signal
+    import sqlite3
+    import subprocess
+    import sys
+    import time
+
+    exe = Path(sys.executable).with_name("rapt-plan")
+    cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "planner.cli"]
+    args = ["generate", str(EXAMPLES / "imitation7.toml"), "--budget", "2000", "--batch-size", "250",
+            "--dithers", "40", "--pairs", "2"]
+    killed = tmp_path / "killed"
+    proc = subprocess.Popen(cmd + args + ["--out", str(killed)], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, env={**os.environ, "COLUMNS": "200"})
+    rows, deadline = 0, time.monotonic() + 240
+    try:
+        while rows < 500 and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.2)
+            try:
+                with sqlite3.connect(f"file:{killed / 'study.db'}?mode=ro", uri=True) as con:
+                    rows = con.execute("SELECT COUNT(*) FROM samples").fetchone()[0]
+            except sqlite3.Error:
+                pass  # not created yet
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    assert 500 <= rows < 2000, rows  # killed mid-search, with runs stored
+    resumed = runner.invoke(app, args + ["--out", str(killed), "--resume"])
+    assert resumed.exit_code == 0, resumed.output
+    whole = runner.invoke(app, args + ["--out", str(tmp_path / "whole")])
+    assert whole.exit_code == 0, whole.output
+    assert (killed / "plan.json").read_text() == (tmp_path / "whole" / "plan.json").read_text()
