@@ -1,0 +1,51 @@
+"""The errors RAPT raises on purpose, so a caller can catch what it means.
+
+Every message is one line that names the field (or file) at fault and how to fix it; the
+command line prints it as it is and exits non-zero.  Each class also derives from the
+built-in exception that code written before this hierarchy caught (``ValueError`` for bad
+input, ``RuntimeError`` for a run that cannot go on, ``TimeoutError``, ``ConnectionError``),
+so ``except ValueError`` still works where it was used.
+
+The packages built on :mod:`rapt` subclass these for their own inputs (mission files,
+robot files, flight logs, the vehicle link).
+"""
+
+from __future__ import annotations
+
+__all__ = [
+    "RaptError",
+    "InputError",
+    "FileFormatError",
+    "StudyMismatchError",
+    "RunError",
+    "LinkError",
+    "LinkTimeoutError",
+]
+
+
+class RaptError(Exception):
+    """Base of every error RAPT raises on purpose; its message is one line naming the field and the fix."""
+
+
+class InputError(RaptError, ValueError):
+    """An argument, setting or parameter that cannot be used as given."""
+
+
+class FileFormatError(InputError):
+    """A file (mission, robot, plan, log, key) that cannot be read; the message names the file and the field."""
+
+
+class StudyMismatchError(RaptError, ValueError):
+    """A stored study that does not belong to the run asked for (another space, system or mission)."""
+
+
+class RunError(RaptError, RuntimeError):
+    """A study, simulation or flight that cannot go on (a sampler broke its contract, a process did not start)."""
+
+
+class LinkError(RaptError, ConnectionError):
+    """The vehicle or the bus cannot be reached, or stopped answering."""
+
+
+class LinkTimeoutError(RaptError, TimeoutError):
+    """Something awaited from the vehicle or the bus did not come in time."""
