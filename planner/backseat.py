@@ -68,7 +68,7 @@ class BackSeat:
         self._token = session.liveliness().declare_token(keys.alive(vehicle, source))
         self._thread = threading.Thread(target=self._run, name=f"backseat-{source}", daemon=True)
 
-    def start(self) -> "BackSeat":
+    def start(self) -> BackSeat:
         self._thread.start()
         return self
 
@@ -81,7 +81,7 @@ class BackSeat:
             except Exception:  # already gone with the session
                 pass
 
-    def __enter__(self) -> "BackSeat":
+    def __enter__(self) -> BackSeat:
         return self.start()
 
     def __exit__(self, *exc) -> None:

@@ -27,8 +27,9 @@ import html
 import json
 import math
 import re
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 from urllib.parse import quote
 
 import matplotlib
@@ -498,7 +499,7 @@ def _fig_dithers(pair: dict, scen: list[dict], dithers: dict, labels: list[str],
         return False
     i, j = axes_idx
     fig, axes = plt.subplots(1, len(present), figsize=(5.4 * len(present), 4.8), squeeze=False)
-    for k, (ax, s) in enumerate(zip(axes[0], present)):
+    for ax, s in zip(axes[0], present):
         U, modes = dithers[s["id"]]
         for code, name in [(-1, "invalid")] + list(enumerate(MODE_NAMES)):
             sel = modes == code

@@ -10,8 +10,8 @@ expert-run counts it records are what the surrogate workflow of ``rapt-plan gene
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 

@@ -11,11 +11,11 @@ Knows nothing of vehicles or MAVLink: a system under test is any function from a
 
 from rapt.boundaries import BoundaryPairs, boundary_pairs
 from rapt.modes import performance_modes
+from rapt.samplers import METHODS, make_sampler
 from rapt.scoretree import ScoreTree
 from rapt.search import Study, search
-from rapt.subboundaries import SubBoundaryTree, subboundary_tree
 from rapt.space import Categorical, Continuous, Integer, Permutation, StateSpace
-from rapt.samplers import METHODS, make_sampler
+from rapt.subboundaries import SubBoundaryTree, subboundary_tree
 
 __all__ = [
     "search", "Study", "StateSpace", "Continuous", "Integer", "Categorical", "Permutation",

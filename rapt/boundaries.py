@@ -13,15 +13,15 @@ simulator a lone sample of the "wrong" mode creates pairs that are not behaviour
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from rapt.modes import performance_modes
-from rapt.validation import check_scores, check_states
 from rapt.parallel import query_workers
+from rapt.validation import check_scores, check_states
 
 __all__ = ["BoundaryPairs", "boundary_pairs", "mutual_pairs", "knn_graph", "graph_mutual_pairs", "pair_differences"]
 
@@ -55,12 +55,12 @@ class BoundaryPairs:
         keys, counts = np.unique(np.column_stack([self.mode_i, self.mode_j]), axis=0, return_counts=True)
         return [(int(a), int(b), int(c)) for (a, b), c in zip(keys, counts)]
 
-    def select(self, mask: np.ndarray) -> "BoundaryPairs":
+    def select(self, mask: np.ndarray) -> BoundaryPairs:
         mask = np.asarray(mask)
         return BoundaryPairs(self.i[mask], self.j[mask], self.distance[mask], self.mode_i[mask], self.mode_j[mask],
                              self.cluster_i[mask], self.cluster_j[mask], self.likely_noise[mask], self.labels)
 
-    def of_type(self, mode_a: int, mode_b: int) -> "BoundaryPairs":
+    def of_type(self, mode_a: int, mode_b: int) -> BoundaryPairs:
         a, b = min(mode_a, mode_b), max(mode_a, mode_b)
         return self.select((self.mode_i == a) & (self.mode_j == b))
 

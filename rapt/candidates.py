@@ -10,10 +10,11 @@ so a batch of 10,000 does not pile up on the one spot with the highest informati
 
 from __future__ import annotations
 
-from typing import Protocol, TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 from scipy.spatial import cKDTree
+
 from rapt.parallel import query_workers
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -25,13 +26,13 @@ __all__ = ["CandidateGenerator", "UniformCandidates", "select_batch"]
 class CandidateGenerator(Protocol):
     """Proposes ``n`` unit-cube candidates; may read the sampler's data (``sampler.X``, ``sampler.Y``)."""
 
-    def __call__(self, n: int, rng: np.random.Generator, sampler: "Sampler") -> np.ndarray: ...
+    def __call__(self, n: int, rng: np.random.Generator, sampler: Sampler) -> np.ndarray: ...
 
 
 class UniformCandidates:
     """Uniform random candidates in the unit cube."""
 
-    def __call__(self, n: int, rng: np.random.Generator, sampler: "Sampler") -> np.ndarray:
+    def __call__(self, n: int, rng: np.random.Generator, sampler: Sampler) -> np.ndarray:
         return rng.random((n, sampler.dim))
 
     def __repr__(self) -> str:

@@ -28,8 +28,8 @@ from __future__ import annotations
 
 import time
 import warnings
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
 
 import numpy as np
 
@@ -69,7 +69,7 @@ class MLPPolicy:
     activation: str = "logistic"
 
     @classmethod
-    def from_sklearn(cls, model) -> "MLPPolicy":
+    def from_sklearn(cls, model) -> MLPPolicy:
         """A copy of ``model``'s weights: a warm-started model trained on float32 keeps float32 weights
         and updates them in place, which would retrain every policy taken from it before."""
         return cls([np.array(w, np.float32) for w in model.coefs_],
@@ -171,7 +171,7 @@ class MLPPolicy:
         return out
 
     @classmethod
-    def from_arrays(cls, arrays) -> "MLPPolicy":
+    def from_arrays(cls, arrays) -> MLPPolicy:
         n = sum(1 for k in arrays if str(k).startswith("W"))
         return cls([np.asarray(arrays[f"W{k}"], np.float32) for k in range(n)],
                    [np.asarray(arrays[f"b{k}"], np.float32) for k in range(n)], str(arrays["activation"]))
@@ -219,7 +219,7 @@ class HeadsPolicy:
         return arrays
 
     @classmethod
-    def from_arrays(cls, arrays) -> "HeadsPolicy":
+    def from_arrays(cls, arrays) -> HeadsPolicy:
         heads, j = [], 0
         while f"h{j}_inputs" in arrays:
             own = {k[len(f"h{j}_"):]: v for k, v in arrays.items() if k.startswith(f"h{j}_")}

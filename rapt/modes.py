@@ -10,7 +10,7 @@ and a continuous cluster.
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 

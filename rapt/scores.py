@@ -8,7 +8,7 @@ closest approach).  The information metrics need continuous scores on a common s
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 

@@ -8,8 +8,9 @@ declared in data (nested mappings, TOML or JSON) so each mission ships its own.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Any, Mapping, Sequence
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
 
 __all__ = ["ScoreTree"]
 
@@ -19,7 +20,7 @@ class ScoreTree:
     """A node: score columns ``indices`` and child nodes; ``name`` is for people."""
 
     indices: tuple[int, ...]
-    children: tuple["ScoreTree", ...] = ()
+    children: tuple[ScoreTree, ...] = ()
     name: str = ""
 
     def __post_init__(self) -> None:
@@ -29,7 +30,7 @@ class ScoreTree:
             raise ValueError(f"tree: node {self.name or '(unnamed)'} has no score indices; every node needs at least one column")
 
     @classmethod
-    def from_mapping(cls, spec: "ScoreTree | Mapping[str, Any]", _path: str = "tree") -> "ScoreTree":
+    def from_mapping(cls, spec: ScoreTree | Mapping[str, Any], _path: str = "tree") -> ScoreTree:
         """Build from ``{"indices": [...], "children": [...], "name": "..."}`` (children likewise)."""
         if isinstance(spec, ScoreTree):
             return spec
@@ -71,7 +72,7 @@ class ScoreTree:
             frontier = [c for node in frontier for c in node.children]
         return out
 
-    def nodes(self) -> list["ScoreTree"]:
+    def nodes(self) -> list[ScoreTree]:
         out, stack = [], [self]
         while stack:
             node = stack.pop(0)
@@ -79,7 +80,7 @@ class ScoreTree:
             stack.extend(node.children)
         return out
 
-    def leaves(self) -> list["ScoreTree"]:
+    def leaves(self) -> list[ScoreTree]:
         return [n for n in self.nodes() if not n.children]
 
     @property

@@ -14,8 +14,9 @@ metrics see "nearly the same order" as "nearby".
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -233,7 +234,7 @@ class StateSpace:
         self.dim = start
 
     @classmethod
-    def from_bounds(cls, bounds: Any) -> "StateSpace":
+    def from_bounds(cls, bounds: Any) -> StateSpace:
         """A space of continuous parameters ``x0, x1, ...`` from ``[(low, high), ...]`` or a (d, 2) array."""
         if isinstance(bounds, StateSpace):
             return bounds

@@ -23,7 +23,7 @@ for the 2-D and 3-D systems).
 
 from __future__ import annotations
 
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -670,9 +670,13 @@ class HierarchicalND(SyntheticSystem):
             tuple(range(self.dim)) if k < leaf0 else tuple(int(i) for i in self.leaf_inputs[k - leaf0])
             for k in range(self.n_outputs)
         )
-        children_l3 = lambda g: [{"name": f"leaf{k}", "indices": [leaf0 + k]} for k in self.l3_groups[g]]
-        children_l2 = lambda h: [{"name": f"l3_{g}", "indices": [l3_0 + g], "children": children_l3(g)}
-                                 for g in self.l2_groups[h]]
+
+        def children_l3(g: int) -> list[dict]:
+            return [{"name": f"leaf{k}", "indices": [leaf0 + k]} for k in self.l3_groups[g]]
+
+        def children_l2(h: int) -> list[dict]:
+            return [{"name": f"l3_{g}", "indices": [l3_0 + g], "children": children_l3(g)} for g in self.l2_groups[h]]
+
         self.score_tree = {
             "name": "root", "indices": [0, 1],
             "children": [{"name": f"l2_{h}", "indices": [l2_0 + h], "children": children_l2(h)} for h in range(n_l2)],

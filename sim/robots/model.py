@@ -37,9 +37,10 @@ from __future__ import annotations
 import copy
 import struct
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -168,7 +169,7 @@ class Robot:
             return self.planar_override
         return all(abs(abs(j.axis[1]) - 1.0) < 1e-9 for j in self.all_joints)
 
-    def lock(self, values: dict[str, float]) -> "Robot":
+    def lock(self, values: dict[str, float]) -> Robot:
         """A copy with the named joints held at ``values`` (radians); the others stay active.
 
         Joints already locked stay locked.  Used to study a manipulator with fewer active

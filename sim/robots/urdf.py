@@ -24,8 +24,8 @@ The tables built here go through the TOML reader's own validation
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
