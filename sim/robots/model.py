@@ -40,7 +40,7 @@ import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, Literal, overload
 
 import numpy as np
 
@@ -216,7 +216,12 @@ class Robot:
 
 
 # -- TOML loading ----------------------------------------------------------------------------
+@overload
+def _vec(value: Any, where: str, n: Literal[3] = 3, positive: bool = False) -> tuple[float, float, float]: ...
+@overload
+def _vec(value: Any, where: str, n: Literal[2], positive: bool = False) -> tuple[float, float]: ...
 def _vec(value: Any, where: str, n: int = 3, positive: bool = False) -> tuple[float, ...]:
+    """``n`` finite numbers (positive ones if asked) from a TOML or URDF value; :class:`RobotFileError` otherwise."""
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):

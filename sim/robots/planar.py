@@ -87,7 +87,7 @@ def planar_all_faces(F, theta: np.ndarray, chunk: int = 2000) -> dict:
     away), ``stable``, ``energy``, ``tips``, ``start_id``, ``rest_id``, ``count`` (faces per joint state).
     """
     uniq = np.unique(F._vertex_id)
-    out = {k: [] for k in ("row", "start", "rest", "stable", "energy", "tips", "start_id", "rest_id", "count")}
+    out: dict[str, list[np.ndarray]] = {k: [] for k in ("row", "start", "rest", "stable", "energy", "tips", "start_id", "rest_id", "count")}
     for s0 in range(0, len(theta), chunk):
         th = theta[s0:s0 + chunk]
         P, com = _kinematics(F, th, uniq)
