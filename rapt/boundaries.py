@@ -73,8 +73,8 @@ def mutual_pairs(X: np.ndarray, labels: np.ndarray, groups: Sequence[int] | None
     neighbour in ``b`` and ``x`` is ``y``'s nearest neighbour in ``a``.  Returns (i, j, d)
     with ``labels[i] < labels[j]``, unsorted.
     """
-    groups = np.unique(labels) if groups is None else np.asarray(groups)
-    members = {int(g): np.flatnonzero(labels == g) for g in groups}
+    group_ids = np.unique(labels) if groups is None else np.asarray(groups)
+    members = {int(g): np.flatnonzero(labels == g) for g in group_ids}
     trees = {g: cKDTree(X[idx]) for g, idx in members.items() if idx.size}
     out_i, out_j, out_d = [], [], []
     keys = sorted(trees)
@@ -155,13 +155,14 @@ def _hnsw_query(X: np.ndarray, k: int, m: int = HNSW_M, ef_construction: int = H
     index = faiss.IndexHNSWFlat(d, m)
     index.hnsw.efConstruction = ef_construction
     index.add(Xf)
-    params = faiss.SearchParametersHNSW()
+    # SearchParametersHNSW and IndexHNSW.search_level_0 are in faiss but missing from the stubs it ships
+    params = faiss.SearchParametersHNSW()  # type: ignore[attr-defined]
     params.efSearch = max(ef_search, k)
     sq = np.empty((n, k), dtype=np.float32)
     idx = np.empty((n, k), dtype=np.int64)
     entry = np.arange(n, dtype=np.int32)  # faiss's storage_idx_t
     entry_d = np.zeros(n, dtype=np.float32)
-    index.search_level_0(n, faiss.swig_ptr(Xf), k, faiss.swig_ptr(entry), faiss.swig_ptr(entry_d),
+    index.search_level_0(n, faiss.swig_ptr(Xf), k, faiss.swig_ptr(entry), faiss.swig_ptr(entry_d),  # type: ignore[attr-defined]
                          faiss.swig_ptr(sq), faiss.swig_ptr(idx), 1, 1, params)
     missing = idx < 0  # too few reachable points: fall back to self at infinite distance
     idx = np.where(missing, np.arange(n)[:, None], idx)

@@ -33,7 +33,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-__all__ = ["MLPPolicy", "HeadsPolicy", "policy_from_arrays", "Trajectory", "IterationRecord", "ImitationResult",
+__all__ = ["MLPPolicy", "HeadsPolicy", "Policy", "policy_from_arrays", "Trajectory", "IterationRecord", "ImitationResult",
            "imitate", "METHODS", "HIDDEN"]
 
 #: Inputs and hidden activations are rounded to multiples of 2**-INPUT_BITS (see MLPPolicy.__call__).
@@ -244,7 +244,11 @@ def _local(cols: np.ndarray, quiet: slice | None, n_features: int) -> slice | No
     return slice(int(inside[0]), int(inside[-1]) + 1) if inside.size else None
 
 
-def policy_from_arrays(arrays) -> MLPPolicy | HeadsPolicy:
+#: What :func:`imitate` trains: one network, or one per head (``heads``).
+Policy = MLPPolicy | HeadsPolicy
+
+
+def policy_from_arrays(arrays) -> Policy:
     """The policy saved by ``to_arrays`` (one network, or heads)."""
     return HeadsPolicy.from_arrays(arrays) if "h0_inputs" in arrays else MLPPolicy.from_arrays(arrays)
 
@@ -272,7 +276,7 @@ class IterationRecord:
 
 @dataclass
 class ImitationResult:
-    policy: MLPPolicy
+    policy: Policy
     method: str
     quantile: float | None
     history: list[IterationRecord]
@@ -283,7 +287,7 @@ class ImitationResult:
         return self.history[-1].runs if self.history else 0
 
 
-Rollout = Callable[[MLPPolicy | None, int, int], Sequence[Trajectory]]
+Rollout = Callable[[Policy | None, int, int], Sequence[Trajectory]]
 
 
 def _stack(trajs: Sequence[Trajectory]) -> tuple[np.ndarray, np.ndarray]:
@@ -297,8 +301,8 @@ def _stack(trajs: Sequence[Trajectory]) -> tuple[np.ndarray, np.ndarray]:
 def imitate(rollout: Rollout, *, method: str = "qdagger", quantile: float = 0.5, iterations: int = 15,
             runs_per_iteration: int = 5, initial_runs: int | None = None, hidden: Sequence[int] = HIDDEN,
             epochs: int = 20, learning_rate: float = 3e-3, batch_size: int = 256, seed: int = 0,
-            select: Callable[[MLPPolicy], float] | None = None,
-            on_iteration: Callable[[IterationRecord, MLPPolicy], None] | None = None,
+            select: Callable[[Policy], float] | None = None,
+            on_iteration: Callable[[IterationRecord, Policy], None] | None = None,
             heads: Sequence[tuple[Sequence[int] | None, Sequence[int]]] | None = None) -> ImitationResult:
     """Train a policy imitating the expert behind ``rollout`` (see the module docstring).
 
@@ -338,10 +342,10 @@ def imitate(rollout: Rollout, *, method: str = "qdagger", quantile: float = 0.5,
     models = [network(j) for j in range(len(heads) if heads else 1)]
     started = time.perf_counter()
     history: list[IterationRecord] = []
-    policy: MLPPolicy | None = None
+    policy: Policy | None = None  # None until the first update, which iteration 0 makes
     F = A = None
     runs = 0
-    best: tuple[float, int, MLPPolicy] | None = None
+    best: tuple[float, int, Policy] | None = None
     for it in range(iterations + 1):
         t0 = time.perf_counter()
         k = (initial_runs or runs_per_iteration) if it == 0 else runs_per_iteration
@@ -352,6 +356,7 @@ def imitate(rollout: Rollout, *, method: str = "qdagger", quantile: float = 0.5,
         if F is None:
             F, A = Fi, Ai
         elif method == "qdagger":
+            assert policy is not None  # F holds data, so an update has made a policy
             loss = np.sum((policy(Fi) - Ai) ** 2, axis=1)
             keep = loss >= np.quantile(loss, quantile)
             F, A = np.concatenate([F, Fi[keep]]), np.concatenate([A, Ai[keep]])
@@ -384,6 +389,7 @@ def imitate(rollout: Rollout, *, method: str = "qdagger", quantile: float = 0.5,
             on_iteration(record, policy)
         history.append(record)
     chosen, policy = (best[1], best[2]) if best is not None else (len(history) - 1, policy)
+    assert policy is not None  # iterations >= 0 was checked, so the loop updated at least once
     return ImitationResult(policy, method, quantile if method == "qdagger" else None, history, chosen)
 
 

@@ -49,7 +49,7 @@ def _check_d_eps(d_eps) -> float:
     if (
         isinstance(d_eps, bool)
         or not isinstance(d_eps, numbers.Real)
-        or not np.isfinite(d_eps)
+        or not np.isfinite(float(d_eps))
         or d_eps <= 0
     ):
         raise ValueError(f"d_eps must be a finite number > 0, got {d_eps!r}")
@@ -218,7 +218,7 @@ def convergence(system, X, d_eps, target=0.9, step=None, **coverage_kw) -> np.nd
     if (
         isinstance(target, bool)
         or not isinstance(target, numbers.Real)
-        or not 0 < target <= 1
+        or not 0 < float(target) <= 1
     ):
         raise ValueError(f"target must be a coverage fraction in (0, 1], got {target!r}")
     n = X.shape[0]
@@ -253,7 +253,7 @@ def quality_table(system, X, d_eps, seed=0, n_reference=20000) -> dict:
         "coverage": boundary_coverage(system, X, d_eps, n_reference=n_reference, seed=seed),
         "mean_distance": mean_boundary_distance(system, X),
     }
-    table = {key: float(np.mean(val)) for key, val in per.items()}
+    table: dict[str, float | dict[str, np.ndarray]] = {key: float(np.mean(val)) for key, val in per.items()}
     table["per_output"] = per
     table["n_samples"] = int(X.shape[0])
     table["d_eps"] = d_eps

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 __all__ = [
     "Continuous",
@@ -62,7 +63,7 @@ class Continuous:
     def width(self) -> int:
         return 1
 
-    def to_unit(self, values: np.ndarray) -> np.ndarray:
+    def to_unit(self, values: npt.ArrayLike) -> np.ndarray:
         v = np.asarray(values, dtype=float)
         if self.log:
             return (np.log(v) - math.log(self.low)) / (math.log(self.high) - math.log(self.low))
@@ -97,7 +98,7 @@ class Integer:
     def width(self) -> int:
         return 1
 
-    def to_unit(self, values: np.ndarray) -> np.ndarray:
+    def to_unit(self, values: npt.ArrayLike) -> np.ndarray:
         v = np.asarray(values, dtype=float)
         n = self.high - self.low + 1
         return (v - self.low + 0.5) / n
@@ -264,9 +265,10 @@ class StateSpace:
         return all(isinstance(p, Continuous) and not p.log for p in self.parameters)
 
     def bounds_array(self) -> np.ndarray:
-        if not self.is_box:
+        linear = [p for p in self.parameters if isinstance(p, Continuous) and not p.log]  # as is_box
+        if len(linear) != len(self.parameters):
             raise ValueError("bounds_array: only defined for spaces of linear continuous parameters")
-        return np.array([[p.low, p.high] for p in self.parameters], dtype=float)
+        return np.array([[p.low, p.high] for p in linear], dtype=float)
 
     def from_unit_array(self, U: np.ndarray) -> np.ndarray:
         """Affine map of cube points to a float array (box spaces only) — the fast path for vectorised systems."""
@@ -321,7 +323,7 @@ class StateSpace:
         """A JSON-friendly description, stored with a study so a resumed run can check it."""
         out = []
         for p in self.parameters:
-            d = {"name": p.name, "type": p.kind}
+            d: dict[str, Any] = {"name": p.name, "type": p.kind}
             if isinstance(p, Continuous):
                 d.update(low=float(p.low), high=float(p.high), log=bool(p.log))
             elif isinstance(p, Integer):

@@ -117,7 +117,7 @@ class SubBoundaryTree:
             np.minimum.at(best, par + 1, gap)
             chosen = np.flatnonzero(gap == best[par + 1])
         inside = np.isin(self.assignment[lv], chosen)
-        clusters = [self.members(lv, c) for c in chosen]
+        clusters = [self.members(lv, int(c)) for c in chosen]
         members = np.flatnonzero(inside)
         i, j, d, level = self.pairs()
         sel = (level <= lv) & (inside[i] != inside[j])

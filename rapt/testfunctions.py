@@ -52,9 +52,9 @@ CONTINUOUS = "continuous"
 # --------------------------------------------------------------------------- geometry
 def segment_distance(P: np.ndarray, a: Sequence[float], b: Sequence[float]) -> np.ndarray:
     """Euclidean distance from each row of ``P`` (n, k) to the segment ``[a, b]``."""
-    a = np.asarray(a, dtype=float)
-    ab = np.asarray(b, dtype=float) - a
-    ap = P - a
+    start = np.asarray(a, dtype=float)
+    ab = np.asarray(b, dtype=float) - start
+    ap = P - start
     t = np.clip(ap @ ab / (ab @ ab), 0.0, 1.0)
     diff = ap - t[:, None] * ab
     return np.sqrt(np.einsum("ij,ij->i", diff, diff))
