@@ -27,7 +27,7 @@ import html
 import json
 import math
 import re
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 from urllib.parse import quote
@@ -38,6 +38,7 @@ matplotlib.use("Agg")  # files only: no display on CI machines or range laptops
 
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.artist import Artist  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 from matplotlib.patches import Polygon as MplPolygon  # noqa: E402
@@ -347,14 +348,14 @@ def _local_frame(collections: Iterable[dict]) -> LocalFrame | None:
     return LocalFrame(float(c[1]), float(c[0]))
 
 
-def _flat_coordinates(geom: dict):
-    t, c = geom.get("type"), geom.get("coordinates")
+def _flat_coordinates(geom: dict) -> Iterator[list[float]]:
+    t = geom.get("type")
     if t == "Point":
-        yield c
+        yield geom["coordinates"]
     elif t == "LineString":
-        yield from c
+        yield from geom["coordinates"]
     elif t == "Polygon":
-        for ring in c:
+        for ring in geom["coordinates"]:
             yield from ring
 
 
@@ -364,7 +365,8 @@ def _xy(frame: LocalFrame, coords) -> np.ndarray:
     return np.column_stack([np.atleast_1d(x), np.atleast_1d(y)])
 
 
-def _draw_scenario(ax, fc: dict, frame: LocalFrame, colour: str, other: tuple[np.ndarray, str] | None) -> np.ndarray | None:
+def _draw_scenario(ax, fc: dict, frame: LocalFrame, colour: str,
+                   other: tuple[np.ndarray | None, str] | None) -> np.ndarray | None:
     track = None
     kinds_seen = set()
     for f in fc["features"]:
@@ -410,13 +412,15 @@ def _draw_scenario(ax, fc: dict, frame: LocalFrame, colour: str, other: tuple[np
 
 def _fig_map(pair: dict, scen: list[dict], out_dir: Path, path: Path) -> str | None:
     """Side-by-side maps of the pair's scenarios; returns a note when GeoJSON is missing."""
-    fcs, missing = [], []
+    fcs: list[dict] = []
+    missing = []
     for s in scen:
         name = Path(str((s.get("files") or {}).get("geojson", f"{s['id']}.geojson"))).name
         fc = _load_geojson(out_dir / name)
         if fc is None:
             missing.append(name)
-        fcs.append(fc)
+        else:
+            fcs.append(fc)
     if missing or not fcs:
         return f"map not drawn: {', '.join(missing) or 'no scenarios'} not found in the plan directory"
     frame = _local_frame(fcs)
@@ -436,7 +440,7 @@ def _fig_map(pair: dict, scen: list[dict], out_dir: Path, path: Path) -> str | N
         ax.set_title(f"{s['id']}: predicted {mode} ({MODE_LABELS.get(mode, mode)})", color=SIDE_COLOURS[k % 2])
     present = {str((f.get("properties") or {}).get("kind")) for fc in fcs for f in fc["features"]
                if (f.get("geometry") or {}).get("type") == "Polygon"}
-    handles = [Patch(facecolor=KIND_STYLE[k][0] or "white", edgecolor=KIND_STYLE[k][1], alpha=max(KIND_STYLE[k][2], .5),
+    handles: list[Artist] = [Patch(facecolor=KIND_STYLE[k][0] or "white", edgecolor=KIND_STYLE[k][1], alpha=max(KIND_STYLE[k][2], .5),
                      label=KIND_LABELS[k], linestyle="--" if k == "operational_area" else "-")
                for k in KIND_STYLE if k in present]
     handles += [Line2D([], [], color=SIDE_COLOURS[k % 2], linewidth=2, label=f"{s['id']} predicted track")

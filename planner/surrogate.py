@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 import sim.uuv
-from rapt.imitation import IterationRecord, MLPPolicy, imitate
+from rapt.imitation import IterationRecord, Policy, imitate
 from sim.uuv.imitation.features import GOAL, feature_spec, policy_heads
 from sim.uuv.imitation.rollouts import annotated_runs, draw_valid, make_rollout
 from sim.uuv.imitation.surrogate import Surrogate
@@ -35,7 +35,7 @@ TRAINING_DEFAULTS = {"method": "qdagger", "quantile": 0.5, "runs": 75, "runs_per
 def train_surrogate(mission: Mission, *, method: str = "qdagger", quantile: float = 0.5, runs: int = 75,
                     runs_per_iteration: int = 5, epochs: int = 30, mixing: float = 0.5, select_runs: int = 25,
                     seed: int = 0,
-                    on_iteration: Callable[[IterationRecord, MLPPolicy], None] | None = None) -> Surrogate:
+                    on_iteration: Callable[[IterationRecord, Policy], None] | None = None) -> Surrogate:
     """Imitate the mission's expert with ``runs`` annotated runs (``runs_per_iteration`` at a time).
 
     ``mixing`` p: update i's runs obey the expert on a share p**i of their steps (DAgger's
