@@ -43,6 +43,7 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 from matplotlib.patches import Polygon as MplPolygon  # noqa: E402
 
+from rapt.errors import InputError  # noqa: E402
 from sim.uuv.geo import LocalFrame  # noqa: E402
 
 __all__ = ["write_report", "REPORT_NAME", "FIGURES_DIR"]
@@ -143,30 +144,30 @@ def _save(fig, path: Path) -> None:
 
 def _check_plan(plan: Any) -> None:
     if not isinstance(plan, dict):
-        raise ValueError(f"plan: expected a {PLAN_SCHEMA} plan (a dict from plan.json), got {type(plan).__name__}")
+        raise InputError(f"plan: expected a {PLAN_SCHEMA} plan (a dict from plan.json), got {type(plan).__name__}")
     schema = plan.get("schema")
     if schema != PLAN_SCHEMA:
-        raise ValueError(f"plan: expected schema {PLAN_SCHEMA!r}, got {schema!r}")
+        raise InputError(f"plan: expected schema {PLAN_SCHEMA!r}, got {schema!r}")
     missing = [k for k in ("mission", "study", "sensitivity", "pairs", "scenarios", "run_order") if k not in plan]
     if missing:
-        raise ValueError(f"plan: a {PLAN_SCHEMA} plan needs {', '.join(missing)}")
+        raise InputError(f"plan: a {PLAN_SCHEMA} plan needs {', '.join(missing)}")
 
 
 def _check_dithers(dithers: Any, dim: int) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     if dithers is None:
         return {}
     if not isinstance(dithers, dict):
-        raise ValueError(f"dithers: expected a dict of scenario id -> (U, modes), got {type(dithers).__name__}")
+        raise InputError(f"dithers: expected a dict of scenario id -> (U, modes), got {type(dithers).__name__}")
     out = {}
     for sid, value in dithers.items():
         try:
             U, modes = value
         except (TypeError, ValueError):
-            raise ValueError(f"dithers[{sid!r}]: expected a pair (U, modes)") from None
+            raise InputError(f"dithers[{sid!r}]: expected a pair (U, modes)") from None
         U = np.asarray(U, dtype=float)
         modes = np.asarray(modes).astype(int)
         if U.ndim != 2 or U.shape[1] != dim or modes.shape != (U.shape[0],):
-            raise ValueError(f"dithers[{sid!r}]: expected U of shape (n, {dim}) and modes of shape (n,), "
+            raise InputError(f"dithers[{sid!r}]: expected U of shape (n, {dim}) and modes of shape (n,), "
                              f"got {U.shape} and {modes.shape}")
         out[str(sid)] = (U, modes)
     return out

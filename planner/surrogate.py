@@ -16,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 import sim.uuv
+from rapt.errors import InputError
 from rapt.imitation import IterationRecord, Policy, imitate
 from sim.uuv.imitation.features import GOAL, feature_spec, policy_heads
 from sim.uuv.imitation.rollouts import annotated_runs, draw_valid, make_rollout
@@ -46,13 +47,13 @@ def train_surrogate(mission: Mission, *, method: str = "qdagger", quantile: floa
     expert run spent: annotated and held out.
     """
     if not 0.0 <= mixing < 1.0:
-        raise ValueError(f"--mixing: expected a share in [0, 1), got {mixing!r}")
+        raise InputError(f"--mixing: expected a share in [0, 1), got {mixing!r}")
     if int(runs_per_iteration) != runs_per_iteration or runs_per_iteration < 1:
-        raise ValueError(f"--runs-per-iteration: expected a positive whole number, got {runs_per_iteration!r}")
+        raise InputError(f"--runs-per-iteration: expected a positive whole number, got {runs_per_iteration!r}")
     if int(runs) != runs or runs < runs_per_iteration:
-        raise ValueError(f"--runs: expected at least {runs_per_iteration} annotated runs, got {runs!r}")
+        raise InputError(f"--runs: expected at least {runs_per_iteration} annotated runs, got {runs!r}")
     if int(select_runs) != select_runs or select_runs < 0:
-        raise ValueError(f"--select-runs: expected a number of held-out expert runs >= 0, got {select_runs!r}")
+        raise InputError(f"--select-runs: expected a number of held-out expert runs >= 0, got {select_runs!r}")
     spec = feature_spec(mission)
     select = None
     if select_runs:
@@ -120,7 +121,7 @@ def load_or_train(path: Path, mission: Mission, seed: int = 0, on_iteration=None
     if path.exists():
         return Surrogate.load(path, mission), False
     if path.suffix != ".npz":
-        raise ValueError(f"--surrogate: a surrogate file ends in .npz, got {str(path)!r}")
+        raise InputError(f"--surrogate: a surrogate file ends in .npz, got {str(path)!r}")
     sur = train_surrogate(mission, seed=seed, on_iteration=on_iteration, **{**TRAINING_DEFAULTS, **options})
     sur.save(path)
     return sur, True

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.spatial import cKDTree
 
+from rapt.errors import InputError
 from rapt.modes import performance_modes
 from rapt.parallel import query_workers
 from rapt.validation import check_scores, check_states
@@ -110,7 +111,7 @@ def knn_graph(X: np.ndarray, k: int, method: str = "auto") -> tuple[np.ndarray, 
     by an equally short neighbour across the same boundary.
     """
     if method not in ("auto", "exact", "hnsw"):
-        raise ValueError(f"method: expected 'auto', 'exact' or 'hnsw', got {method!r}")
+        raise InputError(f"method: expected 'auto', 'exact' or 'hnsw', got {method!r}")
     n, d = X.shape
     k = int(min(k, n - 1))
     if k < 1:
@@ -256,23 +257,23 @@ def boundary_pairs(X: np.ndarray, Y: np.ndarray | None = None, *, labels: np.nda
     """
     X = check_states(X)
     if (Y is None) == (labels is None):
-        raise ValueError("Y, labels: give exactly one of scores Y or mode labels")
+        raise InputError("Y, labels: give exactly one of scores Y or mode labels")
     if labels is None:
         labels = performance_modes(check_scores(Y, X.shape[0]), output_types, bandwidth=bandwidth)
     else:
         labels = np.asarray(labels).reshape(-1)
         if labels.shape[0] != X.shape[0]:
-            raise ValueError(f"labels: expected {X.shape[0]} labels (one per state), got {labels.shape[0]}")
+            raise InputError(f"labels: expected {X.shape[0]} labels (one per state), got {labels.shape[0]}")
         _, labels = np.unique(labels, return_inverse=True)
         labels = labels.reshape(-1)
     if d_eps is not None and not (np.isfinite(d_eps) and d_eps > 0):
-        raise ValueError(f"d_eps: expected a distance > 0, got {d_eps!r}")
+        raise InputError(f"d_eps: expected a distance > 0, got {d_eps!r}")
     if quantile is not None and not (0 < quantile <= 1):
-        raise ValueError(f"quantile: expected q_B in (0, 1], got {quantile!r}")
+        raise InputError(f"quantile: expected q_B in (0, 1], got {quantile!r}")
     if weights is not None:
         weights = np.asarray(weights, dtype=float)
         if weights.shape != (X.shape[1],) or np.any(weights < 0) or not np.all(np.isfinite(weights)):
-            raise ValueError(f"weights: expected {X.shape[1]} non-negative finite scale factors, got {weights!r}")
+            raise InputError(f"weights: expected {X.shape[1]} non-negative finite scale factors, got {weights!r}")
         X = X * weights
 
     i, j, d = mutual_pairs(X, labels)
@@ -303,9 +304,9 @@ def _dbscan_within_modes(X: np.ndarray, labels: np.ndarray, eps: float, min_samp
     from sklearn.cluster import DBSCAN
 
     if not (np.isfinite(eps) and eps > 0):
-        raise ValueError(f"cluster_eps: expected ε_C > 0, got {eps!r}")
+        raise InputError(f"cluster_eps: expected ε_C > 0, got {eps!r}")
     if not isinstance(min_samples, (int, np.integer)) or min_samples < 1:
-        raise ValueError(f"min_samples: expected a positive integer n_min, got {min_samples!r}")
+        raise InputError(f"min_samples: expected a positive integer n_min, got {min_samples!r}")
     out = np.full(X.shape[0], -1, dtype=np.int64)
     for g in np.unique(labels):
         idx = np.flatnonzero(labels == g)
@@ -326,6 +327,6 @@ def pair_differences(X: np.ndarray, pairs: BoundaryPairs, bounds: np.ndarray | N
     if bounds is not None:
         b = np.asarray(bounds, dtype=float)
         if b.shape != (X.shape[1], 2):
-            raise ValueError(f"bounds: expected shape ({X.shape[1]}, 2), got {b.shape}")
+            raise InputError(f"bounds: expected shape ({X.shape[1]}, 2), got {b.shape}")
         diff = diff / (b[:, 1] - b[:, 0])
     return diff

@@ -15,6 +15,7 @@ from typing import TYPE_CHECKING, Protocol
 import numpy as np
 from scipy.spatial import cKDTree
 
+from rapt.errors import InputError
 from rapt.parallel import query_workers
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -52,7 +53,7 @@ def select_batch(candidates: np.ndarray, information: np.ndarray, n: int, radius
     information = np.asarray(information, dtype=float)
     p = information.shape[0]
     if n > p:
-        raise ValueError(f"n: cannot choose {n} from {p} candidates; generate more candidates than the batch size")
+        raise InputError(f"n: cannot choose {n} from {p} candidates; generate more candidates than the batch size")
     pts = np.asarray(candidates if space is None else space, dtype=float)
     radius = np.broadcast_to(np.asarray(radius, dtype=float), (p,))
     order = np.argsort(-information, kind="stable")

@@ -33,6 +33,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from rapt.errors import InputError
+
 __all__ = ["MLPPolicy", "HeadsPolicy", "Policy", "policy_from_arrays", "Trajectory", "IterationRecord", "ImitationResult",
            "imitate", "METHODS", "HIDDEN"]
 
@@ -127,7 +129,7 @@ class MLPPolicy:
         cached = self.__dict__.get("_layers")
         if cached is None:
             if self.activation not in ("logistic", "tanh"):
-                raise ValueError(f"activation: expected 'logistic' or 'tanh' (bounded), got {self.activation!r}")
+                raise InputError(f"activation: expected 'logistic' or 'tanh' (bounded), got {self.activation!r}")
             cached = []
             last = len(self.weights) - 1
             for k, (W, b) in enumerate(zip(self.weights, self.biases)):
@@ -148,7 +150,7 @@ class MLPPolicy:
         cache = self.__dict__.setdefault("_split", {})
         if key not in cache:
             if value * _UNIT != np.rint(value * _UNIT):  # else a quiet row would differ from its grid value
-                raise ValueError(f"quiet_value: {value!r} is not a multiple of 2**-{INPUT_BITS}; use such a value")
+                raise InputError(f"quiet_value: {value!r} is not a multiple of 2**-{INPUT_BITS}; use such a value")
             cols = np.zeros(W.shape[0], dtype=bool)
             cols[quiet] = True
             Wq = np.ascontiguousarray(W[cols])
@@ -293,7 +295,7 @@ Rollout = Callable[[Policy | None, int, int], Sequence[Trajectory]]
 def _stack(trajs: Sequence[Trajectory]) -> tuple[np.ndarray, np.ndarray]:
     trajs = [t for t in trajs if t.features.shape[0]]
     if not trajs:
-        raise ValueError("rollout: returned no annotated states")
+        raise InputError("rollout: returned no annotated states")
     return (np.concatenate([t.features for t in trajs]).astype(np.float32),
             np.concatenate([t.expert for t in trajs]).astype(np.float32))
 
@@ -328,12 +330,12 @@ def imitate(rollout: Rollout, *, method: str = "qdagger", quantile: float = 0.5,
     from sklearn.neural_network import MLPRegressor
 
     if method not in METHODS:
-        raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
+        raise InputError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
     if method == "qdagger" and not 0.0 <= quantile < 1.0:
-        raise ValueError(f"quantile: expected a fraction in [0, 1), got {quantile!r}")
+        raise InputError(f"quantile: expected a fraction in [0, 1), got {quantile!r}")
     for name, value in (("iterations", iterations), ("runs_per_iteration", runs_per_iteration), ("epochs", epochs)):
         if int(value) != value or value < (0 if name == "iterations" else 1):
-            raise ValueError(f"{name}: expected a positive whole number, got {value!r}")
+            raise InputError(f"{name}: expected a positive whole number, got {value!r}")
     def network(j: int) -> MLPRegressor:
         return MLPRegressor(hidden_layer_sizes=tuple(hidden), activation="logistic", solver="adam",
                             learning_rate_init=learning_rate, batch_size=batch_size, max_iter=epochs,
@@ -400,9 +402,9 @@ def _heads(heads, n_features: int, n_actions: int) -> list[tuple[np.ndarray, np.
         cols = np.arange(n_features) if inputs is None else np.asarray(inputs, np.int64)
         outs = np.asarray(outputs, np.int64)
         if cols.size == 0 or cols.min() < 0 or cols.max() >= n_features or np.unique(cols).size != cols.size:
-            raise ValueError(f"heads[{j}]: input columns must be distinct features 0..{n_features - 1}")
+            raise InputError(f"heads[{j}]: input columns must be distinct features 0..{n_features - 1}")
         out.append((cols, outs))
         seen.extend(outs.tolist())
     if sorted(seen) != list(range(n_actions)):
-        raise ValueError(f"heads: output columns must cover the {n_actions} action columns once each, got {seen}")
+        raise InputError(f"heads: output columns must cover the {n_actions} action columns once each, got {seen}")
     return out

@@ -14,6 +14,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from rapt.errors import InputError
 from rapt.scores import check_output_types, infer_output_types
 from rapt.validation import check_scores
 
@@ -40,7 +41,7 @@ def performance_modes(Y: np.ndarray, output_types: Sequence[str] | None = None, 
     """
     Y = check_scores(Y)
     if not np.isfinite(bandwidth) or bandwidth <= 0:
-        raise ValueError(f"bandwidth: expected a number > 0, got {bandwidth!r}")
+        raise InputError(f"bandwidth: expected a number > 0, got {bandwidth!r}")
     types = infer_output_types(Y) if output_types is None else check_output_types(output_types, Y.shape[1])
     discrete = [j for j, t in enumerate(types) if t != "continuous"]
     continuous = [j for j, t in enumerate(types) if t == "continuous"]

@@ -12,6 +12,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from rapt.errors import InputError
+
 __all__ = ["OUTPUT_TYPES", "check_output_types", "infer_output_types", "encode_labels", "row_codes",
            "normalize_continuous"]
 
@@ -24,10 +26,10 @@ MAX_INFERRED_CLASSES = 16
 def check_output_types(output_types: Sequence[str], m: int) -> tuple[str, ...]:
     types = tuple(output_types)
     if len(types) != m:
-        raise ValueError(f"output_types: got {len(types)} types for {m} score columns; give one per column")
+        raise InputError(f"output_types: got {len(types)} types for {m} score columns; give one per column")
     for t in types:
         if t not in OUTPUT_TYPES:
-            raise ValueError(f"output_types: unknown type {t!r}; allowed: {', '.join(OUTPUT_TYPES)}")
+            raise InputError(f"output_types: unknown type {t!r}; allowed: {', '.join(OUTPUT_TYPES)}")
     return types
 
 

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from rapt.errors import FileFormatError, RunError
+from rapt.errors import FileFormatError, InputError, RunError
 
 __all__ = ["StudyStore", "SCHEMA_VERSION"]
 
@@ -61,16 +61,16 @@ class StudyStore:
             self._con.executescript(_SCHEMA)
             return
         if self.path.exists() and self.path.is_dir():
-            raise ValueError(f"store: {self.path} is a directory; give a file path such as study.db")
+            raise InputError(f"store: {self.path} is a directory; give a file path such as study.db")
         if not self.path.parent.exists():
-            raise ValueError(f"store: folder {self.path.parent} does not exist; create it or choose another path")
+            raise InputError(f"store: folder {self.path.parent} does not exist; create it or choose another path")
         try:
             self._con = sqlite3.connect(self.path, isolation_level=None)
             self._con.execute("PRAGMA journal_mode=WAL")
             self._con.execute("PRAGMA synchronous=NORMAL")
             self._con.executescript(_SCHEMA)
         except sqlite3.DatabaseError as exc:
-            raise ValueError(f"store: {self.path} is not a RAPT study database ({exc}); choose another path") from None
+            raise FileFormatError(f"store: {self.path} is not a RAPT study database ({exc}); choose another path") from None
 
     # -- lifecycle ----------------------------------------------------------------------
     def close(self) -> None:

@@ -44,11 +44,16 @@ from typing import Any, Literal, overload
 
 import numpy as np
 
+from rapt.errors import FileFormatError, InputError
+
 __all__ = ["RobotFileError", "Box", "Link", "Joint", "Robot", "load_robot", "read_stl"]
 
 
-class RobotFileError(ValueError):
-    """A robot file is malformed; the message names the field and what is expected."""
+class RobotFileError(FileFormatError):
+    """A robot file is malformed; the message names the field and what is expected.
+
+    A :class:`rapt.errors.FileFormatError`, so also an ``InputError``, a ``RaptError`` and a ``ValueError``.
+    """
 
 
 @dataclass(frozen=True)
@@ -178,7 +183,7 @@ class Robot:
         names = {j.name for j in self.all_joints}
         for name in values:
             if name not in names:
-                raise ValueError(f"lock: no joint named {name!r}; joints: {', '.join(sorted(names))}")
+                raise InputError(f"lock: no joint named {name!r}; joints: {', '.join(sorted(names))}")
         new = copy.copy(self)
         new.locked = {**self.locked, **{k: float(v) for k, v in values.items()}}
         new.joints = [j for j in self.all_joints if j.name not in new.locked]
@@ -198,7 +203,7 @@ class Robot:
         """Vertices (k, 3) and centre of mass (3,) in the base frame for joint state ``theta``."""
         theta = np.asarray(theta, dtype=float).reshape(-1)
         if theta.size != self.dof:
-            raise ValueError(f"theta: expected {self.dof} joint angles, got {theta.size}")
+            raise InputError(f"theta: expected {self.dof} joint angles, got {theta.size}")
         R = {self.base: np.eye(3)}
         t = {self.base: np.zeros(3)}
         for j, angle in zip(self.all_joints, self.joint_angles(theta)):

@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
+from rapt.errors import InputError
 from sim.robots.model import Robot, _rotation
 
 __all__ = ["GRAVITY", "Hull", "StabilityResult", "StabilityFunction", "body_angles", "down_normals"]
@@ -179,7 +180,7 @@ class StabilityFunction:
 
     def __init__(self, robot: Robot, slope_deg: float = 0.0, planar: bool | None = None):
         if not (0.0 <= slope_deg < 90.0):
-            raise ValueError(f"slope: expected degrees in [0, 90), got {slope_deg}")
+            raise InputError(f"slope: expected degrees in [0, 90), got {slope_deg}")
         self.robot = robot
         self.slope = float(np.radians(slope_deg))
         self.planar = robot.planar if planar is None else bool(planar)  # planar=False forces 3-D hulls
