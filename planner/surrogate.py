@@ -82,9 +82,9 @@ def calibrate_goal_threshold(policy, spec, trajectories, thresholds=GOAL_THRESHO
                              within_steps: int = 5) -> tuple[float, list[float]]:
     """The goal threshold under which ``policy`` gives the waypoint up where the expert did.
 
-    Why: the expert gives its waypoint up once per aborted run, so beside a pending waypoint a
-    +1 goal label is rare (0.14% of such states in the chapter 6 mission's expert runs) and a
-    regression on +-1 learns an output that crosses 0 late.  On held-out expert runs
+    Why: the expert gives its waypoint up once per aborted run, so among the many states beside
+    a pending waypoint a +1 goal label is rare, and a regression on +-1 learns an output that
+    crosses 0 late.  On held-out expert runs
     (``trajectories`` of :func:`~sim.uuv.imitation.rollouts.annotated_runs`, the expert flying), a
     run counts as reproduced under a threshold when the goal output first exceeds it at most
     ``within_steps`` steps before the expert's turn (or never, if the expert never turned).

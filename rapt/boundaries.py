@@ -105,10 +105,11 @@ def knn_graph(X: np.ndarray, k: int, method: str = "auto") -> tuple[np.ndarray, 
     ``k`` is capped at ``N - 1``; with ``k = N - 1`` the graph is complete.
     ``method``: ``"exact"`` (scipy k-d tree), ``"hnsw"`` (faiss's hierarchical navigable
     small-world graph, approximate) or ``"auto"``: exact for small or low-dimensional sets,
-    HNSW otherwise.  In 10+ dimensions an exact k-d tree degrades to brute force (10^5
-    samples in 18-D: ~130 s); HNSW finds ~93 % of the exact 12 neighbours at 10^5 and
-    ~88 % at 10^6 (uniform samples in 18-D), and the pairs it misses are mostly replaced
-    by an equally short neighbour across the same boundary.
+    HNSW otherwise.  In 10+ dimensions an exact k-d tree degrades to brute force, whose
+    cost grows with the square of the samples.  HNSW misses some of the exact neighbours,
+    more of them in larger sets, but a pair it misses is mostly replaced by an equally
+    short neighbour across the same boundary, which is all the pairing needs.
+    ``benchmarks/boundaries.py`` measures the time and recall of both.
     """
     if method not in ("auto", "exact", "hnsw"):
         raise InputError(f"method: expected 'auto', 'exact' or 'hnsw', got {method!r}")
@@ -132,9 +133,10 @@ def knn_graph(X: np.ndarray, k: int, method: str = "auto") -> tuple[np.ndarray, 
 
 
 #: HNSW graph parameters (faiss): links per node, candidate list while building and while
-#: searching.  Chosen on 10^5-10^6 uniform samples in 18-D (benchmarks/boundaries.py): against
-#: the former M = 12, efConstruction = 40 and a top-down search with efSearch = 32 they cost
-#: ~40 % less CPU for ~3 points less recall of the exact 12 nearest neighbours.
+#: searching.  Chosen with benchmarks/boundaries.py on 10^5-10^6 uniform samples in 18-D:
+#: short candidate lists cost clearly less CPU than the former M = 12, efConstruction = 40
+#: and a top-down search with efSearch = 32, for a slightly lower recall of the exact
+#: nearest neighbours, which the boundary pairs tolerate (see :func:`knn_graph`).
 HNSW_M = 16
 HNSW_EF_CONSTRUCTION = 24
 HNSW_EF_SEARCH = 24
@@ -147,7 +149,7 @@ def _hnsw_query(X: np.ndarray, k: int, m: int = HNSW_M, ef_construction: int = H
     The queries are the indexed points themselves, so each search starts on the bottom
     layer at the point itself (``search_level_0`` with the point as its entry) instead of
     descending the hierarchy from the top: the descent only finds a way to the query,
-    which is already known, and skipping it saves ~25 % of the search.
+    which is already known, so skipping it saves that part of the work.
     """
     import faiss
 

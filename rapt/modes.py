@@ -62,9 +62,9 @@ def _mean_shift_labels(Yc: np.ndarray, bandwidth: float, bin_seeding: bool) -> n
 
 
 #: Mean shift runs as dense numpy iterations on at most this many distinct rows: a
-#: sub-boundary tree clusters thousands of parents, where scikit-learn's per-seed overhead
-#: (~0.1 ms a call, ~5 ms a fit) dominates, and in many score columns bin seeding leaves
-#: about one seed per row, so a full fit grows as n^2.  Larger sets fit their centres on
+#: sub-boundary tree clusters thousands of parents, where scikit-learn's fixed cost per
+#: call and per fit outweighs the small clustering work, and in many score columns bin
+#: seeding leaves about one seed per row, so a full fit grows as n^2.  Larger sets fit their centres on
 #: a seeded subset of this size and every row joins its nearest centre — what
 #: ``cluster_all`` does with the rows of a full fit anyway.
 MEAN_SHIFT_MAX_FIT = 2000

@@ -36,8 +36,8 @@ def check_output_types(output_types: Sequence[str], m: int) -> tuple[str, ...]:
 def infer_output_types(Y: np.ndarray) -> tuple[str, ...]:
     """Guess each column's kind: integral with few values -> categorical (binary if two), else continuous.
 
-    Vectorised over columns (no per-column sort): a million-row, 96-column score matrix
-    takes a fraction of a second.
+    Vectorised over columns (no per-column sort), because a large study's score matrix
+    has a million rows and dozens of columns.
     """
     Y = np.asarray(Y, dtype=float)
     columns = np.ascontiguousarray((Y[:, None] if Y.ndim == 1 else Y).T)
@@ -72,8 +72,8 @@ def row_codes(A) -> tuple[np.ndarray, int]:
 
     Same result as ``np.unique(A, axis=0, return_inverse=True)`` but built from per-column
     codes folded into one integer key (mixed radix, re-compressed before it can overflow),
-    so it sorts integers instead of byte strings: ~20x faster on wide discrete score
-    matrices, which is where a sub-boundary tree spends its splitting time.
+    so it sorts integers instead of byte strings: the comparison that dominates on wide
+    discrete score matrices, which is where a sub-boundary tree spends its splitting time.
     """
     if isinstance(A, np.ndarray):
         A = A[:, None] if A.ndim == 1 else A
