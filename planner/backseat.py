@@ -29,6 +29,7 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from bridge import keys  # noqa: E402
+from rapt.errors import InputError  # noqa: E402
 from sim.uuv.autonomy import GOAL_RETURN, Autonomy, Observation  # noqa: E402
 from sim.uuv.interface import battery_fraction, encode_command  # noqa: E402
 from sim.uuv.mission import Mission  # noqa: E402
@@ -43,7 +44,7 @@ class BackSeat:
     def __init__(self, session, vehicle: str, mission: Mission, u, source: str = "autonomy", surrogate=None):
         scen = make_scenarios(mission, np.asarray(u, dtype=float).reshape(1, -1))
         if not scen.valid[0]:
-            raise ValueError(f"scenario: invalid for mission '{mission.name}' ({scen.invalid_reason[0]})")
+            raise InputError(f"scenario: invalid for mission '{mission.name}' ({scen.invalid_reason[0]})")
         self.mission, self.scen, self.vehicle, self.source = mission, scen, vehicle, source
         if surrogate is not None:
             surrogate.check(mission)
@@ -68,7 +69,7 @@ class BackSeat:
         self._token = session.liveliness().declare_token(keys.alive(vehicle, source))
         self._thread = threading.Thread(target=self._run, name=f"backseat-{source}", daemon=True)
 
-    def start(self) -> "BackSeat":
+    def start(self) -> BackSeat:
         self._thread.start()
         return self
 
@@ -81,7 +82,7 @@ class BackSeat:
             except Exception:  # already gone with the session
                 pass
 
-    def __enter__(self) -> "BackSeat":
+    def __enter__(self) -> BackSeat:
         return self.start()
 
     def __exit__(self, *exc) -> None:

@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import least_squares
 
+from rapt.errors import InputError
 from sim.uuv.bias import BIAS_LIMITS, BIAS_NAMES, NEUTRAL, Bias
 from sim.uuv.environment import tidal_current
 from sim.uuv.mission import Mission
@@ -180,7 +181,7 @@ def fit_bias(mission: Mission, runs: list, start_times: list[float], fit: tuple[
     """Fit the parameters ``fit`` (the others stay neutral) to all ``runs`` jointly."""
     seg = segment_batch(mission, runs, start_times, length)
     if not seg.valid.any():
-        raise ValueError("LOGS: no replayable flight in the logs (no telemetry steps with set-points); "
+        raise InputError("LOGS: no replayable flight in the logs (no telemetry steps with set-points); "
                          "the bias cannot be estimated")
     names = [n for n in BIAS_NAMES if n in fit]
     scale = np.array([SCALE[n] for n in names])

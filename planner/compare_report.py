@@ -148,7 +148,10 @@ def write_comparison_report(result: dict, plan, tracks: list[tuple[str, np.ndarr
                  f"residual {fitd['rms_position_m']:.3g} m RMS (unbiased model: {fitd['rms_position_unbiased_m']:.3g} m), "
                  f"energy residual {fitd['rms_energy_wh']:.3g} Wh RMS.</p><img src='{FIGURES}/bias.png' alt='bias'>")
     ag = result["mode_agreement"]
-    pct = (lambda v: "–" if v is None else f"{v:.0%}")
+
+    def pct(v: float | None) -> str:
+        return "–" if v is None else f"{v:.0%}"
+
     parts.append(f"<h2>Mode agreement</h2><p>Predicted modes matched the observed ones on <b>{pct(ag['uncorrected'])}"
                  f"</b> of {ag['scenarios']} scenario(s) as planned, and on <b>{pct(ag['corrected'])}</b> with the "
                  "fitted bias applied.</p>")
@@ -173,7 +176,10 @@ def write_comparison_report(result: dict, plan, tracks: list[tuple[str, np.ndarr
     # pairs
     parts.append("<h2>Pairs</h2><table><tr><th>pair</th><th class='l'>scenarios</th><th class='l'>elements</th>"
                  "<th>predicted</th><th>observed</th><th>straddled on the water</th><th>under the bias</th></tr>")
-    yn = (lambda v: "–" if v is None else ("yes" if v else "<span class='bad'>no</span>"))
+
+    def yn(v: bool | None) -> str:
+        return "–" if v is None else ("yes" if v else "<span class='bad'>no</span>")
+
     for p in result["pairs"]:
         parts.append(f"<tr><td>{_e(p['id'])}</td><td class='l'>{_e(' / '.join(p['scenarios']))}</td>"
                      f"<td class='l'>{_e(', '.join(p['elements']))}</td><td>{_e(' / '.join(p['predicted_modes']))}</td>"

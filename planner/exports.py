@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from rapt.errors import InputError
 from sim.uuv.geo import LocalFrame
 from sim.uuv.interface import DEPTH_M
 from sim.uuv.mission import Mission
@@ -63,13 +64,13 @@ def _scenario(mission: Mission, u) -> Scenarios:
     """The decoded scenario of row ``u``; raises if the row is malformed or the scenario invalid."""
     row = np.asarray(u, dtype=float)
     if row.shape != (mission.dim,):
-        raise ValueError(f"u: expected a unit-cube row of shape ({mission.dim},) for mission "
+        raise InputError(f"u: expected a unit-cube row of shape ({mission.dim},) for mission "
                          f"'{mission.name}', got {row.shape}")
     if not np.all(np.isfinite(row)) or np.any(row < 0.0) or np.any(row > 1.0):
-        raise ValueError("u: values must be finite and inside the unit cube [0, 1]")
+        raise InputError("u: values must be finite and inside the unit cube [0, 1]")
     scen = make_scenarios(mission, row[None, :])
     if not scen.valid[0]:
-        raise ValueError(f"u: scenario is invalid ({scen.invalid_reason[0]})")
+        raise InputError(f"u: scenario is invalid ({scen.invalid_reason[0]})")
     return scen
 
 
@@ -196,10 +197,10 @@ def wpl(mission: Mission, u) -> str:
 def _check_track(track) -> np.ndarray:
     tr = np.asarray(track, dtype=float)
     if tr.ndim != 2 or tr.shape[1] != len(TRAJECTORY_FIELDS) or tr.shape[0] < 2:
-        raise ValueError(f"track: expected a trajectory of shape (steps >= 2, {len(TRAJECTORY_FIELDS)}) "
+        raise InputError(f"track: expected a trajectory of shape (steps >= 2, {len(TRAJECTORY_FIELDS)}) "
                          f"with columns {TRAJECTORY_FIELDS}, got {tr.shape}")
     if not np.all(np.isfinite(tr[:, [_T, _X, _Y]])):
-        raise ValueError("track: t, x and y must be finite")
+        raise InputError("track: t, x and y must be finite")
     return tr
 
 
@@ -253,7 +254,7 @@ def write_scenario_files(mission: Mission, u, directory, stem: str, track=None) 
     built before anything is written, so an invalid scenario leaves no files behind.
     """
     if not isinstance(stem, str) or not stem or Path(stem).name != stem or stem in (".", ".."):
-        raise ValueError(f"stem: expected a plain file name without directories, got {stem!r}")
+        raise InputError(f"stem: expected a plain file name without directories, got {stem!r}")
     texts = {
         "plan": json.dumps(qgc_plan(mission, u), indent=4, allow_nan=False) + "\n",
         "waypoints": wpl(mission, u),

@@ -17,6 +17,7 @@ from pathlib import Path
 import numpy as np
 
 import sim.uuv
+from rapt.errors import FileFormatError, InputError, StudyMismatchError
 from sim.uuv.mission import Mission
 
 __all__ = ["Plan", "load_plan", "plan_id"]
@@ -61,7 +62,7 @@ class Plan:
             if s["id"] == sid:
                 return s
         ids = [s["id"] for s in self.scenarios + self.variants]
-        raise ValueError(f"--scenario: {sid!r} is not a scenario of {self.path}; choose one of {', '.join(ids)}")
+        raise InputError(f"--scenario: {sid!r} is not a scenario of {self.path}; choose one of {', '.join(ids)}")
 
     def u(self, sid: str) -> np.ndarray:
         return np.asarray(self.scenario(sid)["u"], dtype=float)
@@ -83,23 +84,23 @@ def load_plan(path: str | Path) -> Plan:
     if path.is_dir():
         path = path / "plan.json"
     if not path.is_file():
-        raise ValueError(f"PLAN: {path} does not exist; give a plan directory or plan.json from rapt-plan generate")
+        raise FileFormatError(f"PLAN: {path} does not exist; give a plan directory or plan.json from rapt-plan generate")
     try:
         data = json.loads(path.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise ValueError(f"PLAN: {path} is not valid JSON ({exc}); regenerate it with rapt-plan generate") from None
+        raise FileFormatError(f"PLAN: {path} is not valid JSON ({exc}); regenerate it with rapt-plan generate") from None
     schema = data.get("schema") if isinstance(data, dict) else None
     if schema != SCHEMA:
-        raise ValueError(f"PLAN: {path} is not a {SCHEMA} plan (schema {schema!r}); "
-                         "give the plan.json written by rapt-plan generate")
+        raise FileFormatError(f"PLAN: {path} is not a {SCHEMA} plan (schema {schema!r}); "
+                              "give the plan.json written by rapt-plan generate")
     file = Path(data.get("mission", {}).get("file", ""))
     candidates = [file] if file.is_absolute() else [Path.cwd() / file, path.parent / file, path.parent / file.name]
     found = next((c for c in candidates if c.is_file()), None)
     if found is None:
-        raise ValueError(f"PLAN: {path} names mission file {str(file)!r}, which is not there; "
-                         "put the mission file back or next to plan.json")
+        raise FileFormatError(f"PLAN: {path} names mission file {str(file)!r}, which is not there; "
+                              "put the mission file back or next to plan.json")
     mission = sim.uuv.load_mission(found)
     if mission.name != data["mission"].get("name"):
-        raise ValueError(f"PLAN: {found} holds mission {mission.name!r}, but the plan was made for "
-                         f"{data['mission'].get('name')!r}; point the plan at its own mission file")
+        raise StudyMismatchError(f"PLAN: {found} holds mission {mission.name!r}, but the plan was made for "
+                                 f"{data['mission'].get('name')!r}; point the plan at its own mission file")
     return Plan(data, path, mission, found, plan_id(data))

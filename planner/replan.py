@@ -74,7 +74,8 @@ def adjust_for_bias(mission: Mission, u: np.ndarray, partner: np.ndarray, cols: 
     for j, entry in enumerate(entries):
         block = slice(j * dithers, (j + 1) * dithers)
         ok = d.valid[block]
-        entry["p_intended"] = float(show[block][ok].mean()) if ok.any() else 0.0
-        if entry["p_intended"] >= p_target:
+        p_intended = float(show[block][ok].mean()) if ok.any() else 0.0
+        entry["p_intended"] = p_intended
+        if p_intended >= p_target:
             return entry
     return {**max(entries, key=lambda e: e["p_intended"]), "robust": False}

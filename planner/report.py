@@ -27,8 +27,9 @@ import html
 import json
 import math
 import re
+from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Any, Iterable
+from typing import Any
 from urllib.parse import quote
 
 import matplotlib
@@ -37,10 +38,12 @@ matplotlib.use("Agg")  # files only: no display on CI machines or range laptops
 
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.artist import Artist  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 from matplotlib.patches import Polygon as MplPolygon  # noqa: E402
 
+from rapt.errors import InputError  # noqa: E402
 from sim.uuv.geo import LocalFrame  # noqa: E402
 
 __all__ = ["write_report", "REPORT_NAME", "FIGURES_DIR"]
@@ -141,30 +144,30 @@ def _save(fig, path: Path) -> None:
 
 def _check_plan(plan: Any) -> None:
     if not isinstance(plan, dict):
-        raise ValueError(f"plan: expected a {PLAN_SCHEMA} plan (a dict from plan.json), got {type(plan).__name__}")
+        raise InputError(f"plan: expected a {PLAN_SCHEMA} plan (a dict from plan.json), got {type(plan).__name__}")
     schema = plan.get("schema")
     if schema != PLAN_SCHEMA:
-        raise ValueError(f"plan: expected schema {PLAN_SCHEMA!r}, got {schema!r}")
+        raise InputError(f"plan: expected schema {PLAN_SCHEMA!r}, got {schema!r}")
     missing = [k for k in ("mission", "study", "sensitivity", "pairs", "scenarios", "run_order") if k not in plan]
     if missing:
-        raise ValueError(f"plan: a {PLAN_SCHEMA} plan needs {', '.join(missing)}")
+        raise InputError(f"plan: a {PLAN_SCHEMA} plan needs {', '.join(missing)}")
 
 
 def _check_dithers(dithers: Any, dim: int) -> dict[str, tuple[np.ndarray, np.ndarray]]:
     if dithers is None:
         return {}
     if not isinstance(dithers, dict):
-        raise ValueError(f"dithers: expected a dict of scenario id -> (U, modes), got {type(dithers).__name__}")
+        raise InputError(f"dithers: expected a dict of scenario id -> (U, modes), got {type(dithers).__name__}")
     out = {}
     for sid, value in dithers.items():
         try:
             U, modes = value
         except (TypeError, ValueError):
-            raise ValueError(f"dithers[{sid!r}]: expected a pair (U, modes)") from None
+            raise InputError(f"dithers[{sid!r}]: expected a pair (U, modes)") from None
         U = np.asarray(U, dtype=float)
         modes = np.asarray(modes).astype(int)
         if U.ndim != 2 or U.shape[1] != dim or modes.shape != (U.shape[0],):
-            raise ValueError(f"dithers[{sid!r}]: expected U of shape (n, {dim}) and modes of shape (n,), "
+            raise InputError(f"dithers[{sid!r}]: expected U of shape (n, {dim}) and modes of shape (n,), "
                              f"got {U.shape} and {modes.shape}")
         out[str(sid)] = (U, modes)
     return out
@@ -346,14 +349,14 @@ def _local_frame(collections: Iterable[dict]) -> LocalFrame | None:
     return LocalFrame(float(c[1]), float(c[0]))
 
 
-def _flat_coordinates(geom: dict):
-    t, c = geom.get("type"), geom.get("coordinates")
+def _flat_coordinates(geom: dict) -> Iterator[list[float]]:
+    t = geom.get("type")
     if t == "Point":
-        yield c
+        yield geom["coordinates"]
     elif t == "LineString":
-        yield from c
+        yield from geom["coordinates"]
     elif t == "Polygon":
-        for ring in c:
+        for ring in geom["coordinates"]:
             yield from ring
 
 
@@ -363,7 +366,8 @@ def _xy(frame: LocalFrame, coords) -> np.ndarray:
     return np.column_stack([np.atleast_1d(x), np.atleast_1d(y)])
 
 
-def _draw_scenario(ax, fc: dict, frame: LocalFrame, colour: str, other: tuple[np.ndarray, str] | None) -> np.ndarray | None:
+def _draw_scenario(ax, fc: dict, frame: LocalFrame, colour: str,
+                   other: tuple[np.ndarray | None, str] | None) -> np.ndarray | None:
     track = None
     kinds_seen = set()
     for f in fc["features"]:
@@ -409,13 +413,15 @@ def _draw_scenario(ax, fc: dict, frame: LocalFrame, colour: str, other: tuple[np
 
 def _fig_map(pair: dict, scen: list[dict], out_dir: Path, path: Path) -> str | None:
     """Side-by-side maps of the pair's scenarios; returns a note when GeoJSON is missing."""
-    fcs, missing = [], []
+    fcs: list[dict] = []
+    missing = []
     for s in scen:
         name = Path(str((s.get("files") or {}).get("geojson", f"{s['id']}.geojson"))).name
         fc = _load_geojson(out_dir / name)
         if fc is None:
             missing.append(name)
-        fcs.append(fc)
+        else:
+            fcs.append(fc)
     if missing or not fcs:
         return f"map not drawn: {', '.join(missing) or 'no scenarios'} not found in the plan directory"
     frame = _local_frame(fcs)
@@ -435,7 +441,7 @@ def _fig_map(pair: dict, scen: list[dict], out_dir: Path, path: Path) -> str | N
         ax.set_title(f"{s['id']}: predicted {mode} ({MODE_LABELS.get(mode, mode)})", color=SIDE_COLOURS[k % 2])
     present = {str((f.get("properties") or {}).get("kind")) for fc in fcs for f in fc["features"]
                if (f.get("geometry") or {}).get("type") == "Polygon"}
-    handles = [Patch(facecolor=KIND_STYLE[k][0] or "white", edgecolor=KIND_STYLE[k][1], alpha=max(KIND_STYLE[k][2], .5),
+    handles: list[Artist] = [Patch(facecolor=KIND_STYLE[k][0] or "white", edgecolor=KIND_STYLE[k][1], alpha=max(KIND_STYLE[k][2], .5),
                      label=KIND_LABELS[k], linestyle="--" if k == "operational_area" else "-")
                for k in KIND_STYLE if k in present]
     handles += [Line2D([], [], color=SIDE_COLOURS[k % 2], linewidth=2, label=f"{s['id']} predicted track")
@@ -498,7 +504,7 @@ def _fig_dithers(pair: dict, scen: list[dict], dithers: dict, labels: list[str],
         return False
     i, j = axes_idx
     fig, axes = plt.subplots(1, len(present), figsize=(5.4 * len(present), 4.8), squeeze=False)
-    for k, (ax, s) in enumerate(zip(axes[0], present)):
+    for ax, s in zip(axes[0], present):
         U, modes = dithers[s["id"]]
         for code, name in [(-1, "invalid")] + list(enumerate(MODE_NAMES)):
             sel = modes == code

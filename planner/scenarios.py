@@ -14,6 +14,7 @@ from pathlib import Path
 import numpy as np
 from scipy.stats import qmc
 
+from rapt.errors import FileFormatError, InputError
 from sim.uuv.mission import Mission
 
 __all__ = ["resolve_scenario", "design_row"]
@@ -22,7 +23,7 @@ __all__ = ["resolve_scenario", "design_row"]
 def design_row(mission: Mission, index: int) -> np.ndarray:
     """Row ``index`` of the mission's Sobol design (seed 0)."""
     if index < 0:
-        raise ValueError(f"--scenario: expected a row number >= 0, got {index}")
+        raise InputError(f"--scenario: expected a row number >= 0, got {index}")
     sobol = qmc.Sobol(mission.dim, scramble=True, seed=0)
     if index:
         sobol.fast_forward(index)
@@ -35,22 +36,22 @@ def resolve_scenario(mission: Mission, spec: str) -> tuple[np.ndarray, str]:
         return design_row(mission, int(spec)), f"sobol-{int(spec)}"
     path = Path(spec)
     if not path.is_file():
-        raise ValueError(f"--scenario: {spec!r} is neither a row number nor an existing JSON file")
+        raise InputError(f"--scenario: {spec!r} is neither a row number nor an existing JSON file")
     try:
         data = json.loads(path.read_text())
     except json.JSONDecodeError as exc:
-        raise ValueError(f"--scenario: {path} is not valid JSON ({exc.msg} at line {exc.lineno})") from None
+        raise FileFormatError(f"--scenario: {path} is not valid JSON ({exc.msg} at line {exc.lineno})") from None
     if isinstance(data, dict) and "u" in data:
         u = np.asarray(data["u"], dtype=float)
         if u.shape != (mission.dim,) or np.any(u < 0) or np.any(u > 1):
-            raise ValueError(f"--scenario: {path}: 'u' must be {mission.dim} numbers in [0, 1]")
+            raise FileFormatError(f"--scenario: {path}: 'u' must be {mission.dim} numbers in [0, 1]")
     elif isinstance(data, dict) and "parameters" in data:
         names = set(mission.space.names)
         given = data["parameters"]
         missing = sorted(names - set(given))
         if missing:
-            raise ValueError(f"--scenario: {path}: parameters lack {', '.join(missing)}; give every parameter")
+            raise FileFormatError(f"--scenario: {path}: parameters lack {', '.join(missing)}; give every parameter")
         u = mission.space.encode([given])[0]
     else:
-        raise ValueError(f"--scenario: {path}: expected a JSON object with 'u' or 'parameters'")
+        raise FileFormatError(f"--scenario: {path}: expected a JSON object with 'u' or 'parameters'")
     return u, str(data.get("id", path.stem))

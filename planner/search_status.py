@@ -5,8 +5,8 @@ modes the search has met and how many boundary links it has made: new runs whose
 nearest earlier run lies in another mode.  A link is the one-sided precursor of a
 boundary pair (the pairs themselves are mutual nearest neighbours, found once the
 search ends); counting links costs one nearest-neighbour query per batch against an
-HNSW index grown as the runs arrive, about a second per 10^5 runs in 15 dimensions,
-where a k-d tree rebuilt per batch would take minutes.
+HNSW index grown as the runs arrive, where a k-d tree would have to be rebuilt for
+every batch and, in the many dimensions of a mission's space, degrades to brute force.
 """
 
 from __future__ import annotations

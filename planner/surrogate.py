@@ -10,13 +10,14 @@ expert-run counts it records are what the surrogate workflow of ``rapt-plan gene
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
 import sim.uuv
-from rapt.imitation import IterationRecord, MLPPolicy, imitate
+from rapt.errors import InputError
+from rapt.imitation import IterationRecord, Policy, imitate
 from sim.uuv.imitation.features import GOAL, feature_spec, policy_heads
 from sim.uuv.imitation.rollouts import annotated_runs, draw_valid, make_rollout
 from sim.uuv.imitation.surrogate import Surrogate
@@ -35,7 +36,7 @@ TRAINING_DEFAULTS = {"method": "qdagger", "quantile": 0.5, "runs": 75, "runs_per
 def train_surrogate(mission: Mission, *, method: str = "qdagger", quantile: float = 0.5, runs: int = 75,
                     runs_per_iteration: int = 5, epochs: int = 30, mixing: float = 0.5, select_runs: int = 25,
                     seed: int = 0,
-                    on_iteration: Callable[[IterationRecord, MLPPolicy], None] | None = None) -> Surrogate:
+                    on_iteration: Callable[[IterationRecord, Policy], None] | None = None) -> Surrogate:
     """Imitate the mission's expert with ``runs`` annotated runs (``runs_per_iteration`` at a time).
 
     ``mixing`` p: update i's runs obey the expert on a share p**i of their steps (DAgger's
@@ -46,13 +47,13 @@ def train_surrogate(mission: Mission, *, method: str = "qdagger", quantile: floa
     expert run spent: annotated and held out.
     """
     if not 0.0 <= mixing < 1.0:
-        raise ValueError(f"--mixing: expected a share in [0, 1), got {mixing!r}")
+        raise InputError(f"--mixing: expected a share in [0, 1), got {mixing!r}")
     if int(runs_per_iteration) != runs_per_iteration or runs_per_iteration < 1:
-        raise ValueError(f"--runs-per-iteration: expected a positive whole number, got {runs_per_iteration!r}")
+        raise InputError(f"--runs-per-iteration: expected a positive whole number, got {runs_per_iteration!r}")
     if int(runs) != runs or runs < runs_per_iteration:
-        raise ValueError(f"--runs: expected at least {runs_per_iteration} annotated runs, got {runs!r}")
+        raise InputError(f"--runs: expected at least {runs_per_iteration} annotated runs, got {runs!r}")
     if int(select_runs) != select_runs or select_runs < 0:
-        raise ValueError(f"--select-runs: expected a number of held-out expert runs >= 0, got {select_runs!r}")
+        raise InputError(f"--select-runs: expected a number of held-out expert runs >= 0, got {select_runs!r}")
     spec = feature_spec(mission)
     select = None
     if select_runs:
@@ -81,9 +82,9 @@ def calibrate_goal_threshold(policy, spec, trajectories, thresholds=GOAL_THRESHO
                              within_steps: int = 5) -> tuple[float, list[float]]:
     """The goal threshold under which ``policy`` gives the waypoint up where the expert did.
 
-    Why: the expert gives its waypoint up once per aborted run, so beside a pending waypoint a
-    +1 goal label is rare (0.14% of such states in the chapter 6 mission's expert runs) and a
-    regression on +-1 learns an output that crosses 0 late.  On held-out expert runs
+    Why: the expert gives its waypoint up once per aborted run, so among the many states beside
+    a pending waypoint a +1 goal label is rare, and a regression on +-1 learns an output that
+    crosses 0 late.  On held-out expert runs
     (``trajectories`` of :func:`~sim.uuv.imitation.rollouts.annotated_runs`, the expert flying), a
     run counts as reproduced under a threshold when the goal output first exceeds it at most
     ``within_steps`` steps before the expert's turn (or never, if the expert never turned).
@@ -120,7 +121,7 @@ def load_or_train(path: Path, mission: Mission, seed: int = 0, on_iteration=None
     if path.exists():
         return Surrogate.load(path, mission), False
     if path.suffix != ".npz":
-        raise ValueError(f"--surrogate: a surrogate file ends in .npz, got {str(path)!r}")
+        raise InputError(f"--surrogate: a surrogate file ends in .npz, got {str(path)!r}")
     sur = train_surrogate(mission, seed=seed, on_iteration=on_iteration, **{**TRAINING_DEFAULTS, **options})
     sur.save(path)
     return sur, True

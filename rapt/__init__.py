@@ -10,17 +10,27 @@ Knows nothing of vehicles or MAVLink: a system under test is any function from a
 """
 
 from rapt.boundaries import BoundaryPairs, boundary_pairs
+from rapt.errors import (
+    FileFormatError,
+    InputError,
+    LinkError,
+    LinkTimeoutError,
+    RaptError,
+    RunError,
+    StudyMismatchError,
+)
 from rapt.modes import performance_modes
+from rapt.samplers import METHODS, make_sampler
 from rapt.scoretree import ScoreTree
 from rapt.search import Study, search
-from rapt.subboundaries import SubBoundaryTree, subboundary_tree
 from rapt.space import Categorical, Continuous, Integer, Permutation, StateSpace
-from rapt.samplers import METHODS, make_sampler
+from rapt.subboundaries import SubBoundaryTree, subboundary_tree
 
 __all__ = [
     "search", "Study", "StateSpace", "Continuous", "Integer", "Categorical", "Permutation",
     "METHODS", "make_sampler", "performance_modes", "boundary_pairs", "BoundaryPairs", "ScoreTree",
     "subboundary_tree", "SubBoundaryTree",
+    "RaptError", "InputError", "FileFormatError", "StudyMismatchError", "RunError", "LinkError", "LinkTimeoutError",
 ]
 
 __version__ = "0.1.0"

@@ -27,6 +27,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from rapt.boundaries import boundary_pairs
+from rapt.errors import InputError
 
 __all__ = ["Agreement", "agreement", "path_error", "confusion_matrix"]
 
@@ -90,7 +91,7 @@ def agreement(X: np.ndarray, system: np.ndarray, surrogate: np.ndarray, n_modes:
     X = np.asarray(X, dtype=float)
     system, surrogate = np.asarray(system, int), np.asarray(surrogate, int)
     if not (X.shape[0] == system.shape[0] == surrogate.shape[0]):
-        raise ValueError("X, system, surrogate: expected one label per scenario")
+        raise InputError("X, system, surrogate: expected one label per scenario")
     accuracy = float(np.mean(system == surrogate))
     si, sj, s_mid = _midpoints(X, surrogate)
     ti, tj, t_mid = _midpoints(X, system)

@@ -13,15 +13,16 @@ simulator a lone sample of the "wrong" mode creates pairs that are not behaviour
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
 
 import numpy as np
 from scipy.spatial import cKDTree
 
+from rapt.errors import InputError
 from rapt.modes import performance_modes
-from rapt.validation import check_scores, check_states
 from rapt.parallel import query_workers
+from rapt.validation import check_scores, check_states
 
 __all__ = ["BoundaryPairs", "boundary_pairs", "mutual_pairs", "knn_graph", "graph_mutual_pairs", "pair_differences"]
 
@@ -55,12 +56,12 @@ class BoundaryPairs:
         keys, counts = np.unique(np.column_stack([self.mode_i, self.mode_j]), axis=0, return_counts=True)
         return [(int(a), int(b), int(c)) for (a, b), c in zip(keys, counts)]
 
-    def select(self, mask: np.ndarray) -> "BoundaryPairs":
+    def select(self, mask: np.ndarray) -> BoundaryPairs:
         mask = np.asarray(mask)
         return BoundaryPairs(self.i[mask], self.j[mask], self.distance[mask], self.mode_i[mask], self.mode_j[mask],
                              self.cluster_i[mask], self.cluster_j[mask], self.likely_noise[mask], self.labels)
 
-    def of_type(self, mode_a: int, mode_b: int) -> "BoundaryPairs":
+    def of_type(self, mode_a: int, mode_b: int) -> BoundaryPairs:
         a, b = min(mode_a, mode_b), max(mode_a, mode_b)
         return self.select((self.mode_i == a) & (self.mode_j == b))
 
@@ -73,8 +74,8 @@ def mutual_pairs(X: np.ndarray, labels: np.ndarray, groups: Sequence[int] | None
     neighbour in ``b`` and ``x`` is ``y``'s nearest neighbour in ``a``.  Returns (i, j, d)
     with ``labels[i] < labels[j]``, unsorted.
     """
-    groups = np.unique(labels) if groups is None else np.asarray(groups)
-    members = {int(g): np.flatnonzero(labels == g) for g in groups}
+    group_ids = np.unique(labels) if groups is None else np.asarray(groups)
+    members = {int(g): np.flatnonzero(labels == g) for g in group_ids}
     trees = {g: cKDTree(X[idx]) for g, idx in members.items() if idx.size}
     out_i, out_j, out_d = [], [], []
     keys = sorted(trees)
@@ -104,13 +105,14 @@ def knn_graph(X: np.ndarray, k: int, method: str = "auto") -> tuple[np.ndarray, 
     ``k`` is capped at ``N - 1``; with ``k = N - 1`` the graph is complete.
     ``method``: ``"exact"`` (scipy k-d tree), ``"hnsw"`` (faiss's hierarchical navigable
     small-world graph, approximate) or ``"auto"``: exact for small or low-dimensional sets,
-    HNSW otherwise.  In 10+ dimensions an exact k-d tree degrades to brute force (10^5
-    samples in 18-D: ~130 s); HNSW finds ~93 % of the exact 12 neighbours at 10^5 and
-    ~88 % at 10^6 (uniform samples in 18-D), and the pairs it misses are mostly replaced
-    by an equally short neighbour across the same boundary.
+    HNSW otherwise.  In 10+ dimensions an exact k-d tree degrades to brute force, whose
+    cost grows with the square of the samples.  HNSW misses some of the exact neighbours,
+    more of them in larger sets, but a pair it misses is mostly replaced by an equally
+    short neighbour across the same boundary, which is all the pairing needs.
+    ``benchmarks/boundaries.py`` measures the time and recall of both.
     """
     if method not in ("auto", "exact", "hnsw"):
-        raise ValueError(f"method: expected 'auto', 'exact' or 'hnsw', got {method!r}")
+        raise InputError(f"method: expected 'auto', 'exact' or 'hnsw', got {method!r}")
     n, d = X.shape
     k = int(min(k, n - 1))
     if k < 1:
@@ -131,9 +133,10 @@ def knn_graph(X: np.ndarray, k: int, method: str = "auto") -> tuple[np.ndarray, 
 
 
 #: HNSW graph parameters (faiss): links per node, candidate list while building and while
-#: searching.  Chosen on 10^5-10^6 uniform samples in 18-D (benchmarks/boundaries.py): against
-#: the former M = 12, efConstruction = 40 and a top-down search with efSearch = 32 they cost
-#: ~40 % less CPU for ~3 points less recall of the exact 12 nearest neighbours.
+#: searching.  Chosen with benchmarks/boundaries.py on 10^5-10^6 uniform samples in 18-D:
+#: short candidate lists cost clearly less CPU than the former M = 12, efConstruction = 40
+#: and a top-down search with efSearch = 32, for a slightly lower recall of the exact
+#: nearest neighbours, which the boundary pairs tolerate (see :func:`knn_graph`).
 HNSW_M = 16
 HNSW_EF_CONSTRUCTION = 24
 HNSW_EF_SEARCH = 24
@@ -146,7 +149,7 @@ def _hnsw_query(X: np.ndarray, k: int, m: int = HNSW_M, ef_construction: int = H
     The queries are the indexed points themselves, so each search starts on the bottom
     layer at the point itself (``search_level_0`` with the point as its entry) instead of
     descending the hierarchy from the top: the descent only finds a way to the query,
-    which is already known, and skipping it saves ~25 % of the search.
+    which is already known, so skipping it saves that part of the work.
     """
     import faiss
 
@@ -155,13 +158,14 @@ def _hnsw_query(X: np.ndarray, k: int, m: int = HNSW_M, ef_construction: int = H
     index = faiss.IndexHNSWFlat(d, m)
     index.hnsw.efConstruction = ef_construction
     index.add(Xf)
-    params = faiss.SearchParametersHNSW()
+    # SearchParametersHNSW and IndexHNSW.search_level_0 are in faiss but missing from the stubs it ships
+    params = faiss.SearchParametersHNSW()  # type: ignore[attr-defined]
     params.efSearch = max(ef_search, k)
     sq = np.empty((n, k), dtype=np.float32)
     idx = np.empty((n, k), dtype=np.int64)
     entry = np.arange(n, dtype=np.int32)  # faiss's storage_idx_t
     entry_d = np.zeros(n, dtype=np.float32)
-    index.search_level_0(n, faiss.swig_ptr(Xf), k, faiss.swig_ptr(entry), faiss.swig_ptr(entry_d),
+    index.search_level_0(n, faiss.swig_ptr(Xf), k, faiss.swig_ptr(entry), faiss.swig_ptr(entry_d),  # type: ignore[attr-defined]
                          faiss.swig_ptr(sq), faiss.swig_ptr(idx), 1, 1, params)
     missing = idx < 0  # too few reachable points: fall back to self at infinite distance
     idx = np.where(missing, np.arange(n)[:, None], idx)
@@ -255,23 +259,23 @@ def boundary_pairs(X: np.ndarray, Y: np.ndarray | None = None, *, labels: np.nda
     """
     X = check_states(X)
     if (Y is None) == (labels is None):
-        raise ValueError("Y, labels: give exactly one of scores Y or mode labels")
+        raise InputError("Y, labels: give exactly one of scores Y or mode labels")
     if labels is None:
         labels = performance_modes(check_scores(Y, X.shape[0]), output_types, bandwidth=bandwidth)
     else:
         labels = np.asarray(labels).reshape(-1)
         if labels.shape[0] != X.shape[0]:
-            raise ValueError(f"labels: expected {X.shape[0]} labels (one per state), got {labels.shape[0]}")
+            raise InputError(f"labels: expected {X.shape[0]} labels (one per state), got {labels.shape[0]}")
         _, labels = np.unique(labels, return_inverse=True)
         labels = labels.reshape(-1)
     if d_eps is not None and not (np.isfinite(d_eps) and d_eps > 0):
-        raise ValueError(f"d_eps: expected a distance > 0, got {d_eps!r}")
+        raise InputError(f"d_eps: expected a distance > 0, got {d_eps!r}")
     if quantile is not None and not (0 < quantile <= 1):
-        raise ValueError(f"quantile: expected q_B in (0, 1], got {quantile!r}")
+        raise InputError(f"quantile: expected q_B in (0, 1], got {quantile!r}")
     if weights is not None:
         weights = np.asarray(weights, dtype=float)
         if weights.shape != (X.shape[1],) or np.any(weights < 0) or not np.all(np.isfinite(weights)):
-            raise ValueError(f"weights: expected {X.shape[1]} non-negative finite scale factors, got {weights!r}")
+            raise InputError(f"weights: expected {X.shape[1]} non-negative finite scale factors, got {weights!r}")
         X = X * weights
 
     i, j, d = mutual_pairs(X, labels)
@@ -302,9 +306,9 @@ def _dbscan_within_modes(X: np.ndarray, labels: np.ndarray, eps: float, min_samp
     from sklearn.cluster import DBSCAN
 
     if not (np.isfinite(eps) and eps > 0):
-        raise ValueError(f"cluster_eps: expected ε_C > 0, got {eps!r}")
+        raise InputError(f"cluster_eps: expected ε_C > 0, got {eps!r}")
     if not isinstance(min_samples, (int, np.integer)) or min_samples < 1:
-        raise ValueError(f"min_samples: expected a positive integer n_min, got {min_samples!r}")
+        raise InputError(f"min_samples: expected a positive integer n_min, got {min_samples!r}")
     out = np.full(X.shape[0], -1, dtype=np.int64)
     for g in np.unique(labels):
         idx = np.flatnonzero(labels == g)
@@ -325,6 +329,6 @@ def pair_differences(X: np.ndarray, pairs: BoundaryPairs, bounds: np.ndarray | N
     if bounds is not None:
         b = np.asarray(bounds, dtype=float)
         if b.shape != (X.shape[1], 2):
-            raise ValueError(f"bounds: expected shape ({X.shape[1]}, 2), got {b.shape}")
+            raise InputError(f"bounds: expected shape ({X.shape[1]}, 2), got {b.shape}")
         diff = diff / (b[:, 1] - b[:, 0])
     return diff

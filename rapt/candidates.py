@@ -10,10 +10,12 @@ so a batch of 10,000 does not pile up on the one spot with the highest informati
 
 from __future__ import annotations
 
-from typing import Protocol, TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 from scipy.spatial import cKDTree
+
+from rapt.errors import InputError
 from rapt.parallel import query_workers
 
 if TYPE_CHECKING:  # pragma: no cover
@@ -25,13 +27,13 @@ __all__ = ["CandidateGenerator", "UniformCandidates", "select_batch"]
 class CandidateGenerator(Protocol):
     """Proposes ``n`` unit-cube candidates; may read the sampler's data (``sampler.X``, ``sampler.Y``)."""
 
-    def __call__(self, n: int, rng: np.random.Generator, sampler: "Sampler") -> np.ndarray: ...
+    def __call__(self, n: int, rng: np.random.Generator, sampler: Sampler) -> np.ndarray: ...
 
 
 class UniformCandidates:
     """Uniform random candidates in the unit cube."""
 
-    def __call__(self, n: int, rng: np.random.Generator, sampler: "Sampler") -> np.ndarray:
+    def __call__(self, n: int, rng: np.random.Generator, sampler: Sampler) -> np.ndarray:
         return rng.random((n, sampler.dim))
 
     def __repr__(self) -> str:
@@ -51,7 +53,7 @@ def select_batch(candidates: np.ndarray, information: np.ndarray, n: int, radius
     information = np.asarray(information, dtype=float)
     p = information.shape[0]
     if n > p:
-        raise ValueError(f"n: cannot choose {n} from {p} candidates; generate more candidates than the batch size")
+        raise InputError(f"n: cannot choose {n} from {p} candidates; generate more candidates than the batch size")
     pts = np.asarray(candidates if space is None else space, dtype=float)
     radius = np.broadcast_to(np.asarray(radius, dtype=float), (p,))
     order = np.argsort(-information, kind="stable")

@@ -11,6 +11,8 @@ import concurrent.futures as cf
 import os
 from typing import Any
 
+from rapt.errors import InputError
+
 __all__ = ["resolve_executor"]
 
 
@@ -24,6 +26,6 @@ def resolve_executor(executor: Any) -> tuple[cf.Executor | None, int]:
     if isinstance(executor, cf.Executor):
         workers = getattr(executor, "_max_workers", None) or os.cpu_count() or 1
         return executor, int(workers)
-    raise ValueError(
+    raise InputError(
         f"executor: expected None, a concurrent.futures.Executor or a dask.distributed.Client, got {type(executor).__name__}"
     )

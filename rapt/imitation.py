@@ -28,12 +28,14 @@ from __future__ import annotations
 
 import time
 import warnings
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Callable, Sequence
 
 import numpy as np
 
-__all__ = ["MLPPolicy", "HeadsPolicy", "policy_from_arrays", "Trajectory", "IterationRecord", "ImitationResult",
+from rapt.errors import InputError
+
+__all__ = ["MLPPolicy", "HeadsPolicy", "Policy", "policy_from_arrays", "Trajectory", "IterationRecord", "ImitationResult",
            "imitate", "METHODS", "HIDDEN"]
 
 #: Inputs and hidden activations are rounded to multiples of 2**-INPUT_BITS (see MLPPolicy.__call__).
@@ -69,7 +71,7 @@ class MLPPolicy:
     activation: str = "logistic"
 
     @classmethod
-    def from_sklearn(cls, model) -> "MLPPolicy":
+    def from_sklearn(cls, model) -> MLPPolicy:
         """A copy of ``model``'s weights: a warm-started model trained on float32 keeps float32 weights
         and updates them in place, which would retrain every policy taken from it before."""
         return cls([np.array(w, np.float32) for w in model.coefs_],
@@ -127,7 +129,7 @@ class MLPPolicy:
         cached = self.__dict__.get("_layers")
         if cached is None:
             if self.activation not in ("logistic", "tanh"):
-                raise ValueError(f"activation: expected 'logistic' or 'tanh' (bounded), got {self.activation!r}")
+                raise InputError(f"activation: expected 'logistic' or 'tanh' (bounded), got {self.activation!r}")
             cached = []
             last = len(self.weights) - 1
             for k, (W, b) in enumerate(zip(self.weights, self.biases)):
@@ -148,7 +150,7 @@ class MLPPolicy:
         cache = self.__dict__.setdefault("_split", {})
         if key not in cache:
             if value * _UNIT != np.rint(value * _UNIT):  # else a quiet row would differ from its grid value
-                raise ValueError(f"quiet_value: {value!r} is not a multiple of 2**-{INPUT_BITS}; use such a value")
+                raise InputError(f"quiet_value: {value!r} is not a multiple of 2**-{INPUT_BITS}; use such a value")
             cols = np.zeros(W.shape[0], dtype=bool)
             cols[quiet] = True
             Wq = np.ascontiguousarray(W[cols])
@@ -171,7 +173,7 @@ class MLPPolicy:
         return out
 
     @classmethod
-    def from_arrays(cls, arrays) -> "MLPPolicy":
+    def from_arrays(cls, arrays) -> MLPPolicy:
         n = sum(1 for k in arrays if str(k).startswith("W"))
         return cls([np.asarray(arrays[f"W{k}"], np.float32) for k in range(n)],
                    [np.asarray(arrays[f"b{k}"], np.float32) for k in range(n)], str(arrays["activation"]))
@@ -219,7 +221,7 @@ class HeadsPolicy:
         return arrays
 
     @classmethod
-    def from_arrays(cls, arrays) -> "HeadsPolicy":
+    def from_arrays(cls, arrays) -> HeadsPolicy:
         heads, j = [], 0
         while f"h{j}_inputs" in arrays:
             own = {k[len(f"h{j}_"):]: v for k, v in arrays.items() if k.startswith(f"h{j}_")}
@@ -244,7 +246,11 @@ def _local(cols: np.ndarray, quiet: slice | None, n_features: int) -> slice | No
     return slice(int(inside[0]), int(inside[-1]) + 1) if inside.size else None
 
 
-def policy_from_arrays(arrays) -> MLPPolicy | HeadsPolicy:
+#: What :func:`imitate` trains: one network, or one per head (``heads``).
+Policy = MLPPolicy | HeadsPolicy
+
+
+def policy_from_arrays(arrays) -> Policy:
     """The policy saved by ``to_arrays`` (one network, or heads)."""
     return HeadsPolicy.from_arrays(arrays) if "h0_inputs" in arrays else MLPPolicy.from_arrays(arrays)
 
@@ -272,7 +278,7 @@ class IterationRecord:
 
 @dataclass
 class ImitationResult:
-    policy: MLPPolicy
+    policy: Policy
     method: str
     quantile: float | None
     history: list[IterationRecord]
@@ -283,13 +289,13 @@ class ImitationResult:
         return self.history[-1].runs if self.history else 0
 
 
-Rollout = Callable[[MLPPolicy | None, int, int], Sequence[Trajectory]]
+Rollout = Callable[[Policy | None, int, int], Sequence[Trajectory]]
 
 
 def _stack(trajs: Sequence[Trajectory]) -> tuple[np.ndarray, np.ndarray]:
     trajs = [t for t in trajs if t.features.shape[0]]
     if not trajs:
-        raise ValueError("rollout: returned no annotated states")
+        raise InputError("rollout: returned no annotated states")
     return (np.concatenate([t.features for t in trajs]).astype(np.float32),
             np.concatenate([t.expert for t in trajs]).astype(np.float32))
 
@@ -297,8 +303,8 @@ def _stack(trajs: Sequence[Trajectory]) -> tuple[np.ndarray, np.ndarray]:
 def imitate(rollout: Rollout, *, method: str = "qdagger", quantile: float = 0.5, iterations: int = 15,
             runs_per_iteration: int = 5, initial_runs: int | None = None, hidden: Sequence[int] = HIDDEN,
             epochs: int = 20, learning_rate: float = 3e-3, batch_size: int = 256, seed: int = 0,
-            select: Callable[[MLPPolicy], float] | None = None,
-            on_iteration: Callable[[IterationRecord, MLPPolicy], None] | None = None,
+            select: Callable[[Policy], float] | None = None,
+            on_iteration: Callable[[IterationRecord, Policy], None] | None = None,
             heads: Sequence[tuple[Sequence[int] | None, Sequence[int]]] | None = None) -> ImitationResult:
     """Train a policy imitating the expert behind ``rollout`` (see the module docstring).
 
@@ -324,12 +330,12 @@ def imitate(rollout: Rollout, *, method: str = "qdagger", quantile: float = 0.5,
     from sklearn.neural_network import MLPRegressor
 
     if method not in METHODS:
-        raise ValueError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
+        raise InputError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
     if method == "qdagger" and not 0.0 <= quantile < 1.0:
-        raise ValueError(f"quantile: expected a fraction in [0, 1), got {quantile!r}")
+        raise InputError(f"quantile: expected a fraction in [0, 1), got {quantile!r}")
     for name, value in (("iterations", iterations), ("runs_per_iteration", runs_per_iteration), ("epochs", epochs)):
         if int(value) != value or value < (0 if name == "iterations" else 1):
-            raise ValueError(f"{name}: expected a positive whole number, got {value!r}")
+            raise InputError(f"{name}: expected a positive whole number, got {value!r}")
     def network(j: int) -> MLPRegressor:
         return MLPRegressor(hidden_layer_sizes=tuple(hidden), activation="logistic", solver="adam",
                             learning_rate_init=learning_rate, batch_size=batch_size, max_iter=epochs,
@@ -338,10 +344,10 @@ def imitate(rollout: Rollout, *, method: str = "qdagger", quantile: float = 0.5,
     models = [network(j) for j in range(len(heads) if heads else 1)]
     started = time.perf_counter()
     history: list[IterationRecord] = []
-    policy: MLPPolicy | None = None
+    policy: Policy | None = None  # None until the first update, which iteration 0 makes
     F = A = None
     runs = 0
-    best: tuple[float, int, MLPPolicy] | None = None
+    best: tuple[float, int, Policy] | None = None
     for it in range(iterations + 1):
         t0 = time.perf_counter()
         k = (initial_runs or runs_per_iteration) if it == 0 else runs_per_iteration
@@ -352,6 +358,7 @@ def imitate(rollout: Rollout, *, method: str = "qdagger", quantile: float = 0.5,
         if F is None:
             F, A = Fi, Ai
         elif method == "qdagger":
+            assert policy is not None  # F holds data, so an update has made a policy
             loss = np.sum((policy(Fi) - Ai) ** 2, axis=1)
             keep = loss >= np.quantile(loss, quantile)
             F, A = np.concatenate([F, Fi[keep]]), np.concatenate([A, Ai[keep]])
@@ -384,6 +391,7 @@ def imitate(rollout: Rollout, *, method: str = "qdagger", quantile: float = 0.5,
             on_iteration(record, policy)
         history.append(record)
     chosen, policy = (best[1], best[2]) if best is not None else (len(history) - 1, policy)
+    assert policy is not None  # iterations >= 0 was checked, so the loop updated at least once
     return ImitationResult(policy, method, quantile if method == "qdagger" else None, history, chosen)
 
 
@@ -394,9 +402,9 @@ def _heads(heads, n_features: int, n_actions: int) -> list[tuple[np.ndarray, np.
         cols = np.arange(n_features) if inputs is None else np.asarray(inputs, np.int64)
         outs = np.asarray(outputs, np.int64)
         if cols.size == 0 or cols.min() < 0 or cols.max() >= n_features or np.unique(cols).size != cols.size:
-            raise ValueError(f"heads[{j}]: input columns must be distinct features 0..{n_features - 1}")
+            raise InputError(f"heads[{j}]: input columns must be distinct features 0..{n_features - 1}")
         out.append((cols, outs))
         seen.extend(outs.tolist())
     if sorted(seen) != list(range(n_actions)):
-        raise ValueError(f"heads: output columns must cover the {n_actions} action columns once each, got {seen}")
+        raise InputError(f"heads: output columns must cover the {n_actions} action columns once each, got {seen}")
     return out

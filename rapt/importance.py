@@ -11,6 +11,8 @@ from __future__ import annotations
 import numpy as np
 from sklearn.tree import DecisionTreeClassifier, DecisionTreeRegressor
 
+from rapt.errors import InputError
+
 __all__ = ["tree_importance", "importance_weights", "output_importance", "boundary_type_importance"]
 
 
@@ -26,9 +28,9 @@ def tree_importance(X: np.ndarray, y: np.ndarray, kind: str, *, max_samples: int
     X = np.asarray(X, dtype=float)
     y = np.asarray(y)
     if X.ndim != 2 or X.shape[0] != y.shape[0]:
-        raise ValueError(f"X, y: expected X (n, d) and y (n,), got {X.shape} and {y.shape}")
+        raise InputError(f"X, y: expected X (n, d) and y (n,), got {X.shape} and {y.shape}")
     if kind not in ("categorical", "binary", "continuous"):
-        raise ValueError(f"kind: unknown score kind {kind!r}; allowed: categorical, binary, continuous")
+        raise InputError(f"kind: unknown score kind {kind!r}; allowed: categorical, binary, continuous")
     rng = np.random.default_rng(random_state)
     if X.shape[0] > max_samples:
         rows = np.sort(rng.choice(X.shape[0], size=max_samples, replace=False))
@@ -65,7 +67,7 @@ def output_importance(X: np.ndarray, Y: np.ndarray, output_types, *, max_samples
         Y = Y[:, None]
     types = tuple(output_types)
     if len(types) != Y.shape[1]:
-        raise ValueError(f"output_types: got {len(types)} types for {Y.shape[1]} score columns")
+        raise InputError(f"output_types: got {len(types)} types for {Y.shape[1]} score columns")
     return np.vstack([
         tree_importance(X, Y[:, k], "continuous" if t == "continuous" else "categorical",
                         max_samples=max_samples, random_state=random_state + k)

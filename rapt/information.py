@@ -17,6 +17,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from rapt.errors import InputError
+
 __all__ = ["unalikeability", "neighbour_variance", "nndv_information", "gpr_information"]
 
 
@@ -27,10 +29,10 @@ def unalikeability(labels: np.ndarray, n_classes: int | None = None) -> np.ndarr
     """
     labels = np.asarray(labels)
     if labels.ndim != 2:
-        raise ValueError(f"labels: expected a 2-D array (queries, neighbours), got shape {labels.shape}")
+        raise InputError(f"labels: expected a 2-D array (queries, neighbours), got shape {labels.shape}")
     p, k = labels.shape
     if k < 2:
-        raise ValueError("labels: unalikeability needs at least 2 neighbours per query")
+        raise InputError("labels: unalikeability needs at least 2 neighbours per query")
     if n_classes is None:
         n_classes = int(labels.max()) + 1 if labels.size else 1
     flat = (np.arange(p, dtype=np.int64)[:, None] * n_classes + labels.astype(np.int64)).ravel()
@@ -42,7 +44,7 @@ def neighbour_variance(values: np.ndarray) -> np.ndarray:
     """Variance of each row of neighbour scores (shape (p, k)), the σ_K of eq. 3.5."""
     values = np.asarray(values, dtype=float)
     if values.ndim != 2:
-        raise ValueError(f"values: expected a 2-D array (queries, neighbours), got shape {values.shape}")
+        raise InputError(f"values: expected a 2-D array (queries, neighbours), got shape {values.shape}")
     return values.var(axis=1)
 
 

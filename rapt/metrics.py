@@ -20,6 +20,8 @@ import numbers
 import numpy as np
 from scipy.spatial import cKDTree
 
+from rapt.errors import InputError
+
 __all__ = [
     "boundary_precision",
     "boundary_coverage",
@@ -38,7 +40,7 @@ _PAIR_CHUNK = 20_000  # in-band samples per pair query in coverage_curve
 def _check_X(system, X) -> np.ndarray:
     X = np.asarray(X, dtype=float)
     if X.ndim != 2 or X.shape[1] != system.dim:
-        raise ValueError(
+        raise InputError(
             f"X must be a 2-D array of shape (n, {system.dim}) (system.dim columns); "
             f"got shape {X.shape}"
         )
@@ -49,16 +51,16 @@ def _check_d_eps(d_eps) -> float:
     if (
         isinstance(d_eps, bool)
         or not isinstance(d_eps, numbers.Real)
-        or not np.isfinite(d_eps)
+        or not np.isfinite(float(d_eps))
         or d_eps <= 0
     ):
-        raise ValueError(f"d_eps must be a finite number > 0, got {d_eps!r}")
+        raise InputError(f"d_eps must be a finite number > 0, got {d_eps!r}")
     return float(d_eps)
 
 
 def _check_positive_int(value, name: str) -> int:
     if isinstance(value, bool) or not isinstance(value, numbers.Integral) or value < 1:
-        raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+        raise InputError(f"{name} must be an integer >= 1, got {value!r}")
     return int(value)
 
 
@@ -160,7 +162,7 @@ def coverage_curve(system, X, d_eps, sizes, n_reference=20000, seed=0, max_draws
     d_eps = _check_d_eps(d_eps)
     sizes = np.asarray(sizes, dtype=np.int64).reshape(-1)
     if np.any(sizes < 0):
-        raise ValueError(f"sizes must be non-negative prefix lengths, got {sizes.tolist()}")
+        raise InputError(f"sizes must be non-negative prefix lengths, got {sizes.tolist()}")
     refs = band_reference_points(system, d_eps, n_reference, seed, max_draws)
     dist = _distances(system, X)
     curve = np.empty((len(sizes), system.n_outputs))
@@ -218,9 +220,9 @@ def convergence(system, X, d_eps, target=0.9, step=None, **coverage_kw) -> np.nd
     if (
         isinstance(target, bool)
         or not isinstance(target, numbers.Real)
-        or not 0 < target <= 1
+        or not 0 < float(target) <= 1
     ):
-        raise ValueError(f"target must be a coverage fraction in (0, 1], got {target!r}")
+        raise InputError(f"target must be a coverage fraction in (0, 1], got {target!r}")
     n = X.shape[0]
     step = max(n // 20, 1) if step is None else _check_positive_int(step, "step")
     if n == 0:
@@ -253,7 +255,7 @@ def quality_table(system, X, d_eps, seed=0, n_reference=20000) -> dict:
         "coverage": boundary_coverage(system, X, d_eps, n_reference=n_reference, seed=seed),
         "mean_distance": mean_boundary_distance(system, X),
     }
-    table = {key: float(np.mean(val)) for key, val in per.items()}
+    table: dict[str, float | dict[str, np.ndarray]] = {key: float(np.mean(val)) for key, val in per.items()}
     table["per_output"] = per
     table["n_samples"] = int(X.shape[0])
     table["d_eps"] = d_eps
@@ -275,7 +277,7 @@ def subboundary_recovery(system, subtree, *, grid: int = 512, tol: float = 0.05,
     ``pairs``, ``on_boundary_fraction``.
     """
     if system.dim != 2:
-        raise ValueError(f"system: sub-boundary ground truth is rasterised in 2-D; got dim={system.dim}")
+        raise InputError(f"system: sub-boundary ground truth is rasterised in 2-D; got dim={system.dim}")
     g = _check_positive_int(grid, "grid")
     c = (np.arange(g) + 0.5) / g
     xx, yy = np.meshgrid(c, c, indexing="ij")

@@ -10,10 +10,11 @@ and a continuous cluster.
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
+from rapt.errors import InputError
 from rapt.scores import check_output_types, infer_output_types
 from rapt.validation import check_scores
 
@@ -40,7 +41,7 @@ def performance_modes(Y: np.ndarray, output_types: Sequence[str] | None = None, 
     """
     Y = check_scores(Y)
     if not np.isfinite(bandwidth) or bandwidth <= 0:
-        raise ValueError(f"bandwidth: expected a number > 0, got {bandwidth!r}")
+        raise InputError(f"bandwidth: expected a number > 0, got {bandwidth!r}")
     types = infer_output_types(Y) if output_types is None else check_output_types(output_types, Y.shape[1])
     discrete = [j for j, t in enumerate(types) if t != "continuous"]
     continuous = [j for j, t in enumerate(types) if t == "continuous"]
@@ -61,9 +62,9 @@ def _mean_shift_labels(Yc: np.ndarray, bandwidth: float, bin_seeding: bool) -> n
 
 
 #: Mean shift runs as dense numpy iterations on at most this many distinct rows: a
-#: sub-boundary tree clusters thousands of parents, where scikit-learn's per-seed overhead
-#: (~0.1 ms a call, ~5 ms a fit) dominates, and in many score columns bin seeding leaves
-#: about one seed per row, so a full fit grows as n^2.  Larger sets fit their centres on
+#: sub-boundary tree clusters thousands of parents, where scikit-learn's fixed cost per
+#: call and per fit outweighs the small clustering work, and in many score columns bin
+#: seeding leaves about one seed per row, so a full fit grows as n^2.  Larger sets fit their centres on
 #: a seeded subset of this size and every row joins its nearest centre — what
 #: ``cluster_all`` does with the rows of a full fit anyway.
 MEAN_SHIFT_MAX_FIT = 2000

@@ -1,8 +1,8 @@
 """How many threads a k-d tree query should use.
 
 ``cKDTree.query(..., workers=-1)`` starts a thread per core on every call; for a few
-thousand queries that start-up costs more than the queries (it was two thirds of a
-1000-sample 2D search), so small queries stay on the calling thread.
+thousand queries that start-up costs more than the queries themselves (a small
+low-dimensional search makes many such calls), so small queries stay on the calling thread.
 """
 
 from __future__ import annotations

@@ -8,9 +8,11 @@ closest approach).  The information metrics need continuous scores on a common s
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
+
+from rapt.errors import InputError
 
 __all__ = ["OUTPUT_TYPES", "check_output_types", "infer_output_types", "encode_labels", "row_codes",
            "normalize_continuous"]
@@ -24,18 +26,18 @@ MAX_INFERRED_CLASSES = 16
 def check_output_types(output_types: Sequence[str], m: int) -> tuple[str, ...]:
     types = tuple(output_types)
     if len(types) != m:
-        raise ValueError(f"output_types: got {len(types)} types for {m} score columns; give one per column")
+        raise InputError(f"output_types: got {len(types)} types for {m} score columns; give one per column")
     for t in types:
         if t not in OUTPUT_TYPES:
-            raise ValueError(f"output_types: unknown type {t!r}; allowed: {', '.join(OUTPUT_TYPES)}")
+            raise InputError(f"output_types: unknown type {t!r}; allowed: {', '.join(OUTPUT_TYPES)}")
     return types
 
 
 def infer_output_types(Y: np.ndarray) -> tuple[str, ...]:
     """Guess each column's kind: integral with few values -> categorical (binary if two), else continuous.
 
-    Vectorised over columns (no per-column sort): a million-row, 96-column score matrix
-    takes a fraction of a second.
+    Vectorised over columns (no per-column sort), because a large study's score matrix
+    has a million rows and dozens of columns.
     """
     Y = np.asarray(Y, dtype=float)
     columns = np.ascontiguousarray((Y[:, None] if Y.ndim == 1 else Y).T)
@@ -70,8 +72,8 @@ def row_codes(A) -> tuple[np.ndarray, int]:
 
     Same result as ``np.unique(A, axis=0, return_inverse=True)`` but built from per-column
     codes folded into one integer key (mixed radix, re-compressed before it can overflow),
-    so it sorts integers instead of byte strings: ~20x faster on wide discrete score
-    matrices, which is where a sub-boundary tree spends its splitting time.
+    so it sorts integers instead of byte strings: the comparison that dominates on wide
+    discrete score matrices, which is where a sub-boundary tree spends its splitting time.
     """
     if isinstance(A, np.ndarray):
         A = A[:, None] if A.ndim == 1 else A

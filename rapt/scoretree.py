@@ -8,8 +8,11 @@ declared in data (nested mappings, TOML or JSON) so each mission ships its own.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
-from typing import Any, Mapping, Sequence
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+from rapt.errors import InputError
 
 __all__ = ["ScoreTree"]
 
@@ -19,36 +22,36 @@ class ScoreTree:
     """A node: score columns ``indices`` and child nodes; ``name`` is for people."""
 
     indices: tuple[int, ...]
-    children: tuple["ScoreTree", ...] = ()
+    children: tuple[ScoreTree, ...] = ()
     name: str = ""
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "indices", tuple(int(i) for i in self.indices))
         object.__setattr__(self, "children", tuple(self.children))
         if not self.indices:
-            raise ValueError(f"tree: node {self.name or '(unnamed)'} has no score indices; every node needs at least one column")
+            raise InputError(f"tree: node {self.name or '(unnamed)'} has no score indices; every node needs at least one column")
 
     @classmethod
-    def from_mapping(cls, spec: "ScoreTree | Mapping[str, Any]", _path: str = "tree") -> "ScoreTree":
+    def from_mapping(cls, spec: ScoreTree | Mapping[str, Any], _path: str = "tree") -> ScoreTree:
         """Build from ``{"indices": [...], "children": [...], "name": "..."}`` (children likewise)."""
         if isinstance(spec, ScoreTree):
             return spec
         if not isinstance(spec, Mapping):
-            raise ValueError(f"{_path}: expected a mapping with 'indices' and optional 'children', got {type(spec).__name__}")
+            raise InputError(f"{_path}: expected a mapping with 'indices' and optional 'children', got {type(spec).__name__}")
         unknown = set(spec) - {"indices", "children", "name"}
         if unknown:
-            raise ValueError(f"{_path}: unknown field(s) {sorted(unknown)}; allowed: indices, children, name")
+            raise InputError(f"{_path}: unknown field(s) {sorted(unknown)}; allowed: indices, children, name")
         if "indices" not in spec:
-            raise ValueError(f"{_path}: missing 'indices' (the score columns this node owns)")
+            raise InputError(f"{_path}: missing 'indices' (the score columns this node owns)")
         indices = spec["indices"]
         if isinstance(indices, (str, bytes)) or not isinstance(indices, Sequence):
-            raise ValueError(f"{_path}.indices: expected a list of column numbers, got {indices!r}")
+            raise InputError(f"{_path}.indices: expected a list of column numbers, got {indices!r}")
         for k in indices:
             if isinstance(k, bool) or not isinstance(k, int) or k < 0:
-                raise ValueError(f"{_path}.indices: {k!r} is not a column number (a non-negative integer)")
+                raise InputError(f"{_path}.indices: {k!r} is not a column number (a non-negative integer)")
         children = spec.get("children", [])
         if not isinstance(children, Sequence) or isinstance(children, (str, bytes)):
-            raise ValueError(f"{_path}.children: expected a list of nodes")
+            raise InputError(f"{_path}.children: expected a list of nodes")
         kids = tuple(cls.from_mapping(c, f"{_path}.children[{n}]") for n, c in enumerate(children))
         return cls(tuple(indices), kids, str(spec.get("name", "")))
 
@@ -71,7 +74,7 @@ class ScoreTree:
             frontier = [c for node in frontier for c in node.children]
         return out
 
-    def nodes(self) -> list["ScoreTree"]:
+    def nodes(self) -> list[ScoreTree]:
         out, stack = [], [self]
         while stack:
             node = stack.pop(0)
@@ -79,7 +82,7 @@ class ScoreTree:
             stack.extend(node.children)
         return out
 
-    def leaves(self) -> list["ScoreTree"]:
+    def leaves(self) -> list[ScoreTree]:
         return [n for n in self.nodes() if not n.children]
 
     @property
@@ -92,10 +95,10 @@ class ScoreTree:
         for node in self.nodes():
             for i in node.indices:
                 if i >= n_columns:
-                    raise ValueError(
+                    raise InputError(
                         f"tree: node {node.name or node.indices} names score column {i}, but Y has {n_columns} "
                         f"columns (0..{n_columns - 1}); fix the tree or the scores"
                     )
                 if i in seen:
-                    raise ValueError(f"tree: score column {i} appears in two nodes ({seen[i]} and {node.name or node.indices})")
+                    raise InputError(f"tree: score column {i} appears in two nodes ({seen[i]} and {node.name or node.indices})")
                 seen[i] = node.name or str(node.indices)

@@ -14,10 +14,14 @@ metrics see "nearly the same order" as "nearby".
 from __future__ import annotations
 
 import math
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Iterable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
+import numpy.typing as npt
+
+from rapt.errors import InputError
 
 __all__ = [
     "Continuous",
@@ -31,7 +35,7 @@ __all__ = [
 
 def _check_name(name: str) -> str:
     if not isinstance(name, str) or not name:
-        raise ValueError(f"parameter name must be a non-empty string, got {name!r}")
+        raise InputError(f"parameter name must be a non-empty string, got {name!r}")
     return name
 
 
@@ -49,19 +53,19 @@ class Continuous:
         _check_name(self.name)
         low, high = float(self.low), float(self.high)
         if not (math.isfinite(low) and math.isfinite(high)):
-            raise ValueError(f"parameter '{self.name}': bounds must be finite, got low={self.low}, high={self.high}")
+            raise InputError(f"parameter '{self.name}': bounds must be finite, got low={self.low}, high={self.high}")
         if low >= high:
-            raise ValueError(
+            raise InputError(
                 f"parameter '{self.name}': low must be < high, got low={low}, high={high}; swap or widen the bounds"
             )
         if self.log and low <= 0:
-            raise ValueError(f"parameter '{self.name}': log scale needs low > 0, got low={low}")
+            raise InputError(f"parameter '{self.name}': log scale needs low > 0, got low={low}")
 
     @property
     def width(self) -> int:
         return 1
 
-    def to_unit(self, values: np.ndarray) -> np.ndarray:
+    def to_unit(self, values: npt.ArrayLike) -> np.ndarray:
         v = np.asarray(values, dtype=float)
         if self.log:
             return (np.log(v) - math.log(self.low)) / (math.log(self.high) - math.log(self.low))
@@ -86,9 +90,9 @@ class Integer:
     def __post_init__(self) -> None:
         _check_name(self.name)
         if int(self.low) != self.low or int(self.high) != self.high:
-            raise ValueError(f"parameter '{self.name}': integer bounds must be whole numbers, got {self.low}, {self.high}")
+            raise InputError(f"parameter '{self.name}': integer bounds must be whole numbers, got {self.low}, {self.high}")
         if self.low >= self.high:
-            raise ValueError(
+            raise InputError(
                 f"parameter '{self.name}': low must be < high, got low={self.low}, high={self.high}; swap or widen the bounds"
             )
 
@@ -96,7 +100,7 @@ class Integer:
     def width(self) -> int:
         return 1
 
-    def to_unit(self, values: np.ndarray) -> np.ndarray:
+    def to_unit(self, values: npt.ArrayLike) -> np.ndarray:
         v = np.asarray(values, dtype=float)
         n = self.high - self.low + 1
         return (v - self.low + 0.5) / n
@@ -119,9 +123,9 @@ class Categorical:
         _check_name(self.name)
         object.__setattr__(self, "choices", tuple(self.choices))
         if len(self.choices) < 2:
-            raise ValueError(f"parameter '{self.name}': a categorical parameter needs at least 2 choices")
+            raise InputError(f"parameter '{self.name}': a categorical parameter needs at least 2 choices")
         if len(set(map(repr, self.choices))) != len(self.choices):
-            raise ValueError(f"parameter '{self.name}': categorical choices must be distinct")
+            raise InputError(f"parameter '{self.name}': categorical choices must be distinct")
 
     @property
     def width(self) -> int:
@@ -132,7 +136,7 @@ class Categorical:
         try:
             idx = np.array([index[v] for v in values], dtype=float)
         except KeyError as exc:
-            raise ValueError(f"parameter '{self.name}': {exc.args[0]!r} is not one of {list(self.choices)}") from None
+            raise InputError(f"parameter '{self.name}': {exc.args[0]!r} is not one of {list(self.choices)}") from None
         return (idx + 0.5) / len(self.choices)
 
     def from_unit(self, u: np.ndarray) -> np.ndarray:
@@ -156,9 +160,9 @@ class Permutation:
         _check_name(self.name)
         object.__setattr__(self, "items", tuple(self.items))
         if len(self.items) < 2:
-            raise ValueError(f"parameter '{self.name}': a permutation needs at least 2 items")
+            raise InputError(f"parameter '{self.name}': a permutation needs at least 2 items")
         if len(set(map(repr, self.items))) != len(self.items):
-            raise ValueError(f"parameter '{self.name}': permutation items must be distinct")
+            raise InputError(f"parameter '{self.name}': permutation items must be distinct")
 
     @property
     def width(self) -> int:
@@ -172,7 +176,7 @@ class Permutation:
         for order in orders:
             order = list(order)
             if sorted(map(repr, order)) != sorted(map(repr, self.items)) or len(order) != n:
-                raise ValueError(f"parameter '{self.name}': {order!r} is not an ordering of {list(self.items)}")
+                raise InputError(f"parameter '{self.name}': {order!r} is not an ordering of {list(self.items)}")
             keys = np.empty(n)
             for rank, item in enumerate(order):
                 keys[index[item]] = (rank + 0.5) / n
@@ -196,13 +200,13 @@ def parameter_from_mapping(spec: Mapping[str, Any]) -> Parameter:
     spec = dict(spec)
     kind = spec.pop("type", "continuous")
     if kind not in _KINDS:
-        raise ValueError(
+        raise InputError(
             f"parameter '{spec.get('name', '?')}': unknown type {kind!r}; allowed: continuous, integer, categorical, permutation"
         )
     try:
         return _KINDS[kind](**spec)
     except TypeError as exc:
-        raise ValueError(f"parameter '{spec.get('name', '?')}' ({kind}): {exc}") from None
+        raise InputError(f"parameter '{spec.get('name', '?')}' ({kind}): {exc}") from None
 
 
 class StateSpace:
@@ -214,16 +218,16 @@ class StateSpace:
     def __init__(self, parameters: Sequence[Parameter | Mapping[str, Any]]):
         params = [p if not isinstance(p, Mapping) else parameter_from_mapping(p) for p in parameters]
         if not params:
-            raise ValueError("parameters: a state space needs at least one parameter")
+            raise InputError("parameters: a state space needs at least one parameter")
         for p in params:
             if not isinstance(p, (Continuous, Integer, Categorical, Permutation)):
-                raise ValueError(
+                raise InputError(
                     f"parameters: {p!r} is not a parameter; use Continuous, Integer, Categorical or Permutation"
                 )
         names = [p.name for p in params]
         dupes = sorted({n for n in names if names.count(n) > 1})
         if dupes:
-            raise ValueError(f"parameters: duplicate names {dupes}; every parameter needs its own name")
+            raise InputError(f"parameters: duplicate names {dupes}; every parameter needs its own name")
         self.parameters: tuple[Parameter, ...] = tuple(params)
         self._slices: dict[str, slice] = {}
         start = 0
@@ -233,21 +237,21 @@ class StateSpace:
         self.dim = start
 
     @classmethod
-    def from_bounds(cls, bounds: Any) -> "StateSpace":
+    def from_bounds(cls, bounds: Any) -> StateSpace:
         """A space of continuous parameters ``x0, x1, ...`` from ``[(low, high), ...]`` or a (d, 2) array."""
         if isinstance(bounds, StateSpace):
             return bounds
         arr = np.asarray(bounds, dtype=float)
         if arr.ndim != 2 or arr.shape[1] != 2 or arr.shape[0] == 0:
-            raise ValueError(f"bounds: expected a sequence of (low, high) pairs, got shape {arr.shape}")
+            raise InputError(f"bounds: expected a sequence of (low, high) pairs, got shape {arr.shape}")
         bad = np.flatnonzero(~(arr[:, 0] < arr[:, 1]))
         if bad.size:
             i = int(bad[0])
-            raise ValueError(
+            raise InputError(
                 f"bounds: dimension {i} has low={arr[i, 0]} >= high={arr[i, 1]}; every low must be < its high"
             )
         if not np.all(np.isfinite(arr)):
-            raise ValueError("bounds: every low and high must be finite")
+            raise InputError("bounds: every low and high must be finite")
         return cls([Continuous(f"x{i}", lo, hi) for i, (lo, hi) in enumerate(arr)])
 
     @property
@@ -263,9 +267,10 @@ class StateSpace:
         return all(isinstance(p, Continuous) and not p.log for p in self.parameters)
 
     def bounds_array(self) -> np.ndarray:
-        if not self.is_box:
-            raise ValueError("bounds_array: only defined for spaces of linear continuous parameters")
-        return np.array([[p.low, p.high] for p in self.parameters], dtype=float)
+        linear = [p for p in self.parameters if isinstance(p, Continuous) and not p.log]  # as is_box
+        if len(linear) != len(self.parameters):
+            raise InputError("bounds_array: only defined for spaces of linear continuous parameters")
+        return np.array([[p.low, p.high] for p in linear], dtype=float)
 
     def from_unit_array(self, U: np.ndarray) -> np.ndarray:
         """Affine map of cube points to a float array (box spaces only) — the fast path for vectorised systems."""
@@ -281,7 +286,7 @@ class StateSpace:
     def _check_unit(self, U: np.ndarray) -> np.ndarray:
         U = np.asarray(U, dtype=float)
         if U.ndim != 2 or U.shape[1] != self.dim:
-            raise ValueError(f"U: expected shape (n, {self.dim}), got {U.shape}")
+            raise InputError(f"U: expected shape (n, {self.dim}), got {U.shape}")
         return U
 
     def decode(self, U: np.ndarray) -> list[dict[str, Any]]:
@@ -308,19 +313,19 @@ class StateSpace:
             try:
                 values = [s[p.name] for s in scenarios]
             except KeyError:
-                raise ValueError(f"scenarios: missing parameter '{p.name}'") from None
+                raise InputError(f"scenarios: missing parameter '{p.name}'") from None
             u = p.to_unit(values)
             U[:, self._slices[p.name]] = np.asarray(u, dtype=float).reshape(n, p.width)
         if np.any((U < 0) | (U > 1)):
             bad = [p.name for p in self.parameters if np.any((U[:, self._slices[p.name]] < 0) | (U[:, self._slices[p.name]] > 1))]
-            raise ValueError(f"scenarios: values outside the declared range for {bad}")
+            raise InputError(f"scenarios: values outside the declared range for {bad}")
         return U
 
     def to_config(self) -> list[dict[str, Any]]:
         """A JSON-friendly description, stored with a study so a resumed run can check it."""
         out = []
         for p in self.parameters:
-            d = {"name": p.name, "type": p.kind}
+            d: dict[str, Any] = {"name": p.name, "type": p.kind}
             if isinstance(p, Continuous):
                 d.update(low=float(p.low), high=float(p.high), log=bool(p.log))
             elif isinstance(p, Integer):

@@ -17,10 +17,14 @@ from __future__ import annotations
 
 import json
 import sqlite3
+from collections.abc import Iterable
 from pathlib import Path
-from typing import Any, Iterable
+from types import TracebackType
+from typing import Any
 
 import numpy as np
+
+from rapt.errors import FileFormatError, InputError, RunError
 
 __all__ = ["StudyStore", "SCHEMA_VERSION"]
 
@@ -51,21 +55,22 @@ class StudyStore:
     def __init__(self, path: str | Path):
         """Open or create the store at ``path`` (``":memory:"`` keeps it in memory)."""
         self.path = Path(path)
+        self._con: sqlite3.Connection | None = None  # None once closed
         if str(path) == ":memory:":
             self._con = sqlite3.connect(":memory:", isolation_level=None)
             self._con.executescript(_SCHEMA)
             return
         if self.path.exists() and self.path.is_dir():
-            raise ValueError(f"store: {self.path} is a directory; give a file path such as study.db")
+            raise InputError(f"store: {self.path} is a directory; give a file path such as study.db")
         if not self.path.parent.exists():
-            raise ValueError(f"store: folder {self.path.parent} does not exist; create it or choose another path")
+            raise InputError(f"store: folder {self.path.parent} does not exist; create it or choose another path")
         try:
             self._con = sqlite3.connect(self.path, isolation_level=None)
             self._con.execute("PRAGMA journal_mode=WAL")
             self._con.execute("PRAGMA synchronous=NORMAL")
             self._con.executescript(_SCHEMA)
         except sqlite3.DatabaseError as exc:
-            raise ValueError(f"store: {self.path} is not a RAPT study database ({exc}); choose another path") from None
+            raise FileFormatError(f"store: {self.path} is not a RAPT study database ({exc}); choose another path") from None
 
     # -- lifecycle ----------------------------------------------------------------------
     def close(self) -> None:
@@ -73,7 +78,14 @@ class StudyStore:
             self._con.close()
             self._con = None
 
-    def __enter__(self) -> "StudyStore":
+    @property
+    def _db(self) -> sqlite3.Connection:
+        """The open connection; a closed store cannot be read or written."""
+        if self._con is None:
+            raise RunError(f"store: {self.path} is closed; open a new StudyStore to use it")
+        return self._con
+
+    def __enter__(self) -> StudyStore:
         return self
 
     def __exit__(self, *exc: Any) -> None:
@@ -81,12 +93,12 @@ class StudyStore:
 
     # -- metadata -----------------------------------------------------------------------
     def get_meta(self) -> dict[str, Any]:
-        rows = self._con.execute("SELECT key, value FROM meta").fetchall()
+        rows = self._db.execute("SELECT key, value FROM meta").fetchall()
         return {k: json.loads(v) for k, v in rows}
 
     def set_meta(self, values: dict[str, Any]) -> None:
         with self._tx():
-            self._con.executemany(
+            self._db.executemany(
                 "INSERT OR REPLACE INTO meta(key, value) VALUES (?, ?)",
                 [(k, json.dumps(v, sort_keys=True)) for k, v in values.items()],
             )
@@ -95,14 +107,17 @@ class StudyStore:
     def add_batch(self, batch: int, asked: np.ndarray) -> None:
         asked = np.ascontiguousarray(asked, dtype="<f8")
         with self._tx():
-            self._con.execute("INSERT INTO batches(batch, n, asked) VALUES (?, ?, ?)",
+            self._db.execute("INSERT INTO batches(batch, n, asked) VALUES (?, ?, ?)",
                               (int(batch), int(asked.shape[0]), asked.tobytes()))
 
     def batches(self) -> list[tuple[int, np.ndarray]]:
         """All asked batches in order as (batch index, asked points)."""
         dim = self.get_meta().get("dim")
         out = []
-        for b, n, blob in self._con.execute("SELECT batch, n, asked FROM batches ORDER BY batch"):
+        for b, n, blob in self._db.execute("SELECT batch, n, asked FROM batches ORDER BY batch"):
+            if dim is None:
+                raise FileFormatError(f"store: {self.path} holds batches but no dim in its meta table; "
+                                      "it was not written by rapt.search, choose another path")
             out.append((int(b), np.frombuffer(blob, dtype="<f8").reshape(int(n), int(dim)).copy()))
         return out
 
@@ -115,12 +130,12 @@ class StudyStore:
             y = None if (Y is None or st != "ok") else np.ascontiguousarray(Y[i], dtype="<f8").tobytes()
             records.append((int(batch), int(row), X[i].tobytes(), y, st, why))
         with self._tx():
-            self._con.executemany(
+            self._db.executemany(
                 "INSERT INTO samples(batch, row, x, y, status, reason) VALUES (?, ?, ?, ?, ?, ?)", records
             )
 
     def done_rows(self, batch: int) -> set[int]:
-        return {int(r) for (r,) in self._con.execute("SELECT row FROM samples WHERE batch = ?", (int(batch),))}
+        return {int(r) for (r,) in self._db.execute("SELECT row FROM samples WHERE batch = ?", (int(batch),))}
 
     def samples(self, batch: int | None = None) -> list[tuple[int, int, np.ndarray, np.ndarray | None, str, str | None]]:
         """Rows as (batch, row, x, y, status, reason), in (batch, row) order."""
@@ -130,16 +145,16 @@ class StudyStore:
             sql += " WHERE batch = ?"
             args = (int(batch),)
         out = []
-        for b, r, x, y, st, why in self._con.execute(sql + " ORDER BY batch, row", args):
+        for b, r, x, y, st, why in self._db.execute(sql + " ORDER BY batch, row", args):
             out.append((int(b), int(r), np.frombuffer(x, dtype="<f8").copy(),
                         None if y is None else np.frombuffer(y, dtype="<f8").copy(), st, why))
         return out
 
     def count(self) -> int:
-        return int(self._con.execute("SELECT COUNT(*) FROM samples").fetchone()[0])
+        return int(self._db.execute("SELECT COUNT(*) FROM samples").fetchone()[0])
 
-    def _tx(self):
-        return _Transaction(self._con)
+    def _tx(self) -> _Transaction:
+        return _Transaction(self._db)
 
 
 class _Transaction:
@@ -151,5 +166,6 @@ class _Transaction:
     def __enter__(self) -> None:
         self.con.execute("BEGIN IMMEDIATE")
 
-    def __exit__(self, exc_type, exc, tb) -> None:
+    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
+                 tb: TracebackType | None) -> None:
         self.con.execute("ROLLBACK" if exc_type else "COMMIT")

@@ -18,12 +18,14 @@ a 66-leaf tree.
 from __future__ import annotations
 
 import time
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
 from rapt.boundaries import graph_mutual_pairs, knn_graph
+from rapt.errors import InputError
 from rapt.modes import mean_shift_normalised
 from rapt.scores import check_output_types, infer_output_types, row_codes
 from rapt.scoretree import ScoreTree
@@ -104,7 +106,7 @@ class SubBoundaryTree:
         owning = [lv for lv, cols in enumerate(self.levels) if score_index in cols]
         if not owning:
             cols = sorted(c for level in self.levels for c in level)
-            raise ValueError(f"score_index: column {score_index} is not in the score tree (columns: {cols})")
+            raise InputError(f"score_index: column {score_index} is not in the score tree (columns: {cols})")
         lv = owning[0]
         vals = self.values[lv][:, self.levels[lv].index(score_index)]
         if self.output_types[score_index] != "continuous":
@@ -116,7 +118,7 @@ class SubBoundaryTree:
             np.minimum.at(best, par + 1, gap)
             chosen = np.flatnonzero(gap == best[par + 1])
         inside = np.isin(self.assignment[lv], chosen)
-        clusters = [self.members(lv, c) for c in chosen]
+        clusters = [self.members(lv, int(c)) for c in chosen]
         members = np.flatnonzero(inside)
         i, j, d, level = self.pairs()
         sel = (level <= lv) & (inside[i] != inside[j])
@@ -156,11 +158,11 @@ def subboundary_tree(X: np.ndarray, Y: np.ndarray, tree: ScoreTree | Mapping[str
     X = check_states(X)
     Y = check_scores(Y, X.shape[0])
     if not isinstance(k, (int, np.integer)) or k < 1:
-        raise ValueError(f"k: expected a positive number of neighbours, got {k!r}")
+        raise InputError(f"k: expected a positive number of neighbours, got {k!r}")
     if neighbours not in ("auto", "exact", "hnsw"):
-        raise ValueError(f"neighbours: expected 'auto', 'exact' or 'hnsw', got {neighbours!r}")
+        raise InputError(f"neighbours: expected 'auto', 'exact' or 'hnsw', got {neighbours!r}")
     if not isinstance(tree, (ScoreTree, Mapping)):
-        raise ValueError("tree: expected a ScoreTree or a mapping with 'indices' and 'children'")
+        raise InputError("tree: expected a ScoreTree or a mapping with 'indices' and 'children'")
     tree = ScoreTree.from_mapping(tree)
     tree.validate(Y.shape[1])
     columns = np.ascontiguousarray(Y.T)  # (m, N): a column of the row-major (N, m) matrix is strided
@@ -223,5 +225,5 @@ def _split(parent: np.ndarray, columns: np.ndarray, types: list[str], bandwidth:
 def _check_weights(weights: np.ndarray, d: int) -> np.ndarray:
     w = np.asarray(weights, dtype=float)
     if w.shape != (d,) or np.any(w < 0) or not np.all(np.isfinite(w)):
-        raise ValueError(f"weights: expected {d} non-negative finite scale factors")
+        raise InputError(f"weights: expected {d} non-negative finite scale factors")
     return w

@@ -23,9 +23,11 @@ for the 2-D and 3-D systems).
 
 from __future__ import annotations
 
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
+
+from rapt.errors import InputError
 
 __all__ = [
     "SyntheticSystem",
@@ -52,9 +54,9 @@ CONTINUOUS = "continuous"
 # --------------------------------------------------------------------------- geometry
 def segment_distance(P: np.ndarray, a: Sequence[float], b: Sequence[float]) -> np.ndarray:
     """Euclidean distance from each row of ``P`` (n, k) to the segment ``[a, b]``."""
-    a = np.asarray(a, dtype=float)
-    ab = np.asarray(b, dtype=float) - a
-    ap = P - a
+    start = np.asarray(a, dtype=float)
+    ab = np.asarray(b, dtype=float) - start
+    ap = P - start
     t = np.clip(ap @ ab / (ab @ ab), 0.0, 1.0)
     diff = ap - t[:, None] * ab
     return np.sqrt(np.einsum("ij,ij->i", diff, diff))
@@ -130,7 +132,7 @@ class SyntheticSystem:
     def _check(self, X) -> np.ndarray:
         X = np.asarray(X, dtype=float)
         if X.ndim != 2 or X.shape[1] != self.dim:
-            raise ValueError(
+            raise InputError(
                 f"X must be a 2-D array of shape (n, {self.dim}) for system "
                 f"'{self.name}'; got shape {X.shape}"
             )
@@ -261,7 +263,7 @@ class Custom2D(SyntheticSystem):
 
     def __init__(self, width: float = 0.002) -> None:
         if not width > 0:
-            raise ValueError(f"width must be > 0, got {width!r}")
+            raise InputError(f"width must be > 0, got {width!r}")
         self.width = float(width)
         self.name = "custom2d"
         self.dim = 2
@@ -334,7 +336,7 @@ class Mirrored(SyntheticSystem):
     def __init__(self, base: SyntheticSystem, axes: Sequence[int] = (0,), name: str | None = None):
         axes = tuple(int(a) for a in axes)
         if any(a < 0 or a >= base.dim for a in axes):
-            raise ValueError(f"axes must be input columns in 0..{base.dim - 1}, got {axes}")
+            raise InputError(f"axes must be input columns in 0..{base.dim - 1}, got {axes}")
         self.base = base
         self.axes = axes
         self.name = name or f"{base.name}-mirrored"
@@ -365,7 +367,7 @@ class Screened(SyntheticSystem):
 
     def __init__(self, base: SyntheticSystem, n_noise: int, name: str | None = None):
         if int(n_noise) != n_noise or n_noise < 0:
-            raise ValueError(f"n_noise must be a non-negative integer, got {n_noise!r}")
+            raise InputError(f"n_noise must be a non-negative integer, got {n_noise!r}")
         self.base = base
         self.n_noise = int(n_noise)
         self.name = name or f"{base.name}+{self.n_noise}noise"
@@ -393,7 +395,7 @@ class Composite(SyntheticSystem):
     def __init__(self, parts: Sequence[SyntheticSystem], name: str | None = None):
         parts = list(parts)
         if not parts:
-            raise ValueError("parts must contain at least one system")
+            raise InputError("parts must contain at least one system")
         self.parts = parts
         self.name = name or "composite(" + ",".join(p.name for p in parts) + ")"
         self._offsets = np.cumsum([0] + [p.dim for p in parts]).tolist()
@@ -471,7 +473,7 @@ class FuzzyBoundary(_NoiseWrapper):
 
     def __init__(self, base: SyntheticSystem, sigma: float, seed=0):
         if not (np.isfinite(sigma) and sigma >= 0):
-            raise ValueError(f"sigma must be a finite number >= 0, got {sigma!r}")
+            raise InputError(f"sigma must be a finite number >= 0, got {sigma!r}")
         super().__init__(base, seed, f"fuzzy{sigma:g}")
         self.sigma = float(sigma)
         self._jitter_dims = sorted({a for i in self._cat for a in base.active_dims[i]})
@@ -502,7 +504,7 @@ class GlobalNoise(_NoiseWrapper):
 
     def __init__(self, base: SyntheticSystem, rate: float, seed=0):
         if not (0.0 <= rate <= 1.0):
-            raise ValueError(f"rate must be in [0, 1], got {rate!r}")
+            raise InputError(f"rate must be in [0, 1], got {rate!r}")
         super().__init__(base, seed, f"noise{rate:g}")
         self.rate = float(rate)
 
@@ -536,7 +538,7 @@ def get_system(name: str) -> SyntheticSystem:
     try:
         factory = SYSTEMS[name]
     except (KeyError, TypeError):
-        raise ValueError(
+        raise InputError(
             f"unknown system {name!r}; choose one of: {', '.join(sorted(SYSTEMS))}"
         ) from None
     return factory()
@@ -670,9 +672,13 @@ class HierarchicalND(SyntheticSystem):
             tuple(range(self.dim)) if k < leaf0 else tuple(int(i) for i in self.leaf_inputs[k - leaf0])
             for k in range(self.n_outputs)
         )
-        children_l3 = lambda g: [{"name": f"leaf{k}", "indices": [leaf0 + k]} for k in self.l3_groups[g]]
-        children_l2 = lambda h: [{"name": f"l3_{g}", "indices": [l3_0 + g], "children": children_l3(g)}
-                                 for g in self.l2_groups[h]]
+
+        def children_l3(g: int) -> list[dict]:
+            return [{"name": f"leaf{k}", "indices": [leaf0 + k]} for k in self.l3_groups[g]]
+
+        def children_l2(h: int) -> list[dict]:
+            return [{"name": f"l3_{g}", "indices": [l3_0 + g], "children": children_l3(g)} for g in self.l2_groups[h]]
+
         self.score_tree = {
             "name": "root", "indices": [0, 1],
             "children": [{"name": f"l2_{h}", "indices": [l2_0 + h], "children": children_l2(h)} for h in range(n_l2)],

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from rapt.errors import InputError
+
 __all__ = ["check_states", "check_scores"]
 
 
@@ -11,9 +13,9 @@ def check_states(X) -> np.ndarray:
     """A non-empty, finite (N, d) float array of states."""
     X = np.asarray(X, dtype=float)
     if X.ndim != 2 or X.shape[0] == 0:
-        raise ValueError(f"X: expected a non-empty (N, d) array of states, got shape {X.shape}")
+        raise InputError(f"X: expected a non-empty (N, d) array of states, got shape {X.shape}")
     if not np.all(np.isfinite(X)):
-        raise ValueError("X: states must be finite")
+        raise InputError("X: states must be finite")
     return X
 
 
@@ -23,14 +25,14 @@ def check_scores(Y, n: int | None = None) -> np.ndarray:
     if Y.ndim == 1:
         Y = Y[:, None]
     if Y.ndim != 2:
-        raise ValueError(f"Y: expected an (N, m) array of scores, got shape {Y.shape}")
+        raise InputError(f"Y: expected an (N, m) array of scores, got shape {Y.shape}")
     if n is not None and Y.shape[0] != n:
-        raise ValueError(f"Y: expected {n} score rows (one per state), got {Y.shape[0]}")
+        raise InputError(f"Y: expected {n} score rows (one per state), got {Y.shape[0]}")
     if Y.shape[0] == 0:
-        raise ValueError("Y: no samples; at least one scored sample is needed")
+        raise InputError("Y: no samples; at least one scored sample is needed")
     if Y.shape[1] == 0:
-        raise ValueError("Y: no score columns")
+        raise InputError("Y: no score columns")
     if not np.all(np.isfinite(Y)):
         bad = int(np.flatnonzero(~np.all(np.isfinite(Y), axis=1))[0])
-        raise ValueError(f"Y: scores must be finite; row {bad} has NaN or inf (drop failed runs first)")
+        raise InputError(f"Y: scores must be finite; row {bad} has NaN or inf (drop failed runs first)")
     return Y

@@ -37,17 +37,23 @@ from __future__ import annotations
 import copy
 import struct
 import tomllib
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Literal, overload
 
 import numpy as np
+
+from rapt.errors import FileFormatError, InputError
 
 __all__ = ["RobotFileError", "Box", "Link", "Joint", "Robot", "load_robot", "read_stl"]
 
 
-class RobotFileError(ValueError):
-    """A robot file is malformed; the message names the field and what is expected."""
+class RobotFileError(FileFormatError):
+    """A robot file is malformed; the message names the field and what is expected.
+
+    A :class:`rapt.errors.FileFormatError`, so also an ``InputError``, a ``RaptError`` and a ``ValueError``.
+    """
 
 
 @dataclass(frozen=True)
@@ -168,7 +174,7 @@ class Robot:
             return self.planar_override
         return all(abs(abs(j.axis[1]) - 1.0) < 1e-9 for j in self.all_joints)
 
-    def lock(self, values: dict[str, float]) -> "Robot":
+    def lock(self, values: dict[str, float]) -> Robot:
         """A copy with the named joints held at ``values`` (radians); the others stay active.
 
         Joints already locked stay locked.  Used to study a manipulator with fewer active
@@ -177,7 +183,7 @@ class Robot:
         names = {j.name for j in self.all_joints}
         for name in values:
             if name not in names:
-                raise ValueError(f"lock: no joint named {name!r}; joints: {', '.join(sorted(names))}")
+                raise InputError(f"lock: no joint named {name!r}; joints: {', '.join(sorted(names))}")
         new = copy.copy(self)
         new.locked = {**self.locked, **{k: float(v) for k, v in values.items()}}
         new.joints = [j for j in self.all_joints if j.name not in new.locked]
@@ -197,7 +203,7 @@ class Robot:
         """Vertices (k, 3) and centre of mass (3,) in the base frame for joint state ``theta``."""
         theta = np.asarray(theta, dtype=float).reshape(-1)
         if theta.size != self.dof:
-            raise ValueError(f"theta: expected {self.dof} joint angles, got {theta.size}")
+            raise InputError(f"theta: expected {self.dof} joint angles, got {theta.size}")
         R = {self.base: np.eye(3)}
         t = {self.base: np.zeros(3)}
         for j, angle in zip(self.all_joints, self.joint_angles(theta)):
@@ -215,7 +221,12 @@ class Robot:
 
 
 # -- TOML loading ----------------------------------------------------------------------------
+@overload
+def _vec(value: Any, where: str, n: Literal[3] = 3, positive: bool = False) -> tuple[float, float, float]: ...
+@overload
+def _vec(value: Any, where: str, n: Literal[2], positive: bool = False) -> tuple[float, float]: ...
 def _vec(value: Any, where: str, n: int = 3, positive: bool = False) -> tuple[float, ...]:
+    """``n`` finite numbers (positive ones if asked) from a TOML or URDF value; :class:`RobotFileError` otherwise."""
     try:
         arr = np.asarray(value, dtype=float)
     except (TypeError, ValueError):

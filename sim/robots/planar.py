@@ -1,9 +1,9 @@
 """Every hull face of many joint states of a planar robot at once (the grid search's inner loop).
 
 :meth:`StabilityFunction.all_faces` on a planar robot (Figure 5.2: every joint turns about
-the base's y axis) spends about a millisecond per joint state in Python: forward
-kinematics, a Qhull call and the tipping table.  A grid of a million joint states needs
-all three in bulk, so here they are array operations over a chunk of joint states:
+the base's y axis) makes Python calls for every joint state: forward kinematics, a Qhull
+call and the tipping table.  A grid of a million joint states needs all three in bulk,
+so here they are array operations over a chunk of joint states:
 
 * kinematics: in the x-z plane a link's rotation is the sum of its joints' angles;
 * hull: edge ``a → b`` of the (deduplicated) vertices is a counter-clockwise hull edge when
@@ -87,7 +87,7 @@ def planar_all_faces(F, theta: np.ndarray, chunk: int = 2000) -> dict:
     away), ``stable``, ``energy``, ``tips``, ``start_id``, ``rest_id``, ``count`` (faces per joint state).
     """
     uniq = np.unique(F._vertex_id)
-    out = {k: [] for k in ("row", "start", "rest", "stable", "energy", "tips", "start_id", "rest_id", "count")}
+    out: dict[str, list[np.ndarray]] = {k: [] for k in ("row", "start", "rest", "stable", "energy", "tips", "start_id", "rest_id", "count")}
     for s0 in range(0, len(theta), chunk):
         th = theta[s0:s0 + chunk]
         P, com = _kinematics(F, th, uniq)

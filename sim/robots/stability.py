@@ -31,9 +31,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import ConvexHull
-from scipy.spatial import QhullError
+from scipy.spatial import ConvexHull, QhullError
 
+from rapt.errors import InputError
 from sim.robots.model import Robot, _rotation
 
 __all__ = ["GRAVITY", "Hull", "StabilityResult", "StabilityFunction", "body_angles", "down_normals"]
@@ -133,10 +133,10 @@ class Hull:
     offsets: np.ndarray  # (k,) plane offsets: normal · x + offset = 0 on the face
     face_vertices: list  # per face: indices into points (ordered around the face for planar hulls)
     angles: np.ndarray  # (k, b) body angles
+    ids: np.ndarray  # (k,) face identities (see the module docstring)
     ordered: bool = True
-    ids: np.ndarray | None = None  # (k,) face identities (see the module docstring)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         self._rings: dict[int, np.ndarray] = {}
 
     @property
@@ -180,7 +180,7 @@ class StabilityFunction:
 
     def __init__(self, robot: Robot, slope_deg: float = 0.0, planar: bool | None = None):
         if not (0.0 <= slope_deg < 90.0):
-            raise ValueError(f"slope: expected degrees in [0, 90), got {slope_deg}")
+            raise InputError(f"slope: expected degrees in [0, 90), got {slope_deg}")
         self.robot = robot
         self.slope = float(np.radians(slope_deg))
         self.planar = robot.planar if planar is None else bool(planar)  # planar=False forces 3-D hulls
@@ -410,27 +410,37 @@ class StabilityFunction:
         theta = theta.reshape(theta.shape[0] if theta.ndim == 2 else -1, self.robot.dof)
         if self.planar and len(theta):
             return self._all_faces_planar(theta)
-        rows, start, rest, energy, tips, faces = [], [], [], [], [], []
-        start_id, rest_id, face_ids = [], [], []
+        # per joint state: its faces' rows of the result, concatenated below
+        row_parts: list[np.ndarray] = []
+        start_parts: list[np.ndarray] = []
+        rest_parts: list[np.ndarray] = []
+        energy_parts: list[np.ndarray] = []
+        tips_parts: list[np.ndarray] = []
+        start_id_parts: list[np.ndarray] = []
+        rest_id_parts: list[np.ndarray] = []
+        faces: list[np.ndarray] = []
+        face_ids: list[np.ndarray] = []
         for th in theta:
             hull = self.hull(th)
             r_all, e_all, t_all = self.settle_all(hull)
             k = hull.n_faces
-            rows.append(np.broadcast_to(th, (k, len(th))))
-            start.append(hull.angles)
-            rest.append(np.where((r_all >= 0)[:, None], hull.angles[np.maximum(r_all, 0)], np.nan))
-            energy.append(e_all)
-            tips.append(t_all)
+            row_parts.append(np.broadcast_to(th, (k, len(th))))
+            start_parts.append(hull.angles)
+            rest_parts.append(np.where((r_all >= 0)[:, None], hull.angles[np.maximum(r_all, 0)], np.nan))
+            energy_parts.append(e_all)
+            tips_parts.append(t_all)
             faces.extend([hull.angles] * k)
-            start_id.append(hull.ids)
-            rest_id.append(np.where(r_all >= 0, hull.ids[np.maximum(r_all, 0)], -1))
+            start_id_parts.append(hull.ids)
+            rest_id_parts.append(np.where(r_all >= 0, hull.ids[np.maximum(r_all, 0)], -1))
             face_ids.extend([hull.ids] * k)
         rows, start, rest = (np.concatenate(v) if v else np.empty((0, w))
-                             for v, w in ((rows, self.robot.dof), (start, self.n_body), (rest, self.n_body)))
-        energy = np.concatenate(energy) if energy else np.empty(0)
-        tips = np.concatenate(tips).astype(int) if tips else np.empty(0, dtype=int)
+                             for v, w in ((row_parts, self.robot.dof), (start_parts, self.n_body),
+                                          (rest_parts, self.n_body)))
+        energy = np.concatenate(energy_parts) if energy_parts else np.empty(0)
+        tips = np.concatenate(tips_parts).astype(int) if tips_parts else np.empty(0, dtype=int)
         self.n_queries += len(tips)
-        ids = [np.concatenate(v).astype(np.int64) if v else np.empty(0, dtype=np.int64) for v in (start_id, rest_id)]
+        ids = [np.concatenate(v).astype(np.int64) if v else np.empty(0, dtype=np.int64)
+               for v in (start_id_parts, rest_id_parts)]
         return StabilityResult(rows, start, tips == 0, rest, energy, faces, tips, ids[0], ids[1], face_ids)
 
     def _all_faces_planar(self, theta: np.ndarray) -> StabilityResult:

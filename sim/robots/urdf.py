@@ -24,8 +24,8 @@ The tables built here go through the TOML reader's own validation
 from __future__ import annotations
 
 import xml.etree.ElementTree as ET
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -38,7 +38,8 @@ _JOINT_TYPES = ("revolute", "continuous", "fixed")
 
 def _numbers(el: ET.Element | None, attr: str, default: str) -> list[float] | str:
     """An attribute's space-separated numbers; the raw text when one is not a number (the validator reports it)."""
-    text = default if el is None or el.get(attr) is None else el.get(attr)
+    raw = None if el is None else el.get(attr)
+    text = default if raw is None else raw
     try:
         return [float(t) for t in text.split()]
     except ValueError:
@@ -46,6 +47,8 @@ def _numbers(el: ET.Element | None, attr: str, default: str) -> list[float] | st
 
 
 def _no_rotation(origin: ET.Element | None, where: str) -> None:
+    if origin is None:  # no <origin>: rpy is 0 0 0
+        return
     rpy = _numbers(origin, "rpy", "0 0 0")
     if isinstance(rpy, str) or len(rpy) != 3 or any(abs(v) > 1e-12 for v in rpy):
         raise RobotFileError(f"{where}/origin/@rpy: rotated frames are not supported, got {origin.get('rpy')!r}; "
@@ -139,7 +142,7 @@ def _joint_table(el: ET.Element, where: str) -> tuple[dict, Callable[[str], str]
                              "independent")
     origin = el.find("origin")
     _no_rotation(origin, where)
-    spec = {"name": el.get("name"), "parent": _child_attr(el, "parent", "link"), "child": _child_attr(el, "child", "link"),
+    spec: dict[str, object] = {"name": el.get("name"), "parent": _child_attr(el, "parent", "link"), "child": _child_attr(el, "child", "link"),
             "origin": _numbers(origin, "xyz", "0 0 0"), "axis": _numbers(el.find("axis"), "xyz", "1 0 0")}
     if kind == "revolute":
         limit = el.find("limit")
@@ -148,8 +151,9 @@ def _joint_table(el: ET.Element, where: str) -> tuple[dict, Callable[[str], str]
                                  "use type=\"continuous\" for a full turn")
         lower, upper = _numbers(limit, "lower", ""), _numbers(limit, "upper", "")
         if isinstance(lower, list) and isinstance(upper, list) and len(lower) == len(upper) == 1:
-            spec["range"] = [float(np.degrees(lower[0])), float(np.degrees(upper[0]))]
-            spec["home"] = float(np.clip(0.0, min(spec["range"]), max(spec["range"])))  # URDF has no home state
+            lo, hi = float(np.degrees(lower[0])), float(np.degrees(upper[0]))
+            spec["range"] = [lo, hi]
+            spec["home"] = float(np.clip(0.0, min(lo, hi), max(lo, hi)))  # URDF has no home state
         else:
             spec["range"] = f"{limit.get('lower')} {limit.get('upper')}"  # the validator names it
     else:
@@ -183,5 +187,6 @@ def load_urdf(path: str | Path) -> Robot:
         if link.mesh is not None:
             link.mesh = link.mesh + offset
     robot = Robot(root.get("name") or path.stem, parsed_links, parsed_joints)
-    fixed = {el.get("name"): 0.0 for el in joint_els if el.get("type") == "fixed"}
+    # parse_parts kept the joints in file order and checked every name
+    fixed = {joint.name: 0.0 for joint, el in zip(parsed_joints, joint_els) if el.get("type") == "fixed"}
     return robot.lock(fixed) if fixed else robot

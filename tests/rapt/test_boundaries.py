@@ -133,7 +133,7 @@ def test_small_mean_shift_partitions_like_scikit_learn():
 
     rng = np.random.default_rng(7)
     scores = []
-    for trial in range(30):
+    for _ in range(30):
         k = rng.integers(1, 4)
         centres = rng.random((k, 3))
         Z = np.vstack([c + 0.03 * rng.standard_normal((rng.integers(3, 30), 3)) for c in centres])

@@ -1,9 +1,9 @@
 import numpy as np
 import pytest
 
-from rapt.information import gpr_information, neighbour_variance, nndv_information, unalikeability
-from rapt.importance import importance_weights, tree_importance
 from rapt.candidates import select_batch
+from rapt.importance import importance_weights, tree_importance
+from rapt.information import gpr_information, neighbour_variance, nndv_information, unalikeability
 
 
 def test_unalikeability_hand_computed():

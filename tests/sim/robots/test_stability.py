@@ -140,7 +140,7 @@ def test_stl_mesh_link(tmp_path):
     """An ASCII STL tetrahedron is read as its 4 vertices and joins the hull."""
     tri = [((0, 0, 0), (1, 0, 0), (0, 1, 0)), ((0, 0, 0), (1, 0, 0), (0, 0, 1)),
            ((0, 0, 0), (0, 1, 0), (0, 0, 1)), ((1, 0, 0), (0, 1, 0), (0, 0, 1))]
-    lines = ["solid t"] + [f"facet normal 0 0 0\nouter loop\n" + "".join(f"vertex {x} {y} {z}\n" for x, y, z in t)
+    lines = ["solid t"] + ["facet normal 0 0 0\nouter loop\n" + "".join(f"vertex {x} {y} {z}\n" for x, y, z in t)
                            + "endloop\nendfacet" for t in tri] + ["endsolid t"]
     (tmp_path / "t.stl").write_text("\n".join(lines))
     assert read_stl(tmp_path / "t.stl").shape == (4, 3)
