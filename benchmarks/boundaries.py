@@ -16,7 +16,11 @@ Three parts, each printed as a table:
    — at the smallest size — the old all-leaves-at-once method (modes from all 66
    leaves, pairs between every two modes) for comparison.
 
-Run:  python benchmarks/boundaries.py [--sizes 10000 100000 1000000] [--skip-noise]
+Run:  python benchmarks/boundaries.py [--sizes 10000 100000 1000000] [--skip-noise] [--quick]
+
+``--quick`` prints the same three tables from a small run (about a minute on 2 cores):
+2000 samples for part 1, 1000 per noise level for part 2, and 3,000 and 30,000 samples
+(one exact, one HNSW graph) for part 3.
 """
 
 from __future__ import annotations
@@ -34,25 +38,25 @@ from rapt.modes import performance_modes
 from rapt.testfunctions import FuzzyBoundary, GlobalNoise, Hierarchical2D, HierarchicalND, Plates2D
 
 
-def correctness() -> None:
+def correctness(n: int = 4000) -> None:
     h = Hierarchical2D()
-    study = rapt.search(h, [(0, 1)] * 2, 4000, method="s-ndv", seed=0, output_types=("categorical",) * 12)
+    study = rapt.search(h, [(0, 1)] * 2, n, method="s-ndv", seed=0, output_types=("categorical",) * 12)
     tree = rapt.subboundary_tree(study.X, study.Y, h.score_tree)
-    print("1. Hierarchical2D (12 elements, 3 levels), 4000 S-NDV samples")
+    print(f"1. Hierarchical2D (12 elements, 3 levels), {n} S-NDV samples")
     print(f"{'level':>5} {'clusters':>8} {'true types':>10} {'recovered':>9} {'pairs':>6} {'on a true boundary':>19}")
     for row in subboundary_recovery(h, tree, grid=512, tol=0.05):
         print(f"{row['level']:>5} {tree.n_clusters(row['level']):>8} {row['true_types']:>10} "
               f"{row['recovered_fraction']:>9.0%} {row['pairs']:>6} {row['on_boundary_fraction']:>19.1%}")
 
 
-def noise(tol: float = 0.03) -> None:
+def noise(n: int = 3000, tol: float = 0.03) -> None:
     truth = Plates2D()
-    print(f"\n2. Noise on Plates2D, 3000 S-NDV samples; a pair is true when both ends lie within {tol} of a true "
+    print(f"\n2. Noise on Plates2D, {n} S-NDV samples; a pair is true when both ends lie within {tol} of a true "
           "boundary (and, with global noise, both carry their noise-free label)")
     print(f"{'system':>16} {'pairs':>6} {'true':>6} {'false flagged':>13} {'true kept':>9}")
     for label, system in [("clean", Plates2D())] + [(f"fuzzy σ={s}", FuzzyBoundary(Plates2D(), s, seed=1)) for s in (0.01, 0.03, 0.05)] \
             + [(f"global γ={g}", GlobalNoise(Plates2D(), g, seed=1)) for g in (0.02, 0.05, 0.1, 0.2)]:
-        study = rapt.search(system, [(0, 1)] * 2, 3000, method="s-ndv", seed=0, output_types=("categorical",))
+        study = rapt.search(system, [(0, 1)] * 2, n, method="s-ndv", seed=0, output_types=("categorical",))
         bp = boundary_pairs(study.X, study.Y, cluster_eps=0.05, min_samples=5)
         d = truth.boundary_distance(study.X)[:, 0]
         near = (d[bp.i] < tol) & (d[bp.j] < tol)
@@ -118,13 +122,16 @@ def cost(sizes: list[int]) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sizes", type=int, nargs="+", default=[10_000, 100_000, 1_000_000])
+    ap.add_argument("--sizes", type=int, nargs="+", default=None,
+                    help="samples for part 3 (default 10000 100000 1000000; --quick: 3000 30000)")
     ap.add_argument("--skip-noise", action="store_true")
+    ap.add_argument("--quick", action="store_true", help="the same tables from a small run (about a minute)")
     args = ap.parse_args()
-    correctness()
+    sizes = args.sizes or ([3_000, 30_000] if args.quick else [10_000, 100_000, 1_000_000])
+    correctness(2000 if args.quick else 4000)
     if not args.skip_noise:
-        noise()
-    cost(sorted(args.sizes))
+        noise(1000 if args.quick else 3000)
+    cost(sorted(sizes))
 
 
 if __name__ == "__main__":

@@ -8,7 +8,10 @@
 3. Sustained load: MAVLink frames at 5,000/s through the bridge into the MCAP logger;
    frames sent, frames logged, loss (target: zero at 5,000/s for 60 s).
 
-Run:  python benchmarks/sil.py [--scenarios 5] [--trips 2000] [--rate 5000] [--seconds 60]
+Run:  python benchmarks/sil.py [--scenarios 5] [--trips 2000] [--rate 5000] [--seconds 60] [--quick]
+
+``--quick`` prints the same three results from a short run: 2 scenarios, 300 round trips,
+5 seconds of sustained load (the targets are judged the same way, on less data).
 """
 
 from __future__ import annotations
@@ -122,11 +125,18 @@ def sustained(rate: int, seconds: float) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--scenarios", type=int, default=5)
-    ap.add_argument("--trips", type=int, default=2000)
+    ap.add_argument("--scenarios", type=int, default=None, help="lock-step SIL runs (default 5; --quick: 2)")
+    ap.add_argument("--trips", type=int, default=None, help="bridge round trips (default 2000; --quick: 300)")
     ap.add_argument("--rate", type=int, default=5000)
-    ap.add_argument("--seconds", type=float, default=60.0)
+    ap.add_argument("--seconds", type=float, default=None, help="sustained load (default 60; --quick: 5)")
+    ap.add_argument("--quick", action="store_true", help="a short run of all three parts (well under a minute)")
     args = ap.parse_args()
+    if args.scenarios is None:
+        args.scenarios = 2 if args.quick else 5
+    if args.trips is None:
+        args.trips = 300 if args.quick else 2000
+    if args.seconds is None:
+        args.seconds = 5.0 if args.quick else 60.0
     mission = sim.uuv.load_mission(MISSION)
     lockstep(mission, args.scenarios)
     round_trip(mission, args.trips)

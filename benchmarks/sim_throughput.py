@@ -10,7 +10,10 @@ Three tables, measured side by side in one run:
 3. A Sobol study of the 2017 mission: how the valid runs split over the performance
    modes TF/SS/MS/TS and how the boundary pairs split over boundary types (Figure 4.23).
 
-Run:  python benchmarks/sim_throughput.py [--sizes 256 1024 4096 16384] [--study 4096]
+Run:  python benchmarks/sim_throughput.py [--sizes 256 1024 4096 16384] [--study 4096] [--quick]
+
+``--quick`` prints the same three tables from a small run: batches of 256, 1,024 and
+4,096 (the stochastic row at 4,096), 5 scenarios one at a time, a 1,024-scenario study.
 """
 
 from __future__ import annotations
@@ -84,10 +87,19 @@ def _top_reason(r) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sizes", type=int, nargs="+", default=[256, 1024, 4096, 16384])
-    ap.add_argument("--loop", type=int, default=20, help="scenarios run one at a time")
-    ap.add_argument("--study", type=int, default=4096, help="Sobol scenarios for the mode distribution")
+    ap.add_argument("--sizes", type=int, nargs="+", default=None,
+                    help="batch sizes (default 256 1024 4096 16384; --quick: 256 1024 4096)")
+    ap.add_argument("--loop", type=int, default=None, help="scenarios run one at a time (default 20; --quick: 5)")
+    ap.add_argument("--study", type=int, default=None,
+                    help="Sobol scenarios for the mode distribution (default 4096; --quick: 1024)")
+    ap.add_argument("--quick", action="store_true", help="the same tables from a small run (under a minute)")
     args = ap.parse_args()
+    if args.sizes is None:
+        args.sizes = [256, 1024, 4096] if args.quick else [256, 1024, 4096, 16384]
+    if args.loop is None:
+        args.loop = 5 if args.quick else 20
+    if args.study is None:
+        args.study = 1024 if args.quick else 4096
     mission = sim.uuv.load_mission(MISSION)
     throughput(mission, sorted(args.sizes), args.loop)
     modes_and_boundaries(mission, args.study)
