@@ -36,7 +36,8 @@ from pymavlink import mavutil  # noqa: E402
 from . import keys  # noqa: E402
 from .command_gate import CommandGate, outward  # noqa: E402
 from .frames import FrameSplitter, mavlink2, message_json  # noqa: E402
-from .session import zenoh_config  # noqa: E402
+from .service import Service  # noqa: E402
+from .session import undeclare, use_session  # noqa: E402
 from .setpoint import Setpoint  # noqa: E402
 
 __all__ = ["MavlinkBridge", "ARDUSUB_MODES", "TYPE_MASK_VELOCITY_YAW", "load_signing_key", "outward"]
@@ -89,13 +90,15 @@ def load_signing_key(signing_key: bytes | str | os.PathLike) -> bytes:
     raise ValueError(f"signing_key: {str(path)!r} holds neither 32 bytes nor 64 hex digits")
 
 
-class MavlinkBridge:
+class MavlinkBridge(Service):
     """Bridge one pymavlink connection (``udpin:``, ``udpout:``, ``tcp:``, ``tcpin:``, serial) to Zenoh.
 
     ``session`` is an open ``zenoh.Session`` (not closed by the bridge), a ``zenoh.Config``
     or None (the bridge opens and closes its own session; None means in-process only).
-    Use as a context manager, or call :meth:`start` and :meth:`close`.
+    Use as a context manager, or call :meth:`start` and :meth:`close` (:class:`~bridge.service.Service`).
     """
+
+    _what = "bridge"
 
     def __init__(
         self,
@@ -116,6 +119,7 @@ class MavlinkBridge:
     ):
         if not isinstance(device, str) or not device:
             raise ValueError(f"device: expected a pymavlink connection string, got {device!r}")
+        super().__init__()
         keys.raw(vehicle)  # validates the name
         #: The command gates (allow_commands, link, geofence, rate, active source); a watchdog may ask it too.
         self.gate = CommandGate(
@@ -144,10 +148,8 @@ class MavlinkBridge:
         self._conn: Any = None
         self._datagram = device.startswith(("udp:", "udpin:", "udpout:", "udpbcast:", "mcast:"))
         self._send_lock = threading.Lock()
-        self._stop = threading.Event()
         self._wake_r: socket.socket | None = None  # wakes the reader thread on close()
         self._wake_w: socket.socket | None = None
-        self._threads: list[threading.Thread] = []
         self._splitter = FrameSplitter(self._decode)
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._raw_pub: zenoh.Publisher | None = None
@@ -166,8 +168,6 @@ class MavlinkBridge:
         self._acks: dict[int, tuple[int, int]] = {}
         self._ack_cond = threading.Condition()
         self._ack_serial = 0
-        self._started = False
-        self._closed = False
         self._counts = dict.fromkeys(
             (
                 "frames_in",
@@ -192,89 +192,49 @@ class MavlinkBridge:
         )
 
     # ----------------------------------------------------------------- life cycle
-    def __enter__(self) -> MavlinkBridge:
-        self.start()
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-
     def __repr__(self) -> str:
         return (
             f"MavlinkBridge({self.device!r}, vehicle={self.vehicle!r}, allow_commands={self.allow_commands}, "
             f"signed={self._key is not None})"
         )
 
-    def start(self) -> MavlinkBridge:
+    def _open(self) -> None:
         """Open the session entities and the link, then start the reader, command and heartbeat threads."""
-        if self._started:
-            raise RuntimeError("start: the bridge was already started")
-        self._started = True
+        self._wake_r, self._wake_w = socket.socketpair()
+        self._session, self._owns_session = use_session(self._session_arg)
+        s, v = self._session, self.vehicle
+        self._raw_pub = s.declare_publisher(
+            keys.raw(v),
+            encoding=zenoh.Encoding.APPLICATION_OCTET_STREAM,
+            reliability=zenoh.Reliability.RELIABLE,
+        )
+        self._cmd_sub = s.declare_subscriber(keys.command(v, "*"), zenoh.handlers.FifoChannel(4096))
+        self._active_sub = s.declare_subscriber(keys.active(v), zenoh.handlers.FifoChannel(256))
+        # Handlers are read by our threads; the subscriber objects are only touched here and in close().
+        self._cmd_handler = self._cmd_sub.handler
+        self._active_handler = self._active_sub.handler
+        self._token = s.liveliness().declare_token(keys.alive(v, "bridge"))
         try:
-            self._wake_r, self._wake_w = socket.socketpair()
-            if isinstance(self._session_arg, zenoh.Session):
-                self._session = self._session_arg
-            else:
-                config = self._session_arg if self._session_arg is not None else zenoh_config()
-                self._session = zenoh.open(config)
-                self._owns_session = True
-            s, v = self._session, self.vehicle
-            self._raw_pub = s.declare_publisher(
-                keys.raw(v),
-                encoding=zenoh.Encoding.APPLICATION_OCTET_STREAM,
-                reliability=zenoh.Reliability.RELIABLE,
-            )
-            self._cmd_sub = s.declare_subscriber(keys.command(v, "*"), zenoh.handlers.FifoChannel(4096))
-            self._active_sub = s.declare_subscriber(keys.active(v), zenoh.handlers.FifoChannel(256))
-            # Handlers are read by our threads; the subscriber objects are only touched here and in close().
-            self._cmd_handler = self._cmd_sub.handler
-            self._active_handler = self._active_sub.handler
-            self._token = s.liveliness().declare_token(keys.alive(v, "bridge"))
-            try:
-                self._open()
-            except (OSError, ConnectionError) as error:  # the reader thread keeps trying
-                log.warning("bridge %s: cannot open %s yet (%s); retrying", v, self.device, error)
-                self._counts["open_failures"] += 1
-            for target, name in (
-                (self._read_loop, "reader"),
-                (self._command_loop, "commands"),
-                (self._heartbeat_loop, "heartbeat"),
-            ):
-                thread = threading.Thread(target=target, name=f"bridge-{v}-{name}", daemon=True)
-                thread.start()
-                self._threads.append(thread)
-        except BaseException:
-            self.close()
-            raise
-        return self
+            self._open_link()
+        except (OSError, ConnectionError) as error:  # the reader thread keeps trying
+            log.warning("bridge %s: cannot open %s yet (%s); retrying", v, self.device, error)
+            self._counts["open_failures"] += 1
+        self._spawn(f"bridge-{v}-reader", self._read_loop)
+        self._spawn(f"bridge-{v}-commands", self._command_loop)
+        self._spawn(f"bridge-{v}-heartbeat", self._heartbeat_loop)
 
-    def close(self) -> None:
-        """Stop the threads, close the link, undeclare everything, close an owned session. Idempotent."""
-        if self._closed:
-            return
-        self._closed = True
-        self._stop.set()
+    def _shutdown(self) -> None:
+        """Stop the threads, close the link, undeclare everything, close an owned session."""
         if self._wake_w is not None:
             try:
                 self._wake_w.send(b"x")
             except OSError:
                 pass
-        for sub in (self._cmd_sub, self._active_sub):
-            if sub is not None:
-                try:
-                    sub.undeclare()
-                except zenoh.ZError:
-                    pass
-        for thread in self._threads:
-            thread.join(timeout=5)
+        undeclare(self._cmd_sub, self._active_sub)
+        self._join(self._threads, timeout=5)
         with self._send_lock:
             self._close_conn()
-        for entity in (self._token, self._raw_pub, *self._publishers.values()):
-            if entity is not None:
-                try:
-                    entity.undeclare()
-                except zenoh.ZError:
-                    pass
+        undeclare(self._token, self._raw_pub, *self._publishers.values())
         self._publishers.clear()
         if self._owns_session and self._session is not None:
             self._session.close()
@@ -337,7 +297,7 @@ class MavlinkBridge:
         return self.gate.active
 
     # ----------------------------------------------------------------- MAVLink link
-    def _open(self) -> None:
+    def _open_link(self) -> None:
         try:
             conn = mavutil.mavlink_connection(
                 self.device,
@@ -395,7 +355,7 @@ class MavlinkBridge:
             conn = self._conn
             if conn is None:
                 try:
-                    self._open()
+                    self._open_link()
                     self._counts["reopens"] += 1
                     backoff = 0.05
                 except Exception as error:  # OSError, SerialException, ...: keep trying
