@@ -101,6 +101,14 @@ def told(case: Case, seed: int = 0, n: int = 40) -> tuple:
     return case.evaluate(np.random.default_rng(100 + seed).random((n, 2)))
 
 
+def reference(case: Case) -> tuple[tuple, int, Sampler]:
+    """:func:`told`'s rows, their number, and a fresh sampler (seed 1) told them at once, for comparisons."""
+    data = told(case)
+    s = case.make(1)
+    s.tell(*data)
+    return data, len(data[0]), s
+
+
 def drive(case: Case, seed: int, sizes=(12, 12, 12, 12)) -> tuple[Sampler, list[np.ndarray], list[tuple]]:
     """Ask and tell batches of ``sizes``: the sampler, its asks and what it was told."""
     s = case.make(seed)
@@ -181,10 +189,8 @@ def test_other_seed_other_points(case):
 # --------------------------------------------------------------------------- tell
 @pytest.mark.parametrize("case", CASES, ids=repr)
 def test_rows_told_in_pieces_are_rows_told_at_once(case):
-    data = told(case)
-    n = len(data[0])
-    whole, pieces = case.make(1), case.make(1)
-    whole.tell(*data)
+    data, n, whole = reference(case)
+    pieces = case.make(1)
     for index in np.array_split(np.arange(n), [7, 8, 25]):  # pieces of 7, 1, 17 and the rest
         pieces.tell(*rows(data, index))
     assert np.array_equal(whole.X, pieces.X) and np.array_equal(whole.Y, pieces.Y)
@@ -194,10 +200,8 @@ def test_rows_told_in_pieces_are_rows_told_at_once(case):
 
 @pytest.mark.parametrize("case", CASES, ids=repr)
 def test_the_order_of_the_rows_told_does_not_matter(case):
-    data = told(case)
-    n = len(data[0])
-    straight, shuffled = case.make(1), case.make(1)
-    straight.tell(*data)
+    data, n, straight = reference(case)
+    shuffled = case.make(1)
     shuffled.tell(*rows(data, np.random.default_rng(7).permutation(n)))
     assert np.array_equal(straight.ask(10), shuffled.ask(10))
     later = case.evaluate(np.random.default_rng(8).random((10, 2)))
@@ -208,27 +212,23 @@ def test_the_order_of_the_rows_told_does_not_matter(case):
 
 @pytest.mark.parametrize("case", CASES, ids=repr)
 def test_only_an_adaptive_sampler_asks_depend_on_the_scores(case):
-    data = told(case)
-    scores = 1  # tell's second argument
+    data, n, a = reference(case)
     shuffled = list(data)
-    shuffled[scores] = data[scores][np.random.default_rng(9).permutation(len(data[scores]))]  # same labels, moved
-    a, b = case.make(1), case.make(1)
-    a.tell(*data)
+    shuffled[1] = data[1][np.random.default_rng(9).permutation(n)]  # the same scores (tell's 2nd argument), moved
+    b = case.make(1)
     b.tell(*shuffled)
     assert np.array_equal(a.ask(10), b.ask(10)) == (not a.adaptive)
     if not a.adaptive:  # nor on constant scores, whichever
         c, d = case.make(1), case.make(1)
-        c.tell(data[0], np.zeros(len(data[0])))
-        d.tell(data[0], np.ones(len(data[0])))
+        c.tell(data[0], np.zeros(n))
+        d.tell(data[0], np.ones(n))
         assert np.array_equal(c.ask(16), d.ask(16))
 
 
 @pytest.mark.parametrize("case", CASES, ids=repr)
 def test_telling_rows_again_counts_them_again_and_keeps_asks_valid(case):
-    data = told(case)
-    n = len(data[0])
-    once, twice, again = case.make(1), case.make(1), case.make(1)
-    once.tell(*data)
+    data, n, once = reference(case)
+    twice, again = case.make(1), case.make(1)
     for s in (twice, again):
         s.tell(*data)
         s.tell(*data)
