@@ -4,14 +4,16 @@ Never imports :mod:`sim`; the planner wires the autonomy to the bus.
 
 Modules: :mod:`bridge.keys` (the key scheme), :mod:`bridge.session` (loopback Zenoh
 sessions), :mod:`bridge.setpoint` (the back-seat set-point), :mod:`bridge.frames` (MAVLink
-frame handling), :mod:`bridge.mavlink_bridge` (:class:`MavlinkBridge`) and
-:mod:`bridge.logger` (:class:`McapLogger`). The names below are imported on first use, so
-``import bridge.keys`` stays cheap for a back-seat process.
+frame handling), :mod:`bridge.command_gate` (:class:`CommandGate`, the bridge's safety
+gates), :mod:`bridge.service` (the start/close life cycle), :mod:`bridge.mavlink_bridge`
+(:class:`MavlinkBridge`) and :mod:`bridge.logger` (:class:`McapLogger`). The names below are
+imported on first use, so ``import bridge.keys`` stays cheap for a back-seat process.
 """
 
 from importlib import import_module
 
 _EXPORTS = {
+    "CommandGate": "bridge.command_gate",
     "MavlinkBridge": "bridge.mavlink_bridge",
     "McapLogger": "bridge.logger",
     "read_log": "bridge.logger",

@@ -34,7 +34,8 @@ from mcap.writer import CompressionType, Writer
 
 from . import keys
 from .frames import strip_signature
-from .session import open_session, zenoh_config
+from .service import Service
+from .session import open_session, undeclare, use_session
 
 __all__ = ["McapLogger", "read_log", "read_metadata", "RAW_TOPIC", "main"]
 
@@ -96,12 +97,15 @@ def _as_object(payload: bytes) -> tuple[bytes, dict]:
     return json.dumps(obj).encode(), obj
 
 
-class McapLogger:
+class McapLogger(Service):
     """Record ``rapt/<vehicle>/**`` and its liveliness tokens to the MCAP file ``path``.
 
     ``session``: an open ``zenoh.Session`` (left open), a ``zenoh.Config``, or None for an
-    in-process session of its own. Use as a context manager or call :meth:`start`/:meth:`close`.
+    in-process session of its own. Use as a context manager or call :meth:`start`/:meth:`close`
+    (:class:`~bridge.service.Service`).
     """
+
+    _what = "logger"
 
     def __init__(
         self,
@@ -113,6 +117,7 @@ class McapLogger:
         flush_interval_s: float = 1.0,
         compression: str = "zstd",
     ):
+        super().__init__()
         keys.everything(vehicle)  # validates the name
         if not (isinstance(chunk_size, int) and chunk_size > 0):
             raise ValueError(f"chunk_size: expected an int > 0, got {chunk_size!r}")
@@ -132,77 +137,36 @@ class McapLogger:
         self._queue: queue.SimpleQueue = queue.SimpleQueue()
         self._subs: list[Any] = []
         self._token: Any = None
-        self._drainers: list[threading.Thread] = []
         self._writer_thread: threading.Thread | None = None
         self._file: Any = None
         self._writer: Writer | None = None
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, tuple[int, list[int]]] = {}
-        self._started = False
-        self._closed = False
         self._counts = dict.fromkeys(("written", "metadata", "errors", "flushes"), 0)
         self._received = [0, 0]  # per drain thread (data, liveliness): no shared counter between threads
 
     # ----------------------------------------------------------------- life cycle
-    def __enter__(self) -> McapLogger:
-        self.start()
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-
-    def start(self) -> McapLogger:
+    def _open(self) -> None:
         """Open the file, subscribe, start the threads."""
-        if self._started:
-            raise RuntimeError("start: the logger was already started")
-        self._started = True
-        try:
-            self._file = open(self.path, "wb")
-            self._writer = Writer(self._file, chunk_size=self.chunk_size, compression=self._compression)
-            self._writer.start(profile="", library="rapt-bridge")
-            if isinstance(self._session_arg, zenoh.Session):
-                self._session = self._session_arg
-            else:
-                config = self._session_arg if self._session_arg is not None else zenoh_config()
-                self._session = zenoh.open(config)
-                self._owns_session = True
-            s = self._session
-            self._writer_thread = threading.Thread(target=self._write_loop, name="mcap-writer", daemon=True)
-            self._writer_thread.start()
-            data = s.declare_subscriber(keys.everything(self.vehicle), zenoh.handlers.FifoChannel(1 << 16))
-            alive = s.liveliness().declare_subscriber(
-                keys.alive(self.vehicle, "*"), zenoh.handlers.FifoChannel(1024), history=True
-            )
-            self._subs = [data, alive]
-            for index, sub in enumerate(self._subs):
-                thread = threading.Thread(
-                    target=self._drain, args=(sub.handler, index), name="mcap-drain", daemon=True
-                )
-                thread.start()
-                self._drainers.append(thread)
-            self._token = s.liveliness().declare_token(keys.alive(self.vehicle, "logger"))
-        except BaseException:
-            self.close()
-            raise
-        return self
+        self._file = open(self.path, "wb")
+        self._writer = Writer(self._file, chunk_size=self.chunk_size, compression=self._compression)
+        self._writer.start(profile="", library="rapt-bridge")
+        self._session, self._owns_session = use_session(self._session_arg)
+        s = self._session
+        self._writer_thread = self._spawn("mcap-writer", self._write_loop)
+        data = s.declare_subscriber(keys.everything(self.vehicle), zenoh.handlers.FifoChannel(1 << 16))
+        alive = s.liveliness().declare_subscriber(
+            keys.alive(self.vehicle, "*"), zenoh.handlers.FifoChannel(1024), history=True
+        )
+        self._subs = [data, alive]
+        for index, sub in enumerate(self._subs):
+            self._spawn("mcap-drain", self._drain, sub.handler, index)
+        self._token = s.liveliness().declare_token(keys.alive(self.vehicle, "logger"))
 
-    def close(self) -> None:
-        """Stop receiving, write what was queued, finish the MCAP file (summary + footer). Idempotent."""
-        if self._closed:
-            return
-        self._closed = True
-        if self._token is not None:
-            try:
-                self._token.undeclare()
-            except zenoh.ZError:
-                pass
-        for sub in self._subs:
-            try:
-                sub.undeclare()
-            except zenoh.ZError:
-                pass
-        for thread in self._drainers:
-            thread.join(timeout=10)
+    def _shutdown(self) -> None:
+        """Stop receiving, write what was queued, finish the MCAP file (summary + footer)."""
+        undeclare(self._token, *self._subs)
+        self._join((t for t in self._threads if t is not self._writer_thread), timeout=10)  # the drainers
         if self._writer_thread is not None:
             self._queue.put(_STOP)
             self._writer_thread.join(timeout=60)

@@ -3,7 +3,8 @@
 Every valid frame goes out as raw bytes and as JSON per message type; set-points from the
 active back-seat source come back as ``SET_POSITION_TARGET_LOCAL_NED`` (velocity + yaw). On a
 real vehicle nothing reaches MAVLink unless ``allow_commands`` is set, the vehicle is heard
-from, the set-point does not push it out of the geofence and the rate limit allows it. The
+from, the set-point does not push it out of the geofence and the rate limit allows it: the
+gates of :class:`bridge.command_gate.CommandGate`, which the bridge asks for every set-point. The
 link may drop or go silent at any time: the bridge then forwards nothing and keeps reopening
 the connection until frames come back.
 
@@ -33,8 +34,10 @@ import zenoh  # noqa: E402
 from pymavlink import mavutil  # noqa: E402
 
 from . import keys  # noqa: E402
+from .command_gate import CommandGate, outward  # noqa: E402
 from .frames import FrameSplitter, mavlink2, message_json  # noqa: E402
-from .session import zenoh_config  # noqa: E402
+from .service import Service  # noqa: E402
+from .session import undeclare, use_session  # noqa: E402
 from .setpoint import Setpoint  # noqa: E402
 
 __all__ = ["MavlinkBridge", "ARDUSUB_MODES", "TYPE_MASK_VELOCITY_YAW", "load_signing_key", "outward"]
@@ -87,38 +90,15 @@ def load_signing_key(signing_key: bytes | str | os.PathLike) -> bytes:
     raise ValueError(f"signing_key: {str(path)!r} holds neither 32 bytes nor 64 hex digits")
 
 
-def outward(
-    fence: tuple[float, float, float, float], margin: float, north: float, east: float, vn: float, ve: float
-) -> bool:
-    """True when velocity (vn, ve) heads out through an edge of ``fence`` that (north, east) is within ``margin`` of."""
-    n_min, n_max, e_min, e_max = fence
-    return (
-        (vn > 0 and north >= n_max - margin)
-        or (vn < 0 and north <= n_min + margin)
-        or (ve > 0 and east >= e_max - margin)
-        or (ve < 0 and east <= e_min + margin)
-    )
-
-
-def _geofence(value: Sequence[float] | None) -> tuple[float, float, float, float] | None:
-    if value is None:
-        return None
-    try:
-        n_min, n_max, e_min, e_max = (float(v) for v in value)
-    except (TypeError, ValueError):
-        raise ValueError("geofence: expected (north_min, north_max, east_min, east_max) in metres") from None
-    if not all(math.isfinite(v) for v in (n_min, n_max, e_min, e_max)) or n_min >= n_max or e_min >= e_max:
-        raise ValueError(f"geofence: need finite north_min < north_max and east_min < east_max, got {tuple(value)}")
-    return n_min, n_max, e_min, e_max
-
-
-class MavlinkBridge:
+class MavlinkBridge(Service):
     """Bridge one pymavlink connection (``udpin:``, ``udpout:``, ``tcp:``, ``tcpin:``, serial) to Zenoh.
 
     ``session`` is an open ``zenoh.Session`` (not closed by the bridge), a ``zenoh.Config``
     or None (the bridge opens and closes its own session; None means in-process only).
-    Use as a context manager, or call :meth:`start` and :meth:`close`.
+    Use as a context manager, or call :meth:`start` and :meth:`close` (:class:`~bridge.service.Service`).
     """
+
+    _what = "bridge"
 
     def __init__(
         self,
@@ -139,13 +119,16 @@ class MavlinkBridge:
     ):
         if not isinstance(device, str) or not device:
             raise ValueError(f"device: expected a pymavlink connection string, got {device!r}")
+        super().__init__()
         keys.raw(vehicle)  # validates the name
-        if not (isinstance(geofence_margin_m, (int, float)) and geofence_margin_m >= 0):
-            raise ValueError(f"geofence_margin_m: expected a number >= 0, got {geofence_margin_m!r}")
-        if max_rate_hz is not None and not (isinstance(max_rate_hz, (int, float)) and max_rate_hz > 0):
-            raise ValueError(f"max_rate_hz: expected None or a number > 0, got {max_rate_hz!r}")
-        if not (isinstance(silence_s, (int, float)) and silence_s > 0):
-            raise ValueError(f"silence_s: expected a number > 0, got {silence_s!r}")
+        #: The command gates (allow_commands, link, geofence, rate, active source); a watchdog may ask it too.
+        self.gate = CommandGate(
+            allow_commands=allow_commands,
+            silence_s=silence_s,
+            geofence=geofence,
+            geofence_margin_m=geofence_margin_m,
+            max_rate_hz=max_rate_hz,
+        )
         if not (isinstance(heartbeat_hz, (int, float)) and heartbeat_hz > 0):
             raise ValueError(f"heartbeat_hz: expected a number > 0, got {heartbeat_hz!r}")
         for name, value in (("source_system", source_system), ("source_component", source_component)):
@@ -153,11 +136,6 @@ class MavlinkBridge:
                 raise ValueError(f"{name}: expected an int in 1..255, got {value!r}")
         self.device = device
         self.vehicle = vehicle
-        self.allow_commands = bool(allow_commands)
-        self.geofence = _geofence(geofence)
-        self.geofence_margin_m = float(geofence_margin_m)
-        self.max_rate_hz = None if max_rate_hz is None else float(max_rate_hz)
-        self.silence_s = float(silence_s)
         self.heartbeat_hz = float(heartbeat_hz)
         self.source_system = source_system
         self.source_component = source_component
@@ -170,10 +148,8 @@ class MavlinkBridge:
         self._conn: Any = None
         self._datagram = device.startswith(("udp:", "udpin:", "udpout:", "udpbcast:", "mcast:"))
         self._send_lock = threading.Lock()
-        self._stop = threading.Event()
         self._wake_r: socket.socket | None = None  # wakes the reader thread on close()
         self._wake_w: socket.socket | None = None
-        self._threads: list[threading.Thread] = []
         self._splitter = FrameSplitter(self._decode)
         self._publishers: dict[str, zenoh.Publisher] = {}
         self._raw_pub: zenoh.Publisher | None = None
@@ -183,19 +159,15 @@ class MavlinkBridge:
         self._active_handler: Any = None
         self._opened_at = time.monotonic()
         self._token: Any = None
-        self._active = keys.DEFAULT_ACTIVE
         self._active_lock = threading.Lock()
         self._target: tuple[int, int] | None = None
         self._position: tuple[float, float, float] | None = None  # north, east, monotonic time
         self._last_frame = -math.inf
         self._heard = False  # frames seen on the current connection
         self._lost = False  # a link loss happened after frames were seen
-        self._last_forward = -math.inf
         self._acks: dict[int, tuple[int, int]] = {}
         self._ack_cond = threading.Condition()
         self._ack_serial = 0
-        self._started = False
-        self._closed = False
         self._counts = dict.fromkeys(
             (
                 "frames_in",
@@ -220,95 +192,79 @@ class MavlinkBridge:
         )
 
     # ----------------------------------------------------------------- life cycle
-    def __enter__(self) -> MavlinkBridge:
-        self.start()
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-
     def __repr__(self) -> str:
         return (
             f"MavlinkBridge({self.device!r}, vehicle={self.vehicle!r}, allow_commands={self.allow_commands}, "
             f"signed={self._key is not None})"
         )
 
-    def start(self) -> MavlinkBridge:
+    def _open(self) -> None:
         """Open the session entities and the link, then start the reader, command and heartbeat threads."""
-        if self._started:
-            raise RuntimeError("start: the bridge was already started")
-        self._started = True
+        self._wake_r, self._wake_w = socket.socketpair()
+        self._session, self._owns_session = use_session(self._session_arg)
+        s, v = self._session, self.vehicle
+        self._raw_pub = s.declare_publisher(
+            keys.raw(v),
+            encoding=zenoh.Encoding.APPLICATION_OCTET_STREAM,
+            reliability=zenoh.Reliability.RELIABLE,
+        )
+        self._cmd_sub = s.declare_subscriber(keys.command(v, "*"), zenoh.handlers.FifoChannel(4096))
+        self._active_sub = s.declare_subscriber(keys.active(v), zenoh.handlers.FifoChannel(256))
+        # Handlers are read by our threads; the subscriber objects are only touched here and in close().
+        self._cmd_handler = self._cmd_sub.handler
+        self._active_handler = self._active_sub.handler
+        self._token = s.liveliness().declare_token(keys.alive(v, "bridge"))
         try:
-            self._wake_r, self._wake_w = socket.socketpair()
-            if isinstance(self._session_arg, zenoh.Session):
-                self._session = self._session_arg
-            else:
-                config = self._session_arg if self._session_arg is not None else zenoh_config()
-                self._session = zenoh.open(config)
-                self._owns_session = True
-            s, v = self._session, self.vehicle
-            self._raw_pub = s.declare_publisher(
-                keys.raw(v),
-                encoding=zenoh.Encoding.APPLICATION_OCTET_STREAM,
-                reliability=zenoh.Reliability.RELIABLE,
-            )
-            self._cmd_sub = s.declare_subscriber(keys.command(v, "*"), zenoh.handlers.FifoChannel(4096))
-            self._active_sub = s.declare_subscriber(keys.active(v), zenoh.handlers.FifoChannel(256))
-            # Handlers are read by our threads; the subscriber objects are only touched here and in close().
-            self._cmd_handler = self._cmd_sub.handler
-            self._active_handler = self._active_sub.handler
-            self._token = s.liveliness().declare_token(keys.alive(v, "bridge"))
-            try:
-                self._open()
-            except (OSError, ConnectionError) as error:  # the reader thread keeps trying
-                log.warning("bridge %s: cannot open %s yet (%s); retrying", v, self.device, error)
-                self._counts["open_failures"] += 1
-            for target, name in (
-                (self._read_loop, "reader"),
-                (self._command_loop, "commands"),
-                (self._heartbeat_loop, "heartbeat"),
-            ):
-                thread = threading.Thread(target=target, name=f"bridge-{v}-{name}", daemon=True)
-                thread.start()
-                self._threads.append(thread)
-        except BaseException:
-            self.close()
-            raise
-        return self
+            self._open_link()
+        except (OSError, ConnectionError) as error:  # the reader thread keeps trying
+            log.warning("bridge %s: cannot open %s yet (%s); retrying", v, self.device, error)
+            self._counts["open_failures"] += 1
+        self._spawn(f"bridge-{v}-reader", self._read_loop)
+        self._spawn(f"bridge-{v}-commands", self._command_loop)
+        self._spawn(f"bridge-{v}-heartbeat", self._heartbeat_loop)
 
-    def close(self) -> None:
-        """Stop the threads, close the link, undeclare everything, close an owned session. Idempotent."""
-        if self._closed:
-            return
-        self._closed = True
-        self._stop.set()
+    def _shutdown(self) -> None:
+        """Stop the threads, close the link, undeclare everything, close an owned session."""
         if self._wake_w is not None:
             try:
                 self._wake_w.send(b"x")
             except OSError:
                 pass
-        for sub in (self._cmd_sub, self._active_sub):
-            if sub is not None:
-                try:
-                    sub.undeclare()
-                except zenoh.ZError:
-                    pass
-        for thread in self._threads:
-            thread.join(timeout=5)
+        undeclare(self._cmd_sub, self._active_sub)
+        self._join(self._threads, timeout=5)
         with self._send_lock:
             self._close_conn()
-        for entity in (self._token, self._raw_pub, *self._publishers.values()):
-            if entity is not None:
-                try:
-                    entity.undeclare()
-                except zenoh.ZError:
-                    pass
+        undeclare(self._token, self._raw_pub, *self._publishers.values())
         self._publishers.clear()
         if self._owns_session and self._session is not None:
             self._session.close()
         for sock in (self._wake_r, self._wake_w):
             if sock is not None:
                 sock.close()
+
+    # ----------------------------------------------------------------- configuration (the gate's)
+    @property
+    def allow_commands(self) -> bool:
+        """Whether set-points and COMMAND_LONGs may reach the vehicle at all."""
+        return self.gate.allow_commands
+
+    @property
+    def geofence(self) -> tuple[float, float, float, float] | None:
+        """(north_min, north_max, east_min, east_max) in metres, or None."""
+        return self.gate.geofence
+
+    @property
+    def geofence_margin_m(self) -> float:
+        return self.gate.geofence_margin_m
+
+    @property
+    def max_rate_hz(self) -> float | None:
+        return self.gate.max_rate_hz
+
+    @property
+    def silence_s(self) -> float:
+        """A link with no valid frame for this long is reopened, and commands are refused as stale."""
+        return self.gate.silence_s
 
     # ----------------------------------------------------------------- state
     @property
@@ -338,10 +294,10 @@ class MavlinkBridge:
     def active(self) -> str:
         """The source whose set-points are forwarded."""
         self._drain_active()
-        return self._active
+        return self.gate.active
 
     # ----------------------------------------------------------------- MAVLink link
-    def _open(self) -> None:
+    def _open_link(self) -> None:
         try:
             conn = mavutil.mavlink_connection(
                 self.device,
@@ -399,7 +355,7 @@ class MavlinkBridge:
             conn = self._conn
             if conn is None:
                 try:
-                    self._open()
+                    self._open_link()
                     self._counts["reopens"] += 1
                     backoff = 0.05
                 except Exception as error:  # OSError, SerialException, ...: keep trying
@@ -525,7 +481,7 @@ class MavlinkBridge:
                 if sample is None:
                     return
                 if sample.kind == zenoh.SampleKind.DELETE:
-                    self._active = keys.DEFAULT_ACTIVE
+                    self.gate.active = keys.DEFAULT_ACTIVE
                     continue
                 try:
                     name = sample.payload.to_bytes().decode("utf-8").strip()
@@ -533,7 +489,7 @@ class MavlinkBridge:
                 except ValueError:
                     log.warning("bridge %s: ignoring an invalid active source", self.vehicle)
                     continue
-                self._active = name
+                self.gate.active = name
 
     def _command_loop(self) -> None:
         handler = self._cmd_handler
@@ -554,8 +510,9 @@ class MavlinkBridge:
         if sample.kind != zenoh.SampleKind.PUT:
             return
         source = str(sample.key_expr).rsplit("/", 1)[-1]
-        if source != self._active:
-            c["commands_inactive"] += 1
+        reason = self.gate.check_source(source)
+        if reason is not None:
+            c["commands_" + reason] += 1
             return
         try:
             sp = Setpoint.from_json(sample.payload.to_bytes())
@@ -563,28 +520,13 @@ class MavlinkBridge:
             c["commands_invalid"] += 1
             log.debug("bridge %s: invalid set-point from %s: %s", self.vehicle, source, error)
             return
-        if not self.allow_commands:
-            c["commands_refused"] += 1
-            return
         now = time.monotonic()
         target = self._target
-        if target is None or now - self._last_frame > self.silence_s:
-            c["commands_stale"] += 1
+        heard = None if target is None else self._last_frame
+        reason = self.gate.check(sp, now, self._position, heard)
+        if reason is not None:
+            c["commands_" + reason] += 1
             return
-        if self.geofence is not None and (sp.vx or sp.vy):
-            pos = self._position
-            if (
-                pos is None
-                or now - pos[2] > self.silence_s
-                or outward(self.geofence, self.geofence_margin_m, pos[0], pos[1], sp.vx, sp.vy)
-            ):
-                c["commands_geofence"] += 1
-                return
-        if self.max_rate_hz is not None:
-            if now - self._last_forward < 1.0 / self.max_rate_hz:
-                c["commands_rate_limited"] += 1
-                return
-            self._last_forward = now
         msg = mavlink2.MAVLink_set_position_target_local_ned_message(
             sp.tick_ms or 0,
             target[0],

@@ -17,10 +17,11 @@ from __future__ import annotations
 import json
 from collections.abc import Iterable
 from pathlib import Path
+from typing import Any
 
 import zenoh
 
-__all__ = ["DEFAULT_HUB", "CONNECT_TIMEOUT_S", "zenoh_config", "open_session"]
+__all__ = ["DEFAULT_HUB", "CONNECT_TIMEOUT_S", "zenoh_config", "open_session", "use_session", "undeclare"]
 
 #: The conventional hub endpoint when nothing else is given to a command line.
 DEFAULT_HUB = "tcp/127.0.0.1:7447"
@@ -101,16 +102,14 @@ def open_session(
     listen: Iterable[str] | str = (),
     connect: Iterable[str] | str = (),
     config_file: str | Path | None = None,
-    *,
-    mode: str | None = None,
-    connect_timeout: float = CONNECT_TIMEOUT_S,
+    **options: Any,
 ) -> zenoh.Session:
-    """Open a session with :func:`zenoh_config`; close it (or use ``with``) when done.
+    """Open a session with :func:`zenoh_config` (``options``: its ``mode``, ``connect_timeout``); close it when done.
 
     Raises ``ConnectionError`` naming the endpoints when no hub answered in time.
     """
     connect = [connect] if isinstance(connect, str) else list(connect)
-    config = zenoh_config(listen, connect, config_file, mode=mode, connect_timeout=connect_timeout)
+    config = zenoh_config(listen, connect, config_file, **options)
     try:
         return zenoh.open(config)
     except zenoh.ZError as exc:
@@ -119,3 +118,24 @@ def open_session(
             f"zenoh: could not open the session ({where or 'config file'}): {str(exc).split(' at ')[0]}; "
             "start the hub (rapt-plan bridge) first or fix the endpoint"
         ) from exc
+
+
+def use_session(session: zenoh.Session | zenoh.Config | None) -> tuple[zenoh.Session, bool]:
+    """The session a bus part runs on, and whether it owns it (opened it here, so must close it).
+
+    An open ``zenoh.Session`` is used as it is and left to its owner; a ``zenoh.Config`` is
+    opened; None opens :func:`zenoh_config`'s in-process-only session.
+    """
+    if isinstance(session, zenoh.Session):
+        return session, False
+    return zenoh.open(session if session is not None else zenoh_config()), True
+
+
+def undeclare(*entities: Any) -> None:
+    """Undeclare each publisher, subscriber or token given, skipping None and those already gone."""
+    for entity in entities:
+        if entity is not None:
+            try:
+                entity.undeclare()
+            except zenoh.ZError:
+                pass

@@ -22,7 +22,8 @@ core:
   its two sides tip over opposite edges of the face: different outcomes bracket it.
 * resolution cut-offs end the search (Algorithm 6): a candidate whose neighbours all agree
   is dropped once ``V < r_max``, one on a boundary once ``V < r_min``; when no candidate is
-  left :attr:`done` is set and :meth:`ask` returns no points.
+  left the sampler has finished early, as :class:`~rapt.samplers.base.Sampler` defines it:
+  :meth:`ask` returns no points and :attr:`done` is set.
 * ``whole_hulls=True`` is for systems that label *every* valid φ of each asked θ (one hull
   computation settles every face): candidates are then ranked per free state θ (its best
   face's information), a batch holds distinct θ, and ``ask(n)`` returns about
@@ -119,7 +120,6 @@ class ManifoldSampler(Sampler):
         self.whole_hulls = bool(whole_hulls)
         if self.whole_hulls and self.n_free < 1:
             raise ValueError("whole_hulls: needs at least one free coordinate (n_free >= 1) to group faces by")
-        self.done = False
         self._faces: list[np.ndarray] = []
         self._ids: list[int] = []
         self._face_ids: list[np.ndarray] | None = []
@@ -243,33 +243,24 @@ class ManifoldSampler(Sampler):
         return unalikeability(classes.reshape(codes.shape)) * (k - 1) / (2 * k)
 
     # -- Algorithm 6's selection and stopping rule --------------------------------------------
-    def ask(self, n: int) -> np.ndarray:
-        """Up to ``n`` queries; fewer (or none, with :attr:`done` set) once the resolution cut-offs bite."""
-        if not isinstance(n, (int, np.integer)) or n < 1:
-            raise ValueError(f"n: expected a positive integer number of points, got {n!r}")
-        rng = np.random.default_rng(np.random.SeedSequence([self.seed, self.n_batches]))
+    def _propose(self, n: int, rng: np.random.Generator) -> np.ndarray:
+        """Up to ``n`` queries (:meth:`Sampler.ask` validates, counts and clips); none once the resolution
+        cut-offs leave no candidate, which finishes the search (:attr:`done`)."""
         if self.n_told < max(self.n_initial, self.k + 1):
-            points = rng.random((self._hull_count(n) if self.whole_hulls else n, self.dim))
             self.last_information = None
-        elif self.whole_hulls:
-            points = self._ask_hulls(n, rng)
-            if not len(points):
-                return points
-        else:
-            cand = self.candidates(n, rng)
-            info, sigma, volume = self.information(cand)
-            live = ~(((sigma == 0) & (volume < self.r_max)) | ((sigma > 0) & (volume < self.r_min)))
-            cand, info, volume = cand[live], info[live], volume[live]
-            if not len(cand):
-                self.done = True
-                return np.empty((0, self.dim))
-            m = min(int(n), len(cand))
-            idx = select_batch(cand, info, m, self.separation * volume, self.embed(cand))
-            points = cand[idx]
-            self.last_information = info[idx]
-        self.n_batches += 1
-        self.n_asked += len(points)
-        return np.clip(points, 0.0, 1.0)
+            return rng.random((self._hull_count(n) if self.whole_hulls else n, self.dim))
+        if self.whole_hulls:
+            return self._ask_hulls(n, rng)
+        cand = self.candidates(n, rng)
+        info, sigma, volume = self.information(cand)
+        live = ~(((sigma == 0) & (volume < self.r_max)) | ((sigma > 0) & (volume < self.r_min)))
+        cand, info, volume = cand[live], info[live], volume[live]
+        if not len(cand):
+            return np.empty((0, self.dim))
+        m = min(int(n), len(cand))
+        idx = select_batch(cand, info, m, self.separation * volume, self.embed(cand))
+        self.last_information = info[idx]
+        return cand[idx]
 
     def _hull_count(self, n: int) -> int:
         """Free states whose faces make about ``n`` labelled states (before any is told, a guess of 8 faces each)."""
@@ -368,8 +359,7 @@ class ManifoldSampler(Sampler):
         order = np.lexsort((-info, groups))  # per group, its best face first
         first = order[np.r_[True, groups[order][1:] != groups[order][:-1]]]
         first = first[np.isfinite(info[first])]
-        if not len(first):
-            self.done = True
+        if not len(first):  # nothing live: the search is finished
             return np.empty((0, self.dim))
         rep = cand[first]
         m = min(m_theta, len(rep))
@@ -377,9 +367,6 @@ class ManifoldSampler(Sampler):
         idx = select_batch(rep, info[first], m, self.separation * volume[first], free)
         self.last_information = info[first][idx]
         return rep[idx]
-
-    def _propose(self, n: int, rng: np.random.Generator) -> np.ndarray:  # pragma: no cover - ask() is overridden
-        raise NotImplementedError
 
 
 def manifold_search(fn: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, Sequence[np.ndarray]]],
