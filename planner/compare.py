@@ -29,6 +29,7 @@ import numpy as np
 
 import sim.uuv
 from planner.biasfit import fit_bias
+from planner.jsonio import json_value, jsonable
 from planner.logs import LogError, LoggedRun, read_run
 from planner.plans import Plan, load_plan
 from planner.replan import adjust_for_bias
@@ -236,9 +237,9 @@ def compare(plan_path: str | Path, log_paths: list[str | Path], out_dir: str | P
                     pname = _owner(m, c)
                     before = m.space.decode(U_plan[k][None, :])[0][pname]
                     after = m.space.decode(v[None, :])[0][pname]
-                    prop.update(found=True, u=found["u"], parameters=_jsonable(m.space.decode(v[None, :])[0]),
-                                moved={"parameter": pname, "unit_step": found["unit_step"], "from": _jv(before),
-                                       "to": _jv(after)},
+                    prop.update(found=True, u=found["u"], parameters=jsonable(m.space.decode(v[None, :])[0]),
+                                moved={"parameter": pname, "unit_step": found["unit_step"], "from": json_value(before),
+                                       "to": json_value(after)},
                                 predicted_mode_under_bias=found["mode"], p_intended=found["p_intended"],
                                 robust=found["robust"])
                 proposals.append(prop)
@@ -306,15 +307,3 @@ def _f(v) -> float | None:
 
 def _round(d: dict | None, key: str) -> float | None:
     return None if d is None else round(d[key], 3)
-
-
-def _jv(v):
-    if isinstance(v, (np.floating, np.integer)):
-        return v.item()
-    if isinstance(v, tuple):
-        return list(v)
-    return v
-
-
-def _jsonable(values: dict) -> dict:
-    return {k: _jv(v) for k, v in values.items()}

@@ -40,6 +40,7 @@ from sim.uuv.metrics import metric_names, metric_types
 from sim.uuv.scoring import MODE_NAMES, modes_from_scores
 
 from planner.exports import write_scenario_files
+from planner.jsonio import jsonable
 from planner.report import write_report
 from planner.search_status import SearchStatus
 
@@ -469,7 +470,7 @@ def generate(mission: Mission, mission_path: Path, out_dir: Path, cfg: GenerateC
         mode = int(chosen.modes[k])
         scenarios.append({
             "id": sid, "u": [float(v) for v in U[k]],
-            "parameters": _jsonable(mission.space.decode(U[k][None, :])[0]),
+            "parameters": jsonable(mission.space.decode(U[k][None, :])[0]),
             "predicted": {"mode": MODE_NAMES[mode],
                           "scores": {n: float(chosen.scores[k, c]) for c, n in enumerate(chosen.names)
                                      if c in level_cols}},
@@ -483,7 +484,7 @@ def generate(mission: Mission, mission_path: Path, out_dir: Path, cfg: GenerateC
             continue
         vid = f"{ids[k]}M"
         variants.append({"id": vid, "variant_of": ids[k], "u": v["u"],
-                         "parameters": _jsonable(mission.space.decode(np.array(v["u"])[None, :])[0]),
+                         "parameters": jsonable(mission.space.decode(np.array(v["u"])[None, :])[0]),
                          "moved": {"parameter": _owner(mission, v["coordinate"]), "unit_step": v["step"]},
                          "predicted": {"mode": MODE_NAMES[int(chosen.modes[k])]},
                          "p_predicted_mode": v["p_predicted_mode"],
@@ -547,14 +548,3 @@ def _owner(mission: Mission, coordinate: int) -> str:
     """The parameter a unit-cube coordinate encodes."""
     return next(p.name for p in mission.space.parameters
                 if mission.space.slice_of(p.name).start <= coordinate < mission.space.slice_of(p.name).stop)
-
-
-def _jsonable(values: dict) -> dict:
-    out = {}
-    for k, v in values.items():
-        if isinstance(v, (np.floating, np.integer)):
-            v = v.item()
-        elif isinstance(v, tuple):
-            v = list(v)
-        out[k] = v
-    return out
