@@ -310,7 +310,7 @@ def _proposal(m, runs: _PlanRuns, pair: dict, s: str, partner: str, cols: list[i
     else:
         v = np.array(found["u"])
         c = found["coordinate"]
-        pname = _owner(m, c)
+        pname = m.parameter_of(c)
         before = m.space.decode(U_plan[k][None, :])[0][pname]
         after = m.space.decode(v[None, :])[0][pname]
         prop.update(found=True, u=found["u"], parameters=jsonable(m.space.decode(v[None, :])[0]),
@@ -361,11 +361,6 @@ def _level_cols(m, level: int) -> list[int]:
 def _obs_mode(obs: list[Observation], sid: str) -> str | None:
     modes = [o.mode for o in obs if o.sid == sid and o.mode is not None]
     return modes[0] if modes else None
-
-
-def _owner(m, c: int) -> str:
-    return next(p.name for p in m.space.parameters if c in range(m.space.slice_of(p.name).start,
-                                                                 m.space.slice_of(p.name).stop))
 
 
 def _f(v) -> float | None:

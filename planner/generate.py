@@ -524,7 +524,7 @@ def _variant_entries(mission: Mission, ids: list[str], fragile: list[int], found
         vid = f"{ids[k]}M"
         variants.append({"id": vid, "variant_of": ids[k], "u": v["u"],
                          "parameters": jsonable(mission.space.decode(np.array(v["u"])[None, :])[0]),
-                         "moved": {"parameter": _owner(mission, v["coordinate"]), "unit_step": v["step"]},
+                         "moved": {"parameter": mission.parameter_of(v["coordinate"]), "unit_step": v["step"]},
                          "predicted": {"mode": MODE_NAMES[int(chosen.modes[k])]},
                          "p_predicted_mode": v["p_predicted_mode"],
                          "files": {kind: path.name for kind, path in
@@ -590,9 +590,3 @@ def _coordinate_sensitivity(mission: Mission, sensitivity: dict[str, dict[str, f
             sl = mission.space.slice_of(p.name)
             sens[sl] += root[p.name] / max(sl.stop - sl.start, 1)
     return sens
-
-
-def _owner(mission: Mission, coordinate: int) -> str:
-    """The parameter a unit-cube coordinate encodes."""
-    return next(p.name for p in mission.space.parameters
-                if mission.space.slice_of(p.name).start <= coordinate < mission.space.slice_of(p.name).stop)
