@@ -32,12 +32,12 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 from bridge import keys  # noqa: E402
 from bridge.logger import RAW_TOPIC  # noqa: E402
 from sim.uuv.interface import decode_command  # noqa: E402
+from sim.uuv.replay import TrackBuilder  # noqa: E402
 
 __all__ = ["LoggedRun", "read_run", "RunLogReader", "STEP_FIELDS", "LogError"]
 
 #: Columns of :attr:`LoggedRun.steps`; the first six are :data:`sim.uuv.replay.TRACK_FIELDS`.
 STEP_FIELDS = ("t", "x", "y", "heading", "energy_hj", "surfaced", "surge", "yaw_rate")
-NEEDED = ("LOCAL_POSITION_NED", "ATTITUDE", "BATTERY_STATUS")
 
 
 class LogError(ValueError):
@@ -71,32 +71,25 @@ class LoggedRun:
         return bool(self.ended)
 
 
-class _Steps:
-    """A step's reports are closed by SYSTEM_TIME; a step repeated for late joiners counts once."""
+class _Steps(TrackBuilder):
+    """The track's steps (closed as :class:`sim.uuv.replay.TrackBuilder` closes them) with the
+    vehicle's surge and yaw rate added, and the front-seat's "run ended" report."""
 
     def __init__(self):
-        self.rows: list[tuple[float, ...]] = []
-        self.tick: dict = {}
-        self.last_ms = -1
+        super().__init__()
         self.ended = ""
 
     def add(self, msg) -> None:
-        kind = msg.get_type()
-        if kind in NEEDED:
-            self.tick[kind] = msg
-        elif kind == "STATUSTEXT":
+        if msg.get_type() == "STATUSTEXT":
             text = msg.text if isinstance(msg.text, str) else bytes(msg.text).decode(errors="replace")
             if text.startswith("run ended:"):
                 self.ended = text.split(":", 1)[1].strip().rstrip("\x00")
-        elif kind == "SYSTEM_TIME":
-            ms = int(msg.time_boot_ms)
-            if ms > self.last_ms and all(k in self.tick for k in NEEDED):
-                lp, att, bat = (self.tick[k] for k in NEEDED)
-                surge = float(np.hypot(np.float32(lp.vx), np.float32(lp.vy)))
-                self.rows.append((ms / 1000.0, float(lp.y), float(lp.x), float(att.yaw), float(bat.energy_consumed),
-                                  1.0 if lp.z <= 0 else 0.0, surge, float(att.yawspeed)))
-                self.last_ms = ms
-            self.tick = {}
+            return
+        super().add(msg)
+
+    def _row(self, ms: int, lp, att, bat) -> tuple[float, ...]:
+        surge = float(np.hypot(np.float32(lp.vx), np.float32(lp.vy)))
+        return super()._row(ms, lp, att, bat) + (surge, float(att.yawspeed))
 
 
 #: MAVLink message ids a run's track needs (everything else on /mavlink/raw is skipped unparsed).
