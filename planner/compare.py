@@ -29,6 +29,7 @@ import numpy as np
 
 import sim.uuv
 from planner.biasfit import fit_bias
+from planner.jsonio import json_value, jsonable
 from planner.logs import LogError, LoggedRun, read_run
 from planner.plans import Plan, load_plan
 from planner.replan import adjust_for_bias
@@ -40,6 +41,7 @@ from sim.uuv.scoring import MODE_NAMES
 __all__ = ["compare", "CompareConfig", "COMPARISON_SCHEMA", "match_logs"]
 
 COMPARISON_SCHEMA = "rapt.comparison/1"
+RESULT_NAME = "comparison.json"
 
 
 @dataclass
@@ -107,9 +109,15 @@ def _path_error(track: np.ndarray, pred: np.ndarray | None) -> dict | None:
 
 def compare(plan_path: str | Path, log_paths: list[str | Path], out_dir: str | Path | None = None,
             cfg: CompareConfig | None = None, progress: Callable[[str], None] | None = None) -> dict:
-    """Run the comparison (see the module docstring); returns what ``comparison.json`` holds."""
+    """Run the comparison (see the module docstring); returns what ``comparison.json`` holds.
+
+    An ``out_dir`` whose ``comparison.json`` would overwrite an input is refused first,
+    before any log is read or any run simulated.
+    """
     cfg = cfg or CompareConfig()
     say = progress or (lambda _: None)
+    if out_dir is not None:
+        _check_out_dir(plan_path, log_paths, out_dir)
     plan = load_plan(plan_path)
     m = plan.mission
     if not log_paths:
@@ -117,12 +125,68 @@ def compare(plan_path: str | Path, log_paths: list[str | Path], out_dir: str | P
     say("reading logs")
     runs = [read_run(p) for p in log_paths]
     obs = match_logs(plan, runs)
+    plan_runs = _predict_plan(plan)
+    say("scoring logged runs")
+    _score_observed(m, obs)
+    say("fitting the execution bias")
+    start_times = [float(make_scenarios(m, o.u[None, :]).start_time[0]) for o in obs]
+    fit = fit_bias(m, [o.run for o in obs], start_times, fit=tuple(cfg.fit))
+    say("re-predicting under the fitted bias")
+    plan_runs.corr = sim.uuv.simulate(m, plan_runs.U, trajectories=True, bias=fit.bias)
+    scen_rows = _scenario_rows(m, obs, plan_runs)
+    agreement = _mode_agreement(scen_rows)
+    say("re-planning")
+    pair_rows, proposals = _pair_rows(plan, obs, plan_runs, fit.bias, cfg)
+    result = {
+        "schema": COMPARISON_SCHEMA,
+        "plan": {"id": plan.id, "path": str(plan.path), "mission": m.name, "mission_file": str(plan.mission_file)},
+        "logs": [{"path": str(o.run.path), "scenario": o.sid, "messages": o.run.messages,
+                  "complete": bool(o.run.complete_file and o.run.has_end), "lost": o.run.problems} for o in obs],
+        "bias": fit.to_dict(),
+        "bias_fit": _bias_fit(fit, cfg),
+        "scenarios": scen_rows,
+        "mode_agreement": agreement,
+        "pairs": pair_rows,
+        "remaining": _remaining(plan, obs, plan_runs),
+        "proposals": proposals,
+    }
+    if out_dir is not None:
+        say("writing the report")
+        _write(result, plan, obs, plan_runs, Path(out_dir))
+    return result
 
-    # -- predictions of every plan scenario: unbiased, as planned -----------------------
+
+def _check_out_dir(plan_path: str | Path, log_paths: list[str | Path], out_dir: str | Path) -> None:
+    """ValueError (one line) when ``out_dir``'s ``comparison.json`` would overwrite a log or the plan.
+
+    Resolves paths only (the plan directory's ``plan.json`` as :func:`planner.plans.load_plan`
+    finds it), so it runs before any work and creates nothing.
+    """
+    plan_file = Path(plan_path)
+    if plan_file.is_dir():
+        plan_file = plan_file / "plan.json"
+    inputs = {Path(p).resolve() for p in log_paths} | {plan_file.resolve()}
+    if (Path(out_dir) / RESULT_NAME).resolve() in inputs:
+        raise ValueError(f"--out: {out_dir} would overwrite an input; choose another directory")
+
+
+@dataclass
+class _PlanRuns:
+    """Every plan scenario (and variant): its unit-cube row, its run as planned and under the fitted bias."""
+
+    ids: list[str]
+    U: np.ndarray
+    row_of: dict[str, int]
+    pred: sim.uuv.Result
+    corr: sim.uuv.Result | None = None
+
+
+def _predict_plan(plan: Plan) -> _PlanRuns:
+    """Predictions of every plan scenario, unbiased, as planned; ValueError when they are not the plan's."""
+    m = plan.mission
     ids = [s["id"] for s in plan.scenarios + plan.variants]
     U_plan = np.array([plan.u(i) for i in ids]).reshape(-1, m.dim)
     pred = sim.uuv.simulate(m, U_plan, trajectories=True)
-    names = pred.names
     row_of = {sid: k for k, sid in enumerate(ids)}
     for s in plan.scenarios + plan.variants:
         planned = s.get("predicted", {}).get("mode")
@@ -130,28 +194,24 @@ def compare(plan_path: str | Path, log_paths: list[str | Path], out_dir: str | P
         if planned and planned != got:
             raise ValueError(f"PLAN: scenario {s['id']} is predicted {got} by {plan.mission_file} but the plan says "
                              f"{planned}; the mission file changed since the plan was made — regenerate the plan")
+    return _PlanRuns(ids, U_plan, row_of, pred)
 
-    # -- observed ----------------------------------------------------------------------
-    say("scoring logged runs")
+
+def _score_observed(m, obs: list[Observation]) -> None:
+    """Each logged run's scores from its track, and its mode when the run's end is in the log."""
     for o in obs:
         if o.run.steps.shape[0]:
             o.scores = score_track(m, o.u, o.run.track, o.run.wp_aborted, o.run.return_reason)
             if o.run.has_end:
                 o.mode = MODE_NAMES[int(2 * o.scores[0] + o.scores[1])]
 
-    # -- bias ---------------------------------------------------------------------------
-    say("fitting the execution bias")
-    start_times = [float(make_scenarios(m, o.u[None, :]).start_time[0]) for o in obs]
-    fit = fit_bias(m, [o.run for o in obs], start_times, fit=tuple(cfg.fit))
-    bias = fit.bias
 
-    say("re-predicting under the fitted bias")
-    corr = sim.uuv.simulate(m, U_plan, trajectories=True, bias=bias)
-
-    # -- per run / per scenario ---------------------------------------------------------
+def _scenario_rows(m, obs: list[Observation], runs: _PlanRuns) -> list[dict]:
+    """One row per logged run: predicted, observed and corrected modes and sub-scores, path errors."""
+    pred, corr, names = runs.pred, runs.corr, runs.pred.names
     scen_rows = []
     for o in obs:
-        k = row_of[o.sid]
+        k = runs.row_of[o.sid]
         p_traj, c_traj = pred.trajectories[k], corr.trajectories[k]
         sub = {}
         for c in sorted(set(_level_cols(m, 1)) | {0, 1}):
@@ -171,21 +231,29 @@ def compare(plan_path: str | Path, log_paths: list[str | Path], out_dir: str | P
             "lost": list(o.run.problems),
             "sub_scores": sub,
         })
+    return scen_rows
 
-    # mode agreement per scenario: every observed run of it agrees
+
+def _mode_agreement(scen_rows: list[dict]) -> dict:
+    """Share of scenarios whose every observed run shows the predicted (the corrected) mode."""
     by_sid: dict[str, list[dict]] = {}
     for r in scen_rows:
         if r["observed_mode"] is not None:
             by_sid.setdefault(r["id"], []).append(r)
     agree_u = [all(r["predicted_mode"] == r["observed_mode"] for r in rs) for rs in by_sid.values()]
     agree_c = [all(r["corrected_mode"] == r["observed_mode"] for r in rs) for rs in by_sid.values()]
-    agreement = {"uncorrected": float(np.mean(agree_u)) if agree_u else None,
-                 "corrected": float(np.mean(agree_c)) if agree_c else None,
-                 "scenarios": len(by_sid),
-                 "runs_without_end": [r["log"] for r in scen_rows if r["observed_mode"] is None]}
+    return {"uncorrected": float(np.mean(agree_u)) if agree_u else None,
+            "corrected": float(np.mean(agree_c)) if agree_c else None,
+            "scenarios": len(by_sid),
+            "runs_without_end": [r["log"] for r in scen_rows if r["observed_mode"] is None]}
 
-    # -- pairs: observed straddle, and under the fitted bias -----------------------------
-    say("re-planning")
+
+def _pair_rows(plan: Plan, obs: list[Observation], runs: _PlanRuns, bias, cfg: CompareConfig
+               ) -> tuple[list[dict], list[dict]]:
+    """Per plan pair: did it straddle its boundary as observed and under the fitted bias; and an
+    adjusted "M" scenario proposed for each side the bias moved."""
+    m, pred, corr, row_of = plan.mission, runs.pred, runs.corr, runs.row_of
+    names = pred.names
     flown = {o.sid for o in obs}
     sens = plan.sensitivity()
     pair_rows, proposals = [], []
@@ -221,65 +289,66 @@ def compare(plan_path: str | Path, log_paths: list[str | Path], out_dir: str | P
             row["reason"] = why
             for s in moved:
                 partner = b if s == a else a
-                k = row_of[s]
-                found = adjust_for_bias(m, U_plan[k], U_plan[row_of[partner]], cols, intended[s], bias, sens,
-                                        dithers=cfg.dithers, p_target=cfg.p_target, seed=cfg.seed * 1000 + k)
-                prop = {"id": f"{s}M", "variant_of": s, "pair": pair["id"],
-                        "intended": {names[c]: _f(v) for c, v in zip(cols, intended[s])},
-                        "under_bias": {names[c]: _f(v) for c, v in zip(cols, biased[s])}}
-                if found is None:
-                    prop.update(found=False, note="no move of up to 0.3 (unit cube) along the three most sensitive "
-                                                  "parameters restores it; choose a new pair")
-                else:
-                    v = np.array(found["u"])
-                    c = found["coordinate"]
-                    pname = _owner(m, c)
-                    before = m.space.decode(U_plan[k][None, :])[0][pname]
-                    after = m.space.decode(v[None, :])[0][pname]
-                    prop.update(found=True, u=found["u"], parameters=_jsonable(m.space.decode(v[None, :])[0]),
-                                moved={"parameter": pname, "unit_step": found["unit_step"], "from": _jv(before),
-                                       "to": _jv(after)},
-                                predicted_mode_under_bias=found["mode"], p_intended=found["p_intended"],
-                                robust=found["robust"])
-                proposals.append(prop)
+                proposals.append(_proposal(m, runs, pair, s, partner, cols, intended[s], biased[s], bias, sens, cfg))
         pair_rows.append(row)
+    return pair_rows, proposals
 
-    remaining = [{"id": sid, "predicted_mode": MODE_NAMES[pred.modes[row_of[sid]]],
-                  "corrected_mode": MODE_NAMES[corr.modes[row_of[sid]]],
-                  "changed": bool(pred.modes[row_of[sid]] != corr.modes[row_of[sid]])}
-                 for sid in plan.data.get("run_order", ids) if sid in row_of and sid not in flown]
 
-    result = {
-        "schema": COMPARISON_SCHEMA,
-        "plan": {"id": plan.id, "path": str(plan.path), "mission": m.name, "mission_file": str(plan.mission_file)},
-        "logs": [{"path": str(o.run.path), "scenario": o.sid, "messages": o.run.messages,
-                  "complete": bool(o.run.complete_file and o.run.has_end), "lost": o.run.problems} for o in obs],
-        "bias": fit.to_dict(),
-        "bias_fit": {"units": dict(BIAS_UNITS), "neutral": dict(NEUTRAL), "fitted": list(cfg.fit),
-                     "rms_position_m": fit.rms_position_m, "rms_position_unbiased_m": fit.rms_position_neutral_m,
-                     "rms_energy_wh": fit.rms_energy_wh, "segments": fit.segments, "residuals": fit.residuals,
-                     "runs": fit.runs, "converged": fit.success, "message": fit.message,
-                     "correlation": fit.correlation},
-        "scenarios": scen_rows,
-        "mode_agreement": agreement,
-        "pairs": pair_rows,
-        "remaining": remaining,
-        "proposals": proposals,
-    }
-    if out_dir is not None:
-        out_dir = Path(out_dir)
-        inputs = {Path(p).resolve() for p in log_paths} | {plan.path.resolve()}
-        out_dir.mkdir(parents=True, exist_ok=True)
-        target = (out_dir / "comparison.json").resolve()
-        if target in inputs:
-            raise ValueError(f"--out: {out_dir} would overwrite an input; choose another directory")
-        say("writing the report")
-        target.write_text(json.dumps(result, indent=2))
-        from planner.compare_report import write_comparison_report
+def _proposal(m, runs: _PlanRuns, pair: dict, s: str, partner: str, cols: list[int], intended: np.ndarray,
+              biased: np.ndarray, bias, sens: np.ndarray, cfg: CompareConfig) -> dict:
+    """The adjusted scenario ``<s>M`` that shows side ``s``'s intended scores again under the bias, if one does."""
+    names, U_plan = runs.pred.names, runs.U
+    k = runs.row_of[s]
+    found = adjust_for_bias(m, U_plan[k], U_plan[runs.row_of[partner]], cols, intended, bias, sens,
+                            dithers=cfg.dithers, p_target=cfg.p_target, seed=cfg.seed * 1000 + k)
+    prop = {"id": f"{s}M", "variant_of": s, "pair": pair["id"],
+            "intended": {names[c]: _f(v) for c, v in zip(cols, intended)},
+            "under_bias": {names[c]: _f(v) for c, v in zip(cols, biased)}}
+    if found is None:
+        prop.update(found=False, note="no move of up to 0.3 (unit cube) along the three most sensitive "
+                                      "parameters restores it; choose a new pair")
+    else:
+        v = np.array(found["u"])
+        c = found["coordinate"]
+        pname = m.parameter_of(c)
+        before = m.space.decode(U_plan[k][None, :])[0][pname]
+        after = m.space.decode(v[None, :])[0][pname]
+        prop.update(found=True, u=found["u"], parameters=jsonable(m.space.decode(v[None, :])[0]),
+                    moved={"parameter": pname, "unit_step": found["unit_step"], "from": json_value(before),
+                           "to": json_value(after)},
+                    predicted_mode_under_bias=found["mode"], p_intended=found["p_intended"],
+                    robust=found["robust"])
+    return prop
 
-        traj = {o.sid: (pred.trajectories[row_of[o.sid]], corr.trajectories[row_of[o.sid]]) for o in obs}
-        write_comparison_report(result, plan, [(o.sid, o.run.track) for o in obs], traj, out_dir)
-    return result
+
+def _remaining(plan: Plan, obs: list[Observation], runs: _PlanRuns) -> list[dict]:
+    """The plan's scenarios not flown yet, in run order, with their modes as planned and under the bias."""
+    pred, corr, row_of = runs.pred, runs.corr, runs.row_of
+    flown = {o.sid for o in obs}
+    return [{"id": sid, "predicted_mode": MODE_NAMES[pred.modes[row_of[sid]]],
+             "corrected_mode": MODE_NAMES[corr.modes[row_of[sid]]],
+             "changed": bool(pred.modes[row_of[sid]] != corr.modes[row_of[sid]])}
+            for sid in plan.data.get("run_order", runs.ids) if sid in row_of and sid not in flown]
+
+
+def _bias_fit(fit, cfg: CompareConfig) -> dict:
+    """How the bias was fitted: units, neutral values, residuals, convergence."""
+    return {"units": dict(BIAS_UNITS), "neutral": dict(NEUTRAL), "fitted": list(cfg.fit),
+            "rms_position_m": fit.rms_position_m, "rms_position_unbiased_m": fit.rms_position_neutral_m,
+            "rms_energy_wh": fit.rms_energy_wh, "segments": fit.segments, "residuals": fit.residuals,
+            "runs": fit.runs, "converged": fit.success, "message": fit.message,
+            "correlation": fit.correlation}
+
+
+def _write(result: dict, plan: Plan, obs: list[Observation], runs: _PlanRuns, out_dir: Path) -> None:
+    """``comparison.json`` and the report (``comparison.html`` and its figures) into ``out_dir``."""
+    out_dir.mkdir(parents=True, exist_ok=True)
+    (out_dir / RESULT_NAME).write_text(json.dumps(result, indent=2))
+    from planner.compare_report import write_comparison_report
+
+    traj = {o.sid: (runs.pred.trajectories[runs.row_of[o.sid]], runs.corr.trajectories[runs.row_of[o.sid]])
+            for o in obs}
+    write_comparison_report(result, plan, [(o.sid, o.run.track) for o in obs], traj, out_dir)
 
 
 def _level_cols(m, level: int) -> list[int]:
@@ -294,11 +363,6 @@ def _obs_mode(obs: list[Observation], sid: str) -> str | None:
     return modes[0] if modes else None
 
 
-def _owner(m, c: int) -> str:
-    return next(p.name for p in m.space.parameters if c in range(m.space.slice_of(p.name).start,
-                                                                 m.space.slice_of(p.name).stop))
-
-
 def _f(v) -> float | None:
     v = float(v)
     return v if np.isfinite(v) else None
@@ -306,15 +370,3 @@ def _f(v) -> float | None:
 
 def _round(d: dict | None, key: str) -> float | None:
     return None if d is None else round(d[key], 3)
-
-
-def _jv(v):
-    if isinstance(v, (np.floating, np.integer)):
-        return v.item()
-    if isinstance(v, tuple):
-        return list(v)
-    return v
-
-
-def _jsonable(values: dict) -> dict:
-    return {k: _jv(v) for k, v in values.items()}

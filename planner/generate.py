@@ -40,6 +40,7 @@ from sim.uuv.metrics import metric_names, metric_types
 from sim.uuv.scoring import MODE_NAMES, modes_from_scores
 
 from planner.exports import write_scenario_files
+from planner.jsonio import jsonable
 from planner.report import write_report
 from planner.search_status import SearchStatus
 
@@ -422,6 +423,36 @@ def generate(mission: Mission, mission_path: Path, out_dir: Path, cfg: GenerateC
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     clock = _StageClock(timings)
+    a, pairs, confirmation = _choose_pairs(mission, cfg, progress, clock)
+    sens = _coordinate_sensitivity(mission, a.sensitivity)
+    U = (np.vstack([np.asarray(p.get("u_override", [a.X[r] for r in p["rows"]])) for p in pairs])
+         if pairs else np.zeros((0, mission.dim)))
+    ids = [f"pair{p}{side}" for p in range(1, len(pairs) + 1) for side in "ab"]
+    partners = U[np.arange(len(U)) ^ 1]  # a's partner is b and b's is a
+    chosen = sim.uuv.simulate(mission, U, trajectories=True)
+    stats, dither_runs = _dither_chosen(mission, cfg, U, ids, chosen, pairs, progress)
+    clock.lap("dithering")
+    fragile = [k for k, st in enumerate(stats) if st.get("p_predicted_mode", 1.0) < cfg.fragile_below]
+    found = robust_variants(mission, U[fragile], partners[fragile], chosen.modes[fragile], sens,
+                            max(cfg.dithers // 10, 20), cfg.dither_sigma, cfg.fragile_below,
+                            cfg.seed + 1, cfg.surrogate) if fragile and cfg.dithers else []
+    clock.lap("variants")
+    scenarios = _scenario_entries(mission, a, U, ids, chosen, stats, out_dir)
+    variants = _variant_entries(mission, ids, fragile, found, chosen, out_dir)
+    plan = _plan_document(mission, mission_path, cfg, a, pairs, confirmation, scenarios, variants)
+    (out_dir / "plan.json").write_text(json.dumps(plan, indent=2))
+    write_report(plan, out_dir, dither_runs)
+    clock.lap("files")
+    return plan
+
+
+def _choose_pairs(mission: Mission, cfg: GenerateConfig, progress: Callable[[str, int, int, str], None] | None,
+                  clock: _StageClock) -> tuple[Analysis, list[dict], tuple[int, int] | None]:
+    """Stages 1-3 (with refinement, and the expert's confirmation on the surrogate workflow).
+
+    Returns the analysis, the chosen pairs, and on the surrogate workflow the number of
+    candidate pairs and the expert runs that checked them (None otherwise).
+    """
     status = SearchStatus(mission.dim) if progress is not None else None
     searched = None if status is None else lambda done, total: progress("search", done, total, status.summary())
     study = search_mission(mission, cfg, searched, on_batch=status)
@@ -436,40 +467,43 @@ def generate(mission: Mission, mission_path: Path, out_dir: Path, cfg: GenerateC
         if progress is not None:
             progress("refine", len(pairs), len(pairs), "")
         clock.lap("refinement")
+    confirmation = None
     if sur is not None:
         candidates = len(pairs)
         pairs, confirm_spent = confirm_with_expert(mission, a, pairs, cfg.pairs)
         if progress is not None:
             progress("confirm", len(pairs), candidates, f"{len(pairs)} of {candidates} candidate pairs confirmed")
         clock.lap("confirmation")
-    sens = _coordinate_sensitivity(mission, a.sensitivity)
-    U = (np.vstack([np.asarray(p.get("u_override", [a.X[r] for r in p["rows"]])) for p in pairs])
-         if pairs else np.zeros((0, mission.dim)))
-    ids = [f"pair{p}{side}" for p in range(1, len(pairs) + 1) for side in "ab"]
-    partners = U[np.arange(len(U)) ^ 1]  # a's partner is b and b's is a
-    chosen = sim.uuv.simulate(mission, U, trajectories=True)
+        confirmation = (candidates, confirm_spent)
+    return a, pairs, confirmation
+
+
+def _dither_chosen(mission: Mission, cfg: GenerateConfig, U: np.ndarray, ids: list[str], chosen: sim.uuv.Result,
+                   pairs: list[dict], progress: Callable[[str, int, int, str], None] | None
+                   ) -> tuple[list[dict], dict[str, tuple[np.ndarray, np.ndarray]]]:
+    """Stage 4 on the chosen scenarios: their dither statistics, and the dithers by scenario for the report."""
     elements = [pair["elements"] for pair in pairs for _ in "ab"]
     stats: list[dict] = [{} for _ in ids]
     dither_runs: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     if cfg.dithers and len(U):
         stats, dU, dmodes = dither_many(mission, U, chosen.modes, elements, cfg.dithers // 2, cfg.dither_sigma,
-                                        cfg.seed, sur)
+                                        cfg.seed, cfg.surrogate)
         dither_runs = {sid: (dU[k], dmodes[k]) for k, sid in enumerate(ids)}
         if progress is not None:
             progress("dither", len(ids), len(ids), "")
-    clock.lap("dithering")
-    fragile = [k for k, st in enumerate(stats) if st.get("p_predicted_mode", 1.0) < cfg.fragile_below]
-    found = robust_variants(mission, U[fragile], partners[fragile], chosen.modes[fragile], sens,
-                            max(cfg.dithers // 10, 20), cfg.dither_sigma, cfg.fragile_below,
-                            cfg.seed + 1, sur) if fragile and cfg.dithers else []
-    clock.lap("variants")
+    return stats, dither_runs
+
+
+def _scenario_entries(mission: Mission, a: Analysis, U: np.ndarray, ids: list[str], chosen: sim.uuv.Result,
+                      stats: list[dict], out_dir: Path) -> list[dict]:
+    """The plan's scenarios (with their predicted root and level-1 scores), their files written."""
     level_cols = set(a.tree.levels[0]) | set(a.tree.levels[min(1, len(a.tree.levels) - 1)])
     scenarios = []
     for k, sid in enumerate(ids):
         mode = int(chosen.modes[k])
         scenarios.append({
             "id": sid, "u": [float(v) for v in U[k]],
-            "parameters": _jsonable(mission.space.decode(U[k][None, :])[0]),
+            "parameters": jsonable(mission.space.decode(U[k][None, :])[0]),
             "predicted": {"mode": MODE_NAMES[mode],
                           "scores": {n: float(chosen.scores[k, c]) for c, n in enumerate(chosen.names)
                                      if c in level_cols}},
@@ -477,25 +511,38 @@ def generate(mission: Mission, mission_path: Path, out_dir: Path, cfg: GenerateC
             "files": {kind: path.name for kind, path in
                       write_scenario_files(mission, U[k], out_dir, sid, chosen.trajectories[k]).items()},
         })
+    return scenarios
+
+
+def _variant_entries(mission: Mission, ids: list[str], fragile: list[int], found: list[dict | None],
+                     chosen: sim.uuv.Result, out_dir: Path) -> list[dict]:
+    """The robust "M" variants found for fragile scenarios, their files written."""
     variants = []
     for k, v in zip(fragile, found):
         if v is None:
             continue
         vid = f"{ids[k]}M"
         variants.append({"id": vid, "variant_of": ids[k], "u": v["u"],
-                         "parameters": _jsonable(mission.space.decode(np.array(v["u"])[None, :])[0]),
-                         "moved": {"parameter": _owner(mission, v["coordinate"]), "unit_step": v["step"]},
+                         "parameters": jsonable(mission.space.decode(np.array(v["u"])[None, :])[0]),
+                         "moved": {"parameter": mission.parameter_of(v["coordinate"]), "unit_step": v["step"]},
                          "predicted": {"mode": MODE_NAMES[int(chosen.modes[k])]},
                          "p_predicted_mode": v["p_predicted_mode"],
                          "files": {kind: path.name for kind, path in
                                    write_scenario_files(mission, np.array(v["u"]), out_dir, vid).items()}})
+    return variants
+
+
+def _plan_document(mission: Mission, mission_path: Path, cfg: GenerateConfig, a: Analysis, pairs: list[dict],
+                   confirmation: tuple[int, int] | None, scenarios: list[dict], variants: list[dict]) -> dict:
+    """What ``plan.json`` holds (schema ``rapt.plan/1``)."""
+    sur = cfg.surrogate
     plan_pairs = [{"id": p, "level": pair["level"], "elements": pair["elements"], "modes": pair["modes"],
                    "distance": pair["distance"], "scenarios": [f"pair{p}a", f"pair{p}b"],
                    "refined": bool(pair.get("refined", False)),
                    **({"confirmed_by_expert": True, "surrogate_modes": pair["surrogate_modes"]} if sur is not None
                       else {})} for p, pair in enumerate(pairs, start=1)]
     modes = a.result.modes
-    plan = {
+    return {
         "schema": PLAN_SCHEMA,
         "mission": {"name": mission.name, "file": str(mission_path), "dim": mission.dim,
                     "parameters": mission.space.names},
@@ -503,20 +550,22 @@ def generate(mission: Mission, mission_path: Path, out_dir: Path, cfg: GenerateC
                   "valid_runs": int(len(a.X)), "invalid_runs": int(len(a.X_invalid)),
                   "modes": {MODE_NAMES[m]: int(c) for m, c in zip(*np.unique(modes, return_counts=True))},
                   "boundary_types": a.boundary_types[:30],
-                  **({"surrogate": {"file": cfg.surrogate_file, "method": str(sur.training.get("method", "")),
-                                    "expert_runs": {"training": int(sur.training.get("runs", 0)),
-                                                    "confirmation": confirm_spent},
-                                    "candidates": candidates, "confirmed": len(pairs)}} if sur is not None else {})},
+                  **({"surrogate": _surrogate_summary(cfg, confirmation, len(pairs))} if sur is not None else {})},
         "sensitivity": a.sensitivity,
         "pairs": plan_pairs,
         "scenarios": scenarios,
         "variants": variants,
         "run_order": [s["id"] for s in scenarios] + [v["id"] for v in variants],
     }
-    (out_dir / "plan.json").write_text(json.dumps(plan, indent=2))
-    write_report(plan, out_dir, dither_runs)
-    clock.lap("files")
-    return plan
+
+
+def _surrogate_summary(cfg: GenerateConfig, confirmation: tuple[int, int], confirmed: int) -> dict:
+    """The plan's account of a surrogate search: its file and method, expert runs, pairs confirmed."""
+    sur = cfg.surrogate
+    candidates, confirm_spent = confirmation
+    return {"file": cfg.surrogate_file, "method": str(sur.training.get("method", "")),
+            "expert_runs": {"training": int(sur.training.get("runs", 0)), "confirmation": confirm_spent},
+            "candidates": candidates, "confirmed": confirmed}
 
 
 class _StageClock:
@@ -541,20 +590,3 @@ def _coordinate_sensitivity(mission: Mission, sensitivity: dict[str, dict[str, f
             sl = mission.space.slice_of(p.name)
             sens[sl] += root[p.name] / max(sl.stop - sl.start, 1)
     return sens
-
-
-def _owner(mission: Mission, coordinate: int) -> str:
-    """The parameter a unit-cube coordinate encodes."""
-    return next(p.name for p in mission.space.parameters
-                if mission.space.slice_of(p.name).start <= coordinate < mission.space.slice_of(p.name).stop)
-
-
-def _jsonable(values: dict) -> dict:
-    out = {}
-    for k, v in values.items():
-        if isinstance(v, (np.floating, np.integer)):
-            v = v.item()
-        elif isinstance(v, tuple):
-            v = list(v)
-        out[k] = v
-    return out

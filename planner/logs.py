@@ -32,12 +32,12 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 from bridge import keys  # noqa: E402
 from bridge.logger import RAW_TOPIC  # noqa: E402
 from sim.uuv.interface import decode_command  # noqa: E402
+from sim.uuv.replay import TrackBuilder  # noqa: E402
 
-__all__ = ["LoggedRun", "read_run", "STEP_FIELDS", "LogError"]
+__all__ = ["LoggedRun", "read_run", "RunLogReader", "STEP_FIELDS", "LogError"]
 
 #: Columns of :attr:`LoggedRun.steps`; the first six are :data:`sim.uuv.replay.TRACK_FIELDS`.
 STEP_FIELDS = ("t", "x", "y", "heading", "energy_hj", "surfaced", "surge", "yaw_rate")
-NEEDED = ("LOCAL_POSITION_NED", "ATTITUDE", "BATTERY_STATUS")
 
 
 class LogError(ValueError):
@@ -71,32 +71,25 @@ class LoggedRun:
         return bool(self.ended)
 
 
-class _Steps:
-    """A step's reports are closed by SYSTEM_TIME; a step repeated for late joiners counts once."""
+class _Steps(TrackBuilder):
+    """The track's steps (closed as :class:`sim.uuv.replay.TrackBuilder` closes them) with the
+    vehicle's surge and yaw rate added, and the front-seat's "run ended" report."""
 
     def __init__(self):
-        self.rows: list[tuple[float, ...]] = []
-        self.tick: dict = {}
-        self.last_ms = -1
+        super().__init__()
         self.ended = ""
 
     def add(self, msg) -> None:
-        kind = msg.get_type()
-        if kind in NEEDED:
-            self.tick[kind] = msg
-        elif kind == "STATUSTEXT":
+        if msg.get_type() == "STATUSTEXT":
             text = msg.text if isinstance(msg.text, str) else bytes(msg.text).decode(errors="replace")
             if text.startswith("run ended:"):
                 self.ended = text.split(":", 1)[1].strip().rstrip("\x00")
-        elif kind == "SYSTEM_TIME":
-            ms = int(msg.time_boot_ms)
-            if ms > self.last_ms and all(k in self.tick for k in NEEDED):
-                lp, att, bat = (self.tick[k] for k in NEEDED)
-                surge = float(np.hypot(np.float32(lp.vx), np.float32(lp.vy)))
-                self.rows.append((ms / 1000.0, float(lp.y), float(lp.x), float(att.yaw), float(bat.energy_consumed),
-                                  1.0 if lp.z <= 0 else 0.0, surge, float(att.yawspeed)))
-                self.last_ms = ms
-            self.tick = {}
+            return
+        super().add(msg)
+
+    def _row(self, ms: int, lp, att, bat) -> tuple[float, ...]:
+        surge = float(np.hypot(np.float32(lp.vx), np.float32(lp.vy)))
+        return super()._row(ms, lp, att, bat) + (surge, float(att.yawspeed))
 
 
 #: MAVLink message ids a run's track needs (everything else on /mavlink/raw is skipped unparsed).
@@ -123,116 +116,170 @@ def _decode_frame(parser, frame: bytes):
 
 def read_run(path: str | Path) -> LoggedRun:
     """Read one run's log (see the module docstring); LogError when nothing comparable is in it."""
-    path = Path(path)
-    if not path.is_file():
-        raise LogError(f"LOG: {path} does not exist")
-    size = path.stat().st_size
-    channels: dict[int, Channel] = {}
-    steps = _Steps()
-    parser = mavlink.MAVLink(None)
-    parser.robust_parsing = True
-    meta: dict = {}
-    commands: dict[str, dict[int, tuple[float, float, float, float]]] = {}
-    status: dict = {}
-    active = keys.DEFAULT_ACTIVE
-    problems: list[str] = []
-    lost_chunks: list[tuple[int, int]] = []
-    footer = False
-    n_messages = 0
-    consumed = 0
+    return RunLogReader(path).read()
 
-    def on_message(msg: Message) -> None:
-        nonlocal active, n_messages
-        ch = channels.get(msg.channel_id)
+
+class RunLogReader:
+    """One pass over a run's log, record by record: a method per record and message kind.
+
+    :meth:`read` streams the file (skipping damaged chunks), then turns what was gathered
+    into a :class:`LoggedRun` with an account of what was lost.  Use :func:`read_run`.
+    """
+
+    def __init__(self, path: str | Path):
+        self.path = Path(path)
+        self.channels: dict[int, Channel] = {}
+        self.steps = _Steps()
+        self.parser = mavlink.MAVLink(None)
+        self.parser.robust_parsing = True
+        self.meta: dict = {}
+        self.commands: dict[str, dict[int, tuple[float, float, float, float]]] = {}
+        self.status: dict = {}
+        self.active = keys.DEFAULT_ACTIVE
+        self.problems: list[str] = []
+        self.lost_chunks: list[tuple[int, int]] = []
+        self.footer = False
+        self.n_messages = 0
+
+    def read(self) -> LoggedRun:
+        """The run in the log; LogError when the file is missing, not MCAP, or has no scenario metadata."""
+        path = self.path
+        if not path.is_file():
+            raise LogError(f"LOG: {path} does not exist")
+        self._stream(path.stat().st_size)
+        if not self.footer:
+            self.problems.insert(0, "no summary or footer: the logger did not finish the file (killed mid-run?)")
+        if self.lost_chunks:
+            t0 = min(a for a, _ in self.lost_chunks) / 1e9
+            t1 = max(b for _, b in self.lost_chunks) / 1e9
+            self.problems.append(f"{len(self.lost_chunks)} damaged chunk(s) skipped (log time {t0:.3f}..{t1:.3f} s)")
+        if not self.meta:
+            raise LogError(f"LOG: {path} has no scenario metadata (meta/scenario); it was not written by "
+                           "rapt-plan run or a logger beside a planned run")
+        rows = np.array(self.steps.rows, dtype=float).reshape(-1, len(STEP_FIELDS))
+        if rows.shape[0] == 0:
+            self.problems.append("no complete telemetry step in the log")
+        source, setpoints = self._setpoints(rows)
+        status = self.status
+        st = status.get(source or keys.DEFAULT_ACTIVE) or (next(iter(status.values())) if status else {})
+        if not self.steps.ended:
+            last = rows[-1, 0] if rows.shape[0] else 0.0
+            self.problems.append(f"the run's end is not in the log (track stops at {last:,.0f} s): no observed mode")
+        return LoggedRun(path, self.meta, rows, setpoints, self.steps.ended,
+                         [bool(v) for v in st.get("wp_aborted", [])], int(st.get("return_reason", 0)), self.footer,
+                         self.problems, self.n_messages)
+
+    # -- the file ----------------------------------------------------------------------
+    def _stream(self, size: int) -> None:
+        """Every readable record, in file order; a damaged chunk is skipped, a damaged tail ends the read."""
+        path, consumed = self.path, 0
+        with open(path, "rb") as f:
+            reader = StreamReader(f, emit_chunks=True, record_size_limit=max(size, 1))
+            try:
+                for rec in reader.records:
+                    consumed = f.tell()
+                    if isinstance(rec, Chunk):
+                        self.on_chunk(rec)
+                    elif isinstance(rec, Footer):
+                        self.footer = True
+                    elif not isinstance(rec, Schema):
+                        self.on_record(rec)
+            except (McapError, EOFError, ValueError, OSError, MemoryError, IndexError, KeyError) as exc:
+                if consumed == 0 and not self.channels:
+                    raise LogError(f"LOG: {path} is not an MCAP file our logger wrote ({type(exc).__name__}: "
+                                   f"{exc}); give the .mcap file of a run") from None
+                self.problems.append(f"the file ends or is damaged after byte {consumed:,} of {size:,}; "
+                                     f"{size - consumed:,} bytes unreadable")
+            except Exception as exc:  # anything else from a damaged record: stop there, keep what was read
+                self.problems.append(f"unreadable record after byte {consumed:,} of {size:,} ({type(exc).__name__})")
+
+    def on_chunk(self, rec: Chunk) -> None:
+        try:
+            inner = breakup_chunk(rec, validate_crc=True)
+        except Exception:  # CRC mismatch, bad compression: skip this chunk, keep going
+            self.lost_chunks.append((rec.message_start_time, rec.message_end_time))
+            return
+        for r in inner:
+            self.on_record(r)
+
+    def on_record(self, rec) -> None:
+        if isinstance(rec, Channel):
+            self.channels[rec.id] = rec
+        elif isinstance(rec, Message):
+            self.on_message(rec)
+        elif isinstance(rec, Metadata) and rec.name == "scenario":
+            self.on_metadata(rec)
+
+    def on_metadata(self, rec: Metadata) -> None:
+        """The scenario metadata record (a fallback for the meta/scenario message)."""
+        for k, v in rec.metadata.items():
+            try:
+                self.meta.setdefault(k, json.loads(v) if k in ("u", "parameters") else v)
+            except ValueError:
+                self.meta.setdefault(k, v)
+
+    # -- messages by kind -----------------------------------------------------------------
+    def on_message(self, msg: Message) -> None:
+        ch = self.channels.get(msg.channel_id)
         if ch is None:
             return
-        n_messages += 1
+        self.n_messages += 1
         if ch.topic == RAW_TOPIC:
-            m = _decode_frame(parser, bytes(msg.data))
-            if m is not None:
-                steps.add(m)
+            self.on_raw(msg)
             return
         try:
             _, kind, name = keys.split(ch.topic)
             obj = json.loads(msg.data)
         except ValueError:
             return
-        if kind == "meta" and name == "scenario" and isinstance(obj, dict):
-            meta.update(obj)
-        elif kind == "command" and isinstance(obj, dict) and obj.get("tick_ms") is not None:
-            commands.setdefault(name, {})[int(obj["tick_ms"])] = (float(obj["vx"]), float(obj["vy"]),
-                                                                  float(obj["vz"]), float(obj["yaw"]))
-        elif kind == "status" and isinstance(obj, dict):
-            status[name] = obj
-        elif kind == "control" and name == "active":
-            active = str(obj.get("value", obj)) if isinstance(obj, dict) else str(obj)
+        handler = {"meta": self.on_meta, "command": self.on_command, "status": self.on_status,
+                   "control": self.on_control}.get(kind)
+        if handler is not None:
+            handler(name, obj)
 
-    def on_record(rec) -> None:
-        if isinstance(rec, Channel):
-            channels[rec.id] = rec
-        elif isinstance(rec, Message):
-            on_message(rec)
-        elif isinstance(rec, Metadata) and rec.name == "scenario":
-            for k, v in rec.metadata.items():
-                try:
-                    meta.setdefault(k, json.loads(v) if k in ("u", "parameters") else v)
-                except ValueError:
-                    meta.setdefault(k, v)
+    def on_raw(self, msg: Message) -> None:
+        """A vehicle MAVLink frame: telemetry of the track and the run's end."""
+        m = _decode_frame(self.parser, bytes(msg.data))
+        if m is not None:
+            self.steps.add(m)
 
-    with open(path, "rb") as f:
-        reader = StreamReader(f, emit_chunks=True, record_size_limit=max(size, 1))
-        try:
-            for rec in reader.records:
-                consumed = f.tell()
-                if isinstance(rec, Chunk):
-                    try:
-                        inner = breakup_chunk(rec, validate_crc=True)
-                    except Exception:  # CRC mismatch, bad compression: skip this chunk, keep going
-                        lost_chunks.append((rec.message_start_time, rec.message_end_time))
-                        continue
-                    for r in inner:
-                        on_record(r)
-                elif isinstance(rec, Footer):
-                    footer = True
-                elif not isinstance(rec, Schema):
-                    on_record(rec)
-        except (McapError, EOFError, ValueError, OSError, MemoryError, IndexError, KeyError) as exc:
-            if consumed == 0 and not channels:
-                raise LogError(f"LOG: {path} is not an MCAP file our logger wrote ({type(exc).__name__}: {exc}); "
-                               "give the .mcap file of a run") from None
-            problems.append(f"the file ends or is damaged after byte {consumed:,} of {size:,}; "
-                            f"{size - consumed:,} bytes unreadable")
-        except Exception as exc:  # anything else from a damaged record: stop there, keep what was read
-            problems.append(f"unreadable record after byte {consumed:,} of {size:,} ({type(exc).__name__})")
-    if not footer:
-        problems.insert(0, "no summary or footer: the logger did not finish the file (killed mid-run?)")
-    if lost_chunks:
-        t0 = min(a for a, _ in lost_chunks) / 1e9
-        t1 = max(b for _, b in lost_chunks) / 1e9
-        problems.append(f"{len(lost_chunks)} damaged chunk(s) skipped (log time {t0:.3f}..{t1:.3f} s)")
-    if not meta:
-        raise LogError(f"LOG: {path} has no scenario metadata (meta/scenario); it was not written by "
-                       "rapt-plan run or a logger beside a planned run")
-    rows = np.array(steps.rows, dtype=float).reshape(-1, len(STEP_FIELDS))
-    if rows.shape[0] == 0:
-        problems.append("no complete telemetry step in the log")
-    source = active if active in commands else (max(commands, key=lambda k: len(commands[k])) if commands else None)
-    setpoints = np.full((rows.shape[0], 3), np.nan)
-    if source is not None and rows.shape[0]:
-        table = commands[source]
-        ticks = np.array(sorted(table))
-        values = np.array([table[k] for k in ticks], dtype=np.float32)
-        step_ms = np.round(rows[:, 0] * 1000).astype(np.int64)
-        # the set-point the front-seat flew after each step: the latest one issued for a tick <= this step
-        idx = np.searchsorted(ticks, step_ms, side="right") - 1
-        ok = idx >= 0
-        h, s, up = decode_command(values[idx[ok], 0], values[idx[ok], 1], values[idx[ok], 2], values[idx[ok], 3])
-        setpoints[ok] = np.column_stack([h, s, up.astype(float)])
-    elif rows.shape[0]:
-        problems.append("no back-seat set-points in the log: the trajectory cannot be replayed for the bias fit")
-    st = status.get(source or keys.DEFAULT_ACTIVE) or (next(iter(status.values())) if status else {})
-    if not steps.ended:
-        last = rows[-1, 0] if rows.shape[0] else 0.0
-        problems.append(f"the run's end is not in the log (track stops at {last:,.0f} s): no observed mode")
-    return LoggedRun(path, meta, rows, setpoints, steps.ended, [bool(v) for v in st.get("wp_aborted", [])],
-                     int(st.get("return_reason", 0)), footer, problems, n_messages)
+    def on_meta(self, name: str, obj) -> None:
+        if name == "scenario" and isinstance(obj, dict):
+            self.meta.update(obj)
+
+    def on_command(self, name: str, obj) -> None:
+        """A back-seat set-point of source ``name``, by the step (tick) it answers."""
+        if isinstance(obj, dict) and obj.get("tick_ms") is not None:
+            self.commands.setdefault(name, {})[int(obj["tick_ms"])] = (float(obj["vx"]), float(obj["vy"]),
+                                                                       float(obj["vz"]), float(obj["yaw"]))
+
+    def on_status(self, name: str, obj) -> None:
+        if isinstance(obj, dict):
+            self.status[name] = obj
+
+    def on_control(self, name: str, obj) -> None:
+        """Which back-seat source the bridge obeys."""
+        if name == "active":
+            self.active = str(obj.get("value", obj)) if isinstance(obj, dict) else str(obj)
+
+    # -- set-points ---------------------------------------------------------------------
+    def _setpoints(self, rows: np.ndarray) -> tuple[str | None, np.ndarray]:
+        """The source flown (the active one, else the one with most set-points) and, per step, the
+        set-point the front-seat flew after it (NaN where none)."""
+        commands, active = self.commands, self.active
+        source = active if active in commands else (max(commands, key=lambda k: len(commands[k])) if commands else None)
+        setpoints = np.full((rows.shape[0], 3), np.nan)
+        if source is not None and rows.shape[0]:
+            table = commands[source]
+            ticks = np.array(sorted(table))
+            values = np.array([table[k] for k in ticks], dtype=np.float32)
+            step_ms = np.round(rows[:, 0] * 1000).astype(np.int64)
+            # the set-point the front-seat flew after each step: the latest one issued for a tick <= this step
+            idx = np.searchsorted(ticks, step_ms, side="right") - 1
+            ok = idx >= 0
+            h, s, up = decode_command(values[idx[ok], 0], values[idx[ok], 1], values[idx[ok], 2], values[idx[ok], 3])
+            setpoints[ok] = np.column_stack([h, s, up.astype(float)])
+        elif rows.shape[0]:
+            self.problems.append("no back-seat set-points in the log: the trajectory cannot be replayed for the "
+                                 "bias fit")
+        return source, setpoints

@@ -27,6 +27,7 @@ from bridge import keys  # noqa: E402
 from bridge.mavlink_bridge import MavlinkBridge  # noqa: E402
 from bridge.session import open_session  # noqa: E402
 from planner.backseat import BackSeat  # noqa: E402
+from planner.jsonio import jsonable  # noqa: E402
 from sim.uuv.frontseat import FrontSeat  # noqa: E402
 from sim.uuv.mission import Mission  # noqa: E402
 from sim.uuv.replay import TrackBuilder, score_track  # noqa: E402
@@ -127,7 +128,7 @@ def run_sil(mission: Mission, u, *, vehicle: str = "uuv1", log_path: str | Path 
         recorder = _Recorder(session, vehicle)
         session.put(keys.meta(vehicle, "scenario"), json.dumps({
             "mission": mission.name, "mission_file": mission_file or mission.source, "scenario_id": scenario_id,
-            "plan_id": plan_id, "u": u.tolist(), "parameters": _jsonable(mission.space.decode(u[None, :])[0]),
+            "plan_id": plan_id, "u": u.tolist(), "parameters": jsonable(mission.space.decode(u[None, :])[0]),
         }))
         backseat = BackSeat(session, vehicle, mission, u).start()
         if surrogate is not None:
@@ -170,14 +171,3 @@ def run_sil(mission: Mission, u, *, vehicle: str = "uuv1", log_path: str | Path 
     scores = score_track(mission, u, track, wp_aborted, reason)
     return SilResult(scores, track, fs.stats.ended, fs.t, wall, fs.stats.ticks, wp_aborted, reason, stats,
                      Path(log_path) if log_path else None)
-
-
-def _jsonable(values: dict) -> dict:
-    out = {}
-    for k, v in values.items():
-        if isinstance(v, (np.floating, np.integer)):
-            v = v.item()
-        elif isinstance(v, tuple):
-            v = list(v)
-        out[k] = v
-    return out

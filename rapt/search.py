@@ -119,6 +119,33 @@ def search(fn: Callable[[np.ndarray], Any], bounds: Any, budget: int, method: st
         raise ValueError("fn: expected a callable mapping an (n, d) array to an (n, m) array")
     space = bounds if isinstance(bounds, StateSpace) else StateSpace.from_bounds(bounds)
     physical = not isinstance(bounds, StateSpace)
+    steer, output_types = _checked_arguments(method, budget, batch_size, seed, chunk_size, n_initial, steer,
+                                             output_types)
+    options = _sampler_options(method, budget, batch_size, n_initial, sampler_options)
+    sampler = make_sampler(method, space.dim, seed=int(seed), output_types=output_types, **options)
+    ex, workers = resolve_executor(executor)
+
+    config = {
+        "schema_version": SCHEMA_VERSION, "method": method, "seed": int(seed), "dim": space.dim,
+        "batch_size": int(batch_size), "space": space.to_config(), "physical": physical,
+        "sampler_options": {k: v for k, v in options.items() if k != "size" and _json_storable(v)},
+        "steer": steer,
+    }
+    db = StudyStore(":memory:" if store is None else store)
+    try:
+        runner = _Runner(fn, space, physical, sampler, db, ex, workers, chunk_size, int(batch_size), on_batch, steer)
+        runner.open(config, output_types)
+        runner.run(int(budget), progress)
+        return runner.study(method, int(seed), None if store is None else str(store))
+    finally:
+        db.close()
+
+
+def _checked_arguments(method: str, budget: Any, batch_size: Any, seed: Any, chunk_size: Any, n_initial: Any,
+                       steer: Sequence[int] | None, output_types: Sequence[str] | None
+                       ) -> tuple[list[int] | None, tuple[str, ...] | None]:
+    """:func:`search`'s arguments checked (ValueError naming the argument); returns ``steer`` and
+    ``output_types`` normalised (a list of ints and a tuple)."""
     if method not in METHODS:
         raise ValueError(f"method: unknown method {method!r}; allowed: {', '.join(METHODS)}")
     for name, value in (("budget", budget), ("batch_size", batch_size)):
@@ -142,31 +169,23 @@ def search(fn: Callable[[np.ndarray], Any], bounds: Any, budget: int, method: st
         if steer is not None and len(output_types) != len(steer):
             raise ValueError(f"output_types: expected one type per steered column ({len(steer)}), "
                              f"got {len(output_types)}")
+    return steer, output_types
+
+
+def _sampler_options(method: str, budget: int, batch_size: int, n_initial: int | None,
+                     sampler_options: dict[str, Any] | None) -> dict[str, Any]:
+    """The sampler's keyword arguments: the caller's, with the space-filling start (adaptive
+    methods) or the design size (``lhs``) filled in."""
     options = dict(sampler_options or {})
     if METHODS[method].adaptive:
         options.setdefault("n_initial", batch_size if n_initial is None else int(n_initial))
     elif method == "lhs":
         options.setdefault("size", int(budget))
-    sampler = make_sampler(method, space.dim, seed=int(seed), output_types=output_types, **options)
-    ex, workers = resolve_executor(executor)
-
-    config = {
-        "schema_version": SCHEMA_VERSION, "method": method, "seed": int(seed), "dim": space.dim,
-        "batch_size": int(batch_size), "space": space.to_config(), "physical": physical,
-        "sampler_options": {k: v for k, v in options.items() if k != "size" and _jsonable(v)},
-        "steer": steer,
-    }
-    db = StudyStore(":memory:" if store is None else store)
-    try:
-        runner = _Runner(fn, space, physical, sampler, db, ex, workers, chunk_size, int(batch_size), on_batch, steer)
-        runner.open(config, output_types)
-        runner.run(int(budget), progress)
-        return runner.study(method, int(seed), None if store is None else str(store))
-    finally:
-        db.close()
+    return options
 
 
-def _jsonable(v: Any) -> bool:
+def _json_storable(v: Any) -> bool:
+    """Whether a sampler option is a plain JSON value, kept in the store's config to recognise the study."""
     return isinstance(v, (int, float, str, bool, type(None), list, tuple, dict))
 
 

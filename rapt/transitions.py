@@ -309,6 +309,32 @@ def transition_graph(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, energy
         the Gabriel graph — a grid search's own neighbours (the original framework, section 5.2),
         which a million-state grid can afford where a Gabriel graph cannot.
     """
+    X, stable, rest, energy, extra, ids = _checked_inputs(X, stable, rest, energy, extra, ids)
+    known = _known_states(X, stable, rest, extra, ids, _gap(X.shape[1], max_edge))
+    # 2-3: Gabriel graph, stable subgraph, components
+    i, j = _graph_edges(known, max_edge, connections, free_dims, rate, continuation_edge)
+    labels, node_sizes = _nodes(known.stable, i, j)
+    # 4: transitions from each unstable evaluated state's nearest stable Gabriel neighbour
+    rest_node = -np.ones(known.n, dtype=int)
+    rest_node[known.rest_idx] = labels[known.n:known.extra0]
+    trans = _transitions(known, labels, rest_node, i, j, energy, free_dims)
+    edges = _cheapest_edges(trans)
+    # where every known state ends up
+    end = labels.copy()
+    end[:known.n] = np.where(stable, labels[:known.n], rest_node)
+    if known.nearest is not None:  # an extra state ends where its label came from, unless it is stable
+        E0 = known.extra0
+        end[E0:] = np.where(known.stable[E0:], labels[E0:], end[:known.n][known.nearest])
+    return TransitionGraph(known.points, known.stable, labels, end, known.n, node_sizes, edges, trans, int(len(i)),
+                           float(max_edge), known.ids)
+
+
+def _checked_inputs(X, stable, rest, energy, extra, ids) -> tuple:
+    """:func:`transition_graph`'s arrays, shaped and checked (ValueError naming the argument).
+
+    Returns ``X``, ``stable``, ``rest``, ``energy``, ``extra`` and the identities as three
+    int arrays (of X, rest, extra), or None without ``ids``.
+    """
     X = np.asarray(X, dtype=float)
     N, d = X.shape if X.ndim == 2 else (-1, -1)
     if N < 0:
@@ -319,21 +345,44 @@ def transition_graph(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, energy
     if stable.shape != (N,) or energy.shape != (N,):
         raise ValueError(f"stable, energy: expected one value per state ({N}), got {stable.shape}, {energy.shape}")
     extra = np.empty((0, d)) if extra is None else np.asarray(extra, dtype=float).reshape(-1, d)
-    gap = _gap(d, max_edge)
     if ids is not None:
         x_id, r_id, e_id = (np.asarray(v, dtype=np.int64).reshape(-1) for v in ids)
         if x_id.shape != (N,) or r_id.shape != (N,) or e_id.shape != (len(extra),):
             raise ValueError(f"ids: expected identities for X ({N}), rest ({N}) and extra ({len(extra)}), "
                              f"got {x_id.shape}, {r_id.shape}, {e_id.shape}")
+        ids = (x_id, r_id, e_id)
+    return X, stable, rest, energy, extra, ids
+
+
+@dataclass
+class _KnownStates:
+    """Step 1's known states ``X^Z``: the evaluated ones, then the settled resting states, then the extra ones."""
+
+    points: np.ndarray
+    ids: np.ndarray | None  # identity of each of ``points`` (None: not known)
+    space: np.ndarray  # ``points`` with the identities set apart (:func:`separate`)
+    stable: np.ndarray  # label of each of ``points``
+    n: int  # evaluated states: ``points[:n]``
+    settled: np.ndarray  # (n,) whether each evaluated state comes to rest
+    rest_idx: np.ndarray  # the evaluated states whose resting states are ``points[n:extra0]``
+    extra0: int  # index of the first extra state
+    nearest: np.ndarray | None  # per extra state, the evaluated state its label comes from
+
+
+def _known_states(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, extra: np.ndarray, ids: tuple | None,
+                  gap: float) -> _KnownStates:
+    """Step 1: every known state and its label; an extra state takes its nearest evaluated state's."""
+    N = len(X)
     settled = np.all(np.isfinite(rest), axis=1)
     rest_idx = np.flatnonzero(settled)
     points = np.concatenate([X, rest[rest_idx], extra])
-    all_ids = None if ids is None else np.concatenate([x_id, r_id[rest_idx], e_id])
+    all_ids = None if ids is None else np.concatenate([ids[0], ids[1][rest_idx], ids[2]])
     space = separate(points, all_ids, gap)
     R0, E0 = N, N + len(rest_idx)
     lab = np.empty(len(points), dtype=bool)
     lab[:N] = stable
     lab[R0:E0] = True
+    nn = None
     if len(extra):
         dist, nn = cKDTree(space[:N]).query(space[E0:], k=1)
         if ids is not None:  # an identity never evaluated: fall back to the nearest state of any identity
@@ -341,7 +390,13 @@ def transition_graph(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, energy
             if lost.any():
                 _, nn[lost] = cKDTree(X).query(extra[lost], k=1)
         lab[E0:] = stable[nn]
-    # 2-3: Gabriel graph, stable subgraph, components
+    return _KnownStates(points, all_ids, space, lab, N, settled, rest_idx, E0, nn)
+
+
+def _graph_edges(known: _KnownStates, max_edge: float, connections: tuple | None, free_dims: int | None,
+                 rate: float, continuation_edge: float | None) -> tuple[np.ndarray, np.ndarray]:
+    """Step 2: the given connections, or the Gabriel graph (plus continuations between identities)."""
+    points, space, lab, E0 = known.points, known.space, known.stable, known.extra0
     if connections is not None:
         i, j = (np.asarray(v, dtype=int).reshape(-1) for v in connections)
         if i.shape != j.shape or (i.size and (min(i.min(), j.min()) < 0 or max(i.max(), j.max()) >= len(points))):
@@ -356,12 +411,18 @@ def transition_graph(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, energy
             both = np.flatnonzero(lab[i] & lab[j])
             apart = ~_empty_balls(cKDTree(space), space, np.column_stack([i[both], j[both]]))
             i, j = np.delete(i, both[apart]), np.delete(j, both[apart])
-    if connections is None and all_ids is not None and free_dims is not None:
-        ci, cj = _continuations(points, all_ids, lab, free_dims,
+    if connections is None and known.ids is not None and free_dims is not None:
+        ci, cj = _continuations(points, known.ids, lab, free_dims,
                                 max_edge / 2 if continuation_edge is None else min(continuation_edge, max_edge), rate)
         i, j = np.concatenate([i, ci]), np.concatenate([j, cj])
+    return i, j
+
+
+def _nodes(lab: np.ndarray, i: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Step 3: the stable subgraph's components, largest first; returns each state's node (-1: unstable)
+    and the nodes' sizes."""
     both = lab[i] & lab[j]
-    n_pts = len(points)
+    n_pts = len(lab)
     adj = coo_matrix((np.ones(both.sum()), (i[both], j[both])), shape=(n_pts, n_pts))
     _, comp = connected_components(adj, directed=False)
     comp = np.where(lab, comp, -1)
@@ -370,7 +431,14 @@ def transition_graph(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, energy
     relabel = -np.ones(comp.max() + 2 if comp.size else 1, dtype=int)
     relabel[uniq[order]] = np.arange(len(uniq))
     labels = np.where(comp >= 0, relabel[np.maximum(comp, 0)], -1)
-    # 4: transitions from each unstable evaluated state's nearest stable Gabriel neighbour
+    return labels, counts[order]
+
+
+def _transitions(known: _KnownStates, labels: np.ndarray, rest_node: np.ndarray, i: np.ndarray, j: np.ndarray,
+                 energy: np.ndarray, free_dims: int | None) -> dict:
+    """Step 4: one transition per unstable evaluated state that comes to rest, from the node of its nearest
+    stable neighbour (its boundary pair) to its resting state's node, where the two nodes differ."""
+    points, lab, N = known.points, known.stable, known.n
     cols = slice(None) if free_dims is None else slice(0, free_dims)  # section 5.3: pair length in joint space
     length = np.linalg.norm(points[i, cols] - points[j, cols], axis=1)
     a = np.concatenate([i, j])
@@ -382,22 +450,17 @@ def transition_graph(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, energy
     a, b, ln = a[o], b[o], ln[o]
     first = np.r_[True, a[1:] != a[:-1]] if a.size else np.empty(0, dtype=bool)
     u, nb, pair_len = a[first], b[first], ln[first]
-    rest_node = -np.ones(N, dtype=int)
-    rest_node[rest_idx] = labels[R0:E0]
-    keep = settled[u]
+    keep = known.settled[u]
     u, nb, pair_len = u[keep], nb[keep], pair_len[keep]
     src, dst = labels[nb], rest_node[u]
     ok = (src >= 0) & (dst >= 0) & (src != dst)
-    trans = {"src": src[ok], "dst": dst[ok], "energy": energy[u[ok]], "witness": u[ok], "partner": nb[ok],
-             "length": pair_len[ok]}
+    return {"src": src[ok], "dst": dst[ok], "energy": energy[u[ok]], "witness": u[ok], "partner": nb[ok],
+            "length": pair_len[ok]}
+
+
+def _cheapest_edges(trans: dict) -> dict:
+    """Of the transitions between the same two nodes, the lowest-energy one."""
     o = np.lexsort((trans["energy"], trans["dst"], trans["src"]))
     t = {k: v[o] for k, v in trans.items()}
     firstpair = np.r_[True, (t["src"][1:] != t["src"][:-1]) | (t["dst"][1:] != t["dst"][:-1])] if len(o) else np.empty(0, bool)
-    edges = {k: v[firstpair] for k, v in t.items()}
-    # where every known state ends up
-    end = labels.copy()
-    end[:N] = np.where(stable, labels[:N], rest_node)
-    if len(extra):
-        end[E0:] = np.where(lab[E0:], labels[E0:], end[:N][nn])
-    return TransitionGraph(points, lab, labels, end, N, counts[order], edges, trans, int(len(i)), float(max_edge),
-                           all_ids)
+    return {k: v[firstpair] for k, v in t.items()}

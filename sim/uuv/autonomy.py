@@ -211,21 +211,35 @@ class Autonomy:
     # -- one decision ------------------------------------------------------------------
     def step(self, obs: Observation, dt: float, active: np.ndarray | None = None) -> Command:
         """Decide for every vehicle; ``active`` masks vehicles whose run has ended."""
-        scen, spec = self.scen, self.spec
-        n = scen.n
+        n = self.scen.n
         active = np.ones(n, dtype=bool) if active is None else active
         kind, gx, gy = self._select_goal(obs, active)
-        A = self.n_areas
-
-        # progress on loiter objectives (what the vehicle believes)
         area = self._current_area()
-        in_area = np.zeros(n, dtype=bool)
-        if A:
+        in_area = self._survey(obs, dt, kind, area, active)
+        in_tx, sending = self._transmit(obs, dt, kind, active)
+        self._arrive(obs, kind, gx, gy, active)
+        self._give_up_when_stuck(obs, dt, kind, gx, gy, area, in_area | in_tx, active)
+        fx, fy = self._potential_field(obs, gx, gy)
+        return self._command(obs, fx, fy, kind, in_area, in_tx, sending)
+
+    # -- behaviours ----------------------------------------------------------------------
+    def _survey(self, obs: Observation, dt: float, kind: np.ndarray, area: np.ndarray, active: np.ndarray
+                ) -> np.ndarray:
+        """Loiter progress in the current mission area (what the vehicle believes); returns who is in it."""
+        scen = self.scen
+        in_area = np.zeros(scen.n, dtype=bool)
+        if self.n_areas:
             rect = scen.area_rect[self._rows, area]
             in_area = inside_rect(obs.x, obs.y, rect[:, None, :])[:, 0] & (kind == GOAL_SURVEY) & active
             self.dwell[self._rows[in_area], area[in_area]] += dt
             done = in_area & (self.dwell[self._rows, area] >= scen.area_dwell[self._rows, area])
             self.area_k[done] += 1
+        return in_area
+
+    def _transmit(self, obs: Observation, dt: float, kind: np.ndarray, active: np.ndarray
+                  ) -> tuple[np.ndarray, np.ndarray]:
+        """Transmission progress: who is in the area, and who is sending (in it while the window is open)."""
+        scen, n = self.scen, self.scen.n
         in_tx = np.zeros(n, dtype=bool)
         if self.has_tx:
             in_tx = inside_rect(obs.x, obs.y, scen.tx_rect[:, None, :])[:, 0] & (kind == GOAL_TRANSMIT) & active
@@ -235,13 +249,18 @@ class Autonomy:
             self.tx_done |= self.tx_time >= self.mission.transmission.duration_s
         else:
             sending = np.zeros(n, dtype=bool)
-        # waypoint arrival
+        return in_tx, sending
+
+    def _arrive(self, obs: Observation, kind: np.ndarray, gx: np.ndarray, gy: np.ndarray, active: np.ndarray) -> None:
+        """Waypoint arrival: the next waypoint becomes the goal."""
         if self.n_waypoints:
-            w = np.minimum(self.wp, self.n_waypoints - 1)
             arrived = (kind == GOAL_WAYPOINT) & (np.hypot(gx - obs.x, gy - obs.y) <= self.mission.waypoint_radius)
             self.wp[arrived & active] += 1
 
-        # stuck detection: abandon the goal (never the way home)
+    def _give_up_when_stuck(self, obs: Observation, dt: float, kind: np.ndarray, gx: np.ndarray, gy: np.ndarray,
+                            area: np.ndarray, loitering: np.ndarray, active: np.ndarray) -> None:
+        """Stuck detection: abandon a goal (never the way home) not approached by PROGRESS_M in stuck_s."""
+        A = self.n_areas
         dist = np.hypot(gx - obs.x, gy - obs.y)
         goal_id = kind * 1000 + np.where(kind == GOAL_WAYPOINT, self.wp, np.where(kind == GOAL_SURVEY, area, 0))
         changed = goal_id != self.last_goal
@@ -250,7 +269,6 @@ class Autonomy:
         self.since_progress = np.where(changed, 0.0, self.since_progress)
         progressed = dist < self.best_dist - PROGRESS_M
         self.best_dist = np.where(progressed, dist, self.best_dist)
-        loitering = in_area | in_tx
         self.since_progress = np.where(progressed | loitering, 0.0, self.since_progress + dt)
         stuck = active & (self.since_progress >= self.stuck_s) & (kind != GOAL_RETURN)
         if np.any(stuck):
@@ -264,11 +282,24 @@ class Autonomy:
             self.tx_aborted |= stuck & (kind == GOAL_TRANSMIT)
             self.since_progress[stuck] = 0.0
 
-        # potential field over ground
+    # -- potential field over ground -------------------------------------------------------
+    def _potential_field(self, obs: Observation, gx: np.ndarray, gy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Attraction to the goal plus the pushes of sonar contacts, no-go areas and the operational area's edge."""
         ax, ay = gx - obs.x, gy - obs.y
         norm = np.maximum(np.hypot(ax, ay), 1e-9)
         ax, ay = ax / norm, ay / norm
         fx, fy = ax.copy(), ay.copy()
+        self._avoid_contacts(obs, ax, ay, fx, fy)
+        self._avoid_nogo(obs, gx, gy, fx, fy)
+        # keep off the edge of the operational area (known): push inwards within OP_MARGIN_M
+        x0, x1, y0, y1 = self._op_bounds
+        fx += NOGO_GAIN * (np.clip(1 - (obs.x - x0) / OP_MARGIN_M, 0, 1) - np.clip(1 - (x1 - obs.x) / OP_MARGIN_M, 0, 1))
+        fy += NOGO_GAIN * (np.clip(1 - (obs.y - y0) / OP_MARGIN_M, 0, 1) - np.clip(1 - (y1 - obs.y) / OP_MARGIN_M, 0, 1))
+        return fx, fy
+
+    def _avoid_contacts(self, obs: Observation, ax: np.ndarray, ay: np.ndarray, fx: np.ndarray, fy: np.ndarray
+                        ) -> None:
+        """Add (in place) the push of remembered sonar contacts to ``fx``, ``fy``; ``ax``, ``ay`` point to the goal."""
         if obs.contact_x.shape[1]:  # remember where each obstacle was last seen
             if self.mem_t is None or self.mem_t.shape != obs.contact_x.shape:
                 self.mem_x, self.mem_y = obs.contact_x.copy(), obs.contact_y.copy()
@@ -282,7 +313,7 @@ class Autonomy:
         else:
             rows = np.empty(0, dtype=np.int64)
         if rows.size:  # only vehicles with a (remembered) sonar contact
-            d0 = spec.sonar_range_m
+            d0 = self.spec.sonar_range_m
             dx = obs.x[rows, None] - self.mem_x[rows]
             dy = obs.y[rows, None] - self.mem_y[rows]
             r = np.maximum(np.hypot(dx, dy), 1.0)
@@ -297,8 +328,12 @@ class Autonomy:
             side = np.where(side == 0, 1.0, side)
             fx[rows] += px - SLIDE_GAIN * side * ly
             fy[rows] += py + SLIDE_GAIN * side * lx
+
+    def _avoid_nogo(self, obs: Observation, gx: np.ndarray, gy: np.ndarray, fx: np.ndarray, fy: np.ndarray) -> None:
+        """Add (in place) the push of known no-go areas near a vehicle, unless its battery is critical."""
+        scen = self.scen
         if scen.nogo.shape[1]:
-            obey = obs.battery > spec.critical_battery  # critical battery overrides no-go avoidance
+            obey = obs.battery > self.spec.critical_battery  # critical battery overrides no-go avoidance
             d = obs.nogo_distance if obs.nogo_distance is not None else rect_signed_distance(obs.x, obs.y, scen.nogo)
             rows = np.flatnonzero(np.any(d < NOGO_INFLUENCE_M, axis=1) & obey)  # only those near an area
             if rows.size:
@@ -307,11 +342,12 @@ class Autonomy:
                 fx[rows] += fx_n
                 fy[rows] += fy_n
 
-        # keep off the edge of the operational area (known): push inwards within OP_MARGIN_M
-        x0, x1, y0, y1 = self._op_bounds
-        fx += NOGO_GAIN * (np.clip(1 - (obs.x - x0) / OP_MARGIN_M, 0, 1) - np.clip(1 - (x1 - obs.x) / OP_MARGIN_M, 0, 1))
-        fy += NOGO_GAIN * (np.clip(1 - (obs.y - y0) / OP_MARGIN_M, 0, 1) - np.clip(1 - (y1 - obs.y) / OP_MARGIN_M, 0, 1))
-
+    # -- the command -------------------------------------------------------------------------
+    def _command(self, obs: Observation, fx: np.ndarray, fy: np.ndarray, kind: np.ndarray, in_area: np.ndarray,
+                 in_tx: np.ndarray, sending: np.ndarray) -> Command:
+        """Heading and speed through water along the field (crabbing against the predicted current); loiter
+        slowly in an area or at home, and surface to send or to be picked up."""
+        spec = self.spec
         course = np.arctan2(fx, fy)
         # home: surface at the recovery point and wait to be picked up
         rx, ry = self.mission.recovery
@@ -321,7 +357,7 @@ class Autonomy:
         # crabbing: through-water velocity = desired ground velocity - predicted current
         ce, cn = obs.current_e, obs.current_n
         if ce is None:
-            ce, cn = tidal_current(self.mission.current, scen.start_time + obs.t)
+            ce, cn = tidal_current(self.mission.current, self.scen.start_time + obs.t)
         we = speed * np.sin(course) - ce
         wn = speed * np.cos(course) - cn
         heading = np.arctan2(we, wn)

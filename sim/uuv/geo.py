@@ -26,17 +26,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from sim.uuv.angles import wrap_degrees
 __all__ = ["LocalFrame", "to_degE7", "from_degE7", "WGS84_A", "WGS84_F"]
 
 #: WGS84 semi-major axis (m) and flattening.
 WGS84_A = 6_378_137.0
 WGS84_F = 1.0 / 298.257223563
 _E2 = WGS84_F * (2.0 - WGS84_F)  # first eccentricity squared
-
-
-def _wrap_deg(d: np.ndarray) -> np.ndarray:
-    """Angles in degrees wrapped to [-180, 180)."""
-    return (d + 180.0) % 360.0 - 180.0
 
 
 def _out(a: np.ndarray, scalar: bool):
@@ -63,7 +59,7 @@ class LocalFrame:
         if not (math.isfinite(lon) and -180.0 <= lon <= 180.0):
             raise ValueError(f"origin_lon: expected degrees in [-180, 180], got {self.origin_lon!r}")
         object.__setattr__(self, "origin_lat", lat)
-        object.__setattr__(self, "origin_lon", float(_wrap_deg(np.float64(lon))))
+        object.__setattr__(self, "origin_lon", float(wrap_degrees(np.float64(lon))))
         phi = math.radians(lat)
         w = 1.0 - _E2 * math.sin(phi) ** 2
         object.__setattr__(self, "prime_vertical_radius", WGS84_A / math.sqrt(w))
@@ -93,7 +89,7 @@ class LocalFrame:
         lon_a = np.asarray(lon, dtype=float)
         if np.any(np.abs(lat_a) > 90.0):
             raise ValueError("lat: latitudes must lie in [-90, 90] degrees")
-        dlam = np.radians(_wrap_deg(lon_a - self.origin_lon))
+        dlam = np.radians(wrap_degrees(lon_a - self.origin_lon))
         x, y = self._enu(np.radians(lat_a), dlam)
         return _out(x, scalar), _out(y, scalar)
 
@@ -114,7 +110,7 @@ class LocalFrame:
             if np.all(np.abs(rx) < 1e-8) and np.all(np.abs(ry) < 1e-8):
                 break
         lat = np.degrees(phi)
-        lon = _wrap_deg(self.origin_lon + np.degrees(dlam))
+        lon = wrap_degrees(self.origin_lon + np.degrees(dlam))
         return _out(lat, scalar), _out(lon, scalar)
 
 

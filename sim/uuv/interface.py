@@ -18,6 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from sim.uuv.angles import wrap_angle
 __all__ = ["report_position", "report_heading", "energy_consumed_hj", "battery_fraction", "encode_command",
            "decode_command", "DEPTH_M", "HJ_PER_WH"]
 
@@ -37,7 +38,7 @@ def report_position(v: np.ndarray) -> np.ndarray:
 
 def report_heading(heading: np.ndarray) -> np.ndarray:
     """A compass heading (radians) as ATTITUDE.yaw reports it: float32 in (-pi, pi]."""
-    h = np.pi - np.mod(np.pi - np.asarray(heading, dtype=float), 2.0 * np.pi)
+    h = wrap_angle(np.asarray(heading, dtype=float))
     return h.astype(np.float32).astype(np.float64)
 
 

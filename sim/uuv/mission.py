@@ -183,3 +183,8 @@ class Mission:
     def dim(self) -> int:
         """Width of the unit cube a study samples (a permutation takes one key per item)."""
         return self.space.dim
+
+    def parameter_of(self, coordinate: int) -> str:
+        """The name of the parameter that unit-cube ``coordinate`` encodes."""
+        return next(p.name for p in self.space.parameters
+                    if self.space.slice_of(p.name).start <= coordinate < self.space.slice_of(p.name).stop)

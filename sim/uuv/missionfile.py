@@ -261,128 +261,25 @@ class _Loader:
         return self.build(data)
 
     def build(self, data: dict) -> Mission:
+        """The mission in the parsed file, section by section in the order problems are reported."""
         self.element_owner: dict[str, str] = {}
-        for key in data:
-            if key not in _SECTIONS:
-                hint = difflib.get_close_matches(key, _SECTIONS, n=1)
-                did = f" (did you mean '{hint[0]}'?)" if hint else ""
-                self.fail(key, f"unknown section{did}; allowed sections: {_names(_SECTIONS)}")
-        for key in _REQUIRED_SECTIONS:
-            if key not in data:
-                header = f"[[{key}]]" if key in _ARRAY_SECTIONS else f"[{key}]"
-                self.fail(key, f"missing required section; add {header} to the file")
-        for key in _SECTIONS:
-            if key in data and key not in _ARRAY_SECTIONS:
-                self.table(data[key], key, f"[{key}]")
-
+        self.check_sections(data)
         # operational area first: every position is checked against it
-        op = data["operational_area"]
-        self.keys(op, "operational_area", ("x", "y", "width", "height"))
-        self.op = Rect("operational_area", self.number(op, "x", "operational_area"), self.number(op, "y", "operational_area"),
-                       self.number(op, "width", "operational_area", positive=True),
-                       self.number(op, "height", "operational_area", positive=True))
-
+        self.op = self.operational_area_section(data["operational_area"])
         m = data["mission"]
-        self.keys(m, "mission", ("name", "origin", "start_time_s", "time_limit_s"),
-                  ("waypoint_radius_m", "dt_s", "priority", "requires"))
-        name = self.string(m, "name", "mission")
-        origin = self.table(m["origin"], "mission.origin", "origin = { lat = ..., lon = ... }")
-        self.keys(origin, "mission.origin", ("lat", "lon"))
-        lat = self.number(origin, "lat", "mission.origin", low=-89.9, high=89.9)
-        lon = self.number(origin, "lon", "mission.origin", low=-180.0, high=180.0)
-        start_time = self.number(m, "start_time_s", "mission", low=0.0, high=86400.0)
-        time_limit = self.number(m, "time_limit_s", "mission", positive=True)
-        wp_radius = self.number(m, "waypoint_radius_m", "mission", 25.0, positive=True)
-        dt = self.number(m, "dt_s", "mission", 2.0, positive=True)
-        if dt > time_limit:
-            self.fail("mission.dt_s", f"step {_fmt(dt)} s exceeds time_limit_s {_fmt(time_limit)} s; use a smaller step")
-
-        launch_t = data["launch"]
-        self.keys(launch_t, "launch", ("x", "y"))
-        launch = self.xy(launch_t, "launch")
-        rec_t = data["recovery"]
-        self.keys(rec_t, "recovery", ("x", "y"), ("radius_m",))
-        recovery = self.xy(rec_t, "recovery")
-        rec_radius = self.number(rec_t, "radius_m", "recovery", 15.0, positive=True)
-
-        waypoints = []
-        for i, w in enumerate(self.array(data, "waypoints")):
-            where = f"waypoints[{i}]"
-            self.keys(w, where, ("x", "y"))
-            waypoints.append(self.xy(w, where))
-
-        areas = []
-        for i, a in enumerate(self.array(data, "mission_areas")):
-            where = f"mission_areas[{i}]"
-            self.keys(a, where, ("name", "x", "y", "dwell_s"), ("width", "height"))
-            nm = self.element_name(a, where)
-            x, y = self.xy(a, where)
-            areas.append(MissionArea(nm, x, y, self.number(a, "width", where, 500.0, positive=True),
-                                     self.number(a, "height", where, 500.0, positive=True),
-                                     self.number(a, "dwell_s", where, low=0.0)))
+        name, lat, lon, start_time, time_limit, wp_radius, dt = self.mission_section(m)
+        launch = self.launch_section(data["launch"])
+        recovery, rec_radius = self.recovery_section(data["recovery"])
+        waypoints = self.waypoints_section(data)
+        areas = self.mission_areas_section(data)
         area_names = [a.name for a in areas]
-
-        transmission = None
-        if "transmission" in data:
-            t = data["transmission"]
-            where = "transmission"
-            self.keys(t, where, ("x", "y"), ("name", "width", "height", "window_start_s", "window_length_s", "duration_s"))
-            nm = self.element_name(t, where, "transmission")
-            x, y = self.xy(t, where)
-            d = Transmission("transmission", 0.0, 0.0)
-            transmission = Transmission(nm, x, y, self.number(t, "width", where, d.width, positive=True),
-                                        self.number(t, "height", where, d.height, positive=True),
-                                        self.number(t, "window_start_s", where, d.window_start_s, low=0.0),
-                                        self.number(t, "window_length_s", where, d.window_length_s, positive=True),
-                                        self.number(t, "duration_s", where, d.duration_s, low=0.0))
-
-        def rects(section: str, width: float, height: float) -> tuple[Rect, ...]:
-            out = []
-            for i, r in enumerate(self.array(data, section)):
-                where = f"{section}[{i}]"
-                self.keys(r, where, ("name", "x", "y"), ("width", "height"))
-                nm = self.element_name(r, where)
-                x, y = self.xy(r, where)
-                out.append(Rect(nm, x, y, self.number(r, "width", where, width, positive=True),
-                                self.number(r, "height", where, height, positive=True)))
-            return tuple(out)
-
-        nogo = rects("nogo", 400.0, 500.0)
-        barriers = rects("barriers", 40.0, 700.0)
-        obstacles = []
-        for i, o in enumerate(self.array(data, "obstacles")):
-            where = f"obstacles[{i}]"
-            self.keys(o, where, ("name", "x", "y"), ("side",))
-            nm = self.element_name(o, where)
-            x, y = self.xy(o, where)
-            obstacles.append(Triangle(nm, x, y, self.number(o, "side", where, 50.0, positive=True)))
-
+        transmission = self.transmission_section(data)
+        nogo = self.rects_section(data, "nogo", 400.0, 500.0)
+        barriers = self.rects_section(data, "barriers", 40.0, 700.0)
+        obstacles = self.obstacles_section(data)
         # mission priority and requirements (need the areas and the transmission)
-        if "priority" in m:
-            priority = self.string_list(m["priority"], "mission.priority")
-            if sorted(priority) != sorted(area_names) or len(set(priority)) != len(priority):
-                self.fail("mission.priority", f"{priority!r} is not an ordering of the mission areas; "
-                                              f"list each of {_names(area_names)} exactly once")
-        else:
-            priority = list(area_names)
-        if "requires" in m:
-            requires = self.string_list(m["requires"], "mission.requires")
-            for r in requires:
-                if r not in _REQUIRES:
-                    self.fail("mission.requires", f"unknown objective {r!r}; allowed: {_names(_REQUIRES)}")
-            if len(set(requires)) != len(requires):
-                self.fail("mission.requires", f"{requires!r} lists an objective twice; list each once")
-            present = {"waypoints": bool(waypoints), "mission_areas": bool(areas),
-                       "transmission": transmission is not None, "mission_time": True}
-            header = {"waypoints": "[[waypoints]]", "mission_areas": "[[mission_areas]]", "transmission": "[transmission]"}
-            for r in requires:
-                if not present[r]:
-                    self.fail("mission.requires", f"requires {r!r} but the mission has no {r.replace('_', ' ')}; "
-                                                  f"add {header[r]} or drop {r!r} from requires")
-        else:
-            requires = [r for r in ("mission_areas", "transmission", "mission_time")
-                        if r == "mission_time" or (r == "mission_areas" and areas)
-                        or (r == "transmission" and transmission is not None)]
+        priority = self.priority(m, area_names)
+        requires = self.requires(m, waypoints, areas, transmission)
 
         vehicle = self.overrides(data.get("vehicle", {}), "vehicle", Vehicle)
         current = self.overrides(data.get("current", {}), "current", Current)
@@ -402,6 +299,144 @@ class _Loader:
         )
         tree = self.score_tree(data["score_tree"], mission)
         return dataclasses.replace(mission, score_tree=tree)
+
+    # ------------------------------------------------------------------ sections
+    def check_sections(self, data: dict) -> None:
+        """No unknown section, every required one, and a table where a table belongs."""
+        for key in data:
+            if key not in _SECTIONS:
+                hint = difflib.get_close_matches(key, _SECTIONS, n=1)
+                did = f" (did you mean '{hint[0]}'?)" if hint else ""
+                self.fail(key, f"unknown section{did}; allowed sections: {_names(_SECTIONS)}")
+        for key in _REQUIRED_SECTIONS:
+            if key not in data:
+                header = f"[[{key}]]" if key in _ARRAY_SECTIONS else f"[{key}]"
+                self.fail(key, f"missing required section; add {header} to the file")
+        for key in _SECTIONS:
+            if key in data and key not in _ARRAY_SECTIONS:
+                self.table(data[key], key, f"[{key}]")
+
+    def operational_area_section(self, op: Mapping) -> Rect:
+        self.keys(op, "operational_area", ("x", "y", "width", "height"))
+        return Rect("operational_area", self.number(op, "x", "operational_area"), self.number(op, "y", "operational_area"),
+                    self.number(op, "width", "operational_area", positive=True),
+                    self.number(op, "height", "operational_area", positive=True))
+
+    def mission_section(self, m: Mapping) -> tuple[str, float, float, float, float, float, float]:
+        """[mission]'s name, origin (lat, lon), start time, time limit, waypoint radius and step."""
+        self.keys(m, "mission", ("name", "origin", "start_time_s", "time_limit_s"),
+                  ("waypoint_radius_m", "dt_s", "priority", "requires"))
+        name = self.string(m, "name", "mission")
+        origin = self.table(m["origin"], "mission.origin", "origin = { lat = ..., lon = ... }")
+        self.keys(origin, "mission.origin", ("lat", "lon"))
+        lat = self.number(origin, "lat", "mission.origin", low=-89.9, high=89.9)
+        lon = self.number(origin, "lon", "mission.origin", low=-180.0, high=180.0)
+        start_time = self.number(m, "start_time_s", "mission", low=0.0, high=86400.0)
+        time_limit = self.number(m, "time_limit_s", "mission", positive=True)
+        wp_radius = self.number(m, "waypoint_radius_m", "mission", 25.0, positive=True)
+        dt = self.number(m, "dt_s", "mission", 2.0, positive=True)
+        if dt > time_limit:
+            self.fail("mission.dt_s", f"step {_fmt(dt)} s exceeds time_limit_s {_fmt(time_limit)} s; use a smaller step")
+        return name, lat, lon, start_time, time_limit, wp_radius, dt
+
+    def launch_section(self, launch_t: Mapping) -> tuple[float, float]:
+        self.keys(launch_t, "launch", ("x", "y"))
+        return self.xy(launch_t, "launch")
+
+    def recovery_section(self, rec_t: Mapping) -> tuple[tuple[float, float], float]:
+        """The recovery point and its radius."""
+        self.keys(rec_t, "recovery", ("x", "y"), ("radius_m",))
+        recovery = self.xy(rec_t, "recovery")
+        return recovery, self.number(rec_t, "radius_m", "recovery", 15.0, positive=True)
+
+    def waypoints_section(self, data: Mapping) -> list[tuple[float, float]]:
+        waypoints = []
+        for i, w in enumerate(self.array(data, "waypoints")):
+            where = f"waypoints[{i}]"
+            self.keys(w, where, ("x", "y"))
+            waypoints.append(self.xy(w, where))
+        return waypoints
+
+    def mission_areas_section(self, data: Mapping) -> list[MissionArea]:
+        areas = []
+        for i, a in enumerate(self.array(data, "mission_areas")):
+            where = f"mission_areas[{i}]"
+            self.keys(a, where, ("name", "x", "y", "dwell_s"), ("width", "height"))
+            nm = self.element_name(a, where)
+            x, y = self.xy(a, where)
+            areas.append(MissionArea(nm, x, y, self.number(a, "width", where, 500.0, positive=True),
+                                     self.number(a, "height", where, 500.0, positive=True),
+                                     self.number(a, "dwell_s", where, low=0.0)))
+        return areas
+
+    def transmission_section(self, data: Mapping) -> Transmission | None:
+        """The optional [transmission] area (None when the file has none)."""
+        if "transmission" not in data:
+            return None
+        t = data["transmission"]
+        where = "transmission"
+        self.keys(t, where, ("x", "y"), ("name", "width", "height", "window_start_s", "window_length_s", "duration_s"))
+        nm = self.element_name(t, where, "transmission")
+        x, y = self.xy(t, where)
+        d = Transmission("transmission", 0.0, 0.0)
+        return Transmission(nm, x, y, self.number(t, "width", where, d.width, positive=True),
+                            self.number(t, "height", where, d.height, positive=True),
+                            self.number(t, "window_start_s", where, d.window_start_s, low=0.0),
+                            self.number(t, "window_length_s", where, d.window_length_s, positive=True),
+                            self.number(t, "duration_s", where, d.duration_s, low=0.0))
+
+    def rects_section(self, data: Mapping, section: str, width: float, height: float) -> tuple[Rect, ...]:
+        """[[nogo]] or [[barriers]]: named rectangles with default sizes."""
+        out = []
+        for i, r in enumerate(self.array(data, section)):
+            where = f"{section}[{i}]"
+            self.keys(r, where, ("name", "x", "y"), ("width", "height"))
+            nm = self.element_name(r, where)
+            x, y = self.xy(r, where)
+            out.append(Rect(nm, x, y, self.number(r, "width", where, width, positive=True),
+                            self.number(r, "height", where, height, positive=True)))
+        return tuple(out)
+
+    def obstacles_section(self, data: Mapping) -> list[Triangle]:
+        obstacles = []
+        for i, o in enumerate(self.array(data, "obstacles")):
+            where = f"obstacles[{i}]"
+            self.keys(o, where, ("name", "x", "y"), ("side",))
+            nm = self.element_name(o, where)
+            x, y = self.xy(o, where)
+            obstacles.append(Triangle(nm, x, y, self.number(o, "side", where, 50.0, positive=True)))
+        return obstacles
+
+    def priority(self, m: Mapping, area_names: list[str]) -> list[str]:
+        """mission.priority: an ordering of the mission areas (default: file order)."""
+        if "priority" not in m:
+            return list(area_names)
+        priority = self.string_list(m["priority"], "mission.priority")
+        if sorted(priority) != sorted(area_names) or len(set(priority)) != len(priority):
+            self.fail("mission.priority", f"{priority!r} is not an ordering of the mission areas; "
+                                          f"list each of {_names(area_names)} exactly once")
+        return priority
+
+    def requires(self, m: Mapping, waypoints: list, areas: list, transmission: Transmission | None) -> list[str]:
+        """mission.requires: objectives the mission has (default: areas, transmission, time, where present)."""
+        if "requires" not in m:
+            return [r for r in ("mission_areas", "transmission", "mission_time")
+                    if r == "mission_time" or (r == "mission_areas" and areas)
+                    or (r == "transmission" and transmission is not None)]
+        requires = self.string_list(m["requires"], "mission.requires")
+        for r in requires:
+            if r not in _REQUIRES:
+                self.fail("mission.requires", f"unknown objective {r!r}; allowed: {_names(_REQUIRES)}")
+        if len(set(requires)) != len(requires):
+            self.fail("mission.requires", f"{requires!r} lists an objective twice; list each once")
+        present = {"waypoints": bool(waypoints), "mission_areas": bool(areas),
+                   "transmission": transmission is not None, "mission_time": True}
+        header = {"waypoints": "[[waypoints]]", "mission_areas": "[[mission_areas]]", "transmission": "[transmission]"}
+        for r in requires:
+            if not present[r]:
+                self.fail("mission.requires", f"requires {r!r} but the mission has no {r.replace('_', ' ')}; "
+                                              f"add {header[r]} or drop {r!r} from requires")
+        return requires
 
     # ------------------------------------------------------------------ vehicle and current
     def overrides(self, tbl: Mapping, where: str, cls: type) -> Any:

@@ -80,10 +80,14 @@ class TrackBuilder:
             ms = int(msg.time_boot_ms)
             if ms > self._last_ms and all(k in self._tick for k in self.NEEDED):
                 lp, att, bat = (self._tick[k] for k in self.NEEDED)
-                self.rows.append((ms / 1000.0, float(lp.y), float(lp.x), float(att.yaw), float(bat.energy_consumed),
-                                  1.0 if lp.z <= 0 else 0.0))
+                self.rows.append(self._row(ms, lp, att, bat))
                 self._last_ms = ms
             self._tick = {}
+
+    def _row(self, ms: int, lp, att, bat) -> tuple[float, ...]:
+        """One step's row (TRACK_FIELDS) from its reports; a subclass may add columns."""
+        return (ms / 1000.0, float(lp.y), float(lp.x), float(att.yaw), float(bat.energy_consumed),
+                1.0 if lp.z <= 0 else 0.0)
 
     def track(self) -> np.ndarray:
         return np.array(self.rows, dtype=float).reshape(-1, len(TRACK_FIELDS))

@@ -11,9 +11,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sim.uuv.angles import wrap_angle
 from sim.uuv.geometry import polygon_edges, polygon_signed_distance, rect_closest_point, rect_signed_distance
 from sim.uuv.mission import Vehicle
-from sim.uuv.vehicle import wrap_angle
 
 __all__ = ["Contacts", "sense", "scan", "SCAN_BEAMS", "SCAN_RESOLUTION_M", "BEAMS_PER_MESSAGE"]
 
@@ -110,7 +110,7 @@ def scan(x: np.ndarray, y: np.ndarray, heading: np.ndarray, obstacles, barriers:
         half = np.where(dist > radius, np.arcsin(np.clip(radius / np.maximum(dist, 1e-9), 0.0, 1.0)) + 2 * step,
                         np.pi)  # inside the shape's circumcircle it may fill any beam
         off = np.mod(np.arctan2(cx - x[rows], cy - y[rows]) - heading[rows], 2 * np.pi)  # centre, from the bow
-        gap = np.abs(np.mod(rel[None, :] - off[:, None] + np.pi, 2 * np.pi) - np.pi)  # (P, beams)
+        gap = np.abs(wrap_angle(rel[None, :] - off[:, None]))  # (P, beams)
         pi, bi = np.nonzero(gap <= half[:, None])
         if pi.size == 0:
             continue

@@ -13,19 +13,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sim.uuv.angles import wrap_angle
 from sim.uuv.mission import Vehicle
 
-__all__ = ["VehicleState", "step_vehicle", "propulsion_power", "wrap_angle"]
+__all__ = ["VehicleState", "step_vehicle", "propulsion_power"]
 
 #: Sideslip per unit of (speed x yaw rate): a few degrees of crab angle in a hard turn.
 SWAY_COUPLING = 0.8
 #: Seconds to close a heading error (the autopilot's proportional gain is 1/this).
 HEADING_TIME_S = 4.0
-
-
-def wrap_angle(a: np.ndarray) -> np.ndarray:
-    """Wrap to (-pi, pi]."""
-    return np.pi - np.mod(np.pi - a, 2.0 * np.pi)
 
 
 @dataclass

@@ -204,6 +204,28 @@ def test_a_log_of_another_mission_or_plan_is_one_line_and_exit_2(flown, tmp_path
     assert not (tmp_path / "cmp" / "comparison.json").exists()
 
 
+def test_an_out_that_would_overwrite_an_input_fails_first_in_one_line(tmp_path, monkeypatch):
+    """Refused before the plan is loaded, a log read or a run simulated, and nothing is written."""
+    import planner.compare as compare_module
+
+    def no_work(*args, **kwargs):
+        raise AssertionError("compare did work before checking --out")
+
+    monkeypatch.setattr(compare_module, "load_plan", no_work)
+    monkeypatch.setattr(compare_module, "read_run", no_work)
+    monkeypatch.setattr(sim.uuv, "simulate", no_work)
+    out = tmp_path / "cmp"
+    out.mkdir()
+    log = out / "comparison.json"  # a log kept where the comparison would go
+    log.write_text("not really a log\n")
+    result = runner.invoke(app, ["compare", str(tmp_path / "plan"), str(log), "--out", str(out)])
+    assert result.exit_code == 2, result.output
+    assert "--out:" in result.output and "would overwrite an input" in result.output
+    assert "Traceback" not in result.output
+    assert len([line for line in result.output.splitlines() if line.strip()]) == 1, result.output
+    assert log.read_text() == "not really a log\n" and sorted(out.iterdir()) == [log]
+
+
 @pytest.mark.parametrize("text,expect", [
     ("sped=1.1", "sped: unknown bias parameter; choose from speed, current_scale"),
     ("speed", "speed: no value; write speed=<number>"),

@@ -37,9 +37,9 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from sim.uuv.angles import wrap_angle
 from sim.uuv.mission import Mission
 from sim.uuv.sonar import SCAN_BEAMS
-from sim.uuv.vehicle import wrap_angle
 
 __all__ = ["FeatureSpec", "feature_spec", "features", "expert_action", "action_command", "advance_waypoints",
            "waypoint_target", "policy_heads", "ACTIONS", "GOAL"]
