@@ -8,7 +8,7 @@ import xml.etree.ElementTree as ET
 import typer
 from typer.testing import CliRunner
 
-from planner.selfright import selfright_command
+from planner.cli import selfright_command
 
 app = typer.Typer()
 app.command()(selfright_command)

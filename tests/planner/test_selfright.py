@@ -5,11 +5,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from planner.selfright.analysis import analyse, compare_graphs, home_state
+from planner.selfright.crossing import crossing_energies
+from planner.selfright.graph import grid_connections
+from planner.selfright.probes import probe_states
+from planner.selfright.search import adaptive_study, grid_study
+from planner.selfright.space import to_unit
+from sim.robots import StabilityFunction, load_robot
+
 
 def test_one_dof_robot_graph_agrees_with_a_grid_search():
-    from planner.selfright import adaptive_study, analyse, compare_graphs, grid_study, probe_states
-    from sim.robots import load_robot
-
     robot = load_robot("examples/robots/1dof.toml")
     probes = probe_states(robot, 20.0, 150, 1)
     grid = grid_study(robot, 20.0, 3.0)
@@ -18,25 +23,22 @@ def test_one_dof_robot_graph_agrees_with_a_grid_search():
     a = analyse(study, probes=probes)
     # whole hulls: every face of a queried joint state is a query; the last batch may overshoot by a hull
     assert 700 <= study.queries <= 700 + 12 and study.queries < grid.queries
-    assert a["home"] >= 0 and g["home"] >= 0
-    G = a["graph"]
+    assert a.home >= 0 and g.home >= 0
+    G = a.graph
     assert G.n_edges >= 3 and np.all(G.edges["energy"] > 0)
-    assert (G.edges["dst"] == a["home"]).any()  # some region rights itself onto the home node
+    assert (G.edges["dst"] == a.home).any()  # some region rights itself onto the home node
     c = compare_graphs(a, study, g, grid, probes)
-    assert c["same"] and c["nodes_matched"] >= 4 and c["edges_matched"] >= 6
+    assert c.same and c.nodes_matched >= 4 and c.edges_matched >= 6
     # every state rights itself on this slope (test_quasi_static_sweep_confirms_the_one_dof_righting_path)
-    assert a["rightable"] == g["rightable"] == 1.0 and c["rightable_agreement"] == 1.0
+    assert a.rightable == g.rightable == 1.0 and c.rightable_agreement == 1.0
     # the adaptive search puts its boundary pairs closer than the grid's 3° spacing
-    assert a["pair_length_deg"] < g["pair_length_deg"]
+    assert a.pair_length_deg < g.pair_length_deg
 
 
 def test_a_tenth_of_the_grid_s_queries_gives_its_graph_with_closer_pairs():
     """Figure 5.3's claim on the 1-DOF robot: an order of magnitude fewer queries than the 1° grid, the same
     graph, and boundary pairs closer on average than the grid's 1° (benchmarks/selfright.py's setting;
     over seeds 0-119 the graph is the grid's on about nine seeds in ten, README)."""
-    from planner.selfright import adaptive_study, analyse, compare_graphs, grid_study, probe_states
-    from sim.robots import load_robot
-
     robot = load_robot("examples/robots/1dof.toml")
     probes = probe_states(robot, 20.0, 500, 1)
     grid = grid_study(robot, 20.0, 1.0)
@@ -47,16 +49,13 @@ def test_a_tenth_of_the_grid_s_queries_gives_its_graph_with_closer_pairs():
         assert study.queries * 10 <= grid.queries
         a = analyse(study, probes=probes)
         c = compare_graphs(a, study, g, grid, probes)
-        assert c["same"], f"seed {seed}: {c['nodes_matched']} nodes, {c['edges_matched']} edges matched"
-        mine, grids = c["pair_length_deg"]  # means over the matched edges
+        assert c.same, f"seed {seed}: {c.nodes_matched} nodes, {c.edges_matched} edges matched"
+        mine, grids = c.pair_length_deg  # means over the matched edges
         assert mine < 1.0 and mine < grids, f"seed {seed}: {mine:.2f}° against {grids:.2f}°"
 
 
 def test_refinement_bisects_every_transition_pair_below_the_boundary_resolution():
     """Same budget, with and without the refinement: only with it is every edge's pair under r_min."""
-    from planner.selfright import adaptive_study, analyse
-    from sim.robots import load_robot
-
     robot = load_robot("examples/robots/1dof.toml")
     plain = adaptive_study(robot, 20.0, 700, seed=0, r_min_deg=0.5, refine=0.0)
     refined = adaptive_study(robot, 20.0, 700, seed=0, r_min_deg=0.5, refine=0.1)
@@ -67,9 +66,9 @@ def test_refinement_bisects_every_transition_pair_below_the_boundary_resolution(
     assert np.all(faces_per_joint_state[0] > 1)
     assert np.sum(faces_per_joint_state[1] == 1) == refined.extra["refine_queries"]
     a, b = analyse(plain), analyse(refined)
-    la, lb = np.degrees(a["graph"].edges["length"]), np.degrees(b["graph"].edges["length"])
+    la, lb = np.degrees(a.graph.edges["length"]), np.degrees(b.graph.edges["length"])
     assert la.max() > 0.5 and lb.max() <= 0.5
-    assert b["edges"] >= a["edges"] and b["pair_length_deg"] < a["pair_length_deg"]
+    assert b.n_edges >= a.n_edges and b.pair_length_deg < a.pair_length_deg
     with pytest.raises(ValueError, match="refine"):
         adaptive_study(robot, 20.0, 100, refine=1.0)
 
@@ -95,9 +94,6 @@ def test_quasi_static_sweep_confirms_the_one_dof_righting_path():
     stable half without losing energy, then tips onto the home face at about -56° (38.6 J).
     Both graphs must say the same: one node from -10° to -56°, an edge of 38.6 J home.
     """
-    from planner.selfright import _to_unit, analyse, grid_study, home_state
-    from sim.robots import StabilityFunction, load_robot
-
     robot = load_robot("examples/robots/1dof.toml")
     F = StabilityFunction(robot, 20.0)
     events, _ = _sweep(F, -10.0, -170.0, -70.0)
@@ -105,12 +101,12 @@ def test_quasi_static_sweep_confirms_the_one_dof_righting_path():
     grid = grid_study(robot, 20.0, 1.0)
     home_U, home_id = home_state(grid, with_id=True)
     g = analyse(grid, probes=np.zeros((0, 2)))
-    G = g["graph"]
+    G = g.graph
     start = F(np.radians([[-10.0]]), np.radians([[-170.0]]))
-    U = grid.embed(_to_unit([np.radians(-10.0), start.start[0][0]], grid.bounds[:, 0], grid.bounds[:, 1])[None])
+    U = grid.embed(to_unit([np.radians(-10.0), start.start[0][0]], grid.bounds[:, 0], grid.bounds[:, 1])[None])
     n = G.node_of(U, ids=[start.start_id[0]])[0]
-    cost, _ = G.costs_to(g["home"])
-    assert G.node_of(grid.embed(home_U[None]), ids=[home_id])[0] == g["home"] != n
+    cost, _ = G.costs_to(g.home)
+    assert G.node_of(grid.embed(home_U[None]), ids=[home_id])[0] == g.home != n
     assert abs(cost[n] - 38.58) < 0.05  # one transition home, the one the sweep found
     # and the robot resting on the merged face near +90° rolls on as one region until its face tips at +2.6°
     events, _ = _sweep(F, -25.0, 93.0, 5.0)
@@ -118,9 +114,6 @@ def test_quasi_static_sweep_confirms_the_one_dof_righting_path():
 
 
 def test_grid_connections_join_neighbouring_joint_states_on_one_face_or_its_replacement():
-    from planner.selfright import grid_connections, grid_study
-    from sim.robots import load_robot
-
     grid = grid_study(load_robot("examples/robots/1dof.toml"), 20.0, 3.0)
     i, j = grid_connections(grid)
     N = len(grid.X)
@@ -145,21 +138,18 @@ def test_crossing_energies_are_the_boundary_s_whatever_the_grid_spacing():
     """A witness lies up to a grid step past the boundary, so a coarse grid reports other energies;
     bisected to the boundary, the 3° and the 10° grids' transitions lose the same, and the one home
     from the region the sweep starts in loses what the sweep does (38.58 J)."""
-    from planner.selfright import analyse, crossing_energies, grid_study
-    from sim.robots import load_robot
-
     robot = load_robot("examples/robots/1dof.toml")
     out = {}
     for res in (3.0, 10.0):
         grid = grid_study(robot, 20.0, res)
         g = analyse(grid, probes=np.zeros((0, 2)))
         c = crossing_energies(grid, g, tol_deg=0.01)
-        assert len(c["energy"]) == g["edges"] and np.all(c["pairs"] <= len(g["graph"].all_transitions["src"]))
-        assert np.isfinite(c["energy"]).sum() >= 5 and np.array_equal(c["reported"], g["graph"].edges["energy"])
+        assert len(c.energy) == g.n_edges and np.all(c.pairs <= len(g.graph.all_transitions["src"]))
+        assert np.isfinite(c.energy).sum() >= 5 and np.array_equal(c.reported, g.graph.edges["energy"])
         out[res] = c
     fine, coarse = out[3.0], out[10.0]
-    at = np.isfinite(coarse["energy"])
+    at = np.isfinite(coarse.energy)
     nearest = lambda v, ref: np.min(np.abs(ref[np.isfinite(ref)][None, :] - v[:, None]), axis=1)  # noqa: E731
-    assert np.all(nearest(coarse["energy"][at], fine["energy"]) < 0.01)
-    assert np.max(nearest(coarse["reported"][at], fine["reported"])) > 0.5  # what the grids report disagrees
-    assert np.any(np.abs(fine["energy"] - 38.58) < 0.01)
+    assert np.all(nearest(coarse.energy[at], fine.energy) < 0.01)
+    assert np.max(nearest(coarse.reported[at], fine.reported)) > 0.5  # what the grids report disagrees
+    assert np.any(np.abs(fine.energy - 38.58) < 0.01)
