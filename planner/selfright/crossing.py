@@ -35,14 +35,15 @@ def crossing_energies(study: SelfRightStudy, result: SelfRightAnalysis, tol_deg:
     """What each edge's transition loses at the boundary itself: its boundary pairs bisected to ``tol_deg``.
 
     A witness lies up to a pair's length past the boundary, where the face has already
-    turned, so its energy is not what the robot loses when its joints carry it across: on
-    the 2-DOF robot's edge 1 -> 0 the 1° grid's cheapest witness loses 4.65 J, the boundary
-    it stands for 5.05 J.  So every transition of every edge is bisected in joint space, on
+    turned, so its energy is not what the robot loses when its joints carry it across; the
+    longer a search's pairs, the further its reported energies can lie from the boundary's.
+    So every transition of every edge is bisected in joint space, on
     the pair's faces (the witness's, or for a continuation the partner's; partner stable,
     witness tipping onto the same resting face), until the pair is under ``tol_deg``; a
     pair whose midpoint leaves both faces or tips elsewhere is left out (the robot moving
     from the partner would meet something else first).  A measurement, as a quasi-static sweep is:
-    its queries go to a stability function of its own, not the study's.
+    its queries go to a stability function of its own, not the study's.  ``tol_deg`` = 0.01°
+    lies far below any search's boundary resolution, so what it measures is the boundary's.
     """
     G: TransitionGraph = result.graph
     T, e = G.all_transitions, G.edges

@@ -28,11 +28,14 @@ def adaptive_study(robot: Robot, slope: float, budget: int, *, seed: int = 0, ba
     """Algorithm 6 on ``robot`` at ``slope`` degrees, about ``budget`` queries, then the transitions refined.
 
     A query is the stability of one state ``[θ, face]``, as the grid search counts them.
+    ``r_min_deg`` and ``r_max_deg`` are the boundary and interior resolutions: the search
+    ends once its boundaries are resolved to the one and its interiors to the other.
     ``refine`` is the share of the budget kept back for :func:`refine_transitions` (with
     whatever the search leaves when its resolution cut-offs end it first); 0 turns it off.
     What a refinement leaves goes back to the search, less the same share of it, and the
     study ends on a refinement (up to four), so that transitions the last search found are
-    bisected too.
+    bisected too.  The default is a small share because a refinement query moves one
+    boundary pair, while the search needs most of the budget to find the boundaries.
     ``whole_hulls`` labels every face of each queried joint state and counts each face as
     a query; otherwise only the snapped face is labelled (the other faces are known states
     labelled by their nearest neighbour in Algorithm 8).  Default: on for planar robots,
@@ -41,10 +44,10 @@ def adaptive_study(robot: Robot, slope: float, budget: int, *, seed: int = 0, ba
     face is its own tipping simulation with tens to hundreds of faces per hull.  The last
     batch may overshoot the budget by a few faces.  ``outcomes`` tells the search where each
     state comes to rest, so that neighbours on a face tipping to different faces count as a
-    boundary (:mod:`rapt.manifold`): it finds stable islands narrower than a coarse r_max,
-    which pays with a coarse r_max (1 DOF at 210 queries, r_max 45°: the grid's graph on 85 of 96
-    held-out seeds against 52) and costs with a fine one, which resolves the extra boundaries
-    (700 queries at r_max 10°, batch 50: 10 of 24 seeds against 18).
+    boundary (:mod:`rapt.manifold`): it finds stable islands narrower than ``r_max``.  Off
+    by default: with a fine ``r_max`` it costs queries, spent resolving the extra
+    boundaries it reveals; it pays with a coarse ``r_max``, where such islands are
+    otherwise stepped over.
     """
     system = StabilitySystem(robot, slope, False)
     whole_hulls = system.F.planar if whole_hulls is None else bool(whole_hulls)
@@ -80,7 +83,7 @@ def adaptive_study(robot: Robot, slope: float, budget: int, *, seed: int = 0, ba
 
 def refine_transitions(system: StabilitySystem, robot: Robot, slope: float, budget: int, r_min: float, *,
                        r_max: float | None = None, max_rounds: int = 12, splits: int = 2, tell=None) -> int:
-    """Cut every transition's boundary pair in ``splits`` parts (bisect it) until it is shorter than ``r_min`` (joint space).
+    """Cut every transition's boundary pair in ``splits`` parts until it is shorter than ``r_min`` (joint space).
 
     Section 5.5.1 prizes close boundary pairs (the transition point is known better), but
     the search spreads its budget over every boundary, most of them between faces no
@@ -88,13 +91,16 @@ def refine_transitions(system: StabilitySystem, robot: Robot, slope: float, budg
     stable partner queried (equally spaced in joint angles, on the pair's face): the one
     next to the boundary becomes the new witness or partner, or shows a transition the
     search missed.  Each such state is asked alone, on the pair's face, even where the search
-    labels whole hulls: the pair lies on that one face, and the hull's other faces (6 on
-    the 1-DOF robot, more on 3 DOF) would cost a query each and tell the pair nothing (on
-    3 DOF that took the matched pairs from 8.5° to 1.2° for the same budget).  The graph is
-    rebuilt each round; a state already asked is not asked again, so a pair that cannot
-    shrink is left as it is.  Stops when every pair is below
-    ``r_min``, ``system`` has answered ``budget`` queries, or after ``max_rounds``;
-    ``tell`` (e.g. the search's :meth:`~rapt.manifold.ManifoldSampler.tell`) hears every answer.
+    labels whole hulls: the pair lies on that one face, and the hull's other faces would
+    cost a query each and tell the pair nothing.  The graph is rebuilt each round; a state
+    already asked is not asked again, so a pair that cannot shrink is left as it is.
+    Stops when every pair is below ``r_min``, ``system`` has answered ``budget`` queries,
+    or after ``max_rounds``; ``tell`` (e.g. the search's
+    :meth:`~rapt.manifold.ManifoldSampler.tell`) hears every answer.  ``splits`` = 2 bisects:
+    one query per pair and round halves it, the cheapest step that always shrinks it.  Twelve
+    halvings shrink a pair 4096-fold (45° to about 0.01°), so ``max_rounds`` is a safeguard
+    rather than a resolution.
+    ``r_max`` (radians) is the interior resolution the graph's ``d_max`` is derived from.
     Returns the number of rounds run.
     """
     asked: set = set()
