@@ -41,6 +41,11 @@ def run_search(label: str, fn, bounds, budget: int, **kwargs):
         return found, time.perf_counter() - start
 
 
+def _methods(method: str, baseline: str) -> list[str]:
+    """The method, then the baseline unless it is 'none' or the method itself."""
+    return [method] + ([baseline] if baseline not in ("none", method) else [])
+
+
 def search(
     system: Annotated[str, typer.Argument(help=f"Synthetic system: {', '.join(SYSTEMS)}.")] = "plates2d",
     budget: Annotated[Optional[int], typer.Option(help="Samples to evaluate (default: the system's reference budget).")] = None,
@@ -66,8 +71,7 @@ def search(
     types = search_output_types(sut)
 
     rows = []
-    methods = [method] + ([baseline] if baseline not in ("none", method) else [])
-    for i, m in enumerate(methods):
+    for i, m in enumerate(_methods(method, baseline)):
         study, elapsed = run_search(m, sut, bounds, budget, method=m, batch_size=batch_size, seed=seed,
                                     store=store if i == 0 else None, output_types=types)
         q = quality_table(sut, study.X, d_eps, seed=seed)
@@ -101,50 +105,33 @@ def study(
     baseline: Annotated[str, typer.Option(help="Method to compare against (or 'none').")] = "sobol",
 ) -> None:
     """Search a mission's scenarios for performance boundaries; print modes and boundary types."""
-    import numpy as np
-
-    import sim.uuv
+    from planner.mission_search import ROOT_OUTPUT_TYPES, ModeSearch, root_scores
     from sim.uuv.scoring import MODE_NAMES
 
     if baseline != "none" and baseline not in rapt.METHODS:
         fail(f"--baseline: unknown method {baseline!r}; choose one of: {', '.join(rapt.METHODS)}, none")
     mission = load_mission(mission_file)
-
-    def run_root_scores(X):  # the search steers on mission and safety success (section 4.3.6)
-        return sim.uuv.simulate(mission, X, seed=seed, stochastic=stochastic).scores[:, :2]
-
+    scores = root_scores(mission, seed=seed, stochastic=stochastic)
     results = []
-    methods = [method] + ([baseline] if baseline not in ("none", method) else [])
-    for i, m in enumerate(methods):
-        found, elapsed = run_search(m, run_root_scores, mission.space, budget, method=m, batch_size=batch_size,
-                                    seed=seed, store=store if i == 0 else None, output_types=("binary", "binary"))
-        modes = (2 * found.Y[:, 0] + found.Y[:, 1]).astype(int)
-        pairs = rapt.boundary_pairs(found.X, labels=modes) if np.unique(modes).size > 1 else None
-        results.append((m, found, modes, pairs, elapsed))
+    for i, m in enumerate(_methods(method, baseline)):
+        found, elapsed = run_search(m, scores, mission.space, budget, method=m, batch_size=batch_size,
+                                    seed=seed, store=store if i == 0 else None, output_types=ROOT_OUTPUT_TYPES)
+        results.append(ModeSearch.of(m, found, elapsed))
 
     table = Table(title=f"{mission.name}: {budget} scenarios ({mission.dim}-D), seed {seed}")
     table.add_column("", justify="left")
-    for m, *_ in results:
-        table.add_column(m, justify="right")
-    present = {m: sorted(set(modes.tolist())) for m, _, modes, _, _ in results}
-    table.add_row("valid runs", *[f"{len(f.X):,}" for _, f, *_ in results])
-    table.add_row("invalid scenarios", *[f"{len(f.X_failed):,}" for _, f, *_ in results])
+    for r in results:
+        table.add_column(r.method, justify="right")
+    table.add_row("valid runs", *[f"{len(r.found.X):,}" for r in results])
+    table.add_row("invalid scenarios", *[f"{len(r.found.X_failed):,}" for r in results])
     for k, name in enumerate(MODE_NAMES):
-        table.add_row(f"mode {name}", *[f"{np.mean(modes == k):.1%}" for _, _, modes, _, _ in results])
-    types = sorted({tuple(sorted((present[m][a], present[m][b]))) for m, _, _, bp, _ in results if bp
-                    for a, b, _ in bp.types()})
-    for a, b in types:
-        cells = []
-        for m, _, _, bp, _ in results:
-            n = 0
-            if bp is not None and a in present[m] and b in present[m]:
-                n = len(bp.of_type(present[m].index(a), present[m].index(b)))
-            total = len(bp) if bp is not None and len(bp) else 1
-            cells.append(f"{n:,} ({n / total:.0%})")
-        table.add_row(f"boundary {MODE_NAMES[a]}/{MODE_NAMES[b]}", *cells)
-    table.add_row("median pair distance",
-                  *[f"{np.median(bp.distance):.3f}" if bp is not None and len(bp) else "-" for *_, bp, _ in results])
-    table.add_row("time (s)", *[f"{e:.1f}" for *_, e in results])
+        table.add_row(f"mode {name}", *[f"{r.mode_share(k):.1%}" for r in results])
+    for a, b in sorted(set().union(*(r.boundary_types() for r in results))):
+        table.add_row(f"boundary {MODE_NAMES[a]}/{MODE_NAMES[b]}",
+                      *[f"{r.boundary_count(a, b):,} ({r.boundary_count(a, b) / (r.n_pairs or 1):.0%})" for r in results])
+    table.add_row("median pair distance", *["-" if (d := r.median_pair_distance()) is None else f"{d:.3f}"
+                                            for r in results])
+    table.add_row("time (s)", *[f"{r.seconds:.1f}" for r in results])
     out.print(table)
     if store is not None:
-        out.print(f"study stored in {store} ({results[0][1].n_evaluated} scenarios)", soft_wrap=True, highlight=False)
+        out.print(f"study stored in {store} ({results[0].found.n_evaluated} scenarios)", soft_wrap=True, highlight=False)
