@@ -36,60 +36,48 @@ def run(
     With --surrogate the learned policy commands the vehicle while the expert autonomy
     keeps running beside it; the expert's commands are on the bus and in the log.
     """
-    import numpy as np
-
-    import sim.uuv
-    from planner.sil import run_sil
+    from planner.flight import Flight, check_against_batch, flight_from_plan, fly, is_plan, mode_name
     from sim.uuv.bias import parse_bias
 
     try:
         bias = parse_bias(inject_bias) if inject_bias is not None else None
     except ValueError as exc:
         fail(f"--inject-bias: {exc}")
-    pid = ""
-    if mission_file.suffix == ".json" or mission_file.is_dir():
-        from planner.plans import load_plan
-
+    if is_plan(mission_file):
         try:
-            plan = load_plan(mission_file)
-            mission, u, sid, pid = plan.mission, plan.u(scenario), scenario, plan.id
+            flight = flight_from_plan(mission_file, scenario)
         except ValueError as exc:
             fail(str(exc))
-        source = str(plan.mission_file)
     else:
         mission, u, sid = mission_and_scenario(mission_file, scenario)
-        source = str(mission_file)
+        flight = Flight(mission, u, sid, str(mission_file))
     if speedup is not None and speedup <= 0:
         fail(f"--speedup: expected a factor > 0, got {speedup}")
-    learned = load_surrogate(surrogate, mission)
+    learned = load_surrogate(surrogate, flight.mission)
     try:
-        result = run_sil(mission, u, log_path=log, speedup=speedup, timeout_s=timeout, scenario_id=sid,
-                         mission_file=source, plan_id=pid, bias=bias, stochastic=stochastic, seed=seed,
-                         surrogate=learned)
+        result = fly(flight, log_path=log, speedup=speedup, timeout_s=timeout, bias=bias, stochastic=stochastic,
+                     seed=seed, surrogate=learned)
     except (ValueError, RuntimeError, TimeoutError) as exc:
         fail(str(exc))
-    batch = sim.uuv.simulate(mission, u[None, :], bias=bias, seed=seed, stochastic=stochastic, surrogate=learned)
-    same = bool(np.array_equal(result.scores, batch.scores[0]))
-    names = batch.names
-    mode = ("TF", "SS", "MS", "TS")[int(2 * result.scores[0] + result.scores[1])]
-    table = Table(title=f"{mission.name} scenario {sid}: software in the loop")
+    batch = check_against_batch(flight, result.scores, bias=bias, stochastic=stochastic, seed=seed, surrogate=learned)
+    table = Table(title=f"{flight.mission.name} scenario {flight.scenario_id}: software in the loop")
     table.add_column("", justify="left")
     table.add_column("value", justify="right")
     table.add_row("ended", result.ended)
     if learned is not None:
         table.add_row("flown by", f"surrogate {surrogate.name} (expert commands recorded)")
-    table.add_row("mode", mode)
+    table.add_row("mode", mode_name(result.scores))
     if bias is not None:
         table.add_row("injected bias", str(bias))
     table.add_row("simulated time", f"{result.sim_s:,.0f} s in {result.wall_s:.1f} s ({result.speedup:,.0f}x)")
     for name in ("mission_areas", "transmission", "recovery", "nogo_areas", "mission.battery_left"):
-        if name in names:
-            table.add_row(name, f"{result.scores[names.index(name)]:g}")
+        if name in batch.names:
+            table.add_row(name, f"{result.scores[batch.names.index(name)]:g}")
     if stochastic:  # the log holds what the navigation believed, the batch scores ground truth
-        table.add_row("batch simulator's mode (ground truth)", ("TF", "SS", "MS", "TS")[int(batch.modes[0])])
+        table.add_row("batch simulator's mode (ground truth)", batch.mode)
     else:
         table.add_row("same scores as the batch simulator" + (" (same bias)" if bias is not None else ""),
-                      "yes" if same else "NO")
+                      "yes" if batch.same else "NO")
     if log is not None:
         table.add_row("log", str(log))
     out.print(table)
