@@ -14,21 +14,9 @@ import typer
 from planner.cli.console import fail
 from planner.cli.inputs import (ScenarioOpt, SurrogateOpt, Vehicle, ZenohConfig, ZenohConnect, ZenohListen,
                                 bus_session, load_surrogate, mission_and_scenario)
+from planner.processes import arm_when_heard, run_until_signal, serve_until_signal, wait_for_signal
 
 __all__ = ["frontseat", "bridge", "autonomy", "log"]
-
-
-def _wait_for_signal(until=None) -> None:
-    """Block until SIGINT/SIGTERM (or ``until()`` is true), so a process stops cleanly."""
-    import signal
-    import threading
-
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
-    while not stop.wait(0.1):
-        if until is not None and until():
-            break
 
 
 def frontseat(
@@ -45,14 +33,7 @@ def frontseat(
         fs = FrontSeat(mission, u, mavlink, lockstep=speedup is None, speedup=speedup or 1.0)
     except (ValueError, OSError) as exc:
         fail(f"--mavlink: {exc}")
-    import threading
-
-    thread = threading.Thread(target=fs.serve, daemon=True)
-    thread.start()
-    _wait_for_signal()
-    fs.stop()
-    thread.join(timeout=5)
-    fs.close()
+    serve_until_signal(fs)
 
 
 def bridge(
@@ -69,7 +50,6 @@ def bridge(
                                                      "(needs --allow-commands).")] = False,
 ) -> None:
     """Join a vehicle's MAVLink port (simulated or real) to the Zenoh bus."""
-    import time
     from bridge.mavlink_bridge import MavlinkBridge
     from bridge.session import zenoh_config as make_config
 
@@ -86,15 +66,9 @@ def bridge(
             fail("--arm: arming sends commands to the vehicle; add --allow-commands")
         with MavlinkBridge(mavlink, conf, vehicle=vehicle, allow_commands=allow_commands, geofence=fence,
                            max_rate_hz=max_rate, signing_key=signing_key) as link:
-            if arm:
-                deadline = time.monotonic() + 30
-                while link.target is None and time.monotonic() < deadline:
-                    time.sleep(0.05)
-                if link.target is None:
-                    fail("--mavlink: no vehicle HEARTBEAT within 30 s; check the connection string")
-                link.set_mode("GUIDED")
-                link.arm(True)
-            _wait_for_signal()
+            if arm and not arm_when_heard(link, timeout_s=30.0):
+                fail("--mavlink: no vehicle HEARTBEAT within 30 s; check the connection string")
+            wait_for_signal()
     except (ValueError, OSError) as exc:
         fail(str(exc))
 
@@ -114,11 +88,7 @@ def autonomy(
     mission, u, _ = mission_and_scenario(mission_file, scenario)
     learned = load_surrogate(surrogate, mission)
     session = bus_session(zenoh_connect, zenoh_config)
-    try:
-        with BackSeat(session, vehicle, mission, u, source=source, surrogate=learned):
-            _wait_for_signal()
-    finally:
-        session.close()
+    run_until_signal(session, lambda: BackSeat(session, vehicle, mission, u, source=source, surrogate=learned))
 
 
 def log(
@@ -131,8 +101,4 @@ def log(
     from bridge.logger import McapLogger
 
     session = bus_session(zenoh_connect, zenoh_config)
-    try:
-        with McapLogger(out_file, session, vehicle=vehicle):
-            _wait_for_signal()
-    finally:
-        session.close()
+    run_until_signal(session, lambda: McapLogger(out_file, session, vehicle=vehicle))
