@@ -34,28 +34,23 @@ def surrogate(
     seed: Annotated[int, typer.Option(help="Seed of every random choice.")] = 0,
 ) -> None:
     """Train a surrogate of a mission's back-seat autonomy by imitation learning (chapter 6)."""
-    from scipy.stats import qmc
-
-    import sim.uuv
-    from planner.surrogate import mode_agreement, train_surrogate
+    from planner.surrogate import train_surrogate
+    from planner.surrogate_validation import ModeValidation
 
     mission = load_mission(mission_file)
     if out_file.suffix != ".npz":
         fail(f"--out: a surrogate file ends in .npz, got {out_file}")
     if validate < 0:
         fail(f"--validate: expected a number of scenarios >= 0, got {validate}")
-    Xv = qmc.Sobol(mission.dim, seed=seed).random(validate) if validate else None
-    expert = sim.uuv.simulate(mission, Xv) if validate else None
+    accuracy = ModeValidation(mission, validate, seed) if validate else None
     table = Table(title=f"{mission.name}: {method} imitation of the autonomy")
     for col in ("iteration", "expert runs", "samples", "fit (s)", "train MSE") + (("mode accuracy",) if validate else ()):
         table.add_column(col, justify="right")
 
     def on_iteration(rec, policy):
         row = [str(rec.iteration), str(rec.runs), f"{rec.samples:,}", f"{rec.fit_s:.1f}", f"{rec.loss:.4f}"]
-        if validate:
-            from sim.uuv.imitation.surrogate import Surrogate
-
-            row.append(f"{mode_agreement(mission, Surrogate.for_mission(mission, policy), Xv, expert):.1%}")
+        if accuracy is not None:
+            row.append(f"{accuracy(policy):.1%}")
         table.add_row(*row)
         err.print(" ".join(row), highlight=False)
 
