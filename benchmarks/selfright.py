@@ -20,7 +20,7 @@ setting and the settings it was chosen against, then on held-out seeds 24-119):
    (and the share whose verdict agrees), the mean boundary-pair length (joint space) and
    transition energy over all boundary pairs, and both again over the matched edges; then
    the matched edges' energies at the boundary itself (each method's pairs bisected to
-   0.01° by :func:`~planner.selfright.crossing_energies`, "m.bdy") and how far the reported
+   0.01° by :func:`~planner.selfright.crossing.crossing_energies`, "m.bdy") and how far the reported
    energy lies from it ("m.err"): a witness up to a grid step past the boundary stands on a
    face that has turned, and can lose less (or more) than the crossing does.
 2. Table 5.1 — building the graph from the adaptive sample sets: Gabriel-graph
@@ -46,7 +46,10 @@ import time
 import numpy as np
 from scipy.spatial import cKDTree
 
-from planner.selfright import adaptive_study, analyse, compare_graphs, crossing_energies, grid_study, probe_states
+from planner.selfright.analysis import analyse, compare_graphs
+from planner.selfright.crossing import crossing_energies
+from planner.selfright.probes import probe_states
+from planner.selfright.search import adaptive_study, grid_study
 from sim.robots import StabilityFunction, load_robot
 
 ROBOTS = "examples/robots"
@@ -83,26 +86,26 @@ def fig53(quick: bool, seed: int, robots: list[str] | None = None, fine: bool = 
         # the matched edges' energies at the boundary itself (each method's pairs bisected to 0.01°), and how far
         # what each method reports lies from its own boundary figure
         ce = [crossing_energies(study, r) for study, r in ((ad, a), (grid, g))]
-        at = c["matched_edges"].T
-        both = np.isfinite(ce[0]["energy"][at[0]]) & np.isfinite(ce[1]["energy"][at[1]])  # resolved in both
+        at = c.matched_edges.T
+        both = np.isfinite(ce[0].energy[at[0]]) & np.isfinite(ce[1].energy[at[1]])  # resolved in both
         mean = lambda v: float(v.mean()) if v.size else float("nan")  # noqa: E731
-        bdy = [mean(x["energy"][i][both]) for x, i in zip(ce, at)]
-        err = [mean(np.abs(x["reported"][i] - x["energy"][i])[both]) for x, i in zip(ce, at)]
+        bdy = [mean(x.energy[i][both]) for x, i in zip(ce, at)]
+        err = [mean(np.abs(x.reported[i] - x.energy[i])[both]) for x, i in zip(ce, at)]
         for k, (study, r, label, secs) in enumerate(((grid, g, grid.method, grid_seconds), (ad, a, "adaptive", ad_seconds))):
-            T = r["graph"].all_transitions
-            matched = (f"{c['nodes_matched']}/{c['nodes'][0]}/{c['nodes'][1]} {c['edges_matched']}/{c['edges'][0]}/{c['edges'][1]}"
+            T = r.graph.all_transitions
+            matched = (f"{c.nodes_matched}/{c.n_nodes[0]}/{c.n_nodes[1]} {c.edges_matched}/{c.n_edges[0]}/{c.n_edges[1]}"
                        if k else "")  # matched / adaptive's / grid's (nodes over 1 % of probes, edges between them)
-            agree = f"{c['rightable_agreement']:.1%}" if k else ""
-            print(f"{name:>5} {label:>9} {r['queries']:>9,} {secs:>7.1f} {r['nodes']:>5} {r['edges']:>5} {matched:>13} "
-                  f"{r['rightable']:>9.1%} {agree:>6} {len(T['length']):>6,} {np.degrees(T['length']).mean():>8.2f} "
-                  f"{T['energy'].mean():>8.2f} {c['pair_length_deg'][1 - k]:>10.2f} {c['transition_energy'][1 - k]:>10.2f} "
+            agree = f"{c.rightable_agreement:.1%}" if k else ""
+            print(f"{name:>5} {label:>9} {r.queries:>9,} {secs:>7.1f} {r.n_nodes:>5} {r.n_edges:>5} {matched:>13} "
+                  f"{r.rightable:>9.1%} {agree:>6} {len(T['length']):>6,} {np.degrees(T['length']).mean():>8.2f} "
+                  f"{T['energy'].mean():>8.2f} {c.pair_length_deg[1 - k]:>10.2f} {c.transition_energy[1 - k]:>10.2f} "
                   f"{bdy[1 - k]:>8.3f} {err[1 - k]:>7.3f}", flush=True)
         stop = "resolution reached" if ad.extra.get("stopped_by_resolution") else "budget spent"
-        pg = np.degrees(g["graph"].all_transitions["length"]).mean() / np.degrees(a["graph"].all_transitions["length"]).mean()
-        eg = g["graph"].all_transitions["energy"].mean() / a["graph"].all_transitions["energy"].mean()
-        print(f"{'':>5} {'ratio':>9} {g['queries'] / a['queries']:>8.1f}x {'':>7} {'':>5} {'':>5} "
-              f"{'same' if c['same'] else 'differs':>13} {'':>9} {'':>6} {'':>6} {pg:>7.2f}x {eg:>7.2f}x "
-              f"{c['pair_length_deg'][1] / c['pair_length_deg'][0]:>9.2f}x {c['transition_energy'][1] / c['transition_energy'][0]:>9.2f}x"
+        pg = np.degrees(g.graph.all_transitions["length"]).mean() / np.degrees(a.graph.all_transitions["length"]).mean()
+        eg = g.graph.all_transitions["energy"].mean() / a.graph.all_transitions["energy"].mean()
+        print(f"{'':>5} {'ratio':>9} {g.queries / a.queries:>8.1f}x {'':>7} {'':>5} {'':>5} "
+              f"{'same' if c.same else 'differs':>13} {'':>9} {'':>6} {'':>6} {pg:>7.2f}x {eg:>7.2f}x "
+              f"{c.pair_length_deg[1] / c.pair_length_deg[0]:>9.2f}x {c.transition_energy[1] / c.transition_energy[0]:>9.2f}x"
               f" {bdy[1] / bdy[0]:>7.3f}x {err[1] / err[0] if err[0] else float('inf'):>6.0f}x"
               f"   grid/adaptive ({stop}, {ad.extra['joint_states']:,} joint states)", flush=True)
         studies.append((name, ad, a))
@@ -117,7 +120,7 @@ def one_dof_seeds(seeds: int = 8, held_out: range = range(24, 120)) -> None:
     probes = probe_states(robot, 20.0, 500, 1)
     grid = grid_study(robot, 20.0, 1.0)
     g = analyse(grid, probes=probes)
-    print(f"\n1b. 1 DOF against the 1° grid ({g['queries']:,} queries): how often the graph is the same, and the "
+    print(f"\n1b. 1 DOF against the 1° grid ({g.queries:,} queries): how often the graph is the same, and the "
           "matched pairs and energies when it is")
     print(f"{'setting':<66} {'seeds':>7} {'queries':>8} {'ratio':>6} {'same':>7} {'m.pair deg':>10} "
           f"{'m.energy/grid':>13} {'ended by':>10}")
@@ -138,14 +141,14 @@ def one_dof_seeds(seeds: int = 8, held_out: range = range(24, 120)) -> None:
             converged += bool(ad.extra["stopped_by_resolution"])
             a = analyse(ad, probes=probes)
             c = compare_graphs(a, ad, g, grid, probes)
-            queries.append(a["queries"])
-            if c["same"]:
+            queries.append(a.queries)
+            if c.same:
                 same += 1
-                pair.append(c["pair_length_deg"][0])
-                energy.append(c["transition_energy"][0] / c["transition_energy"][1])
+                pair.append(c.pair_length_deg[0])
+                energy.append(c.transition_energy[0] / c.transition_energy[1])
         q = float(np.mean(queries))
         n = len(seed_range)
-        print(f"{label:<66} {f'{seed_range[0]}-{seed_range[-1]}':>7} {q:>8.0f} {g['queries'] / q:>5.1f}x "
+        print(f"{label:<66} {f'{seed_range[0]}-{seed_range[-1]}':>7} {q:>8.0f} {g.queries / q:>5.1f}x "
               f"{f'{same}/{n}':>7} {np.mean(pair) if pair else float('nan'):>10.2f} "
               f"{np.mean(energy) if energy else float('nan'):>12.3f}x "
               f"{f'cut-offs {converged}' if converged else 'budget':>10}", flush=True)
@@ -158,15 +161,15 @@ def prm_components(study, result, step_deg: float = 1.0, max_edges: int | None =
     space, every ``step_deg``) is stable when evaluated; returns (components, seconds,
     edges checked, edges in total, evaluations).
     """
-    g = result["graph"]
+    g = result.graph
     stable_pts = np.flatnonzero(g.labels >= 0)
     P = g.points[stable_pts]
-    pairs = cKDTree(P).query_pairs(result["max_edge"], output_type="ndarray")
+    pairs = cKDTree(P).query_pairs(result.max_edge, output_type="ndarray")
     total = len(pairs)
     if max_edges is not None and total > max_edges:
         pairs = pairs[np.sort(np.random.default_rng(seed).choice(total, max_edges, replace=False))]
     # angles of the stable known states, from their unit-cube coordinates
-    known = np.concatenate([study.X, study.rest[np.isfinite(study.rest).all(axis=1)], result["extra_states"]])[stable_pts]
+    known = np.concatenate([study.X, study.rest[np.isfinite(study.rest).all(axis=1)], result.extra_states])[stable_pts]
     ang = study.bounds[:, 0] + known * np.ptp(study.bounds, axis=1)
     F = StabilityFunction(study.robot, study.slope)
     m = study.n_free
@@ -200,11 +203,11 @@ def table51(studies, quick: bool, seed: int) -> None:
     print(f"{'robot':>5} {'known states':>12} {'d_max deg':>9} {'Gabriel s':>9} {'nodes':>5} {'PRM s':>9} {'PRM edges':>10} "
           f"{'evaluations':>11} {'PRM regions':>11} {'PRM/Gabriel':>11}")
     for name, study, result in studies:
-        gab = result["graph_seconds"]  # analyse() built the graph (with its face identities) and timed it
+        gab = result.graph_seconds  # analyse() built the graph (with its face identities) and timed it
         regions, prm_s, checked, total, evals = prm_components(study, result, max_edges=cap, seed=seed)
         est = prm_s * total / max(checked, 1)
         mark = "*" if checked < total else " "
-        print(f"{name:>5} {result['states']:>12,} {np.degrees(result['max_edge']):>9.1f} {gab:>9.2f} {result['nodes']:>5} "
+        print(f"{name:>5} {result.n_known_states:>12,} {np.degrees(result.max_edge):>9.1f} {gab:>9.2f} {result.n_nodes:>5} "
               f"{est:>8.1f}{mark} {total:>10,} "
               f"{int(evals * total / max(checked, 1)):>11,} {regions if checked == total else '-':>11} "
               f"{est / gab:>10.0f}x", flush=True)
@@ -225,9 +228,9 @@ def fig56(quick: bool, seed: int) -> None:
         faces = np.mean([len(f) for f in study.faces])
         grid = faces * np.prod([np.ptp(b) / np.radians(5.0) for b in r.joint_bounds])
         stop = "resolution" if study.extra.get("stopped_by_resolution") else "budget"
-        energy = res["energy_to_home"]
+        energy = res.energy_to_home
         print(f"{m:>6} {', '.join(j.name for j in r.joints):<52} {study.queries:>8,} {stop:>10} {study.seconds:>7.1f} "
-              f"{res['nodes']:>5} {res['rightable']:>9.1%} {energy:>16.2f} {grid:>14,.0f}", flush=True)
+              f"{res.n_nodes:>5} {res.rightable:>9.1%} {energy:>16.2f} {grid:>14,.0f}", flush=True)
 
 
 def main() -> None:

@@ -8,10 +8,10 @@ import xml.etree.ElementTree as ET
 import typer
 from typer.testing import CliRunner
 
-from planner.selfright import selfright_command
+from planner.cli.selfright import selfright
 
 app = typer.Typer()
-app.command()(selfright_command)
+app.command()(selfright)
 runner = CliRunner()
 
 

@@ -1,0 +1,40 @@
+"""``rapt-plan``: the test engineer's command line.
+
+``rapt-plan study MISSION`` searches a mission file's scenario space with the simulator
+and reports the performance modes and boundary types it found, side by side with a
+space-filling design (Figure 3.12).  ``rapt-plan search SYSTEM`` does the same on a
+bundled synthetic system with known boundaries and prints how well it found them.
+
+Each command group is a module of this package (argument parsing, progress and printing
+only); the work is done by the application modules of :mod:`planner`.
+"""
+
+from __future__ import annotations
+
+import typer
+
+from planner.cli import compare, generate, processes, run, search, selfright, surrogate
+
+__all__ = ["app"]
+
+app = typer.Typer(no_args_is_help=True, add_completion=False, help=__doc__.splitlines()[0])
+
+
+@app.callback()
+def main() -> None:
+    """Plan field tests of autonomous underwater vehicles from adaptive boundary searches."""
+
+
+# in this order in --help
+app.command("search")(search.search)
+app.command("study")(search.study)
+app.command("run")(run.run)
+app.command("generate")(generate.generate)
+app.command("surrogate")(surrogate.surrogate)
+app.command("compare")(compare.compare)
+app.command("frontseat")(processes.frontseat)
+app.command("bridge")(processes.bridge)
+app.command("autonomy")(processes.autonomy)
+app.command("log")(processes.log)
+# Chapter 5's second system under test: self-righting ground robots (planner/selfright/).
+app.command("selfright")(selfright.selfright)

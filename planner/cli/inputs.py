@@ -1,0 +1,88 @@
+"""What the commands are given, loaded and checked: mission files, scenarios, surrogates, the bus.
+
+Several commands take the same arguments (a mission file, ``--scenario``, ``--surrogate``,
+the Zenoh endpoints); their option declarations and loaders live here once, so every
+command reports a bad one with the same one-line error.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+
+from planner.cli.console import fail
+
+__all__ = ["SurrogateOpt", "ScenarioOpt", "ZenohListen", "ZenohConnect", "ZenohConfig", "Vehicle", "load_mission",
+           "mission_and_scenario", "load_surrogate", "bus_session"]
+
+
+SurrogateOpt = Annotated[Optional[Path], typer.Option(
+    "--surrogate", help="A trained surrogate (.npz from `rapt-plan surrogate`) flies instead of the expert "
+                        "autonomy; it must have been trained for this mission.")]
+
+
+ScenarioOpt = Annotated[str, typer.Option("--scenario", help="Row number of the mission's Sobol design, or a "
+                                                              "JSON file with 'u' or 'parameters'.")]
+
+
+ZenohListen = Annotated[list[str], typer.Option("--zenoh-listen", help="Zenoh endpoints to listen on.")]
+
+
+ZenohConnect = Annotated[list[str], typer.Option("--zenoh-connect", help="Zenoh endpoints to connect to.")]
+
+
+ZenohConfig = Annotated[Optional[Path], typer.Option("--zenoh-config", help="Zenoh config file (real deployments).")]
+
+
+Vehicle = Annotated[str, typer.Option("--vehicle", help="Vehicle name on the bus.")]
+
+
+def load_mission(mission_file: Path):
+    """The mission file, loaded and validated, or a one-line error naming it."""
+    import sim.uuv
+
+    if not mission_file.is_file():
+        fail(f"MISSION_FILE: {mission_file} does not exist; give the path of a mission TOML file")
+    try:
+        return sim.uuv.load_mission(mission_file)
+    except ValueError as exc:
+        fail(str(exc))
+
+
+def mission_and_scenario(mission_file: Path, scenario: str):
+    import sim.uuv
+    from planner.scenarios import resolve_scenario
+
+    mission = load_mission(mission_file)
+    try:
+        u, sid = resolve_scenario(mission, scenario)
+        scen = sim.uuv.scenario.make_scenarios(mission, u[None, :])
+    except ValueError as exc:
+        fail(str(exc))
+    if not scen.valid[0]:
+        fail(f"--scenario: {scenario} is invalid for {mission.name} ({scen.invalid_reason[0]}); pick another")
+    return mission, u, sid
+
+
+def load_surrogate(path: Optional[Path], mission):
+    """The surrogate file for ``mission``, or a one-line error naming --surrogate."""
+    if path is None:
+        return None
+    from sim.uuv.imitation.surrogate import Surrogate
+
+    try:
+        return Surrogate.load(path, mission)
+    except (ValueError, OSError) as exc:
+        fail(f"--surrogate: {exc}")
+
+
+def bus_session(connect: list[str], config_file: Optional[Path]):
+    """A Zenoh session joining the bus: the config file as given, else the endpoints (loopback by default)."""
+    from bridge.session import open_session
+
+    try:
+        return open_session(config_file=config_file) if config_file is not None else open_session(connect=connect)
+    except (ValueError, OSError) as exc:
+        fail(str(exc))

@@ -1,0 +1,83 @@
+"""``rapt-plan run``: fly one scenario software-in-the-loop and print how it ended."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated, Optional
+
+import typer
+from rich.table import Table
+
+from planner.cli.console import fail, out
+from planner.cli.inputs import SurrogateOpt, load_surrogate, mission_and_scenario
+
+__all__ = ["run"]
+
+
+def run(
+    mission_file: Annotated[Path, typer.Argument(metavar="MISSION_OR_PLAN",
+                                                 help="Mission file (TOML), or a plan.json from rapt-plan generate.")],
+    scenario: Annotated[str, typer.Option("--scenario", help="Row number of the mission's Sobol design, or a JSON "
+                                                            "file with 'u' or 'parameters'; with a plan, a scenario "
+                                                            "id such as pair1a.")] = "0",
+    speedup: Annotated[Optional[float], typer.Option(help="Real time times this factor (default: lock-step).")] = None,
+    log: Annotated[Optional[Path], typer.Option(help="Record the bus to this MCAP file.")] = None,
+    timeout: Annotated[float, typer.Option(help="Give up after this many wall seconds.")] = 600.0,
+    inject_bias: Annotated[Optional[str], typer.Option(
+        "--inject-bias", help="Fly a biased vehicle for rehearsal, e.g. speed=1.15,current_offset=0.3 "
+                              "(speed, current_scale, current_offset, heading, battery, start_time; see sim.uuv.bias). "
+                              "Not written to the log.")] = None,
+    stochastic: Annotated[bool, typer.Option(help="Navigation drift and current perturbations on (seeded).")] = False,
+    seed: Annotated[int, typer.Option(help="Seed of the stochastic effects.")] = 0,
+    surrogate: SurrogateOpt = None,
+) -> None:
+    """Fly one scenario software-in-the-loop: front-seat, bridge, autonomy (and logger).
+
+    With --surrogate the learned policy commands the vehicle while the expert autonomy
+    keeps running beside it; the expert's commands are on the bus and in the log.
+    """
+    from planner.flight import Flight, check_against_batch, flight_from_plan, fly, is_plan, mode_name
+    from sim.uuv.bias import parse_bias
+
+    try:
+        bias = parse_bias(inject_bias) if inject_bias is not None else None
+    except ValueError as exc:
+        fail(f"--inject-bias: {exc}")
+    if is_plan(mission_file):
+        try:
+            flight = flight_from_plan(mission_file, scenario)
+        except ValueError as exc:
+            fail(str(exc))
+    else:
+        mission, u, sid = mission_and_scenario(mission_file, scenario)
+        flight = Flight(mission, u, sid, str(mission_file))
+    if speedup is not None and speedup <= 0:
+        fail(f"--speedup: expected a factor > 0, got {speedup}")
+    learned = load_surrogate(surrogate, flight.mission)
+    try:
+        result = fly(flight, log_path=log, speedup=speedup, timeout_s=timeout, bias=bias, stochastic=stochastic,
+                     seed=seed, surrogate=learned)
+    except (ValueError, RuntimeError, TimeoutError) as exc:
+        fail(str(exc))
+    batch = check_against_batch(flight, result.scores, bias=bias, stochastic=stochastic, seed=seed, surrogate=learned)
+    table = Table(title=f"{flight.mission.name} scenario {flight.scenario_id}: software in the loop")
+    table.add_column("", justify="left")
+    table.add_column("value", justify="right")
+    table.add_row("ended", result.ended)
+    if learned is not None:
+        table.add_row("flown by", f"surrogate {surrogate.name} (expert commands recorded)")
+    table.add_row("mode", mode_name(result.scores))
+    if bias is not None:
+        table.add_row("injected bias", str(bias))
+    table.add_row("simulated time", f"{result.sim_s:,.0f} s in {result.wall_s:.1f} s ({result.speedup:,.0f}x)")
+    for name in ("mission_areas", "transmission", "recovery", "nogo_areas", "mission.battery_left"):
+        if name in batch.names:
+            table.add_row(name, f"{result.scores[batch.names.index(name)]:g}")
+    if stochastic:  # the log holds what the navigation believed, the batch scores ground truth
+        table.add_row("batch simulator's mode (ground truth)", batch.mode)
+    else:
+        table.add_row("same scores as the batch simulator" + (" (same bias)" if bias is not None else ""),
+                      "yes" if batch.same else "NO")
+    if log is not None:
+        table.add_row("log", str(log))
+    out.print(table)

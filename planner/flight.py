@@ -1,0 +1,81 @@
+"""One scenario flown in the loop, then checked against the batch simulator.
+
+``rapt-plan run`` flies a scenario of a mission, or of a field plan, through the
+interfaces used on the water (:func:`planner.sil.run_sil`).  The loop adds no physics of
+its own, so a deterministic flight must score exactly what the batch simulator scores
+for the same row, bias and surrogate; a stochastic flight is scored from what the
+navigation believed, so the batch's mode is the ground truth beside it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from sim.uuv.mission import Mission
+from sim.uuv.scoring import MODE_NAMES
+
+__all__ = ["Flight", "BatchCheck", "is_plan", "flight_from_plan", "fly", "check_against_batch", "mode_name"]
+
+
+@dataclass(frozen=True)
+class Flight:
+    """What to fly: one scenario of a mission, and where it came from (both go into the log)."""
+
+    mission: Mission
+    u: np.ndarray  # the scenario's unit-cube row
+    scenario_id: str
+    mission_file: str
+    plan_id: str = ""
+
+
+@dataclass(frozen=True)
+class BatchCheck:
+    """The batch simulator's verdict on the scenario a flight flew."""
+
+    scores: np.ndarray  # the batch's scores of the row
+    names: list  # the scores' names
+    mode: str  # the batch's performance mode
+    same: bool  # the flight scored exactly the batch's scores
+
+
+def is_plan(path: Path) -> bool:
+    """A field plan (its plan.json or its directory) rather than a mission file."""
+    return path.suffix == ".json" or path.is_dir()
+
+
+def flight_from_plan(path: Path, scenario_id: str) -> Flight:
+    """Scenario ``scenario_id`` (e.g. pair1a) of the plan at ``path``; ValueError names what is wrong."""
+    from planner.plans import load_plan
+
+    plan = load_plan(path)
+    mission, u = plan.mission, plan.u(scenario_id)
+    return Flight(mission, u, scenario_id, str(plan.mission_file), plan.id)
+
+
+def fly(flight: Flight, *, log_path=None, speedup=None, timeout_s: float = 600.0, bias=None,
+        stochastic: bool = False, seed: int = 0, surrogate=None):
+    """Fly ``flight`` software-in-the-loop (:func:`planner.sil.run_sil`); returns its :class:`~planner.sil.SilResult`."""
+    from planner.sil import run_sil
+
+    return run_sil(flight.mission, flight.u, log_path=log_path, speedup=speedup, timeout_s=timeout_s,
+                   scenario_id=flight.scenario_id, mission_file=flight.mission_file, plan_id=flight.plan_id,
+                   bias=bias, stochastic=stochastic, seed=seed, surrogate=surrogate)
+
+
+def check_against_batch(flight: Flight, scores: np.ndarray, *, bias=None, stochastic: bool = False, seed: int = 0,
+                        surrogate=None) -> BatchCheck:
+    """The batch simulator on the flight's row with the same bias, seed and surrogate, against its ``scores``."""
+    import sim.uuv
+
+    batch = sim.uuv.simulate(flight.mission, flight.u[None, :], bias=bias, seed=seed, stochastic=stochastic,
+                             surrogate=surrogate)
+    return BatchCheck(batch.scores[0], batch.names, MODE_NAMES[int(batch.modes[0])],
+                      bool(np.array_equal(scores, batch.scores[0])))
+
+
+def mode_name(scores: np.ndarray) -> str:
+    """The performance mode of a run's scores: ``2 * mission success + safety success``."""
+    return MODE_NAMES[int(2 * scores[0] + scores[1])]

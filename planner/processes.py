@@ -1,0 +1,58 @@
+"""The loop's pieces as processes of their own: run until SIGINT or SIGTERM, then stop cleanly.
+
+``rapt-plan frontseat``, ``bridge``, ``autonomy`` and ``log`` each run one piece of the
+software-in-the-loop setup (or of the real one: the bridge joins a real vehicle) as a
+long-lived process.  How a piece is started, kept running and shut down is the same for
+all of them, and lives here rather than in the command line.
+"""
+
+from __future__ import annotations
+
+import signal
+import threading
+import time
+from contextlib import AbstractContextManager
+from typing import Callable
+
+__all__ = ["wait_for_signal", "serve_until_signal", "run_until_signal", "arm_when_heard"]
+
+
+def wait_for_signal(until: Callable[[], bool] | None = None) -> None:
+    """Block until SIGINT/SIGTERM (or ``until()`` is true), so a process stops cleanly."""
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    while not stop.wait(0.1):
+        if until is not None and until():
+            break
+
+
+def serve_until_signal(frontseat) -> None:
+    """Serve a front-seat (:class:`sim.uuv.frontseat.FrontSeat`) until a stop signal, then stop and close it."""
+    thread = threading.Thread(target=frontseat.serve, daemon=True)
+    thread.start()
+    wait_for_signal()
+    frontseat.stop()
+    thread.join(timeout=5)
+    frontseat.close()
+
+
+def run_until_signal(session, start: Callable[[], AbstractContextManager]) -> None:
+    """Run the piece ``start()`` opens on the bus ``session`` until a stop signal; the session is closed after."""
+    try:
+        with start():
+            wait_for_signal()
+    finally:
+        session.close()
+
+
+def arm_when_heard(link, timeout_s: float = 30.0) -> bool:
+    """Once the bridge ``link`` hears the vehicle: GUIDED mode and arm.  False if it is not heard in ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while link.target is None and time.monotonic() < deadline:
+        time.sleep(0.05)
+    if link.target is None:
+        return False
+    link.set_mode("GUIDED")
+    link.arm(True)
+    return True

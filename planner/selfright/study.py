@@ -1,0 +1,65 @@
+"""The record of one self-righting search: every state it evaluated and what became of it.
+
+Grid and adaptive searches (:mod:`planner.selfright.search`) both end in a
+:class:`SelfRightStudy`, so the graph, the figures of merit and the outputs are built the
+same way whichever search ran.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from planner.selfright.space import row_keys
+from rapt.manifold import angular_embedding
+from sim.robots import Robot
+
+__all__ = ["SelfRightStudy"]
+
+
+@dataclass
+class SelfRightStudy:
+    """Every evaluated state of one search, in unit-cube coordinates of :func:`~planner.selfright.space.space_bounds`."""
+
+    robot: Robot
+    slope: float  # degrees
+    method: str
+    bounds: np.ndarray
+    n_free: int
+    X: np.ndarray  # (N, d) starting states
+    stable: np.ndarray
+    rest: np.ndarray  # (N, d), NaN rows where it rolls away
+    energy: np.ndarray
+    faces: list  # per state: (k, b) valid body angles, unit cube
+    queries: int
+    seconds: float
+    resolution: float | None = None  # grid spacing, radians
+    extra: dict = field(default_factory=dict)
+    ids: np.ndarray | None = None  # (N,) face identity of each starting state
+    rest_ids: np.ndarray | None = None  # (N,) face identity of each resting state (-1: none)
+    face_ids: list | None = None  # per state: (k,) identities of ``faces``
+
+    def embed(self, U: np.ndarray) -> np.ndarray:
+        return angular_embedding(U, self.bounds)
+
+    def known_states(self, with_ids: bool = False):
+        """``X^Z``: every hull face of every evaluated joint state, each once (unit cube); and their identities."""
+        counts = np.array([len(f) for f in self.faces])
+        K = np.column_stack([np.repeat(self.X[:, :self.n_free], counts, axis=0), np.concatenate(self.faces)])
+        _, first = np.unique(row_keys(K), return_index=True)
+        first = np.sort(first)
+        if not with_ids:
+            return K[first]
+        return K[first], (np.concatenate(self.face_ids)[first] if self.face_ids is not None else None)
+
+    def extra_states(self, with_ids: bool = False, known: tuple | None = None):
+        """Known states that were not themselves evaluated (Algorithm 8 labels them by nearest neighbour).
+
+        ``known``: :meth:`known_states` ``(with_ids=True)`` when the caller already has it.
+        """
+        K, ids = self.known_states(with_ids=True) if known is None else known
+        new = ~np.isin(row_keys(K), row_keys(self.X))
+        if not with_ids:
+            return K[new]
+        return K[new], (ids[new] if ids is not None else None)
