@@ -130,9 +130,10 @@ def run_sil(mission: Mission, u, *, vehicle: str = "uuv1", log_path: str | Path 
             "mission": mission.name, "mission_file": mission_file or mission.source, "scenario_id": scenario_id,
             "plan_id": plan_id, "u": u.tolist(), "parameters": jsonable(mission.space.decode(u[None, :])[0]),
         }))
-        backseat = BackSeat(session, vehicle, mission, u).start()
+        backseat = flying = BackSeat(session, vehicle, mission, u).start()
         if surrogate is not None:
-            learned = BackSeat(session, vehicle, mission, u, source=SURROGATE_SOURCE, surrogate=surrogate).start()
+            learned = flying = BackSeat(session, vehicle, mission, u, source=SURROGATE_SOURCE,
+                                        surrogate=surrogate).start()
         bridge = MavlinkBridge(f"udpout:127.0.0.1:{port}", session, vehicle=vehicle, allow_commands=True).start()
         deadline = time.monotonic() + 10
         while bridge.target is None and time.monotonic() < deadline:
@@ -155,7 +156,7 @@ def run_sil(mission: Mission, u, *, vehicle: str = "uuv1", log_path: str | Path 
             raise TimeoutError(f"timeout_s: the run did not end within {timeout_s} s of wall time")
         time.sleep(0.3)  # let the last step's telemetry reach the recorder and the logger
         wall = time.perf_counter() - started
-        status = (learned if surrogate is not None else backseat).autonomy
+        status = flying.autonomy  # the scores are those of whoever flew
         wp_aborted = [bool(v) for v in status.wp_aborted[0]]
         reason = int(status.return_reason[0])
         track = recorder.builder.track()

@@ -64,7 +64,7 @@ def run(
     table.add_column("", justify="left")
     table.add_column("value", justify="right")
     table.add_row("ended", result.ended)
-    if learned is not None:
+    if learned is not None and surrogate is not None:
         table.add_row("flown by", f"surrogate {surrogate.name} (expert commands recorded)")
     table.add_row("mode", mode_name(result.scores))
     if bias is not None:

@@ -85,11 +85,13 @@ def analyse(study: SelfRightStudy, *, max_edge: float | None = None, probes=None
     graph, extra, max_edge, n_known = build_graph(study, max_edge=max_edge, use_ids=use_ids)
     seconds = time.perf_counter() - t0
     home_U, home_id = home_state(study, with_id=True)
-    home = int(graph.node_of(study.embed(home_U[None]), ids=[home_id])[0])
+    home = int(graph.node_of(study.embed(home_U[None]), ids=np.array([home_id]))[0])
     cost, _ = graph.costs_to(home) if home >= 0 else (np.full(graph.n_nodes, np.inf), None)
     probes = as_probes(probe_states(study.robot, study.slope, 500, 0) if probes is None else probes)
-    ok, energy = (graph.outcome(study.embed(probes.U), home, ids=probes.ids) if home >= 0
-                  else (np.zeros(len(probes), bool), None))
+    if home >= 0:
+        ok, energy = graph.outcome(study.embed(probes.U), home, ids=probes.ids)
+    else:  # no home node: nothing rights itself
+        ok, energy = np.zeros(len(probes), bool), np.zeros(len(probes))
     e = graph.edges
     return SelfRightAnalysis(
         graph=graph, home=home, cost_to_home=cost, graph_seconds=seconds, max_edge=max_edge, extra_states=extra,

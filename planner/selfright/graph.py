@@ -14,6 +14,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from planner.selfright.study import SelfRightStudy
+from rapt.errors import InputError
 from rapt.transitions import TransitionGraph, transition_graph
 
 __all__ = ["StudyGraph", "build_graph", "default_max_edge", "grid_connections"]
@@ -38,6 +39,8 @@ def grid_connections(study: SelfRightStudy) -> tuple[np.ndarray, np.ndarray]:
     stable); each resting state is the evaluated state it names.  Indices
     run over ``[X, settled rest states]`` (a grid has no unevaluated known states).
     """
+    if study.resolution is None or "grid_shape" not in study.extra:
+        raise InputError(f"study: a {study.method!r} study is not a grid; grid_connections needs grid_study's")
     shape, periodic = study.extra["grid_shape"], study.extra["grid_periodic"]
     m = study.n_free
     U = study.X[:, :m]
@@ -45,7 +48,7 @@ def grid_connections(study: SelfRightStudy) -> tuple[np.ndarray, np.ndarray]:
     for a in range(m):
         div = shape[a] if periodic[a] else shape[a] - 1
         idx[:, a] = np.rint(U[:, a] * div).astype(np.int64) % shape[a]
-    flat = np.ravel_multi_index(tuple(idx.T), shape)
+    flat = np.asarray(np.ravel_multi_index(tuple(idx.T), shape))
     settled = np.flatnonzero(np.isfinite(study.rest).all(axis=1))
     _, rank = np.unique(np.concatenate([study.ids, study.rest_ids[settled]]), return_inverse=True)
     rank = rank.reshape(-1).astype(np.int64)
@@ -74,7 +77,7 @@ def grid_connections(study: SelfRightStudy) -> tuple[np.ndarray, np.ndarray]:
             nb[:, a] %= shape[a]
             ok[:] = True
         s = np.flatnonzero(ok)
-        nflat = np.ravel_multi_index(tuple(nb[s].T), shape)
+        nflat = np.asarray(np.ravel_multi_index(tuple(nb[s].T), shape))
         same = find(nflat * n_id + rank[s])
         src.append(s[same >= 0])
         dst.append(same[same >= 0])
@@ -139,7 +142,7 @@ def build_graph(study: SelfRightStudy, *, max_edge: float | None = None, use_ids
     known = study.known_states(with_ids=True)  # X^Z, once for d_max, the extra states and their identities
     max_edge = default_max_edge(study, known[0]) if max_edge is None else max_edge
     extra, extra_ids = study.extra_states(with_ids=True, known=known)
-    ids = (study.ids, study.rest_ids, extra_ids) if use_ids and study.ids is not None else None
+    ids = (study.ids, study.rest_ids, extra_ids) if use_ids else None
     connections = grid_connections(study) if use_ids and "grid_shape" in study.extra else None
     graph = transition_graph(study.embed(study.X), study.stable, study.embed(study.rest), study.energy,
                              study.embed(extra), max_edge=max_edge, ids=ids,

@@ -34,11 +34,11 @@ class SelfRightStudy:
     faces: list  # per state: (k, b) valid body angles, unit cube
     queries: int
     seconds: float
-    resolution: float | None = None  # grid spacing, radians
+    ids: np.ndarray  # (N,) face identity of each starting state
+    rest_ids: np.ndarray  # (N,) face identity of each resting state (-1: none)
+    face_ids: list  # per state: (k,) identities of ``faces``
+    resolution: float | None = None  # grid spacing, radians (grid studies only)
     extra: dict = field(default_factory=dict)
-    ids: np.ndarray | None = None  # (N,) face identity of each starting state
-    rest_ids: np.ndarray | None = None  # (N,) face identity of each resting state (-1: none)
-    face_ids: list | None = None  # per state: (k,) identities of ``faces``
 
     def embed(self, U: np.ndarray) -> np.ndarray:
         return angular_embedding(U, self.bounds)
@@ -51,7 +51,7 @@ class SelfRightStudy:
         first = np.sort(first)
         if not with_ids:
             return K[first]
-        return K[first], (np.concatenate(self.face_ids)[first] if self.face_ids is not None else None)
+        return K[first], np.concatenate(self.face_ids)[first]
 
     def extra_states(self, with_ids: bool = False, known: tuple | None = None):
         """Known states that were not themselves evaluated (Algorithm 8 labels them by nearest neighbour).
@@ -62,4 +62,4 @@ class SelfRightStudy:
         new = ~np.isin(row_keys(K), row_keys(self.X))
         if not with_ids:
             return K[new]
-        return K[new], (ids[new] if ids is not None else None)
+        return K[new], ids[new]

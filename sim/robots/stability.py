@@ -163,9 +163,9 @@ class StabilityResult:
     energy: np.ndarray  # (n,) potential energy lost, J
     faces: list  # per query: (k_i, b) hull faces Z_θ as body angles
     tips: np.ndarray  # (n,) number of tips until rest
-    start_id: np.ndarray | None = None  # (n,) face identity of the starting face
-    rest_id: np.ndarray | None = None  # (n,) face identity of the resting face (-1 when it never rests)
-    face_ids: list | None = None  # per query: (k_i,) identities of the faces in ``faces``
+    start_id: np.ndarray  # (n,) face identity of the starting face
+    rest_id: np.ndarray  # (n,) face identity of the resting face (-1 when it never rests)
+    face_ids: list  # per query: (k_i,) identities of the faces in ``faces``
 
     def __len__(self) -> int:
         return len(self.stable)
