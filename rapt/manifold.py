@@ -90,14 +90,14 @@ class ManifoldSampler(Sampler):
     name = "manifold-nndv"
     adaptive = True
 
-    def __init__(self, n_free: int, bounds: Sequence[Sequence[float]], *, seed: int = 0, k: int = 6,
+    def __init__(self, n_free: int, bounds: np.ndarray | Sequence[Sequence[float]], *, seed: int = 0, k: int = 6,
                  alpha: float = 1.0, beta: float = 1.0, r_min: float = np.radians(1.0), r_max: float = np.radians(10.0),
                  n_initial: int = 100, candidates_per_point: float = 10.0, min_candidates: int = 1000,
                  separation: float = 0.5, whole_hulls: bool = False):
-        bounds = np.asarray(bounds, dtype=float)
-        if bounds.ndim != 2 or bounds.shape[1] != 2 or not np.all(bounds[:, 1] > bounds[:, 0]):
-            raise ValueError(f"bounds: expected (d, 2) ranges with lower < upper, got {bounds.tolist()}")
-        super().__init__(len(bounds), seed=seed, output_types=("binary",))
+        ranges = np.asarray(bounds, dtype=float)
+        if ranges.ndim != 2 or ranges.shape[1] != 2 or not np.all(ranges[:, 1] > ranges[:, 0]):
+            raise ValueError(f"bounds: expected (d, 2) ranges with lower < upper, got {ranges.tolist()}")
+        super().__init__(len(ranges), seed=seed, output_types=("binary",))
         if not 0 <= n_free < self.dim:
             raise ValueError(f"n_free: expected 0 <= n_free < {self.dim} (at least one constrained coordinate), got {n_free}")
         for name, value in (("alpha", alpha), ("beta", beta), ("r_min", r_min), ("r_max", r_max),
@@ -109,7 +109,7 @@ class ManifoldSampler(Sampler):
         if k < 2:
             raise ValueError(f"k: need at least 2 neighbours for a variance, got {k}")
         self.n_free = int(n_free)
-        self.bounds = bounds
+        self.bounds = ranges
         self.k = int(k)
         self.alpha, self.beta = float(alpha), float(beta)
         self.r_min, self.r_max = float(r_min), float(r_max)
@@ -148,7 +148,8 @@ class ManifoldSampler(Sampler):
         if len(faces) != len(X):
             raise ValueError(f"faces: expected one face set per state ({len(X)}), got {len(faces)}")
         faces = [np.asarray(f, dtype=float).reshape(-1, self.dim - self.n_free) for f in faces]
-        if (ids is None) != (face_ids is None) or (ids is not None and (len(ids) != len(X) or len(face_ids) != len(X))):
+        if (ids is None) != (face_ids is None) or (ids is not None and face_ids is not None
+                                                   and (len(ids) != len(X) or len(face_ids) != len(X))):
             raise ValueError(f"ids, face_ids: give both, one per state ({len(X)}), or neither")
         if ids is None or self._face_ids is None or (self.n_told and not self._ids):
             self._face_ids = None  # identities only help when every state has them
@@ -160,7 +161,7 @@ class ManifoldSampler(Sampler):
         if self._outcomes is not None:
             self._outcomes.extend(np.asarray(outcomes, dtype=float).reshape(-1).tolist())
         self._faces.extend(faces)
-        if self._face_ids is not None:
+        if self._face_ids is not None and ids is not None and face_ids is not None:  # kept only while both are told
             self._ids.extend(int(v) for v in ids)
             self._face_ids.extend(np.asarray(f, dtype=np.int64).reshape(-1) for f in face_ids)
 
@@ -192,7 +193,7 @@ class ManifoldSampler(Sampler):
 
     def _candidates(self, n: int, rng: np.random.Generator, tree: cKDTree | None):
         """:meth:`candidates` with their groups and identities (see :meth:`_on_nearest_faces`)."""
-        mean_faces = max(np.mean([len(f) for f in self._faces]), 1.0)
+        mean_faces = max(float(np.mean([len(f) for f in self._faces])), 1.0)
         p = max(int(np.ceil(max(self.candidates_per_point * n, self.min_candidates) / mean_faces)), 1)
         return self._on_nearest_faces(rng.random((p, self.n_free)), tree)
 
@@ -204,7 +205,7 @@ class ManifoldSampler(Sampler):
         identities (None when the states were told without them).
         """
         p = len(theta)
-        if self.n_free:
+        if tree is not None:  # there are free coordinates
             _, nn = tree.query(angular_embedding(theta, self.bounds[:self.n_free]), k=1, workers=query_workers(p))
         else:
             nn = np.zeros(p, dtype=int)

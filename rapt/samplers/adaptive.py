@@ -114,7 +114,7 @@ class InformationSampler(Sampler):
         """Per output: (kind, codes or normalised values, n_classes or 0)."""
         Y = self.Y
         out = []
-        for j, kind in enumerate(self.output_types):
+        for j, kind in enumerate(self.output_types or ()):  # set by the first tell, before any metamodel runs
             if kind == "continuous":
                 out.append((kind, normalize_continuous(Y[:, j]), 0))
             else:
