@@ -78,7 +78,6 @@ class Bias:
 
 
 BIAS_NAMES: tuple[str, ...] = tuple(f.name for f in fields(Bias))
-NEUTRAL: dict[str, float] = {f.name: f.default for f in fields(Bias)}
 BIAS_UNITS: dict[str, str] = {"speed": "x", "current_scale": "x", "current_offset": "m/s", "heading": "deg",
                               "battery": "x", "start_time": "s"}
 #: Accepted range of each field (inclusive): wider than any plausible range day, narrow
@@ -100,6 +99,10 @@ def check_value(name: str, value) -> float:
         raise ValueError(f"{name}: {value} is outside [{lo:g}, {hi:g}] {BIAS_UNITS[name]}; "
                          f"give a value in that range (neutral: {NEUTRAL[name]:g})")
     return v
+
+
+#: The neutral bias's fields (the defaults: no change to the vehicle).
+NEUTRAL: dict[str, float] = Bias().to_dict()
 
 
 def parse_bias(text: str) -> Bias:

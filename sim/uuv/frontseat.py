@@ -240,6 +240,7 @@ class FrontSeat:
             cx, cy = float(tel.contact_x[0, j]), float(tel.contact_y[0, j])
             m.obstacle_distance_3d_send(ms, mav.MAV_DISTANCE_SENSOR_ULTRASOUND, mav.MAV_FRAME_LOCAL_NED, int(j),
                                         cy, cx, 0.0, 0.0, rng)
+        assert tel.scan is not None, "the front-seat's world scans (SCAN_BEAMS > 0)"
         cm = np.round(tel.scan[0] * 100.0).astype(np.int64)
         for start in range(0, SCAN_BEAMS, BEAMS_PER_MESSAGE):
             m.obstacle_distance_send(ms * 1000, mav.MAV_DISTANCE_SENSOR_ULTRASOUND,

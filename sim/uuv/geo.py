@@ -59,7 +59,7 @@ class LocalFrame:
         if not (math.isfinite(lon) and -180.0 <= lon <= 180.0):
             raise ValueError(f"origin_lon: expected degrees in [-180, 180], got {self.origin_lon!r}")
         object.__setattr__(self, "origin_lat", lat)
-        object.__setattr__(self, "origin_lon", float(wrap_degrees(np.float64(lon))))
+        object.__setattr__(self, "origin_lon", float(wrap_degrees(np.asarray(lon))))
         phi = math.radians(lat)
         w = 1.0 - _E2 * math.sin(phi) ** 2
         object.__setattr__(self, "prime_vertical_radius", WGS84_A / math.sqrt(w))

@@ -27,7 +27,7 @@ __all__ = ["TRACK_FIELDS", "score_track", "TrackBuilder"]
 TRACK_FIELDS = ("t", "x", "y", "heading", "energy_hj", "surfaced")
 
 
-def score_track(mission: Mission, u: Sequence[float], track: np.ndarray, wp_aborted: Sequence[bool] = (),
+def score_track(mission: Mission, u: np.ndarray | Sequence[float], track: np.ndarray, wp_aborted: Sequence[bool] = (),
                 return_reason: int = 0) -> np.ndarray:
     """Score vector of scenario ``u`` (unit cube) from its ``track`` (steps, TRACK_FIELDS).
 
@@ -67,9 +67,9 @@ class TrackBuilder:
 
     NEEDED = ("LOCAL_POSITION_NED", "ATTITUDE", "BATTERY_STATUS")
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.rows: list[tuple[float, ...]] = []
-        self._tick: dict = {}
+        self._tick: dict[str, object] = {}  # this step's reports by type, until SYSTEM_TIME closes it
         self._last_ms = -1
 
     def add(self, msg) -> None:

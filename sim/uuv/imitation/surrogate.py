@@ -87,7 +87,8 @@ class Surrogate:
         arrays = self.policy.to_arrays()
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_name(path.name + ".part.npz")
-        np.savez(tmp, header=np.array(json.dumps(header)), **arrays)
+        # numpy's stub lets **arrays bind savez's allow_pickle (a bool); the policy's keys are array names only
+        np.savez(tmp, header=np.array(json.dumps(header)), **arrays)  # type: ignore[arg-type]
         tmp.replace(path)
         return path
 
