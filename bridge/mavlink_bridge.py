@@ -422,16 +422,18 @@ class MavlinkBridge(Service):
                 self._acks[msg.command] = (msg.result, self._ack_serial)
                 self._ack_cond.notify_all()
         try:
+            session, raw_pub = self._session, self._raw_pub
+            assert session is not None and raw_pub is not None, "the reader starts after _open declared both"
             pub = self._publishers.get(name)
             if pub is None:
-                pub = self._session.declare_publisher(
+                pub = session.declare_publisher(
                     keys.telemetry(self.vehicle, name),
                     encoding=zenoh.Encoding.APPLICATION_JSON,
                     reliability=zenoh.Reliability.RELIABLE,
                 )  # not express: batching keeps bursts lossless, and costs no measurable latency
                 self._publishers[name] = pub
             pub.put(message_json(msg, recv_ns))
-            self._raw_pub.put(frame)
+            raw_pub.put(frame)
             self._counts["published"] += 2
         except Exception as error:  # a closing session, an unencodable field: count, keep reading
             self._counts["publish_errors"] += 1
@@ -527,6 +529,7 @@ class MavlinkBridge(Service):
         if reason is not None:
             c["commands_" + reason] += 1
             return
+        assert target is not None, "the gate forwards only while an autopilot is heard"
         msg = mavlink2.MAVLink_set_position_target_local_ned_message(
             sp.tick_ms or 0,
             target[0],
@@ -573,9 +576,9 @@ class MavlinkBridge(Service):
         if not self.allow_commands:
             self._counts["commands_refused"] += 1
             raise PermissionError(f"{what}: allow_commands is False, nothing but HEARTBEAT is sent to the vehicle")
-        if not self.linked:
+        target = self._target  # read once: the reader may forget it (link lost) at any time
+        if target is None or not self.linked:
             raise RuntimeError(f"{what}: no autopilot heard within the last {self.silence_s} s")
-        target = self._target
         for attempt in range(retries + 1):
             with self._ack_cond:
                 serial = self._ack_serial
