@@ -145,8 +145,9 @@ def search_mission(mission: Mission, cfg: GenerateConfig, progress: Callable[[in
 
     Every score is stored with its run, so the sub-boundary analysis needs no second run.
     """
+    batch_size = auto_batch_size(cfg.budget) if cfg.batch_size is None else cfg.batch_size  # as __post_init__
     return rapt.search(MissionScores(mission, cfg.surrogate), mission.space, cfg.budget, method="s-ndv",
-                       batch_size=cfg.batch_size, seed=cfg.seed, store=cfg.store, executor=cfg.executor,
+                       batch_size=batch_size, seed=cfg.seed, store=cfg.store, executor=cfg.executor,
                        output_types=("binary", "binary"), steer=ROOT_COLUMNS,
                        sampler_options={"max_reference": SEARCH_REFERENCE},
                        n_initial=int(round(cfg.budget * cfg.global_fraction)), progress=progress,
@@ -233,7 +234,7 @@ def select_pairs(a: Analysis, k: int, min_cluster: int = 3) -> list[dict]:
 
 
 # -- 4. dithering ---------------------------------------------------------------------------
-def dither_many(mission: Mission, centres: np.ndarray, predicted: Sequence[int], elements: Sequence[list[str]],
+def dither_many(mission: Mission, centres: np.ndarray, predicted: np.ndarray | Sequence[int], elements: Sequence[list[str]],
                 n: int, sigma: float, seed: int, surrogate=None) -> tuple[list[dict], np.ndarray, np.ndarray]:
     """Stochastic runs of ``n`` Gaussian dithers around each centre, all in one batch.
 
@@ -275,7 +276,7 @@ def dither_stats(U: np.ndarray, scores: np.ndarray, modes: np.ndarray, valid: np
     other = modes != predicted_mode
     out["nearest_other_mode"] = float(dist[other].min()) if other.any() else None
     same = scores[valid][~other]
-    flips = []
+    flips: list[dict[str, str | float]] = []
     if same.shape[0] > 1 and valid[0]:
         ref = scores[0]
         for c, (name, t) in enumerate(zip(names, types)):
@@ -296,7 +297,7 @@ VARIANT_STEPS = (0.02, 0.05, 0.1)
 VARIANT_COORDINATES = 2  # the most sensitive coordinates tried
 
 
-def robust_variants(mission: Mission, fragile: np.ndarray, partners: np.ndarray, modes: Sequence[int],
+def robust_variants(mission: Mission, fragile: np.ndarray, partners: np.ndarray, modes: np.ndarray | Sequence[int],
                     sensitivity: np.ndarray, n: int, sigma: float, target: float, seed: int,
                     surrogate=None) -> list[dict | None]:
     """Move fragile scenarios away from their boundary along their most sensitive coordinates.
@@ -323,15 +324,15 @@ def robust_variants(mission: Mission, fragile: np.ndarray, partners: np.ndarray,
     out: list[dict | None] = [None] * len(fragile)
     if not cands:
         return out
-    V, owner = np.array(cands), np.array(owner)
+    V, owners = np.array(cands), np.array(owner)
     det = sim.uuv.simulate(mission, V, surrogate=surrogate)
-    keep = np.flatnonzero(det.valid & (det.modes == np.asarray(modes)[owner]))
+    keep = np.flatnonzero(det.valid & (det.modes == np.asarray(modes)[owners]))
     if keep.size == 0:
         return out
-    stats, _, _ = dither_many(mission, V[keep], np.asarray(modes)[owner[keep]], [[]] * keep.size, n, sigma, seed,
+    stats, _, _ = dither_many(mission, V[keep], np.asarray(modes)[owners[keep]], [[]] * keep.size, n, sigma, seed,
                               surrogate)
     for idx, st in zip(keep.tolist(), stats):
-        s = owner[idx]
+        s = owners[idx]
         if out[s] is None and st.get("p_predicted_mode", 0.0) >= target:
             c, step = meta[idx]
             out[s] = {"u": [float(x) for x in V[idx]], "coordinate": c, "step": step,
@@ -453,8 +454,11 @@ def _choose_pairs(mission: Mission, cfg: GenerateConfig, progress: Callable[[str
     Returns the analysis, the chosen pairs, and on the surrogate workflow the number of
     candidate pairs and the expert runs that checked them (None otherwise).
     """
-    status = SearchStatus(mission.dim) if progress is not None else None
-    searched = None if status is None else lambda done, total: progress("search", done, total, status.summary())
+    status: SearchStatus | None = None
+    searched: Callable[[int, int], None] | None = None
+    if progress is not None:
+        status = SearchStatus(mission.dim)
+        searched = _search_progress(progress, status)
     study = search_mission(mission, cfg, searched, on_batch=status)
     clock.lap("search")
     sur = cfg.surrogate
@@ -476,6 +480,12 @@ def _choose_pairs(mission: Mission, cfg: GenerateConfig, progress: Callable[[str
         clock.lap("confirmation")
         confirmation = (candidates, confirm_spent)
     return a, pairs, confirmation
+
+
+def _search_progress(progress: Callable[[str, int, int, str], None], status: SearchStatus
+                     ) -> Callable[[int, int], None]:
+    """The search's ``progress``: runs done of the budget, and what the runs so far show (``status``)."""
+    return lambda done, total: progress("search", done, total, status.summary())
 
 
 def _dither_chosen(mission: Mission, cfg: GenerateConfig, U: np.ndarray, ids: list[str], chosen: sim.uuv.Result,
@@ -509,7 +519,7 @@ def _scenario_entries(mission: Mission, a: Analysis, U: np.ndarray, ids: list[st
                                      if c in level_cols}},
             "dithering": stats[k],
             "files": {kind: path.name for kind, path in
-                      write_scenario_files(mission, U[k], out_dir, sid, chosen.trajectories[k]).items()},
+                      write_scenario_files(mission, U[k], out_dir, sid, chosen.trajectory(k)).items()},
         })
     return scenarios
 
@@ -550,7 +560,8 @@ def _plan_document(mission: Mission, mission_path: Path, cfg: GenerateConfig, a:
                   "valid_runs": int(len(a.X)), "invalid_runs": int(len(a.X_invalid)),
                   "modes": {MODE_NAMES[m]: int(c) for m, c in zip(*np.unique(modes, return_counts=True))},
                   "boundary_types": a.boundary_types[:30],
-                  **({"surrogate": _surrogate_summary(cfg, confirmation, len(pairs))} if sur is not None else {})},
+                  **({"surrogate": _surrogate_summary(cfg, confirmation, len(pairs))} if confirmation is not None
+                     else {})},
         "sensitivity": a.sensitivity,
         "pairs": plan_pairs,
         "scenarios": scenarios,
