@@ -46,6 +46,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from rapt.candidates import select_batch
+from rapt.errors import InputError
 from rapt.information import neighbour_variance, unalikeability
 from rapt.parallel import query_workers
 from rapt.samplers.base import Sampler
@@ -96,18 +97,18 @@ class ManifoldSampler(Sampler):
                  separation: float = 0.5, whole_hulls: bool = False):
         ranges = np.asarray(bounds, dtype=float)
         if ranges.ndim != 2 or ranges.shape[1] != 2 or not np.all(ranges[:, 1] > ranges[:, 0]):
-            raise ValueError(f"bounds: expected (d, 2) ranges with lower < upper, got {ranges.tolist()}")
+            raise InputError(f"bounds: expected (d, 2) ranges with lower < upper, got {ranges.tolist()}")
         super().__init__(len(ranges), seed=seed, output_types=("binary",))
         if not 0 <= n_free < self.dim:
-            raise ValueError(f"n_free: expected 0 <= n_free < {self.dim} (at least one constrained coordinate), got {n_free}")
+            raise InputError(f"n_free: expected 0 <= n_free < {self.dim} (at least one constrained coordinate), got {n_free}")
         for name, value in (("alpha", alpha), ("beta", beta), ("r_min", r_min), ("r_max", r_max),
                             ("candidates_per_point", candidates_per_point), ("separation", separation)):
             if not np.isfinite(value) or value < 0:
-                raise ValueError(f"{name}: expected a finite number >= 0, got {value!r}")
+                raise InputError(f"{name}: expected a finite number >= 0, got {value!r}")
         if r_min > r_max:
-            raise ValueError(f"r_min: the boundary resolution ({r_min}) must not exceed the interior one, r_max ({r_max})")
+            raise InputError(f"r_min: the boundary resolution ({r_min}) must not exceed the interior one, r_max ({r_max})")
         if k < 2:
-            raise ValueError(f"k: need at least 2 neighbours for a variance, got {k}")
+            raise InputError(f"k: need at least 2 neighbours for a variance, got {k}")
         self.n_free = int(n_free)
         self.bounds = ranges
         self.k = int(k)
@@ -119,7 +120,7 @@ class ManifoldSampler(Sampler):
         self.separation = float(separation)
         self.whole_hulls = bool(whole_hulls)
         if self.whole_hulls and self.n_free < 1:
-            raise ValueError("whole_hulls: needs at least one free coordinate (n_free >= 1) to group faces by")
+            raise InputError("whole_hulls: needs at least one free coordinate (n_free >= 1) to group faces by")
         self._faces: list[np.ndarray] = []
         self._ids: list[int] = []
         self._face_ids: list[np.ndarray] | None = []
@@ -146,15 +147,15 @@ class ManifoldSampler(Sampler):
         if faces is None:
             faces = [x[None, self.n_free:] for x in X]
         if len(faces) != len(X):
-            raise ValueError(f"faces: expected one face set per state ({len(X)}), got {len(faces)}")
+            raise InputError(f"faces: expected one face set per state ({len(X)}), got {len(faces)}")
         faces = [np.asarray(f, dtype=float).reshape(-1, self.dim - self.n_free) for f in faces]
         if (ids is None) != (face_ids is None) or (ids is not None and face_ids is not None
                                                    and (len(ids) != len(X) or len(face_ids) != len(X))):
-            raise ValueError(f"ids, face_ids: give both, one per state ({len(X)}), or neither")
+            raise InputError(f"ids, face_ids: give both, one per state ({len(X)}), or neither")
         if ids is None or self._face_ids is None or (self.n_told and not self._ids):
             self._face_ids = None  # identities only help when every state has them
         if outcomes is not None and len(outcomes) != len(X):
-            raise ValueError(f"outcomes: expected one per state ({len(X)}), got {len(outcomes)}")
+            raise InputError(f"outcomes: expected one per state ({len(X)}), got {len(outcomes)}")
         if outcomes is None or self._outcomes is None or (self.n_told and not self._outcomes):
             self._outcomes = None  # as identities: every state's, or none
         super().tell(X, Y)
@@ -381,7 +382,7 @@ def manifold_search(fn: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, Seq
     unstable state ends up (see :meth:`ManifoldSampler.tell`).
     """
     if budget < 1 or batch_size < 1:
-        raise ValueError(f"budget, batch_size: expected positive integers, got {budget}, {batch_size}")
+        raise InputError(f"budget, batch_size: expected positive integers, got {budget}, {batch_size}")
     while sampler.n_told < budget and not sampler.done:
         q = sampler.ask(min(batch_size, budget - sampler.n_told))
         if not len(q):

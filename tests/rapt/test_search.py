@@ -68,7 +68,7 @@ def test_a_system_that_always_fails_stops_the_study():
     def broken(X):
         raise KeyError("missing scenario file")
 
-    with pytest.raises(RuntimeError, match="every row of the first 3 batches failed.*missing scenario file"):
+    with pytest.raises(rapt.RunError, match="every row of the first 3 batches failed.*missing scenario file"):
         rapt.search(broken, [(0, 1)], budget=1000, method="sobol", batch_size=10)
 
 
