@@ -30,6 +30,7 @@ import numpy as np
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
+from rapt.errors import InputError  # noqa: E402
 from sim.uuv.geo import LocalFrame  # noqa: E402
 from sim.uuv.interface import DEPTH_M, decode_command  # noqa: E402
 from sim.uuv.mission import Mission  # noqa: E402
@@ -81,9 +82,9 @@ class FrontSeat:
         self.u = np.asarray(u, dtype=float).reshape(1, -1)
         scen = make_scenarios(mission, self.u)
         if not scen.valid[0]:
-            raise ValueError(f"scenario: invalid for mission '{mission.name}' ({scen.invalid_reason[0]})")
+            raise InputError(f"scenario: invalid for mission '{mission.name}' ({scen.invalid_reason[0]})")
         if speedup <= 0:
-            raise ValueError(f"speedup: expected a factor > 0, got {speedup}")
+            raise InputError(f"speedup: expected a factor > 0, got {speedup}")
         self.scen = scen
         # a biased vehicle (sim.uuv.bias) flies like a real one whose speed, tide, compass or
         # battery differ from the model; the back-seat on the far side does not know

@@ -96,6 +96,7 @@ import tomllib
 from pathlib import Path
 from typing import Any, Mapping, NoReturn
 
+from rapt.errors import FileFormatError
 from rapt.scoretree import ScoreTree
 from rapt.space import Categorical, Continuous, Integer, Parameter, Permutation, StateSpace
 from sim.uuv.metrics import ELEMENT_KINDS, element_names, metric_names
@@ -105,8 +106,11 @@ from sim.uuv.mission import (TARGET_FIELDS, Binding, Current, Mission, MissionAr
 __all__ = ["load_mission", "MissionFileError"]
 
 
-class MissionFileError(ValueError):
-    """A mission file that cannot be loaded; the message is one line: file, field, problem, fix."""
+class MissionFileError(FileFormatError):
+    """A mission file that cannot be loaded; the message is one line: file, field, problem, fix.
+
+    A :class:`rapt.errors.FileFormatError`, so also an ``InputError``, a ``RaptError`` and a ``ValueError``.
+    """
 
 
 _MISSING = object()

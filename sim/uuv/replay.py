@@ -13,6 +13,7 @@ from typing import Sequence
 
 import numpy as np
 
+from rapt.errors import InputError
 from sim.uuv.geometry import rect_signed_distance
 from sim.uuv.interface import battery_fraction
 from sim.uuv.mission import Mission
@@ -36,10 +37,10 @@ def score_track(mission: Mission, u: np.ndarray | Sequence[float], track: np.nda
     """
     scen = make_scenarios(mission, np.asarray(u, dtype=float)[None, :])
     if not scen.valid[0]:
-        raise ValueError(f"u: scenario is invalid ({scen.invalid_reason[0]}); it has no score")
+        raise InputError(f"u: scenario is invalid ({scen.invalid_reason[0]}); it has no score")
     track = np.asarray(track, dtype=float)
     if track.ndim != 2 or track.shape[1] < len(TRACK_FIELDS) or track.shape[0] == 0:
-        raise ValueError(f"track: expected rows of {', '.join(TRACK_FIELDS)}, got shape {track.shape}")
+        raise InputError(f"track: expected rows of {', '.join(TRACK_FIELDS)}, got shape {track.shape}")
     scorer = Scorer(scen)
     start_wh = scen.battery0 * mission.vehicle.battery_wh
     active = np.ones(1, dtype=bool)

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from rapt.errors import InputError
 from rapt.space import Permutation
 from sim.uuv.geometry import (inside_rect, polygon_edges, polygon_signed_distance, rect_signed_distance,
                           triangle_vertices)
@@ -89,10 +90,10 @@ def make_scenarios(mission: Mission, U: np.ndarray) -> Scenarios:
     """Decode unit-cube rows ``U`` (N, mission.dim) into a batch of scenarios."""
     U = np.asarray(U, dtype=float)
     if U.ndim != 2 or U.shape[1] != mission.dim:
-        raise ValueError(f"X: expected unit-cube rows of shape (N, {mission.dim}) for mission "
+        raise InputError(f"X: expected unit-cube rows of shape (N, {mission.dim}) for mission "
                          f"'{mission.name}', got {U.shape}")
     if U.size and (np.nanmin(U) < 0 or np.nanmax(U) > 1 or not np.all(np.isfinite(U))):
-        raise ValueError("X: values must be finite and inside the unit cube [0, 1]; scale physical values with "
+        raise InputError("X: values must be finite and inside the unit cube [0, 1]; scale physical values with "
                          "mission.space.to_unit_array")
     n = U.shape[0]
     values = {p.name: _decode(p, U[:, mission.space.slice_of(p.name)])

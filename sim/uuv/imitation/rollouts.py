@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from rapt.errors import InputError
 from rapt.imitation import MLPPolicy, Trajectory
 from sim.uuv.autonomy import Autonomy, Command
 from sim.uuv.imitation.driver import PolicyAutonomy
@@ -141,7 +142,7 @@ def draw_valid(mission: Mission, k: int, rng: np.random.Generator) -> np.ndarray
         out = np.vstack([out, X[make_scenarios(mission, X).valid]])
         if out.shape[0] >= k:
             return out[:k]
-    raise ValueError(f"mission: fewer than {k} valid scenarios in {100 * max(2 * k, 8)} random draws")
+    raise InputError(f"mission: fewer than {k} valid scenarios in {100 * max(2 * k, 8)} random draws")
 
 
 def make_rollout(mission: Mission, spec: FeatureSpec, seed: int = 0, stochastic: bool = False,
