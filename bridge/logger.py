@@ -32,6 +32,8 @@ from mcap.exceptions import EndOfFile, McapError
 from mcap.reader import NonSeekingReader, make_reader
 from mcap.writer import CompressionType, Writer
 
+from rapt.errors import InputError
+
 from . import keys
 from .frames import strip_signature
 from .service import Service
@@ -120,12 +122,12 @@ class McapLogger(Service):
         super().__init__()
         keys.everything(vehicle)  # validates the name
         if not (isinstance(chunk_size, int) and chunk_size > 0):
-            raise ValueError(f"chunk_size: expected an int > 0, got {chunk_size!r}")
+            raise InputError(f"chunk_size: expected an int > 0, got {chunk_size!r}")
         if not (isinstance(flush_interval_s, (int, float)) and flush_interval_s > 0):
-            raise ValueError(f"flush_interval_s: expected a number > 0, got {flush_interval_s!r}")
+            raise InputError(f"flush_interval_s: expected a number > 0, got {flush_interval_s!r}")
         codecs = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
         if compression not in codecs:
-            raise ValueError(f"compression: expected one of {sorted(codecs)}, got {compression!r}")
+            raise InputError(f"compression: expected one of {sorted(codecs)}, got {compression!r}")
         self.path = Path(path)
         self.vehicle = vehicle
         self.chunk_size = chunk_size
