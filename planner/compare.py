@@ -33,6 +33,7 @@ from planner.jsonio import json_value, jsonable
 from planner.logs import LogError, LoggedRun, read_run
 from planner.plans import Plan, load_plan
 from planner.replan import adjust_for_bias
+from rapt.errors import InputError, StudyMismatchError
 from sim.uuv.bias import BIAS_NAMES, BIAS_UNITS, NEUTRAL
 from sim.uuv.replay import score_track
 from sim.uuv.scenario import make_scenarios
@@ -121,7 +122,7 @@ def compare(plan_path: str | Path, log_paths: Sequence[str | Path], out_dir: str
     plan = load_plan(plan_path)
     m = plan.mission
     if not log_paths:
-        raise ValueError("LOGS: give at least one .mcap log of a run of this plan")
+        raise InputError("LOGS: give at least one .mcap log of a run of this plan")
     say("reading logs")
     runs = [read_run(p) for p in log_paths]
     obs = match_logs(plan, runs)
@@ -158,7 +159,7 @@ def compare(plan_path: str | Path, log_paths: Sequence[str | Path], out_dir: str
 
 
 def _check_out_dir(plan_path: str | Path, log_paths: Sequence[str | Path], out_dir: str | Path) -> None:
-    """ValueError (one line) when ``out_dir``'s ``comparison.json`` would overwrite a log or the plan.
+    """InputError (one line) when ``out_dir``'s ``comparison.json`` would overwrite a log or the plan.
 
     Resolves paths only (the plan directory's ``plan.json`` as :func:`planner.plans.load_plan`
     finds it), so it runs before any work and creates nothing.
@@ -168,7 +169,7 @@ def _check_out_dir(plan_path: str | Path, log_paths: Sequence[str | Path], out_d
         plan_file = plan_file / "plan.json"
     inputs = {Path(p).resolve() for p in log_paths} | {plan_file.resolve()}
     if (Path(out_dir) / RESULT_NAME).resolve() in inputs:
-        raise ValueError(f"--out: {out_dir} would overwrite an input; choose another directory")
+        raise InputError(f"--out: {out_dir} would overwrite an input; choose another directory")
 
 
 @dataclass
@@ -190,7 +191,7 @@ class _PlanRuns:
 
 def _predict_plan(plan: Plan) -> tuple[list[str], np.ndarray, dict[str, int], sim.uuv.Result]:
     """Predictions of every plan scenario, unbiased, as planned: ids, unit-cube rows, row of each id, the
-    runs (with trajectories); ValueError when they are not the plan's."""
+    runs (with trajectories); StudyMismatchError when they are not the plan's."""
     m = plan.mission
     ids = [s["id"] for s in plan.scenarios + plan.variants]
     U_plan = np.array([plan.u(i) for i in ids]).reshape(-1, m.dim)
@@ -200,7 +201,7 @@ def _predict_plan(plan: Plan) -> tuple[list[str], np.ndarray, dict[str, int], si
         planned = s.get("predicted", {}).get("mode")
         got = MODE_NAMES[pred.modes[row_of[s["id"]]]] if pred.valid[row_of[s["id"]]] else "invalid"
         if planned and planned != got:
-            raise ValueError(f"PLAN: scenario {s['id']} is predicted {got} by {plan.mission_file} but the plan says "
+            raise StudyMismatchError(f"PLAN: scenario {s['id']} is predicted {got} by {plan.mission_file} but the plan says "
                              f"{planned}; the mission file changed since the plan was made — regenerate the plan")
     return ids, U_plan, row_of, pred
 

@@ -34,6 +34,7 @@ from scipy.spatial import cKDTree
 
 import rapt
 import sim.uuv
+from rapt.errors import InputError, StudyMismatchError
 from rapt.importance import output_importance
 from sim.uuv.mission import Mission
 from sim.uuv.metrics import metric_names, metric_types
@@ -83,19 +84,19 @@ class GenerateConfig:
 
     def check(self) -> None:
         if not isinstance(self.batch_size, int) or self.batch_size < 1:
-            raise ValueError(f"--batch-size: expected a positive number of runs, got {self.batch_size}")
+            raise InputError(f"--batch-size: expected a positive number of runs, got {self.batch_size}")
         if not isinstance(self.budget, int) or self.budget < 2 * self.batch_size:
-            raise ValueError(f"--budget: expected at least {2 * self.batch_size} runs, got {self.budget}")
+            raise InputError(f"--budget: expected at least {2 * self.batch_size} runs, got {self.budget}")
         if not (0 < self.global_fraction < 1):
-            raise ValueError(f"--global-fraction: expected a share in (0, 1), got {self.global_fraction}")
+            raise InputError(f"--global-fraction: expected a share in (0, 1), got {self.global_fraction}")
         if not isinstance(self.pairs, int) or self.pairs < 1:
-            raise ValueError(f"--pairs: expected a positive number of pairs, got {self.pairs}")
+            raise InputError(f"--pairs: expected a positive number of pairs, got {self.pairs}")
         if not isinstance(self.refine, int) or self.refine < 0:
-            raise ValueError(f"--refine-runs: expected runs per pair >= 0, got {self.refine}")
+            raise InputError(f"--refine-runs: expected runs per pair >= 0, got {self.refine}")
         if not isinstance(self.dithers, int) or self.dithers < 0:
-            raise ValueError(f"--dithers: expected a number of runs >= 0, got {self.dithers}")
+            raise InputError(f"--dithers: expected a number of runs >= 0, got {self.dithers}")
         if not isinstance(self.confirm_runs, int) or self.confirm_runs < 2 * self.pairs:
-            raise ValueError(f"--confirm-runs: expected at least two runs per pair ({2 * self.pairs}), "
+            raise InputError(f"--confirm-runs: expected at least two runs per pair ({2 * self.pairs}), "
                              f"got {self.confirm_runs}")
 
 
@@ -134,10 +135,10 @@ def make_executor(spec: str):
         try:
             from distributed import Client
         except ImportError:
-            raise ValueError("--executor: dask:// needs the cluster extra; pip install -e '.[cluster]'") from None
+            raise InputError("--executor: dask:// needs the cluster extra; pip install -e '.[cluster]'") from None
         client = Client(f"tcp://{spec[len('dask://'):]}", timeout=10)
         return client, client.close
-    raise ValueError(f"--executor: expected local, processes or dask://host:port, got {spec!r}")
+    raise InputError(f"--executor: expected local, processes or dask://host:port, got {spec!r}")
 
 def search_mission(mission: Mission, cfg: GenerateConfig, progress: Callable[[int, int], None] | None = None,
                    on_batch: Callable[[np.ndarray, np.ndarray], None] | None = None) -> rapt.Study:
@@ -170,7 +171,7 @@ def analyse(mission: Mission, study: rapt.Study, surrogate=None) -> Analysis:
     names, types = metric_names(mission), metric_types(mission)
     spot = sim.uuv.simulate(mission, X[:SPOT_CHECK_RUNS], surrogate=surrogate)
     if Y.shape[1] != len(names) or not np.array_equal(spot.scores, Y[:SPOT_CHECK_RUNS], equal_nan=True):
-        raise RuntimeError("study: the stored runs do not match the mission file (was it edited?); "
+        raise StudyMismatchError("study: the stored runs do not match the mission file (was it edited?); "
                            "plan into a new --out directory")
     result = sim.uuv.Result(Y, modes_from_scores(Y), np.ones(len(Y), dtype=bool), [""] * len(Y), names, types)
     tree = rapt.subboundary_tree(X, result.scores, mission.score_tree, output_types=result.output_types)
