@@ -292,18 +292,26 @@ class _Runner:
 
     # -- evaluation --------------------------------------------------------------------
     def run(self, budget: int, progress) -> None:
+        """Evaluate batches until ``budget`` rows were asked, or the sampler finished early.
+
+        A sampler may return fewer points than asked, and finishes early by returning none
+        (:attr:`Sampler.done`, see :class:`~rapt.samplers.base.Sampler`): the budget counts
+        the points it did return, and an empty ask ends the study without recording a batch.
+        """
         # Finish a batch that was asked but not fully evaluated before the last stop.
         if self._unfinished is not None:
             self._evaluate_batch(*self._unfinished)
             self._unfinished = None
             self._report(progress, budget)
-        while self.asked < budget:
+        while self.asked < budget and not self.sampler.done:
             n = min(self.batch_size, budget - self.asked)
             asked = self.sampler.ask(n)
+            if not len(asked):  # finished early: sampler.done is now set
+                break
             b = self.batches
             self.db.add_batch(b, asked)
             self.batches += 1
-            self.asked += n
+            self.asked += len(asked)
             self._evaluate_batch(b, asked)
             self._report(progress, budget)
 
