@@ -21,9 +21,9 @@ to identify and apply this bias to our predictions").  :func:`compare`
 from __future__ import annotations
 
 import json
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable, Sequence
 
 import numpy as np
 

@@ -25,25 +25,25 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 import rapt
 import sim.uuv
-from rapt.errors import InputError, StudyMismatchError
-from rapt.importance import output_importance
-from sim.uuv.mission import Mission
-from sim.uuv.metrics import metric_names, metric_types
-from sim.uuv.scoring import MODE_NAMES, modes_from_scores
-
 from planner.exports import write_scenario_files
 from planner.jsonio import jsonable
 from planner.report import write_report
 from planner.search_status import SearchStatus
+from rapt.errors import InputError, StudyMismatchError
+from rapt.importance import output_importance
+from sim.uuv.metrics import metric_names, metric_types
+from sim.uuv.mission import Mission
+from sim.uuv.scoring import MODE_NAMES, modes_from_scores
 
 __all__ = ["GenerateConfig", "search_mission", "analyse", "select_pairs", "dither_many", "robust_variants",
            "refine_pairs", "generate", "auto_batch_size", "PLAN_SCHEMA"]

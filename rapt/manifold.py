@@ -40,7 +40,7 @@ angle for small differences (so resolutions are in radians).
 
 from __future__ import annotations
 
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from scipy.spatial import cKDTree

@@ -13,7 +13,7 @@ near-duplicates.  They differ in the metamodel:
 from __future__ import annotations
 
 import warnings
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -21,8 +21,8 @@ from scipy.spatial import cKDTree
 from rapt.candidates import CandidateGenerator, UniformCandidates, select_batch
 from rapt.errors import InputError
 from rapt.importance import importance_weights, tree_importance
-from rapt.parallel import query_workers
 from rapt.information import gpr_information, neighbour_variance, nndv_information, unalikeability
+from rapt.parallel import query_workers
 from rapt.samplers.base import Sampler
 from rapt.samplers.space_filling import sobol_points
 from rapt.scores import encode_labels, normalize_continuous
@@ -277,9 +277,9 @@ class GPRSampler(InformationSampler):
         return np.hstack(cols)
 
     def information(self, candidates: np.ndarray, rng: np.random.Generator):
+        from sklearn.exceptions import ConvergenceWarning
         from sklearn.gaussian_process import GaussianProcessRegressor
         from sklearn.gaussian_process.kernels import ConstantKernel, Matern, WhiteKernel
-        from sklearn.exceptions import ConvergenceWarning
 
         X = self.X
         T = self._design_targets()

@@ -34,8 +34,8 @@ are bit-identical to a run without one.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, fields
-from typing import Mapping, Sequence
 
 import numpy as np
 
@@ -71,7 +71,7 @@ class Bias:
         return np.array([getattr(self, n) for n in BIAS_NAMES], dtype=float)
 
     @classmethod
-    def from_vector(cls, values: Sequence[float]) -> "Bias":
+    def from_vector(cls, values: Sequence[float]) -> Bias:
         return cls(**{n: float(v) for n, v in zip(BIAS_NAMES, values)})
 
     def __str__(self) -> str:
@@ -143,11 +143,11 @@ class BiasArrays:
     battery: np.ndarray
     start_time: np.ndarray
 
-    def select(self, rows: np.ndarray) -> "BiasArrays":
+    def select(self, rows: np.ndarray) -> BiasArrays:
         return BiasArrays(*(getattr(self, f.name)[rows] for f in fields(self)))
 
 
-def bias_arrays(bias: "Bias | BiasArrays | Sequence[Bias] | Mapping[str, np.ndarray] | None", n: int) -> BiasArrays:
+def bias_arrays(bias: Bias | BiasArrays | Sequence[Bias] | Mapping[str, np.ndarray] | None, n: int) -> BiasArrays:
     """Broadcast one bias, one per vehicle, or arrays by field name over ``n`` vehicles."""
     if bias is None:
         bias = Bias()

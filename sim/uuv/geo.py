@@ -28,6 +28,7 @@ import numpy as np
 
 from rapt.errors import InputError
 from sim.uuv.angles import wrap_degrees
+
 __all__ = ["LocalFrame", "to_degE7", "from_degE7", "WGS84_A", "WGS84_F"]
 
 #: WGS84 semi-major axis (m) and flattening.

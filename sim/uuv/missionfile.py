@@ -93,15 +93,15 @@ import difflib
 import math
 import re
 import tomllib
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Mapping, NoReturn
+from typing import Any, NoReturn
 
 from rapt.errors import FileFormatError
 from rapt.scoretree import ScoreTree
 from rapt.space import Categorical, Continuous, Integer, Parameter, Permutation, StateSpace
 from sim.uuv.metrics import ELEMENT_KINDS, element_names, metric_names
-from sim.uuv.mission import (TARGET_FIELDS, Binding, Current, Mission, MissionArea, Rect, Transmission, Triangle,
-                         Vehicle)
+from sim.uuv.mission import TARGET_FIELDS, Binding, Current, Mission, MissionArea, Rect, Transmission, Triangle, Vehicle
 
 __all__ = ["load_mission", "MissionFileError"]
 

@@ -9,7 +9,7 @@ both see the same reported values (:mod:`sim.uuv.interface`).
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 

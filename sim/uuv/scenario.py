@@ -15,8 +15,13 @@ import numpy as np
 
 from rapt.errors import InputError
 from rapt.space import Permutation
-from sim.uuv.geometry import (inside_rect, polygon_edges, polygon_signed_distance, rect_signed_distance,
-                          triangle_vertices)
+from sim.uuv.geometry import (
+    inside_rect,
+    polygon_edges,
+    polygon_signed_distance,
+    rect_signed_distance,
+    triangle_vertices,
+)
 from sim.uuv.mission import Mission, MissionArea, Rect
 
 __all__ = ["Scenarios", "make_scenarios", "rects_array"]
@@ -62,7 +67,7 @@ class Scenarios:
     def n(self) -> int:
         return int(self.start_time.shape[0])
 
-    def select(self, rows: np.ndarray) -> "Scenarios":
+    def select(self, rows: np.ndarray) -> Scenarios:
         """The scenarios at ``rows`` (for simulating only the valid ones)."""
         r = np.asarray(rows)
         return Scenarios(self.mission, self.start_time[r], self.battery0[r], self.tx_rect[r], self.tx_open[r],

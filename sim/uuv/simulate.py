@@ -18,9 +18,9 @@ from sim.uuv.autonomy import Autonomy, Observation
 from sim.uuv.bias import bias_arrays
 from sim.uuv.environment import tidal_current
 from sim.uuv.geometry import rect_signed_distance
+from sim.uuv.interface import decode_command, encode_command
 from sim.uuv.metrics import metric_names, metric_types
 from sim.uuv.mission import Mission
-from sim.uuv.interface import decode_command, encode_command
 from sim.uuv.scenario import Scenarios, make_scenarios
 from sim.uuv.scoring import MODE_NAMES, Scorer, modes_from_scores
 from sim.uuv.world import Telemetry, World, scenario_generators

@@ -15,11 +15,11 @@ from rapt.imitation import MLPPolicy, Trajectory
 from sim.uuv.autonomy import Autonomy, Command
 from sim.uuv.imitation.driver import PolicyAutonomy
 from sim.uuv.imitation.features import FeatureSpec, advance_waypoints, expert_action, features, waypoint_target
+from sim.uuv.metrics import metric_names, metric_types
 from sim.uuv.mission import Mission
 from sim.uuv.scenario import make_scenarios
-from sim.uuv.simulate import Result, run_scenarios
-from sim.uuv.metrics import metric_names, metric_types
 from sim.uuv.scoring import modes_from_scores
+from sim.uuv.simulate import Result, run_scenarios
 from sim.uuv.world import scenario_generators
 
 __all__ = ["annotated_runs", "make_rollout", "draw_valid", "MixedDriver"]

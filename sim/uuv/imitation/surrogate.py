@@ -50,7 +50,7 @@ class Surrogate:
 
     @classmethod
     def for_mission(cls, mission: Mission, policy: MLPPolicy | HeadsPolicy,
-                    training: dict | None = None, goal_threshold: float = 0.0) -> "Surrogate":
+                    training: dict | None = None, goal_threshold: float = 0.0) -> Surrogate:
         spec = feature_spec(mission)
         if policy.n_features != spec.size:
             raise InputError(f"policy: takes {policy.n_features} features, the mission's definition has {spec.size}")
@@ -94,7 +94,7 @@ class Surrogate:
         return path
 
     @classmethod
-    def load(cls, path: str | Path, mission: Mission | None = None) -> "Surrogate":
+    def load(cls, path: str | Path, mission: Mission | None = None) -> Surrogate:
         """Read a surrogate file; with ``mission``, refuse it unless trained for that mission."""
         path = Path(path)
         if not path.is_file():
