@@ -173,6 +173,20 @@ def publisher(session, key: str):
     return pub
 
 
+def wait_for_subscriber(session, key: str) -> None:
+    """Wait until ``session`` routes ``key`` to a subscriber: until its declaration has reached ``session``.
+
+    A sample put before then is dropped, not queued (eclipse-zenoh 1.10), so a test that counts every
+    sample a bridge on ``session`` publishes waits here first. A probe publisher's matching status
+    says when ``session`` knows the subscriber; the probe itself never puts anything.
+    """
+    probe = session.declare_publisher(key)
+    try:
+        wait_until(lambda: probe.matching_status.matching, what=f"a subscriber for {key} to reach the session")
+    finally:
+        probe.undeclare()
+
+
 def setpoint(vx=0.5, vy=-0.25, vz=-0.1, yaw=1.0, tick_ms=None) -> bytes:
     return Setpoint(vx, vy, vz, yaw, tick_ms).to_json()
 
@@ -557,6 +571,7 @@ def test_junk_on_a_tcp_stream_does_not_swallow_frames():
     with bus() as (hub, client, _):
         tel = Collector(client, keys.telemetry(VEHICLE, "SYSTEM_TIME"))
         try:
+            wait_for_subscriber(hub, keys.telemetry(VEHICLE, "SYSTEM_TIME"))  # or the hub may drop the first frame
             with MavlinkBridge(f"tcp:127.0.0.1:{port}", hub, vehicle=VEHICLE) as bridge:
                 conn, _ = server.accept()
                 with conn:
