@@ -24,8 +24,8 @@ Everything about a vehicle lives under ``rapt/<vehicle>/``:
 
 A bad name raises the built-in ``ValueError`` (``TypeError`` for a non-str), not a
 :mod:`rapt.errors` class: this module and :mod:`bridge.setpoint` are what a back-seat on
-another computer imports, and importing :mod:`rapt` would cost it about a second (numpy,
-SciPy, scikit-learn).
+another computer imports, and :mod:`rapt.errors` would import all of :mod:`rapt` (numpy,
+SciPy, scikit-learn) into it.
 """
 
 from __future__ import annotations

@@ -55,7 +55,8 @@ def auto_batch_size(budget: int) -> int:
     """About 40 batches of 250 to 5,000 runs.
 
     Small batches steer the search more often; large ones keep the vectorised simulator
-    at full speed (its throughput more than triples from 256 to 4,096 scenarios a batch).
+    at full speed (its runs per second grow with the batch: ``benchmarks/sim_throughput.py``
+    measures them by batch size on the machine at hand).
     """
     return int(np.clip(budget // 40, 250, 5000))
 

@@ -41,7 +41,7 @@ class MixedDriver(PolicyAutonomy):
 
     The annotating experts never give a goal up for lack of progress: that clock would time
     the learner's wobbles, which no feature shows, and turn its labels home mid-leg (the
-    expert's own runs abort a waypoint so in 0.2% of the chapter 6 mission's scenarios).
+    expert's own runs seldom abort a waypoint so on the chapter 6 mission).
     """
 
     def __init__(self, scen, policy, spec: FeatureSpec, beta: float = 0.0, rng: np.random.Generator | None = None):
