@@ -29,6 +29,8 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 
+from rapt.errors import InputError
+
 from . import keys
 from .setpoint import Setpoint
 
@@ -62,9 +64,9 @@ def _geofence(value: Sequence[float] | None) -> Fence | None:
     try:
         n_min, n_max, e_min, e_max = (float(v) for v in value)
     except (TypeError, ValueError):
-        raise ValueError("geofence: expected (north_min, north_max, east_min, east_max) in metres") from None
+        raise InputError("geofence: expected (north_min, north_max, east_min, east_max) in metres") from None
     if not all(math.isfinite(v) for v in (n_min, n_max, e_min, e_max)) or n_min >= n_max or e_min >= e_max:
-        raise ValueError(f"geofence: need finite north_min < north_max and east_min < east_max, got {tuple(value)}")
+        raise InputError(f"geofence: need finite north_min < north_max and east_min < east_max, got {tuple(value)}")
     return n_min, n_max, e_min, e_max
 
 
@@ -90,11 +92,11 @@ class CommandGate:
         active: str = keys.DEFAULT_ACTIVE,
     ):
         if not (isinstance(geofence_margin_m, (int, float)) and geofence_margin_m >= 0):
-            raise ValueError(f"geofence_margin_m: expected a number >= 0, got {geofence_margin_m!r}")
+            raise InputError(f"geofence_margin_m: expected a number >= 0, got {geofence_margin_m!r}")
         if max_rate_hz is not None and not (isinstance(max_rate_hz, (int, float)) and max_rate_hz > 0):
-            raise ValueError(f"max_rate_hz: expected None or a number > 0, got {max_rate_hz!r}")
+            raise InputError(f"max_rate_hz: expected None or a number > 0, got {max_rate_hz!r}")
         if not (isinstance(silence_s, (int, float)) and silence_s > 0):
-            raise ValueError(f"silence_s: expected a number > 0, got {silence_s!r}")
+            raise InputError(f"silence_s: expected a number > 0, got {silence_s!r}")
         self.allow_commands = bool(allow_commands)
         self.silence_s = float(silence_s)
         self.geofence = _geofence(geofence)

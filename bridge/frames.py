@@ -22,6 +22,8 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink2  # noqa: E402
 from pymavlink.generator.mavcrc import x25crc  # noqa: E402
 
+from rapt.errors import InputError  # noqa: E402
+
 __all__ = ["mavlink2", "FrameSplitter", "strip_signature", "is_signed", "message_json"]
 
 _MAGIC = re.compile(b"[\xfd\xfe]")
@@ -159,7 +161,7 @@ def strip_signature(frame: bytes) -> bytes:
         return frame
     end = 10 + frame[1]
     if len(frame) != end + 2 + _SIG_LEN:
-        raise ValueError(f"frame: signed frame of {len(frame)} bytes, expected {end + 2 + _SIG_LEN}")
+        raise InputError(f"frame: signed frame of {len(frame)} bytes, expected {end + 2 + _SIG_LEN}")
     body = bytearray(frame[:end])
     body[2] &= ~_SIGNED & 0xFF
     msg_id = body[7] | (body[8] << 8) | (body[9] << 16)

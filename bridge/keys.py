@@ -21,6 +21,11 @@ Everything about a vehicle lives under ``rapt/<vehicle>/``:
 ``<vehicle>``, ``<source>``, ``<name>`` and ``<role>`` are single key chunks: non-empty, without
 ``/``, ``*``, ``$``, ``?``, ``#`` or spaces. ``"*"`` is accepted where a pattern makes sense
 (``command(v, "*")``, ``alive(v, "*")``).
+
+A bad name raises the built-in ``ValueError`` (``TypeError`` for a non-str), not a
+:mod:`rapt.errors` class: this module and :mod:`bridge.setpoint` are what a back-seat on
+another computer imports, and :mod:`rapt.errors` would import all of :mod:`rapt` (numpy,
+SciPy, scikit-learn) into it.
 """
 
 from __future__ import annotations

@@ -32,6 +32,8 @@ from mcap.exceptions import EndOfFile, McapError
 from mcap.reader import NonSeekingReader, make_reader
 from mcap.writer import CompressionType, Writer
 
+from rapt.errors import InputError
+
 from . import keys
 from .frames import strip_signature
 from .service import Service
@@ -120,12 +122,12 @@ class McapLogger(Service):
         super().__init__()
         keys.everything(vehicle)  # validates the name
         if not (isinstance(chunk_size, int) and chunk_size > 0):
-            raise ValueError(f"chunk_size: expected an int > 0, got {chunk_size!r}")
+            raise InputError(f"chunk_size: expected an int > 0, got {chunk_size!r}")
         if not (isinstance(flush_interval_s, (int, float)) and flush_interval_s > 0):
-            raise ValueError(f"flush_interval_s: expected a number > 0, got {flush_interval_s!r}")
+            raise InputError(f"flush_interval_s: expected a number > 0, got {flush_interval_s!r}")
         codecs = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
         if compression not in codecs:
-            raise ValueError(f"compression: expected one of {sorted(codecs)}, got {compression!r}")
+            raise InputError(f"compression: expected one of {sorted(codecs)}, got {compression!r}")
         self.path = Path(path)
         self.vehicle = vehicle
         self.chunk_size = chunk_size
@@ -149,11 +151,11 @@ class McapLogger(Service):
     def _open(self) -> None:
         """Open the file, subscribe, start the threads."""
         self._file = open(self.path, "wb")
-        self._writer = Writer(self._file, chunk_size=self.chunk_size, compression=self._compression)
-        self._writer.start(profile="", library="rapt-bridge")
+        self._writer = writer = Writer(self._file, chunk_size=self.chunk_size, compression=self._compression)
+        writer.start(profile="", library="rapt-bridge")
         self._session, self._owns_session = use_session(self._session_arg)
         s = self._session
-        self._writer_thread = self._spawn("mcap-writer", self._write_loop)
+        self._writer_thread = self._spawn("mcap-writer", self._write_loop, writer)
         data = s.declare_subscriber(keys.everything(self.vehicle), zenoh.handlers.FifoChannel(1 << 16))
         alive = s.liveliness().declare_subscriber(
             keys.alive(self.vehicle, "*"), zenoh.handlers.FifoChannel(1024), history=True
@@ -200,7 +202,8 @@ class McapLogger(Service):
             else:
                 put((str(sample.key_expr), now, sample.payload.to_bytes(), sample.kind == zenoh.SampleKind.PUT))
 
-    def _write_loop(self) -> None:
+    def _write_loop(self, writer: Writer) -> None:
+        """The one thread that writes ``writer``: queued samples, and a flush every ``flush_interval_s``."""
         get = self._queue.get
         next_flush = time.monotonic() + self.flush_interval_s
         dirty = False
@@ -214,19 +217,20 @@ class McapLogger(Service):
                 return
             if item is not None:
                 try:
-                    self._write(*item)
+                    self._write(writer, *item)
                     dirty = True
                 except Exception:  # one bad sample must not stop the log
                     self._counts["errors"] += 1
                     log.exception("logger: cannot write a sample on %s", item[0])
             if time.monotonic() >= next_flush:
                 if dirty:
-                    self._writer.flush()
+                    writer.flush()
                     self._counts["flushes"] += 1
                     dirty = False
                 next_flush = time.monotonic() + self.flush_interval_s
 
-    def _channel(self, topic: str, encoding: str, schema: tuple[str, dict] | None) -> tuple[int, list[int]]:
+    def _channel(self, writer: Writer, topic: str, encoding: str, schema: tuple[str, dict] | None
+                 ) -> tuple[int, list[int]]:
         entry = self._channels.get(topic)
         if entry is None:
             schema_id = 0
@@ -234,28 +238,27 @@ class McapLogger(Service):
                 name, body = schema
                 schema_id = self._schemas.get(name, 0)
                 if not schema_id:
-                    schema_id = self._writer.register_schema(name, "jsonschema", json.dumps(body).encode())
+                    schema_id = writer.register_schema(name, "jsonschema", json.dumps(body).encode())
                     self._schemas[name] = schema_id
-            channel_id = self._writer.register_channel(topic, encoding, schema_id)
+            channel_id = writer.register_channel(topic, encoding, schema_id)
             entry = self._channels[topic] = (channel_id, [0])
         return entry
 
-    def _write(self, key: str, recv_ns: int, payload: bytes | None, put: bool) -> None:
+    def _write(self, w: Writer, key: str, recv_ns: int, payload: bytes | None, put: bool) -> None:
         try:
             _, kind, name = keys.split(key)
         except ValueError:
             kind, name = "", key
-        w = self._writer
         if payload is None:  # liveliness change
-            channel_id, seq = self._channel(key, "json", _schema_for("alive", name))
+            channel_id, seq = self._channel(w, key, "json", _schema_for("alive", name))
             data = json.dumps({"alive": put}).encode()
             publish_ns = recv_ns
         elif kind == "mavlink" and name == "raw":
-            channel_id, seq = self._channel(RAW_TOPIC, RAW_ENCODING, None)
+            channel_id, seq = self._channel(w, RAW_TOPIC, RAW_ENCODING, None)
             data = strip_signature(payload)
             publish_ns = recv_ns
         else:
-            channel_id, seq = self._channel(key, "json", _schema_for(kind, name))
+            channel_id, seq = self._channel(w, key, "json", _schema_for(kind, name))
             if put:
                 data, obj = _as_object(payload)
             else:

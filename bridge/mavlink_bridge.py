@@ -33,6 +33,8 @@ os.environ.setdefault("MAVLINK20", "1")
 import zenoh  # noqa: E402
 from pymavlink import mavutil  # noqa: E402
 
+from rapt.errors import FileFormatError, InputError, LinkError, LinkTimeoutError, RefusedError, RunError  # noqa: E402
+
 from . import keys  # noqa: E402
 from .command_gate import CommandGate, outward  # noqa: E402
 from .frames import FrameSplitter, mavlink2, message_json  # noqa: E402
@@ -71,13 +73,13 @@ def load_signing_key(signing_key: bytes | str | os.PathLike) -> bytes:
     """A 32-byte MAVLink2 signing key from bytes, or from a file of 32 bytes or 64 hex digits."""
     if isinstance(signing_key, (bytes, bytearray)):
         if len(signing_key) != 32:
-            raise ValueError(f"signing_key: expected 32 bytes, got {len(signing_key)}")
+            raise InputError(f"signing_key: expected 32 bytes, got {len(signing_key)}")
         return bytes(signing_key)
     if not isinstance(signing_key, (str, os.PathLike)):
         raise TypeError(f"signing_key: expected 32 bytes or a key file path, got {type(signing_key).__name__}")
     path = Path(signing_key)
     if not path.is_file():
-        raise ValueError(f"signing_key: {str(path)!r} is not a file")
+        raise FileFormatError(f"signing_key: {str(path)!r} is not a file")
     data = path.read_bytes()
     if len(data) == 32:
         return data
@@ -87,7 +89,7 @@ def load_signing_key(signing_key: bytes | str | os.PathLike) -> bytes:
             return bytes.fromhex(text.decode("ascii"))
         except (ValueError, UnicodeDecodeError):
             pass
-    raise ValueError(f"signing_key: {str(path)!r} holds neither 32 bytes nor 64 hex digits")
+    raise FileFormatError(f"signing_key: {str(path)!r} holds neither 32 bytes nor 64 hex digits")
 
 
 class MavlinkBridge(Service):
@@ -118,7 +120,7 @@ class MavlinkBridge(Service):
         baud: int = 115200,
     ):
         if not isinstance(device, str) or not device:
-            raise ValueError(f"device: expected a pymavlink connection string, got {device!r}")
+            raise InputError(f"device: expected a pymavlink connection string, got {device!r}")
         super().__init__()
         keys.raw(vehicle)  # validates the name
         #: The command gates (allow_commands, link, geofence, rate, active source); a watchdog may ask it too.
@@ -130,10 +132,10 @@ class MavlinkBridge(Service):
             max_rate_hz=max_rate_hz,
         )
         if not (isinstance(heartbeat_hz, (int, float)) and heartbeat_hz > 0):
-            raise ValueError(f"heartbeat_hz: expected a number > 0, got {heartbeat_hz!r}")
+            raise InputError(f"heartbeat_hz: expected a number > 0, got {heartbeat_hz!r}")
         for name, value in (("source_system", source_system), ("source_component", source_component)):
             if not (isinstance(value, int) and 1 <= value <= 255):
-                raise ValueError(f"{name}: expected an int in 1..255, got {value!r}")
+                raise InputError(f"{name}: expected an int in 1..255, got {value!r}")
         self.device = device
         self.vehicle = vehicle
         self.heartbeat_hz = float(heartbeat_hz)
@@ -309,7 +311,7 @@ class MavlinkBridge(Service):
                 retries=0,
             )
         except ImportError as error:  # pymavlink imports pyserial only for serial ports
-            raise RuntimeError(f"device: {self.device!r} is a serial port and needs pyserial ({error})") from None
+            raise RunError(f"device: {self.device!r} is a serial port and needs pyserial ({error})") from None
         if isinstance(conn, mavutil.mavudp):
             try:  # bursts of small datagrams overflow the default buffer; the kernel caps this
                 conn.port.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 21)
@@ -422,16 +424,18 @@ class MavlinkBridge(Service):
                 self._acks[msg.command] = (msg.result, self._ack_serial)
                 self._ack_cond.notify_all()
         try:
+            session, raw_pub = self._session, self._raw_pub
+            assert session is not None and raw_pub is not None, "the reader starts after _open declared both"
             pub = self._publishers.get(name)
             if pub is None:
-                pub = self._session.declare_publisher(
+                pub = session.declare_publisher(
                     keys.telemetry(self.vehicle, name),
                     encoding=zenoh.Encoding.APPLICATION_JSON,
                     reliability=zenoh.Reliability.RELIABLE,
                 )  # not express: batching keeps bursts lossless, and costs no measurable latency
                 self._publishers[name] = pub
             pub.put(message_json(msg, recv_ns))
-            self._raw_pub.put(frame)
+            raw_pub.put(frame)
             self._counts["published"] += 2
         except Exception as error:  # a closing session, an unencodable field: count, keep reading
             self._counts["publish_errors"] += 1
@@ -527,6 +531,7 @@ class MavlinkBridge(Service):
         if reason is not None:
             c["commands_" + reason] += 1
             return
+        assert target is not None, "the gate forwards only while an autopilot is heard"
         msg = mavlink2.MAVLink_set_position_target_local_ned_message(
             sp.tick_ms or 0,
             target[0],
@@ -561,21 +566,21 @@ class MavlinkBridge(Service):
         if isinstance(mode, str):
             number = ARDUSUB_MODES.get(mode.strip().upper())
             if number is None:
-                raise ValueError(f"mode: unknown ArduSub mode {mode!r} (known: {', '.join(ARDUSUB_MODES)})")
+                raise InputError(f"mode: unknown ArduSub mode {mode!r} (known: {', '.join(ARDUSUB_MODES)})")
         elif isinstance(mode, int) and not isinstance(mode, bool) and mode in ARDUSUB_MODES.values():
             number = mode
         else:
-            raise ValueError(f"mode: expected an ArduSub mode name or number, got {mode!r}")
+            raise InputError(f"mode: expected an ArduSub mode name or number, got {mode!r}")
         params = (float(mavlink2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED), float(number), 0.0, 0.0, 0.0, 0.0, 0.0)
         return self._command_long(mavlink2.MAV_CMD_DO_SET_MODE, params, timeout, retries, "set_mode")
 
     def _command_long(self, command: int, params: Sequence[float], timeout: float, retries: int, what: str) -> int:
         if not self.allow_commands:
             self._counts["commands_refused"] += 1
-            raise PermissionError(f"{what}: allow_commands is False, nothing but HEARTBEAT is sent to the vehicle")
-        if not self.linked:
-            raise RuntimeError(f"{what}: no autopilot heard within the last {self.silence_s} s")
-        target = self._target
+            raise RefusedError(f"{what}: allow_commands is False, nothing but HEARTBEAT is sent to the vehicle")
+        target = self._target  # read once: the reader may forget it (link lost) at any time
+        if target is None or not self.linked:
+            raise LinkError(f"{what}: no autopilot heard within the last {self.silence_s} s")
         for attempt in range(retries + 1):
             with self._ack_cond:
                 serial = self._ack_serial
@@ -591,7 +596,7 @@ class MavlinkBridge(Service):
                     if remaining <= 0 or self._stop.is_set():
                         break
                     self._ack_cond.wait(remaining)
-        raise TimeoutError(f"{what}: no COMMAND_ACK after {retries + 1} tries")
+        raise LinkTimeoutError(f"{what}: no COMMAND_ACK after {retries + 1} tries")
 
 
 def _refuse_unsigned(mav: Any, msg_id: int) -> bool:

@@ -12,13 +12,15 @@ import threading
 from collections.abc import Callable, Iterable
 from typing import Any, Self
 
+from rapt.errors import RunError
+
 __all__ = ["Service"]
 
 
 class Service:
     """Base of a part that runs threads between :meth:`start` and :meth:`close` (or a ``with`` block).
 
-    ``start`` runs :meth:`_open` once (a second call raises RuntimeError); if ``_open``
+    ``start`` runs :meth:`_open` once (a second call raises :class:`~rapt.errors.RunError`); if ``_open``
     raises, ``close`` runs before the error propagates, so ``_shutdown`` must cope with a
     half-open service. ``close`` sets :attr:`_stop` and runs :meth:`_shutdown` exactly once,
     whether or not the service was started; later calls do nothing.
@@ -48,7 +50,7 @@ class Service:
     def start(self) -> Self:
         """Open everything and start the threads (:meth:`_open`); on failure close and re-raise."""
         if self._started:
-            raise RuntimeError(f"start: the {self._what} was already started")
+            raise RunError(f"start: the {self._what} was already started")
         self._started = True
         try:
             self._open()

@@ -21,6 +21,8 @@ from typing import Any
 
 import zenoh
 
+from rapt.errors import InputError, LinkError, MissingFileError
+
 __all__ = ["DEFAULT_HUB", "CONNECT_TIMEOUT_S", "zenoh_config", "open_session", "use_session", "undeclare"]
 
 #: The conventional hub endpoint when nothing else is given to a command line.
@@ -39,14 +41,14 @@ def _endpoints(values: Iterable[str] | str, argument: str) -> list[str]:
     out = []
     for endpoint in values:
         if not isinstance(endpoint, str) or "/" not in endpoint:
-            raise ValueError(f"{argument}: {endpoint!r} is not a Zenoh endpoint like 'tcp/127.0.0.1:7447'")
+            raise InputError(f"{argument}: {endpoint!r} is not a Zenoh endpoint like 'tcp/127.0.0.1:7447'")
         protocol, _, address = endpoint.partition("/")
         if protocol == "unixsock-stream":
             out.append(endpoint)
             continue
         host = address.split("#", 1)[0].split("?", 1)[0]
         if protocol not in ("tcp", "udp", "tls", "quic", "ws") or not host.startswith(_LOOPBACK_HOSTS):
-            raise ValueError(
+            raise InputError(
                 f"{argument}: {endpoint!r} is not a loopback endpoint; pass config_file for other networks"
             )
         out.append(endpoint)
@@ -70,18 +72,18 @@ def zenoh_config(
     """
     if config_file is not None:
         if listen or connect or mode:
-            raise ValueError("config_file: give either a config file or listen/connect/mode, not both")
+            raise InputError("config_file: give either a config file or listen/connect/mode, not both")
         path = Path(config_file)
         if not path.is_file():
-            raise FileNotFoundError(f"config_file: {str(path)!r} does not exist")
+            raise MissingFileError(f"config_file: {str(path)!r} does not exist")
         return zenoh.Config.from_file(str(path))
     listen, connect = _endpoints(listen, "listen"), _endpoints(connect, "connect")
     if mode is None:
         mode = "client" if connect and not listen else "peer"
     if mode not in ("peer", "client", "router"):
-        raise ValueError(f"mode: expected 'peer', 'client' or 'router', got {mode!r}")
+        raise InputError(f"mode: expected 'peer', 'client' or 'router', got {mode!r}")
     if mode == "client" and (listen or not connect):
-        raise ValueError("mode: a client needs connect endpoints and cannot listen")
+        raise InputError("mode: a client needs connect endpoints and cannot listen")
     config = zenoh.Config()
     config.insert_json5("mode", json.dumps(mode))
     config.insert_json5("listen/endpoints", json.dumps(listen))
@@ -90,7 +92,7 @@ def zenoh_config(
     config.insert_json5("scouting/gossip/enabled", "false")
     if mode == "client":
         if not connect_timeout > 0:
-            raise ValueError(f"connect_timeout: expected a positive number of seconds, got {connect_timeout!r}")
+            raise InputError(f"connect_timeout: expected a positive number of seconds, got {connect_timeout!r}")
         config.insert_json5("connect/timeout_ms", json.dumps(int(connect_timeout * 1000)))
         config.insert_json5(
             "connect/retry", json.dumps({"period_init_ms": 100, "period_max_ms": 1000, "period_increase_factor": 2})
@@ -106,7 +108,7 @@ def open_session(
 ) -> zenoh.Session:
     """Open a session with :func:`zenoh_config` (``options``: its ``mode``, ``connect_timeout``); close it when done.
 
-    Raises ``ConnectionError`` naming the endpoints when no hub answered in time.
+    Raises :class:`~rapt.errors.LinkError` (a ``ConnectionError``) naming the endpoints when no hub answered in time.
     """
     connect = [connect] if isinstance(connect, str) else list(connect)
     config = zenoh_config(listen, connect, config_file, **options)
@@ -114,7 +116,7 @@ def open_session(
         return zenoh.open(config)
     except zenoh.ZError as exc:
         where = ", ".join(connect)
-        raise ConnectionError(
+        raise LinkError(
             f"zenoh: could not open the session ({where or 'config file'}): {str(exc).split(' at ')[0]}; "
             "start the hub (rapt-plan bridge) first or fix the endpoint"
         ) from exc

@@ -3,7 +3,8 @@
 A back-seat publishes it as JSON on ``rapt/<vehicle>/command/<source>``; the bridge turns a
 set-point from the active source into ``SET_POSITION_TARGET_LOCAL_NED`` (velocity + yaw).
 Validation lives here so that a bad set-point is refused, with a reason, before it gets near
-MAVLink.
+MAVLink.  A bad set-point raises the built-in ``ValueError`` (not a :mod:`rapt.errors`
+class), so that this module stays as cheap to import as :mod:`bridge.keys`.
 """
 
 from __future__ import annotations

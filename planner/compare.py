@@ -21,9 +21,9 @@ to identify and apply this bias to our predictions").  :func:`compare`
 from __future__ import annotations
 
 import json
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Callable
 
 import numpy as np
 
@@ -33,6 +33,7 @@ from planner.jsonio import json_value, jsonable
 from planner.logs import LogError, LoggedRun, read_run
 from planner.plans import Plan, load_plan
 from planner.replan import adjust_for_bias
+from rapt.errors import InputError, StudyMismatchError
 from sim.uuv.bias import BIAS_NAMES, BIAS_UNITS, NEUTRAL
 from sim.uuv.replay import score_track
 from sim.uuv.scenario import make_scenarios
@@ -107,7 +108,7 @@ def _path_error(track: np.ndarray, pred: np.ndarray | None) -> dict | None:
             "duration_observed_s": float(track[-1, 0]), "duration_predicted_s": float(pred[-1, 0])}
 
 
-def compare(plan_path: str | Path, log_paths: list[str | Path], out_dir: str | Path | None = None,
+def compare(plan_path: str | Path, log_paths: Sequence[str | Path], out_dir: str | Path | None = None,
             cfg: CompareConfig | None = None, progress: Callable[[str], None] | None = None) -> dict:
     """Run the comparison (see the module docstring); returns what ``comparison.json`` holds.
 
@@ -121,18 +122,19 @@ def compare(plan_path: str | Path, log_paths: list[str | Path], out_dir: str | P
     plan = load_plan(plan_path)
     m = plan.mission
     if not log_paths:
-        raise ValueError("LOGS: give at least one .mcap log of a run of this plan")
+        raise InputError("LOGS: give at least one .mcap log of a run of this plan")
     say("reading logs")
     runs = [read_run(p) for p in log_paths]
     obs = match_logs(plan, runs)
-    plan_runs = _predict_plan(plan)
+    ids, U_plan, row_of, pred = _predict_plan(plan)
     say("scoring logged runs")
     _score_observed(m, obs)
     say("fitting the execution bias")
     start_times = [float(make_scenarios(m, o.u[None, :]).start_time[0]) for o in obs]
     fit = fit_bias(m, [o.run for o in obs], start_times, fit=tuple(cfg.fit))
     say("re-predicting under the fitted bias")
-    plan_runs.corr = sim.uuv.simulate(m, plan_runs.U, trajectories=True, bias=fit.bias)
+    corr = sim.uuv.simulate(m, U_plan, trajectories=True, bias=fit.bias)
+    plan_runs = _PlanRuns(ids, U_plan, row_of, pred, corr)
     scen_rows = _scenario_rows(m, obs, plan_runs)
     agreement = _mode_agreement(scen_rows)
     say("re-planning")
@@ -156,8 +158,8 @@ def compare(plan_path: str | Path, log_paths: list[str | Path], out_dir: str | P
     return result
 
 
-def _check_out_dir(plan_path: str | Path, log_paths: list[str | Path], out_dir: str | Path) -> None:
-    """ValueError (one line) when ``out_dir``'s ``comparison.json`` would overwrite a log or the plan.
+def _check_out_dir(plan_path: str | Path, log_paths: Sequence[str | Path], out_dir: str | Path) -> None:
+    """InputError (one line) when ``out_dir``'s ``comparison.json`` would overwrite a log or the plan.
 
     Resolves paths only (the plan directory's ``plan.json`` as :func:`planner.plans.load_plan`
     finds it), so it runs before any work and creates nothing.
@@ -167,22 +169,29 @@ def _check_out_dir(plan_path: str | Path, log_paths: list[str | Path], out_dir: 
         plan_file = plan_file / "plan.json"
     inputs = {Path(p).resolve() for p in log_paths} | {plan_file.resolve()}
     if (Path(out_dir) / RESULT_NAME).resolve() in inputs:
-        raise ValueError(f"--out: {out_dir} would overwrite an input; choose another directory")
+        raise InputError(f"--out: {out_dir} would overwrite an input; choose another directory")
 
 
 @dataclass
 class _PlanRuns:
-    """Every plan scenario (and variant): its unit-cube row, its run as planned and under the fitted bias."""
+    """Every plan scenario (and variant): its unit-cube row, its run as planned and under the fitted bias
+    (both simulated with their trajectories)."""
 
     ids: list[str]
     U: np.ndarray
     row_of: dict[str, int]
     pred: sim.uuv.Result
-    corr: sim.uuv.Result | None = None
+    corr: sim.uuv.Result
+
+    def trajectories(self, sid: str) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """Scenario ``sid``'s predicted and corrected trajectories (None when it is invalid)."""
+        k = self.row_of[sid]
+        return self.pred.trajectory(k), self.corr.trajectory(k)
 
 
-def _predict_plan(plan: Plan) -> _PlanRuns:
-    """Predictions of every plan scenario, unbiased, as planned; ValueError when they are not the plan's."""
+def _predict_plan(plan: Plan) -> tuple[list[str], np.ndarray, dict[str, int], sim.uuv.Result]:
+    """Predictions of every plan scenario, unbiased, as planned: ids, unit-cube rows, row of each id, the
+    runs (with trajectories); StudyMismatchError when they are not the plan's."""
     m = plan.mission
     ids = [s["id"] for s in plan.scenarios + plan.variants]
     U_plan = np.array([plan.u(i) for i in ids]).reshape(-1, m.dim)
@@ -192,9 +201,9 @@ def _predict_plan(plan: Plan) -> _PlanRuns:
         planned = s.get("predicted", {}).get("mode")
         got = MODE_NAMES[pred.modes[row_of[s["id"]]]] if pred.valid[row_of[s["id"]]] else "invalid"
         if planned and planned != got:
-            raise ValueError(f"PLAN: scenario {s['id']} is predicted {got} by {plan.mission_file} but the plan says "
+            raise StudyMismatchError(f"PLAN: scenario {s['id']} is predicted {got} by {plan.mission_file} but the plan says "
                              f"{planned}; the mission file changed since the plan was made — regenerate the plan")
-    return _PlanRuns(ids, U_plan, row_of, pred)
+    return ids, U_plan, row_of, pred
 
 
 def _score_observed(m, obs: list[Observation]) -> None:
@@ -212,7 +221,7 @@ def _scenario_rows(m, obs: list[Observation], runs: _PlanRuns) -> list[dict]:
     scen_rows = []
     for o in obs:
         k = runs.row_of[o.sid]
-        p_traj, c_traj = pred.trajectories[k], corr.trajectories[k]
+        p_traj, c_traj = runs.trajectories(o.sid)
         sub = {}
         for c in sorted(set(_level_cols(m, 1)) | {0, 1}):
             sub[names[c]] = {"predicted": _f(pred.scores[k, c]), "observed": _f(o.scores[c]) if o.scores is not None
@@ -263,9 +272,9 @@ def _pair_rows(plan: Plan, obs: list[Observation], runs: _PlanRuns, bias, cfg: C
         ka, kb = row_of[a], row_of[b]
         intended = {a: pred.scores[ka, cols], b: pred.scores[kb, cols]}
         biased = {a: corr.scores[ka, cols], b: corr.scores[kb, cols]}
-        observed = {}
+        observed: dict[str, np.ndarray] = {}
         for o in obs:
-            if o.sid in (a, b) and o.mode is not None:
+            if o.sid in (a, b) and o.mode is not None and o.scores is not None:  # a mode comes with scores
                 observed.setdefault(o.sid, o.scores[cols])
         row = {"id": pair["id"], "scenarios": [a, b], "elements": [names[c] for c in cols],
                "predicted_modes": [MODE_NAMES[pred.modes[ka]], MODE_NAMES[pred.modes[kb]]],
@@ -346,8 +355,7 @@ def _write(result: dict, plan: Plan, obs: list[Observation], runs: _PlanRuns, ou
     (out_dir / RESULT_NAME).write_text(json.dumps(result, indent=2))
     from planner.compare_report import write_comparison_report
 
-    traj = {o.sid: (runs.pred.trajectories[runs.row_of[o.sid]], runs.corr.trajectories[runs.row_of[o.sid]])
-            for o in obs}
+    traj = {o.sid: runs.trajectories(o.sid) for o in obs}
     write_comparison_report(result, plan, [(o.sid, o.run.track) for o in obs], traj, out_dir)
 
 

@@ -25,24 +25,25 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 import rapt
 import sim.uuv
-from rapt.importance import output_importance
-from sim.uuv.mission import Mission
-from sim.uuv.metrics import metric_names, metric_types
-from sim.uuv.scoring import MODE_NAMES, modes_from_scores
-
 from planner.exports import write_scenario_files
 from planner.jsonio import jsonable
 from planner.report import write_report
 from planner.search_status import SearchStatus
+from rapt.errors import InputError, StudyMismatchError
+from rapt.importance import output_importance
+from sim.uuv.metrics import metric_names, metric_types
+from sim.uuv.mission import Mission
+from sim.uuv.scoring import MODE_NAMES, modes_from_scores
 
 __all__ = ["GenerateConfig", "search_mission", "analyse", "select_pairs", "dither_many", "robust_variants",
            "refine_pairs", "generate", "auto_batch_size", "PLAN_SCHEMA"]
@@ -54,7 +55,8 @@ def auto_batch_size(budget: int) -> int:
     """About 40 batches of 250 to 5,000 runs.
 
     Small batches steer the search more often; large ones keep the vectorised simulator
-    at full speed (its throughput more than triples from 256 to 4,096 scenarios a batch).
+    at full speed (its runs per second grow with the batch: ``benchmarks/sim_throughput.py``
+    measures them by batch size on the machine at hand).
     """
     return int(np.clip(budget // 40, 250, 5000))
 
@@ -83,19 +85,19 @@ class GenerateConfig:
 
     def check(self) -> None:
         if not isinstance(self.batch_size, int) or self.batch_size < 1:
-            raise ValueError(f"--batch-size: expected a positive number of runs, got {self.batch_size}")
+            raise InputError(f"--batch-size: expected a positive number of runs, got {self.batch_size}")
         if not isinstance(self.budget, int) or self.budget < 2 * self.batch_size:
-            raise ValueError(f"--budget: expected at least {2 * self.batch_size} runs, got {self.budget}")
+            raise InputError(f"--budget: expected at least {2 * self.batch_size} runs, got {self.budget}")
         if not (0 < self.global_fraction < 1):
-            raise ValueError(f"--global-fraction: expected a share in (0, 1), got {self.global_fraction}")
+            raise InputError(f"--global-fraction: expected a share in (0, 1), got {self.global_fraction}")
         if not isinstance(self.pairs, int) or self.pairs < 1:
-            raise ValueError(f"--pairs: expected a positive number of pairs, got {self.pairs}")
+            raise InputError(f"--pairs: expected a positive number of pairs, got {self.pairs}")
         if not isinstance(self.refine, int) or self.refine < 0:
-            raise ValueError(f"--refine-runs: expected runs per pair >= 0, got {self.refine}")
+            raise InputError(f"--refine-runs: expected runs per pair >= 0, got {self.refine}")
         if not isinstance(self.dithers, int) or self.dithers < 0:
-            raise ValueError(f"--dithers: expected a number of runs >= 0, got {self.dithers}")
+            raise InputError(f"--dithers: expected a number of runs >= 0, got {self.dithers}")
         if not isinstance(self.confirm_runs, int) or self.confirm_runs < 2 * self.pairs:
-            raise ValueError(f"--confirm-runs: expected at least two runs per pair ({2 * self.pairs}), "
+            raise InputError(f"--confirm-runs: expected at least two runs per pair ({2 * self.pairs}), "
                              f"got {self.confirm_runs}")
 
 
@@ -134,10 +136,10 @@ def make_executor(spec: str):
         try:
             from distributed import Client
         except ImportError:
-            raise ValueError("--executor: dask:// needs the cluster extra; pip install -e '.[cluster]'") from None
+            raise InputError("--executor: dask:// needs the cluster extra; pip install -e '.[cluster]'") from None
         client = Client(f"tcp://{spec[len('dask://'):]}", timeout=10)
         return client, client.close
-    raise ValueError(f"--executor: expected local, processes or dask://host:port, got {spec!r}")
+    raise InputError(f"--executor: expected local, processes or dask://host:port, got {spec!r}")
 
 def search_mission(mission: Mission, cfg: GenerateConfig, progress: Callable[[int, int], None] | None = None,
                    on_batch: Callable[[np.ndarray, np.ndarray], None] | None = None) -> rapt.Study:
@@ -145,8 +147,9 @@ def search_mission(mission: Mission, cfg: GenerateConfig, progress: Callable[[in
 
     Every score is stored with its run, so the sub-boundary analysis needs no second run.
     """
+    batch_size = auto_batch_size(cfg.budget) if cfg.batch_size is None else cfg.batch_size  # as __post_init__
     return rapt.search(MissionScores(mission, cfg.surrogate), mission.space, cfg.budget, method="s-ndv",
-                       batch_size=cfg.batch_size, seed=cfg.seed, store=cfg.store, executor=cfg.executor,
+                       batch_size=batch_size, seed=cfg.seed, store=cfg.store, executor=cfg.executor,
                        output_types=("binary", "binary"), steer=ROOT_COLUMNS,
                        sampler_options={"max_reference": SEARCH_REFERENCE},
                        n_initial=int(round(cfg.budget * cfg.global_fraction)), progress=progress,
@@ -169,7 +172,7 @@ def analyse(mission: Mission, study: rapt.Study, surrogate=None) -> Analysis:
     names, types = metric_names(mission), metric_types(mission)
     spot = sim.uuv.simulate(mission, X[:SPOT_CHECK_RUNS], surrogate=surrogate)
     if Y.shape[1] != len(names) or not np.array_equal(spot.scores, Y[:SPOT_CHECK_RUNS], equal_nan=True):
-        raise RuntimeError("study: the stored runs do not match the mission file (was it edited?); "
+        raise StudyMismatchError("study: the stored runs do not match the mission file (was it edited?); "
                            "plan into a new --out directory")
     result = sim.uuv.Result(Y, modes_from_scores(Y), np.ones(len(Y), dtype=bool), [""] * len(Y), names, types)
     tree = rapt.subboundary_tree(X, result.scores, mission.score_tree, output_types=result.output_types)
@@ -233,7 +236,7 @@ def select_pairs(a: Analysis, k: int, min_cluster: int = 3) -> list[dict]:
 
 
 # -- 4. dithering ---------------------------------------------------------------------------
-def dither_many(mission: Mission, centres: np.ndarray, predicted: Sequence[int], elements: Sequence[list[str]],
+def dither_many(mission: Mission, centres: np.ndarray, predicted: np.ndarray | Sequence[int], elements: Sequence[list[str]],
                 n: int, sigma: float, seed: int, surrogate=None) -> tuple[list[dict], np.ndarray, np.ndarray]:
     """Stochastic runs of ``n`` Gaussian dithers around each centre, all in one batch.
 
@@ -275,7 +278,7 @@ def dither_stats(U: np.ndarray, scores: np.ndarray, modes: np.ndarray, valid: np
     other = modes != predicted_mode
     out["nearest_other_mode"] = float(dist[other].min()) if other.any() else None
     same = scores[valid][~other]
-    flips = []
+    flips: list[dict[str, str | float]] = []
     if same.shape[0] > 1 and valid[0]:
         ref = scores[0]
         for c, (name, t) in enumerate(zip(names, types)):
@@ -296,7 +299,7 @@ VARIANT_STEPS = (0.02, 0.05, 0.1)
 VARIANT_COORDINATES = 2  # the most sensitive coordinates tried
 
 
-def robust_variants(mission: Mission, fragile: np.ndarray, partners: np.ndarray, modes: Sequence[int],
+def robust_variants(mission: Mission, fragile: np.ndarray, partners: np.ndarray, modes: np.ndarray | Sequence[int],
                     sensitivity: np.ndarray, n: int, sigma: float, target: float, seed: int,
                     surrogate=None) -> list[dict | None]:
     """Move fragile scenarios away from their boundary along their most sensitive coordinates.
@@ -323,15 +326,15 @@ def robust_variants(mission: Mission, fragile: np.ndarray, partners: np.ndarray,
     out: list[dict | None] = [None] * len(fragile)
     if not cands:
         return out
-    V, owner = np.array(cands), np.array(owner)
+    V, owners = np.array(cands), np.array(owner)
     det = sim.uuv.simulate(mission, V, surrogate=surrogate)
-    keep = np.flatnonzero(det.valid & (det.modes == np.asarray(modes)[owner]))
+    keep = np.flatnonzero(det.valid & (det.modes == np.asarray(modes)[owners]))
     if keep.size == 0:
         return out
-    stats, _, _ = dither_many(mission, V[keep], np.asarray(modes)[owner[keep]], [[]] * keep.size, n, sigma, seed,
+    stats, _, _ = dither_many(mission, V[keep], np.asarray(modes)[owners[keep]], [[]] * keep.size, n, sigma, seed,
                               surrogate)
     for idx, st in zip(keep.tolist(), stats):
-        s = owner[idx]
+        s = owners[idx]
         if out[s] is None and st.get("p_predicted_mode", 0.0) >= target:
             c, step = meta[idx]
             out[s] = {"u": [float(x) for x in V[idx]], "coordinate": c, "step": step,
@@ -453,8 +456,11 @@ def _choose_pairs(mission: Mission, cfg: GenerateConfig, progress: Callable[[str
     Returns the analysis, the chosen pairs, and on the surrogate workflow the number of
     candidate pairs and the expert runs that checked them (None otherwise).
     """
-    status = SearchStatus(mission.dim) if progress is not None else None
-    searched = None if status is None else lambda done, total: progress("search", done, total, status.summary())
+    status: SearchStatus | None = None
+    searched: Callable[[int, int], None] | None = None
+    if progress is not None:
+        status = SearchStatus(mission.dim)
+        searched = _search_progress(progress, status)
     study = search_mission(mission, cfg, searched, on_batch=status)
     clock.lap("search")
     sur = cfg.surrogate
@@ -476,6 +482,12 @@ def _choose_pairs(mission: Mission, cfg: GenerateConfig, progress: Callable[[str
         clock.lap("confirmation")
         confirmation = (candidates, confirm_spent)
     return a, pairs, confirmation
+
+
+def _search_progress(progress: Callable[[str, int, int, str], None], status: SearchStatus
+                     ) -> Callable[[int, int], None]:
+    """The search's ``progress``: runs done of the budget, and what the runs so far show (``status``)."""
+    return lambda done, total: progress("search", done, total, status.summary())
 
 
 def _dither_chosen(mission: Mission, cfg: GenerateConfig, U: np.ndarray, ids: list[str], chosen: sim.uuv.Result,
@@ -509,7 +521,7 @@ def _scenario_entries(mission: Mission, a: Analysis, U: np.ndarray, ids: list[st
                                      if c in level_cols}},
             "dithering": stats[k],
             "files": {kind: path.name for kind, path in
-                      write_scenario_files(mission, U[k], out_dir, sid, chosen.trajectories[k]).items()},
+                      write_scenario_files(mission, U[k], out_dir, sid, chosen.trajectory(k)).items()},
         })
     return scenarios
 
@@ -550,7 +562,8 @@ def _plan_document(mission: Mission, mission_path: Path, cfg: GenerateConfig, a:
                   "valid_runs": int(len(a.X)), "invalid_runs": int(len(a.X_invalid)),
                   "modes": {MODE_NAMES[m]: int(c) for m, c in zip(*np.unique(modes, return_counts=True))},
                   "boundary_types": a.boundary_types[:30],
-                  **({"surrogate": _surrogate_summary(cfg, confirmation, len(pairs))} if sur is not None else {})},
+                  **({"surrogate": _surrogate_summary(cfg, confirmation, len(pairs))} if confirmation is not None
+                     else {})},
         "sensitivity": a.sensitivity,
         "pairs": plan_pairs,
         "scenarios": scenarios,

@@ -31,6 +31,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from bridge import keys  # noqa: E402
 from bridge.logger import RAW_TOPIC  # noqa: E402
+from rapt.errors import FileFormatError  # noqa: E402
 from sim.uuv.interface import decode_command  # noqa: E402
 from sim.uuv.replay import TrackBuilder  # noqa: E402
 
@@ -40,8 +41,11 @@ __all__ = ["LoggedRun", "read_run", "RunLogReader", "STEP_FIELDS", "LogError"]
 STEP_FIELDS = ("t", "x", "y", "heading", "energy_hj", "surfaced", "surge", "yaw_rate")
 
 
-class LogError(ValueError):
-    """A log that cannot be compared at all (not MCAP, no scenario metadata)."""
+class LogError(FileFormatError):
+    """A log that cannot be compared at all (missing, not MCAP, no scenario metadata).
+
+    A :class:`rapt.errors.FileFormatError`, so also an ``InputError``, a ``RaptError`` and a ``ValueError``.
+    """
 
 
 @dataclass

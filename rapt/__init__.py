@@ -15,7 +15,9 @@ from rapt.errors import (
     InputError,
     LinkError,
     LinkTimeoutError,
+    MissingFileError,
     RaptError,
+    RefusedError,
     RunError,
     StudyMismatchError,
 )
@@ -30,7 +32,8 @@ __all__ = [
     "search", "Study", "StateSpace", "Continuous", "Integer", "Categorical", "Permutation",
     "METHODS", "make_sampler", "performance_modes", "boundary_pairs", "BoundaryPairs", "ScoreTree",
     "subboundary_tree", "SubBoundaryTree",
-    "RaptError", "InputError", "FileFormatError", "StudyMismatchError", "RunError", "LinkError", "LinkTimeoutError",
+    "RaptError", "InputError", "FileFormatError", "MissingFileError", "StudyMismatchError", "RunError", "LinkError",
+    "LinkTimeoutError", "RefusedError",
 ]
 
 __version__ = "0.1.0"

@@ -3,8 +3,9 @@
 Every message is one line that names the field (or file) at fault and how to fix it; the
 command line prints it as it is and exits non-zero.  Each class also derives from the
 built-in exception that code written before this hierarchy caught (``ValueError`` for bad
-input, ``RuntimeError`` for a run that cannot go on, ``TimeoutError``, ``ConnectionError``),
-so ``except ValueError`` still works where it was used.
+input, ``RuntimeError`` for a run that cannot go on, ``TimeoutError``, ``ConnectionError``,
+``FileNotFoundError`` for a missing file, ``PermissionError`` for a refusal), so
+``except ValueError`` still works where it was used.
 
 The packages built on :mod:`rapt` subclass these for their own inputs (mission files,
 robot files, flight logs, the vehicle link).
@@ -16,10 +17,12 @@ __all__ = [
     "RaptError",
     "InputError",
     "FileFormatError",
+    "MissingFileError",
     "StudyMismatchError",
     "RunError",
     "LinkError",
     "LinkTimeoutError",
+    "RefusedError",
 ]
 
 
@@ -33,6 +36,10 @@ class InputError(RaptError, ValueError):
 
 class FileFormatError(InputError):
     """A file (mission, robot, plan, log, key) that cannot be read; the message names the file and the field."""
+
+
+class MissingFileError(FileFormatError, FileNotFoundError):
+    """A file given by its path that does not exist; also a ``FileNotFoundError``, as it was raised before."""
 
 
 class StudyMismatchError(RaptError, ValueError):
@@ -49,3 +56,7 @@ class LinkError(RaptError, ConnectionError):
 
 class LinkTimeoutError(RaptError, TimeoutError):
     """Something awaited from the vehicle or the bus did not come in time."""
+
+
+class RefusedError(RaptError, PermissionError):
+    """An action the configuration does not allow (a command to a vehicle while commands are off)."""

@@ -40,12 +40,13 @@ angle for small differences (so resolutions are in radians).
 
 from __future__ import annotations
 
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from rapt.candidates import select_batch
+from rapt.errors import InputError
 from rapt.information import neighbour_variance, unalikeability
 from rapt.parallel import query_workers
 from rapt.samplers.base import Sampler
@@ -90,26 +91,26 @@ class ManifoldSampler(Sampler):
     name = "manifold-nndv"
     adaptive = True
 
-    def __init__(self, n_free: int, bounds: Sequence[Sequence[float]], *, seed: int = 0, k: int = 6,
+    def __init__(self, n_free: int, bounds: np.ndarray | Sequence[Sequence[float]], *, seed: int = 0, k: int = 6,
                  alpha: float = 1.0, beta: float = 1.0, r_min: float = np.radians(1.0), r_max: float = np.radians(10.0),
                  n_initial: int = 100, candidates_per_point: float = 10.0, min_candidates: int = 1000,
                  separation: float = 0.5, whole_hulls: bool = False):
-        bounds = np.asarray(bounds, dtype=float)
-        if bounds.ndim != 2 or bounds.shape[1] != 2 or not np.all(bounds[:, 1] > bounds[:, 0]):
-            raise ValueError(f"bounds: expected (d, 2) ranges with lower < upper, got {bounds.tolist()}")
-        super().__init__(len(bounds), seed=seed, output_types=("binary",))
+        ranges = np.asarray(bounds, dtype=float)
+        if ranges.ndim != 2 or ranges.shape[1] != 2 or not np.all(ranges[:, 1] > ranges[:, 0]):
+            raise InputError(f"bounds: expected (d, 2) ranges with lower < upper, got {ranges.tolist()}")
+        super().__init__(len(ranges), seed=seed, output_types=("binary",))
         if not 0 <= n_free < self.dim:
-            raise ValueError(f"n_free: expected 0 <= n_free < {self.dim} (at least one constrained coordinate), got {n_free}")
+            raise InputError(f"n_free: expected 0 <= n_free < {self.dim} (at least one constrained coordinate), got {n_free}")
         for name, value in (("alpha", alpha), ("beta", beta), ("r_min", r_min), ("r_max", r_max),
                             ("candidates_per_point", candidates_per_point), ("separation", separation)):
             if not np.isfinite(value) or value < 0:
-                raise ValueError(f"{name}: expected a finite number >= 0, got {value!r}")
+                raise InputError(f"{name}: expected a finite number >= 0, got {value!r}")
         if r_min > r_max:
-            raise ValueError(f"r_min: the boundary resolution ({r_min}) must not exceed the interior one, r_max ({r_max})")
+            raise InputError(f"r_min: the boundary resolution ({r_min}) must not exceed the interior one, r_max ({r_max})")
         if k < 2:
-            raise ValueError(f"k: need at least 2 neighbours for a variance, got {k}")
+            raise InputError(f"k: need at least 2 neighbours for a variance, got {k}")
         self.n_free = int(n_free)
-        self.bounds = bounds
+        self.bounds = ranges
         self.k = int(k)
         self.alpha, self.beta = float(alpha), float(beta)
         self.r_min, self.r_max = float(r_min), float(r_max)
@@ -119,7 +120,7 @@ class ManifoldSampler(Sampler):
         self.separation = float(separation)
         self.whole_hulls = bool(whole_hulls)
         if self.whole_hulls and self.n_free < 1:
-            raise ValueError("whole_hulls: needs at least one free coordinate (n_free >= 1) to group faces by")
+            raise InputError("whole_hulls: needs at least one free coordinate (n_free >= 1) to group faces by")
         self._faces: list[np.ndarray] = []
         self._ids: list[int] = []
         self._face_ids: list[np.ndarray] | None = []
@@ -146,21 +147,22 @@ class ManifoldSampler(Sampler):
         if faces is None:
             faces = [x[None, self.n_free:] for x in X]
         if len(faces) != len(X):
-            raise ValueError(f"faces: expected one face set per state ({len(X)}), got {len(faces)}")
+            raise InputError(f"faces: expected one face set per state ({len(X)}), got {len(faces)}")
         faces = [np.asarray(f, dtype=float).reshape(-1, self.dim - self.n_free) for f in faces]
-        if (ids is None) != (face_ids is None) or (ids is not None and (len(ids) != len(X) or len(face_ids) != len(X))):
-            raise ValueError(f"ids, face_ids: give both, one per state ({len(X)}), or neither")
+        if (ids is None) != (face_ids is None) or (ids is not None and face_ids is not None
+                                                   and (len(ids) != len(X) or len(face_ids) != len(X))):
+            raise InputError(f"ids, face_ids: give both, one per state ({len(X)}), or neither")
         if ids is None or self._face_ids is None or (self.n_told and not self._ids):
             self._face_ids = None  # identities only help when every state has them
         if outcomes is not None and len(outcomes) != len(X):
-            raise ValueError(f"outcomes: expected one per state ({len(X)}), got {len(outcomes)}")
+            raise InputError(f"outcomes: expected one per state ({len(X)}), got {len(outcomes)}")
         if outcomes is None or self._outcomes is None or (self.n_told and not self._outcomes):
             self._outcomes = None  # as identities: every state's, or none
         super().tell(X, Y)
         if self._outcomes is not None:
             self._outcomes.extend(np.asarray(outcomes, dtype=float).reshape(-1).tolist())
         self._faces.extend(faces)
-        if self._face_ids is not None:
+        if self._face_ids is not None and ids is not None and face_ids is not None:  # kept only while both are told
             self._ids.extend(int(v) for v in ids)
             self._face_ids.extend(np.asarray(f, dtype=np.int64).reshape(-1) for f in face_ids)
 
@@ -192,7 +194,7 @@ class ManifoldSampler(Sampler):
 
     def _candidates(self, n: int, rng: np.random.Generator, tree: cKDTree | None):
         """:meth:`candidates` with their groups and identities (see :meth:`_on_nearest_faces`)."""
-        mean_faces = max(np.mean([len(f) for f in self._faces]), 1.0)
+        mean_faces = max(float(np.mean([len(f) for f in self._faces])), 1.0)
         p = max(int(np.ceil(max(self.candidates_per_point * n, self.min_candidates) / mean_faces)), 1)
         return self._on_nearest_faces(rng.random((p, self.n_free)), tree)
 
@@ -204,7 +206,7 @@ class ManifoldSampler(Sampler):
         identities (None when the states were told without them).
         """
         p = len(theta)
-        if self.n_free:
+        if tree is not None:  # there are free coordinates
             _, nn = tree.query(angular_embedding(theta, self.bounds[:self.n_free]), k=1, workers=query_workers(p))
         else:
             nn = np.zeros(p, dtype=int)
@@ -380,7 +382,7 @@ def manifold_search(fn: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, Seq
     unstable state ends up (see :meth:`ManifoldSampler.tell`).
     """
     if budget < 1 or batch_size < 1:
-        raise ValueError(f"budget, batch_size: expected positive integers, got {budget}, {batch_size}")
+        raise InputError(f"budget, batch_size: expected positive integers, got {budget}, {batch_size}")
     while sampler.n_told < budget and not sampler.done:
         q = sampler.ask(min(batch_size, budget - sampler.n_told))
         if not len(q):

@@ -9,12 +9,14 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 
+from rapt.errors import InputError, RunError, StudyMismatchError
 from rapt.executors import resolve_executor
 from rapt.samplers import METHODS, Sampler, make_sampler
 from rapt.scores import check_output_types, infer_output_types
@@ -116,7 +118,7 @@ def search(fn: Callable[[np.ndarray], Any], bounds: Any, budget: int, method: st
         each sample.
     """
     if not callable(fn):
-        raise ValueError("fn: expected a callable mapping an (n, d) array to an (n, m) array")
+        raise InputError("fn: expected a callable mapping an (n, d) array to an (n, m) array")
     space = bounds if isinstance(bounds, StateSpace) else StateSpace.from_bounds(bounds)
     physical = not isinstance(bounds, StateSpace)
     steer, output_types = _checked_arguments(method, budget, batch_size, seed, chunk_size, n_initial, steer,
@@ -144,30 +146,30 @@ def search(fn: Callable[[np.ndarray], Any], bounds: Any, budget: int, method: st
 def _checked_arguments(method: str, budget: Any, batch_size: Any, seed: Any, chunk_size: Any, n_initial: Any,
                        steer: Sequence[int] | None, output_types: Sequence[str] | None
                        ) -> tuple[list[int] | None, tuple[str, ...] | None]:
-    """:func:`search`'s arguments checked (ValueError naming the argument); returns ``steer`` and
+    """:func:`search`'s arguments checked (InputError naming the argument); returns ``steer`` and
     ``output_types`` normalised (a list of ints and a tuple)."""
     if method not in METHODS:
-        raise ValueError(f"method: unknown method {method!r}; allowed: {', '.join(METHODS)}")
+        raise InputError(f"method: unknown method {method!r}; allowed: {', '.join(METHODS)}")
     for name, value in (("budget", budget), ("batch_size", batch_size)):
         if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or value < 1:
-            raise ValueError(f"{name}: expected a positive integer, got {value!r}")
+            raise InputError(f"{name}: expected a positive integer, got {value!r}")
     if budget < batch_size:
-        raise ValueError(f"budget: {budget} is smaller than batch_size {batch_size}; raise budget or lower batch_size")
+        raise InputError(f"budget: {budget} is smaller than batch_size {batch_size}; raise budget or lower batch_size")
     if not isinstance(seed, (int, np.integer)) or isinstance(seed, bool) or seed < 0:
-        raise ValueError(f"seed: expected a non-negative integer, got {seed!r}")
+        raise InputError(f"seed: expected a non-negative integer, got {seed!r}")
     if chunk_size is not None and (not isinstance(chunk_size, (int, np.integer)) or chunk_size < 1):
-        raise ValueError(f"chunk_size: expected a positive integer or None, got {chunk_size!r}")
+        raise InputError(f"chunk_size: expected a positive integer or None, got {chunk_size!r}")
     if n_initial is not None and (not isinstance(n_initial, (int, np.integer)) or n_initial < 0):
-        raise ValueError(f"n_initial: expected a non-negative integer or None, got {n_initial!r}")
+        raise InputError(f"n_initial: expected a non-negative integer or None, got {n_initial!r}")
     if steer is not None:
         steer = [int(c) for c in steer] if all(isinstance(c, (int, np.integer)) for c in steer) else None
         if not steer or min(steer) < 0 or len(set(steer)) != len(steer):
-            raise ValueError("steer: expected distinct non-negative score column indices, e.g. steer=[0, 1]")
+            raise InputError("steer: expected distinct non-negative score column indices, e.g. steer=[0, 1]")
     if output_types is not None:
         output_types = tuple(output_types)
         check_output_types(output_types, len(output_types))
         if steer is not None and len(output_types) != len(steer):
-            raise ValueError(f"output_types: expected one type per steered column ({len(steer)}), "
+            raise InputError(f"output_types: expected one type per steered column ({len(steer)}), "
                              f"got {len(output_types)}")
     return steer, output_types
 
@@ -232,14 +234,14 @@ class _Runner:
         for key in ("schema_version", "method", "seed", "dim", "batch_size", "space", "physical", "sampler_options",
                     "steer"):
             if meta.get(key) != config[key]:
-                raise ValueError(
+                raise StudyMismatchError(
                     f"store: {self.db.path} holds a study with {key}={meta.get(key)!r}, not {config[key]!r}; "
                     f"pass the same {key} to resume it, or use a new store path"
                 )
         stored_types = meta.get("output_types")
         if stored_types is not None:
             if output_types is not None and tuple(stored_types) != output_types:
-                raise ValueError(
+                raise StudyMismatchError(
                     f"output_types: the store was created with {stored_types}; pass the same or omit output_types"
                 )
             self.sampler.output_types = tuple(stored_types)
@@ -271,7 +273,7 @@ class _Runner:
             if self.n_outputs is None:
                 self.n_outputs = Y.shape[1]
             if self.steer is not None and max(self.steer) >= Y.shape[1]:
-                raise ValueError(f"steer: column {max(self.steer)} does not exist; fn returns "
+                raise InputError(f"steer: column {max(self.steer)} does not exist; fn returns "
                                  f"{Y.shape[1]} score columns")
             steered = Y if self.steer is None else Y[:, self.steer]
             if self.sampler.output_types is None:
@@ -291,24 +293,32 @@ class _Runner:
 
     # -- evaluation --------------------------------------------------------------------
     def run(self, budget: int, progress) -> None:
+        """Evaluate batches until ``budget`` rows were asked, or the sampler finished early.
+
+        A sampler may return fewer points than asked, and finishes early by returning none
+        (:attr:`Sampler.done`, see :class:`~rapt.samplers.base.Sampler`): the budget counts
+        the points it did return, and an empty ask ends the study without recording a batch.
+        """
         # Finish a batch that was asked but not fully evaluated before the last stop.
         if self._unfinished is not None:
             self._evaluate_batch(*self._unfinished)
             self._unfinished = None
             self._report(progress, budget)
-        while self.asked < budget:
+        while self.asked < budget and not self.sampler.done:
             n = min(self.batch_size, budget - self.asked)
             asked = self.sampler.ask(n)
+            if not len(asked):  # finished early: sampler.done is now set
+                break
             b = self.batches
             self.db.add_batch(b, asked)
             self.batches += 1
-            self.asked += n
+            self.asked += len(asked)
             self._evaluate_batch(b, asked)
             self._report(progress, budget)
 
     def _report(self, progress, budget: int) -> None:
         if not any(len(u) for u in self.U) and len(self.reasons) and self.batches >= _ALL_FAILED_BATCHES:
-            raise RuntimeError(
+            raise RunError(
                 f"fn: every row of the first {self.batches} batches failed (last reason: {self.reasons[-1]}); "
                 "fix the system under test before searching"
             )
@@ -366,7 +376,7 @@ class _Runner:
             len(self.sampler.output_types) if self.sampler.output_types and self.steer is None else None)
         if Y.ndim != 2 or Y.shape[0] != n or (expected_m is not None and Y.shape[1] != expected_m):
             shape = f"({n}, {expected_m})" if expected_m else f"({n}, m)"
-            raise ValueError(f"fn: returned scores of shape {Y.shape} for {n} states; expected {shape}")
+            raise InputError(f"fn: returned scores of shape {Y.shape} for {n} states; expected {shape}")
         if self.n_outputs is None:
             self.n_outputs = Y.shape[1]
         if X_eval is None:
@@ -374,7 +384,7 @@ class _Runner:
         else:
             X_eval = np.asarray(X_eval, dtype=float)
             if X_eval.shape != (n, self.space.dim):
-                raise ValueError(
+                raise InputError(
                     f"fn: returned evaluated states of shape {X_eval.shape}; expected ({n}, {self.space.dim})"
                 )
             U = self.space.to_unit_array(X_eval) if self.physical else X_eval

@@ -57,6 +57,7 @@ from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 from scipy.spatial import cKDTree
 
+from rapt.errors import InputError
 from rapt.parallel import query_workers
 
 __all__ = ["gabriel_graph", "TransitionGraph", "transition_graph"]
@@ -71,9 +72,9 @@ def gabriel_graph(X: np.ndarray, max_edge: float, chunk: int = 200_000) -> tuple
     """
     X = np.asarray(X, dtype=float)
     if X.ndim != 2:
-        raise ValueError(f"X: expected a 2-D array of states, got shape {X.shape}")
+        raise InputError(f"X: expected a 2-D array of states, got shape {X.shape}")
     if not np.isfinite(max_edge) or max_edge <= 0:
-        raise ValueError(f"max_edge: expected a length > 0, got {max_edge}")
+        raise InputError(f"max_edge: expected a length > 0, got {max_edge}")
     if len(X) < 2:
         return np.empty(0, dtype=int), np.empty(0, dtype=int)
     tree = cKDTree(X)
@@ -172,7 +173,7 @@ class TransitionGraph:
         unreachable; ``next_edge[n]`` indexes :attr:`edges` (-1 at the goal or unreachable).
         """
         if not 0 <= goal < self.n_nodes:
-            raise ValueError(f"goal: expected a node in [0, {self.n_nodes}), got {goal}")
+            raise InputError(f"goal: expected a node in [0, {self.n_nodes}), got {goal}")
         into: dict[int, list[int]] = {}
         for e, d in enumerate(self.edges["dst"]):
             into.setdefault(int(d), []).append(e)
@@ -330,7 +331,7 @@ def transition_graph(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, energy
 
 
 def _checked_inputs(X, stable, rest, energy, extra, ids) -> tuple:
-    """:func:`transition_graph`'s arrays, shaped and checked (ValueError naming the argument).
+    """:func:`transition_graph`'s arrays, shaped and checked (InputError naming the argument).
 
     Returns ``X``, ``stable``, ``rest``, ``energy``, ``extra`` and the identities as three
     int arrays (of X, rest, extra), or None without ``ids``.
@@ -338,17 +339,17 @@ def _checked_inputs(X, stable, rest, energy, extra, ids) -> tuple:
     X = np.asarray(X, dtype=float)
     N, d = X.shape if X.ndim == 2 else (-1, -1)
     if N < 0:
-        raise ValueError(f"X: expected a 2-D array of states, got shape {np.shape(X)}")
+        raise InputError(f"X: expected a 2-D array of states, got shape {np.shape(X)}")
     stable = np.asarray(stable, dtype=bool).reshape(-1)
     rest = np.asarray(rest, dtype=float).reshape(N, d)
     energy = np.asarray(energy, dtype=float).reshape(-1)
     if stable.shape != (N,) or energy.shape != (N,):
-        raise ValueError(f"stable, energy: expected one value per state ({N}), got {stable.shape}, {energy.shape}")
+        raise InputError(f"stable, energy: expected one value per state ({N}), got {stable.shape}, {energy.shape}")
     extra = np.empty((0, d)) if extra is None else np.asarray(extra, dtype=float).reshape(-1, d)
     if ids is not None:
         x_id, r_id, e_id = (np.asarray(v, dtype=np.int64).reshape(-1) for v in ids)
         if x_id.shape != (N,) or r_id.shape != (N,) or e_id.shape != (len(extra),):
-            raise ValueError(f"ids: expected identities for X ({N}), rest ({N}) and extra ({len(extra)}), "
+            raise InputError(f"ids: expected identities for X ({N}), rest ({N}) and extra ({len(extra)}), "
                              f"got {x_id.shape}, {r_id.shape}, {e_id.shape}")
         ids = (x_id, r_id, e_id)
     return X, stable, rest, energy, extra, ids
@@ -400,7 +401,7 @@ def _graph_edges(known: _KnownStates, max_edge: float, connections: tuple | None
     if connections is not None:
         i, j = (np.asarray(v, dtype=int).reshape(-1) for v in connections)
         if i.shape != j.shape or (i.size and (min(i.min(), j.min()) < 0 or max(i.max(), j.max()) >= len(points))):
-            raise ValueError(f"connections: expected two equal-length index arrays into the {len(points)} known states")
+            raise InputError(f"connections: expected two equal-length index arrays into the {len(points)} known states")
     else:
         # an extra state labelled unstable is a guess, and no edge from it counts: it neither takes part in a
         # boundary pair nor blocks one, but it still stands between two stable states, as any unstable state does

@@ -5,6 +5,7 @@
 
 from __future__ import annotations
 
+from rapt.errors import InputError
 from rapt.samplers.adaptive import GPRSampler, InformationSampler, NNDVSampler, ScaledNDVSampler
 from rapt.samplers.base import Sampler
 from rapt.samplers.space_filling import LatinHypercubeSampler, RandomSampler, SobolSampler
@@ -28,9 +29,9 @@ METHODS: dict[str, type[Sampler]] = {
 def make_sampler(method: str, dim: int, *, seed: int = 0, **options) -> Sampler:
     """Build the sampler registered under ``method`` (one of :data:`METHODS`)."""
     if method not in METHODS:
-        raise ValueError(f"method: unknown method {method!r}; allowed: {', '.join(METHODS)}")
+        raise InputError(f"method: unknown method {method!r}; allowed: {', '.join(METHODS)}")
     cls = METHODS[method]
     try:
         return cls(dim, seed=seed, **options)
     except TypeError as exc:
-        raise ValueError(f"method {method!r}: {exc}") from None
+        raise InputError(f"method {method!r}: {exc}") from None

@@ -13,15 +13,16 @@ near-duplicates.  They differ in the metamodel:
 from __future__ import annotations
 
 import warnings
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 from scipy.spatial import cKDTree
 
 from rapt.candidates import CandidateGenerator, UniformCandidates, select_batch
+from rapt.errors import InputError
 from rapt.importance import importance_weights, tree_importance
-from rapt.parallel import query_workers
 from rapt.information import gpr_information, neighbour_variance, nndv_information, unalikeability
+from rapt.parallel import query_workers
 from rapt.samplers.base import Sampler
 from rapt.samplers.space_filling import sobol_points
 from rapt.scores import encode_labels, normalize_continuous
@@ -34,7 +35,7 @@ def _check_positive(name: str, value: float, *, integer: bool = False, allow_zer
     if not ok or not np.isfinite(value) or value < 0 or (value == 0 and not allow_zero):
         kind = "integer" if integer else "number"
         bound = ">= 0" if allow_zero else "> 0"
-        raise ValueError(f"{name}: expected a finite {kind} {bound}, got {value!r}")
+        raise InputError(f"{name}: expected a finite {kind} {bound}, got {value!r}")
 
 
 class InformationSampler(Sampler):
@@ -68,12 +69,12 @@ class InformationSampler(Sampler):
         _check_positive("v", v, allow_zero=True)
         _check_positive("candidates_per_point", candidates_per_point)
         if candidates_per_point <= 1:
-            raise ValueError(f"candidates_per_point: must be > 1 (Algorithm 1 needs p > L), got {candidates_per_point}")
+            raise InputError(f"candidates_per_point: must be > 1 (Algorithm 1 needs p > L), got {candidates_per_point}")
         _check_positive("min_candidates", min_candidates, integer=True, allow_zero=True)
         _check_positive("separation", separation, allow_zero=True)
         _check_positive("n_initial", n_initial, integer=True, allow_zero=True)
         if candidate_generator is not None and not callable(candidate_generator):
-            raise ValueError("candidate_generator: expected a callable (n, rng, sampler) -> (n, d) array")
+            raise InputError("candidate_generator: expected a callable (n, rng, sampler) -> (n, d) array")
         self.g = float(g)
         self.v = float(v)
         self.candidates_per_point = float(candidates_per_point)
@@ -96,7 +97,7 @@ class InformationSampler(Sampler):
         p = max(int(np.ceil(self.candidates_per_point * n)), self.min_candidates, n + 1)
         cand = np.asarray(self.candidate_generator(p, rng, self), dtype=float)
         if cand.ndim != 2 or cand.shape[1] != self.dim or cand.shape[0] < n:
-            raise ValueError(
+            raise InputError(
                 f"candidate_generator: returned shape {cand.shape}; expected at least {n} rows of {self.dim} columns"
             )
         cand = np.clip(cand, 0.0, 1.0)
@@ -114,7 +115,7 @@ class InformationSampler(Sampler):
         """Per output: (kind, codes or normalised values, n_classes or 0)."""
         Y = self.Y
         out = []
-        for j, kind in enumerate(self.output_types):
+        for j, kind in enumerate(self.output_types or ()):  # set by the first tell, before any metamodel runs
             if kind == "continuous":
                 out.append((kind, normalize_continuous(Y[:, j]), 0))
             else:
@@ -150,14 +151,14 @@ class NNDVSampler(InformationSampler):
         super().__init__(dim, **kwargs)
         _check_positive("k", k, integer=True)
         if k < 2:
-            raise ValueError(f"k: need at least 2 neighbours for a variance, got {k}")
+            raise InputError(f"k: need at least 2 neighbours for a variance, got {k}")
         _check_positive("floor", floor, allow_zero=True)
         self.k = int(k)
         self.floor = float(floor)
         if max_reference is not None:
             _check_positive("max_reference", max_reference, integer=True)
             if max_reference <= k:
-                raise ValueError(f"max_reference: must exceed k={k}, got {max_reference}")
+                raise InputError(f"max_reference: must exceed k={k}, got {max_reference}")
         self.max_reference = None if max_reference is None else int(max_reference)
 
     def _min_data(self) -> int:
@@ -276,9 +277,9 @@ class GPRSampler(InformationSampler):
         return np.hstack(cols)
 
     def information(self, candidates: np.ndarray, rng: np.random.Generator):
+        from sklearn.exceptions import ConvergenceWarning
         from sklearn.gaussian_process import GaussianProcessRegressor
         from sklearn.gaussian_process.kernels import ConstantKernel, Matern, WhiteKernel
-        from sklearn.exceptions import ConvergenceWarning
 
         X = self.X
         T = self._design_targets()

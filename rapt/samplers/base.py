@@ -17,10 +17,11 @@ holds every sampler to it.
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
+from rapt.errors import InputError, RunError
 from rapt.scores import check_output_types, infer_output_types
 
 __all__ = ["Sampler"]
@@ -70,9 +71,9 @@ class Sampler(ABC):
 
     def __init__(self, dim: int, *, seed: int = 0, output_types: Sequence[str] | None = None):
         if not isinstance(dim, (int, np.integer)) or dim < 1:
-            raise ValueError(f"dim: expected a positive integer, got {dim!r}")
+            raise InputError(f"dim: expected a positive integer, got {dim!r}")
         if not isinstance(seed, (int, np.integer)) or seed < 0:
-            raise ValueError(f"seed: expected a non-negative integer, got {seed!r}")
+            raise InputError(f"seed: expected a non-negative integer, got {seed!r}")
         self.dim = int(dim)
         self.seed = int(seed)
         self.output_types = None if output_types is None else tuple(output_types)
@@ -117,13 +118,13 @@ class Sampler(ABC):
     def ask(self, n: int) -> np.ndarray:
         """Propose up to ``n`` unit-cube points, shape (m, dim) with m <= n; none once :attr:`done`."""
         if not isinstance(n, (int, np.integer)) or n < 1:
-            raise ValueError(f"n: expected a positive integer number of points, got {n!r}")
+            raise InputError(f"n: expected a positive integer number of points, got {n!r}")
         if self.done:
             return np.empty((0, self.dim))
         rng = np.random.default_rng(np.random.SeedSequence([self.seed, self.n_batches]))
         points = np.asarray(self._propose(int(n), rng), dtype=float)
         if points.ndim != 2 or points.shape[1] != self.dim or points.shape[0] > n:
-            raise RuntimeError(f"{type(self).__name__} proposed shape {points.shape}, expected at most {(n, self.dim)}")
+            raise RunError(f"{type(self).__name__} proposed shape {points.shape}, expected at most {(n, self.dim)}")
         if not len(points):
             self.done = True
             return np.empty((0, self.dim))
@@ -143,13 +144,13 @@ class Sampler(ABC):
         if Y.ndim == 1:
             Y = Y[:, None]
         if X.ndim != 2 or X.shape[1] != self.dim:
-            raise ValueError(f"X: expected shape (n, {self.dim}), got {X.shape}")
+            raise InputError(f"X: expected shape (n, {self.dim}), got {X.shape}")
         if Y.ndim != 2 or Y.shape[0] != X.shape[0]:
-            raise ValueError(f"Y: expected one score row per state ({X.shape[0]}), got shape {Y.shape}")
+            raise InputError(f"Y: expected one score row per state ({X.shape[0]}), got shape {Y.shape}")
         if not np.all(np.isfinite(Y)):
-            raise ValueError("Y: scores must be finite; report NaN/inf rows with tell_failed(X, reasons)")
+            raise InputError("Y: scores must be finite; report NaN/inf rows with tell_failed(X, reasons)")
         if not np.all(np.isfinite(X)):
-            raise ValueError("X: states must be finite")
+            raise InputError("X: states must be finite")
         if X.shape[0] == 0:
             return
         if self.output_types is None:
@@ -157,7 +158,7 @@ class Sampler(ABC):
         else:
             check_output_types(self.output_types, Y.shape[1])
         if self._Y and self._Y[0].shape[1] != Y.shape[1]:
-            raise ValueError(f"Y: expected {self._Y[0].shape[1]} score columns as before, got {Y.shape[1]}")
+            raise InputError(f"Y: expected {self._Y[0].shape[1]} score columns as before, got {Y.shape[1]}")
         self._X.append(X.copy())
         self._Y.append(Y.copy())
         self._cache = None

@@ -11,6 +11,7 @@ import warnings
 import numpy as np
 from scipy.stats import qmc
 
+from rapt.errors import InputError
 from rapt.samplers.base import Sampler
 
 __all__ = ["RandomSampler", "SobolSampler", "LatinHypercubeSampler"]
@@ -59,7 +60,7 @@ class LatinHypercubeSampler(Sampler):
     def __init__(self, dim: int, *, seed: int = 0, size: int | None = None, output_types=None):
         super().__init__(dim, seed=seed, output_types=output_types)
         if size is not None and (not isinstance(size, (int, np.integer)) or size < 1):
-            raise ValueError(f"size: expected a positive integer or None, got {size!r}")
+            raise InputError(f"size: expected a positive integer or None, got {size!r}")
         self.size = None if size is None else int(size)
         self._design: np.ndarray | None = None
 

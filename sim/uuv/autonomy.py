@@ -118,7 +118,10 @@ class Autonomy:
         else:
             near = np.zeros((n, W), dtype=bool)
         self.wp_doomed = near
-        self.mem_x = self.mem_y = self.mem_t = None  # last seen sonar contacts (N, K)
+        # last seen sonar contacts (N, K): where, and when (None until the first step with contacts)
+        self.mem_x: np.ndarray | None = None
+        self.mem_y: np.ndarray | None = None
+        self.mem_t: np.ndarray | None = None
         op = m.operational_area
         self._op_bounds = (op.x - op.width / 2, op.x + op.width / 2, op.y - op.height / 2, op.y + op.height / 2)
         self._rows = np.arange(n)
@@ -241,12 +244,13 @@ class Autonomy:
         """Transmission progress: who is in the area, and who is sending (in it while the window is open)."""
         scen, n = self.scen, self.scen.n
         in_tx = np.zeros(n, dtype=bool)
-        if self.has_tx:
+        tx = self.mission.transmission
+        if tx is not None:  # self.has_tx
             in_tx = inside_rect(obs.x, obs.y, scen.tx_rect[:, None, :])[:, 0] & (kind == GOAL_TRANSMIT) & active
             window = (obs.t >= scen.tx_open) & (obs.t < scen.tx_close)
             sending = in_tx & window
             self.tx_time[sending] += dt
-            self.tx_done |= self.tx_time >= self.mission.transmission.duration_s
+            self.tx_done |= self.tx_time >= tx.duration_s
         else:
             sending = np.zeros(n, dtype=bool)
         return in_tx, sending
@@ -300,22 +304,23 @@ class Autonomy:
     def _avoid_contacts(self, obs: Observation, ax: np.ndarray, ay: np.ndarray, fx: np.ndarray, fy: np.ndarray
                         ) -> None:
         """Add (in place) the push of remembered sonar contacts to ``fx``, ``fy``; ``ax``, ``ay`` point to the goal."""
-        if obs.contact_x.shape[1]:  # remember where each obstacle was last seen
-            if self.mem_t is None or self.mem_t.shape != obs.contact_x.shape:
-                self.mem_x, self.mem_y = obs.contact_x.copy(), obs.contact_y.copy()
-                self.mem_t = np.full(obs.contact_x.shape, -np.inf)
-            seen = obs.detected
-            self.mem_x = np.where(seen, obs.contact_x, self.mem_x)
-            self.mem_y = np.where(seen, obs.contact_y, self.mem_y)
-            self.mem_t = np.where(seen, obs.t, self.mem_t)
-            known = obs.t - self.mem_t <= CONTACT_MEMORY_S
-            rows = np.flatnonzero(np.any(known, axis=1))
-        else:
-            rows = np.empty(0, dtype=np.int64)
+        if not obs.contact_x.shape[1]:
+            return
+        # remember where each obstacle was last seen
+        mem_x, mem_y, mem_t = self.mem_x, self.mem_y, self.mem_t
+        if mem_x is None or mem_y is None or mem_t is None or mem_t.shape != obs.contact_x.shape:
+            mem_x, mem_y = obs.contact_x.copy(), obs.contact_y.copy()
+            mem_t = np.full(obs.contact_x.shape, -np.inf)
+        seen = obs.detected
+        self.mem_x = mem_x = np.where(seen, obs.contact_x, mem_x)
+        self.mem_y = mem_y = np.where(seen, obs.contact_y, mem_y)
+        self.mem_t = mem_t = np.where(seen, obs.t, mem_t)
+        known = obs.t - mem_t <= CONTACT_MEMORY_S
+        rows = np.flatnonzero(np.any(known, axis=1))
         if rows.size:  # only vehicles with a (remembered) sonar contact
             d0 = self.spec.sonar_range_m
-            dx = obs.x[rows, None] - self.mem_x[rows]
-            dy = obs.y[rows, None] - self.mem_y[rows]
+            dx = obs.x[rows, None] - mem_x[rows]
+            dy = obs.y[rows, None] - mem_y[rows]
             r = np.maximum(np.hypot(dx, dy), 1.0)
             mag = np.where(known[rows], OBSTACLE_GAIN * np.clip((d0 - r) / d0, 0.0, 1.0) ** 2 * d0 / r, 0.0)
             px, py = (mag * dx / r).sum(axis=1), (mag * dy / r).sum(axis=1)

@@ -34,10 +34,12 @@ are bit-identical to a run without one.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, fields
-from typing import Mapping, Sequence
 
 import numpy as np
+
+from rapt.errors import InputError
 
 __all__ = ["Bias", "BiasArrays", "BIAS_NAMES", "BIAS_UNITS", "BIAS_LIMITS", "parse_bias", "bias_arrays"]
 
@@ -69,7 +71,7 @@ class Bias:
         return np.array([getattr(self, n) for n in BIAS_NAMES], dtype=float)
 
     @classmethod
-    def from_vector(cls, values: Sequence[float]) -> "Bias":
+    def from_vector(cls, values: Sequence[float]) -> Bias:
         return cls(**{n: float(v) for n, v in zip(BIAS_NAMES, values)})
 
     def __str__(self) -> str:
@@ -78,7 +80,6 @@ class Bias:
 
 
 BIAS_NAMES: tuple[str, ...] = tuple(f.name for f in fields(Bias))
-NEUTRAL: dict[str, float] = {f.name: f.default for f in fields(Bias)}
 BIAS_UNITS: dict[str, str] = {"speed": "x", "current_scale": "x", "current_offset": "m/s", "heading": "deg",
                               "battery": "x", "start_time": "s"}
 #: Accepted range of each field (inclusive): wider than any plausible range day, narrow
@@ -95,15 +96,19 @@ def check_value(name: str, value) -> float:
     try:
         v = float(value)
     except (TypeError, ValueError):
-        raise ValueError(f"{name}: {value!r} is not a number; write {name}=<number>, {_EXAMPLE}") from None
+        raise InputError(f"{name}: {value!r} is not a number; write {name}=<number>, {_EXAMPLE}") from None
     if not math.isfinite(v) or not lo <= v <= hi:
-        raise ValueError(f"{name}: {value} is outside [{lo:g}, {hi:g}] {BIAS_UNITS[name]}; "
+        raise InputError(f"{name}: {value} is outside [{lo:g}, {hi:g}] {BIAS_UNITS[name]}; "
                          f"give a value in that range (neutral: {NEUTRAL[name]:g})")
     return v
 
 
+#: The neutral bias's fields (the defaults: no change to the vehicle).
+NEUTRAL: dict[str, float] = Bias().to_dict()
+
+
 def parse_bias(text: str) -> Bias:
-    """``"speed=1.15,current_offset=0.3"`` -> :class:`Bias`; ValueError naming the bad field.
+    """``"speed=1.15,current_offset=0.3"`` -> :class:`Bias`; InputError naming the bad field.
 
     An empty string or ``none`` is the neutral bias.
     """
@@ -114,15 +119,15 @@ def parse_bias(text: str) -> Bias:
     for item in text.split(","):
         item = item.strip()
         if not item:
-            raise ValueError(f"empty item in {text!r}; separate name=value items by single commas, {_EXAMPLE}")
+            raise InputError(f"empty item in {text!r}; separate name=value items by single commas, {_EXAMPLE}")
         name, eq, value = item.partition("=")
         name, value = name.strip(), value.strip()
         if name not in BIAS_NAMES:
-            raise ValueError(f"{name}: unknown bias parameter; choose from {', '.join(BIAS_NAMES)} ({_EXAMPLE})")
+            raise InputError(f"{name}: unknown bias parameter; choose from {', '.join(BIAS_NAMES)} ({_EXAMPLE})")
         if not eq or not value:
-            raise ValueError(f"{name}: no value; write {name}=<number>, {_EXAMPLE}")
+            raise InputError(f"{name}: no value; write {name}=<number>, {_EXAMPLE}")
         if name in values:
-            raise ValueError(f"{name}: given twice; give each parameter once")
+            raise InputError(f"{name}: given twice; give each parameter once")
         values[name] = check_value(name, value)
     return Bias(**values)
 
@@ -138,17 +143,17 @@ class BiasArrays:
     battery: np.ndarray
     start_time: np.ndarray
 
-    def select(self, rows: np.ndarray) -> "BiasArrays":
+    def select(self, rows: np.ndarray) -> BiasArrays:
         return BiasArrays(*(getattr(self, f.name)[rows] for f in fields(self)))
 
 
-def bias_arrays(bias: "Bias | BiasArrays | Sequence[Bias] | Mapping[str, np.ndarray] | None", n: int) -> BiasArrays:
+def bias_arrays(bias: Bias | BiasArrays | Sequence[Bias] | Mapping[str, np.ndarray] | None, n: int) -> BiasArrays:
     """Broadcast one bias, one per vehicle, or arrays by field name over ``n`` vehicles."""
     if bias is None:
         bias = Bias()
     if isinstance(bias, BiasArrays):
         if bias.speed.shape != (n,):
-            raise ValueError(f"bias: expected arrays for {n} vehicles, got {bias.speed.shape}")
+            raise InputError(f"bias: expected arrays for {n} vehicles, got {bias.speed.shape}")
         return bias
     if isinstance(bias, Bias):
         cols = {name: np.full(n, float(getattr(bias, name))) for name in BIAS_NAMES}
@@ -158,7 +163,7 @@ def bias_arrays(bias: "Bias | BiasArrays | Sequence[Bias] | Mapping[str, np.ndar
     else:
         items = list(bias)
         if len(items) != n:
-            raise ValueError(f"bias: expected one Bias or {n} of them (one per scenario), got {len(items)}")
+            raise InputError(f"bias: expected one Bias or {n} of them (one per scenario), got {len(items)}")
         cols = {name: np.array([float(getattr(b, name)) for b in items]) for name in BIAS_NAMES}
     return BiasArrays(cols["speed"], cols["current_scale"], cols["current_offset"], np.deg2rad(cols["heading"]),
                       cols["battery"], cols["start_time"])

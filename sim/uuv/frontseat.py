@@ -30,6 +30,7 @@ import numpy as np
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
+from rapt.errors import InputError  # noqa: E402
 from sim.uuv.geo import LocalFrame  # noqa: E402
 from sim.uuv.interface import DEPTH_M, decode_command  # noqa: E402
 from sim.uuv.mission import Mission  # noqa: E402
@@ -81,9 +82,9 @@ class FrontSeat:
         self.u = np.asarray(u, dtype=float).reshape(1, -1)
         scen = make_scenarios(mission, self.u)
         if not scen.valid[0]:
-            raise ValueError(f"scenario: invalid for mission '{mission.name}' ({scen.invalid_reason[0]})")
+            raise InputError(f"scenario: invalid for mission '{mission.name}' ({scen.invalid_reason[0]})")
         if speedup <= 0:
-            raise ValueError(f"speedup: expected a factor > 0, got {speedup}")
+            raise InputError(f"speedup: expected a factor > 0, got {speedup}")
         self.scen = scen
         # a biased vehicle (sim.uuv.bias) flies like a real one whose speed, tide, compass or
         # battery differ from the model; the back-seat on the far side does not know
@@ -240,6 +241,7 @@ class FrontSeat:
             cx, cy = float(tel.contact_x[0, j]), float(tel.contact_y[0, j])
             m.obstacle_distance_3d_send(ms, mav.MAV_DISTANCE_SENSOR_ULTRASOUND, mav.MAV_FRAME_LOCAL_NED, int(j),
                                         cy, cx, 0.0, 0.0, rng)
+        assert tel.scan is not None, "the front-seat's world scans (SCAN_BEAMS > 0)"
         cm = np.round(tel.scan[0] * 100.0).astype(np.int64)
         for start in range(0, SCAN_BEAMS, BEAMS_PER_MESSAGE):
             m.obstacle_distance_send(ms * 1000, mav.MAV_DISTANCE_SENSOR_ULTRASOUND,

@@ -26,7 +26,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from rapt.errors import InputError
 from sim.uuv.angles import wrap_degrees
+
 __all__ = ["LocalFrame", "to_degE7", "from_degE7", "WGS84_A", "WGS84_F"]
 
 #: WGS84 semi-major axis (m) and flattening.
@@ -55,11 +57,11 @@ class LocalFrame:
     def __post_init__(self) -> None:
         lat, lon = float(self.origin_lat), float(self.origin_lon)
         if not (math.isfinite(lat) and -90.0 < lat < 90.0):
-            raise ValueError(f"origin_lat: expected degrees strictly between -90 and 90, got {self.origin_lat!r}")
+            raise InputError(f"origin_lat: expected degrees strictly between -90 and 90, got {self.origin_lat!r}")
         if not (math.isfinite(lon) and -180.0 <= lon <= 180.0):
-            raise ValueError(f"origin_lon: expected degrees in [-180, 180], got {self.origin_lon!r}")
+            raise InputError(f"origin_lon: expected degrees in [-180, 180], got {self.origin_lon!r}")
         object.__setattr__(self, "origin_lat", lat)
-        object.__setattr__(self, "origin_lon", float(wrap_degrees(np.float64(lon))))
+        object.__setattr__(self, "origin_lon", float(wrap_degrees(np.asarray(lon))))
         phi = math.radians(lat)
         w = 1.0 - _E2 * math.sin(phi) ** 2
         object.__setattr__(self, "prime_vertical_radius", WGS84_A / math.sqrt(w))
@@ -88,7 +90,7 @@ class LocalFrame:
         lat_a = np.asarray(lat, dtype=float)
         lon_a = np.asarray(lon, dtype=float)
         if np.any(np.abs(lat_a) > 90.0):
-            raise ValueError("lat: latitudes must lie in [-90, 90] degrees")
+            raise InputError("lat: latitudes must lie in [-90, 90] degrees")
         dlam = np.radians(wrap_degrees(lon_a - self.origin_lon))
         x, y = self._enu(np.radians(lat_a), dlam)
         return _out(x, scalar), _out(y, scalar)
@@ -118,7 +120,7 @@ def to_degE7(deg) -> np.ndarray:
     """Degrees -> MAVLink ``int32`` degrees * 1e7 (rounded to the nearest unit, ~1 cm)."""
     d = np.asarray(deg, dtype=float)
     if not np.all(np.isfinite(d)) or np.any(np.abs(d) > 180.0):
-        raise ValueError("deg: expected finite latitudes/longitudes within [-180, 180] degrees")
+        raise InputError("deg: expected finite latitudes/longitudes within [-180, 180] degrees")
     return np.rint(d * 1e7).astype(np.int32)
 
 

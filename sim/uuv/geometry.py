@@ -36,7 +36,7 @@ def inside_rect(x: np.ndarray, y: np.ndarray, rects: np.ndarray) -> np.ndarray:
             & (y[:, None] >= rects[..., 2]) & (y[:, None] <= rects[..., 3]))
 
 
-def triangle_vertices(cx: np.ndarray, cy: np.ndarray, side: float) -> np.ndarray:
+def triangle_vertices(cx: np.ndarray, cy: np.ndarray, side: float | np.ndarray) -> np.ndarray:
     """(..., 3, 2) vertices of north-pointing equilateral triangles centred on (cx, cy)."""
     r = side / np.sqrt(3.0)  # circumradius
     angles = np.deg2rad([90.0, 210.0, 330.0])

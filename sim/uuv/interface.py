@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 from sim.uuv.angles import wrap_angle
+
 __all__ = ["report_position", "report_heading", "energy_consumed_hj", "battery_fraction", "encode_command",
            "decode_command", "DEPTH_M", "HJ_PER_WH"]
 

@@ -13,6 +13,7 @@ measured as 10 km, so every score is finite.
 
 from __future__ import annotations
 
+from rapt.errors import InputError
 from sim.uuv.mission import Mission
 
 __all__ = ["metric_names", "metric_types", "ELEMENT_KINDS", "element_names", "NEVER_M"]
@@ -54,7 +55,7 @@ def element_names(mission: Mission, kind: str) -> list[str]:
         return [b.name for b in mission.barriers]
     if kind == "nogo":
         return [z.name for z in mission.nogo]
-    raise ValueError(f"kind: expected one of {', '.join(ELEMENT_KINDS)}, got {kind!r}")
+    raise InputError(f"kind: expected one of {', '.join(ELEMENT_KINDS)}, got {kind!r}")
 
 
 def metric_names(mission: Mission) -> list[str]:

@@ -14,8 +14,9 @@ triangular obstacles and a recovery point.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping
+from typing import Any
 
 from rapt.space import StateSpace
 

@@ -93,20 +93,24 @@ import difflib
 import math
 import re
 import tomllib
+from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, Mapping, NoReturn
+from typing import Any, NoReturn
 
+from rapt.errors import FileFormatError
 from rapt.scoretree import ScoreTree
-from rapt.space import Categorical, Continuous, Integer, Permutation, StateSpace
+from rapt.space import Categorical, Continuous, Integer, Parameter, Permutation, StateSpace
 from sim.uuv.metrics import ELEMENT_KINDS, element_names, metric_names
-from sim.uuv.mission import (TARGET_FIELDS, Binding, Current, Mission, MissionArea, Rect, Transmission, Triangle,
-                         Vehicle)
+from sim.uuv.mission import TARGET_FIELDS, Binding, Current, Mission, MissionArea, Rect, Transmission, Triangle, Vehicle
 
 __all__ = ["load_mission", "MissionFileError"]
 
 
-class MissionFileError(ValueError):
-    """A mission file that cannot be loaded; the message is one line: file, field, problem, fix."""
+class MissionFileError(FileFormatError):
+    """A mission file that cannot be loaded; the message is one line: file, field, problem, fix.
+
+    A :class:`rapt.errors.FileFormatError`, so also an ``InputError``, a ``RaptError`` and a ``ValueError``.
+    """
 
 
 _MISSING = object()
@@ -443,7 +447,7 @@ class _Loader:
         defaults = cls()
         fields = {f.name: getattr(defaults, f.name) for f in dataclasses.fields(cls)}
         self.keys(tbl, where, (), tuple(fields))
-        values = {}
+        values: dict[str, object] = {}
         for key, v in tbl.items():
             field = f"{where}.{key}"
             default = fields[key]
@@ -482,7 +486,8 @@ class _Loader:
     def parameters(self, specs: list[dict], area_names: list[str]) -> tuple[StateSpace, tuple[Binding, ...]]:
         if not specs:
             self.fail("parameters", "no [[parameters]] entries; a study needs at least one parameter")
-        params, bindings = [], []
+        params: list[Parameter] = []
+        bindings: list[Binding] = []
         seen_names: dict[str, str] = {}
         seen_targets: dict[tuple, str] = {}
         for i, p in enumerate(specs):

@@ -9,10 +9,11 @@ both see the same reported values (:mod:`sim.uuv.interface`).
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 
+from rapt.errors import InputError
 from sim.uuv.geometry import rect_signed_distance
 from sim.uuv.interface import battery_fraction
 from sim.uuv.mission import Mission
@@ -27,7 +28,7 @@ __all__ = ["TRACK_FIELDS", "score_track", "TrackBuilder"]
 TRACK_FIELDS = ("t", "x", "y", "heading", "energy_hj", "surfaced")
 
 
-def score_track(mission: Mission, u: Sequence[float], track: np.ndarray, wp_aborted: Sequence[bool] = (),
+def score_track(mission: Mission, u: np.ndarray | Sequence[float], track: np.ndarray, wp_aborted: Sequence[bool] = (),
                 return_reason: int = 0) -> np.ndarray:
     """Score vector of scenario ``u`` (unit cube) from its ``track`` (steps, TRACK_FIELDS).
 
@@ -36,10 +37,10 @@ def score_track(mission: Mission, u: Sequence[float], track: np.ndarray, wp_abor
     """
     scen = make_scenarios(mission, np.asarray(u, dtype=float)[None, :])
     if not scen.valid[0]:
-        raise ValueError(f"u: scenario is invalid ({scen.invalid_reason[0]}); it has no score")
+        raise InputError(f"u: scenario is invalid ({scen.invalid_reason[0]}); it has no score")
     track = np.asarray(track, dtype=float)
     if track.ndim != 2 or track.shape[1] < len(TRACK_FIELDS) or track.shape[0] == 0:
-        raise ValueError(f"track: expected rows of {', '.join(TRACK_FIELDS)}, got shape {track.shape}")
+        raise InputError(f"track: expected rows of {', '.join(TRACK_FIELDS)}, got shape {track.shape}")
     scorer = Scorer(scen)
     start_wh = scen.battery0 * mission.vehicle.battery_wh
     active = np.ones(1, dtype=bool)
@@ -67,9 +68,9 @@ class TrackBuilder:
 
     NEEDED = ("LOCAL_POSITION_NED", "ATTITUDE", "BATTERY_STATUS")
 
-    def __init__(self):
+    def __init__(self) -> None:
         self.rows: list[tuple[float, ...]] = []
-        self._tick: dict = {}
+        self._tick: dict[str, object] = {}  # this step's reports by type, until SYSTEM_TIME closes it
         self._last_ms = -1
 
     def add(self, msg) -> None:

@@ -9,13 +9,20 @@ reported, never simulated (section 4.4.3 pruned such scenarios too).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
-from sim.uuv.geometry import (inside_rect, polygon_edges, polygon_signed_distance, rect_signed_distance,
-                          triangle_vertices)
-from sim.uuv.mission import Mission, Rect
+from rapt.errors import InputError
+from rapt.space import Permutation
+from sim.uuv.geometry import (
+    inside_rect,
+    polygon_edges,
+    polygon_signed_distance,
+    rect_signed_distance,
+    triangle_vertices,
+)
+from sim.uuv.mission import Mission, MissionArea, Rect
 
 __all__ = ["Scenarios", "make_scenarios", "rects_array"]
 
@@ -46,11 +53,13 @@ class Scenarios:
     waypoints: np.ndarray  # [W, 2]
     valid: np.ndarray  # [N] bool
     invalid_reason: list[str]
+    #: :attr:`obstacle_edges`' cache (recomputed when the batch size changes)
+    _edges: tuple[np.ndarray, ...] | None = field(default=None, init=False, repr=False, compare=False)
 
     @property
     def obstacle_edges(self) -> tuple[np.ndarray, ...]:
         """Edges of the obstacle triangles, computed once per batch (sonar reads them each step)."""
-        if getattr(self, "_edges", None) is None or self._edges[0].shape[0] != self.n:
+        if self._edges is None or self._edges[0].shape[0] != self.n:
             self._edges = polygon_edges(self.obstacles)
         return self._edges
 
@@ -58,7 +67,7 @@ class Scenarios:
     def n(self) -> int:
         return int(self.start_time.shape[0])
 
-    def select(self, rows: np.ndarray) -> "Scenarios":
+    def select(self, rows: np.ndarray) -> Scenarios:
         """The scenarios at ``rows`` (for simulating only the valid ones)."""
         r = np.asarray(rows)
         return Scenarios(self.mission, self.start_time[r], self.battery0[r], self.tx_rect[r], self.tx_open[r],
@@ -86,10 +95,10 @@ def make_scenarios(mission: Mission, U: np.ndarray) -> Scenarios:
     """Decode unit-cube rows ``U`` (N, mission.dim) into a batch of scenarios."""
     U = np.asarray(U, dtype=float)
     if U.ndim != 2 or U.shape[1] != mission.dim:
-        raise ValueError(f"X: expected unit-cube rows of shape (N, {mission.dim}) for mission "
+        raise InputError(f"X: expected unit-cube rows of shape (N, {mission.dim}) for mission "
                          f"'{mission.name}', got {U.shape}")
     if U.size and (np.nanmin(U) < 0 or np.nanmax(U) > 1 or not np.all(np.isfinite(U))):
-        raise ValueError("X: values must be finite and inside the unit cube [0, 1]; scale physical values with "
+        raise InputError("X: values must be finite and inside the unit cube [0, 1]; scale physical values with "
                          "mission.space.to_unit_array")
     n = U.shape[0]
     values = {p.name: _decode(p, U[:, mission.space.slice_of(p.name)])
@@ -111,12 +120,13 @@ def make_scenarios(mission: Mission, U: np.ndarray) -> Scenarios:
     names = [a.name for a in areas]
     order = np.tile([names.index(p) for p in mission.priority], (n, 1)).astype(np.int64)
 
-    by_name = {
+    # (index, element) by name, per kind; a binding of these kinds always names its element
+    rect_by_name: dict[str, dict[str | None, tuple[int, Rect | MissionArea]]] = {
         "nogo": {z.name: (i, z) for i, z in enumerate(mission.nogo)},
         "barrier": {b.name: (i, b) for i, b in enumerate(mission.barriers)},
-        "obstacle": {o.name: (i, o) for i, o in enumerate(mission.obstacles)},
         "mission_area": {a.name: (i, a) for i, a in enumerate(areas)},
     }
+    obstacle_by_name: dict[str | None, int] = {o.name: i for i, o in enumerate(mission.obstacles)}
     for b in mission.bindings:
         v = values.get(b.parameter)
         if b.kind == "mission":
@@ -124,10 +134,10 @@ def make_scenarios(mission: Mission, U: np.ndarray) -> Scenarios:
         elif b.kind == "vehicle":
             battery0 = np.asarray(v, dtype=float)
         elif b.kind == "mission_areas":  # random keys -> area indices in priority order, vectorised
-            param = next(p for p in mission.space.parameters if p.name == b.parameter)
+            param = next(p for p in mission.space.parameters if isinstance(p, Permutation) and p.name == b.parameter)
             ranks = np.argsort(U[:, mission.space.slice_of(b.parameter)], axis=1, kind="stable")
             order = np.array([names.index(item) for item in param.items], dtype=np.int64)[ranks]
-        elif b.kind == "transmission":
+        elif b.kind == "transmission" and tx is not None:  # bound only when the mission has one
             if b.field in ("x", "y"):
                 _set_rect_centre(tx_rect[:, None, :], 0, b.field, np.asarray(v, float), tx.width, tx.height)
             elif b.field == "window_start_s":
@@ -135,14 +145,14 @@ def make_scenarios(mission: Mission, U: np.ndarray) -> Scenarios:
             else:
                 tx_len = np.asarray(v, dtype=float)
         elif b.kind in ("nogo", "barrier"):
-            k, el = by_name[b.kind][b.name]
+            k, el = rect_by_name[b.kind][b.name]
             _set_rect_centre(nogo if b.kind == "nogo" else barriers, k, b.field, np.asarray(v, float),
                              el.width, el.height)
         elif b.kind == "obstacle":
-            k, _ = by_name["obstacle"][b.name]
+            k = obstacle_by_name[b.name]
             (ob_x if b.field == "x" else ob_y)[:, k] = np.asarray(v, dtype=float)
         elif b.kind == "mission_area":
-            k, el = by_name["mission_area"][b.name]
+            k, el = rect_by_name["mission_area"][b.name]
             if b.field == "dwell_s":
                 area_dwell[:, k] = np.asarray(v, dtype=float)
             else:

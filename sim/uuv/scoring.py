@@ -180,7 +180,7 @@ class Scorer:
         scen, m = self.scen, self.mission
         n = scen.n
         W, A = scen.waypoints.shape[0], scen.area_rect.shape[1]
-        T, B, Z = scen.obstacles.shape[1], scen.barriers.shape[1], scen.nogo.shape[1]
+        T, B = scen.obstacles.shape[1], scen.barriers.shape[1]
         wp_ok = self.wp_time < self.limit
         area_ok = self.area_done < self.limit
         if A:  # in priority order: each area done no later than the next in the order

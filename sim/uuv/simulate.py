@@ -13,13 +13,14 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from rapt.errors import InputError
 from sim.uuv.autonomy import Autonomy, Observation
 from sim.uuv.bias import bias_arrays
 from sim.uuv.environment import tidal_current
 from sim.uuv.geometry import rect_signed_distance
+from sim.uuv.interface import decode_command, encode_command
 from sim.uuv.metrics import metric_names, metric_types
 from sim.uuv.mission import Mission
-from sim.uuv.interface import decode_command, encode_command
 from sim.uuv.scenario import Scenarios, make_scenarios
 from sim.uuv.scoring import MODE_NAMES, Scorer, modes_from_scores
 from sim.uuv.world import Telemetry, World, scenario_generators
@@ -50,6 +51,12 @@ class Result:
     def column(self, name: str) -> np.ndarray:
         return self.scores[:, self.names.index(name)]
 
+    def trajectory(self, row: int) -> np.ndarray | None:
+        """Row ``row``'s trajectory (None for an invalid row), of a batch simulated with ``trajectories=True``."""
+        if self.trajectories is None:
+            raise InputError("trajectories: this batch was simulated without them; pass trajectories=True")
+        return self.trajectories[row]
+
 
 def simulate(mission: Mission, X: np.ndarray, seed: int = 0, stochastic: bool = False,
              trajectories: bool = False, bias=None, surrogate=None) -> Result:
@@ -73,7 +80,7 @@ def simulate(mission: Mission, X: np.ndarray, seed: int = 0, stochastic: bool = 
         got, tr = run_scenarios(sub, rngs, trajectories, bias_arrays(bias, scen.n).select(rows),
                                 **({} if surrogate is None else surrogate.driver_options()))
         scores[rows] = got
-        if trajectories:
+        if trajs is not None:  # trajectories asked for
             for r, t in zip(rows.tolist(), tr):
                 trajs[r] = t
     return Result(scores, modes_from_scores(scores), scen.valid.copy(), list(scen.invalid_reason), names, types,

@@ -35,12 +35,12 @@ class VehicleState:
     energy_wh: np.ndarray
 
     @classmethod
-    def at_rest(cls, x: np.ndarray, y: np.ndarray, heading: np.ndarray, energy_wh: np.ndarray) -> "VehicleState":
+    def at_rest(cls, x: np.ndarray, y: np.ndarray, heading: np.ndarray, energy_wh: np.ndarray) -> VehicleState:
         z = np.zeros_like(np.asarray(x, dtype=float))
         return cls(np.array(x, float), np.array(y, float), np.array(heading, float), z.copy(), z.copy(), z.copy(),
                    np.array(energy_wh, float))
 
-    def select(self, rows: np.ndarray) -> "VehicleState":
+    def select(self, rows: np.ndarray) -> VehicleState:
         return VehicleState(*(getattr(self, f)[rows] for f in self.__dataclass_fields__))
 
 

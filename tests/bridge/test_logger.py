@@ -12,6 +12,7 @@ import time
 from pathlib import Path
 
 import pytest
+from mcap.exceptions import McapError
 from mcap.reader import make_reader
 
 from bridge import keys
@@ -89,7 +90,7 @@ def test_logger_writes_channels_stripped_raw_frames_and_metadata(tmp_path):
 
     messages = read_log(path)
     by_topic: dict[str, list] = {}
-    for topic, log_time, payload in messages:
+    for topic, _, payload in messages:
         by_topic.setdefault(topic, []).append(payload)
     # raw: every frame the bridge received, signatures stripped, still valid MAVLink
     raw = by_topic[RAW_TOPIC]
@@ -139,7 +140,7 @@ def test_sigkilled_logger_leaves_a_readable_file(tmp_path):
                 proc.wait(timeout=10)
             proc.stdout.close()
     assert proc.returncode == -signal.SIGKILL
-    with open(path, "rb") as f, pytest.raises(Exception):
+    with open(path, "rb") as f, pytest.raises(McapError):
         make_reader(f).get_summary()  # no footer: the normal reader gives up
     statuses = [p["i"] for t, _, p in read_log(path) if t == keys.status(VEHICLE, "autonomy")]
     assert statuses == list(range(len(statuses))) and 2000 <= len(statuses) <= 2500

@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 
 from bridge.service import Service
+from rapt.errors import RunError
 
 
 class Waiter(Service):
@@ -42,7 +43,7 @@ def test_start_spawns_named_daemon_threads_and_close_stops_them_once():
 def test_a_second_start_is_refused_and_names_the_service():
     w = Waiter().start()
     try:
-        with pytest.raises(RuntimeError, match="start: the waiter was already started"):
+        with pytest.raises(RunError, match="start: the waiter was already started"):
             w.start()
     finally:
         w.close()

@@ -17,6 +17,9 @@ BUILT_IN_BASES = [
     (RunError, RuntimeError),
     (rapt.errors.LinkError, ConnectionError),
     (rapt.errors.LinkTimeoutError, TimeoutError),
+    (rapt.errors.MissingFileError, FileNotFoundError),
+    (rapt.errors.MissingFileError, ValueError),  # also a FileFormatError
+    (rapt.errors.RefusedError, PermissionError),
 ]
 
 
@@ -75,9 +78,6 @@ def test_a_closed_store_refuses_to_be_used():
         store.get_meta()
 
 
-@pytest.mark.xfail(strict=True, raises=ValueError,
-                   reason="rapt/search.py's Study.open still raises a plain ValueError; once it raises "
-                          "StudyMismatchError this passes and the mark must go")
 def test_a_store_of_another_space_is_a_study_mismatch(tmp_path):
     def fn(X):
         return (X[:, :1] > 0.5).astype(float)

@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 
 import rapt
+from rapt.samplers import Sampler
 from rapt.store import StudyStore
 from tests.rapt.systems import disk, first_of_two_outputs, flaky, projecting, two_outputs
 
@@ -68,7 +69,7 @@ def test_a_system_that_always_fails_stops_the_study():
     def broken(X):
         raise KeyError("missing scenario file")
 
-    with pytest.raises(RuntimeError, match="every row of the first 3 batches failed.*missing scenario file"):
+    with pytest.raises(rapt.RunError, match="every row of the first 3 batches failed.*missing scenario file"):
         rapt.search(broken, [(0, 1)], budget=1000, method="sobol", batch_size=10)
 
 
@@ -123,6 +124,44 @@ def test_store_resumes_and_extends_without_rerunning(tmp_path):
     assert sum(calls) == 500
     straight = rapt.search(disk, [(0, 1), (0, 1)], budget=500, method="s-ndv", batch_size=100, seed=5)
     assert np.array_equal(longer.X, straight.X)
+
+
+class _FinishesEarly(Sampler):
+    """Random points until ``total`` were asked, then none: a sampler that finishes early (the Sampler contract).
+
+    Its end depends only on the ask counters, so a resumed (fast-forwarded) copy ends where the original did.
+    """
+
+    name = "finishes-early"
+
+    def __init__(self, dim, *, seed=0, output_types=None, total=25):
+        super().__init__(dim, seed=seed, output_types=output_types)
+        self.total = total
+
+    def _propose(self, n, rng):
+        return rng.random((max(0, min(n, self.total - self.n_asked)), self.dim))
+
+
+def test_a_sampler_that_finishes_early_ends_the_study(tmp_path, monkeypatch):
+    monkeypatch.setitem(rapt.METHODS, _FinishesEarly.name, _FinishesEarly)
+    db = tmp_path / "early.db"
+    calls = []
+
+    def counted(X):
+        calls.append(len(X))
+        return disk(X)
+
+    study = rapt.search(counted, [(0, 1), (0, 1)], budget=100, method="finishes-early", batch_size=10, seed=4,
+                        store=db)
+    assert calls == [10, 10, 5]  # the short batch counts 5 against the budget, then the empty ask ends it
+    assert study.n_evaluated == 25 and np.bincount(study.batch).tolist() == [10, 10, 5]
+    assert study.sampler.done and (study.sampler.n_batches, study.sampler.n_asked) == (3, 25)
+    with StudyStore(db) as s:
+        assert [len(asked) for _, asked in s.batches()] == [10, 10, 5]  # no empty batch recorded
+    again = rapt.search(counted, [(0, 1), (0, 1)], budget=200, method="finishes-early", batch_size=10, seed=4,
+                        store=db)
+    assert calls == [10, 10, 5]  # resumed: the replayed sampler has nothing left to ask
+    assert np.array_equal(again.X, study.X) and again.sampler.done
 
 
 def test_store_refuses_a_different_study(tmp_path):

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from rapt.errors import InputError
 from sim.uuv.autonomy import GOAL_RETURN, GOAL_WAYPOINT, Command, Observation
 from sim.uuv.imitation.features import GOAL, FeatureSpec, action_command, advance_waypoints, features, waypoint_target
 from sim.uuv.scenario import Scenarios
@@ -45,7 +46,7 @@ class PolicyAutonomy:
 
     def step(self, obs: Observation, dt: float, active: np.ndarray | None = None) -> Command:
         if obs.scan is None:
-            raise ValueError("obs.scan: a learned back-seat needs the 360-degree sonar scan (World(scan_beams=...))")
+            raise InputError("obs.scan: a learned back-seat needs the 360-degree sonar scan (World(scan_beams=...))")
         m = self.mission
         self.wp_next = advance_waypoints(m, self.wp_next, obs.x, obs.y)
         wx, wy, pending = self.last_target = waypoint_target(m, self.wp_next)

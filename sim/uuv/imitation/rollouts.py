@@ -10,15 +10,16 @@ from __future__ import annotations
 
 import numpy as np
 
+from rapt.errors import InputError
 from rapt.imitation import MLPPolicy, Trajectory
 from sim.uuv.autonomy import Autonomy, Command
 from sim.uuv.imitation.driver import PolicyAutonomy
 from sim.uuv.imitation.features import FeatureSpec, advance_waypoints, expert_action, features, waypoint_target
+from sim.uuv.metrics import metric_names, metric_types
 from sim.uuv.mission import Mission
 from sim.uuv.scenario import make_scenarios
-from sim.uuv.simulate import Result, run_scenarios
-from sim.uuv.metrics import metric_names, metric_types
 from sim.uuv.scoring import modes_from_scores
+from sim.uuv.simulate import Result, run_scenarios
 from sim.uuv.world import scenario_generators
 
 __all__ = ["annotated_runs", "make_rollout", "draw_valid", "MixedDriver"]
@@ -40,7 +41,7 @@ class MixedDriver(PolicyAutonomy):
 
     The annotating experts never give a goal up for lack of progress: that clock would time
     the learner's wobbles, which no feature shows, and turn its labels home mid-leg (the
-    expert's own runs abort a waypoint so in 0.2% of the chapter 6 mission's scenarios).
+    expert's own runs seldom abort a waypoint so on the chapter 6 mission).
     """
 
     def __init__(self, scen, policy, spec: FeatureSpec, beta: float = 0.0, rng: np.random.Generator | None = None):
@@ -141,7 +142,7 @@ def draw_valid(mission: Mission, k: int, rng: np.random.Generator) -> np.ndarray
         out = np.vstack([out, X[make_scenarios(mission, X).valid]])
         if out.shape[0] >= k:
             return out[:k]
-    raise ValueError(f"mission: fewer than {k} valid scenarios in {100 * max(2 * k, 8)} random draws")
+    raise InputError(f"mission: fewer than {k} valid scenarios in {100 * max(2 * k, 8)} random draws")
 
 
 def make_rollout(mission: Mission, spec: FeatureSpec, seed: int = 0, stochastic: bool = False,

@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
+from rapt.errors import FileFormatError, InputError, MissingFileError, StudyMismatchError
 from rapt.imitation import HeadsPolicy, MLPPolicy, policy_from_arrays
 from sim.uuv.imitation.features import FeatureSpec, feature_spec
 from sim.uuv.mission import Mission
@@ -49,23 +50,23 @@ class Surrogate:
 
     @classmethod
     def for_mission(cls, mission: Mission, policy: MLPPolicy | HeadsPolicy,
-                    training: dict | None = None, goal_threshold: float = 0.0) -> "Surrogate":
+                    training: dict | None = None, goal_threshold: float = 0.0) -> Surrogate:
         spec = feature_spec(mission)
         if policy.n_features != spec.size:
-            raise ValueError(f"policy: takes {policy.n_features} features, the mission's definition has {spec.size}")
+            raise InputError(f"policy: takes {policy.n_features} features, the mission's definition has {spec.size}")
         if policy.n_outputs != spec.actions:
-            raise ValueError(f"policy: gives {policy.n_outputs} outputs, a back-seat needs {spec.actions} "
+            raise InputError(f"policy: gives {policy.n_outputs} outputs, a back-seat needs {spec.actions} "
                              "(velocity forward and starboard, and the goal decision)")
         return cls(policy, spec, mission.name, mission_digest(mission), dict(training or {}), float(goal_threshold))
 
     def check(self, mission: Mission) -> None:
         """Refuse a mission this surrogate was not trained for."""
         if mission_digest(mission) != self.mission_sha:
-            raise ValueError(
+            raise StudyMismatchError(
                 f"surrogate: trained for mission '{self.mission_name}' ({self.mission_sha}), not for "
                 f"'{mission.name}' ({mission_digest(mission)}); train one for this mission")
         if feature_spec(mission, self.spec.beams) != self.spec:
-            raise ValueError("surrogate: its feature definition does not match this mission's; retrain it")
+            raise StudyMismatchError("surrogate: its feature definition does not match this mission's; retrain it")
 
     def autonomy(self, scen):
         """The back-seat flying ``scen``."""
@@ -80,31 +81,32 @@ class Surrogate:
     def save(self, path: str | Path) -> Path:
         path = Path(path)
         if path.suffix != ".npz":
-            raise ValueError(f"path: a surrogate file ends in .npz, got {str(path)!r}")
+            raise InputError(f"path: a surrogate file ends in .npz, got {str(path)!r}")
         header = {"format": FORMAT, "mission": self.mission_name, "mission_sha": self.mission_sha,
                   "features": self.spec.to_dict(), "feature_names": self.spec.names(),
                   "training": self.training, "goal_threshold": self.goal_threshold}
         arrays = self.policy.to_arrays()
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_name(path.name + ".part.npz")
-        np.savez(tmp, header=np.array(json.dumps(header)), **arrays)
+        # numpy's stub lets **arrays bind savez's allow_pickle (a bool); the policy's keys are array names only
+        np.savez(tmp, header=np.array(json.dumps(header)), **arrays)  # type: ignore[arg-type]
         tmp.replace(path)
         return path
 
     @classmethod
-    def load(cls, path: str | Path, mission: Mission | None = None) -> "Surrogate":
+    def load(cls, path: str | Path, mission: Mission | None = None) -> Surrogate:
         """Read a surrogate file; with ``mission``, refuse it unless trained for that mission."""
         path = Path(path)
         if not path.is_file():
-            raise FileNotFoundError(f"surrogate: {str(path)!r} does not exist; train one with `rapt-plan surrogate`")
+            raise MissingFileError(f"surrogate: {str(path)!r} does not exist; train one with `rapt-plan surrogate`")
         try:
             with np.load(path, allow_pickle=False) as z:
                 header = json.loads(str(z["header"]))
                 policy = policy_from_arrays({k: z[k] for k in z.files if k != "header"})
         except (OSError, ValueError, KeyError) as exc:
-            raise ValueError(f"surrogate: {str(path)!r} is not a surrogate file ({exc})") from exc
+            raise FileFormatError(f"surrogate: {str(path)!r} is not a surrogate file ({exc})") from exc
         if header.get("format") not in READS:
-            raise ValueError(f"surrogate: {str(path)!r} has format {header.get('format')!r}, expected one of "
+            raise FileFormatError(f"surrogate: {str(path)!r} has format {header.get('format')!r}, expected one of "
                              f"{', '.join(READS)}; retrain it with `rapt-plan surrogate`")
         out = cls(policy, FeatureSpec.from_dict(header["features"]), header["mission"], header["mission_sha"],
                   header.get("training", {}), float(header.get("goal_threshold", 0.0)))

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 
 import sim.uuv
+from rapt.errors import FileFormatError, MissingFileError, StudyMismatchError
 from rapt.imitation import HeadsPolicy, MLPPolicy, Trajectory, imitate, policy_from_arrays
 from sim.uuv.imitation.features import action_command, expert_action, feature_spec, features
 from sim.uuv.imitation.rollouts import annotated_runs
@@ -214,15 +215,15 @@ def test_surrogate_files_round_trip_and_refuse_another_mission(tmp_path):
     np.testing.assert_array_equal(back.policy(F), sur.policy(F))
     assert back.spec == SPEC and back.training["method"] == "hand-made" and back.goal_threshold == -0.4
     other = sim.uuv.load_mission(EXAMPLES / "range2017.toml")
-    with pytest.raises(ValueError, match=r"trained for mission 'imitation7' \(\w+\), not for 'range2017'"):
+    with pytest.raises(StudyMismatchError, match=r"trained for mission 'imitation7' \(\w+\), not for 'range2017'"):
         Surrogate.load(path, other)
     edited = dataclasses.replace(IMITATION7, vehicle=dataclasses.replace(IMITATION7.vehicle, battery_wh=250.0))
-    with pytest.raises(ValueError, match="not for 'imitation7'"):
+    with pytest.raises(StudyMismatchError, match="not for 'imitation7'"):
         Surrogate.load(path, edited)
-    with pytest.raises(FileNotFoundError, match="does not exist"):
+    with pytest.raises(MissingFileError, match="does not exist"):  # a FileNotFoundError, as before
         Surrogate.load(tmp_path / "missing.npz")
     (tmp_path / "junk.npz").write_bytes(b"not a zip")
-    with pytest.raises(ValueError, match="not a surrogate file"):
+    with pytest.raises(FileFormatError, match="not a surrogate file"):
         Surrogate.load(tmp_path / "junk.npz")
 
 

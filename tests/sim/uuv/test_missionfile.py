@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from rapt.errors import FileFormatError
 from rapt.scoretree import ScoreTree
 from rapt.space import Continuous, Permutation
 from sim.uuv.geo import LocalFrame, from_degE7, to_degE7
@@ -262,7 +263,7 @@ def test_bad_files_name_the_file_and_the_field(tmp_path, case):
     assert field in msg, msg
     assert words in msg, msg
     assert "\n" not in msg and ";" in msg  # one line, with a fix after the problem
-    assert isinstance(info.value, ValueError)
+    assert isinstance(info.value, FileFormatError) and isinstance(info.value, ValueError)
 
 
 def test_missing_file_is_a_mission_file_error(tmp_path):
