@@ -28,6 +28,7 @@ from bridge.mavlink_bridge import MavlinkBridge  # noqa: E402
 from bridge.session import open_session  # noqa: E402
 from planner.backseat import BackSeat  # noqa: E402
 from planner.jsonio import jsonable  # noqa: E402
+from rapt.errors import LinkTimeoutError  # noqa: E402
 from sim.uuv.frontseat import FrontSeat  # noqa: E402
 from sim.uuv.mission import Mission  # noqa: E402
 from sim.uuv.replay import TrackBuilder, score_track  # noqa: E402
@@ -139,21 +140,21 @@ def run_sil(mission: Mission, u, *, vehicle: str = "uuv1", log_path: str | Path 
         while bridge.target is None and time.monotonic() < deadline:
             time.sleep(0.01)
         if bridge.target is None:
-            raise RuntimeError("front-seat: no HEARTBEAT on the MAVLink link within 10 s")
+            raise LinkTimeoutError("front-seat: no HEARTBEAT on the MAVLink link within 10 s")
         if surrogate is not None:
             session.put(keys.active(vehicle), SURROGATE_SOURCE)
             deadline = time.monotonic() + 10
             while bridge.active != SURROGATE_SOURCE and time.monotonic() < deadline:
                 time.sleep(0.01)
             if bridge.active != SURROGATE_SOURCE:
-                raise RuntimeError("bridge: did not take the surrogate as the active source within 10 s")
+                raise LinkTimeoutError("bridge: did not take the surrogate as the active source within 10 s")
         bridge.set_mode("GUIDED")
         bridge.arm(True)
         deadline = time.monotonic() + timeout_s
         while not fs.ended and time.monotonic() < deadline:
             time.sleep(0.005)
         if not fs.ended:
-            raise TimeoutError(f"timeout_s: the run did not end within {timeout_s} s of wall time")
+            raise LinkTimeoutError(f"timeout_s: the run did not end within {timeout_s} s of wall time")
         time.sleep(0.3)  # let the last step's telemetry reach the recorder and the logger
         wall = time.perf_counter() - started
         status = flying.autonomy  # the scores are those of whoever flew

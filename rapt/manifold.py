@@ -371,7 +371,17 @@ class ManifoldSampler(Sampler):
         return rep[idx]
 
 
-def manifold_search(fn: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray, Sequence[np.ndarray]]],
+#: A labelled batch as :meth:`ManifoldSampler.tell` takes it (``tell(*answer)``):
+#: ``(states, labels, faces[, ids, face_ids[, outcomes]])``.
+Answer = (
+    tuple[np.ndarray, np.ndarray, Sequence[np.ndarray]]
+    | tuple[np.ndarray, np.ndarray, Sequence[np.ndarray], np.ndarray | None, Sequence[np.ndarray] | None]
+    | tuple[np.ndarray, np.ndarray, Sequence[np.ndarray], np.ndarray | None, Sequence[np.ndarray] | None,
+            np.ndarray | None]
+)
+
+
+def manifold_search(fn: Callable[[np.ndarray], Answer],
                     sampler: ManifoldSampler, budget: int, batch_size: int = 50,
                     progress: Callable[[int, int], None] | None = None) -> ManifoldSampler:
     """Algorithm 6's loop: ask, evaluate, tell, until ``budget`` evaluations or the cut-offs end it.

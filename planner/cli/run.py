@@ -10,6 +10,7 @@ from rich.table import Table
 
 from planner.cli.console import fail, out
 from planner.cli.inputs import SurrogateOpt, load_surrogate, mission_and_scenario
+from rapt.errors import RaptError
 
 __all__ = ["run"]
 
@@ -57,7 +58,7 @@ def run(
     try:
         result = fly(flight, log_path=log, speedup=speedup, timeout_s=timeout, bias=bias, stochastic=stochastic,
                      seed=seed, surrogate=learned)
-    except (ValueError, RuntimeError, TimeoutError) as exc:
+    except (RaptError, ValueError, RuntimeError, TimeoutError) as exc:
         fail(str(exc))
     batch = check_against_batch(flight, result.scores, bias=bias, stochastic=stochastic, seed=seed, surrogate=learned)
     table = Table(title=f"{flight.mission.name} scenario {flight.scenario_id}: software in the loop")

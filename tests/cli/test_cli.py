@@ -75,7 +75,6 @@ def test_run_flies_a_scenario_in_the_loop_and_logs_it(tmp_path):
 
 
 def test_each_piece_runs_as_its_own_process_and_stops_cleanly(tmp_path):
-    import os
     import signal
     import socket
     import subprocess

@@ -1,0 +1,76 @@
+"""``rapt-plan generate``: resume, refusal to overwrite, one-line errors, and a study killed mid-search."""
+
+import json
+import re
+from pathlib import Path
+
+import jsonschema
+from typer.testing import CliRunner
+
+import planner
+from planner.cli import app
+
+EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
+SCHEMA = json.loads((Path(planner.__file__).parent / "plan.schema.json").read_text())
+PLAN_VALIDATOR = jsonschema.Draft202012Validator(SCHEMA)
+runner = CliRunner()
+
+
+def test_cli_generate_resume_and_errors(tmp_path):
+    out = tmp_path / "plan"
+    args = ["generate", str(EXAMPLES / "imitation7.toml"), "--out", str(out), "--budget", "600",
+            "--batch-size", "200", "--dithers", "40", "--pairs", "2"]
+    first = runner.invoke(app, args)
+    assert first.exit_code == 0, first.output
+    assert "field plan in" in first.output and (out / "plan.json").is_file()
+    refused = runner.invoke(app, args)
+    assert refused.exit_code == 2 and "--resume" in refused.output
+    plan_before = (out / "plan.json").read_text()
+    again = runner.invoke(app, args + ["--resume"])  # the stored runs are reused, not re-run
+    assert again.exit_code == 0, again.output
+    assert re.search(r"\d+ valid runs", again.output) and (out / "plan.json").read_text() == plan_before
+    bad = tmp_path / "bad.toml"
+    bad.write_text((EXAMPLES / "imitation7.toml").read_text().replace("[vehicle]", "[vehicle]\ncruize_speed = 2.0", 1))
+    for argv, expect in [(["generate", str(bad), "--out", str(tmp_path / "x")], "cruize_speed"),
+                         (["generate", str(tmp_path / "none.toml"), "--out", str(tmp_path / "x")], "MISSION_FILE"),
+                         (["generate", str(EXAMPLES / "imitation7.toml"), "--out", str(tmp_path / "y"),
+                           "--budget", "100"], "--budget")]:
+        result = runner.invoke(app, argv)
+        assert result.exit_code == 2, (argv, result.output)
+        assert expect in result.output and "Traceback" not in result.output
+        assert len([line for line in result.output.splitlines() if line.strip()]) == 1
+
+
+def test_generate_killed_mid_search_resumes_to_the_uninterrupted_plan(tmp_path):
+    import os
+    import signal
+    import sqlite3
+    import subprocess
+    import sys
+    import time
+
+    exe = Path(sys.executable).with_name("rapt-plan")
+    cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "planner.cli"]
+    args = ["generate", str(EXAMPLES / "imitation7.toml"), "--budget", "2000", "--batch-size", "250",
+            "--dithers", "40", "--pairs", "2"]
+    killed = tmp_path / "killed"
+    proc = subprocess.Popen(cmd + args + ["--out", str(killed)], stdout=subprocess.DEVNULL,
+                            stderr=subprocess.DEVNULL, env={**os.environ, "COLUMNS": "200"})
+    rows, deadline = 0, time.monotonic() + 240
+    try:
+        while rows < 500 and time.monotonic() < deadline and proc.poll() is None:
+            time.sleep(0.2)
+            try:
+                with sqlite3.connect(f"file:{killed / 'study.db'}?mode=ro", uri=True) as con:
+                    rows = con.execute("SELECT COUNT(*) FROM samples").fetchone()[0]
+            except sqlite3.Error:
+                pass  # not created yet
+    finally:
+        proc.send_signal(signal.SIGKILL)
+        proc.wait()
+    assert 500 <= rows < 2000, rows  # killed mid-search, with runs stored
+    resumed = runner.invoke(app, args + ["--out", str(killed), "--resume"])
+    assert resumed.exit_code == 0, resumed.output
+    whole = runner.invoke(app, args + ["--out", str(tmp_path / "whole")])
+    assert whole.exit_code == 0, whole.output
+    assert (killed / "plan.json").read_text() == (tmp_path / "whole" / "plan.json").read_text()
