@@ -45,17 +45,24 @@ def correctness(n: int = 4000) -> None:
     print(f"1. Hierarchical2D (12 elements, 3 levels), {n} S-NDV samples")
     print(f"{'level':>5} {'clusters':>8} {'true types':>10} {'recovered':>9} {'pairs':>6} {'on a true boundary':>19}")
     for row in subboundary_recovery(h, tree, grid=512, tol=0.05):
-        print(f"{row['level']:>5} {tree.n_clusters(row['level']):>8} {row['true_types']:>10} "
-              f"{row['recovered_fraction']:>9.0%} {row['pairs']:>6} {row['on_boundary_fraction']:>19.1%}")
+        print(
+            f"{row['level']:>5} {tree.n_clusters(row['level']):>8} {row['true_types']:>10} "
+            f"{row['recovered_fraction']:>9.0%} {row['pairs']:>6} {row['on_boundary_fraction']:>19.1%}"
+        )
 
 
 def noise(n: int = 3000, tol: float = 0.03) -> None:
     truth = Plates2D()
-    print(f"\n2. Noise on Plates2D, {n} S-NDV samples; a pair is true when both ends lie within {tol} of a true "
-          "boundary (and, with global noise, both carry their noise-free label)")
+    print(
+        f"\n2. Noise on Plates2D, {n} S-NDV samples; a pair is true when both ends lie within {tol} of a true "
+        "boundary (and, with global noise, both carry their noise-free label)"
+    )
     print(f"{'system':>16} {'pairs':>6} {'true':>6} {'false flagged':>13} {'true kept':>9}")
-    for label, system in [("clean", Plates2D())] + [(f"fuzzy σ={s}", FuzzyBoundary(Plates2D(), s, seed=1)) for s in (0.01, 0.03, 0.05)] \
-            + [(f"global γ={g}", GlobalNoise(Plates2D(), g, seed=1)) for g in (0.02, 0.05, 0.1, 0.2)]:
+    for label, system in (
+        [("clean", Plates2D())]
+        + [(f"fuzzy σ={s}", FuzzyBoundary(Plates2D(), s, seed=1)) for s in (0.01, 0.03, 0.05)]
+        + [(f"global γ={g}", GlobalNoise(Plates2D(), g, seed=1)) for g in (0.02, 0.05, 0.1, 0.2)]
+    ):
         study = rapt.search(system, [(0, 1)] * 2, n, method="s-ndv", seed=0, output_types=("categorical",))
         bp = boundary_pairs(study.X, study.Y, cluster_eps=0.05, min_samples=5)
         d = truth.boundary_distance(study.X)[:, 0]
@@ -90,10 +97,14 @@ def graph_recall(X: np.ndarray, neighbours: np.ndarray, n_queries: int = 10_000,
 def cost(sizes: list[int]) -> None:
     h = HierarchicalND()
     rng = np.random.default_rng(0)
-    print(f"\n3. Sub-boundary tree of {h.name} ({h.dim} inputs, 66 leaves, 4 levels), uniform samples; "
-          f"target at 10^6: <= 20 s, <= 4 GB")
-    print(f"{'samples':>9} {'graph':>6} {'tree (s)':>9} {'split':>6} {'k-graph':>8} {'pairs':>6} "
-          f"{'clusters per level':>22} {'pairs found':>11} {'peak RSS (GB)':>13} {'graph recall':>12}")
+    print(
+        f"\n3. Sub-boundary tree of {h.name} ({h.dim} inputs, 66 leaves, 4 levels), uniform samples; "
+        f"target at 10^6: <= 20 s, <= 4 GB"
+    )
+    print(
+        f"{'samples':>9} {'graph':>6} {'tree (s)':>9} {'split':>6} {'k-graph':>8} {'pairs':>6} "
+        f"{'clusters per level':>22} {'pairs found':>11} {'peak RSS (GB)':>13} {'graph recall':>12}"
+    )
     for n in sizes:
         X = rng.random((n, h.dim))
         Y = h(X)
@@ -106,8 +117,11 @@ def cost(sizes: list[int]) -> None:
         tm = tree.timings
         # recall of the exact 12 nearest neighbours, 10^4 sampled rows (measured after the peak)
         recall = "100 %" if kind == "exact" else f"{graph_recall(X, tree.neighbours):.1%}"
-        print(f"{n:>9,} {kind:>6} {t:>9.2f} {tm['split']:>6.2f} {tm['graph']:>8.2f} {tm['pairs']:>6.2f} "
-              f"{clusters:>22} {tree.pairs()[0].size:>11,} {peak:>13.2f} {recall:>12}", flush=True)
+        print(
+            f"{n:>9,} {kind:>6} {t:>9.2f} {tm['split']:>6.2f} {tm['graph']:>8.2f} {tm['pairs']:>6.2f} "
+            f"{clusters:>22} {tree.pairs()[0].size:>11,} {peak:>13.2f} {recall:>12}",
+            flush=True,
+        )
         del tree, X, Y
     n = min(sizes)
     X = rng.random((n, h.dim))
@@ -116,14 +130,18 @@ def cost(sizes: list[int]) -> None:
     labels = performance_modes(Y[:, 30:], ["binary"] * 66)
     i, _, _ = mutual_pairs(X, labels)
     t = time.perf_counter() - t0
-    print(f"All 66 leaves at once (Algorithm 2), {n:,} samples: {t:.2f} s "
-          f"({labels.max() + 1} modes, {i.size:,} pairs)")
+    print(f"All 66 leaves at once (Algorithm 2), {n:,} samples: {t:.2f} s ({labels.max() + 1} modes, {i.size:,} pairs)")
 
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sizes", type=int, nargs="+", default=None,
-                    help="samples for part 3 (default 10000 100000 1000000; --quick: 3000 30000)")
+    ap.add_argument(
+        "--sizes",
+        type=int,
+        nargs="+",
+        default=None,
+        help="samples for part 3 (default 10000 100000 1000000; --quick: 3000 30000)",
+    )
     ap.add_argument("--skip-noise", action="store_true")
     ap.add_argument("--quick", action="store_true", help="the same tables from a small run (about a minute)")
     args = ap.parse_args()

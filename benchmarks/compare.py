@@ -32,8 +32,10 @@ from sim.uuv.bias import BIAS_NAMES, Bias, parse_bias  # noqa: E402
 
 CASES = {  # label: (--inject-bias, stochastic effects on)
     "issue 7: faster vehicle, tide offset": ("speed=1.15,current_offset=0.3", False),
-    "all six parameters": ("speed=1.1,current_scale=0.8,current_offset=-0.2,heading=3,battery=1.2,start_time=1800",
-                           False),
+    "all six parameters": (
+        "speed=1.1,current_scale=0.8,current_offset=-0.2,heading=3,battery=1.2,start_time=1800",
+        False,
+    ),
     "issue 7 with navigation drift and current perturbations": ("speed=1.15,current_offset=0.3", True),
 }
 
@@ -50,8 +52,7 @@ def main() -> None:
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--only", default="", help="Run only the cases whose label contains this text.")
-    ap.add_argument("--quick", action="store_true",
-                    help="the first case only, from a one-pair plan (under a minute)")
+    ap.add_argument("--quick", action="store_true", help="the first case only, from a one-pair plan (under a minute)")
     args = ap.parse_args()
     if args.budget is None:
         args.budget = 500 if args.quick else 1000
@@ -66,8 +67,12 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         tmp = Path(tmp)
         t0 = time.perf_counter()
-        plan = generate(sim.uuv.load_mission(mission_file), mission_file, tmp / "plan",
-                        GenerateConfig(budget=args.budget, batch_size=250, pairs=args.pairs, dithers=0, seed=args.seed))
+        plan = generate(
+            sim.uuv.load_mission(mission_file),
+            mission_file,
+            tmp / "plan",
+            GenerateConfig(budget=args.budget, batch_size=250, pairs=args.pairs, dithers=0, seed=args.seed),
+        )
         ids = [s["id"] for s in plan["scenarios"]]
         print(f"plan: {len(ids)} scenarios in {len(plan['pairs'])} pairs ({time.perf_counter() - t0:.0f} s)")
         for label in cases:
@@ -75,12 +80,25 @@ def main() -> None:
             logs = tmp / f"case{list(CASES).index(label)}"
             logs.mkdir()
 
-            def fly(sid: str) -> float:
+            def fly(sid: str, text: str = text, logs: Path = logs, noisy: bool = noisy) -> float:
                 start = time.perf_counter()
-                subprocess.run(rapt_plan() + ["run", str(tmp / "plan" / "plan.json"), "--scenario", sid,
-                                              "--inject-bias", text, "--log", str(logs / f"{sid}.mcap")]
-                               + (["--stochastic", "--seed", str(args.seed + ids.index(sid))] if noisy else []),
-                               check=True, capture_output=True, cwd=ROOT)
+                subprocess.run(
+                    rapt_plan()
+                    + [
+                        "run",
+                        str(tmp / "plan" / "plan.json"),
+                        "--scenario",
+                        sid,
+                        "--inject-bias",
+                        text,
+                        "--log",
+                        str(logs / f"{sid}.mcap"),
+                    ]
+                    + (["--stochastic", "--seed", str(args.seed + ids.index(sid))] if noisy else []),
+                    check=True,
+                    capture_output=True,
+                    cwd=ROOT,
+                )
                 return time.perf_counter() - start
 
             t0 = time.perf_counter()
@@ -88,9 +106,21 @@ def main() -> None:
                 list(pool.map(fly, ids))
             t_fly = time.perf_counter() - t0
             t0 = time.perf_counter()
-            subprocess.run(rapt_plan() + ["compare", str(tmp / "plan"), *[str(logs / f"{s}.mcap") for s in ids],
-                                          "--out", str(logs / "cmp"), "--seed", str(args.seed)],
-                           check=True, capture_output=True, cwd=ROOT)
+            subprocess.run(
+                rapt_plan()
+                + [
+                    "compare",
+                    str(tmp / "plan"),
+                    *[str(logs / f"{s}.mcap") for s in ids],
+                    "--out",
+                    str(logs / "cmp"),
+                    "--seed",
+                    str(args.seed),
+                ],
+                check=True,
+                capture_output=True,
+                cwd=ROOT,
+            )
             t_cmp = time.perf_counter() - t0
             c = json.loads((logs / "cmp" / "comparison.json").read_text())
             injected = parse_bias(text)
@@ -106,13 +136,17 @@ def main() -> None:
                 rel = f"{abs(est - inj) / abs(shift):.2%}" if shift else f"(abs. {abs(est - inj):.2g})"
                 print(f"| {n} | {inj:g} | {est:.5g} | {'n/a' if se is None else f'{se:.2g}'} | {rel} |")
             ag = c["mode_agreement"]
-            print(f"mode agreement over {ag['scenarios']} scenarios: as planned {ag['uncorrected']:.0%}, "
-                  f"with the fitted bias {ag['corrected']:.0%}")
+            print(
+                f"mode agreement over {ag['scenarios']} scenarios: as planned {ag['uncorrected']:.0%}, "
+                f"with the fitted bias {ag['corrected']:.0%}"
+            )
             flagged = [p["id"] for p in c["pairs"] if p["flagged"]]
             props = [q["id"] for q in c["proposals"] if q["found"]]
             print(f"pairs flagged under the bias: {flagged or 'none'}; adjusted scenarios proposed: {props or 'none'}")
-            print(f"position residual after the fit {c['bias_fit']['rms_position_m']:.2g} m RMS "
-                  f"(unbiased model {c['bias_fit']['rms_position_unbiased_m']:.3g} m)")
+            print(
+                f"position residual after the fit {c['bias_fit']['rms_position_m']:.2g} m RMS "
+                f"(unbiased model {c['bias_fit']['rms_position_unbiased_m']:.3g} m)"
+            )
 
 
 if __name__ == "__main__":

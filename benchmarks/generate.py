@@ -54,16 +54,25 @@ def main() -> None:
             last["search"] = (done, detail)
 
     with tempfile.TemporaryDirectory() as tmp:
-        cfg = GenerateConfig(budget=args.budget, batch_size=batch, dithers=args.dithers, pairs=args.pairs,
-                             seed=args.seed, executor=executor, store=Path(tmp) / "study.db")
+        cfg = GenerateConfig(
+            budget=args.budget,
+            batch_size=batch,
+            dithers=args.dithers,
+            pairs=args.pairs,
+            seed=args.seed,
+            executor=executor,
+            store=Path(tmp) / "study.db",
+        )
         try:
             plan = generate(mission, MISSION, Path(tmp) / "plan", cfg, progress, timings)
         finally:
             close()
     total = time.perf_counter() - started
 
-    print(f"rapt-plan generate {MISSION.name} --budget {args.budget:,} (batches of {batch:,}, "
-          f"{args.dithers:,} dithers per pair, executor {args.executor}, {os.cpu_count()} cores)")
+    print(
+        f"rapt-plan generate {MISSION.name} --budget {args.budget:,} (batches of {batch:,}, "
+        f"{args.dithers:,} dithers per pair, executor {args.executor}, {os.cpu_count()} cores)"
+    )
     print(f"{'stage':>12} {'seconds':>8} {'share':>6}")
     for stage, seconds in timings.items():
         print(f"{stage:>12} {seconds:>8.1f} {seconds / total:>6.0%}")
@@ -73,13 +82,19 @@ def main() -> None:
         verdict = f"{'met' if total <= TARGET_S else 'NOT met'} ({total / TARGET_S:.2f} of the target)"
     print(f"{'total':>12} {total:>8.1f} {'':>6}  target <= {TARGET_S:.0f} s: {verdict}")
     study = plan["study"]
-    print(f"search: {args.budget / timings['search']:,.0f} runs/s; {study['valid_runs']:,} valid, "
-          f"{study['invalid_runs']:,} invalid; at the end: {last['search'][1]}")
-    print(f"plan: {len(plan['pairs'])} pairs, {len(plan['variants'])} robust variants; pair distances "
-          + ", ".join(f"{p['distance']:.3f}" for p in plan["pairs"]))
+    print(
+        f"search: {args.budget / timings['search']:,.0f} runs/s; {study['valid_runs']:,} valid, "
+        f"{study['invalid_runs']:,} invalid; at the end: {last['search'][1]}"
+    )
+    print(
+        f"plan: {len(plan['pairs'])} pairs, {len(plan['variants'])} robust variants; pair distances "
+        + ", ".join(f"{p['distance']:.3f}" for p in plan["pairs"])
+    )
     for s in plan["scenarios"]:
         d = s["dithering"]
-        print(f"  {s['id']:>7} {s['predicted']['mode']} P(predicted mode) = {d.get('p_predicted_mode', float('nan')):.2f}")
+        print(
+            f"  {s['id']:>7} {s['predicted']['mode']} P(predicted mode) = {d.get('p_predicted_mode', float('nan')):.2f}"
+        )
 
 
 if __name__ == "__main__":

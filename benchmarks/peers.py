@@ -95,8 +95,9 @@ def _entropy(proba: np.ndarray) -> np.ndarray:
     return -(proba * np.log(p)).sum(axis=1)
 
 
-def _output_uncertainty(X: np.ndarray, y: np.ndarray, kind: str, cand: np.ndarray, random_state: int,
-                        n_estimators: int) -> np.ndarray | None:
+def _output_uncertainty(
+    X: np.ndarray, y: np.ndarray, kind: str, cand: np.ndarray, random_state: int, n_estimators: int
+) -> np.ndarray | None:
     """Predictive uncertainty of one output at the candidates, or None when it is constant so far.
 
     Categorical: entropy (nats) of a ``RandomForestClassifier``'s class probabilities.
@@ -123,9 +124,16 @@ def _output_uncertainty(X: np.ndarray, y: np.ndarray, kind: str, cand: np.ndarra
     return _entropy(forest.predict_proba(cand))
 
 
-def uncertainty_search(system, budget: int, batch_size: int = 100, seed: int = 0, *,
-                       candidates_per_point: int = 10, n_estimators: int = 50,
-                       combine: str = COMBINE) -> np.ndarray:
+def uncertainty_search(
+    system,
+    budget: int,
+    batch_size: int = 100,
+    seed: int = 0,
+    *,
+    candidates_per_point: int = 10,
+    n_estimators: int = 50,
+    combine: str = COMBINE,
+) -> np.ndarray:
     """Active learning by random-forest predictive uncertainty.
 
     Batch 0 is scrambled Sobol (the same points rapt's adaptive samplers start with).
@@ -241,8 +249,13 @@ def main(argv: list[str] | None = None) -> int:
 
     ap = argparse.ArgumentParser(description="Peer samplers beside Sobol and S-NDV (search_quality's table).")
     ap.add_argument("--seeds", type=int, default=3, help="seeds 0..N-1 per method (default 3; --quick: 1)")
-    ap.add_argument("--systems", nargs="+", choices=list(search_quality.SYSTEMS), default=None,
-                    help="default: all five; --quick: " + " ".join(QUICK_SYSTEMS))
+    ap.add_argument(
+        "--systems",
+        nargs="+",
+        choices=list(search_quality.SYSTEMS),
+        default=None,
+        help="default: all five; --quick: " + " ".join(QUICK_SYSTEMS),
+    )
     ap.add_argument("--quick", action="store_true", help="one seed on the 2-D and 3-D systems")
     args = ap.parse_args(argv)
     systems = args.systems or list(QUICK_SYSTEMS if args.quick else search_quality.SYSTEMS)

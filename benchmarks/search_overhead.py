@@ -31,8 +31,8 @@ import time
 import numpy as np
 
 import rapt
-from rapt.samplers import make_sampler
 from rapt.metrics import quality_table
+from rapt.samplers import make_sampler
 from rapt.testfunctions import Plates3D, Screened, get_system, search_output_types
 
 
@@ -53,8 +53,12 @@ def main() -> None:
     ap.add_argument("--max-n", type=int, default=None, help="largest study size (default 10^6; --quick: 10^5)")
     ap.add_argument("--batch", type=int, default=10_000)
     ap.add_argument("--repeat", type=int, default=None, help="timings per size, median taken (default 3; --quick: 1)")
-    ap.add_argument("--nndv-max-n", type=int, default=None,
-                    help="largest study size to time unscaled NNDV at (default 10^4; --quick: 10^3)")
+    ap.add_argument(
+        "--nndv-max-n",
+        type=int,
+        default=None,
+        help="largest study size to time unscaled NNDV at (default 10^4; --quick: 10^3)",
+    )
     ap.add_argument("--million", action="store_true", help="also run 10^6-sample searches and compare quality")
     ap.add_argument("--quick", action="store_true", help="the same tables from a small run (well under a minute)")
     args = ap.parse_args()
@@ -68,8 +72,10 @@ def main() -> None:
     system = Screened(Plates3D(), 15)
     rng = np.random.default_rng(0)
     sizes = [n for n in (10**3, 10**4, 10**5, 10**6) if n <= args.max_n]
-    print(f"Proposing a batch of {args.batch:,} points, 18 inputs (Plates3D + 15 non-contributing), "
-          f"median of {args.repeat}")
+    print(
+        f"Proposing a batch of {args.batch:,} points, 18 inputs (Plates3D + 15 non-contributing), "
+        f"median of {args.repeat}"
+    )
     print(f"{'samples':>10} {'method':>6} {'batch (s)':>10} {'µs/point':>9} {'vs previous n':>14}")
     previous: dict[str, tuple[int, float]] = {}
     results = {}
@@ -89,22 +95,28 @@ def main() -> None:
             print(f"{n:>10,} {method:>6} {t:>10.2f} {1e6 * t / args.batch:>9.1f} {growth:>14}")
     if ("s-ndv", 10**6) in results:
         t = results[("s-ndv", 10**6)]
-        print(f"\nS-NDV 10,000-point batch from 10^6 samples: {t:.2f} s (target < 10 s: "
-              f"{'PASS' if t < 10 else 'FAIL'})")
+        print(
+            f"\nS-NDV 10,000-point batch from 10^6 samples: {t:.2f} s (target < 10 s: {'PASS' if t < 10 else 'FAIL'})"
+        )
     else:
-        print(f"\nS-NDV 10,000-point batch from 10^6 samples: not run (largest study {max(sizes):,}; "
-              f"target < 10 s not judged)")
+        print(
+            f"\nS-NDV 10,000-point batch from 10^6 samples: not run (largest study {max(sizes):,}; "
+            f"target < 10 s not judged)"
+        )
 
     sut = get_system("plates2d")
     runs = []
     for seed in range(5):
         t0 = time.perf_counter()
-        rapt.search(sut, [(0, 1)] * 2, 1000, method="nndv", batch_size=100, seed=seed,
-                    output_types=search_output_types(sut))
+        rapt.search(
+            sut, [(0, 1)] * 2, 1000, method="nndv", batch_size=100, seed=seed, output_types=search_output_types(sut)
+        )
         runs.append(time.perf_counter() - t0)
     t = statistics.median(runs)
-    print(f"Whole 1000-sample 2D NNDV search (plates2d, batch 100, median of 5): {t:.3f} s; "
-          f"paper's MATLAB 0.645 s -> {0.645 / t:.1f}x faster; target < 0.3 s: {'PASS' if t < 0.3 else 'FAIL'}")
+    print(
+        f"Whole 1000-sample 2D NNDV search (plates2d, batch 100, median of 5): {t:.3f} s; "
+        f"paper's MATLAB 0.645 s -> {0.645 / t:.1f}x faster; target < 0.3 s: {'PASS' if t < 0.3 else 'FAIL'}"
+    )
 
     if args.million:
         million_quality(10**5 if args.quick else 10**6)
@@ -118,16 +130,19 @@ def million_quality(n: int = 10**6, d_eps: float = 0.004) -> None:
     rows = {}
     for method in ("sobol", "s-ndv"):
         t0 = time.perf_counter()
-        study = rapt.search(sut, [(0, 1)] * sut.dim, n, method=method, batch_size=10_000, seed=0,
-                            output_types=search_output_types(sut))
+        study = rapt.search(
+            sut, [(0, 1)] * sut.dim, n, method=method, batch_size=10_000, seed=0, output_types=search_output_types(sut)
+        )
         elapsed = time.perf_counter() - t0
         q = quality_table(sut, study.X, d_eps, seed=0)
         rows[method] = q
         print(f"{method:>6} {elapsed:>11.1f} {q['precision']:>10.2%} {q['coverage']:>9.2%}")
     p = rows["s-ndv"]["precision"] / rows["sobol"]["precision"]
     c = rows["s-ndv"]["coverage"] / rows["sobol"]["coverage"]
-    print(f"S-NDV / Sobol at {n:,}: precision x{p:.1f}, coverage x{c:.1f} "
-          f"(Sobol coverage {rows['sobol']['coverage']:.0%}, below 40%: {'yes' if rows['sobol']['coverage'] < 0.4 else 'NO'})")
+    print(
+        f"S-NDV / Sobol at {n:,}: precision x{p:.1f}, coverage x{c:.1f} "
+        f"(Sobol coverage {rows['sobol']['coverage']:.0%}, below 40%: {'yes' if rows['sobol']['coverage'] < 0.4 else 'NO'})"
+    )
 
 
 if __name__ == "__main__":

@@ -73,11 +73,11 @@ _HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(_HERE))
 sys.path.insert(0, str(_HERE.parent))
 
+import peers  # noqa: E402
+
 import rapt  # noqa: E402
 from rapt.metrics import quality_table  # noqa: E402
 from rapt.testfunctions import REFERENCE_SETTINGS, get_system, search_output_types  # noqa: E402
-
-import peers  # noqa: E402
 
 BATCH = 100
 #: A method other than sobol / s-ndv / uncertainty whose first run takes longer than
@@ -113,10 +113,12 @@ SYSTEMS: dict[str, SystemSpec] = {
     "custom2d": _spec("custom2d", 1000, 3.0, 1.8, "1 % of the side; Table 3.1's Sobol covers ~32 % at 1000"),
     "plates2d": _spec("plates2d", 1000, 3.0, 1.8, "1 % of the side; Table 3.1's Sobol covers ~32 % at 1000"),
     "plates3d": _spec("plates3d", 3000, 3.0, 1.8, "narrow, as the paper's Plates3D (Sobol 1.3 % at 3000)"),
-    "plates3d-screened": _spec("plates3d-screened", 3000, 2.0, 1.0,
-                               "same band as plates3d (same boundary and active inputs)"),
-    "composite8d": _spec("composite8d", 3000, 2.0, 1.0,
-                         "per 2-D subfunction; 10000 samples fill each 2-D block densely"),
+    "plates3d-screened": _spec(
+        "plates3d-screened", 3000, 2.0, 1.0, "same band as plates3d (same boundary and active inputs)"
+    ),
+    "composite8d": _spec(
+        "composite8d", 3000, 2.0, 1.0, "per 2-D subfunction; 10000 samples fill each 2-D block densely"
+    ),
 }
 
 RAPT_METHODS = ("random", "sobol", "lhs", "nndv", "s-ndv", "gpr")
@@ -151,8 +153,15 @@ def run_once(method: str, system, budget: int, seed: int) -> tuple[np.ndarray, f
     """One search; returns the evaluated unit-cube samples and the wall time in seconds."""
     start = time.perf_counter()
     if method in RAPT_METHODS:
-        study = rapt.search(system, [(0.0, 1.0)] * system.dim, budget, method=method, batch_size=BATCH,
-                            seed=seed, output_types=list(search_output_types(system)))
+        study = rapt.search(
+            system,
+            [(0.0, 1.0)] * system.dim,
+            budget,
+            method=method,
+            batch_size=BATCH,
+            seed=seed,
+            output_types=list(search_output_types(system)),
+        )
         X = study.X
     elif method == "python-adaptive":
         X = peers.python_adaptive_search(system, budget, BATCH, seed)
@@ -163,8 +172,9 @@ def run_once(method: str, system, budget: int, seed: int) -> tuple[np.ndarray, f
     return X, time.perf_counter() - start
 
 
-def not_applicable(method: str, system, adaptive_ok: bool, nd_probe: dict | None, quick: bool,
-                   explicit_methods: bool) -> str:
+def not_applicable(
+    method: str, system, adaptive_ok: bool, nd_probe: dict | None, quick: bool, explicit_methods: bool
+) -> str:
     """Why ``method`` is not run on ``system`` ('' when it is)."""
     if method == "gpr":
         if system.dim != 2:
@@ -186,9 +196,18 @@ def not_applicable(method: str, system, adaptive_ok: bool, nd_probe: dict | None
     return ""
 
 
-def evaluate(system_name: str, spec: SystemSpec, budget: int, methods: list[str], seeds: list[int],
-             adaptive_ok: bool, nd_probe: dict | None, quick: bool, explicit_methods: bool,
-             log) -> dict[str, Result]:
+def evaluate(
+    system_name: str,
+    spec: SystemSpec,
+    budget: int,
+    methods: list[str],
+    seeds: list[int],
+    adaptive_ok: bool,
+    nd_probe: dict | None,
+    quick: bool,
+    explicit_methods: bool,
+    log,
+) -> dict[str, Result]:
     system = get_system(system_name)
     results: dict[str, Result] = {}
     for method in methods:
@@ -206,9 +225,11 @@ def evaluate(system_name: str, spec: SystemSpec, budget: int, methods: list[str]
             res.coverage.append(q["coverage"])
             res.mean_distance.append(q["mean_distance"])
             res.seconds.append(seconds)
-            log(f"  {system_name:18s} {method:16s} seed {seed}: P={q['precision']:.3f} C={q['coverage']:.3f} "
-                f"t={seconds:.2f}s")
-            if (i == 0 and len(seeds) > 1 and method not in FULL_SEEDS and seconds > SLOW_SECONDS):
+            log(
+                f"  {system_name:18s} {method:16s} seed {seed}: P={q['precision']:.3f} C={q['coverage']:.3f} "
+                f"t={seconds:.2f}s"
+            )
+            if i == 0 and len(seeds) > 1 and method not in FULL_SEEDS and seconds > SLOW_SECONDS:
                 res.note = f"1 seed only: the run took {seconds:.0f} s > {SLOW_SECONDS:.0f} s"
                 break
         if method == "python-adaptive" and len(seeds) > 1:
@@ -247,11 +268,23 @@ def verdict(spec: SystemSpec, p_ratio: float, c_ratio: float) -> str:
     return f"{word} (P>={spec.p_target:g}x, C>={spec.c_target:g}x)"
 
 
-def print_table(all_results: dict[str, dict[str, Result]], specs: dict[str, SystemSpec],
-                budgets: dict[str, int], seeds: list[int]) -> list[str]:
+def print_table(
+    all_results: dict[str, dict[str, Result]], specs: dict[str, SystemSpec], budgets: dict[str, int], seeds: list[int]
+) -> list[str]:
     """Print the table; return the failed targets as text lines."""
-    headers = ["system", "method", "n", "seeds", "precision", "coverage", "mean dist", "time/search s",
-               "P/Sobol", "C/Sobol", "target (s-ndv)"]
+    headers = [
+        "system",
+        "method",
+        "n",
+        "seeds",
+        "precision",
+        "coverage",
+        "mean dist",
+        "time/search s",
+        "P/Sobol",
+        "C/Sobol",
+        "target (s-ndv)",
+    ]
     rows: list[list[str]] = []
     notes: list[str] = []
     failures: list[str] = []
@@ -270,11 +303,25 @@ def print_table(all_results: dict[str, dict[str, Result]], specs: dict[str, Syst
             if method == "s-ndv":
                 target = verdict(spec, pr, cr) if np.isfinite(pr) and np.isfinite(cr) else "n/a (no sobol row)"
                 if target.startswith("FAIL"):
-                    failures.append(f"{name}: s-ndv P/Sobol={pr:.2f} (need {spec.p_target:g}), "
-                                    f"C/Sobol={cr:.2f} (need {spec.c_target:g})")
-            rows.append([name, method, str(budgets[name]), str(len(res.precision)), _pm(res.precision),
-                         _pm(res.coverage), f"{res.mean('mean_distance'):.4f}", _time(res.seconds),
-                         f"{pr:.2f}", f"{cr:.2f}", target])
+                    failures.append(
+                        f"{name}: s-ndv P/Sobol={pr:.2f} (need {spec.p_target:g}), "
+                        f"C/Sobol={cr:.2f} (need {spec.c_target:g})"
+                    )
+            rows.append(
+                [
+                    name,
+                    method,
+                    str(budgets[name]),
+                    str(len(res.precision)),
+                    _pm(res.precision),
+                    _pm(res.coverage),
+                    f"{res.mean('mean_distance'):.4f}",
+                    _time(res.seconds),
+                    f"{pr:.2f}",
+                    f"{cr:.2f}",
+                    target,
+                ]
+            )
             if res.note:
                 notes.append(f"{name} / {method}: {res.note}")
         rows.append([])
@@ -292,11 +339,19 @@ def print_table(all_results: dict[str, dict[str, Result]], specs: dict[str, Syst
             print()
             continue
         if row[5:] == [""] * 6:
-            print("  ".join(cell.ljust(w) if i < 2 else cell.rjust(w)
-                            for i, (cell, w) in enumerate(zip(row[:4], widths[:4]))) + "  " + row[4])
+            print(
+                "  ".join(
+                    cell.ljust(w) if i < 2 else cell.rjust(w) for i, (cell, w) in enumerate(zip(row[:4], widths[:4]))
+                )
+                + "  "
+                + row[4]
+            )
             continue
-        print("  ".join(cell.ljust(w) if i < 2 or i == 10 else cell.rjust(w)
-                        for i, (cell, w) in enumerate(zip(row, widths))).rstrip())
+        print(
+            "  ".join(
+                cell.ljust(w) if i < 2 or i == 10 else cell.rjust(w) for i, (cell, w) in enumerate(zip(row, widths))
+            ).rstrip()
+        )
     if notes:
         print("Notes:")
         for n in notes:
@@ -318,14 +373,18 @@ def print_d_eps(all_results, specs, budgets) -> list[str]:
         ok = worst < MAX_SOBOL_COVERAGE
         if not ok:
             failures.append(f"{name}: Sobol coverage {worst:.1%} at D_eps={spec.d_eps:g} is not < 40 %")
-        print(f"  {name:18s} D_eps={spec.d_eps:<6g} n={budgets[name]:<6d} Sobol coverage {cov:6.1%} "
-              f"(max over seeds {worst:.1%}) {'OK' if ok else 'TOO WIDE'}  - {spec.why}")
+        print(
+            f"  {name:18s} D_eps={spec.d_eps:<6g} n={budgets[name]:<6d} Sobol coverage {cov:6.1%} "
+            f"(max over seeds {worst:.1%}) {'OK' if ok else 'TOO WIDE'}  - {spec.why}"
+        )
     return failures
 
 
 def print_uncertainty(all_results) -> list[str]:
-    print(f"\nS-NDV against the uncertainty learner (match: P s-ndv/unc >= {MATCH_RATIO:g}; "
-          f"time: unc/s-ndv >= {TIME_FACTOR:g}):")
+    print(
+        f"\nS-NDV against the uncertainty learner (match: P s-ndv/unc >= {MATCH_RATIO:g}; "
+        f"time: unc/s-ndv >= {TIME_FACTOR:g}):"
+    )
     failures = []
     for name, results in all_results.items():
         s, u = results.get("s-ndv"), results.get("uncertainty")
@@ -340,17 +399,21 @@ def print_uncertainty(all_results) -> list[str]:
             why.append("precision below the learner's")
         if not t_ok:
             why.append("less than 10x faster")
-        print(f"  {name:18s} P s-ndv/unc = {pr:5.2f} ({s.mean('precision'):.3f} vs {u.mean('precision'):.3f})   "
-              f"time unc/s-ndv = {tr:6.1f}x ({u.mean('seconds'):.2f} s vs {s.mean('seconds'):.2f} s)   "
-              f"{word}{' (' + '; '.join(why) + ')' if why else ''}")
+        print(
+            f"  {name:18s} P s-ndv/unc = {pr:5.2f} ({s.mean('precision'):.3f} vs {u.mean('precision'):.3f})   "
+            f"time unc/s-ndv = {tr:6.1f}x ({u.mean('seconds'):.2f} s vs {s.mean('seconds'):.2f} s)   "
+            f"{word}{' (' + '; '.join(why) + ')' if why else ''}"
+        )
         if word == "FAIL":
             failures.append(f"{name}: vs uncertainty P ratio {pr:.2f}, time ratio {tr:.1f}x ({'; '.join(why)})")
     return failures
 
 
 def print_nndv_timing(all_results, seeds: list[int]) -> list[str]:
-    print(f"\n2-D NNDV search time (1000 samples, batch {BATCH}; paper: {PAPER_NNDV_2D_SECONDS} s in MATLAB, "
-          f"target: {TARGET_NNDV_2D_SECONDS} s):")
+    print(
+        f"\n2-D NNDV search time (1000 samples, batch {BATCH}; paper: {PAPER_NNDV_2D_SECONDS} s in MATLAB, "
+        f"target: {TARGET_NNDV_2D_SECONDS} s):"
+    )
     timings: dict[str, list[float]] = {}
     for name in ("custom2d", "plates2d"):
         res = all_results.get(name, {}).get("nndv")
@@ -363,9 +426,11 @@ def print_nndv_timing(all_results, seeds: list[int]) -> list[str]:
     for name, secs in timings.items():
         m, worst = float(np.mean(secs)), float(np.max(secs))
         word = "PASS" if m < TARGET_NNDV_2D_SECONDS else "FAIL"
-        print(f"  {name:18s} mean {m:.3f} s (max {worst:.3f} s) over {len(secs)} run(s): "
-              f"{PAPER_NNDV_2D_SECONDS / m:.1f}x faster than the paper's {PAPER_NNDV_2D_SECONDS} s; "
-              f"{word} against the {TARGET_NNDV_2D_SECONDS} s target")
+        print(
+            f"  {name:18s} mean {m:.3f} s (max {worst:.3f} s) over {len(secs)} run(s): "
+            f"{PAPER_NNDV_2D_SECONDS / m:.1f}x faster than the paper's {PAPER_NNDV_2D_SECONDS} s; "
+            f"{word} against the {TARGET_NNDV_2D_SECONDS} s target"
+        )
         if word == "FAIL":
             failures.append(f"{name}: 2-D NNDV search takes {m:.3f} s, not < {TARGET_NNDV_2D_SECONDS} s")
     return failures
@@ -373,15 +438,18 @@ def print_nndv_timing(all_results, seeds: list[int]) -> list[str]:
 
 # ------------------------------------------------------------------------------- main
 def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0],
-                                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser = argparse.ArgumentParser(
+        description=__doc__.split("\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     parser.add_argument("--seeds", type=int, default=3, help="seeds 0..N-1 per method (default 3)")
-    parser.add_argument("--quick", action="store_true",
-                        help="1 seed, 7-D/8-D budgets 3000, GPR skipped: a fast look, not the verdict")
+    parser.add_argument(
+        "--quick", action="store_true", help="1 seed, 7-D/8-D budgets 3000, GPR skipped: a fast look, not the verdict"
+    )
     parser.add_argument("--systems", nargs="+", choices=list(SYSTEMS), default=list(SYSTEMS))
     parser.add_argument("--methods", nargs="+", choices=list(METHODS), default=None)
-    parser.add_argument("--probe-seconds", type=float, default=30.0,
-                        help="time allowed to the LearnerND 7-D probe (default 30)")
+    parser.add_argument(
+        "--probe-seconds", type=float, default=30.0, help="time allowed to the LearnerND 7-D probe (default 30)"
+    )
     args = parser.parse_args(argv)
     if args.seeds < 1:
         parser.error("--seeds must be >= 1")
@@ -394,17 +462,25 @@ def main(argv: list[str] | None = None) -> int:
 
     t_start = time.perf_counter()
     print("RAPT search quality at equal budgets")
-    print(f"python {platform.python_version()} on {platform.machine()}, {os.cpu_count()} cores; "
-          f"numpy {np.__version__}; seeds {seeds}; batch {BATCH}; "
-          f"{'QUICK (targets are defined at the full budgets)' if args.quick else 'full budgets'}")
+    print(
+        f"python {platform.python_version()} on {platform.machine()}, {os.cpu_count()} cores; "
+        f"numpy {np.__version__}; seeds {seeds}; batch {BATCH}; "
+        f"{'QUICK (targets are defined at the full budgets)' if args.quick else 'full budgets'}"
+    )
     adaptive_ok = peers.adaptive_available()
     nd_probe = None
     if adaptive_ok and "python-adaptive" in methods and any(get_system(n).dim > 3 for n in args.systems):
-        print(f"Probing python-adaptive LearnerND on the 7-D screened system (batches of 20, "
-              f"up to 500 points, {args.probe_seconds:g} s limit) ...", flush=True)
+        print(
+            f"Probing python-adaptive LearnerND on the 7-D screened system (batches of 20, "
+            f"up to 500 points, {args.probe_seconds:g} s limit) ...",
+            flush=True,
+        )
         nd_probe = peers.probe_learnernd("plates3d-screened", args.probe_seconds)
-        print(f"  reached {nd_probe['points']} points in {nd_probe['at']:.1f} s"
-              f"{'' if nd_probe['finished'] else ' before the limit stopped it'}", flush=True)
+        print(
+            f"  reached {nd_probe['points']} points in {nd_probe['at']:.1f} s"
+            f"{'' if nd_probe['finished'] else ' before the limit stopped it'}",
+            flush=True,
+        )
     warm_up()
 
     def log(msg: str) -> None:
@@ -413,8 +489,9 @@ def main(argv: list[str] | None = None) -> int:
     all_results: dict[str, dict[str, Result]] = {}
     for name in args.systems:
         print(f"Running {name} ({budgets[name]} samples) ...", file=sys.stderr, flush=True)
-        all_results[name] = evaluate(name, SYSTEMS[name], budgets[name], methods, seeds, adaptive_ok, nd_probe,
-                                     args.quick, explicit_methods, log)
+        all_results[name] = evaluate(
+            name, SYSTEMS[name], budgets[name], methods, seeds, adaptive_ok, nd_probe, args.quick, explicit_methods, log
+        )
 
     print()
     failures = print_table(all_results, SYSTEMS, budgets, seeds)

@@ -60,15 +60,25 @@ ONE_DOF_TENTH = dict(budget=210, r_min_deg=0.5, r_max_deg=45.0, batch_size=10, r
 
 def fig53(quick: bool, seed: int, robots: list[str] | None = None, fine: bool = False) -> list:
     # robot, slope, grid resolution (deg), adaptive options
-    cases = [("1dof", 20.0, 1.0, dict(ONE_DOF_TENTH)),
-             ("2dof", 0.0, 3.0 if quick else 1.0, dict(budget=10000 if quick else 30000, r_min_deg=0.5, r_max_deg=10.0)),
-             ("3dof", 0.0, 12.0 if quick else 3.0 if fine else 6.0,
-              dict(budget=10000 if quick else 40000, r_min_deg=2.0, r_max_deg=15.0, batch_size=100))]
-    print("1. Figure 5.3: grid search against adaptive manifold sampling (a query = one [joint state, face]; "
-          "graphs matched on probe states)")
-    print(f"{'robot':>5} {'method':>9} {'queries':>9} {'time s':>7} {'nodes':>5} {'edges':>5} {'matched n/e':>13} "
-          f"{'rightable':>9} {'agree':>6} {'pairs':>6} {'pair deg':>8} {'energy J':>8} {'m.pair deg':>10} {'m.energy J':>10} "
-          f"{'m.bdy J':>8} {'m.err J':>7}")
+    cases = [
+        ("1dof", 20.0, 1.0, dict(ONE_DOF_TENTH)),
+        ("2dof", 0.0, 3.0 if quick else 1.0, dict(budget=10000 if quick else 30000, r_min_deg=0.5, r_max_deg=10.0)),
+        (
+            "3dof",
+            0.0,
+            12.0 if quick else 3.0 if fine else 6.0,
+            dict(budget=10000 if quick else 40000, r_min_deg=2.0, r_max_deg=15.0, batch_size=100),
+        ),
+    ]
+    print(
+        "1. Figure 5.3: grid search against adaptive manifold sampling (a query = one [joint state, face]; "
+        "graphs matched on probe states)"
+    )
+    print(
+        f"{'robot':>5} {'method':>9} {'queries':>9} {'time s':>7} {'nodes':>5} {'edges':>5} {'matched n/e':>13} "
+        f"{'rightable':>9} {'agree':>6} {'pairs':>6} {'pair deg':>8} {'energy J':>8} {'m.pair deg':>10} {'m.energy J':>10} "
+        f"{'m.bdy J':>8} {'m.err J':>7}"
+    )
     studies = []
     for name, slope, res, opts in [c for c in cases if robots is None or c[0] in robots]:
         robot = load_robot(f"{ROBOTS}/{name}.toml")
@@ -91,23 +101,34 @@ def fig53(quick: bool, seed: int, robots: list[str] | None = None, fine: bool = 
         mean = lambda v: float(v.mean()) if v.size else float("nan")  # noqa: E731
         bdy = [mean(x.energy[i][both]) for x, i in zip(ce, at)]
         err = [mean(np.abs(x.reported[i] - x.energy[i])[both]) for x, i in zip(ce, at)]
-        for k, (study, r, label, secs) in enumerate(((grid, g, grid.method, grid_seconds), (ad, a, "adaptive", ad_seconds))):
+        for k, (_study, r, label, secs) in enumerate(
+            ((grid, g, grid.method, grid_seconds), (ad, a, "adaptive", ad_seconds))
+        ):
             T = r.graph.all_transitions
-            matched = (f"{c.nodes_matched}/{c.n_nodes[0]}/{c.n_nodes[1]} {c.edges_matched}/{c.n_edges[0]}/{c.n_edges[1]}"
-                       if k else "")  # matched / adaptive's / grid's (nodes over 1 % of probes, edges between them)
+            matched = (
+                f"{c.nodes_matched}/{c.n_nodes[0]}/{c.n_nodes[1]} {c.edges_matched}/{c.n_edges[0]}/{c.n_edges[1]}"
+                if k
+                else ""
+            )  # matched / adaptive's / grid's (nodes over 1 % of probes, edges between them)
             agree = f"{c.rightable_agreement:.1%}" if k else ""
-            print(f"{name:>5} {label:>9} {r.queries:>9,} {secs:>7.1f} {r.n_nodes:>5} {r.n_edges:>5} {matched:>13} "
-                  f"{r.rightable:>9.1%} {agree:>6} {len(T['length']):>6,} {np.degrees(T['length']).mean():>8.2f} "
-                  f"{T['energy'].mean():>8.2f} {c.pair_length_deg[1 - k]:>10.2f} {c.transition_energy[1 - k]:>10.2f} "
-                  f"{bdy[1 - k]:>8.3f} {err[1 - k]:>7.3f}", flush=True)
+            print(
+                f"{name:>5} {label:>9} {r.queries:>9,} {secs:>7.1f} {r.n_nodes:>5} {r.n_edges:>5} {matched:>13} "
+                f"{r.rightable:>9.1%} {agree:>6} {len(T['length']):>6,} {np.degrees(T['length']).mean():>8.2f} "
+                f"{T['energy'].mean():>8.2f} {c.pair_length_deg[1 - k]:>10.2f} {c.transition_energy[1 - k]:>10.2f} "
+                f"{bdy[1 - k]:>8.3f} {err[1 - k]:>7.3f}",
+                flush=True,
+            )
         stop = "resolution reached" if ad.extra.get("stopped_by_resolution") else "budget spent"
         pg = np.degrees(g.graph.all_transitions["length"]).mean() / np.degrees(a.graph.all_transitions["length"]).mean()
         eg = g.graph.all_transitions["energy"].mean() / a.graph.all_transitions["energy"].mean()
-        print(f"{'':>5} {'ratio':>9} {g.queries / a.queries:>8.1f}x {'':>7} {'':>5} {'':>5} "
-              f"{'same' if c.same else 'differs':>13} {'':>9} {'':>6} {'':>6} {pg:>7.2f}x {eg:>7.2f}x "
-              f"{c.pair_length_deg[1] / c.pair_length_deg[0]:>9.2f}x {c.transition_energy[1] / c.transition_energy[0]:>9.2f}x"
-              f" {bdy[1] / bdy[0]:>7.3f}x {err[1] / err[0] if err[0] else float('inf'):>6.0f}x"
-              f"   grid/adaptive ({stop}, {ad.extra['joint_states']:,} joint states)", flush=True)
+        print(
+            f"{'':>5} {'ratio':>9} {g.queries / a.queries:>8.1f}x {'':>7} {'':>5} {'':>5} "
+            f"{'same' if c.same else 'differs':>13} {'':>9} {'':>6} {'':>6} {pg:>7.2f}x {eg:>7.2f}x "
+            f"{c.pair_length_deg[1] / c.pair_length_deg[0]:>9.2f}x {c.transition_energy[1] / c.transition_energy[0]:>9.2f}x"
+            f" {bdy[1] / bdy[0]:>7.3f}x {err[1] / err[0] if err[0] else float('inf'):>6.0f}x"
+            f"   grid/adaptive ({stop}, {ad.extra['joint_states']:,} joint states)",
+            flush=True,
+        )
         studies.append((name, ad, a))
     return studies
 
@@ -120,20 +141,25 @@ def one_dof_seeds(seeds: int = 8, held_out: range = range(24, 120)) -> None:
     probes = probe_states(robot, 20.0, 500, 1)
     grid = grid_study(robot, 20.0, 1.0)
     g = analyse(grid, probes=probes)
-    print(f"\n1b. 1 DOF against the 1° grid ({g.queries:,} queries): how often the graph is the same, and the "
-          "matched pairs and energies when it is")
-    print(f"{'setting':<66} {'seeds':>7} {'queries':>8} {'ratio':>6} {'same':>7} {'m.pair deg':>10} "
-          f"{'m.energy/grid':>13} {'ended by':>10}")
+    print(
+        f"\n1b. 1 DOF against the 1° grid ({g.queries:,} queries): how often the graph is the same, and the "
+        "matched pairs and energies when it is"
+    )
+    print(
+        f"{'setting':<66} {'seeds':>7} {'queries':>8} {'ratio':>6} {'same':>7} {'m.pair deg':>10} "
+        f"{'m.energy/grid':>13} {'ended by':>10}"
+    )
     first = range(seeds)
-    settings = (("budget 700, r_min 0.5°, r_max 10°, batch 50, refine 0.1", first, dict(budget=700, r_min_deg=0.5)),
-                ("the same, until the resolution cut-offs end it (budget 5,000)", first,
-                 dict(budget=5000, r_min_deg=0.5)),
-                ("budget 210, r_min 0.5°, r_max 45°, batch 10, refine 0.4", first, dict(ONE_DOF_TENTH, outcomes=False)),
-                ("the same, told where states tip (outcomes): part 1's setting", first, dict(ONE_DOF_TENTH)),
-                ("the same with refine 0.5", first, dict(ONE_DOF_TENTH, refine=0.5)),
-                ("part 1's setting with budget 300", first, dict(ONE_DOF_TENTH, budget=300)),
-                ("part 1's setting, held-out seeds", held_out, dict(ONE_DOF_TENTH)),
-                ("part 1's setting with budget 300, held-out seeds", held_out, dict(ONE_DOF_TENTH, budget=300)))
+    settings = (
+        ("budget 700, r_min 0.5°, r_max 10°, batch 50, refine 0.1", first, dict(budget=700, r_min_deg=0.5)),
+        ("the same, until the resolution cut-offs end it (budget 5,000)", first, dict(budget=5000, r_min_deg=0.5)),
+        ("budget 210, r_min 0.5°, r_max 45°, batch 10, refine 0.4", first, dict(ONE_DOF_TENTH, outcomes=False)),
+        ("the same, told where states tip (outcomes): part 1's setting", first, dict(ONE_DOF_TENTH)),
+        ("the same with refine 0.5", first, dict(ONE_DOF_TENTH, refine=0.5)),
+        ("part 1's setting with budget 300", first, dict(ONE_DOF_TENTH, budget=300)),
+        ("part 1's setting, held-out seeds", held_out, dict(ONE_DOF_TENTH)),
+        ("part 1's setting with budget 300, held-out seeds", held_out, dict(ONE_DOF_TENTH, budget=300)),
+    )
     for label, seed_range, opts in settings:
         queries, same, pair, energy, converged = [], 0, [], [], 0
         for seed in seed_range:
@@ -148,10 +174,13 @@ def one_dof_seeds(seeds: int = 8, held_out: range = range(24, 120)) -> None:
                 energy.append(c.transition_energy[0] / c.transition_energy[1])
         q = float(np.mean(queries))
         n = len(seed_range)
-        print(f"{label:<66} {f'{seed_range[0]}-{seed_range[-1]}':>7} {q:>8.0f} {g.queries / q:>5.1f}x "
-              f"{f'{same}/{n}':>7} {np.mean(pair) if pair else float('nan'):>10.2f} "
-              f"{np.mean(energy) if energy else float('nan'):>12.3f}x "
-              f"{f'cut-offs {converged}' if converged else 'budget':>10}", flush=True)
+        print(
+            f"{label:<66} {f'{seed_range[0]}-{seed_range[-1]}':>7} {q:>8.0f} {g.queries / q:>5.1f}x "
+            f"{f'{same}/{n}':>7} {np.mean(pair) if pair else float('nan'):>10.2f} "
+            f"{np.mean(energy) if energy else float('nan'):>12.3f}x "
+            f"{f'cut-offs {converged}' if converged else 'budget':>10}",
+            flush=True,
+        )
 
 
 def prm_components(study, result, step_deg: float = 1.0, max_edges: int | None = None, seed: int = 0):
@@ -186,11 +215,15 @@ def prm_components(study, result, step_deg: float = 1.0, max_edges: int | None =
         path = ang[i] + s * d
         res = F(path[:, :m], path[:, m:])
         evals += len(s)
-        on_manifold = np.abs(np.angle(np.exp(1j * (res.start - path[:, m:])))).max(axis=1) < 2 * np.radians(step_deg) + np.abs(d[m:]).max()
+        on_manifold = (
+            np.abs(np.angle(np.exp(1j * (res.start - path[:, m:])))).max(axis=1)
+            < 2 * np.radians(step_deg) + np.abs(d[m:]).max()
+        )
         ok[e] = bool(np.all(res.stable & on_manifold))
     seconds = time.perf_counter() - t0
     from scipy.sparse import coo_matrix
     from scipy.sparse.csgraph import connected_components
+
     adj = coo_matrix((np.ones(ok.sum()), (pairs[ok, 0], pairs[ok, 1])), shape=(len(P), len(P)))
     _, labels = connected_components(adj, directed=False)
     big = int((np.bincount(labels) >= max(2, len(P) // 200)).sum())
@@ -199,28 +232,39 @@ def prm_components(study, result, step_deg: float = 1.0, max_edges: int | None =
 
 def table51(studies, quick: bool, seed: int) -> None:
     cap = 500 if quick else 1000
-    print("\n2. Table 5.1: building the graph from the adaptive sample sets: Gabriel clustering against PRM edge checking")
-    print(f"{'robot':>5} {'known states':>12} {'d_max deg':>9} {'Gabriel s':>9} {'nodes':>5} {'PRM s':>9} {'PRM edges':>10} "
-          f"{'evaluations':>11} {'PRM regions':>11} {'PRM/Gabriel':>11}")
+    print(
+        "\n2. Table 5.1: building the graph from the adaptive sample sets: Gabriel clustering against PRM edge checking"
+    )
+    print(
+        f"{'robot':>5} {'known states':>12} {'d_max deg':>9} {'Gabriel s':>9} {'nodes':>5} {'PRM s':>9} {'PRM edges':>10} "
+        f"{'evaluations':>11} {'PRM regions':>11} {'PRM/Gabriel':>11}"
+    )
     for name, study, result in studies:
         gab = result.graph_seconds  # analyse() built the graph (with its face identities) and timed it
         regions, prm_s, checked, total, evals = prm_components(study, result, max_edges=cap, seed=seed)
         est = prm_s * total / max(checked, 1)
         mark = "*" if checked < total else " "
-        print(f"{name:>5} {result.n_known_states:>12,} {np.degrees(result.max_edge):>9.1f} {gab:>9.2f} {result.n_nodes:>5} "
-              f"{est:>8.1f}{mark} {total:>10,} "
-              f"{int(evals * total / max(checked, 1)):>11,} {regions if checked == total else '-':>11} "
-              f"{est / gab:>10.0f}x", flush=True)
+        print(
+            f"{name:>5} {result.n_known_states:>12,} {np.degrees(result.max_edge):>9.1f} {gab:>9.2f} {result.n_nodes:>5} "
+            f"{est:>8.1f}{mark} {total:>10,} "
+            f"{int(evals * total / max(checked, 1)):>11,} {regions if checked == total else '-':>11} "
+            f"{est / gab:>10.0f}x",
+            flush=True,
+        )
 
 
 def fig56(quick: bool, seed: int) -> None:
     robot = load_robot(f"{ROBOTS}/5dof.toml")
     order = ["shoulder_pitch", "shoulder_yaw", "elbow", "wrist", "jaw"]
     budget = 1000 if quick else 4000
-    print(f"\n3. Figure 5.6: 5-DOF manipulator robot, flat ground, active joints added one at a time "
-          f"(adaptive: r_min 3°, r_max 20°, at most {budget:,} queries)")
-    print(f"{'active':>6} {'joints':<52} {'queries':>8} {'stopped by':>10} {'time s':>7} {'nodes':>5} "
-          f"{'rightable':>9} {'energy to home J':>16} {'5° grid (est.)':>14}")
+    print(
+        f"\n3. Figure 5.6: 5-DOF manipulator robot, flat ground, active joints added one at a time "
+        f"(adaptive: r_min 3°, r_max 20°, at most {budget:,} queries)"
+    )
+    print(
+        f"{'active':>6} {'joints':<52} {'queries':>8} {'stopped by':>10} {'time s':>7} {'nodes':>5} "
+        f"{'rightable':>9} {'energy to home J':>16} {'5° grid (est.)':>14}"
+    )
     for m in range(1, 6):
         r = robot.lock({n: 0.0 for n in order[m:]})
         study = adaptive_study(r, 0.0, budget, seed=seed, r_min_deg=3.0, r_max_deg=20.0, batch_size=100, refine=0.0)
@@ -229,8 +273,11 @@ def fig56(quick: bool, seed: int) -> None:
         grid = faces * np.prod([np.ptp(b) / np.radians(5.0) for b in r.joint_bounds])
         stop = "resolution" if study.extra.get("stopped_by_resolution") else "budget"
         energy = res.energy_to_home
-        print(f"{m:>6} {', '.join(j.name for j in r.joints):<52} {study.queries:>8,} {stop:>10} {study.seconds:>7.1f} "
-              f"{res.n_nodes:>5} {res.rightable:>9.1%} {energy:>16.2f} {grid:>14,.0f}", flush=True)
+        print(
+            f"{m:>6} {', '.join(j.name for j in r.joints):<52} {study.queries:>8,} {stop:>10} {study.seconds:>7.1f} "
+            f"{res.n_nodes:>5} {res.rightable:>9.1%} {energy:>16.2f} {grid:>14,.0f}",
+            flush=True,
+        )
 
 
 def main() -> None:
@@ -239,8 +286,13 @@ def main() -> None:
     ap.add_argument("--fine", action="store_true", help="the 3-DOF grid at the paper's 3° (10.5 million queries)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--skip", nargs="*", default=[], choices=["fig53", "table51", "fig56"])
-    ap.add_argument("--robots", nargs="+", default=None, choices=["1dof", "2dof", "3dof"],
-                    help="Figure 5.3 and Table 5.1 on these robots only (1dof alone takes seconds)")
+    ap.add_argument(
+        "--robots",
+        nargs="+",
+        default=None,
+        choices=["1dof", "2dof", "3dof"],
+        help="Figure 5.3 and Table 5.1 on these robots only (1dof alone takes seconds)",
+    )
     args = ap.parse_args()
     t0 = time.perf_counter()
     if args.quick and args.fine:

@@ -20,7 +20,6 @@ import argparse
 import os
 import socket
 import tempfile
-import threading
 import time
 from pathlib import Path
 
@@ -30,7 +29,6 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
 import sim.uuv  # noqa: E402
-from bridge import keys  # noqa: E402
 from bridge.logger import McapLogger, read_log  # noqa: E402
 from bridge.mavlink_bridge import MavlinkBridge  # noqa: E402
 from bridge.session import open_session  # noqa: E402
@@ -61,12 +59,15 @@ def round_trip(mission, trips: int) -> None:
     X = np.random.default_rng(0).random((40, mission.dim))
     u = X[np.flatnonzero(sim.uuv.simulate(mission, X).valid)[0]]
     port = free_port()
-    vehicle = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=1, source_component=1,
-                                         dialect="ardupilotmega")
+    vehicle = mavutil.mavlink_connection(
+        f"udpin:127.0.0.1:{port}", source_system=1, source_component=1, dialect="ardupilotmega"
+    )
     session = open_session(listen=[f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"])
     lat = []
-    with BackSeat(session, "uuv1", mission, u), \
-            MavlinkBridge(f"udpout:127.0.0.1:{port}", session, vehicle="uuv1", allow_commands=True) as bridge:
+    with (
+        BackSeat(session, "uuv1", mission, u),
+        MavlinkBridge(f"udpout:127.0.0.1:{port}", session, vehicle="uuv1", allow_commands=True) as bridge,
+    ):
         m = vehicle.mav
         vehicle.recv_match(type="HEARTBEAT", blocking=True, timeout=5)  # the bridge has spoken: we can send
         deadline = time.monotonic() + 5
@@ -91,20 +92,25 @@ def round_trip(mission, trips: int) -> None:
     session.close()
     vehicle.close()
     lat = np.array(lat)
-    print(f"\n2. Bridge round trip (MAVLink -> Zenoh -> autonomy -> Zenoh -> MAVLink), {lat.size} steps: "
-          f"p50 {np.percentile(lat, 50):.2f} ms, p99 {np.percentile(lat, 99):.2f} ms, max {lat.max():.2f} ms "
-          f"(target p99 <= 2 ms)")
+    print(
+        f"\n2. Bridge round trip (MAVLink -> Zenoh -> autonomy -> Zenoh -> MAVLink), {lat.size} steps: "
+        f"p50 {np.percentile(lat, 50):.2f} ms, p99 {np.percentile(lat, 99):.2f} ms, max {lat.max():.2f} ms "
+        f"(target p99 <= 2 ms)"
+    )
 
 
 def sustained(rate: int, seconds: float) -> None:
     port = free_port()
-    vehicle = mavutil.mavlink_connection(f"udpin:127.0.0.1:{port}", source_system=1, source_component=1,
-                                         dialect="ardupilotmega")
+    vehicle = mavutil.mavlink_connection(
+        f"udpin:127.0.0.1:{port}", source_system=1, source_component=1, dialect="ardupilotmega"
+    )
     session = open_session(listen=[f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"])
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "load.mcap"
-        with McapLogger(path, session, vehicle="uuv1") as logger, \
-                MavlinkBridge(f"udpout:127.0.0.1:{port}", session, vehicle="uuv1") as bridge:
+        with (
+            McapLogger(path, session, vehicle="uuv1"),
+            MavlinkBridge(f"udpout:127.0.0.1:{port}", session, vehicle="uuv1") as bridge,
+        ):
             vehicle.recv_match(type="HEARTBEAT", blocking=True, timeout=5)
             sent = 0
             start = time.perf_counter()
@@ -119,8 +125,10 @@ def sustained(rate: int, seconds: float) -> None:
         logged = sum(1 for topic, _, _ in read_log(path) if topic.endswith("/raw") or topic == "/mavlink/raw")
     session.close()
     vehicle.close()
-    print(f"\n3. Sustained load, {rate:,} frames/s for {seconds:g} s: sent {sent:,}, bridge received {bridge_in:,}, "
-          f"logged {logged:,}, lost {sent - logged:,} ({(sent - logged) / max(sent, 1):.3%})")
+    print(
+        f"\n3. Sustained load, {rate:,} frames/s for {seconds:g} s: sent {sent:,}, bridge received {bridge_in:,}, "
+        f"logged {logged:,}, lost {sent - logged:,} ({(sent - logged) / max(sent, 1):.3%})"
+    )
 
 
 def main() -> None:

@@ -34,8 +34,10 @@ MISSION = Path(__file__).resolve().parents[1] / "examples" / "range2017.toml"
 
 def throughput(mission, sizes: list[int], loop_n: int) -> None:
     X = qmc.Sobol(mission.dim, seed=0).random(max(sizes))
-    print(f"1. {mission.name}: full simulations per second (2 cores, numpy, dt = {mission.dt:g} s, "
-          f"time limit {mission.time_limit_s:g} s)")
+    print(
+        f"1. {mission.name}: full simulations per second (2 cores, numpy, dt = {mission.dt:g} s, "
+        f"time limit {mission.time_limit_s:g} s)"
+    )
     print(f"{'batch':>7} {'mode':>13} {'seconds':>8} {'valid runs':>10} {'runs/s':>8} {'10^6 runs (min)':>16}")
     best = 0.0
     for n in sizes:
@@ -46,16 +48,20 @@ def throughput(mission, sizes: list[int], loop_n: int) -> None:
             rate = r.valid.sum() / t
             if not stochastic:
                 best = max(best, rate)
-            print(f"{n:>7,} {'stochastic' if stochastic else 'deterministic':>13} {t:>8.2f} {r.valid.sum():>10,} "
-                  f"{rate:>8.0f} {1e6 / rate / 60:>16.1f}")
-    rows = np.flatnonzero(sim.uuv.simulate(mission, X[:loop_n * 2]).valid)[:loop_n]
+            print(
+                f"{n:>7,} {'stochastic' if stochastic else 'deterministic':>13} {t:>8.2f} {r.valid.sum():>10,} "
+                f"{rate:>8.0f} {1e6 / rate / 60:>16.1f}"
+            )
+    rows = np.flatnonzero(sim.uuv.simulate(mission, X[: loop_n * 2]).valid)[:loop_n]
     t0 = time.perf_counter()
     for i in rows:
-        sim.uuv.simulate(mission, X[i:i + 1])
+        sim.uuv.simulate(mission, X[i : i + 1])
     t = time.perf_counter() - t0
     loop_rate = rows.size / t
-    print(f"\n2. The same code one scenario at a time ({rows.size} scenarios): {loop_rate:.1f} runs/s; "
-          f"the best batch is {best / loop_rate:.0f}x faster")
+    print(
+        f"\n2. The same code one scenario at a time ({rows.size} scenarios): {loop_rate:.1f} runs/s; "
+        f"the best batch is {best / loop_rate:.0f}x faster"
+    )
     return best
 
 
@@ -63,11 +69,15 @@ def modes_and_boundaries(mission, n: int) -> None:
     X = qmc.Sobol(mission.dim, seed=1).random(n)
     r = sim.uuv.simulate(mission, X)
     Xv, modes = X[r.valid], r.modes[r.valid]
-    print(f"\n3. Sobol study of {n:,} {mission.name} scenarios: {r.valid.sum():,} valid "
-          f"({(~r.valid).sum():,} invalid, e.g. {_top_reason(r)})")
+    print(
+        f"\n3. Sobol study of {n:,} {mission.name} scenarios: {r.valid.sum():,} valid "
+        f"({(~r.valid).sum():,} invalid, e.g. {_top_reason(r)})"
+    )
     counts = np.bincount(modes, minlength=4)
-    print("   performance modes: " + ", ".join(f"{MODE_NAMES[k]} {c:,} ({c / counts.sum():.0%})"
-                                             for k, c in enumerate(counts)))
+    print(
+        "   performance modes: "
+        + ", ".join(f"{MODE_NAMES[k]} {c:,} ({c / counts.sum():.0%})" for k, c in enumerate(counts))
+    )
     bp = rapt.boundary_pairs(Xv, labels=modes)
     present = sorted(set(modes.tolist()))
     print(f"   boundary pairs: {len(bp):,} in {len(bp.types())} boundary types")
@@ -87,11 +97,20 @@ def _top_reason(r) -> str:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sizes", type=int, nargs="+", default=None,
-                    help="batch sizes (default 256 1024 4096 16384; --quick: 256 1024 4096)")
+    ap.add_argument(
+        "--sizes",
+        type=int,
+        nargs="+",
+        default=None,
+        help="batch sizes (default 256 1024 4096 16384; --quick: 256 1024 4096)",
+    )
     ap.add_argument("--loop", type=int, default=None, help="scenarios run one at a time (default 20; --quick: 5)")
-    ap.add_argument("--study", type=int, default=None,
-                    help="Sobol scenarios for the mode distribution (default 4096; --quick: 1024)")
+    ap.add_argument(
+        "--study",
+        type=int,
+        default=None,
+        help="Sobol scenarios for the mode distribution (default 4096; --quick: 1024)",
+    )
     ap.add_argument("--quick", action="store_true", help="the same tables from a small run (under a minute)")
     args = ap.parse_args()
     if args.sizes is None:

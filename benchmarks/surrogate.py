@@ -41,8 +41,12 @@ from sim.uuv.simulate import observation
 from sim.uuv.world import World
 
 MISSION = Path(__file__).resolve().parents[1] / "examples" / "imitation7.toml"
-METHODS = {"supervised": ("supervised", 0.0), "dagger": ("dagger", 0.0), "qdagger50": ("qdagger", 0.5),
-           "qdagger75": ("qdagger", 0.75)}
+METHODS = {
+    "supervised": ("supervised", 0.0),
+    "dagger": ("dagger", 0.0),
+    "qdagger50": ("qdagger", 0.5),
+    "qdagger75": ("qdagger", 0.75),
+}
 
 
 def decision_time(mission, surrogate: Surrogate, repeats: int = 5) -> None:
@@ -57,8 +61,9 @@ def decision_time(mission, surrogate: Surrogate, repeats: int = 5) -> None:
         world.advance(0.0, cmd.heading, cmd.speed, cmd.surface, np.ones(scen.n, dtype=bool))
     tel = world.telemetry(300.0)
     obs = observation(tel, scen)
-    singles = [(scen.select(np.array([i])), observation(_row(tel, i), scen.select(np.array([i]))))
-               for i in range(scen.n)]
+    singles = [
+        (scen.select(np.array([i])), observation(_row(tel, i), scen.select(np.array([i])))) for i in range(scen.n)
+    ]
     seen = int(np.sum(np.any(tel.scan <= surrogate.spec.sonar_range_m, axis=1)))
 
     def best(fn) -> float:
@@ -79,19 +84,33 @@ def decision_time(mission, surrogate: Surrogate, repeats: int = 5) -> None:
     F = batch_l.last_features
     quiet = surrogate.spec.sonar
     rows = [
-        ("expert autonomy", "1 vehicle a call x 100", best(lambda: [a.step(o, mission.dt) for a, (_, o) in
-                                                                   zip(experts, singles)])),
-        ("surrogate back-seat (features + network)", "1 vehicle a call x 100",
-         best(lambda: [a.step(o, mission.dt) for a, (_, o) in zip(learned, singles)])),
-        ("surrogate network alone", "1 vehicle a call x 100",
-         best(lambda: [surrogate.policy(F[i:i + 1], quiet) for i in range(F.shape[0])])),
+        (
+            "expert autonomy",
+            "1 vehicle a call x 100",
+            best(lambda: [a.step(o, mission.dt) for a, (_, o) in zip(experts, singles)]),
+        ),
+        (
+            "surrogate back-seat (features + network)",
+            "1 vehicle a call x 100",
+            best(lambda: [a.step(o, mission.dt) for a, (_, o) in zip(learned, singles)]),
+        ),
+        (
+            "surrogate network alone",
+            "1 vehicle a call x 100",
+            best(lambda: [surrogate.policy(F[i : i + 1], quiet) for i in range(F.shape[0])]),
+        ),
         ("expert autonomy", "100 vehicles in 1 call", best(lambda: batch_e.step(obs, mission.dt))),
-        ("surrogate back-seat (features + network)", "100 vehicles in 1 call",
-         best(lambda: batch_l.step(obs, mission.dt))),
+        (
+            "surrogate back-seat (features + network)",
+            "100 vehicles in 1 call",
+            best(lambda: batch_l.step(obs, mission.dt)),
+        ),
         ("surrogate network alone", "100 vehicles in 1 call", best(lambda: surrogate.policy(F, quiet))),
     ]
-    print(f"1. Decision time, 100 decisions, same process, one BLAS thread ({seen} of {scen.n} vehicles with "
-          f"sonar returns; best of {repeats})")
+    print(
+        f"1. Decision time, 100 decisions, same process, one BLAS thread ({seen} of {scen.n} vehicles with "
+        f"sonar returns; best of {repeats})"
+    )
     print(f"{'decider':<42} {'how':<24} {'ms per 100':>10} {'expert / this':>14}")
     for who, how, t in rows:
         ref = rows[0][2] if how.startswith("1 vehicle") else rows[3][2]
@@ -100,12 +119,16 @@ def decision_time(mission, surrogate: Surrogate, repeats: int = 5) -> None:
     need = rows[0][2] / 100  # seconds the networks may take for 100 decisions at 100x
     peak = gemm_rate()
     limit.restore_original_limits()
-    print(f"   expert one vehicle a call / network batch of 100: {rows[0][2] / rows[5][2]:.0f}x "
-          "(Table 6.2 compares 100 evaluations: 0.487 s against 0.00421 s, 115x)")
-    print(f"   100x here: the networks' {macs / 1e6:.2f} M multiply-adds for these 100 decisions (quiet scans "
-          f"skipped) in {need * 1e6:.0f} us, {macs / need / 1e9:.1f} G/s; this core's float64 matrix product "
-          f"peaks at {peak / 1e9:.1f} G/s (1000 x 1000, one thread), so the arithmetic alone takes "
-          f"{macs / peak * 1e6:.0f} us ({rows[0][2] / (macs / peak):.0f}x at best)\n")
+    print(
+        f"   expert one vehicle a call / network batch of 100: {rows[0][2] / rows[5][2]:.0f}x "
+        "(Table 6.2 compares 100 evaluations: 0.487 s against 0.00421 s, 115x)"
+    )
+    print(
+        f"   100x here: the networks' {macs / 1e6:.2f} M multiply-adds for these 100 decisions (quiet scans "
+        f"skipped) in {need * 1e6:.0f} us, {macs / need / 1e9:.1f} G/s; this core's float64 matrix product "
+        f"peaks at {peak / 1e9:.1f} G/s (1000 x 1000, one thread), so the arithmetic alone takes "
+        f"{macs / peak * 1e6:.0f} us ({rows[0][2] / (macs / peak):.0f}x at best)\n"
+    )
 
 
 def multiply_adds(policy, F: np.ndarray, quiet: slice) -> int:
@@ -131,7 +154,7 @@ def gemm_rate(size: int = 1000, repeats: int = 5) -> float:
         t0 = time.perf_counter()
         a @ a
         best = min(best, time.perf_counter() - t0)
-    return size ** 3 / best
+    return size**3 / best
 
 
 def _row(tel, i):
@@ -141,58 +164,89 @@ def _row(tel, i):
     for f in fields(tel):
         v = getattr(tel, f.name)
         if isinstance(v, np.ndarray) and v.ndim:
-            sel[f.name] = v[i:i + 1]
+            sel[f.name] = v[i : i + 1]
     return replace(tel, **sel)
 
 
-def learners(mission, methods: list[str], runs: int, per: int, epochs: int, track: int, seed: int,
-             mixing: float = 0.5, select_runs: int = 25) -> dict[str, tuple[Surrogate, list]]:
+def learners(
+    mission,
+    methods: list[str],
+    runs: int,
+    per: int,
+    epochs: int,
+    track: int,
+    seed: int,
+    mixing: float = 0.5,
+    select_runs: int = 25,
+) -> dict[str, tuple[Surrogate, list]]:
     Xt = qmc.Sobol(mission.dim, seed=seed + 1).random(track)
     expert = sim.uuv.simulate(mission, Xt)
     out = {}
-    print(f"2. Learners: {runs} expert-annotated runs ({per} per update), {epochs} epochs per update, "
-          f"DAgger mixing {mixing:g}**i; mode accuracy on {track} Sobol scenarios after each update; "
-          "fit time in CPU seconds on one BLAS thread (wall time on this shared machine swings 10x)")
+    print(
+        f"2. Learners: {runs} expert-annotated runs ({per} per update), {epochs} epochs per update, "
+        f"DAgger mixing {mixing:g}**i; mode accuracy on {track} Sobol scenarios after each update; "
+        "fit time in CPU seconds on one BLAS thread (wall time on this shared machine swings 10x)"
+    )
     from threadpoolctl import threadpool_limits
 
     for name in methods:
         method, q = METHODS[name]
         curve = []
 
-        def on_iteration(rec, policy):
+        def on_iteration(rec, policy, name=name, curve=curve):
             accuracy = mode_agreement(mission, Surrogate.for_mission(mission, policy), Xt, expert)
             curve.append((rec.runs, rec.samples, rec.fit_cpu_s, accuracy))
-            print(f"   {name:<10} runs {rec.runs:>3} samples {rec.samples:>6,} fit {rec.fit_cpu_s:6.1f} CPU s "
-                  f"accuracy {curve[-1][-1]:.1%}", flush=True)
+            print(
+                f"   {name:<10} runs {rec.runs:>3} samples {rec.samples:>6,} fit {rec.fit_cpu_s:6.1f} CPU s "
+                f"accuracy {curve[-1][-1]:.1%}",
+                flush=True,
+            )
 
         with threadpool_limits(1):
-            sur = train_surrogate(mission, method=method, quantile=q, runs=runs, runs_per_iteration=per,
-                                  epochs=epochs, mixing=mixing if method != "supervised" else 0.0,
-                                  select_runs=select_runs, seed=seed, on_iteration=on_iteration)
+            sur = train_surrogate(
+                mission,
+                method=method,
+                quantile=q,
+                runs=runs,
+                runs_per_iteration=per,
+                epochs=epochs,
+                mixing=mixing if method != "supervised" else 0.0,
+                select_runs=select_runs,
+                seed=seed,
+                on_iteration=on_iteration,
+            )
         sur.training["method"] = name
         out[name] = (sur, curve)
         chosen = sur.training["selection_accuracy"]
-        print(f"   {name}: update {sur.training['chosen_iteration']} kept (best on {select_runs} held-out expert "
-              f"runs: {float('nan') if chosen is None else chosen:.1%}; goal threshold {sur.goal_threshold:+.1f})",
-              flush=True)
+        print(
+            f"   {name}: update {sur.training['chosen_iteration']} kept (best on {select_runs} held-out expert "
+            f"runs: {float('nan') if chosen is None else chosen:.1%}; goal threshold {sur.goal_threshold:+.1f})",
+            flush=True,
+        )
     finals = {n: c[out[n][0].training["chosen_iteration"]][-1] for n, (_, c) in out.items()}
     contenders = [n for n in ("dagger", "qdagger50", "qdagger75") if n in out]
     # the accuracy every contender reaches (its best), less 2 points of tracking-set noise
     target = min(max(c[-1] for c in out[n][1]) for n in contenders) - 0.02 if contenders else 0.0
-    print(f"\n{'learner':<11} {'runs':>5} {'kept acc':>9} {'best acc':>9} {'samples':>8} {'fit CPU s':>9} "
-          f"{'fit to ' + format(target, '.0%'):>10}")
+    print(
+        f"\n{'learner':<11} {'runs':>5} {'kept acc':>9} {'best acc':>9} {'samples':>8} {'fit CPU s':>9} "
+        f"{'fit to ' + format(target, '.0%'):>10}"
+    )
     reach = {}
     for n, (_, c) in out.items():
         fit = np.cumsum([r[2] for r in c])
         hit = next((k for k, r in enumerate(c) if r[-1] >= target), None)
         reach[n] = (fit[hit] if hit is not None else np.nan, fit[-1])
-        print(f"{n:<11} {c[-1][0]:>5} {finals[n]:>9.1%} {max(r[-1] for r in c):>9.1%} {c[-1][1]:>8,} "
-              f"{fit[-1]:>9.1f} {reach[n][0]:>10.1f}")
+        print(
+            f"{n:<11} {c[-1][0]:>5} {finals[n]:>9.1%} {max(r[-1] for r in c):>9.1%} {c[-1][1]:>8,} "
+            f"{fit[-1]:>9.1f} {reach[n][0]:>10.1f}"
+        )
     for q in ("qdagger50", "qdagger75"):
         if q in reach and "dagger" in reach:
-            print(f"   DAgger / {q} fit CPU time: {reach['dagger'][1] / reach[q][1]:.1f}x for all {runs} runs "
-                  f"(kept policy's accuracy {finals['dagger']:.1%} vs {finals[q]:.1%}), "
-                  f"{reach['dagger'][0] / reach[q][0]:.1f}x to {target:.0%}; Table 6.3: 3.0x (7 h 41 min vs 2 h 32 min)")
+            print(
+                f"   DAgger / {q} fit CPU time: {reach['dagger'][1] / reach[q][1]:.1f}x for all {runs} runs "
+                f"(kept policy's accuracy {finals['dagger']:.1%} vs {finals[q]:.1%}), "
+                f"{reach['dagger'][0] / reach[q][0]:.1f}x to {target:.0%}; Table 6.3: 3.0x (7 h 41 min vs 2 h 32 min)"
+            )
     print()
     return out
 
@@ -211,15 +265,19 @@ def validation(mission, surrogate: Surrogate, n: int, paths: int, seed: int) -> 
     tr_e = sim.uuv.simulate(mission, X[rows], trajectories=True).trajectories
     tr_s = sim.uuv.simulate(mission, X[rows], surrogate=surrogate, trajectories=True).trajectories
     perr = path_error([t[:, 1:3] for t in tr_e], [t[:, 1:3] for t in tr_s])
-    print(f"3. {surrogate.training.get('method', 'surrogate')} against the expert on {a.n:,} valid Sobol scenarios "
-          f"(expert {te:.1f} s, surrogate {ts:.1f} s to simulate them)")
+    print(
+        f"3. {surrogate.training.get('method', 'surrogate')} against the expert on {a.n:,} valid Sobol scenarios "
+        f"(expert {te:.1f} s, surrogate {ts:.1f} s to simulate them)"
+    )
     print(f"{'figure':<46} {'measured':>10} {'dissertation':>13}")
-    for name, value, paper in (("mode accuracy", f"{a.mode_accuracy:.1%}", "84-85%"),
-                               (f"path error (first {len(rows)} runs, m per step)", f"{perr:.1f}", "61-70 m"),
-                               ("boundary accuracy (regions)", f"{a.boundary_accuracy:.1%}", "86.8%"),
-                               ("surrogate pairs the expert straddles", f"{a.straddled:.1%}", "-"),
-                               ("distance error (unit cube)", f"{a.distance_error:.4f}", "0.0096"),
-                               ("mismatches next to a boundary", f"{a.mismatches_near_boundary:.1%}", "95%")):
+    for name, value, paper in (
+        ("mode accuracy", f"{a.mode_accuracy:.1%}", "84-85%"),
+        (f"path error (first {len(rows)} runs, m per step)", f"{perr:.1f}", "61-70 m"),
+        ("boundary accuracy (regions)", f"{a.boundary_accuracy:.1%}", "86.8%"),
+        ("surrogate pairs the expert straddles", f"{a.straddled:.1%}", "-"),
+        ("distance error (unit cube)", f"{a.distance_error:.4f}", "0.0096"),
+        ("mismatches next to a boundary", f"{a.mismatches_near_boundary:.1%}", "95%"),
+    ):
         print(f"{name:<46} {value:>10} {paper:>13}")
     print(f"   boundary pairs: surrogate {a.surrogate_pairs:,}, expert {a.system_pairs:,}")
     print("   confusion (rows: expert mode, columns: surrogate mode)")
@@ -244,15 +302,21 @@ def workflow(mission, surrogate: Surrogate, budget: int, confirm: int, pairs: in
     confirmed_types = {tuple(sorted(p["elements"])) for p in confirmed}
     found = sum(t in expert_types for t in confirmed_types)
     train = int(surrogate.training.get("runs", 0))
-    print(f"4. Workflow (section 6.2.3): S-NDV search of {budget:,} runs on the expert, and on the surrogate "
-          f"followed by {confirm} expert runs on its best {len(candidates)} candidate pairs")
+    print(
+        f"4. Workflow (section 6.2.3): S-NDV search of {budget:,} runs on the expert, and on the surrogate "
+        f"followed by {confirm} expert runs on its best {len(candidates)} candidate pairs"
+    )
     print(f"{'':<34} {'expert runs':>11} {'wall (s)':>9} {'boundary pairs':>15}")
     print(f"{'expert-only search':<34} {budget:>11,} {te:>9.1f} {len(a_e.tree.pairs()[0]):>15,}")
-    print(f"{'surrogate search + confirmation':<34} {train + runs:>11,} {ts:>9.1f} "
-          f"{str(len(confirmed)) + ' confirmed of ' + str(len(candidates)):>15}")
-    print(f"   expert runs saved: {budget / (train + runs):.0f}x ({budget:,} against {train} training + {runs} "
-          f"confirmation); confirmed sub-boundary types the expert-only search also found: "
-          f"{found} of {len(confirmed_types)}\n")
+    print(
+        f"{'surrogate search + confirmation':<34} {train + runs:>11,} {ts:>9.1f} "
+        f"{str(len(confirmed)) + ' confirmed of ' + str(len(candidates)):>15}"
+    )
+    print(
+        f"   expert runs saved: {budget / (train + runs):.0f}x ({budget:,} against {train} training + {runs} "
+        f"confirmation); confirmed sub-boundary types the expert-only search also found: "
+        f"{found} of {len(confirmed_types)}\n"
+    )
 
 
 def main() -> None:
@@ -261,8 +325,12 @@ def main() -> None:
     ap.add_argument("--per", type=int, default=5, help="runs per update")
     ap.add_argument("--epochs", type=int, default=30)
     ap.add_argument("--mixing", type=float, default=0.5, help="DAgger's beta = mixing**iteration")
-    ap.add_argument("--select-runs", type=int, default=25,
-                    help="held-out expert runs choosing the policy kept and its goal threshold")
+    ap.add_argument(
+        "--select-runs",
+        type=int,
+        default=25,
+        help="held-out expert runs choosing the policy kept and its goal threshold",
+    )
     ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
     ap.add_argument("--track", type=int, default=256, help="Sobol scenarios tracking accuracy during training")
     ap.add_argument("--validation", type=int, default=5000)
@@ -281,8 +349,17 @@ def main() -> None:
     if args.load is not None:
         main_surrogate = Surrogate.load(args.load, mission)
     else:
-        trained = learners(mission, args.methods, args.runs, args.per, args.epochs, args.track, args.seed,
-                           args.mixing, args.select_runs)
+        trained = learners(
+            mission,
+            args.methods,
+            args.runs,
+            args.per,
+            args.epochs,
+            args.track,
+            args.seed,
+            args.mixing,
+            args.select_runs,
+        )
         main_surrogate = trained.get("qdagger50", next(iter(trained.values())))[0]
         if args.save is not None:
             main_surrogate.save(args.save)

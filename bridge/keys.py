@@ -60,9 +60,7 @@ def _chunk(value: str, argument: str, *, wildcard: bool = False) -> str:
     if wildcard and value == "*":
         return value
     if not _CHUNK.match(value):
-        raise ValueError(
-            f"{argument}: {value!r} is not a single key chunk (letters, digits, '_', '.', '-')"
-        )
+        raise ValueError(f"{argument}: {value!r} is not a single key chunk (letters, digits, '_', '.', '-')")
     return value
 
 

@@ -229,8 +229,9 @@ class McapLogger(Service):
                     dirty = False
                 next_flush = time.monotonic() + self.flush_interval_s
 
-    def _channel(self, writer: Writer, topic: str, encoding: str, schema: tuple[str, dict] | None
-                 ) -> tuple[int, list[int]]:
+    def _channel(
+        self, writer: Writer, topic: str, encoding: str, schema: tuple[str, dict] | None
+    ) -> tuple[int, list[int]]:
         entry = self._channels.get(topic)
         if entry is None:
             schema_id = 0
@@ -290,9 +291,7 @@ def read_log(path: str | Path) -> list[tuple[str, int, Any]]:
         try:
             reader = make_reader(f)
             reader.get_summary()
-            return [
-                (c.topic, m.log_time, _decode(c, m.data)) for _, c, m in reader.iter_messages(log_time_order=False)
-            ]
+            return [(c.topic, m.log_time, _decode(c, m.data)) for _, c, m in reader.iter_messages(log_time_order=False)]
         except McapError:
             f.seek(0)
         out = []

@@ -108,8 +108,8 @@ class BackSeat:
         elif kind == "OBSTACLE_DISTANCE" and self.beams and msg.frame == mavlink.MAV_FRAME_BODY_FRD:
             scan = self._tick.setdefault("scan", np.full(self.beams, np.nan))
             start = int(round(msg.angle_offset / msg.increment_f)) if msg.increment_f > 0 else 0
-            cm = np.asarray(msg.distances, dtype=float)[:max(0, min(len(msg.distances), self.beams - start))]
-            scan[start:start + cm.size] = cm / 100.0
+            cm = np.asarray(msg.distances, dtype=float)[: max(0, min(len(msg.distances), self.beams - start))]
+            scan[start : start + cm.size] = cm / 100.0
         elif kind in ("LOCAL_POSITION_NED", "ATTITUDE", "BATTERY_STATUS"):
             self._tick[kind] = msg
 
@@ -118,23 +118,32 @@ class BackSeat:
             self._pub.put(json.dumps(self._answered[tick_ms]))
             return
         needed = ("LOCAL_POSITION_NED", "ATTITUDE", "BATTERY_STATUS") + (("scan",) if self.beams else ())
-        if tick_ms < self.last_tick_ms or not all(k in self._tick for k in needed) or (
-                self.beams and np.isnan(self._tick["scan"]).any()):
+        if (
+            tick_ms < self.last_tick_ms
+            or not all(k in self._tick for k in needed)
+            or (self.beams and np.isnan(self._tick["scan"]).any())
+        ):
             return  # a stale or incomplete step (joined mid-step): wait for the next one
         obs = self._observation(tick_ms)
         cmd = self.autonomy.step(obs, self.mission.dt, np.ones(1, dtype=bool))
         vx, vy, vz, yaw = encode_command(cmd.heading, cmd.speed, cmd.surface)
-        answer = {"tick_ms": tick_ms, "vx": float(vx[0]), "vy": float(vy[0]), "vz": float(vz[0]),
-                  "yaw": float(yaw[0])}
+        answer = {"tick_ms": tick_ms, "vx": float(vx[0]), "vy": float(vy[0]), "vz": float(vz[0]), "yaw": float(yaw[0])}
         self._answered = {tick_ms: answer}
         self.last_tick_ms = tick_ms
         self.steps += 1
         self._pub.put(json.dumps(answer))
         a = self.autonomy
-        self._status.put(json.dumps({
-            "tick_ms": tick_ms, "goal": int(a.goal_kind[0]), "returning": bool(a.goal_kind[0] == GOAL_RETURN),
-            "return_reason": int(a.return_reason[0]), "wp_aborted": [bool(v) for v in a.wp_aborted[0]],
-        }))
+        self._status.put(
+            json.dumps(
+                {
+                    "tick_ms": tick_ms,
+                    "goal": int(a.goal_kind[0]),
+                    "returning": bool(a.goal_kind[0] == GOAL_RETURN),
+                    "return_reason": int(a.return_reason[0]),
+                    "wp_aborted": [bool(v) for v in a.wp_aborted[0]],
+                }
+            )
+        )
 
     def _observation(self, tick_ms: int) -> Observation:
         lp, att, bat = self._tick["LOCAL_POSITION_NED"], self._tick["ATTITUDE"], self._tick["BATTERY_STATUS"]
@@ -145,5 +154,15 @@ class BackSeat:
                 cx[0, j], cy[0, j], seen[0, j] = east, north, True
         battery = battery_fraction(self.start_wh, np.array([bat.energy_consumed]), self.mission.vehicle.battery_wh)
         scan = self._tick["scan"][None, :] if self.beams else None
-        return Observation(tick_ms / 1000.0, np.array([float(lp.y)]), np.array([float(lp.x)]),
-                           np.array([float(att.yaw)]), battery, cx, cy, np.zeros((1, k)), seen, scan=scan)
+        return Observation(
+            tick_ms / 1000.0,
+            np.array([float(lp.y)]),
+            np.array([float(lp.x)]),
+            np.array([float(att.yaw)]),
+            battery,
+            cx,
+            cy,
+            np.zeros((1, k)),
+            seen,
+            scan=scan,
+        )

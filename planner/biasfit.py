@@ -49,11 +49,16 @@ SIGMA_ENERGY_WH = 0.05
 #: A weak prior around neutral, one standard deviation per parameter: far wider than any
 #: range day's bias, so informative logs are not pulled, but a direction the logs say
 #: nothing about (one run, one tide phase: current scale against offset) stays put.
-PRIOR_SD = {"speed": 0.5, "current_scale": 1.0, "current_offset": 1.0, "heading": 15.0, "battery": 1.0,
-            "start_time": 3 * 3600.0}
+PRIOR_SD = {
+    "speed": 0.5,
+    "current_scale": 1.0,
+    "current_offset": 1.0,
+    "heading": 15.0,
+    "battery": 1.0,
+    "start_time": 3 * 3600.0,
+}
 #: Parameter scaling for the optimiser (a unit step of each is a comparable effect).
-SCALE = {"speed": 0.1, "current_scale": 0.1, "current_offset": 0.1, "heading": 1.0, "battery": 0.1,
-         "start_time": 600.0}
+SCALE = {"speed": 0.1, "current_scale": 0.1, "current_offset": 0.1, "heading": 1.0, "battery": 0.1, "start_time": 600.0}
 
 
 @dataclass
@@ -122,8 +127,8 @@ def segment_batch(mission: Mission, runs: list, start_times: list[float], length
         st[j], run_index[j] = t0, i
         t[j, :m] = s[k:end, 0]
         hc[j, :m], sc[j, :m] = sp[k:end, 0], sp[k:end, 1]
-        ox[j, :m], oy[j, :m] = s[k + 1:end + 1, 1], s[k + 1:end + 1, 2]
-        oe[j, :m] = (s[k + 1:end + 1, 4] - s[k, 4]) / 36.0
+        ox[j, :m], oy[j, :m] = s[k + 1 : end + 1, 1], s[k + 1 : end + 1, 2]
+        oe[j, :m] = (s[k + 1 : end + 1, 4] - s[k, 4]) / 36.0
         valid[j, :m] = True
     return Segments(start, t, st, hc, sc, ox, oy, oe, valid, run_index)
 
@@ -132,16 +137,35 @@ def replay(mission: Mission, seg: Segments, bias: Bias) -> tuple[np.ndarray, np.
     """Predicted (x, y, energy used) of every segment step under ``bias``: (N, L) each."""
     n, L = seg.t.shape
     spec, dt = mission.vehicle, mission.dt
-    s = VehicleState(seg.start["x"].copy(), seg.start["y"].copy(), seg.start["heading"].copy(),
-                     seg.start["surge"].copy(), seg.start["sway"].copy(), seg.start["yaw_rate"].copy(), np.zeros(n))
+    s = VehicleState(
+        seg.start["x"].copy(),
+        seg.start["y"].copy(),
+        seg.start["heading"].copy(),
+        seg.start["surge"].copy(),
+        seg.start["sway"].copy(),
+        seg.start["yaw_rate"].copy(),
+        np.zeros(n),
+    )
     px, py, pe = np.zeros((n, L)), np.zeros((n, L)), np.zeros((n, L))
     course = np.deg2rad(bias.heading)
     for j in range(L):
         moving = seg.valid[:, j]
-        ce, cn = tidal_current(mission.current, seg.start_time + bias.start_time + seg.t[:, j], bias.current_scale,
-                               bias.current_offset)
-        step_vehicle(s, spec, seg.heading_cmd[:, j], seg.speed_cmd[:, j], ce, cn, dt, moving,
-                     speed_scale=bias.speed, course_bias=course, energy_scale=bias.battery)
+        ce, cn = tidal_current(
+            mission.current, seg.start_time + bias.start_time + seg.t[:, j], bias.current_scale, bias.current_offset
+        )
+        step_vehicle(
+            s,
+            spec,
+            seg.heading_cmd[:, j],
+            seg.speed_cmd[:, j],
+            ce,
+            cn,
+            dt,
+            moving,
+            speed_scale=bias.speed,
+            course_bias=course,
+            energy_scale=bias.battery,
+        )
         px[:, j], py[:, j], pe[:, j] = s.x, s.y, -s.energy_wh
     return px, py, pe
 
@@ -163,8 +187,7 @@ class BiasFit:
     correlation: dict[str, dict[str, float]] = field(default_factory=dict)
 
     def to_dict(self) -> dict:
-        return {name: {"estimate": float(getattr(self.bias, name)), "stderr": self.stderr[name]}
-                for name in BIAS_NAMES}
+        return {name: {"estimate": float(getattr(self.bias, name)), "stderr": self.stderr[name]} for name in BIAS_NAMES}
 
 
 def _residuals(mission: Mission, seg: Segments, bias: Bias) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -176,13 +199,19 @@ def _residuals(mission: Mission, seg: Segments, bias: Bias) -> tuple[np.ndarray,
     return dx, dy, de
 
 
-def fit_bias(mission: Mission, runs: list, start_times: list[float], fit: tuple[str, ...] = BIAS_NAMES,
-             length: int = SEGMENT_STEPS) -> BiasFit:
+def fit_bias(
+    mission: Mission,
+    runs: list,
+    start_times: list[float],
+    fit: tuple[str, ...] = BIAS_NAMES,
+    length: int = SEGMENT_STEPS,
+) -> BiasFit:
     """Fit the parameters ``fit`` (the others stay neutral) to all ``runs`` jointly."""
     seg = segment_batch(mission, runs, start_times, length)
     if not seg.valid.any():
-        raise InputError("LOGS: no replayable flight in the logs (no telemetry steps with set-points); "
-                         "the bias cannot be estimated")
+        raise InputError(
+            "LOGS: no replayable flight in the logs (no telemetry steps with set-points); the bias cannot be estimated"
+        )
     names = [n for n in BIAS_NAMES if n in fit]
     scale = np.array([SCALE[n] for n in names])
     base = np.array([NEUTRAL[n] for n in names])
@@ -236,8 +265,16 @@ def fit_bias(mission: Mission, runs: list, start_times: list[float], fit: tuple[
             stderr[n] = 0.0
     best = to_bias(p)
     dx, dy, de = _residuals(mission, seg, best)
-    return BiasFit(best, stderr, float(np.sqrt(np.mean(dx ** 2 + dy ** 2))) * SIGMA_POSITION_M,
-                   float(np.sqrt(np.mean(de ** 2))) * SIGMA_ENERGY_WH,
-                   float(np.sqrt(np.mean(r0[0] ** 2 + r0[1] ** 2))) * SIGMA_POSITION_M,
-                   int(seg.valid.shape[0]), int(m), int(len(set(seg.run.tolist()))), bool(sol.success),
-                   str(sol.message), correlation)
+    return BiasFit(
+        best,
+        stderr,
+        float(np.sqrt(np.mean(dx**2 + dy**2))) * SIGMA_POSITION_M,
+        float(np.sqrt(np.mean(de**2))) * SIGMA_ENERGY_WH,
+        float(np.sqrt(np.mean(r0[0] ** 2 + r0[1] ** 2))) * SIGMA_POSITION_M,
+        int(seg.valid.shape[0]),
+        int(m),
+        int(len(set(seg.run.tolist()))),
+        bool(sol.success),
+        str(sol.message),
+        correlation,
+    )

@@ -70,20 +70,26 @@ def match_logs(plan: Plan, runs: list[LoggedRun]) -> list[Observation]:
         meta, name = run.meta, run.path.name
         mission = meta.get("mission")
         if mission != plan.mission.name:
-            raise LogError(f"LOG: {name} was flown on mission {mission!r}, but the plan is for "
-                           f"{plan.mission.name!r}; compare a plan only with the logs of its own runs")
+            raise LogError(
+                f"LOG: {name} was flown on mission {mission!r}, but the plan is for "
+                f"{plan.mission.name!r}; compare a plan only with the logs of its own runs"
+            )
         pid = meta.get("plan_id") or ""
         if pid and pid != plan.id:
-            raise LogError(f"LOG: {name} flew plan {pid}, not this plan ({plan.id}); give the plan directory "
-                           "its runs were flown from")
+            raise LogError(
+                f"LOG: {name} flew plan {pid}, not this plan ({plan.id}); give the plan directory "
+                "its runs were flown from"
+            )
         u = np.asarray(meta.get("u", []), dtype=float)
         sid = str(meta.get("scenario_id", ""))
         known = {s["id"]: np.asarray(s["u"], dtype=float) for s in plan.scenarios + plan.variants}
         if sid not in known or u.shape != known[sid].shape or not np.allclose(u, known[sid], rtol=0, atol=1e-9):
             same = [k for k, v in known.items() if u.shape == v.shape and np.allclose(u, v, rtol=0, atol=1e-9)]
             if not same:
-                raise LogError(f"LOG: {name} flew scenario {sid!r}, which is not a scenario of this plan (no plan "
-                               "scenario has its parameters); fly it with rapt-plan run PLAN/plan.json --scenario ID")
+                raise LogError(
+                    f"LOG: {name} flew scenario {sid!r}, which is not a scenario of this plan (no plan "
+                    "scenario has its parameters); fly it with rapt-plan run PLAN/plan.json --scenario ID"
+                )
             sid = same[0]
         out.append(Observation(run, sid, known[sid]))
     return out
@@ -104,12 +110,22 @@ def _path_error(track: np.ndarray, pred: np.ndarray | None) -> dict | None:
         return None
     n = min(track.shape[0], pred.shape[0])
     d = np.hypot(track[:n, 1] - pred[:n, 1], track[:n, 2] - pred[:n, 2])
-    return {"rms_m": float(np.sqrt(np.mean(d ** 2))), "max_m": float(d.max()), "compared_s": float(track[n - 1, 0]),
-            "duration_observed_s": float(track[-1, 0]), "duration_predicted_s": float(pred[-1, 0])}
+    return {
+        "rms_m": float(np.sqrt(np.mean(d**2))),
+        "max_m": float(d.max()),
+        "compared_s": float(track[n - 1, 0]),
+        "duration_observed_s": float(track[-1, 0]),
+        "duration_predicted_s": float(pred[-1, 0]),
+    }
 
 
-def compare(plan_path: str | Path, log_paths: Sequence[str | Path], out_dir: str | Path | None = None,
-            cfg: CompareConfig | None = None, progress: Callable[[str], None] | None = None) -> dict:
+def compare(
+    plan_path: str | Path,
+    log_paths: Sequence[str | Path],
+    out_dir: str | Path | None = None,
+    cfg: CompareConfig | None = None,
+    progress: Callable[[str], None] | None = None,
+) -> dict:
     """Run the comparison (see the module docstring); returns what ``comparison.json`` holds.
 
     An ``out_dir`` whose ``comparison.json`` would overwrite an input is refused first,
@@ -142,8 +158,16 @@ def compare(plan_path: str | Path, log_paths: Sequence[str | Path], out_dir: str
     result = {
         "schema": COMPARISON_SCHEMA,
         "plan": {"id": plan.id, "path": str(plan.path), "mission": m.name, "mission_file": str(plan.mission_file)},
-        "logs": [{"path": str(o.run.path), "scenario": o.sid, "messages": o.run.messages,
-                  "complete": bool(o.run.complete_file and o.run.has_end), "lost": o.run.problems} for o in obs],
+        "logs": [
+            {
+                "path": str(o.run.path),
+                "scenario": o.sid,
+                "messages": o.run.messages,
+                "complete": bool(o.run.complete_file and o.run.has_end),
+                "lost": o.run.problems,
+            }
+            for o in obs
+        ],
         "bias": fit.to_dict(),
         "bias_fit": _bias_fit(fit, cfg),
         "scenarios": scen_rows,
@@ -201,8 +225,10 @@ def _predict_plan(plan: Plan) -> tuple[list[str], np.ndarray, dict[str, int], si
         planned = s.get("predicted", {}).get("mode")
         got = MODE_NAMES[pred.modes[row_of[s["id"]]]] if pred.valid[row_of[s["id"]]] else "invalid"
         if planned and planned != got:
-            raise StudyMismatchError(f"PLAN: scenario {s['id']} is predicted {got} by {plan.mission_file} but the plan says "
-                             f"{planned}; the mission file changed since the plan was made — regenerate the plan")
+            raise StudyMismatchError(
+                f"PLAN: scenario {s['id']} is predicted {got} by {plan.mission_file} but the plan says "
+                f"{planned}; the mission file changed since the plan was made — regenerate the plan"
+            )
     return ids, U_plan, row_of, pred
 
 
@@ -224,22 +250,28 @@ def _scenario_rows(m, obs: list[Observation], runs: _PlanRuns) -> list[dict]:
         p_traj, c_traj = runs.trajectories(o.sid)
         sub = {}
         for c in sorted(set(_level_cols(m, 1)) | {0, 1}):
-            sub[names[c]] = {"predicted": _f(pred.scores[k, c]), "observed": _f(o.scores[c]) if o.scores is not None
-                             else None, "corrected": _f(corr.scores[k, c])}
-        scen_rows.append({
-            "id": o.sid, "log": o.run.path.name,
-            "predicted_mode": MODE_NAMES[pred.modes[k]],
-            "observed_mode": o.mode,
-            "corrected_mode": MODE_NAMES[corr.modes[k]],
-            "path_error_m": _round(_path_error(o.run.track, p_traj), "rms_m"),
-            "path_error": _path_error(o.run.track, p_traj),
-            "path_error_corrected_m": _round(_path_error(o.run.track, c_traj), "rms_m"),
-            "ended": o.run.ended or None,
-            "steps": int(o.run.steps.shape[0]),
-            "log_complete": bool(o.run.complete_file and o.run.has_end),
-            "lost": list(o.run.problems),
-            "sub_scores": sub,
-        })
+            sub[names[c]] = {
+                "predicted": _f(pred.scores[k, c]),
+                "observed": _f(o.scores[c]) if o.scores is not None else None,
+                "corrected": _f(corr.scores[k, c]),
+            }
+        scen_rows.append(
+            {
+                "id": o.sid,
+                "log": o.run.path.name,
+                "predicted_mode": MODE_NAMES[pred.modes[k]],
+                "observed_mode": o.mode,
+                "corrected_mode": MODE_NAMES[corr.modes[k]],
+                "path_error_m": _round(_path_error(o.run.track, p_traj), "rms_m"),
+                "path_error": _path_error(o.run.track, p_traj),
+                "path_error_corrected_m": _round(_path_error(o.run.track, c_traj), "rms_m"),
+                "ended": o.run.ended or None,
+                "steps": int(o.run.steps.shape[0]),
+                "log_complete": bool(o.run.complete_file and o.run.has_end),
+                "lost": list(o.run.problems),
+                "sub_scores": sub,
+            }
+        )
     return scen_rows
 
 
@@ -251,14 +283,17 @@ def _mode_agreement(scen_rows: list[dict]) -> dict:
             by_sid.setdefault(r["id"], []).append(r)
     agree_u = [all(r["predicted_mode"] == r["observed_mode"] for r in rs) for rs in by_sid.values()]
     agree_c = [all(r["corrected_mode"] == r["observed_mode"] for r in rs) for rs in by_sid.values()]
-    return {"uncorrected": float(np.mean(agree_u)) if agree_u else None,
-            "corrected": float(np.mean(agree_c)) if agree_c else None,
-            "scenarios": len(by_sid),
-            "runs_without_end": [r["log"] for r in scen_rows if r["observed_mode"] is None]}
+    return {
+        "uncorrected": float(np.mean(agree_u)) if agree_u else None,
+        "corrected": float(np.mean(agree_c)) if agree_c else None,
+        "scenarios": len(by_sid),
+        "runs_without_end": [r["log"] for r in scen_rows if r["observed_mode"] is None],
+    }
 
 
-def _pair_rows(plan: Plan, obs: list[Observation], runs: _PlanRuns, bias, cfg: CompareConfig
-               ) -> tuple[list[dict], list[dict]]:
+def _pair_rows(
+    plan: Plan, obs: list[Observation], runs: _PlanRuns, bias, cfg: CompareConfig
+) -> tuple[list[dict], list[dict]]:
     """Per plan pair: did it straddle its boundary as observed and under the fitted bias; and an
     adjusted "M" scenario proposed for each side the bias moved."""
     m, pred, corr, row_of = plan.mission, runs.pred, runs.corr, runs.row_of
@@ -276,15 +311,20 @@ def _pair_rows(plan: Plan, obs: list[Observation], runs: _PlanRuns, bias, cfg: C
         for o in obs:
             if o.sid in (a, b) and o.mode is not None and o.scores is not None:  # a mode comes with scores
                 observed.setdefault(o.sid, o.scores[cols])
-        row = {"id": pair["id"], "scenarios": [a, b], "elements": [names[c] for c in cols],
-               "predicted_modes": [MODE_NAMES[pred.modes[ka]], MODE_NAMES[pred.modes[kb]]],
-               "observed_modes": [_obs_mode(obs, a), _obs_mode(obs, b)],
-               "corrected_modes": [MODE_NAMES[corr.modes[ka]], MODE_NAMES[corr.modes[kb]]],
-               "remaining": [s for s in (a, b) if s not in flown]}
+        row = {
+            "id": pair["id"],
+            "scenarios": [a, b],
+            "elements": [names[c] for c in cols],
+            "predicted_modes": [MODE_NAMES[pred.modes[ka]], MODE_NAMES[pred.modes[kb]]],
+            "observed_modes": [_obs_mode(obs, a), _obs_mode(obs, b)],
+            "corrected_modes": [MODE_NAMES[corr.modes[ka]], MODE_NAMES[corr.modes[kb]]],
+            "remaining": [s for s in (a, b) if s not in flown],
+        }
         if a in observed and b in observed:
             row["observed_straddles"] = bool(np.any(observed[a] != observed[b]))
-            row["observed_as_predicted"] = bool(np.array_equal(observed[a], intended[a])
-                                                and np.array_equal(observed[b], intended[b]))
+            row["observed_as_predicted"] = bool(
+                np.array_equal(observed[a], intended[a]) and np.array_equal(observed[b], intended[b])
+            )
         else:
             row["observed_straddles"] = row["observed_as_predicted"] = None
         moved = [s for s in (a, b) if not np.array_equal(biased[s], intended[s])]
@@ -292,9 +332,14 @@ def _pair_rows(plan: Plan, obs: list[Observation], runs: _PlanRuns, bias, cfg: C
         row["flagged"] = bool(moved)
         row["moved_sides"] = moved
         if moved:
-            why = ("both sides now show the same " + ", ".join(names[c] for c in cols)
-                   if not row["straddles_under_bias"] else
-                   "side(s) " + ", ".join(moved) + " no longer show their predicted " + ", ".join(names[c] for c in cols))
+            why = (
+                "both sides now show the same " + ", ".join(names[c] for c in cols)
+                if not row["straddles_under_bias"]
+                else "side(s) "
+                + ", ".join(moved)
+                + " no longer show their predicted "
+                + ", ".join(names[c] for c in cols)
+            )
             row["reason"] = why
             for s in moved:
                 partner = b if s == a else a
@@ -303,30 +348,67 @@ def _pair_rows(plan: Plan, obs: list[Observation], runs: _PlanRuns, bias, cfg: C
     return pair_rows, proposals
 
 
-def _proposal(m, runs: _PlanRuns, pair: dict, s: str, partner: str, cols: list[int], intended: np.ndarray,
-              biased: np.ndarray, bias, sens: np.ndarray, cfg: CompareConfig) -> dict:
+def _proposal(
+    m,
+    runs: _PlanRuns,
+    pair: dict,
+    s: str,
+    partner: str,
+    cols: list[int],
+    intended: np.ndarray,
+    biased: np.ndarray,
+    bias,
+    sens: np.ndarray,
+    cfg: CompareConfig,
+) -> dict:
     """The adjusted scenario ``<s>M`` that shows side ``s``'s intended scores again under the bias, if one does."""
     names, U_plan = runs.pred.names, runs.U
     k = runs.row_of[s]
-    found = adjust_for_bias(m, U_plan[k], U_plan[runs.row_of[partner]], cols, intended, bias, sens,
-                            dithers=cfg.dithers, p_target=cfg.p_target, seed=cfg.seed * 1000 + k)
-    prop = {"id": f"{s}M", "variant_of": s, "pair": pair["id"],
-            "intended": {names[c]: _f(v) for c, v in zip(cols, intended)},
-            "under_bias": {names[c]: _f(v) for c, v in zip(cols, biased)}}
+    found = adjust_for_bias(
+        m,
+        U_plan[k],
+        U_plan[runs.row_of[partner]],
+        cols,
+        intended,
+        bias,
+        sens,
+        dithers=cfg.dithers,
+        p_target=cfg.p_target,
+        seed=cfg.seed * 1000 + k,
+    )
+    prop = {
+        "id": f"{s}M",
+        "variant_of": s,
+        "pair": pair["id"],
+        "intended": {names[c]: _f(v) for c, v in zip(cols, intended)},
+        "under_bias": {names[c]: _f(v) for c, v in zip(cols, biased)},
+    }
     if found is None:
-        prop.update(found=False, note="no move of up to 0.3 (unit cube) along the three most sensitive "
-                                      "parameters restores it; choose a new pair")
+        prop.update(
+            found=False,
+            note="no move of up to 0.3 (unit cube) along the three most sensitive "
+            "parameters restores it; choose a new pair",
+        )
     else:
         v = np.array(found["u"])
         c = found["coordinate"]
         pname = m.parameter_of(c)
         before = m.space.decode(U_plan[k][None, :])[0][pname]
         after = m.space.decode(v[None, :])[0][pname]
-        prop.update(found=True, u=found["u"], parameters=jsonable(m.space.decode(v[None, :])[0]),
-                    moved={"parameter": pname, "unit_step": found["unit_step"], "from": json_value(before),
-                           "to": json_value(after)},
-                    predicted_mode_under_bias=found["mode"], p_intended=found["p_intended"],
-                    robust=found["robust"])
+        prop.update(
+            found=True,
+            u=found["u"],
+            parameters=jsonable(m.space.decode(v[None, :])[0]),
+            moved={
+                "parameter": pname,
+                "unit_step": found["unit_step"],
+                "from": json_value(before),
+                "to": json_value(after),
+            },
+            predicted_mode_under_bias=found["mode"],
+            p_intended=found["p_intended"],
+            robust=found["robust"],
+        )
     return prop
 
 
@@ -334,19 +416,34 @@ def _remaining(plan: Plan, obs: list[Observation], runs: _PlanRuns) -> list[dict
     """The plan's scenarios not flown yet, in run order, with their modes as planned and under the bias."""
     pred, corr, row_of = runs.pred, runs.corr, runs.row_of
     flown = {o.sid for o in obs}
-    return [{"id": sid, "predicted_mode": MODE_NAMES[pred.modes[row_of[sid]]],
-             "corrected_mode": MODE_NAMES[corr.modes[row_of[sid]]],
-             "changed": bool(pred.modes[row_of[sid]] != corr.modes[row_of[sid]])}
-            for sid in plan.data.get("run_order", runs.ids) if sid in row_of and sid not in flown]
+    return [
+        {
+            "id": sid,
+            "predicted_mode": MODE_NAMES[pred.modes[row_of[sid]]],
+            "corrected_mode": MODE_NAMES[corr.modes[row_of[sid]]],
+            "changed": bool(pred.modes[row_of[sid]] != corr.modes[row_of[sid]]),
+        }
+        for sid in plan.data.get("run_order", runs.ids)
+        if sid in row_of and sid not in flown
+    ]
 
 
 def _bias_fit(fit, cfg: CompareConfig) -> dict:
     """How the bias was fitted: units, neutral values, residuals, convergence."""
-    return {"units": dict(BIAS_UNITS), "neutral": dict(NEUTRAL), "fitted": list(cfg.fit),
-            "rms_position_m": fit.rms_position_m, "rms_position_unbiased_m": fit.rms_position_neutral_m,
-            "rms_energy_wh": fit.rms_energy_wh, "segments": fit.segments, "residuals": fit.residuals,
-            "runs": fit.runs, "converged": fit.success, "message": fit.message,
-            "correlation": fit.correlation}
+    return {
+        "units": dict(BIAS_UNITS),
+        "neutral": dict(NEUTRAL),
+        "fitted": list(cfg.fit),
+        "rms_position_m": fit.rms_position_m,
+        "rms_position_unbiased_m": fit.rms_position_neutral_m,
+        "rms_energy_wh": fit.rms_energy_wh,
+        "segments": fit.segments,
+        "residuals": fit.residuals,
+        "runs": fit.runs,
+        "converged": fit.success,
+        "message": fit.message,
+        "correlation": fit.correlation,
+    }
 
 
 def _write(result: dict, plan: Plan, obs: list[Observation], runs: _PlanRuns, out_dir: Path) -> None:

@@ -62,8 +62,11 @@ def _differ(row: dict) -> str:
 
 def _rects(ax, rects: np.ndarray, face: str, edge: str, alpha: float, label: str | None = None) -> None:
     for i, (x0, x1, y0, y1) in enumerate(np.asarray(rects).reshape(-1, 4)):
-        ax.add_patch(Rectangle((x0, y0), x1 - x0, y1 - y0, facecolor=face, edgecolor=edge, alpha=alpha,
-                               label=label if i == 0 else None))
+        ax.add_patch(
+            Rectangle(
+                (x0, y0), x1 - x0, y1 - y0, facecolor=face, edgecolor=edge, alpha=alpha, label=label if i == 0 else None
+            )
+        )
 
 
 def _map(plan, sid: str, track: np.ndarray, predicted, corrected, row: dict, path: Path) -> None:
@@ -71,8 +74,9 @@ def _map(plan, sid: str, track: np.ndarray, predicted, corrected, row: dict, pat
     scen = make_scenarios(m, plan.u(sid)[None, :])
     fig, ax = plt.subplots(figsize=(5.2, 6.0))
     op = m.operational_area
-    ax.add_patch(Rectangle((op.x - op.width / 2, op.y - op.height / 2), op.width, op.height, fill=False,
-                           edgecolor="#333"))
+    ax.add_patch(
+        Rectangle((op.x - op.width / 2, op.y - op.height / 2), op.width, op.height, fill=False, edgecolor="#333")
+    )
     _rects(ax, scen.area_rect[0], "#4daf4a", "#2b7a28", 0.3, "mission area")
     if m.transmission is not None:
         _rects(ax, scen.tx_rect[0], "#80b1d3", "#377eb8", 0.3, "transmission")
@@ -83,13 +87,28 @@ def _map(plan, sid: str, track: np.ndarray, predicted, corrected, row: dict, pat
         ax.plot(w[:, 0], w[:, 1], "k^", ms=6, label="waypoint")
     ax.plot(*m.recovery, "ks", ms=6, label="recovery")
     if predicted is not None:
-        ax.plot(predicted[:, 1], predicted[:, 2], "--", color="#555", lw=1.2, label=f"predicted ({row['predicted_mode']})")
+        ax.plot(
+            predicted[:, 1], predicted[:, 2], "--", color="#555", lw=1.2, label=f"predicted ({row['predicted_mode']})"
+        )
     if track.shape[0]:
-        ax.plot(track[:, 1], track[:, 2], "-", color="#d62728", lw=2.4, alpha=0.55,
-                label=f"observed ({row['observed_mode'] or 'end not logged'})")
+        ax.plot(
+            track[:, 1],
+            track[:, 2],
+            "-",
+            color="#d62728",
+            lw=2.4,
+            alpha=0.55,
+            label=f"observed ({row['observed_mode'] or 'end not logged'})",
+        )
     if corrected is not None:  # on top: where it overlays the observed track, the bias explains the run
-        ax.plot(corrected[:, 1], corrected[:, 2], ":", color="#1f4e9c", lw=1.4,
-                label=f"bias-corrected ({row['corrected_mode']})")
+        ax.plot(
+            corrected[:, 1],
+            corrected[:, 2],
+            ":",
+            color="#1f4e9c",
+            lw=1.4,
+            label=f"bias-corrected ({row['corrected_mode']})",
+        )
     ax.set_aspect("equal")
     ax.set_xlim(op.x - op.width / 2 - 20, op.x + op.width / 2 + 20)
     ax.set_ylim(op.y - op.height / 2 - 20, op.y + op.height / 2 + 20)
@@ -120,52 +139,69 @@ def _bias_figure(result: dict, path: Path) -> None:
     plt.close(fig)
 
 
-def write_comparison_report(result: dict, plan, tracks: list[tuple[str, np.ndarray]], traj: dict,
-                            out_dir: Path) -> Path:
+def write_comparison_report(
+    result: dict, plan, tracks: list[tuple[str, np.ndarray]], traj: dict, out_dir: Path
+) -> Path:
     """Write ``comparison.html`` and its figures into ``out_dir``; returns the page's path."""
     out_dir = Path(out_dir)
     fig_dir = out_dir / FIGURES
     fig_dir.mkdir(parents=True, exist_ok=True)
-    parts = [f"<!doctype html><html><head><meta charset='utf-8'><title>RAPT comparison: {_e(result['plan']['mission'])}"
-             f"</title><style>{CSS}</style></head><body>",
-             f"<h1>Range day against plan {_e(result['plan']['id'])} ({_e(result['plan']['mission'])})</h1>",
-             f"<p>{len(result['logs'])} log(s) of plan <code>{_e(result['plan']['path'])}</code>.</p>"]
+    parts = [
+        f"<!doctype html><html><head><meta charset='utf-8'><title>RAPT comparison: {_e(result['plan']['mission'])}"
+        f"</title><style>{CSS}</style></head><body>",
+        f"<h1>Range day against plan {_e(result['plan']['id'])} ({_e(result['plan']['mission'])})</h1>",
+        f"<p>{len(result['logs'])} log(s) of plan <code>{_e(result['plan']['path'])}</code>.</p>",
+    ]
     lost = [(lg["path"], p) for lg in result["logs"] for p in lg["lost"]]
     if lost:
-        parts.append("<div class='warn'><b>What the logs lost</b><ul>"
-                     + "".join(f"<li><code>{_e(Path(p).name)}</code>: {_e(msg)}</li>" for p, msg in lost)
-                     + "</ul></div>")
+        parts.append(
+            "<div class='warn'><b>What the logs lost</b><ul>"
+            + "".join(f"<li><code>{_e(Path(p).name)}</code>: {_e(msg)}</li>" for p, msg in lost)
+            + "</ul></div>"
+        )
     # bias
     _bias_figure(result, fig_dir / "bias.png")
     fitd = result["bias_fit"]
-    parts.append("<h2>Execution bias</h2><table><tr><th class='l'>parameter</th><th>estimate</th><th>std. error</th>"
-                 "<th>neutral</th><th class='l'>unit</th></tr>")
+    parts.append(
+        "<h2>Execution bias</h2><table><tr><th class='l'>parameter</th><th>estimate</th><th>std. error</th>"
+        "<th>neutral</th><th class='l'>unit</th></tr>"
+    )
     for n, v in result["bias"].items():
         se = "not identifiable" if v["stderr"] is None else f"{v['stderr']:.2g}"
-        parts.append(f"<tr><td class='l'>{_e(n)}</td><td>{v['estimate']:.4g}</td><td>{se}</td>"
-                     f"<td>{fitd['neutral'][n]:g}</td><td class='l'>{_e(fitd['units'][n])}</td></tr>")
-    parts.append(f"</table><p>Fitted on {fitd['runs']} run(s), {fitd['segments']} open-loop segments: position "
-                 f"residual {fitd['rms_position_m']:.3g} m RMS (unbiased model: {fitd['rms_position_unbiased_m']:.3g} m), "
-                 f"energy residual {fitd['rms_energy_wh']:.3g} Wh RMS.</p><img src='{FIGURES}/bias.png' alt='bias'>")
+        parts.append(
+            f"<tr><td class='l'>{_e(n)}</td><td>{v['estimate']:.4g}</td><td>{se}</td>"
+            f"<td>{fitd['neutral'][n]:g}</td><td class='l'>{_e(fitd['units'][n])}</td></tr>"
+        )
+    parts.append(
+        f"</table><p>Fitted on {fitd['runs']} run(s), {fitd['segments']} open-loop segments: position "
+        f"residual {fitd['rms_position_m']:.3g} m RMS (unbiased model: {fitd['rms_position_unbiased_m']:.3g} m), "
+        f"energy residual {fitd['rms_energy_wh']:.3g} Wh RMS.</p><img src='{FIGURES}/bias.png' alt='bias'>"
+    )
     ag = result["mode_agreement"]
 
     def pct(v: float | None) -> str:
         return "–" if v is None else f"{v:.0%}"
 
-    parts.append(f"<h2>Mode agreement</h2><p>Predicted modes matched the observed ones on <b>{pct(ag['uncorrected'])}"
-                 f"</b> of {ag['scenarios']} scenario(s) as planned, and on <b>{pct(ag['corrected'])}</b> with the "
-                 "fitted bias applied.</p>")
+    parts.append(
+        f"<h2>Mode agreement</h2><p>Predicted modes matched the observed ones on <b>{pct(ag['uncorrected'])}"
+        f"</b> of {ag['scenarios']} scenario(s) as planned, and on <b>{pct(ag['corrected'])}</b> with the "
+        "fitted bias applied.</p>"
+    )
     # scenarios
-    parts.append("<h2>Scenarios</h2><table><tr><th class='l'>scenario</th><th class='l'>log</th><th>predicted</th>"
-                 "<th>observed</th><th>corrected</th><th>path error (m)</th><th>corrected (m)</th>"
-                 "<th class='l'>ended</th><th class='l'>sub-scores not as predicted</th></tr>")
+    parts.append(
+        "<h2>Scenarios</h2><table><tr><th class='l'>scenario</th><th class='l'>log</th><th>predicted</th>"
+        "<th>observed</th><th>corrected</th><th>path error (m)</th><th>corrected (m)</th>"
+        "<th class='l'>ended</th><th class='l'>sub-scores not as predicted</th></tr>"
+    )
     for r in result["scenarios"]:
         cls = "ok" if r["observed_mode"] == r["predicted_mode"] else "bad"
-        parts.append(f"<tr><td class='l'>{_e(r['id'])}</td><td class='l'>{_e(r['log'])}</td>"
-                     f"<td>{_e(r['predicted_mode'])}</td><td class='{cls}'>{_e(r['observed_mode'] or '–')}</td>"
-                     f"<td>{_e(r['corrected_mode'])}</td><td>{_num(r['path_error_m'])}</td>"
-                     f"<td>{_num(r['path_error_corrected_m'])}</td><td class='l'>{_e(r['ended'] or 'not in log')}</td>"
-                     f"<td class='l'>{_e(_differ(r))}</td></tr>")
+        parts.append(
+            f"<tr><td class='l'>{_e(r['id'])}</td><td class='l'>{_e(r['log'])}</td>"
+            f"<td>{_e(r['predicted_mode'])}</td><td class='{cls}'>{_e(r['observed_mode'] or '–')}</td>"
+            f"<td>{_e(r['corrected_mode'])}</td><td>{_num(r['path_error_m'])}</td>"
+            f"<td>{_num(r['path_error_corrected_m'])}</td><td class='l'>{_e(r['ended'] or 'not in log')}</td>"
+            f"<td class='l'>{_e(_differ(r))}</td></tr>"
+        )
     parts.append("</table>")
     for i, (sid, track) in enumerate(tracks):
         row = result["scenarios"][i]
@@ -174,42 +210,56 @@ def write_comparison_report(result: dict, plan, tracks: list[tuple[str, np.ndarr
         _map(plan, sid, track, p, c, row, fig_dir / name)
         parts.append(f"<img src='{FIGURES}/{_e(name)}' alt='{_e(sid)}' style='width:48%'>")
     # pairs
-    parts.append("<h2>Pairs</h2><table><tr><th>pair</th><th class='l'>scenarios</th><th class='l'>elements</th>"
-                 "<th>predicted</th><th>observed</th><th>straddled on the water</th><th>under the bias</th></tr>")
+    parts.append(
+        "<h2>Pairs</h2><table><tr><th>pair</th><th class='l'>scenarios</th><th class='l'>elements</th>"
+        "<th>predicted</th><th>observed</th><th>straddled on the water</th><th>under the bias</th></tr>"
+    )
 
     def yn(v: bool | None) -> str:
         return "–" if v is None else ("yes" if v else "<span class='bad'>no</span>")
 
     for p in result["pairs"]:
-        parts.append(f"<tr><td>{_e(p['id'])}</td><td class='l'>{_e(' / '.join(p['scenarios']))}</td>"
-                     f"<td class='l'>{_e(', '.join(p['elements']))}</td><td>{_e(' / '.join(p['predicted_modes']))}</td>"
-                     f"<td>{_e(' / '.join(m or '–' for m in p['observed_modes']))}</td>"
-                     f"<td>{yn(p['observed_straddles'])}</td>"
-                     f"<td>{'<span class=bad>flagged: ' + _e(p.get('reason')) + '</span>' if p['flagged'] else 'holds'}"
-                     "</td></tr>")
+        parts.append(
+            f"<tr><td>{_e(p['id'])}</td><td class='l'>{_e(' / '.join(p['scenarios']))}</td>"
+            f"<td class='l'>{_e(', '.join(p['elements']))}</td><td>{_e(' / '.join(p['predicted_modes']))}</td>"
+            f"<td>{_e(' / '.join(m or '–' for m in p['observed_modes']))}</td>"
+            f"<td>{yn(p['observed_straddles'])}</td>"
+            f"<td>{'<span class=bad>flagged: ' + _e(p.get('reason')) + '</span>' if p['flagged'] else 'holds'}"
+            "</td></tr>"
+        )
     parts.append("</table><h2>Re-plan: adjusted scenarios for the next runs</h2>")
     if not result["proposals"]:
         parts.append("<p>Every pair still straddles its boundary under the fitted bias; no adjustment needed.</p>")
     else:
-        parts.append("<table><tr><th class='l'>new</th><th class='l'>replaces</th><th class='l'>move</th>"
-                     "<th>mode under bias</th><th>P(intended) in dithers</th></tr>")
+        parts.append(
+            "<table><tr><th class='l'>new</th><th class='l'>replaces</th><th class='l'>move</th>"
+            "<th>mode under bias</th><th>P(intended) in dithers</th></tr>"
+        )
         for q in result["proposals"]:
             if q["found"]:
                 mv = q["moved"]
                 move = f"{mv['parameter']}: {_num(mv['from'], 5)} → {_num(mv['to'], 5)}"
-                parts.append(f"<tr><td class='l'>{_e(q['id'])}</td><td class='l'>{_e(q['variant_of'])}</td>"
-                             f"<td class='l'>{_e(move)}</td><td>{_e(q['predicted_mode_under_bias'])}</td>"
-                             f"<td>{_num(q['p_intended'])}{'' if q['robust'] else ' (fragile)'}</td></tr>")
+                parts.append(
+                    f"<tr><td class='l'>{_e(q['id'])}</td><td class='l'>{_e(q['variant_of'])}</td>"
+                    f"<td class='l'>{_e(move)}</td><td>{_e(q['predicted_mode_under_bias'])}</td>"
+                    f"<td>{_num(q['p_intended'])}{'' if q['robust'] else ' (fragile)'}</td></tr>"
+                )
             else:
-                parts.append(f"<tr><td class='l'>–</td><td class='l'>{_e(q['variant_of'])}</td>"
-                             f"<td class='l' colspan=3>{_e(q['note'])}</td></tr>")
+                parts.append(
+                    f"<tr><td class='l'>–</td><td class='l'>{_e(q['variant_of'])}</td>"
+                    f"<td class='l' colspan=3>{_e(q['note'])}</td></tr>"
+                )
         parts.append("</table>")
     if result["remaining"]:
-        parts.append("<h3>Scenarios not flown yet, re-predicted</h3><table><tr><th class='l'>scenario</th>"
-                     "<th>as planned</th><th>under the bias</th></tr>")
+        parts.append(
+            "<h3>Scenarios not flown yet, re-predicted</h3><table><tr><th class='l'>scenario</th>"
+            "<th>as planned</th><th>under the bias</th></tr>"
+        )
         for r in result["remaining"]:
-            parts.append(f"<tr><td class='l'>{_e(r['id'])}</td><td>{_e(r['predicted_mode'])}</td>"
-                         f"<td class='{'bad' if r['changed'] else 'ok'}'>{_e(r['corrected_mode'])}</td></tr>")
+            parts.append(
+                f"<tr><td class='l'>{_e(r['id'])}</td><td>{_e(r['predicted_mode'])}</td>"
+                f"<td class='{'bad' if r['changed'] else 'ok'}'>{_e(r['corrected_mode'])}</td></tr>"
+            )
         parts.append("</table>")
     parts.append("</body></html>")
     page = out_dir / REPORT_NAME

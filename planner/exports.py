@@ -64,8 +64,9 @@ def _scenario(mission: Mission, u) -> Scenarios:
     """The decoded scenario of row ``u``; raises if the row is malformed or the scenario invalid."""
     row = np.asarray(u, dtype=float)
     if row.shape != (mission.dim,):
-        raise InputError(f"u: expected a unit-cube row of shape ({mission.dim},) for mission "
-                         f"'{mission.name}', got {row.shape}")
+        raise InputError(
+            f"u: expected a unit-cube row of shape ({mission.dim},) for mission '{mission.name}', got {row.shape}"
+        )
     if not np.all(np.isfinite(row)) or np.any(row < 0.0) or np.any(row > 1.0):
         raise InputError("u: values must be finite and inside the unit cube [0, 1]")
     scen = make_scenarios(mission, row[None, :])
@@ -81,8 +82,10 @@ def _centre(rect: np.ndarray) -> tuple[float, float]:
 
 def _items(mission: Mission, scen: Scenarios) -> list[_Item]:
     """Mission items in flying order (see the module docstring)."""
-    items = [_Item(MAV_CMD_NAV_WAYPOINT, (0.0, float(mission.waypoint_radius), 0.0, 0.0), float(x), float(y))
-             for x, y in scen.waypoints]
+    items = [
+        _Item(MAV_CMD_NAV_WAYPOINT, (0.0, float(mission.waypoint_radius), 0.0, 0.0), float(x), float(y))
+        for x, y in scen.waypoints
+    ]
     for a in scen.order[0].tolist():
         x, y = _centre(scen.area_rect[0, a])
         items.append(_Item(MAV_CMD_NAV_LOITER_TIME, (float(scen.area_dwell[0, a]), 0.0, 0.0, 0.0), x, y))
@@ -139,17 +142,19 @@ def qgc_plan(mission: Mission, u) -> dict[str, Any]:
 
     items = []
     for seq, it in enumerate(_items(mission, scen), start=1):
-        items.append({
-            "AMSLAltAboveTerrain": None,
-            "Altitude": alt,
-            "AltitudeMode": QGC_ALT_MODE_RELATIVE,
-            "autoContinue": True,
-            "command": it.command,
-            "doJumpId": seq,
-            "frame": MAV_FRAME_GLOBAL_RELATIVE_ALT,
-            "params": [_num(p) for p in it.params] + latlon(it.x, it.y) + [alt],
-            "type": "SimpleItem",
-        })
+        items.append(
+            {
+                "AMSLAltAboveTerrain": None,
+                "Altitude": alt,
+                "AltitudeMode": QGC_ALT_MODE_RELATIVE,
+                "autoContinue": True,
+                "command": it.command,
+                "doJumpId": seq,
+                "frame": MAV_FRAME_GLOBAL_RELATIVE_ALT,
+                "params": [_num(p) for p in it.params] + latlon(it.x, it.y) + [alt],
+                "type": "SimpleItem",
+            }
+        )
 
     def polygon(vertices: np.ndarray, inclusion: bool) -> dict[str, Any]:
         cw = _oriented(vertices, clockwise=True)
@@ -197,8 +202,10 @@ def wpl(mission: Mission, u) -> str:
 def _check_track(track) -> np.ndarray:
     tr = np.asarray(track, dtype=float)
     if tr.ndim != 2 or tr.shape[1] != len(TRAJECTORY_FIELDS) or tr.shape[0] < 2:
-        raise InputError(f"track: expected a trajectory of shape (steps >= 2, {len(TRAJECTORY_FIELDS)}) "
-                         f"with columns {TRAJECTORY_FIELDS}, got {tr.shape}")
+        raise InputError(
+            f"track: expected a trajectory of shape (steps >= 2, {len(TRAJECTORY_FIELDS)}) "
+            f"with columns {TRAJECTORY_FIELDS}, got {tr.shape}"
+        )
     if not np.all(np.isfinite(tr[:, [_T, _X, _Y]])):
         raise InputError("track: t, x and y must be finite")
     return tr
@@ -227,23 +234,47 @@ def geojson(mission: Mission, u, track=None) -> dict[str, Any]:
         ring = lonlat(_oriented(vertices, clockwise=False))
         return feature({"type": "Polygon", "coordinates": [ring + [ring[0]]]}, kind, name, **extra)
 
-    feats = [point(*mission.launch, "launch", "launch"),
-             point(*mission.recovery, "recovery", "recovery", radius_m=float(mission.recovery_radius))]
+    feats = [
+        point(*mission.launch, "launch", "launch"),
+        point(*mission.recovery, "recovery", "recovery", radius_m=float(mission.recovery_radius)),
+    ]
     feats += [point(x, y, "waypoint", str(i)) for i, (x, y) in enumerate(scen.waypoints)]
     feats.append(polygon(_rect_vertices(_op_rect(mission)), "operational_area", mission.operational_area.name))
     rank = {int(a): r for r, a in enumerate(scen.order[0].tolist(), start=1)}
-    feats += [polygon(_rect_vertices(scen.area_rect[0, k]), "mission_area", a.name, priority=rank[k],
-                      dwell_s=float(scen.area_dwell[0, k])) for k, a in enumerate(mission.mission_areas)]
+    feats += [
+        polygon(
+            _rect_vertices(scen.area_rect[0, k]),
+            "mission_area",
+            a.name,
+            priority=rank[k],
+            dwell_s=float(scen.area_dwell[0, k]),
+        )
+        for k, a in enumerate(mission.mission_areas)
+    ]
     if mission.transmission is not None:
-        feats.append(polygon(_rect_vertices(scen.tx_rect[0]), "transmission", mission.transmission.name,
-                             window_open_s=float(scen.tx_open[0]), window_close_s=float(scen.tx_close[0]),
-                             duration_s=float(mission.transmission.duration_s)))
+        feats.append(
+            polygon(
+                _rect_vertices(scen.tx_rect[0]),
+                "transmission",
+                mission.transmission.name,
+                window_open_s=float(scen.tx_open[0]),
+                window_close_s=float(scen.tx_close[0]),
+                duration_s=float(mission.transmission.duration_s),
+            )
+        )
     feats += [polygon(v, kind, name) for kind, name, v in _exclusions(mission, scen)]
     if tr is not None:
         t = tr[:, _T]
         surfaced_s = float(np.sum(np.diff(t) * (tr[:-1, _SURFACED] > 0.5)))
-        feats.append(feature({"type": "LineString", "coordinates": lonlat(tr[:, [_X, _Y]])}, "predicted_track",
-                             "predicted track", duration_s=float(t[-1] - t[0]), surfaced_s=surfaced_s))
+        feats.append(
+            feature(
+                {"type": "LineString", "coordinates": lonlat(tr[:, [_X, _Y]])},
+                "predicted_track",
+                "predicted track",
+                duration_s=float(t[-1] - t[0]),
+                surfaced_s=surfaced_s,
+            )
+        )
     return {"type": "FeatureCollection", "features": feats}
 
 

@@ -55,25 +55,48 @@ def flight_from_plan(path: Path, scenario_id: str) -> Flight:
     return Flight(mission, u, scenario_id, str(plan.mission_file), plan.id)
 
 
-def fly(flight: Flight, *, log_path=None, speedup=None, timeout_s: float = 600.0, bias=None,
-        stochastic: bool = False, seed: int = 0, surrogate=None):
+def fly(
+    flight: Flight,
+    *,
+    log_path=None,
+    speedup=None,
+    timeout_s: float = 600.0,
+    bias=None,
+    stochastic: bool = False,
+    seed: int = 0,
+    surrogate=None,
+):
     """Fly ``flight`` software-in-the-loop (:func:`planner.sil.run_sil`); returns its :class:`~planner.sil.SilResult`."""
     from planner.sil import run_sil
 
-    return run_sil(flight.mission, flight.u, log_path=log_path, speedup=speedup, timeout_s=timeout_s,
-                   scenario_id=flight.scenario_id, mission_file=flight.mission_file, plan_id=flight.plan_id,
-                   bias=bias, stochastic=stochastic, seed=seed, surrogate=surrogate)
+    return run_sil(
+        flight.mission,
+        flight.u,
+        log_path=log_path,
+        speedup=speedup,
+        timeout_s=timeout_s,
+        scenario_id=flight.scenario_id,
+        mission_file=flight.mission_file,
+        plan_id=flight.plan_id,
+        bias=bias,
+        stochastic=stochastic,
+        seed=seed,
+        surrogate=surrogate,
+    )
 
 
-def check_against_batch(flight: Flight, scores: np.ndarray, *, bias=None, stochastic: bool = False, seed: int = 0,
-                        surrogate=None) -> BatchCheck:
+def check_against_batch(
+    flight: Flight, scores: np.ndarray, *, bias=None, stochastic: bool = False, seed: int = 0, surrogate=None
+) -> BatchCheck:
     """The batch simulator on the flight's row with the same bias, seed and surrogate, against its ``scores``."""
     import sim.uuv
 
-    batch = sim.uuv.simulate(flight.mission, flight.u[None, :], bias=bias, seed=seed, stochastic=stochastic,
-                             surrogate=surrogate)
-    return BatchCheck(batch.scores[0], batch.names, MODE_NAMES[int(batch.modes[0])],
-                      bool(np.array_equal(scores, batch.scores[0])))
+    batch = sim.uuv.simulate(
+        flight.mission, flight.u[None, :], bias=bias, seed=seed, stochastic=stochastic, surrogate=surrogate
+    )
+    return BatchCheck(
+        batch.scores[0], batch.names, MODE_NAMES[int(batch.modes[0])], bool(np.array_equal(scores, batch.scores[0]))
+    )
 
 
 def mode_name(scores: np.ndarray) -> str:

@@ -45,8 +45,18 @@ from sim.uuv.metrics import metric_names, metric_types
 from sim.uuv.mission import Mission
 from sim.uuv.scoring import MODE_NAMES, modes_from_scores
 
-__all__ = ["GenerateConfig", "search_mission", "analyse", "select_pairs", "dither_many", "robust_variants",
-           "refine_pairs", "generate", "auto_batch_size", "PLAN_SCHEMA"]
+__all__ = [
+    "GenerateConfig",
+    "search_mission",
+    "analyse",
+    "select_pairs",
+    "dither_many",
+    "robust_variants",
+    "refine_pairs",
+    "generate",
+    "auto_batch_size",
+    "PLAN_SCHEMA",
+]
 
 PLAN_SCHEMA = "rapt.plan/1"
 
@@ -97,8 +107,9 @@ class GenerateConfig:
         if not isinstance(self.dithers, int) or self.dithers < 0:
             raise InputError(f"--dithers: expected a number of runs >= 0, got {self.dithers}")
         if not isinstance(self.confirm_runs, int) or self.confirm_runs < 2 * self.pairs:
-            raise InputError(f"--confirm-runs: expected at least two runs per pair ({2 * self.pairs}), "
-                             f"got {self.confirm_runs}")
+            raise InputError(
+                f"--confirm-runs: expected at least two runs per pair ({2 * self.pairs}), got {self.confirm_runs}"
+            )
 
 
 # -- 1. search --------------------------------------------------------------------------
@@ -137,23 +148,38 @@ def make_executor(spec: str):
             from distributed import Client
         except ImportError:
             raise InputError("--executor: dask:// needs the cluster extra; pip install -e '.[cluster]'") from None
-        client = Client(f"tcp://{spec[len('dask://'):]}", timeout=10)
+        client = Client(f"tcp://{spec[len('dask://') :]}", timeout=10)
         return client, client.close
     raise InputError(f"--executor: expected local, processes or dask://host:port, got {spec!r}")
 
-def search_mission(mission: Mission, cfg: GenerateConfig, progress: Callable[[int, int], None] | None = None,
-                   on_batch: Callable[[np.ndarray, np.ndarray], None] | None = None) -> rapt.Study:
+
+def search_mission(
+    mission: Mission,
+    cfg: GenerateConfig,
+    progress: Callable[[int, int], None] | None = None,
+    on_batch: Callable[[np.ndarray, np.ndarray], None] | None = None,
+) -> rapt.Study:
     """Global then adaptive search steered by mission and safety success; invalid scenarios fail.
 
     Every score is stored with its run, so the sub-boundary analysis needs no second run.
     """
     batch_size = auto_batch_size(cfg.budget) if cfg.batch_size is None else cfg.batch_size  # as __post_init__
-    return rapt.search(MissionScores(mission, cfg.surrogate), mission.space, cfg.budget, method="s-ndv",
-                       batch_size=batch_size, seed=cfg.seed, store=cfg.store, executor=cfg.executor,
-                       output_types=("binary", "binary"), steer=ROOT_COLUMNS,
-                       sampler_options={"max_reference": SEARCH_REFERENCE},
-                       n_initial=int(round(cfg.budget * cfg.global_fraction)), progress=progress,
-                       on_batch=on_batch)
+    return rapt.search(
+        MissionScores(mission, cfg.surrogate),
+        mission.space,
+        cfg.budget,
+        method="s-ndv",
+        batch_size=batch_size,
+        seed=cfg.seed,
+        store=cfg.store,
+        executor=cfg.executor,
+        output_types=("binary", "binary"),
+        steer=ROOT_COLUMNS,
+        sampler_options={"max_reference": SEARCH_REFERENCE},
+        n_initial=int(round(cfg.budget * cfg.global_fraction)),
+        progress=progress,
+        on_batch=on_batch,
+    )
 
 
 # -- 2. analysis --------------------------------------------------------------------------
@@ -172,8 +198,9 @@ def analyse(mission: Mission, study: rapt.Study, surrogate=None) -> Analysis:
     names, types = metric_names(mission), metric_types(mission)
     spot = sim.uuv.simulate(mission, X[:SPOT_CHECK_RUNS], surrogate=surrogate)
     if Y.shape[1] != len(names) or not np.array_equal(spot.scores, Y[:SPOT_CHECK_RUNS], equal_nan=True):
-        raise StudyMismatchError("study: the stored runs do not match the mission file (was it edited?); "
-                           "plan into a new --out directory")
+        raise StudyMismatchError(
+            "study: the stored runs do not match the mission file (was it edited?); plan into a new --out directory"
+        )
     result = sim.uuv.Result(Y, modes_from_scores(Y), np.ones(len(Y), dtype=bool), [""] * len(Y), names, types)
     tree = rapt.subboundary_tree(X, result.scores, mission.score_tree, output_types=result.output_types)
     imp = output_importance(X, result.scores[:, :2], ("binary", "binary"), random_state=0)
@@ -189,7 +216,9 @@ def _pair_elements(a: Analysis, i: int, j: int, level: int) -> list[str]:
     """Names of the discrete score elements of ``level`` that differ across a pair."""
     cols = a.tree.levels[level]
     types = a.result.output_types
-    return [a.result.names[c] for c in cols if types[c] != "continuous" and a.result.scores[i, c] != a.result.scores[j, c]]
+    return [
+        a.result.names[c] for c in cols if types[c] != "continuous" and a.result.scores[i, c] != a.result.scores[j, c]
+    ]
 
 
 def _boundary_types(a: Analysis) -> list[dict]:
@@ -228,16 +257,31 @@ def select_pairs(a: Analysis, k: int, min_cluster: int = 3) -> list[dict]:
                 continue
         seen.add((ll, elements))
         modes = a.result.modes
-        chosen.append({"level": ll, "elements": list(elements), "distance": dd, "rows": [ii, jj],
-                       "modes": [MODE_NAMES[modes[ii]], MODE_NAMES[modes[jj]]]})
+        chosen.append(
+            {
+                "level": ll,
+                "elements": list(elements),
+                "distance": dd,
+                "rows": [ii, jj],
+                "modes": [MODE_NAMES[modes[ii]], MODE_NAMES[modes[jj]]],
+            }
+        )
         if len(chosen) == k:
             break
     return chosen
 
 
 # -- 4. dithering ---------------------------------------------------------------------------
-def dither_many(mission: Mission, centres: np.ndarray, predicted: np.ndarray | Sequence[int], elements: Sequence[list[str]],
-                n: int, sigma: float, seed: int, surrogate=None) -> tuple[list[dict], np.ndarray, np.ndarray]:
+def dither_many(
+    mission: Mission,
+    centres: np.ndarray,
+    predicted: np.ndarray | Sequence[int],
+    elements: Sequence[list[str]],
+    n: int,
+    sigma: float,
+    seed: int,
+    surrogate=None,
+) -> tuple[list[dict], np.ndarray, np.ndarray]:
     """Stochastic runs of ``n`` Gaussian dithers around each centre, all in one batch.
 
     Returns per centre the statistics of :func:`dither_stats`, and the dithers' unit-cube
@@ -253,13 +297,33 @@ def dither_many(mission: Mission, centres: np.ndarray, predicted: np.ndarray | S
     stats = []
     for c in range(k):
         rows = slice(c * n, (c + 1) * n)
-        stats.append(dither_stats(U[c], r.scores[rows], r.modes[rows], r.valid[rows], r.names, r.output_types,
-                                  int(predicted[c]), list(elements[c]), sigma))
+        stats.append(
+            dither_stats(
+                U[c],
+                r.scores[rows],
+                r.modes[rows],
+                r.valid[rows],
+                r.names,
+                r.output_types,
+                int(predicted[c]),
+                list(elements[c]),
+                sigma,
+            )
+        )
     return stats, U, r.modes.reshape(k, n)
 
 
-def dither_stats(U: np.ndarray, scores: np.ndarray, modes: np.ndarray, valid: np.ndarray, names: list[str],
-                 types: Sequence[str], predicted_mode: int, elements: list[str], sigma: float) -> dict:
+def dither_stats(
+    U: np.ndarray,
+    scores: np.ndarray,
+    modes: np.ndarray,
+    valid: np.ndarray,
+    names: list[str],
+    types: Sequence[str],
+    predicted_mode: int,
+    elements: list[str],
+    sigma: float,
+) -> dict:
     """Reproducibility and neighbours of one dithered scenario (sections 4.4.5-4.4.7).
 
     How often the predicted mode shows, how close the nearest run of another mode lies,
@@ -288,8 +352,14 @@ def dither_stats(U: np.ndarray, scores: np.ndarray, modes: np.ndarray, valid: np
             if differ.any():
                 kind = name.split(".")[0]
                 relation = "parallel" if any(e.split(".")[0] == kind for e in elements) else "orthogonal"
-                flips.append({"element": name, "relation": relation, "share": float(differ.mean()),
-                              "nearest": float(dist[~other][differ].min())})
+                flips.append(
+                    {
+                        "element": name,
+                        "relation": relation,
+                        "share": float(differ.mean()),
+                        "nearest": float(dist[~other][differ].min()),
+                    }
+                )
     out["sub_boundaries"] = sorted(flips, key=lambda f: f["nearest"])[:8]
     return out
 
@@ -299,9 +369,18 @@ VARIANT_STEPS = (0.02, 0.05, 0.1)
 VARIANT_COORDINATES = 2  # the most sensitive coordinates tried
 
 
-def robust_variants(mission: Mission, fragile: np.ndarray, partners: np.ndarray, modes: np.ndarray | Sequence[int],
-                    sensitivity: np.ndarray, n: int, sigma: float, target: float, seed: int,
-                    surrogate=None) -> list[dict | None]:
+def robust_variants(
+    mission: Mission,
+    fragile: np.ndarray,
+    partners: np.ndarray,
+    modes: np.ndarray | Sequence[int],
+    sensitivity: np.ndarray,
+    n: int,
+    sigma: float,
+    target: float,
+    seed: int,
+    surrogate=None,
+) -> list[dict | None]:
     """Move fragile scenarios away from their boundary along their most sensitive coordinates.
 
     For each scenario the candidates step away from the pair's other scenario along the
@@ -331,20 +410,26 @@ def robust_variants(mission: Mission, fragile: np.ndarray, partners: np.ndarray,
     keep = np.flatnonzero(det.valid & (det.modes == np.asarray(modes)[owners]))
     if keep.size == 0:
         return out
-    stats, _, _ = dither_many(mission, V[keep], np.asarray(modes)[owners[keep]], [[]] * keep.size, n, sigma, seed,
-                              surrogate)
+    stats, _, _ = dither_many(
+        mission, V[keep], np.asarray(modes)[owners[keep]], [[]] * keep.size, n, sigma, seed, surrogate
+    )
     for idx, st in zip(keep.tolist(), stats):
         s = owners[idx]
         if out[s] is None and st.get("p_predicted_mode", 0.0) >= target:
             c, step = meta[idx]
-            out[s] = {"u": [float(x) for x in V[idx]], "coordinate": c, "step": step,
-                      "p_predicted_mode": st["p_predicted_mode"]}
+            out[s] = {
+                "u": [float(x) for x in V[idx]],
+                "coordinate": c,
+                "step": step,
+                "p_predicted_mode": st["p_predicted_mode"],
+            }
     return out
 
 
 # -- 6. refinement ----------------------------------------------------------------------------
-def refine_pairs(mission: Mission, a: Analysis, pairs: list[dict], runs: int, min_distance: float = 0.02,
-                 surrogate=None) -> list[dict]:
+def refine_pairs(
+    mission: Mission, a: Analysis, pairs: list[dict], runs: int, min_distance: float = 0.02, surrogate=None
+) -> list[dict]:
     """Sharpen pairs with a search focused on their own sub-scores (section 4.3.6).
 
     Bisection on the segment between each pair's two scenarios: each run is scored on the
@@ -383,8 +468,13 @@ def refine_pairs(mission: Mission, a: Analysis, pairs: list[dict], runs: int, mi
     if better.size:
         r = sim.uuv.simulate(mission, np.vstack([lo[better], hi[better]]), surrogate=surrogate)
         for k, row in enumerate(better.tolist()):
-            out[row] = {**pairs[row], "distance": float(d[row]), "refined": True, "u_override": [lo[row], hi[row]],
-                        "modes": [MODE_NAMES[r.modes[k]], MODE_NAMES[r.modes[better.size + k]]]}
+            out[row] = {
+                **pairs[row],
+                "distance": float(d[row]),
+                "refined": True,
+                "u_override": [lo[row], hi[row]],
+                "modes": [MODE_NAMES[r.modes[k]], MODE_NAMES[r.modes[better.size + k]]],
+            }
     return out
 
 
@@ -404,17 +494,28 @@ def confirm_with_expert(mission: Mission, a: Analysis, candidates: list[dict], k
     for c, pair in enumerate(candidates):
         ma, mb = int(r.modes[2 * c]), int(r.modes[2 * c + 1])
         if r.valid[2 * c] and r.valid[2 * c + 1] and ma != mb:
-            out.append({**pair, "confirmed_by_expert": True, "surrogate_modes": pair["modes"],
-                        "modes": [MODE_NAMES[ma], MODE_NAMES[mb]]})
+            out.append(
+                {
+                    **pair,
+                    "confirmed_by_expert": True,
+                    "surrogate_modes": pair["modes"],
+                    "modes": [MODE_NAMES[ma], MODE_NAMES[mb]],
+                }
+            )
             if len(out) == k:
                 break
     return out, int(len(U))
 
 
 # -- everything ------------------------------------------------------------------------------
-def generate(mission: Mission, mission_path: Path, out_dir: Path, cfg: GenerateConfig,
-             progress: Callable[[str, int, int, str], None] | None = None,
-             timings: dict[str, float] | None = None) -> dict:
+def generate(
+    mission: Mission,
+    mission_path: Path,
+    out_dir: Path,
+    cfg: GenerateConfig,
+    progress: Callable[[str, int, int, str], None] | None = None,
+    timings: dict[str, float] | None = None,
+) -> dict:
     """Run every stage and write ``plan.json`` (plus per-scenario files and the report) into ``out_dir``.
 
     ``progress(stage, done, total, detail)`` follows the stages; during the search
@@ -428,17 +529,33 @@ def generate(mission: Mission, mission_path: Path, out_dir: Path, cfg: GenerateC
     clock = _StageClock(timings)
     a, pairs, confirmation = _choose_pairs(mission, cfg, progress, clock)
     sens = _coordinate_sensitivity(mission, a.sensitivity)
-    U = (np.vstack([np.asarray(p.get("u_override", [a.X[r] for r in p["rows"]])) for p in pairs])
-         if pairs else np.zeros((0, mission.dim)))
+    U = (
+        np.vstack([np.asarray(p.get("u_override", [a.X[r] for r in p["rows"]])) for p in pairs])
+        if pairs
+        else np.zeros((0, mission.dim))
+    )
     ids = [f"pair{p}{side}" for p in range(1, len(pairs) + 1) for side in "ab"]
     partners = U[np.arange(len(U)) ^ 1]  # a's partner is b and b's is a
     chosen = sim.uuv.simulate(mission, U, trajectories=True)
     stats, dither_runs = _dither_chosen(mission, cfg, U, ids, chosen, pairs, progress)
     clock.lap("dithering")
     fragile = [k for k, st in enumerate(stats) if st.get("p_predicted_mode", 1.0) < cfg.fragile_below]
-    found = robust_variants(mission, U[fragile], partners[fragile], chosen.modes[fragile], sens,
-                            max(cfg.dithers // 10, 20), cfg.dither_sigma, cfg.fragile_below,
-                            cfg.seed + 1, cfg.surrogate) if fragile and cfg.dithers else []
+    found = (
+        robust_variants(
+            mission,
+            U[fragile],
+            partners[fragile],
+            chosen.modes[fragile],
+            sens,
+            max(cfg.dithers // 10, 20),
+            cfg.dither_sigma,
+            cfg.fragile_below,
+            cfg.seed + 1,
+            cfg.surrogate,
+        )
+        if fragile and cfg.dithers
+        else []
+    )
     clock.lap("variants")
     scenarios = _scenario_entries(mission, a, U, ids, chosen, stats, out_dir)
     variants = _variant_entries(mission, ids, fragile, found, chosen, out_dir)
@@ -449,8 +566,9 @@ def generate(mission: Mission, mission_path: Path, out_dir: Path, cfg: GenerateC
     return plan
 
 
-def _choose_pairs(mission: Mission, cfg: GenerateConfig, progress: Callable[[str, int, int, str], None] | None,
-                  clock: _StageClock) -> tuple[Analysis, list[dict], tuple[int, int] | None]:
+def _choose_pairs(
+    mission: Mission, cfg: GenerateConfig, progress: Callable[[str, int, int, str], None] | None, clock: _StageClock
+) -> tuple[Analysis, list[dict], tuple[int, int] | None]:
     """Stages 1-3 (with refinement, and the expert's confirmation on the surrogate workflow).
 
     Returns the analysis, the chosen pairs, and on the surrogate workflow the number of
@@ -484,86 +602,145 @@ def _choose_pairs(mission: Mission, cfg: GenerateConfig, progress: Callable[[str
     return a, pairs, confirmation
 
 
-def _search_progress(progress: Callable[[str, int, int, str], None], status: SearchStatus
-                     ) -> Callable[[int, int], None]:
+def _search_progress(
+    progress: Callable[[str, int, int, str], None], status: SearchStatus
+) -> Callable[[int, int], None]:
     """The search's ``progress``: runs done of the budget, and what the runs so far show (``status``)."""
     return lambda done, total: progress("search", done, total, status.summary())
 
 
-def _dither_chosen(mission: Mission, cfg: GenerateConfig, U: np.ndarray, ids: list[str], chosen: sim.uuv.Result,
-                   pairs: list[dict], progress: Callable[[str, int, int, str], None] | None
-                   ) -> tuple[list[dict], dict[str, tuple[np.ndarray, np.ndarray]]]:
+def _dither_chosen(
+    mission: Mission,
+    cfg: GenerateConfig,
+    U: np.ndarray,
+    ids: list[str],
+    chosen: sim.uuv.Result,
+    pairs: list[dict],
+    progress: Callable[[str, int, int, str], None] | None,
+) -> tuple[list[dict], dict[str, tuple[np.ndarray, np.ndarray]]]:
     """Stage 4 on the chosen scenarios: their dither statistics, and the dithers by scenario for the report."""
     elements = [pair["elements"] for pair in pairs for _ in "ab"]
     stats: list[dict] = [{} for _ in ids]
     dither_runs: dict[str, tuple[np.ndarray, np.ndarray]] = {}
     if cfg.dithers and len(U):
-        stats, dU, dmodes = dither_many(mission, U, chosen.modes, elements, cfg.dithers // 2, cfg.dither_sigma,
-                                        cfg.seed, cfg.surrogate)
+        stats, dU, dmodes = dither_many(
+            mission, U, chosen.modes, elements, cfg.dithers // 2, cfg.dither_sigma, cfg.seed, cfg.surrogate
+        )
         dither_runs = {sid: (dU[k], dmodes[k]) for k, sid in enumerate(ids)}
         if progress is not None:
             progress("dither", len(ids), len(ids), "")
     return stats, dither_runs
 
 
-def _scenario_entries(mission: Mission, a: Analysis, U: np.ndarray, ids: list[str], chosen: sim.uuv.Result,
-                      stats: list[dict], out_dir: Path) -> list[dict]:
+def _scenario_entries(
+    mission: Mission,
+    a: Analysis,
+    U: np.ndarray,
+    ids: list[str],
+    chosen: sim.uuv.Result,
+    stats: list[dict],
+    out_dir: Path,
+) -> list[dict]:
     """The plan's scenarios (with their predicted root and level-1 scores), their files written."""
     level_cols = set(a.tree.levels[0]) | set(a.tree.levels[min(1, len(a.tree.levels) - 1)])
     scenarios = []
     for k, sid in enumerate(ids):
         mode = int(chosen.modes[k])
-        scenarios.append({
-            "id": sid, "u": [float(v) for v in U[k]],
-            "parameters": jsonable(mission.space.decode(U[k][None, :])[0]),
-            "predicted": {"mode": MODE_NAMES[mode],
-                          "scores": {n: float(chosen.scores[k, c]) for c, n in enumerate(chosen.names)
-                                     if c in level_cols}},
-            "dithering": stats[k],
-            "files": {kind: path.name for kind, path in
-                      write_scenario_files(mission, U[k], out_dir, sid, chosen.trajectory(k)).items()},
-        })
+        scenarios.append(
+            {
+                "id": sid,
+                "u": [float(v) for v in U[k]],
+                "parameters": jsonable(mission.space.decode(U[k][None, :])[0]),
+                "predicted": {
+                    "mode": MODE_NAMES[mode],
+                    "scores": {n: float(chosen.scores[k, c]) for c, n in enumerate(chosen.names) if c in level_cols},
+                },
+                "dithering": stats[k],
+                "files": {
+                    kind: path.name
+                    for kind, path in write_scenario_files(mission, U[k], out_dir, sid, chosen.trajectory(k)).items()
+                },
+            }
+        )
     return scenarios
 
 
-def _variant_entries(mission: Mission, ids: list[str], fragile: list[int], found: list[dict | None],
-                     chosen: sim.uuv.Result, out_dir: Path) -> list[dict]:
+def _variant_entries(
+    mission: Mission,
+    ids: list[str],
+    fragile: list[int],
+    found: list[dict | None],
+    chosen: sim.uuv.Result,
+    out_dir: Path,
+) -> list[dict]:
     """The robust "M" variants found for fragile scenarios, their files written."""
     variants = []
     for k, v in zip(fragile, found):
         if v is None:
             continue
         vid = f"{ids[k]}M"
-        variants.append({"id": vid, "variant_of": ids[k], "u": v["u"],
-                         "parameters": jsonable(mission.space.decode(np.array(v["u"])[None, :])[0]),
-                         "moved": {"parameter": mission.parameter_of(v["coordinate"]), "unit_step": v["step"]},
-                         "predicted": {"mode": MODE_NAMES[int(chosen.modes[k])]},
-                         "p_predicted_mode": v["p_predicted_mode"],
-                         "files": {kind: path.name for kind, path in
-                                   write_scenario_files(mission, np.array(v["u"]), out_dir, vid).items()}})
+        variants.append(
+            {
+                "id": vid,
+                "variant_of": ids[k],
+                "u": v["u"],
+                "parameters": jsonable(mission.space.decode(np.array(v["u"])[None, :])[0]),
+                "moved": {"parameter": mission.parameter_of(v["coordinate"]), "unit_step": v["step"]},
+                "predicted": {"mode": MODE_NAMES[int(chosen.modes[k])]},
+                "p_predicted_mode": v["p_predicted_mode"],
+                "files": {
+                    kind: path.name
+                    for kind, path in write_scenario_files(mission, np.array(v["u"]), out_dir, vid).items()
+                },
+            }
+        )
     return variants
 
 
-def _plan_document(mission: Mission, mission_path: Path, cfg: GenerateConfig, a: Analysis, pairs: list[dict],
-                   confirmation: tuple[int, int] | None, scenarios: list[dict], variants: list[dict]) -> dict:
+def _plan_document(
+    mission: Mission,
+    mission_path: Path,
+    cfg: GenerateConfig,
+    a: Analysis,
+    pairs: list[dict],
+    confirmation: tuple[int, int] | None,
+    scenarios: list[dict],
+    variants: list[dict],
+) -> dict:
     """What ``plan.json`` holds (schema ``rapt.plan/1``)."""
     sur = cfg.surrogate
-    plan_pairs = [{"id": p, "level": pair["level"], "elements": pair["elements"], "modes": pair["modes"],
-                   "distance": pair["distance"], "scenarios": [f"pair{p}a", f"pair{p}b"],
-                   "refined": bool(pair.get("refined", False)),
-                   **({"confirmed_by_expert": True, "surrogate_modes": pair["surrogate_modes"]} if sur is not None
-                      else {})} for p, pair in enumerate(pairs, start=1)]
+    plan_pairs = [
+        {
+            "id": p,
+            "level": pair["level"],
+            "elements": pair["elements"],
+            "modes": pair["modes"],
+            "distance": pair["distance"],
+            "scenarios": [f"pair{p}a", f"pair{p}b"],
+            "refined": bool(pair.get("refined", False)),
+            **({"confirmed_by_expert": True, "surrogate_modes": pair["surrogate_modes"]} if sur is not None else {}),
+        }
+        for p, pair in enumerate(pairs, start=1)
+    ]
     modes = a.result.modes
     return {
         "schema": PLAN_SCHEMA,
-        "mission": {"name": mission.name, "file": str(mission_path), "dim": mission.dim,
-                    "parameters": mission.space.names},
-        "study": {"budget": cfg.budget, "seed": cfg.seed, "global_fraction": cfg.global_fraction,
-                  "valid_runs": int(len(a.X)), "invalid_runs": int(len(a.X_invalid)),
-                  "modes": {MODE_NAMES[m]: int(c) for m, c in zip(*np.unique(modes, return_counts=True))},
-                  "boundary_types": a.boundary_types[:30],
-                  **({"surrogate": _surrogate_summary(cfg, confirmation, len(pairs))} if confirmation is not None
-                     else {})},
+        "mission": {
+            "name": mission.name,
+            "file": str(mission_path),
+            "dim": mission.dim,
+            "parameters": mission.space.names,
+        },
+        "study": {
+            "budget": cfg.budget,
+            "seed": cfg.seed,
+            "global_fraction": cfg.global_fraction,
+            "valid_runs": int(len(a.X)),
+            "invalid_runs": int(len(a.X_invalid)),
+            "modes": {MODE_NAMES[m]: int(c) for m, c in zip(*np.unique(modes, return_counts=True))},
+            "boundary_types": a.boundary_types[:30],
+            **({"surrogate": _surrogate_summary(cfg, confirmation, len(pairs))} if confirmation is not None else {}),
+        },
         "sensitivity": a.sensitivity,
         "pairs": plan_pairs,
         "scenarios": scenarios,
@@ -576,9 +753,13 @@ def _surrogate_summary(cfg: GenerateConfig, confirmation: tuple[int, int], confi
     """The plan's account of a surrogate search: its file and method, expert runs, pairs confirmed."""
     sur = cfg.surrogate
     candidates, confirm_spent = confirmation
-    return {"file": cfg.surrogate_file, "method": str(sur.training.get("method", "")),
-            "expert_runs": {"training": int(sur.training.get("runs", 0)), "confirmation": confirm_spent},
-            "candidates": candidates, "confirmed": confirmed}
+    return {
+        "file": cfg.surrogate_file,
+        "method": str(sur.training.get("method", "")),
+        "expert_runs": {"training": int(sur.training.get("runs", 0)), "confirmation": confirm_spent},
+        "candidates": candidates,
+        "confirmed": confirmed,
+    }
 
 
 class _StageClock:

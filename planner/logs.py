@@ -97,9 +97,13 @@ class _Steps(TrackBuilder):
 
 
 #: MAVLink message ids a run's track needs (everything else on /mavlink/raw is skipped unparsed).
-WANTED_IDS = {mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED, mavlink.MAVLINK_MSG_ID_ATTITUDE,
-              mavlink.MAVLINK_MSG_ID_BATTERY_STATUS, mavlink.MAVLINK_MSG_ID_SYSTEM_TIME,
-              mavlink.MAVLINK_MSG_ID_STATUSTEXT}
+WANTED_IDS = {
+    mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED,
+    mavlink.MAVLINK_MSG_ID_ATTITUDE,
+    mavlink.MAVLINK_MSG_ID_BATTERY_STATUS,
+    mavlink.MAVLINK_MSG_ID_SYSTEM_TIME,
+    mavlink.MAVLINK_MSG_ID_STATUSTEXT,
+}
 
 
 def _decode_frame(parser, frame: bytes):
@@ -158,8 +162,10 @@ class RunLogReader:
             t1 = max(b for _, b in self.lost_chunks) / 1e9
             self.problems.append(f"{len(self.lost_chunks)} damaged chunk(s) skipped (log time {t0:.3f}..{t1:.3f} s)")
         if not self.meta:
-            raise LogError(f"LOG: {path} has no scenario metadata (meta/scenario); it was not written by "
-                           "rapt-plan run or a logger beside a planned run")
+            raise LogError(
+                f"LOG: {path} has no scenario metadata (meta/scenario); it was not written by "
+                "rapt-plan run or a logger beside a planned run"
+            )
         rows = np.array(self.steps.rows, dtype=float).reshape(-1, len(STEP_FIELDS))
         if rows.shape[0] == 0:
             self.problems.append("no complete telemetry step in the log")
@@ -169,9 +175,18 @@ class RunLogReader:
         if not self.steps.ended:
             last = rows[-1, 0] if rows.shape[0] else 0.0
             self.problems.append(f"the run's end is not in the log (track stops at {last:,.0f} s): no observed mode")
-        return LoggedRun(path, self.meta, rows, setpoints, self.steps.ended,
-                         [bool(v) for v in st.get("wp_aborted", [])], int(st.get("return_reason", 0)), self.footer,
-                         self.problems, self.n_messages)
+        return LoggedRun(
+            path,
+            self.meta,
+            rows,
+            setpoints,
+            self.steps.ended,
+            [bool(v) for v in st.get("wp_aborted", [])],
+            int(st.get("return_reason", 0)),
+            self.footer,
+            self.problems,
+            self.n_messages,
+        )
 
     # -- the file ----------------------------------------------------------------------
     def _stream(self, size: int) -> None:
@@ -190,10 +205,14 @@ class RunLogReader:
                         self.on_record(rec)
             except (McapError, EOFError, ValueError, OSError, MemoryError, IndexError, KeyError) as exc:
                 if consumed == 0 and not self.channels:
-                    raise LogError(f"LOG: {path} is not an MCAP file our logger wrote ({type(exc).__name__}: "
-                                   f"{exc}); give the .mcap file of a run") from None
-                self.problems.append(f"the file ends or is damaged after byte {consumed:,} of {size:,}; "
-                                     f"{size - consumed:,} bytes unreadable")
+                    raise LogError(
+                        f"LOG: {path} is not an MCAP file our logger wrote ({type(exc).__name__}: "
+                        f"{exc}); give the .mcap file of a run"
+                    ) from None
+                self.problems.append(
+                    f"the file ends or is damaged after byte {consumed:,} of {size:,}; "
+                    f"{size - consumed:,} bytes unreadable"
+                )
             except Exception as exc:  # anything else from a damaged record: stop there, keep what was read
                 self.problems.append(f"unreadable record after byte {consumed:,} of {size:,} ({type(exc).__name__})")
 
@@ -236,8 +255,12 @@ class RunLogReader:
             obj = json.loads(msg.data)
         except ValueError:
             return
-        handler = {"meta": self.on_meta, "command": self.on_command, "status": self.on_status,
-                   "control": self.on_control}.get(kind)
+        handler = {
+            "meta": self.on_meta,
+            "command": self.on_command,
+            "status": self.on_status,
+            "control": self.on_control,
+        }.get(kind)
         if handler is not None:
             handler(name, obj)
 
@@ -254,8 +277,12 @@ class RunLogReader:
     def on_command(self, name: str, obj) -> None:
         """A back-seat set-point of source ``name``, by the step (tick) it answers."""
         if isinstance(obj, dict) and obj.get("tick_ms") is not None:
-            self.commands.setdefault(name, {})[int(obj["tick_ms"])] = (float(obj["vx"]), float(obj["vy"]),
-                                                                       float(obj["vz"]), float(obj["yaw"]))
+            self.commands.setdefault(name, {})[int(obj["tick_ms"])] = (
+                float(obj["vx"]),
+                float(obj["vy"]),
+                float(obj["vz"]),
+                float(obj["yaw"]),
+            )
 
     def on_status(self, name: str, obj) -> None:
         if isinstance(obj, dict):
@@ -284,6 +311,7 @@ class RunLogReader:
             h, s, up = decode_command(values[idx[ok], 0], values[idx[ok], 1], values[idx[ok], 2], values[idx[ok], 3])
             setpoints[ok] = np.column_stack([h, s, up.astype(float)])
         elif rows.shape[0]:
-            self.problems.append("no back-seat set-points in the log: the trajectory cannot be replayed for the "
-                                 "bias fit")
+            self.problems.append(
+                "no back-seat set-points in the log: the trajectory cannot be replayed for the bias fit"
+            )
         return source, setpoints

@@ -8,9 +8,9 @@ decided here, so the command only runs the searches and prints the table.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from functools import cached_property
-from typing import Callable
 
 import numpy as np
 

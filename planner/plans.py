@@ -27,8 +27,10 @@ SCHEMA = "rapt.plan/1"
 
 def plan_id(plan: dict) -> str:
     """12 hex digits naming the plan's mission and scenarios (not its file or timestamps)."""
-    rows = [(s["id"], [round(float(v), 12) for v in s["u"]])
-            for s in list(plan.get("scenarios", [])) + list(plan.get("variants", []))]
+    rows = [
+        (s["id"], [round(float(v), 12) for v in s["u"]])
+        for s in list(plan.get("scenarios", [])) + list(plan.get("variants", []))
+    ]
     text = json.dumps({"mission": plan.get("mission", {}).get("name"), "scenarios": rows}, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:12]
 
@@ -84,23 +86,32 @@ def load_plan(path: str | Path) -> Plan:
     if path.is_dir():
         path = path / "plan.json"
     if not path.is_file():
-        raise FileFormatError(f"PLAN: {path} does not exist; give a plan directory or plan.json from rapt-plan generate")
+        raise FileFormatError(
+            f"PLAN: {path} does not exist; give a plan directory or plan.json from rapt-plan generate"
+        )
     try:
         data = json.loads(path.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise FileFormatError(f"PLAN: {path} is not valid JSON ({exc}); regenerate it with rapt-plan generate") from None
+        raise FileFormatError(
+            f"PLAN: {path} is not valid JSON ({exc}); regenerate it with rapt-plan generate"
+        ) from None
     schema = data.get("schema") if isinstance(data, dict) else None
     if schema != SCHEMA:
-        raise FileFormatError(f"PLAN: {path} is not a {SCHEMA} plan (schema {schema!r}); "
-                              "give the plan.json written by rapt-plan generate")
+        raise FileFormatError(
+            f"PLAN: {path} is not a {SCHEMA} plan (schema {schema!r}); give the plan.json written by rapt-plan generate"
+        )
     file = Path(data.get("mission", {}).get("file", ""))
     candidates = [file] if file.is_absolute() else [Path.cwd() / file, path.parent / file, path.parent / file.name]
     found = next((c for c in candidates if c.is_file()), None)
     if found is None:
-        raise FileFormatError(f"PLAN: {path} names mission file {str(file)!r}, which is not there; "
-                              "put the mission file back or next to plan.json")
+        raise FileFormatError(
+            f"PLAN: {path} names mission file {str(file)!r}, which is not there; "
+            "put the mission file back or next to plan.json"
+        )
     mission = sim.uuv.load_mission(found)
     if mission.name != data["mission"].get("name"):
-        raise StudyMismatchError(f"PLAN: {found} holds mission {mission.name!r}, but the plan was made for "
-                                 f"{data['mission'].get('name')!r}; point the plan at its own mission file")
+        raise StudyMismatchError(
+            f"PLAN: {found} holds mission {mission.name!r}, but the plan was made for "
+            f"{data['mission'].get('name')!r}; point the plan at its own mission file"
+        )
     return Plan(data, path, mission, found, plan_id(data))

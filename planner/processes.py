@@ -11,8 +11,8 @@ from __future__ import annotations
 import signal
 import threading
 import time
+from collections.abc import Callable
 from contextlib import AbstractContextManager
-from typing import Callable
 
 __all__ = ["wait_for_signal", "serve_until_signal", "run_until_signal", "arm_when_heard"]
 

@@ -28,9 +28,21 @@ __all__ = ["adjust_for_bias", "STEPS"]
 STEPS = (0.01, 0.02, 0.05, 0.1, 0.15, 0.2, 0.3)
 
 
-def adjust_for_bias(mission: Mission, u: np.ndarray, partner: np.ndarray, cols: list[int], target: np.ndarray,
-                    bias: Bias, sensitivity: np.ndarray, *, coordinates: int = 3, dithers: int = 20,
-                    sigma: float = 0.02, p_target: float = 0.8, seed: int = 0) -> dict | None:
+def adjust_for_bias(
+    mission: Mission,
+    u: np.ndarray,
+    partner: np.ndarray,
+    cols: list[int],
+    target: np.ndarray,
+    bias: Bias,
+    sensitivity: np.ndarray,
+    *,
+    coordinates: int = 3,
+    dithers: int = 20,
+    sigma: float = 0.02,
+    p_target: float = 0.8,
+    seed: int = 0,
+) -> dict | None:
     """The smallest move of ``u`` whose run under ``bias`` shows ``target`` on score columns ``cols``.
 
     Candidates: each of the ``coordinates`` most sensitive coordinates, moved away from
@@ -45,7 +57,7 @@ def adjust_for_bias(mission: Mission, u: np.ndarray, partner: np.ndarray, cols: 
     cands, moves = [], []
     for c in order.tolist():
         away = np.sign(u[c] - partner[c])
-        for direction in ([away] if away else [1.0, -1.0]):
+        for direction in [away] if away else [1.0, -1.0]:
             for step in STEPS:
                 v = u.copy()
                 v[c] = np.clip(v[c] + direction * step, 0.0, 1.0)
@@ -61,13 +73,23 @@ def adjust_for_bias(mission: Mission, u: np.ndarray, partner: np.ndarray, cols: 
     if not ranked:
         return None
     first = ranked[:4]  # dither the few smallest matches only, in one batch
-    entries = [{"u": [float(x) for x in U[i]], "coordinate": moves[i][1], "unit_step": moves[i][2],
-                "mode": MODE_NAMES[int(r.modes[i])], "p_intended": None, "robust": True} for i in first]
+    entries = [
+        {
+            "u": [float(x) for x in U[i]],
+            "coordinate": moves[i][1],
+            "unit_step": moves[i][2],
+            "mode": MODE_NAMES[int(r.modes[i])],
+            "p_intended": None,
+            "robust": True,
+        }
+        for i in first
+    ]
     if dithers <= 0:
         return entries[0]
     rng = np.random.default_rng(seed)
-    D = np.clip(np.repeat(U[first], dithers, axis=0) + sigma * rng.standard_normal((len(first) * dithers, u.size)),
-                0.0, 1.0)
+    D = np.clip(
+        np.repeat(U[first], dithers, axis=0) + sigma * rng.standard_normal((len(first) * dithers, u.size)), 0.0, 1.0
+    )
     D[::dithers] = U[first]  # each candidate itself, with the stochastic effects on
     d = sim.uuv.simulate(mission, D, seed=seed, stochastic=True, bias=bias)
     show = d.valid & np.all(d.scores[:, cols] == np.asarray(target)[None, :], axis=1)

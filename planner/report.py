@@ -66,9 +66,14 @@ KIND_STYLE = {
     "obstacle": ("#000000", "#000000", 0.75),
     "barrier": ("#000000", "#000000", 0.75),
 }
-KIND_LABELS = {"operational_area": "operational area", "mission_area": "mission area",
-               "transmission": "transmission area", "nogo": "no-go area", "obstacle": "obstacle",
-               "barrier": "barrier"}
+KIND_LABELS = {
+    "operational_area": "operational area",
+    "mission_area": "mission area",
+    "transmission": "transmission area",
+    "nogo": "no-go area",
+    "obstacle": "obstacle",
+    "barrier": "barrier",
+}
 DPI = 100
 
 _CSS = """
@@ -167,8 +172,10 @@ def _check_dithers(dithers: Any, dim: int) -> dict[str, tuple[np.ndarray, np.nda
         U = np.asarray(U, dtype=float)
         modes = np.asarray(modes).astype(int)
         if U.ndim != 2 or U.shape[1] != dim or modes.shape != (U.shape[0],):
-            raise InputError(f"dithers[{sid!r}]: expected U of shape (n, {dim}) and modes of shape (n,), "
-                             f"got {U.shape} and {modes.shape}")
+            raise InputError(
+                f"dithers[{sid!r}]: expected U of shape (n, {dim}) and modes of shape (n,), "
+                f"got {U.shape} and {modes.shape}"
+            )
         out[str(sid)] = (U, modes)
     return out
 
@@ -196,7 +203,7 @@ def _coordinates(plan: dict) -> tuple[list[str], list[str]]:
             if isinstance(v, (list, tuple)) and len(v) > 1:
                 width = len(v)
                 items = [str(i) for i in range(width)]
-                keys = u[start:start + width]
+                keys = u[start : start + width]
                 if keys.size == width:
                     for rank, k in enumerate(np.argsort(keys, kind="stable")):
                         items[int(k)] = str(v[rank])
@@ -246,8 +253,15 @@ def _fig_modes(plan: dict, path: Path) -> None:
         bars[-1].set_hatch("//")
     total = max(sum(values), 1)
     for b, v in zip(bars, values):
-        ax.annotate(f"{v:,}\n{100 * v / total:.0f}%", (b.get_x() + b.get_width() / 2, v), ha="center",
-                    va="bottom", fontsize=8, xytext=(0, 2), textcoords="offset points")
+        ax.annotate(
+            f"{v:,}\n{100 * v / total:.0f}%",
+            (b.get_x() + b.get_width() / 2, v),
+            ha="center",
+            va="bottom",
+            fontsize=8,
+            xytext=(0, 2),
+            textcoords="offset points",
+        )
     ax.set_xticks(range(len(values)), labels, fontsize=8)
     ax.set_ylabel("runs")
     ax.set_ylim(0, max(values + [1]) * 1.25)
@@ -366,8 +380,9 @@ def _xy(frame: LocalFrame, coords) -> np.ndarray:
     return np.column_stack([np.atleast_1d(x), np.atleast_1d(y)])
 
 
-def _draw_scenario(ax, fc: dict, frame: LocalFrame, colour: str,
-                   other: tuple[np.ndarray | None, str] | None) -> np.ndarray | None:
+def _draw_scenario(
+    ax, fc: dict, frame: LocalFrame, colour: str, other: tuple[np.ndarray | None, str] | None
+) -> np.ndarray | None:
     track = None
     kinds_seen = set()
     for f in fc["features"]:
@@ -385,8 +400,15 @@ def _draw_scenario(ax, fc: dict, frame: LocalFrame, colour: str,
             if kind != "operational_area" and props.get("name") not in (None, ""):
                 c = ring[:-1].mean(axis=0) if len(ring) > 1 else ring[0]
                 dark = kind in ("obstacle", "barrier")
-                ax.annotate(str(props["name"]), c, ha="center", va="center", fontsize=7,
-                            color="white" if dark else "#111", fontweight="bold" if dark else "normal")
+                ax.annotate(
+                    str(props["name"]),
+                    c,
+                    ha="center",
+                    va="center",
+                    fontsize=7,
+                    color="white" if dark else "#111",
+                    fontweight="bold" if dark else "normal",
+                )
         elif geom.get("type") == "LineString" and kind == "predicted_track":
             track = _xy(frame, geom["coordinates"])
         elif geom.get("type") == "Point":
@@ -429,8 +451,15 @@ def _fig_map(pair: dict, scen: list[dict], out_dir: Path, path: Path) -> str | N
         return "map not drawn: the GeoJSON files hold no coordinates"
     tracks = []
     for fc in fcs:
-        t = next((f for f in fc["features"] if (f.get("properties") or {}).get("kind") == "predicted_track"
-                  and (f.get("geometry") or {}).get("type") == "LineString"), None)
+        t = next(
+            (
+                f
+                for f in fc["features"]
+                if (f.get("properties") or {}).get("kind") == "predicted_track"
+                and (f.get("geometry") or {}).get("type") == "LineString"
+            ),
+            None,
+        )
         tracks.append(None if t is None else _xy(frame, t["geometry"]["coordinates"]))
     fig, axes = plt.subplots(1, len(fcs), figsize=(6.2 * len(fcs), 6.0), squeeze=False)
     for k, (ax, fc, s) in enumerate(zip(axes[0], fcs, scen)):
@@ -439,17 +468,33 @@ def _fig_map(pair: dict, scen: list[dict], out_dir: Path, path: Path) -> str | N
         _draw_scenario(ax, fc, frame, SIDE_COLOURS[k % 2], other)
         mode = (s.get("predicted") or {}).get("mode", "?")
         ax.set_title(f"{s['id']}: predicted {mode} ({MODE_LABELS.get(mode, mode)})", color=SIDE_COLOURS[k % 2])
-    present = {str((f.get("properties") or {}).get("kind")) for fc in fcs for f in fc["features"]
-               if (f.get("geometry") or {}).get("type") == "Polygon"}
-    handles: list[Artist] = [Patch(facecolor=KIND_STYLE[k][0] or "white", edgecolor=KIND_STYLE[k][1], alpha=max(KIND_STYLE[k][2], .5),
-                     label=KIND_LABELS[k], linestyle="--" if k == "operational_area" else "-")
-               for k in KIND_STYLE if k in present]
-    handles += [Line2D([], [], color=SIDE_COLOURS[k % 2], linewidth=2, label=f"{s['id']} predicted track")
-                for k, s in enumerate(scen)]
-    handles += [Line2D([], [], marker="^", color="k", markerfacecolor="#ffd92f", linestyle="", label="launch"),
-                Line2D([], [], marker="s", color="k", markerfacecolor="#a6d854", linestyle="", label="recovery"),
-                Line2D([], [], marker="o", color="k", markerfacecolor="white", linestyle="", label="waypoint"),
-                Line2D([], [], marker="x", color="#444", linestyle="", label="end of track")]
+    present = {
+        str((f.get("properties") or {}).get("kind"))
+        for fc in fcs
+        for f in fc["features"]
+        if (f.get("geometry") or {}).get("type") == "Polygon"
+    }
+    handles: list[Artist] = [
+        Patch(
+            facecolor=KIND_STYLE[k][0] or "white",
+            edgecolor=KIND_STYLE[k][1],
+            alpha=max(KIND_STYLE[k][2], 0.5),
+            label=KIND_LABELS[k],
+            linestyle="--" if k == "operational_area" else "-",
+        )
+        for k in KIND_STYLE
+        if k in present
+    ]
+    handles += [
+        Line2D([], [], color=SIDE_COLOURS[k % 2], linewidth=2, label=f"{s['id']} predicted track")
+        for k, s in enumerate(scen)
+    ]
+    handles += [
+        Line2D([], [], marker="^", color="k", markerfacecolor="#ffd92f", linestyle="", label="launch"),
+        Line2D([], [], marker="s", color="k", markerfacecolor="#a6d854", linestyle="", label="recovery"),
+        Line2D([], [], marker="o", color="k", markerfacecolor="white", linestyle="", label="waypoint"),
+        Line2D([], [], marker="x", color="#444", linestyle="", label="end of track"),
+    ]
     fig.legend(handles=handles, loc="lower center", ncol=6, fontsize=8, frameon=False)
     fig.suptitle(f"Pair {pair.get('id')}: " + " + ".join(str(e) for e in pair.get("elements", [])))
     fig.tight_layout(rect=(0, 0.08, 1, 1))
@@ -457,12 +502,18 @@ def _fig_map(pair: dict, scen: list[dict], out_dir: Path, path: Path) -> str | N
     return None
 
 
-def _fig_parallel(pair: dict, scen: list[dict], labels: list[str], owners: list[str], imp: tuple[np.ndarray, np.ndarray],
-                  path: Path) -> None:
+def _fig_parallel(
+    pair: dict, scen: list[dict], labels: list[str], owners: list[str], imp: tuple[np.ndarray, np.ndarray], path: Path
+) -> None:
     dim = len(labels)
     x = np.arange(dim)
-    fig, (ax, axs) = plt.subplots(2, 1, figsize=(max(7.0, 0.62 * dim + 2), 5.6), sharex=True,
-                                  gridspec_kw={"height_ratios": [3, 1.1], "hspace": 0.06})
+    fig, (ax, axs) = plt.subplots(
+        2,
+        1,
+        figsize=(max(7.0, 0.62 * dim + 2), 5.6),
+        sharex=True,
+        gridspec_kw={"height_ratios": [3, 1.1], "hspace": 0.06},
+    )
     for xi in x:
         ax.axvline(xi, color="#bbbbbb", linewidth=0.8, zorder=0)
     # group the coordinates of one parameter (permutations) with a shaded band
@@ -478,8 +529,15 @@ def _fig_parallel(pair: dict, scen: list[dict], labels: list[str], owners: list[
         if u.size != dim:
             continue
         mode = (s.get("predicted") or {}).get("mode", "?")
-        ax.plot(x, u, color=SIDE_COLOURS[k % 2], linewidth=2, marker="o", markersize=5,
-                label=f"{s['id']} (predicted {mode})")
+        ax.plot(
+            x,
+            u,
+            color=SIDE_COLOURS[k % 2],
+            linewidth=2,
+            marker="o",
+            markersize=5,
+            label=f"{s['id']} (predicted {mode})",
+        )
     ax.set_ylim(-0.03, 1.03)
     ax.set_ylabel("unit-cube value")
     ax.legend(fontsize=8, loc="upper right", ncol=2, framealpha=0.9)
@@ -497,8 +555,9 @@ def _fig_parallel(pair: dict, scen: list[dict], labels: list[str], owners: list[
     _save(fig, path)
 
 
-def _fig_dithers(pair: dict, scen: list[dict], dithers: dict, labels: list[str], axes_idx: tuple[int, int],
-                 path: Path) -> bool:
+def _fig_dithers(
+    pair: dict, scen: list[dict], dithers: dict, labels: list[str], axes_idx: tuple[int, int], path: Path
+) -> bool:
     present = [s for s in scen if s["id"] in dithers]
     if not present:
         return False
@@ -509,13 +568,29 @@ def _fig_dithers(pair: dict, scen: list[dict], dithers: dict, labels: list[str],
         for code, name in [(-1, "invalid")] + list(enumerate(MODE_NAMES)):
             sel = modes == code
             if sel.any():
-                ax.scatter(U[sel, i], U[sel, j], s=14 if code >= 0 else 18, marker="o" if code >= 0 else "x",
-                           color=MODE_COLOURS[name], alpha=0.75, label=f"{name} ({int(sel.sum())})", linewidths=1)
+                ax.scatter(
+                    U[sel, i],
+                    U[sel, j],
+                    s=14 if code >= 0 else 18,
+                    marker="o" if code >= 0 else "x",
+                    color=MODE_COLOURS[name],
+                    alpha=0.75,
+                    label=f"{name} ({int(sel.sum())})",
+                    linewidths=1,
+                )
         u = np.asarray(s.get("u", []), dtype=float)
         side = scen.index(s)
         if u.size == len(labels):
-            ax.scatter([u[i]], [u[j]], marker="*", s=260, color=SIDE_COLOURS[side % 2], edgecolor="k", zorder=5,
-                       label=f"{s['id']}")
+            ax.scatter(
+                [u[i]],
+                [u[j]],
+                marker="*",
+                s=260,
+                color=SIDE_COLOURS[side % 2],
+                edgecolor="k",
+                zorder=5,
+                label=f"{s['id']}",
+            )
         mode = (s.get("predicted") or {}).get("mode", "?")
         ax.set_title(f"{s['id']} (predicted {mode}): {len(modes)} dithers", fontsize=10)
         ax.set_xlabel(labels[i])
@@ -530,23 +605,31 @@ def _fig_dithers(pair: dict, scen: list[dict], dithers: dict, labels: list[str],
 
 # -- HTML ----------------------------------------------------------------------------------------
 def _img(src: str, alt: str, caption: str) -> str:
-    return (f'<figure><img src="{_e(quote(src))}" alt="{_e(alt)}">'
-            f"<figcaption>{_e(caption)}</figcaption></figure>")
+    return f'<figure><img src="{_e(quote(src))}" alt="{_e(alt)}"><figcaption>{_e(caption)}</figcaption></figure>'
 
 
 def _header(plan: dict) -> str:
     m, st = plan["mission"], plan["study"]
-    items = [("mission", m.get("name", "?")), ("file", m.get("file", "?")), ("dimensions", m.get("dim", "?")),
-             ("budget", _num(st.get("budget"))), ("seed", st.get("seed", "?")),
-             ("valid runs", _num(st.get("valid_runs"))), ("invalid runs", _num(st.get("invalid_runs"))),
-             ("pairs", len(plan["pairs"])), ("scenarios", len(plan["scenarios"]))]
+    items = [
+        ("mission", m.get("name", "?")),
+        ("file", m.get("file", "?")),
+        ("dimensions", m.get("dim", "?")),
+        ("budget", _num(st.get("budget"))),
+        ("seed", st.get("seed", "?")),
+        ("valid runs", _num(st.get("valid_runs"))),
+        ("invalid runs", _num(st.get("invalid_runs"))),
+        ("pairs", len(plan["pairs"])),
+        ("scenarios", len(plan["scenarios"])),
+    ]
     dl = "".join(f'<div class="item"><dt>{_e(k)}</dt><dd>{_e(v)}</dd></div>' for k, v in items)
-    return (f"<header><h1>Field-test plan: {_e(m.get('name', '?'))}</h1><dl>{dl}</dl></header>")
+    return f"<header><h1>Field-test plan: {_e(m.get('name', '?'))}</h1><dl>{dl}</dl></header>"
 
 
 def _scenario_table(scen: list[dict]) -> str:
-    head = ("<tr><th>scenario</th><th>predicted mode</th><th>P(predicted mode)</th><th>dithering runs "
-            "(valid / all)</th><th>modes seen</th><th>nearest other mode</th><th>sub-boundaries nearby</th></tr>")
+    head = (
+        "<tr><th>scenario</th><th>predicted mode</th><th>P(predicted mode)</th><th>dithering runs "
+        "(valid / all)</th><th>modes seen</th><th>nearest other mode</th><th>sub-boundaries nearby</th></tr>"
+    )
     rows = []
     for s in scen:
         d = s.get("dithering") or {}
@@ -556,7 +639,9 @@ def _scenario_table(scen: list[dict]) -> str:
         if subs:
             sub_html = "<br>".join(
                 f"{_e(b.get('element', '?'))} <em>({_e(b.get('relation', '?'))})</em>: "
-                f"{_pct(b.get('share'))} of runs, nearest {_num(b.get('nearest'))}" for b in subs)
+                f"{_pct(b.get('share'))} of runs, nearest {_num(b.get('nearest'))}"
+                for b in subs
+            )
         elif d:
             sub_html = "none found"
         else:
@@ -564,16 +649,18 @@ def _scenario_table(scen: list[dict]) -> str:
         runs = f"{_e(d.get('valid', '—'))} / {_e(d.get('runs', '—'))}" if d else "not dithered"
         p = d.get("p_predicted_mode")
         warn = ' <span class="note">(fragile)</span>' if p is not None and float(p) < 0.6 else ""
-        rows.append(f"<tr><td>{_e(s['id'])}</td><td>{_mode_badge(mode)} {_e(MODE_LABELS.get(mode, ''))}</td>"
-                    f"<td class='num'>{_pct(p)}{warn}</td><td class='num'>{runs}</td><td>{seen}</td>"
-                    f"<td class='num'>{_num(d.get('nearest_other_mode'))}</td><td>{sub_html}</td></tr>")
+        rows.append(
+            f"<tr><td>{_e(s['id'])}</td><td>{_mode_badge(mode)} {_e(MODE_LABELS.get(mode, ''))}</td>"
+            f"<td class='num'>{_pct(p)}{warn}</td><td class='num'>{runs}</td><td>{seen}</td>"
+            f"<td class='num'>{_num(d.get('nearest_other_mode'))}</td><td>{sub_html}</td></tr>"
+        )
     return f"<table>{head}{''.join(rows)}</table>"
 
 
 def _parameter_table(scen: list[dict]) -> str:
     names: list[str] = []
     for s in scen:
-        for n in (s.get("parameters") or {}):
+        for n in s.get("parameters") or {}:
             if n not in names:
                 names.append(n)
     head = "<tr><th>parameter</th>" + "".join(f"<th>{_e(s['id'])}</th>" for s in scen) + "</tr>"
@@ -585,8 +672,12 @@ def _parameter_table(scen: list[dict]) -> str:
             return _num(v, 4)
         return _e(v)
 
-    rows = "".join(f"<tr><td>{_e(n)}</td>" + "".join(f"<td class='num'>{cell((s.get('parameters') or {}).get(n))}</td>"
-                                                     for s in scen) + "</tr>" for n in names)
+    rows = "".join(
+        f"<tr><td>{_e(n)}</td>"
+        + "".join(f"<td class='num'>{cell((s.get('parameters') or {}).get(n))}</td>" for s in scen)
+        + "</tr>"
+        for n in names
+    )
     return f"<details><summary>Parameter values</summary><table>{head}{rows}</table></details>"
 
 
@@ -609,8 +700,10 @@ def _run_order_table(plan: dict, out_dir: Path) -> str:
                 links.append(f'<span class="muted">{_e(name)} (missing)</span>')
         mode = (s.get("predicted") or {}).get("mode", "?")
         p = (s.get("dithering") or {}).get("p_predicted_mode")
-        rows.append(f"<tr><td class='num'>{n}</td><td>{_e(sid)}</td><td>{_e(pair_of.get(sid, '—'))}</td>"
-                    f"<td>{_mode_badge(mode)}</td><td class='num'>{_pct(p)}</td><td>{' · '.join(links) or '—'}</td></tr>")
+        rows.append(
+            f"<tr><td class='num'>{n}</td><td>{_e(sid)}</td><td>{_e(pair_of.get(sid, '—'))}</td>"
+            f"<td>{_mode_badge(mode)}</td><td class='num'>{_pct(p)}</td><td>{' · '.join(links) or '—'}</td></tr>"
+        )
     return f"<table>{head}{''.join(rows)}</table>"
 
 
@@ -639,17 +732,31 @@ def write_report(plan: dict, out_dir: Path, dithers: dict[str, tuple[np.ndarray,
     _fig_modes(plan, fig_dir / "modes.png")
     top = _fig_boundary_types(plan, fig_dir / "boundary_types.png")
     body.append("<h2>Performance modes and boundary types</h2>")
-    body.append('<div class="row">' + _img(f"{FIGURES_DIR}/modes.png", "runs per performance mode",
-                                           "Runs of the study per performance mode, and the invalid scenarios "
-                                           "(hatched); percentages of all runs.")
-                + _img(f"{FIGURES_DIR}/boundary_types.png", "boundary types",
-                       f"The {len(top)} most frequent boundary types: score-tree level and the elements that "
-                       "flip across a boundary pair.") + "</div>")
+    body.append(
+        '<div class="row">'
+        + _img(
+            f"{FIGURES_DIR}/modes.png",
+            "runs per performance mode",
+            "Runs of the study per performance mode, and the invalid scenarios (hatched); percentages of all runs.",
+        )
+        + _img(
+            f"{FIGURES_DIR}/boundary_types.png",
+            "boundary types",
+            f"The {len(top)} most frequent boundary types: score-tree level and the elements that "
+            "flip across a boundary pair.",
+        )
+        + "</div>"
+    )
     # sensitivity
     roots = _fig_sensitivity(plan, fig_dir / "sensitivity.png")
     body.append("<h2>Sensitivity</h2>")
-    body.append(_img(f"{FIGURES_DIR}/sensitivity.png", "sensitivity",
-                     "Estimated importance of each parameter for " + (", ".join(roots) or "the root scores") + "."))
+    body.append(
+        _img(
+            f"{FIGURES_DIR}/sensitivity.png",
+            "sensitivity",
+            "Estimated importance of each parameter for " + (", ".join(roots) or "the root scores") + ".",
+        )
+    )
     # pairs
     by_id = {s["id"]: s for s in plan["scenarios"]}
     body.append("<h2>Boundary pairs</h2>")
@@ -661,42 +768,64 @@ def write_report(plan: dict, out_dir: Path, dithers: dict[str, tuple[np.ndarray,
         modes = pair.get("modes", [])
         elements = ", ".join(str(e) for e in pair.get("elements", []))
         body.append(f'<section class="pair" id="pair-{_e(pid)}"><h3>Pair {_e(pair.get("id"))}: {_e(elements)}</h3>')
-        body.append(f"<p>Score-tree level {_e(pair.get('level', '?'))}; modes "
-                    + " / ".join(_mode_badge(m) for m in modes)
-                    + f"; distance in the unit cube {_num(pair.get('distance'))}; scenarios "
-                    + ", ".join(_e(s["id"]) for s in scen) + ".</p>")
+        body.append(
+            f"<p>Score-tree level {_e(pair.get('level', '?'))}; modes "
+            + " / ".join(_mode_badge(m) for m in modes)
+            + f"; distance in the unit cube {_num(pair.get('distance'))}; scenarios "
+            + ", ".join(_e(s["id"]) for s in scen)
+            + ".</p>"
+        )
         if not scen:
             body.append('<p class="note">The pair\'s scenarios are missing from the plan.</p></section>')
             continue
         note = _fig_map(pair, scen, out_dir, fig_dir / f"pair{pid}_map.png")
         if note is None:
-            body.append(_img(f"{FIGURES_DIR}/pair{pid}_map.png", f"map of pair {pair.get('id')}",
-                             "Mission elements of each scenario in metres east/north of the operational area's "
-                             "centre, its predicted track (solid) and the other scenario's track (dotted)."))
+            body.append(
+                _img(
+                    f"{FIGURES_DIR}/pair{pid}_map.png",
+                    f"map of pair {pair.get('id')}",
+                    "Mission elements of each scenario in metres east/north of the operational area's "
+                    "centre, its predicted track (solid) and the other scenario's track (dotted).",
+                )
+            )
         else:
             body.append(f'<p class="note">{_e(note)}</p>')
         _fig_parallel(pair, scen, labels, owners, imp, fig_dir / f"pair{pid}_parallel.png")
-        body.append(_img(f"{FIGURES_DIR}/pair{pid}_parallel.png", f"parallel coordinates of pair {pair.get('id')}",
-                         "Unit-cube coordinates of both scenarios (a permutation spans several shaded "
-                         "coordinates, one key per item); below, each coordinate's importance for mission "
-                         "and safety success."))
+        body.append(
+            _img(
+                f"{FIGURES_DIR}/pair{pid}_parallel.png",
+                f"parallel coordinates of pair {pair.get('id')}",
+                "Unit-cube coordinates of both scenarios (a permutation spans several shaded "
+                "coordinates, one key per item); below, each coordinate's importance for mission "
+                "and safety success.",
+            )
+        )
         if dim >= 2 and _fig_dithers(pair, scen, dithers, labels, axes_idx, fig_dir / f"pair{pid}_dithers.png"):
-            body.append(_img(f"{FIGURES_DIR}/pair{pid}_dithers.png", f"dithering of pair {pair.get('id')}",
-                             f"Dithering runs around each scenario on {labels[axes_idx[0]]} and "
-                             f"{labels[axes_idx[1]]} (the two most sensitive coordinates), coloured by the mode "
-                             "the stochastic simulation gave; the star is the scenario."))
+            body.append(
+                _img(
+                    f"{FIGURES_DIR}/pair{pid}_dithers.png",
+                    f"dithering of pair {pair.get('id')}",
+                    f"Dithering runs around each scenario on {labels[axes_idx[0]]} and "
+                    f"{labels[axes_idx[1]]} (the two most sensitive coordinates), coloured by the mode "
+                    "the stochastic simulation gave; the star is the scenario.",
+                )
+            )
         body.append(_scenario_table(scen))
         body.append(_parameter_table(scen))
         body.append("</section>")
     # run order
     body.append("<h2>Run order</h2>")
     body.append(_run_order_table(plan, out_dir))
-    body.append('<p class="muted">Generated by RAPT from <a href="plan.json">plan.json</a> '
-                f"(schema {_e(PLAN_SCHEMA)}).</p></main>")
+    body.append(
+        '<p class="muted">Generated by RAPT from <a href="plan.json">plan.json</a> '
+        f"(schema {_e(PLAN_SCHEMA)}).</p></main>"
+    )
     title = f"RAPT field plan: {plan['mission'].get('name', '?')}"
-    page = ("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">"
-            f"<meta name=\"viewport\" content=\"width=device-width, initial-scale=1\"><title>{_e(title)}</title>"
-            f"<style>{_CSS}</style></head><body>\n" + "\n".join(body) + "\n</body></html>\n")
+    page = (
+        '<!DOCTYPE html>\n<html lang="en"><head><meta charset="utf-8">'
+        f'<meta name="viewport" content="width=device-width, initial-scale=1"><title>{_e(title)}</title>'
+        f"<style>{_CSS}</style></head><body>\n" + "\n".join(body) + "\n</body></html>\n"
+    )
     path = out_dir / REPORT_NAME
     path.write_text(page, encoding="utf-8")
     return path

@@ -91,10 +91,22 @@ class _Recorder:
         self.sub.undeclare()
 
 
-def run_sil(mission: Mission, u, *, vehicle: str = "uuv1", log_path: str | Path | None = None,
-            speedup: float | None = None, timeout_s: float = 600.0, scenario_id: str = "",
-            mission_file: str = "", plan_id: str = "", bias=None, stochastic: bool = False,
-            seed: int = 0, surrogate=None) -> SilResult:
+def run_sil(
+    mission: Mission,
+    u,
+    *,
+    vehicle: str = "uuv1",
+    log_path: str | Path | None = None,
+    speedup: float | None = None,
+    timeout_s: float = 600.0,
+    scenario_id: str = "",
+    mission_file: str = "",
+    plan_id: str = "",
+    bias=None,
+    stochastic: bool = False,
+    seed: int = 0,
+    surrogate=None,
+) -> SilResult:
     """Fly scenario ``u`` through front-seat, bridge, back-seat (and logger); return its scores.
 
     ``speedup=None`` runs lock-step (as fast as the back-seat answers); a number runs the
@@ -114,8 +126,16 @@ def run_sil(mission: Mission, u, *, vehicle: str = "uuv1", log_path: str | Path 
     if surrogate is not None:
         surrogate.check(mission)
     port = free_port()
-    fs = FrontSeat(mission, u, f"udpin:127.0.0.1:{port}", lockstep=speedup is None, speedup=speedup or 1.0,
-                   bias=bias, stochastic=stochastic, seed=seed)
+    fs = FrontSeat(
+        mission,
+        u,
+        f"udpin:127.0.0.1:{port}",
+        lockstep=speedup is None,
+        speedup=speedup or 1.0,
+        bias=bias,
+        stochastic=stochastic,
+        seed=seed,
+    )
     fs_thread = threading.Thread(target=fs.serve, name="frontseat", daemon=True)
     session = open_session(listen=[f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"])
     logger = bridge = backseat = recorder = learned = None
@@ -127,14 +147,24 @@ def run_sil(mission: Mission, u, *, vehicle: str = "uuv1", log_path: str | Path 
 
             logger = McapLogger(log_path, session, vehicle=vehicle).start()
         recorder = _Recorder(session, vehicle)
-        session.put(keys.meta(vehicle, "scenario"), json.dumps({
-            "mission": mission.name, "mission_file": mission_file or mission.source, "scenario_id": scenario_id,
-            "plan_id": plan_id, "u": u.tolist(), "parameters": jsonable(mission.space.decode(u[None, :])[0]),
-        }))
+        session.put(
+            keys.meta(vehicle, "scenario"),
+            json.dumps(
+                {
+                    "mission": mission.name,
+                    "mission_file": mission_file or mission.source,
+                    "scenario_id": scenario_id,
+                    "plan_id": plan_id,
+                    "u": u.tolist(),
+                    "parameters": jsonable(mission.space.decode(u[None, :])[0]),
+                }
+            ),
+        )
         backseat = flying = BackSeat(session, vehicle, mission, u).start()
         if surrogate is not None:
-            learned = flying = BackSeat(session, vehicle, mission, u, source=SURROGATE_SOURCE,
-                                        surrogate=surrogate).start()
+            learned = flying = BackSeat(
+                session, vehicle, mission, u, source=SURROGATE_SOURCE, surrogate=surrogate
+            ).start()
         bridge = MavlinkBridge(f"udpout:127.0.0.1:{port}", session, vehicle=vehicle, allow_commands=True).start()
         deadline = time.monotonic() + 10
         while bridge.target is None and time.monotonic() < deadline:
@@ -171,5 +201,15 @@ def run_sil(mission: Mission, u, *, vehicle: str = "uuv1", log_path: str | Path 
         fs.close()
         session.close()
     scores = score_track(mission, u, track, wp_aborted, reason)
-    return SilResult(scores, track, fs.stats.ended, fs.t, wall, fs.stats.ticks, wp_aborted, reason, stats,
-                     Path(log_path) if log_path else None)
+    return SilResult(
+        scores,
+        track,
+        fs.stats.ended,
+        fs.t,
+        wall,
+        fs.stats.ticks,
+        wp_aborted,
+        reason,
+        stats,
+        Path(log_path) if log_path else None,
+    )

@@ -29,14 +29,30 @@ __all__ = ["train_surrogate", "load_or_train", "calibrate_goal_threshold", "TRAI
 GOAL_THRESHOLDS = tuple(round(t, 1) for t in np.arange(-0.9, 0.91, 0.1))
 
 #: Section 6.6.1: 5 expert runs, then 5 annotated runs per iteration; 50-75 runs converge.
-TRAINING_DEFAULTS = {"method": "qdagger", "quantile": 0.5, "runs": 75, "runs_per_iteration": 5, "epochs": 30,
-                     "mixing": 0.5, "select_runs": 25}
+TRAINING_DEFAULTS = {
+    "method": "qdagger",
+    "quantile": 0.5,
+    "runs": 75,
+    "runs_per_iteration": 5,
+    "epochs": 30,
+    "mixing": 0.5,
+    "select_runs": 25,
+}
 
 
-def train_surrogate(mission: Mission, *, method: str = "qdagger", quantile: float = 0.5, runs: int = 75,
-                    runs_per_iteration: int = 5, epochs: int = 30, mixing: float = 0.5, select_runs: int = 25,
-                    seed: int = 0,
-                    on_iteration: Callable[[IterationRecord, Policy], None] | None = None) -> Surrogate:
+def train_surrogate(
+    mission: Mission,
+    *,
+    method: str = "qdagger",
+    quantile: float = 0.5,
+    runs: int = 75,
+    runs_per_iteration: int = 5,
+    epochs: int = 30,
+    mixing: float = 0.5,
+    select_runs: int = 25,
+    seed: int = 0,
+    on_iteration: Callable[[IterationRecord, Policy], None] | None = None,
+) -> Surrogate:
     """Imitate the mission's expert with ``runs`` annotated runs (``runs_per_iteration`` at a time).
 
     ``mixing`` p: update i's runs obey the expert on a share p**i of their steps (DAgger's
@@ -60,26 +76,44 @@ def train_surrogate(mission: Mission, *, method: str = "qdagger", quantile: floa
         Xs = draw_valid(mission, int(select_runs), np.random.default_rng([int(seed), 0x73656C]))
         expert, held_out = annotated_runs(mission, Xs, spec)
         select = lambda policy: mode_agreement(mission, Surrogate.for_mission(mission, policy), Xs, expert)  # noqa: E731
-    result = imitate(make_rollout(mission, spec, seed=seed, mixing=mixing), method=method, quantile=quantile,
-                     iterations=runs // runs_per_iteration - 1, runs_per_iteration=runs_per_iteration,
-                     epochs=epochs, seed=seed, select=select, on_iteration=on_iteration,
-                     heads=policy_heads(spec))
+    result = imitate(
+        make_rollout(mission, spec, seed=seed, mixing=mixing),
+        method=method,
+        quantile=quantile,
+        iterations=runs // runs_per_iteration - 1,
+        runs_per_iteration=runs_per_iteration,
+        epochs=epochs,
+        seed=seed,
+        select=select,
+        on_iteration=on_iteration,
+        heads=policy_heads(spec),
+    )
     h = result.history[result.chosen]
     threshold, calibration = 0.0, None
     if select_runs:
         threshold, share = calibrate_goal_threshold(result.policy, spec, held_out)
         calibration = [round(a, 4) for a in share]
-    training = {"method": method if method != "qdagger" else f"qdagger({int(round(quantile * 100))})",
-                "runs": result.runs + int(select_runs), "annotated_runs": result.runs,
-                "select_runs": int(select_runs), "chosen_iteration": result.chosen,
-                "selection_accuracy": h.extra.get("selection"), "samples": h.samples, "seed": seed,
-                "epochs": epochs, "mixing": mixing, "fit_s": round(sum(r.fit_s for r in result.history), 2),
-                "iterations": len(result.history), "threshold_reproduced": calibration}
+    training = {
+        "method": method if method != "qdagger" else f"qdagger({int(round(quantile * 100))})",
+        "runs": result.runs + int(select_runs),
+        "annotated_runs": result.runs,
+        "select_runs": int(select_runs),
+        "chosen_iteration": result.chosen,
+        "selection_accuracy": h.extra.get("selection"),
+        "samples": h.samples,
+        "seed": seed,
+        "epochs": epochs,
+        "mixing": mixing,
+        "fit_s": round(sum(r.fit_s for r in result.history), 2),
+        "iterations": len(result.history),
+        "threshold_reproduced": calibration,
+    }
     return Surrogate.for_mission(mission, result.policy, training, threshold)
 
 
-def calibrate_goal_threshold(policy, spec, trajectories, thresholds=GOAL_THRESHOLDS,
-                             within_steps: int = 5) -> tuple[float, list[float]]:
+def calibrate_goal_threshold(
+    policy, spec, trajectories, thresholds=GOAL_THRESHOLDS, within_steps: int = 5
+) -> tuple[float, list[float]]:
     """The goal threshold under which ``policy`` gives the waypoint up where the expert did.
 
     Why: the expert gives its waypoint up once per aborted run, so among the many states beside

@@ -29,11 +29,30 @@ from rapt.space import Categorical, Continuous, Integer, Permutation, StateSpace
 from rapt.subboundaries import SubBoundaryTree, subboundary_tree
 
 __all__ = [
-    "search", "Study", "StateSpace", "Continuous", "Integer", "Categorical", "Permutation",
-    "METHODS", "make_sampler", "performance_modes", "boundary_pairs", "BoundaryPairs", "ScoreTree",
-    "subboundary_tree", "SubBoundaryTree",
-    "RaptError", "InputError", "FileFormatError", "MissingFileError", "StudyMismatchError", "RunError", "LinkError",
-    "LinkTimeoutError", "RefusedError",
+    "search",
+    "Study",
+    "StateSpace",
+    "Continuous",
+    "Integer",
+    "Categorical",
+    "Permutation",
+    "METHODS",
+    "make_sampler",
+    "performance_modes",
+    "boundary_pairs",
+    "BoundaryPairs",
+    "ScoreTree",
+    "subboundary_tree",
+    "SubBoundaryTree",
+    "RaptError",
+    "InputError",
+    "FileFormatError",
+    "MissingFileError",
+    "StudyMismatchError",
+    "RunError",
+    "LinkError",
+    "LinkTimeoutError",
+    "RefusedError",
 ]
 
 __version__ = "0.1.0"

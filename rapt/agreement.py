@@ -111,5 +111,15 @@ def agreement(X: np.ndarray, system: np.ndarray, surrogate: np.ndarray, n_modes:
         near = float(np.mean(d_t[wrong] <= radius))
     else:
         near = float("nan")
-    return Agreement(int(X.shape[0]), accuracy, confusion_matrix(system, surrogate, n_modes), int(si.size),
-                     int(ti.size), regions, straddled, distance_error, int(wrong.size), near)
+    return Agreement(
+        int(X.shape[0]),
+        accuracy,
+        confusion_matrix(system, surrogate, n_modes),
+        int(si.size),
+        int(ti.size),
+        regions,
+        straddled,
+        distance_error,
+        int(wrong.size),
+        near,
+    )

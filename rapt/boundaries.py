@@ -58,16 +58,26 @@ class BoundaryPairs:
 
     def select(self, mask: np.ndarray) -> BoundaryPairs:
         mask = np.asarray(mask)
-        return BoundaryPairs(self.i[mask], self.j[mask], self.distance[mask], self.mode_i[mask], self.mode_j[mask],
-                             self.cluster_i[mask], self.cluster_j[mask], self.likely_noise[mask], self.labels)
+        return BoundaryPairs(
+            self.i[mask],
+            self.j[mask],
+            self.distance[mask],
+            self.mode_i[mask],
+            self.mode_j[mask],
+            self.cluster_i[mask],
+            self.cluster_j[mask],
+            self.likely_noise[mask],
+            self.labels,
+        )
 
     def of_type(self, mode_a: int, mode_b: int) -> BoundaryPairs:
         a, b = min(mode_a, mode_b), max(mode_a, mode_b)
         return self.select((self.mode_i == a) & (self.mode_j == b))
 
 
-def mutual_pairs(X: np.ndarray, labels: np.ndarray, groups: Sequence[int] | None = None
-                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def mutual_pairs(
+    X: np.ndarray, labels: np.ndarray, groups: Sequence[int] | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Mutual nearest neighbours across every pair of label groups.
 
     For groups ``a < b``: ``x ∈ a`` and ``y ∈ b`` form a pair when ``y`` is ``x``'s nearest
@@ -80,9 +90,11 @@ def mutual_pairs(X: np.ndarray, labels: np.ndarray, groups: Sequence[int] | None
     out_i, out_j, out_d = [], [], []
     keys = sorted(trees)
     for ai, a in enumerate(keys):
-        for b in keys[ai + 1:]:
+        for b in keys[ai + 1 :]:
             ia, ib = members[a], members[b]
-            d_ab, nn_ab = trees[b].query(X[ia], k=1, workers=query_workers(ia.size))  # for each a: nearest b (local index)
+            d_ab, nn_ab = trees[b].query(
+                X[ia], k=1, workers=query_workers(ia.size)
+            )  # for each a: nearest b (local index)
             _, nn_ba = trees[a].query(X[ib], k=1, workers=query_workers(ib.size))  # for each b: nearest a (local index)
             mutual = nn_ba[nn_ab] == np.arange(ia.size)
             out_i.append(ia[mutual])
@@ -142,8 +154,9 @@ HNSW_EF_CONSTRUCTION = 24
 HNSW_EF_SEARCH = 24
 
 
-def _hnsw_query(X: np.ndarray, k: int, m: int = HNSW_M, ef_construction: int = HNSW_EF_CONSTRUCTION,
-                ef_search: int = HNSW_EF_SEARCH) -> tuple[np.ndarray, np.ndarray]:
+def _hnsw_query(
+    X: np.ndarray, k: int, m: int = HNSW_M, ef_construction: int = HNSW_EF_CONSTRUCTION, ef_search: int = HNSW_EF_SEARCH
+) -> tuple[np.ndarray, np.ndarray]:
     """Approximate k nearest neighbours (self included) of every row from a faiss HNSW index.
 
     The queries are the indexed points themselves, so each search starts on the bottom
@@ -165,8 +178,18 @@ def _hnsw_query(X: np.ndarray, k: int, m: int = HNSW_M, ef_construction: int = H
     idx = np.empty((n, k), dtype=np.int64)
     entry = np.arange(n, dtype=np.int32)  # faiss's storage_idx_t
     entry_d = np.zeros(n, dtype=np.float32)
-    index.search_level_0(n, faiss.swig_ptr(Xf), k, faiss.swig_ptr(entry), faiss.swig_ptr(entry_d),  # type: ignore[attr-defined]
-                         faiss.swig_ptr(sq), faiss.swig_ptr(idx), 1, 1, params)
+    index.search_level_0(  # type: ignore[attr-defined]
+        n,
+        faiss.swig_ptr(Xf),
+        k,
+        faiss.swig_ptr(entry),
+        faiss.swig_ptr(entry_d),
+        faiss.swig_ptr(sq),
+        faiss.swig_ptr(idx),
+        1,
+        1,
+        params,
+    )
     missing = idx < 0  # too few reachable points: fall back to self at infinite distance
     idx = np.where(missing, np.arange(n)[:, None], idx)
     dist = np.sqrt(np.maximum(sq.astype(float), 0.0))
@@ -174,8 +197,9 @@ def _hnsw_query(X: np.ndarray, k: int, m: int = HNSW_M, ef_construction: int = H
     return dist, idx
 
 
-def graph_mutual_pairs(dist: np.ndarray, idx: np.ndarray, groups: np.ndarray,
-                       parents: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def graph_mutual_pairs(
+    dist: np.ndarray, idx: np.ndarray, groups: np.ndarray, parents: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Mutual nearest cross-group neighbours within a k-nearest-neighbour graph.
 
     ``x`` and ``y`` pair when ``y`` is the nearest of ``x``'s graph neighbours in
@@ -233,11 +257,19 @@ def _first_per_group(G: np.ndarray, valid: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(first.T)
 
 
-def boundary_pairs(X: np.ndarray, Y: np.ndarray | None = None, *, labels: np.ndarray | None = None,
-                   output_types: Sequence[str] | None = None, bandwidth: float = 0.2,
-                   d_eps: float | None = None, quantile: float | None = None,
-                   weights: np.ndarray | None = None, cluster_eps: float | None = None,
-                   min_samples: int = 20) -> BoundaryPairs:
+def boundary_pairs(
+    X: np.ndarray,
+    Y: np.ndarray | None = None,
+    *,
+    labels: np.ndarray | None = None,
+    output_types: Sequence[str] | None = None,
+    bandwidth: float = 0.2,
+    d_eps: float | None = None,
+    quantile: float | None = None,
+    weights: np.ndarray | None = None,
+    cluster_eps: float | None = None,
+    min_samples: int = 20,
+) -> BoundaryPairs:
     """Find, threshold and rank the boundary pairs of a labelled sample set (Algorithm 2).
 
     Parameters
@@ -298,8 +330,17 @@ def boundary_pairs(X: np.ndarray, Y: np.ndarray | None = None, *, labels: np.nda
     order = np.lexsort((j, i, d))
     i, j, d, mi, mj = i[order], j[order], d[order], mi[order], mj[order]
     ci, cj = clusters[i], clusters[j]
-    return BoundaryPairs(i.astype(np.int64), j.astype(np.int64), d, mi.astype(np.int64), mj.astype(np.int64),
-                         ci, cj, (ci < 0) | (cj < 0), labels)
+    return BoundaryPairs(
+        i.astype(np.int64),
+        j.astype(np.int64),
+        d,
+        mi.astype(np.int64),
+        mj.astype(np.int64),
+        ci,
+        cj,
+        (ci < 0) | (cj < 0),
+        labels,
+    )
 
 
 def _dbscan_within_modes(X: np.ndarray, labels: np.ndarray, eps: float, min_samples: int) -> np.ndarray:

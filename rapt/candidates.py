@@ -40,8 +40,9 @@ class UniformCandidates:
         return "UniformCandidates()"
 
 
-def select_batch(candidates: np.ndarray, information: np.ndarray, n: int, radius: np.ndarray | float,
-                 space: np.ndarray | None = None) -> np.ndarray:
+def select_batch(
+    candidates: np.ndarray, information: np.ndarray, n: int, radius: np.ndarray | float, space: np.ndarray | None = None
+) -> np.ndarray:
     """Indices of ``n`` candidates chosen greedily by descending information.
 
     A candidate is skipped when it lies within ``radius`` (its own radius) of one already
@@ -65,7 +66,7 @@ def select_batch(candidates: np.ndarray, information: np.ndarray, n: int, radius
     start = 0
     chunk = max(2 * n, 256)
     while len(chosen) < n and start < p:
-        block = order[start:start + chunk]
+        block = order[start : start + chunk]
         start += chunk
         live = block[~suppressed[block]]
         if live.size == 0:

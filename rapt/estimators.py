@@ -43,8 +43,7 @@ class PerformanceModes(ClusterMixin, BaseEstimator):
         """Label each row of scores ``X`` with its mode; returns ``self``."""
         self._validate_params()
         X = validate_data(self, X, dtype=np.float64)
-        self.labels_ = performance_modes(X, self.output_types, bandwidth=self.bandwidth,
-                                         bin_seeding=self.bin_seeding)
+        self.labels_ = performance_modes(X, self.output_types, bandwidth=self.bandwidth, bin_seeding=self.bin_seeding)
         self.n_modes_ = int(self.labels_.max()) + 1
         return self
 
@@ -64,8 +63,9 @@ class BoundaryPairFinder(BaseEstimator):
         "min_samples": [Interval(Integral, 1, None, closed="left")],
     }
 
-    def __init__(self, *, output_types=None, bandwidth=0.2, d_eps=None, quantile=None, cluster_eps=None,
-                 min_samples=20):
+    def __init__(
+        self, *, output_types=None, bandwidth=0.2, d_eps=None, quantile=None, cluster_eps=None, min_samples=20
+    ):
         self.output_types = output_types
         self.bandwidth = bandwidth
         self.d_eps = d_eps
@@ -77,8 +77,15 @@ class BoundaryPairFinder(BaseEstimator):
         """Find, threshold and rank the boundary pairs; returns ``self``."""
         self._validate_params()
         X, y = validate_data(self, X, y, dtype=np.float64, multi_output=True, y_numeric=True)
-        self.pairs_ = boundary_pairs(X, y, output_types=self.output_types, bandwidth=self.bandwidth,
-                                     d_eps=self.d_eps, quantile=self.quantile, cluster_eps=self.cluster_eps,
-                                     min_samples=self.min_samples)
+        self.pairs_ = boundary_pairs(
+            X,
+            y,
+            output_types=self.output_types,
+            bandwidth=self.bandwidth,
+            d_eps=self.d_eps,
+            quantile=self.quantile,
+            cluster_eps=self.cluster_eps,
+            min_samples=self.min_samples,
+        )
         self.labels_ = self.pairs_.labels
         return self

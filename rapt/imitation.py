@@ -35,12 +35,22 @@ import numpy as np
 
 from rapt.errors import InputError
 
-__all__ = ["MLPPolicy", "HeadsPolicy", "Policy", "policy_from_arrays", "Trajectory", "IterationRecord", "ImitationResult",
-           "imitate", "METHODS", "HIDDEN"]
+__all__ = [
+    "MLPPolicy",
+    "HeadsPolicy",
+    "Policy",
+    "policy_from_arrays",
+    "Trajectory",
+    "IterationRecord",
+    "ImitationResult",
+    "imitate",
+    "METHODS",
+    "HIDDEN",
+]
 
 #: Inputs and hidden activations are rounded to multiples of 2**-INPUT_BITS (see MLPPolicy.__call__).
 INPUT_BITS = 16
-_UNIT = 2.0 ** INPUT_BITS
+_UNIT = 2.0**INPUT_BITS
 #: exp's argument is capped here: 2^16 / (1 + e^40) already rounds to 0 units, and e^710 overflows.
 _EXP_CAP = 40.0
 
@@ -54,7 +64,7 @@ def _units(F: np.ndarray) -> np.ndarray:
 
 def _grid(a: np.ndarray, bits: int) -> np.ndarray:
     """``a`` rounded to multiples of 2**-bits (exactly, in float64)."""
-    return np.round(np.asarray(a, np.float64) * 2.0 ** bits) / 2.0 ** bits
+    return np.round(np.asarray(a, np.float64) * 2.0**bits) / 2.0**bits
 
 
 METHODS = ("supervised", "dagger", "qdagger")
@@ -74,8 +84,11 @@ class MLPPolicy:
     def from_sklearn(cls, model) -> MLPPolicy:
         """A copy of ``model``'s weights: a warm-started model trained on float32 keeps float32 weights
         and updates them in place, which would retrain every policy taken from it before."""
-        return cls([np.array(w, np.float32) for w in model.coefs_],
-                   [np.array(b, np.float32) for b in model.intercepts_], model.activation)
+        return cls(
+            [np.array(w, np.float32) for w in model.coefs_],
+            [np.array(b, np.float32) for b in model.intercepts_],
+            model.activation,
+        )
 
     @property
     def n_features(self) -> int:
@@ -154,8 +167,12 @@ class MLPPolicy:
             cols = np.zeros(W.shape[0], dtype=bool)
             cols[quiet] = True
             Wq = np.ascontiguousarray(W[cols])
-            cache[key] = (np.flatnonzero(~cols), np.ascontiguousarray(W[~cols]), Wq,
-                          b + (value * _UNIT) * Wq.sum(axis=0))
+            cache[key] = (
+                np.flatnonzero(~cols),
+                np.ascontiguousarray(W[~cols]),
+                Wq,
+                b + (value * _UNIT) * Wq.sum(axis=0),
+            )
         rest, W_rest, Wq, b_rest = cache[key]
         h = _units(F[:, rest]) @ W_rest
         h += b_rest
@@ -175,8 +192,11 @@ class MLPPolicy:
     @classmethod
     def from_arrays(cls, arrays) -> MLPPolicy:
         n = sum(1 for k in arrays if str(k).startswith("W"))
-        return cls([np.asarray(arrays[f"W{k}"], np.float32) for k in range(n)],
-                   [np.asarray(arrays[f"b{k}"], np.float32) for k in range(n)], str(arrays["activation"]))
+        return cls(
+            [np.asarray(arrays[f"W{k}"], np.float32) for k in range(n)],
+            [np.asarray(arrays[f"b{k}"], np.float32) for k in range(n)],
+            str(arrays["activation"]),
+        )
 
 
 @dataclass
@@ -209,8 +229,9 @@ class HeadsPolicy:
         key = None if quiet is None else (quiet.start, quiet.stop, quiet.step)
         cache = self.__dict__.setdefault("_plans", {})
         if key not in cache:
-            cache[key] = [(_all_columns(cols, self.n_features), _local(cols, quiet, self.n_features))
-                          for cols, _, _ in self.heads]
+            cache[key] = [
+                (_all_columns(cols, self.n_features), _local(cols, quiet, self.n_features)) for cols, _, _ in self.heads
+            ]
         return cache[key]
 
     def to_arrays(self) -> dict[str, np.ndarray]:
@@ -224,9 +245,14 @@ class HeadsPolicy:
     def from_arrays(cls, arrays) -> HeadsPolicy:
         heads, j = [], 0
         while f"h{j}_inputs" in arrays:
-            own = {k[len(f"h{j}_"):]: v for k, v in arrays.items() if k.startswith(f"h{j}_")}
-            heads.append((np.asarray(own.pop("inputs"), np.int64), np.asarray(own.pop("outputs"), np.int64),
-                          MLPPolicy.from_arrays(own)))
+            own = {k[len(f"h{j}_") :]: v for k, v in arrays.items() if k.startswith(f"h{j}_")}
+            heads.append(
+                (
+                    np.asarray(own.pop("inputs"), np.int64),
+                    np.asarray(own.pop("outputs"), np.int64),
+                    MLPPolicy.from_arrays(own),
+                )
+            )
             j += 1
         return cls(int(arrays["n_features"]), heads)
 
@@ -296,16 +322,29 @@ def _stack(trajs: Sequence[Trajectory]) -> tuple[np.ndarray, np.ndarray]:
     trajs = [t for t in trajs if t.features.shape[0]]
     if not trajs:
         raise InputError("rollout: returned no annotated states")
-    return (np.concatenate([t.features for t in trajs]).astype(np.float32),
-            np.concatenate([t.expert for t in trajs]).astype(np.float32))
+    return (
+        np.concatenate([t.features for t in trajs]).astype(np.float32),
+        np.concatenate([t.expert for t in trajs]).astype(np.float32),
+    )
 
 
-def imitate(rollout: Rollout, *, method: str = "qdagger", quantile: float = 0.5, iterations: int = 15,
-            runs_per_iteration: int = 5, initial_runs: int | None = None, hidden: Sequence[int] = HIDDEN,
-            epochs: int = 20, learning_rate: float = 3e-3, batch_size: int = 256, seed: int = 0,
-            select: Callable[[Policy], float] | None = None,
-            on_iteration: Callable[[IterationRecord, Policy], None] | None = None,
-            heads: Sequence[tuple[Sequence[int] | None, Sequence[int]]] | None = None) -> ImitationResult:
+def imitate(
+    rollout: Rollout,
+    *,
+    method: str = "qdagger",
+    quantile: float = 0.5,
+    iterations: int = 15,
+    runs_per_iteration: int = 5,
+    initial_runs: int | None = None,
+    hidden: Sequence[int] = HIDDEN,
+    epochs: int = 20,
+    learning_rate: float = 3e-3,
+    batch_size: int = 256,
+    seed: int = 0,
+    select: Callable[[Policy], float] | None = None,
+    on_iteration: Callable[[IterationRecord, Policy], None] | None = None,
+    heads: Sequence[tuple[Sequence[int] | None, Sequence[int]]] | None = None,
+) -> ImitationResult:
     """Train a policy imitating the expert behind ``rollout`` (see the module docstring).
 
     ``rollout(policy, k, iteration)`` flies ``k`` new runs (the expert flies when ``policy``
@@ -336,10 +375,21 @@ def imitate(rollout: Rollout, *, method: str = "qdagger", quantile: float = 0.5,
     for name, value in (("iterations", iterations), ("runs_per_iteration", runs_per_iteration), ("epochs", epochs)):
         if int(value) != value or value < (0 if name == "iterations" else 1):
             raise InputError(f"{name}: expected a positive whole number, got {value!r}")
+
     def network(j: int) -> MLPRegressor:
-        return MLPRegressor(hidden_layer_sizes=tuple(hidden), activation="logistic", solver="adam",
-                            learning_rate_init=learning_rate, batch_size=batch_size, max_iter=epochs,
-                            warm_start=True, shuffle=True, random_state=seed + j, tol=0.0, n_iter_no_change=10 ** 9)
+        return MLPRegressor(
+            hidden_layer_sizes=tuple(hidden),
+            activation="logistic",
+            solver="adam",
+            learning_rate_init=learning_rate,
+            batch_size=batch_size,
+            max_iter=epochs,
+            warm_start=True,
+            shuffle=True,
+            random_state=seed + j,
+            tol=0.0,
+            n_iter_no_change=10**9,
+        )
 
     models = [network(j) for j in range(len(heads) if heads else 1)]
     started = time.perf_counter()
@@ -377,8 +427,9 @@ def imitate(rollout: Rollout, *, method: str = "qdagger", quantile: float = 0.5,
         if split is None:
             policy = MLPPolicy.from_sklearn(models[0])
         else:
-            policy = HeadsPolicy(F.shape[1], [(cols, outs, MLPPolicy.from_sklearn(m))
-                                              for (cols, outs), m in zip(split, models)])
+            policy = HeadsPolicy(
+                F.shape[1], [(cols, outs, MLPPolicy.from_sklearn(m)) for (cols, outs), m in zip(split, models)]
+            )
         t2, c2 = time.perf_counter(), time.process_time()
         mse = float(np.mean((policy(F) - A) ** 2))
         record = IterationRecord(it, runs, int(F.shape[0]), t1 - t0, t2 - t1, t2 - started, mse, c2 - c1)

@@ -16,9 +16,16 @@ from rapt.errors import InputError
 __all__ = ["tree_importance", "importance_weights", "output_importance", "boundary_type_importance"]
 
 
-def tree_importance(X: np.ndarray, y: np.ndarray, kind: str, *, max_samples: int = 20000,
-                    random_state: int | np.random.Generator = 0, min_samples_leaf: int = 2,
-                    max_depth: int | None = 16) -> np.ndarray:
+def tree_importance(
+    X: np.ndarray,
+    y: np.ndarray,
+    kind: str,
+    *,
+    max_samples: int = 20000,
+    random_state: int | np.random.Generator = 0,
+    min_samples_leaf: int = 2,
+    max_depth: int | None = 16,
+) -> np.ndarray:
     """Impurity-decrease importance of each column of ``X`` for score ``y``.
 
     ``kind`` is ``"categorical"``/``"binary"`` (classification tree, Gini) or
@@ -58,8 +65,9 @@ def importance_weights(importance: np.ndarray) -> np.ndarray:
     return importance / top
 
 
-def output_importance(X: np.ndarray, Y: np.ndarray, output_types, *, max_samples: int = 20000,
-                      random_state: int = 0) -> np.ndarray:
+def output_importance(
+    X: np.ndarray, Y: np.ndarray, output_types, *, max_samples: int = 20000, random_state: int = 0
+) -> np.ndarray:
     """Tree importance of every input for every score column: an (m, d) array, rows sum to 1 or 0."""
     X = np.asarray(X, dtype=float)
     Y = np.asarray(Y, dtype=float)
@@ -68,15 +76,23 @@ def output_importance(X: np.ndarray, Y: np.ndarray, output_types, *, max_samples
     types = tuple(output_types)
     if len(types) != Y.shape[1]:
         raise InputError(f"output_types: got {len(types)} types for {Y.shape[1]} score columns")
-    return np.vstack([
-        tree_importance(X, Y[:, k], "continuous" if t == "continuous" else "categorical",
-                        max_samples=max_samples, random_state=random_state + k)
-        for k, t in enumerate(types)
-    ])
+    return np.vstack(
+        [
+            tree_importance(
+                X,
+                Y[:, k],
+                "continuous" if t == "continuous" else "categorical",
+                max_samples=max_samples,
+                random_state=random_state + k,
+            )
+            for k, t in enumerate(types)
+        ]
+    )
 
 
-def boundary_type_importance(X: np.ndarray, labels: np.ndarray, types, *, max_samples: int = 20000,
-                             random_state: int = 0) -> dict[tuple[int, int], np.ndarray]:
+def boundary_type_importance(
+    X: np.ndarray, labels: np.ndarray, types, *, max_samples: int = 20000, random_state: int = 0
+) -> dict[tuple[int, int], np.ndarray]:
     """Per boundary type ``(a, b)``: which inputs separate mode ``a`` from mode ``b``.
 
     A classification tree is fitted on the samples of the two modes only, so the answer is
@@ -89,6 +105,7 @@ def boundary_type_importance(X: np.ndarray, labels: np.ndarray, types, *, max_sa
     for n, t in enumerate(types):
         a, b = int(t[0]), int(t[1])
         rows = np.flatnonzero((labels == a) | (labels == b))
-        out[(a, b)] = tree_importance(X[rows], labels[rows], "categorical", max_samples=max_samples,
-                                      random_state=random_state + n)
+        out[(a, b)] = tree_importance(
+            X[rows], labels[rows], "categorical", max_samples=max_samples, random_state=random_state + n
+        )
     return out

@@ -48,8 +48,9 @@ def neighbour_variance(values: np.ndarray) -> np.ndarray:
     return values.var(axis=1)
 
 
-def nndv_information(spread: np.ndarray, mean_distance: np.ndarray, g: float = 1.0, v: float = 1.0,
-                     floor: float = 0.0) -> np.ndarray:
+def nndv_information(
+    spread: np.ndarray, mean_distance: np.ndarray, g: float = 1.0, v: float = 1.0, floor: float = 0.0
+) -> np.ndarray:
     """Eq. 3.5: ``(spread + floor)^g · mean_distance^v``."""
     spread = np.asarray(spread, dtype=float)
     mean_distance = np.asarray(mean_distance, dtype=float)

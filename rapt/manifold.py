@@ -91,22 +91,45 @@ class ManifoldSampler(Sampler):
     name = "manifold-nndv"
     adaptive = True
 
-    def __init__(self, n_free: int, bounds: np.ndarray | Sequence[Sequence[float]], *, seed: int = 0, k: int = 6,
-                 alpha: float = 1.0, beta: float = 1.0, r_min: float = np.radians(1.0), r_max: float = np.radians(10.0),
-                 n_initial: int = 100, candidates_per_point: float = 10.0, min_candidates: int = 1000,
-                 separation: float = 0.5, whole_hulls: bool = False):
+    def __init__(
+        self,
+        n_free: int,
+        bounds: np.ndarray | Sequence[Sequence[float]],
+        *,
+        seed: int = 0,
+        k: int = 6,
+        alpha: float = 1.0,
+        beta: float = 1.0,
+        r_min: float = np.radians(1.0),
+        r_max: float = np.radians(10.0),
+        n_initial: int = 100,
+        candidates_per_point: float = 10.0,
+        min_candidates: int = 1000,
+        separation: float = 0.5,
+        whole_hulls: bool = False,
+    ):
         ranges = np.asarray(bounds, dtype=float)
         if ranges.ndim != 2 or ranges.shape[1] != 2 or not np.all(ranges[:, 1] > ranges[:, 0]):
             raise InputError(f"bounds: expected (d, 2) ranges with lower < upper, got {ranges.tolist()}")
         super().__init__(len(ranges), seed=seed, output_types=("binary",))
         if not 0 <= n_free < self.dim:
-            raise InputError(f"n_free: expected 0 <= n_free < {self.dim} (at least one constrained coordinate), got {n_free}")
-        for name, value in (("alpha", alpha), ("beta", beta), ("r_min", r_min), ("r_max", r_max),
-                            ("candidates_per_point", candidates_per_point), ("separation", separation)):
+            raise InputError(
+                f"n_free: expected 0 <= n_free < {self.dim} (at least one constrained coordinate), got {n_free}"
+            )
+        for name, value in (
+            ("alpha", alpha),
+            ("beta", beta),
+            ("r_min", r_min),
+            ("r_max", r_max),
+            ("candidates_per_point", candidates_per_point),
+            ("separation", separation),
+        ):
             if not np.isfinite(value) or value < 0:
                 raise InputError(f"{name}: expected a finite number >= 0, got {value!r}")
         if r_min > r_max:
-            raise InputError(f"r_min: the boundary resolution ({r_min}) must not exceed the interior one, r_max ({r_max})")
+            raise InputError(
+                f"r_min: the boundary resolution ({r_min}) must not exceed the interior one, r_max ({r_max})"
+            )
         if k < 2:
             raise InputError(f"k: need at least 2 neighbours for a variance, got {k}")
         self.n_free = int(n_free)
@@ -128,9 +151,15 @@ class ManifoldSampler(Sampler):
         self.last_information: np.ndarray | None = None
 
     # -- data --------------------------------------------------------------------------------
-    def tell(self, X: np.ndarray, Y: np.ndarray, faces: Sequence[np.ndarray] | None = None,
-             ids: np.ndarray | None = None, face_ids: Sequence[np.ndarray] | None = None,
-             outcomes: np.ndarray | None = None) -> None:
+    def tell(
+        self,
+        X: np.ndarray,
+        Y: np.ndarray,
+        faces: Sequence[np.ndarray] | None = None,
+        ids: np.ndarray | None = None,
+        face_ids: Sequence[np.ndarray] | None = None,
+        outcomes: np.ndarray | None = None,
+    ) -> None:
         """Record the states the system used, their labels and, per state, its valid constrained values.
 
         ``faces[i]`` is a (k_i, d − n_free) array of unit-cube constrained coordinates valid
@@ -145,12 +174,13 @@ class ManifoldSampler(Sampler):
         """
         X = np.asarray(X, dtype=float).reshape(-1, self.dim)
         if faces is None:
-            faces = [x[None, self.n_free:] for x in X]
+            faces = [x[None, self.n_free :] for x in X]
         if len(faces) != len(X):
             raise InputError(f"faces: expected one face set per state ({len(X)}), got {len(faces)}")
         faces = [np.asarray(f, dtype=float).reshape(-1, self.dim - self.n_free) for f in faces]
-        if (ids is None) != (face_ids is None) or (ids is not None and face_ids is not None
-                                                   and (len(ids) != len(X) or len(face_ids) != len(X))):
+        if (ids is None) != (face_ids is None) or (
+            ids is not None and face_ids is not None and (len(ids) != len(X) or len(face_ids) != len(X))
+        ):
             raise InputError(f"ids, face_ids: give both, one per state ({len(X)}), or neither")
         if ids is None or self._face_ids is None or (self.n_told and not self._ids):
             self._face_ids = None  # identities only help when every state has them
@@ -181,7 +211,7 @@ class ManifoldSampler(Sampler):
         if not len(X):
             return np.empty((0, self.dim))
         counts = np.array([len(f) for f in self._faces])
-        return np.column_stack([np.repeat(X[:, :self.n_free], counts, axis=0), np.concatenate(self._faces)])
+        return np.column_stack([np.repeat(X[:, : self.n_free], counts, axis=0), np.concatenate(self._faces)])
 
     # -- Algorithm 7 ---------------------------------------------------------------------------
     def candidates(self, n: int, rng: np.random.Generator) -> np.ndarray:
@@ -190,7 +220,7 @@ class ManifoldSampler(Sampler):
 
     def _free_tree(self) -> cKDTree | None:
         """k-d tree of the told free states (embedded), for :meth:`_on_nearest_faces`; None without free coordinates."""
-        return cKDTree(angular_embedding(self.X[:, :self.n_free], self.bounds[:self.n_free])) if self.n_free else None
+        return cKDTree(angular_embedding(self.X[:, : self.n_free], self.bounds[: self.n_free])) if self.n_free else None
 
     def _candidates(self, n: int, rng: np.random.Generator, tree: cKDTree | None):
         """:meth:`candidates` with their groups and identities (see :meth:`_on_nearest_faces`)."""
@@ -207,7 +237,7 @@ class ManifoldSampler(Sampler):
         """
         p = len(theta)
         if tree is not None:  # there are free coordinates
-            _, nn = tree.query(angular_embedding(theta, self.bounds[:self.n_free]), k=1, workers=query_workers(p))
+            _, nn = tree.query(angular_embedding(theta, self.bounds[: self.n_free]), k=1, workers=query_workers(p))
         else:
             nn = np.zeros(p, dtype=int)
         sets = [self._faces[i] for i in nn]
@@ -269,8 +299,9 @@ class ManifoldSampler(Sampler):
         mean_faces = np.mean([len(f) for f in self._faces]) if self._faces else 8.0
         return max(int(round(n / max(mean_faces, 1.0))), 1)
 
-    def hull_information(self, candidates: np.ndarray,
-                         cand_ids: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def hull_information(
+        self, candidates: np.ndarray, cand_ids: np.ndarray | None = None
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """NNDV along the manifolds: (I, σ, V) per candidate when every face of each told θ is labelled.
 
         The K = 2 n_free nearest told free states θ_i are the neighbours; at each, the face
@@ -286,7 +317,7 @@ class ManifoldSampler(Sampler):
         order = np.argsort(inv, kind="stable")
         counts = np.bincount(inv, minlength=len(thetas))
         slot = np.arange(len(X)) - np.repeat(np.cumsum(counts) - counts, counts)
-        body = self.embed(X)[:, 2 * f:]
+        body = self.embed(X)[:, 2 * f :]
         faces = np.full((len(thetas), counts.max(), body.shape[1]), np.inf)
         labels = np.zeros((len(thetas), counts.max()))
         faces[inv[order], slot] = body[order]
@@ -294,7 +325,7 @@ class ManifoldSampler(Sampler):
         k = min(max(2 * f, 2), len(thetas))
         emb = self.embed(candidates)
         tree = cKDTree(angular_embedding(thetas, self.bounds[:f]))
-        dist, nbr = tree.query(emb[:, :2 * f], k=k, workers=query_workers(len(candidates)))
+        dist, nbr = tree.query(emb[:, : 2 * f], k=k, workers=query_workers(len(candidates)))
         dist, nbr = dist.reshape(len(candidates), k), nbr.reshape(len(candidates), k)
         if self._face_ids and cand_ids is not None:  # follow the face by name; absent counts as unstable
             first = np.unique(inv, return_index=True)[1]  # one told state per θ names every face of its hull
@@ -303,25 +334,28 @@ class ManifoldSampler(Sampler):
             _, rank = np.unique(np.concatenate([np.asarray(self._ids), hull_ids, cand_ids]), return_inverse=True)
             rank = rank.reshape(-1).astype(np.int64)
             n_id = rank.max() + 1
-            key = inv.astype(np.int64) * n_id + rank[:len(X)]
+            key = inv.astype(np.int64) * n_id + rank[: len(X)]
             o = np.argsort(key)
-            want = nbr.astype(np.int64) * n_id + rank[len(X) + len(hull_ids):][:, None]
+            want = nbr.astype(np.int64) * n_id + rank[len(X) + len(hull_ids) :][:, None]
             at = np.clip(np.searchsorted(key[o], want), 0, len(key) - 1)
             found = key[o][at] == want
             lab = np.where(found, Y[o][at], absent)
             # where the face exists but was not labelled (a single-face query of another face there) it is not
             # gone: it reads as the face at the nearest joint state that labelled it (as Algorithm 8's extra states)
-            unlabelled = ~found & np.isin(want, owner * n_id + rank[len(X):len(X) + len(hull_ids)])
+            unlabelled = ~found & np.isin(want, owner * n_id + rank[len(X) : len(X) + len(hull_ids)])
             if unlabelled.any():
                 r, c = np.nonzero(unlabelled)
                 slot = 4.0 * np.sqrt(f)  # farther than any two joint states: the nearest is of the same face
-                P = separate(angular_embedding(np.concatenate([X[:, :f], thetas[nbr[r, c]]]), self.bounds[:f]),
-                             np.concatenate([self._ids, np.asarray(cand_ids)[r]]), slot)
-                d, nn = cKDTree(P[:len(X)]).query(P[len(X):], k=1)
+                P = separate(
+                    angular_embedding(np.concatenate([X[:, :f], thetas[nbr[r, c]]]), self.bounds[:f]),
+                    np.concatenate([self._ids, np.asarray(cand_ids)[r]]),
+                    slot,
+                )
+                d, nn = cKDTree(P[: len(X)]).query(P[len(X) :], k=1)
                 said = np.argmax(~unlabelled[r], axis=1)  # a face never labelled: the nearest neighbour that said
                 lab[r, c] = np.where(d <= slot / 2, Y[nn], lab[r, said])
         else:
-            gap = np.linalg.norm(faces[nbr] - emb[:, None, None, 2 * f:], axis=-1)  # (p, k, faces)
+            gap = np.linalg.norm(faces[nbr] - emb[:, None, None, 2 * f :], axis=-1)  # (p, k, faces)
             gap = np.where(np.isfinite(gap), gap, np.inf)
             lab = np.take_along_axis(labels[nbr], gap.argmin(axis=2)[..., None], axis=2)[..., 0]
         sigma = self._spread(lab)
@@ -348,8 +382,11 @@ class ManifoldSampler(Sampler):
         periodic = full_turn(self.bounds[:f, 0], self.bounds[:f, 1])
         local = np.where(periodic, np.mod(local, 1.0), np.clip(local, 0.0, 1.0))
         extra, extra_groups, extra_ids = self._on_nearest_faces(local, tree)
-        return (np.concatenate([cand, extra]), np.concatenate([groups, groups.max() + 1 + extra_groups]),
-                None if ids is None else np.concatenate([ids, extra_ids]))
+        return (
+            np.concatenate([cand, extra]),
+            np.concatenate([groups, groups.max() + 1 + extra_groups]),
+            None if ids is None else np.concatenate([ids, extra_ids]),
+        )
 
     def _ask_hulls(self, n: int, rng: np.random.Generator) -> np.ndarray:
         """Whole-hull batch: distinct free states ranked by their best live face; each returned with that face."""
@@ -365,7 +402,7 @@ class ManifoldSampler(Sampler):
             return np.empty((0, self.dim))
         rep = cand[first]
         m = min(m_theta, len(rep))
-        free = self.embed(rep)[:, :2 * self.n_free] if self.n_free else self.embed(rep)
+        free = self.embed(rep)[:, : 2 * self.n_free] if self.n_free else self.embed(rep)
         idx = select_batch(rep, info[first], m, self.separation * volume[first], free)
         self.last_information = info[first][idx]
         return rep[idx]
@@ -376,14 +413,19 @@ class ManifoldSampler(Sampler):
 Answer = (
     tuple[np.ndarray, np.ndarray, Sequence[np.ndarray]]
     | tuple[np.ndarray, np.ndarray, Sequence[np.ndarray], np.ndarray | None, Sequence[np.ndarray] | None]
-    | tuple[np.ndarray, np.ndarray, Sequence[np.ndarray], np.ndarray | None, Sequence[np.ndarray] | None,
-            np.ndarray | None]
+    | tuple[
+        np.ndarray, np.ndarray, Sequence[np.ndarray], np.ndarray | None, Sequence[np.ndarray] | None, np.ndarray | None
+    ]
 )
 
 
-def manifold_search(fn: Callable[[np.ndarray], Answer],
-                    sampler: ManifoldSampler, budget: int, batch_size: int = 50,
-                    progress: Callable[[int, int], None] | None = None) -> ManifoldSampler:
+def manifold_search(
+    fn: Callable[[np.ndarray], Answer],
+    sampler: ManifoldSampler,
+    budget: int,
+    batch_size: int = 50,
+    progress: Callable[[int, int], None] | None = None,
+) -> ManifoldSampler:
     """Algorithm 6's loop: ask, evaluate, tell, until ``budget`` evaluations or the cut-offs end it.
 
     ``fn(queries) -> (used_states, labels, faces[, ids, face_ids[, outcomes]])`` evaluates

@@ -40,20 +40,12 @@ _PAIR_CHUNK = 20_000  # in-band samples per pair query in coverage_curve
 def _check_X(system, X) -> np.ndarray:
     X = np.asarray(X, dtype=float)
     if X.ndim != 2 or X.shape[1] != system.dim:
-        raise InputError(
-            f"X must be a 2-D array of shape (n, {system.dim}) (system.dim columns); "
-            f"got shape {X.shape}"
-        )
+        raise InputError(f"X must be a 2-D array of shape (n, {system.dim}) (system.dim columns); got shape {X.shape}")
     return X
 
 
 def _check_d_eps(d_eps) -> float:
-    if (
-        isinstance(d_eps, bool)
-        or not isinstance(d_eps, numbers.Real)
-        or not np.isfinite(float(d_eps))
-        or d_eps <= 0
-    ):
+    if isinstance(d_eps, bool) or not isinstance(d_eps, numbers.Real) or not np.isfinite(float(d_eps)) or d_eps <= 0:
         raise InputError(f"d_eps must be a finite number > 0, got {d_eps!r}")
     return float(d_eps)
 
@@ -217,11 +209,7 @@ def convergence(system, X, d_eps, target=0.9, step=None, **coverage_kw) -> np.nd
     """
     X = _check_X(system, X)
     d_eps = _check_d_eps(d_eps)
-    if (
-        isinstance(target, bool)
-        or not isinstance(target, numbers.Real)
-        or not 0 < float(target) <= 1
-    ):
+    if isinstance(target, bool) or not isinstance(target, numbers.Real) or not 0 < float(target) <= 1:
         raise InputError(f"target must be a coverage fraction in (0, 1], got {target!r}")
     n = X.shape[0]
     step = max(n // 20, 1) if step is None else _check_positive_int(step, "step")
@@ -262,8 +250,9 @@ def quality_table(system, X, d_eps, seed=0, n_reference=20000) -> dict:
     return table
 
 
-def subboundary_recovery(system, subtree, *, grid: int = 512, tol: float = 0.05,
-                         quantile: float | None = None) -> list[dict]:
+def subboundary_recovery(
+    system, subtree, *, grid: int = 512, tol: float = 0.05, quantile: float | None = None
+) -> list[dict]:
     """How well a sub-boundary tree matches a 2-D system's true sub-boundaries, per level.
 
     Ground truth comes from a ``grid × grid`` raster of the system's scores: at level ``l``
@@ -295,7 +284,7 @@ def subboundary_recovery(system, subtree, *, grid: int = 512, tol: float = 0.05,
             i, j, d = i[keep], j[keep], d[keep]
         codes = _row_codes(np.vstack([V[:, cols], subtree.Y[i][:, cols], subtree.Y[j][:, cols]]))
         key_grid = codes[: g * g].reshape(g, g)
-        ki, kj = codes[g * g: g * g + i.size], codes[g * g + i.size:]
+        ki, kj = codes[g * g : g * g + i.size], codes[g * g + i.size :]
         parent_grid = _row_codes(V[:, parent_cols]).reshape(g, g) if parent_cols else np.zeros((g, g), dtype=np.int64)
         edges: dict[tuple[int, int], list[np.ndarray]] = {}
         for axis in (0, 1):
@@ -315,7 +304,7 @@ def subboundary_recovery(system, subtree, *, grid: int = 512, tol: float = 0.05,
                 edges.setdefault((int(t[0]), int(t[1])), []).append(mid[sel])
         trees = {t: cKDTree(np.vstack(p)) for t, p in edges.items()}
         recovered = 0
-        for (ta, tb) in trees:
+        for ta, tb in trees:
             hit = ((np.minimum(ki, kj) == ta) & (np.maximum(ki, kj) == tb)) & (d < tol)
             recovered += bool(np.any(hit))
         on = np.zeros(i.size, dtype=bool)
@@ -324,11 +313,16 @@ def subboundary_recovery(system, subtree, *, grid: int = 512, tol: float = 0.05,
             sel = (np.minimum(ki, kj) == ta) & (np.maximum(ki, kj) == tb)
             if np.any(sel):
                 on[sel] = tree.query(mid[sel], k=1)[0] < tol
-        out.append({
-            "level": lv, "true_types": len(trees), "recovered": recovered,
-            "recovered_fraction": recovered / len(trees) if trees else float("nan"),
-            "pairs": int(i.size), "on_boundary_fraction": float(on.mean()) if i.size else float("nan"),
-        })
+        out.append(
+            {
+                "level": lv,
+                "true_types": len(trees),
+                "recovered": recovered,
+                "recovered_fraction": recovered / len(trees) if trees else float("nan"),
+                "pairs": int(i.size),
+                "on_boundary_fraction": float(on.mean()) if i.size else float("nan"),
+            }
+        )
     return out
 
 

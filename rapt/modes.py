@@ -21,8 +21,9 @@ from rapt.validation import check_scores
 __all__ = ["performance_modes", "mean_shift_normalised"]
 
 
-def performance_modes(Y: np.ndarray, output_types: Sequence[str] | None = None, *, bandwidth: float = 0.2,
-                      bin_seeding: bool = True) -> np.ndarray:
+def performance_modes(
+    Y: np.ndarray, output_types: Sequence[str] | None = None, *, bandwidth: float = 0.2, bin_seeding: bool = True
+) -> np.ndarray:
     """Label each score row with its performance mode (integers ``0..P-1``).
 
     Parameters
@@ -88,10 +89,11 @@ def _small_mean_shift(Z: np.ndarray, bandwidth: float, max_iter: int = 300) -> n
     return _nearest_centre_labels(Z, centres, bandwidth, intensity)
 
 
-def _shift_seeds(Z: np.ndarray, bandwidth: float, max_iter: int,
-                 seeds: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
+def _shift_seeds(
+    Z: np.ndarray, bandwidth: float, max_iter: int, seeds: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """Seeds (default: every row of ``Z``) shifted to convergence; returns (centres, rows within bandwidth of each)."""
-    b2 = bandwidth ** 2
+    b2 = bandwidth**2
     centres = (Z if seeds is None else seeds).astype(float, copy=True)
     for _ in range(max_iter):
         near = (_sq_distances(centres, Z) <= b2).astype(float)
@@ -105,13 +107,14 @@ def _shift_seeds(Z: np.ndarray, bandwidth: float, max_iter: int,
     return centres[intensity > 0], intensity[intensity > 0]  # seeds no row reached are dropped
 
 
-def _nearest_centre_labels(Z: np.ndarray, centres: np.ndarray, bandwidth: float, intensity: np.ndarray,
-                           rows: np.ndarray | None = None) -> np.ndarray:
+def _nearest_centre_labels(
+    Z: np.ndarray, centres: np.ndarray, bandwidth: float, intensity: np.ndarray, rows: np.ndarray | None = None
+) -> np.ndarray:
     """Deduplicate converged seeds (most populated first) and label ``rows`` (default ``Z``) by nearest centre."""
     order = np.lexsort((*centres.T[::-1], -intensity))  # most populated first, ties by position
     kept: list[int] = []
     for i in order:
-        if not kept or np.all(((centres[kept] - centres[i]) ** 2).sum(-1) > bandwidth ** 2):
+        if not kept or np.all(((centres[kept] - centres[i]) ** 2).sum(-1) > bandwidth**2):
             kept.append(int(i))
     c = centres[kept]
     labels = np.argmin(_sq_distances(Z if rows is None else rows, c), axis=1)

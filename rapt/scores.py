@@ -14,8 +14,14 @@ import numpy as np
 
 from rapt.errors import InputError
 
-__all__ = ["OUTPUT_TYPES", "check_output_types", "infer_output_types", "encode_labels", "row_codes",
-           "normalize_continuous"]
+__all__ = [
+    "OUTPUT_TYPES",
+    "check_output_types",
+    "infer_output_types",
+    "encode_labels",
+    "row_codes",
+    "normalize_continuous",
+]
 
 OUTPUT_TYPES = ("categorical", "binary", "continuous")
 
@@ -45,7 +51,7 @@ def infer_output_types(Y: np.ndarray) -> tuple[str, ...]:
     for col in columns:
         if not np.all(np.isfinite(col)):
             col = col[np.isfinite(col)]
-        if col.size == 0 or col.max() - col.min() >= 2 ** 20 or not np.all(col == np.rint(col)):
+        if col.size == 0 or col.max() - col.min() >= 2**20 or not np.all(col == np.rint(col)):
             types.append("continuous")
             continue
         lo, hi = col.min(), col.max()
@@ -85,7 +91,7 @@ def row_codes(A) -> tuple[np.ndarray, int]:
     span = 1
     for column in columns:
         codes, count = _column_codes(column)
-        if span * count >= 2 ** 62:  # compress before the key overflows
+        if span * count >= 2**62:  # compress before the key overflows
             _, key = np.unique(key, return_inverse=True)
             key = key.reshape(-1).astype(np.int64)
             span = int(key.max()) + 1 if n else 1

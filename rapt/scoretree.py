@@ -29,7 +29,9 @@ class ScoreTree:
         object.__setattr__(self, "indices", tuple(int(i) for i in self.indices))
         object.__setattr__(self, "children", tuple(self.children))
         if not self.indices:
-            raise InputError(f"tree: node {self.name or '(unnamed)'} has no score indices; every node needs at least one column")
+            raise InputError(
+                f"tree: node {self.name or '(unnamed)'} has no score indices; every node needs at least one column"
+            )
 
     @classmethod
     def from_mapping(cls, spec: ScoreTree | Mapping[str, Any], _path: str = "tree") -> ScoreTree:
@@ -37,7 +39,9 @@ class ScoreTree:
         if isinstance(spec, ScoreTree):
             return spec
         if not isinstance(spec, Mapping):
-            raise InputError(f"{_path}: expected a mapping with 'indices' and optional 'children', got {type(spec).__name__}")
+            raise InputError(
+                f"{_path}: expected a mapping with 'indices' and optional 'children', got {type(spec).__name__}"
+            )
         unknown = set(spec) - {"indices", "children", "name"}
         if unknown:
             raise InputError(f"{_path}: unknown field(s) {sorted(unknown)}; allowed: indices, children, name")
@@ -100,5 +104,7 @@ class ScoreTree:
                         f"columns (0..{n_columns - 1}); fix the tree or the scores"
                     )
                 if i in seen:
-                    raise InputError(f"tree: score column {i} appears in two nodes ({seen[i]} and {node.name or node.indices})")
+                    raise InputError(
+                        f"tree: score column {i} appears in two nodes ({seen[i]} and {node.name or node.indices})"
+                    )
                 seen[i] = node.name or str(node.indices)

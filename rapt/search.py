@@ -62,14 +62,24 @@ class Study:
         return self.space.decode(self.U)
 
 
-def search(fn: Callable[[np.ndarray], Any], bounds: Any, budget: int, method: str = "s-ndv",
-           batch_size: int = 100, seed: int = 0, *, store: str | Path | None = None,
-           executor: Any = None, chunk_size: int | None = None,
-           output_types: Sequence[str] | None = None, n_initial: int | None = None,
-           sampler_options: dict[str, Any] | None = None,
-           progress: Callable[[int, int], None] | None = None,
-           on_batch: Callable[[np.ndarray, np.ndarray], None] | None = None,
-           steer: Sequence[int] | None = None) -> Study:
+def search(
+    fn: Callable[[np.ndarray], Any],
+    bounds: Any,
+    budget: int,
+    method: str = "s-ndv",
+    batch_size: int = 100,
+    seed: int = 0,
+    *,
+    store: str | Path | None = None,
+    executor: Any = None,
+    chunk_size: int | None = None,
+    output_types: Sequence[str] | None = None,
+    n_initial: int | None = None,
+    sampler_options: dict[str, Any] | None = None,
+    progress: Callable[[int, int], None] | None = None,
+    on_batch: Callable[[np.ndarray, np.ndarray], None] | None = None,
+    steer: Sequence[int] | None = None,
+) -> Study:
     """Search the space for performance boundaries of ``fn``.
 
     Parameters
@@ -121,15 +131,21 @@ def search(fn: Callable[[np.ndarray], Any], bounds: Any, budget: int, method: st
         raise InputError("fn: expected a callable mapping an (n, d) array to an (n, m) array")
     space = bounds if isinstance(bounds, StateSpace) else StateSpace.from_bounds(bounds)
     physical = not isinstance(bounds, StateSpace)
-    steer, output_types = _checked_arguments(method, budget, batch_size, seed, chunk_size, n_initial, steer,
-                                             output_types)
+    steer, output_types = _checked_arguments(
+        method, budget, batch_size, seed, chunk_size, n_initial, steer, output_types
+    )
     options = _sampler_options(method, budget, batch_size, n_initial, sampler_options)
     sampler = make_sampler(method, space.dim, seed=int(seed), output_types=output_types, **options)
     ex, workers = resolve_executor(executor)
 
     config = {
-        "schema_version": SCHEMA_VERSION, "method": method, "seed": int(seed), "dim": space.dim,
-        "batch_size": int(batch_size), "space": space.to_config(), "physical": physical,
+        "schema_version": SCHEMA_VERSION,
+        "method": method,
+        "seed": int(seed),
+        "dim": space.dim,
+        "batch_size": int(batch_size),
+        "space": space.to_config(),
+        "physical": physical,
         "sampler_options": {k: v for k, v in options.items() if k != "size" and _json_storable(v)},
         "steer": steer,
     }
@@ -143,9 +159,16 @@ def search(fn: Callable[[np.ndarray], Any], bounds: Any, budget: int, method: st
         db.close()
 
 
-def _checked_arguments(method: str, budget: Any, batch_size: Any, seed: Any, chunk_size: Any, n_initial: Any,
-                       steer: Sequence[int] | None, output_types: Sequence[str] | None
-                       ) -> tuple[list[int] | None, tuple[str, ...] | None]:
+def _checked_arguments(
+    method: str,
+    budget: Any,
+    batch_size: Any,
+    seed: Any,
+    chunk_size: Any,
+    n_initial: Any,
+    steer: Sequence[int] | None,
+    output_types: Sequence[str] | None,
+) -> tuple[list[int] | None, tuple[str, ...] | None]:
     """:func:`search`'s arguments checked (InputError naming the argument); returns ``steer`` and
     ``output_types`` normalised (a list of ints and a tuple)."""
     if method not in METHODS:
@@ -169,13 +192,15 @@ def _checked_arguments(method: str, budget: Any, batch_size: Any, seed: Any, chu
         output_types = tuple(output_types)
         check_output_types(output_types, len(output_types))
         if steer is not None and len(output_types) != len(steer):
-            raise InputError(f"output_types: expected one type per steered column ({len(steer)}), "
-                             f"got {len(output_types)}")
+            raise InputError(
+                f"output_types: expected one type per steered column ({len(steer)}), got {len(output_types)}"
+            )
     return steer, output_types
 
 
-def _sampler_options(method: str, budget: int, batch_size: int, n_initial: int | None,
-                     sampler_options: dict[str, Any] | None) -> dict[str, Any]:
+def _sampler_options(
+    method: str, budget: int, batch_size: int, n_initial: int | None, sampler_options: dict[str, Any] | None
+) -> dict[str, Any]:
     """The sampler's keyword arguments: the caller's, with the space-filling start (adaptive
     methods) or the design size (``lhs``) filled in."""
     options = dict(sampler_options or {})
@@ -194,10 +219,20 @@ def _json_storable(v: Any) -> bool:
 class _Runner:
     """One study in progress: replay what the store holds, then evaluate the rest."""
 
-    def __init__(self, fn, space: StateSpace, physical: bool, sampler: Sampler, db: StudyStore,
-                 executor: cf.Executor | None, workers: int, chunk_size: int | None, batch_size: int,
-                 on_batch: Callable[[np.ndarray, np.ndarray], None] | None = None,
-                 steer: list[int] | None = None):
+    def __init__(
+        self,
+        fn,
+        space: StateSpace,
+        physical: bool,
+        sampler: Sampler,
+        db: StudyStore,
+        executor: cf.Executor | None,
+        workers: int,
+        chunk_size: int | None,
+        batch_size: int,
+        on_batch: Callable[[np.ndarray, np.ndarray], None] | None = None,
+        steer: list[int] | None = None,
+    ):
         self.fn = fn
         self.space = space
         self.physical = physical
@@ -231,8 +266,17 @@ class _Runner:
             if output_types is not None:
                 self.db.set_meta({"output_types": list(output_types)})
             return
-        for key in ("schema_version", "method", "seed", "dim", "batch_size", "space", "physical", "sampler_options",
-                    "steer"):
+        for key in (
+            "schema_version",
+            "method",
+            "seed",
+            "dim",
+            "batch_size",
+            "space",
+            "physical",
+            "sampler_options",
+            "steer",
+        ):
             if meta.get(key) != config[key]:
                 raise StudyMismatchError(
                     f"store: {self.db.path} holds a study with {key}={meta.get(key)!r}, not {config[key]!r}; "
@@ -273,8 +317,9 @@ class _Runner:
             if self.n_outputs is None:
                 self.n_outputs = Y.shape[1]
             if self.steer is not None and max(self.steer) >= Y.shape[1]:
-                raise InputError(f"steer: column {max(self.steer)} does not exist; fn returns "
-                                 f"{Y.shape[1]} score columns")
+                raise InputError(
+                    f"steer: column {max(self.steer)} does not exist; fn returns {Y.shape[1]} score columns"
+                )
             steered = Y if self.steer is None else Y[:, self.steer]
             if self.sampler.output_types is None:
                 self.sampler.output_types = infer_output_types(steered)
@@ -335,7 +380,7 @@ class _Runner:
                 size = self.chunk_size or max(1, math.ceil(todo.size / (2 * self.workers)))
                 futures = {}
                 for start in range(0, todo.size, size):
-                    rows = todo[start:start + size]
+                    rows = todo[start : start + size]
                     fut = self.executor.submit(_call_fn, self.fn, self._to_fn(asked[rows]))
                     futures[fut] = rows
                 for fut in cf.as_completed(futures):
@@ -372,8 +417,11 @@ class _Runner:
         Y = np.asarray(Y, dtype=float)
         if Y.ndim == 1 and Y.shape[0] == n:
             Y = Y[:, None]
-        expected_m = self.n_outputs if self.n_outputs is not None else (
-            len(self.sampler.output_types) if self.sampler.output_types and self.steer is None else None)
+        expected_m = (
+            self.n_outputs
+            if self.n_outputs is not None
+            else (len(self.sampler.output_types) if self.sampler.output_types and self.steer is None else None)
+        )
         if Y.ndim != 2 or Y.shape[0] != n or (expected_m is not None and Y.shape[1] != expected_m):
             shape = f"({n}, {expected_m})" if expected_m else f"({n}, m)"
             raise InputError(f"fn: returned scores of shape {Y.shape} for {n} states; expected {shape}")
@@ -393,8 +441,9 @@ class _Runner:
         reasons = [None if f else "score row contains NaN or inf" for f in finite]
         Y_clean = np.where(finite[:, None], Y, 0.0)
         self.db.add_samples(b, rows, U, Y_clean, status, reasons)
-        self._fresh.extend((b, int(r), U[k], Y_clean[k] if finite[k] else None, str(status[k]), reasons[k])
-                           for k, r in enumerate(rows))
+        self._fresh.extend(
+            (b, int(r), U[k], Y_clean[k] if finite[k] else None, str(status[k]), reasons[k]) for k, r in enumerate(rows)
+        )
 
     def study(self, method: str, seed: int, store: str | None) -> Study:
         m = self.n_outputs or 0
@@ -403,10 +452,18 @@ class _Runner:
         Uf = np.vstack(self.U_failed) if self.U_failed else np.empty((0, self.space.dim))
         to_x = self.space.from_unit_array if self.physical else (lambda a: a)
         return Study(
-            X=to_x(U) if len(U) else U.copy(), Y=Y, U=U,
+            X=to_x(U) if len(U) else U.copy(),
+            Y=Y,
+            U=U,
             batch=np.concatenate(self.batch_of) if self.batch_of else np.empty(0, dtype=np.int64),
-            X_failed=to_x(Uf) if len(Uf) else Uf.copy(), failures=list(self.reasons), method=method, seed=seed,
-            space=self.space, output_types=tuple(self.sampler.output_types or ()), sampler=self.sampler, store=store,
+            X_failed=to_x(Uf) if len(Uf) else Uf.copy(),
+            failures=list(self.reasons),
+            method=method,
+            seed=seed,
+            space=self.space,
+            output_types=tuple(self.sampler.output_types or ()),
+            sampler=self.sampler,
+            store=store,
         )
 
 

@@ -90,7 +90,9 @@ class Integer:
     def __post_init__(self) -> None:
         _check_name(self.name)
         if int(self.low) != self.low or int(self.high) != self.high:
-            raise InputError(f"parameter '{self.name}': integer bounds must be whole numbers, got {self.low}, {self.high}")
+            raise InputError(
+                f"parameter '{self.name}': integer bounds must be whole numbers, got {self.low}, {self.high}"
+            )
         if self.low >= self.high:
             raise InputError(
                 f"parameter '{self.name}': low must be < high, got low={self.low}, high={self.high}; swap or widen the bounds"
@@ -191,8 +193,14 @@ class Permutation:
 
 Parameter = Continuous | Integer | Categorical | Permutation
 
-_KINDS = {"continuous": Continuous, "float": Continuous, "integer": Integer, "int": Integer,
-          "categorical": Categorical, "permutation": Permutation}
+_KINDS = {
+    "continuous": Continuous,
+    "float": Continuous,
+    "integer": Integer,
+    "int": Integer,
+    "categorical": Categorical,
+    "permutation": Permutation,
+}
 
 
 def parameter_from_mapping(spec: Mapping[str, Any]) -> Parameter:
@@ -317,7 +325,11 @@ class StateSpace:
             u = p.to_unit(values)
             U[:, self._slices[p.name]] = np.asarray(u, dtype=float).reshape(n, p.width)
         if np.any((U < 0) | (U > 1)):
-            bad = [p.name for p in self.parameters if np.any((U[:, self._slices[p.name]] < 0) | (U[:, self._slices[p.name]] > 1))]
+            bad = [
+                p.name
+                for p in self.parameters
+                if np.any((U[:, self._slices[p.name]] < 0) | (U[:, self._slices[p.name]] > 1))
+            ]
             raise InputError(f"scenarios: values outside the declared range for {bad}")
         return U
 

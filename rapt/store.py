@@ -70,7 +70,9 @@ class StudyStore:
             self._con.execute("PRAGMA synchronous=NORMAL")
             self._con.executescript(_SCHEMA)
         except sqlite3.DatabaseError as exc:
-            raise FileFormatError(f"store: {self.path} is not a RAPT study database ({exc}); choose another path") from None
+            raise FileFormatError(
+                f"store: {self.path} is not a RAPT study database ({exc}); choose another path"
+            ) from None
 
     # -- lifecycle ----------------------------------------------------------------------
     def close(self) -> None:
@@ -107,8 +109,10 @@ class StudyStore:
     def add_batch(self, batch: int, asked: np.ndarray) -> None:
         asked = np.ascontiguousarray(asked, dtype="<f8")
         with self._tx():
-            self._db.execute("INSERT INTO batches(batch, n, asked) VALUES (?, ?, ?)",
-                              (int(batch), int(asked.shape[0]), asked.tobytes()))
+            self._db.execute(
+                "INSERT INTO batches(batch, n, asked) VALUES (?, ?, ?)",
+                (int(batch), int(asked.shape[0]), asked.tobytes()),
+            )
 
     def batches(self) -> list[tuple[int, np.ndarray]]:
         """All asked batches in order as (batch index, asked points)."""
@@ -116,13 +120,22 @@ class StudyStore:
         out = []
         for b, n, blob in self._db.execute("SELECT batch, n, asked FROM batches ORDER BY batch"):
             if dim is None:
-                raise FileFormatError(f"store: {self.path} holds batches but no dim in its meta table; "
-                                      "it was not written by rapt.search, choose another path")
+                raise FileFormatError(
+                    f"store: {self.path} holds batches but no dim in its meta table; "
+                    "it was not written by rapt.search, choose another path"
+                )
             out.append((int(b), np.frombuffer(blob, dtype="<f8").reshape(int(n), int(dim)).copy()))
         return out
 
-    def add_samples(self, batch: int, rows: Iterable[int], X: np.ndarray, Y: np.ndarray | None,
-                    status: Iterable[str], reasons: Iterable[str | None]) -> None:
+    def add_samples(
+        self,
+        batch: int,
+        rows: Iterable[int],
+        X: np.ndarray,
+        Y: np.ndarray | None,
+        status: Iterable[str],
+        reasons: Iterable[str | None],
+    ) -> None:
         """Write evaluated rows of one batch in a single transaction."""
         X = np.ascontiguousarray(X, dtype="<f8")
         records = []
@@ -137,7 +150,9 @@ class StudyStore:
     def done_rows(self, batch: int) -> set[int]:
         return {int(r) for (r,) in self._db.execute("SELECT row FROM samples WHERE batch = ?", (int(batch),))}
 
-    def samples(self, batch: int | None = None) -> list[tuple[int, int, np.ndarray, np.ndarray | None, str, str | None]]:
+    def samples(
+        self, batch: int | None = None
+    ) -> list[tuple[int, int, np.ndarray, np.ndarray | None, str, str | None]]:
         """Rows as (batch, row, x, y, status, reason), in (batch, row) order."""
         sql = "SELECT batch, row, x, y, status, reason FROM samples"
         args: tuple = ()
@@ -146,8 +161,16 @@ class StudyStore:
             args = (int(batch),)
         out = []
         for b, r, x, y, st, why in self._db.execute(sql + " ORDER BY batch, row", args):
-            out.append((int(b), int(r), np.frombuffer(x, dtype="<f8").copy(),
-                        None if y is None else np.frombuffer(y, dtype="<f8").copy(), st, why))
+            out.append(
+                (
+                    int(b),
+                    int(r),
+                    np.frombuffer(x, dtype="<f8").copy(),
+                    None if y is None else np.frombuffer(y, dtype="<f8").copy(),
+                    st,
+                    why,
+                )
+            )
         return out
 
     def count(self) -> int:
@@ -166,6 +189,7 @@ class _Transaction:
     def __enter__(self) -> None:
         self.con.execute("BEGIN IMMEDIATE")
 
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None,
-                 tb: TracebackType | None) -> None:
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
         self.con.execute("ROLLBACK" if exc_type else "COMMIT")

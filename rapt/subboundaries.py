@@ -65,9 +65,18 @@ class SubBoundaryTree:
     the level l-1 cluster that c splits (-1 at the root).
     """
 
-    def __init__(self, tree: ScoreTree, X: np.ndarray, Y: np.ndarray, output_types: tuple[str, ...],
-                 assignment: np.ndarray, values: list[np.ndarray], parent: list[np.ndarray],
-                 pairs: list[tuple[np.ndarray, np.ndarray, np.ndarray]], k: int):
+    def __init__(
+        self,
+        tree: ScoreTree,
+        X: np.ndarray,
+        Y: np.ndarray,
+        output_types: tuple[str, ...],
+        assignment: np.ndarray,
+        values: list[np.ndarray],
+        parent: list[np.ndarray],
+        pairs: list[tuple[np.ndarray, np.ndarray, np.ndarray]],
+        k: int,
+    ):
         self.score_tree = tree
         self.levels = tree.levels()
         self.X = X
@@ -128,10 +137,18 @@ class SubBoundaryTree:
         return Reconstruction(score_index, float(value), clusters, members, i, j, d, level)
 
 
-def subboundary_tree(X: np.ndarray, Y: np.ndarray, tree: ScoreTree | Mapping[str, Any], *,
-                     output_types: Sequence[str] | None = None, bandwidth: float = 0.2,
-                     weights: np.ndarray | None = None, k: int = 12,
-                     exact_below: int = 2000, neighbours: str = "auto") -> SubBoundaryTree:
+def subboundary_tree(
+    X: np.ndarray,
+    Y: np.ndarray,
+    tree: ScoreTree | Mapping[str, Any],
+    *,
+    output_types: Sequence[str] | None = None,
+    bandwidth: float = 0.2,
+    weights: np.ndarray | None = None,
+    k: int = 12,
+    exact_below: int = 2000,
+    neighbours: str = "auto",
+) -> SubBoundaryTree:
     """Algorithm 3: split by the score tree level by level and pair sub-clusters within parents.
 
     Parameters
@@ -182,8 +199,9 @@ def subboundary_tree(X: np.ndarray, Y: np.ndarray, tree: ScoreTree | Mapping[str
         inverse = inverse.reshape(-1)
         assignment[lv] = inverse
         counts = np.bincount(inverse, minlength=keys.size).astype(float)
-        values.append(np.column_stack([np.bincount(inverse, weights=columns[c], minlength=keys.size) / counts
-                                       for c in cols]))
+        values.append(
+            np.column_stack([np.bincount(inverse, weights=columns[c], minlength=keys.size) / counts for c in cols])
+        )
         parents.append(keys // n_sub if lv else np.full(keys.size, -1, dtype=np.int64))
         previous = inverse
 
@@ -194,11 +212,15 @@ def subboundary_tree(X: np.ndarray, Y: np.ndarray, tree: ScoreTree | Mapping[str
     for lv in range(len(levels)):
         parent = assignment[lv - 1] if lv else None
         pairs.append(graph_mutual_pairs(dist, idx, assignment[lv], parent))
-    result = SubBoundaryTree(tree, X, Y, tuple(types), assignment, values, parents, pairs,
-                             n - 1 if n <= exact_below else int(k))
+    result = SubBoundaryTree(
+        tree, X, Y, tuple(types), assignment, values, parents, pairs, n - 1 if n <= exact_below else int(k)
+    )
     result.neighbours = idx  # the (N, k) neighbour graph the pairs came from (nearest first)
-    result.timings = {"split": split_done - started, "graph": graph_done - split_done,
-                      "pairs": time.perf_counter() - graph_done}
+    result.timings = {
+        "split": split_done - started,
+        "graph": graph_done - split_done,
+        "pairs": time.perf_counter() - graph_done,
+    }
     return result
 
 

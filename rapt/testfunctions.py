@@ -133,8 +133,7 @@ class SyntheticSystem:
         X = np.asarray(X, dtype=float)
         if X.ndim != 2 or X.shape[1] != self.dim:
             raise InputError(
-                f"X must be a 2-D array of shape (n, {self.dim}) for system "
-                f"'{self.name}'; got shape {X.shape}"
+                f"X must be a 2-D array of shape (n, {self.dim}) for system '{self.name}'; got shape {X.shape}"
             )
         return X
 
@@ -404,9 +403,7 @@ class Composite(SyntheticSystem):
         self.output_types = tuple(t for p in parts for t in p.output_types)
         self.n_classes = tuple(c for p in parts for c in p.n_classes)
         self.active_dims = tuple(
-            tuple(off + a for a in dims)
-            for p, off in zip(parts, self._offsets)
-            for dims in p.active_dims
+            tuple(off + a for a in dims) for p, off in zip(parts, self._offsets) for dims in p.active_dims
         )
 
     def _blocks(self, X):
@@ -427,9 +424,7 @@ class Composite8D(Composite):
     """
 
     def __init__(self) -> None:
-        super().__init__(
-            [Plates2D(), Custom2D(), Mirrored(Plates2D(), (0, 1)), Rings2D()], name="composite8d"
-        )
+        super().__init__([Plates2D(), Custom2D(), Mirrored(Plates2D(), (0, 1)), Rings2D()], name="composite8d")
 
 
 class _NoiseWrapper(SyntheticSystem):
@@ -538,9 +533,7 @@ def get_system(name: str) -> SyntheticSystem:
     try:
         factory = SYSTEMS[name]
     except (KeyError, TypeError):
-        raise InputError(
-            f"unknown system {name!r}; choose one of: {', '.join(sorted(SYSTEMS))}"
-        ) from None
+        raise InputError(f"unknown system {name!r}; choose one of: {', '.join(sorted(SYSTEMS))}") from None
     return factory()
 
 
@@ -573,10 +566,20 @@ class Hierarchical2D(SyntheticSystem):
     """
 
     SCORE_TREE = {
-        "name": "root", "indices": [0, 1], "children": [
-            {"name": "s1", "indices": [2], "children": [{"name": "l1", "indices": [6]}, {"name": "l2", "indices": [7]}]},
+        "name": "root",
+        "indices": [0, 1],
+        "children": [
+            {
+                "name": "s1",
+                "indices": [2],
+                "children": [{"name": "l1", "indices": [6]}, {"name": "l2", "indices": [7]}],
+            },
             {"name": "s2", "indices": [3], "children": [{"name": "l3", "indices": [8]}]},
-            {"name": "s3", "indices": [4], "children": [{"name": "l4", "indices": [9]}, {"name": "l5", "indices": [10]}]},
+            {
+                "name": "s3",
+                "indices": [4],
+                "children": [{"name": "l4", "indices": [9]}, {"name": "l5", "indices": [10]}],
+            },
             {"name": "s4", "indices": [5], "children": [{"name": "l6", "indices": [11]}]},
         ],
     }
@@ -636,7 +639,6 @@ class Hierarchical2D(SyntheticSystem):
         return out
 
 
-
 class HierarchicalND(SyntheticSystem):
     """A mission-like score tree over many inputs: 66 leaves in 4 levels (benchmarks).
 
@@ -680,7 +682,8 @@ class HierarchicalND(SyntheticSystem):
             return [{"name": f"l3_{g}", "indices": [l3_0 + g], "children": children_l3(g)} for g in self.l2_groups[h]]
 
         self.score_tree = {
-            "name": "root", "indices": [0, 1],
+            "name": "root",
+            "indices": [0, 1],
             "children": [{"name": f"l2_{h}", "indices": [l2_0 + h], "children": children_l2(h)} for h in range(n_l2)],
         }
 
@@ -688,7 +691,7 @@ class HierarchicalND(SyntheticSystem):
         a, b = self.leaf_inputs[:, 0], self.leaf_inputs[:, 1]
         dx = X[:, a] - self.leaf_centres[:, 0]
         dy = X[:, b] - self.leaf_centres[:, 1]
-        leaves = (dx * dx + dy * dy) > self.leaf_radii ** 2  # pass outside the disc
+        leaves = (dx * dx + dy * dy) > self.leaf_radii**2  # pass outside the disc
         l3 = np.column_stack([leaves[:, g].all(axis=1) for g in self.l3_groups])
         l2 = np.column_stack([l3[:, g].all(axis=1) for g in self.l2_groups])
         root = np.column_stack([l2[:, :3].all(axis=1), l2[:, 3:].all(axis=1)])
@@ -698,5 +701,5 @@ class HierarchicalND(SyntheticSystem):
         out = np.full((X.shape[0], self.n_outputs), np.nan)
         a, b = self.leaf_inputs[:, 0], self.leaf_inputs[:, 1]
         r = np.hypot(X[:, a] - self.leaf_centres[:, 0], X[:, b] - self.leaf_centres[:, 1])
-        out[:, -len(self.leaf_radii):] = np.abs(r - self.leaf_radii)
+        out[:, -len(self.leaf_radii) :] = np.abs(r - self.leaf_radii)
         return out

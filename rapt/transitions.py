@@ -87,14 +87,14 @@ def _empty_balls(tree: cKDTree, X: np.ndarray, pairs: np.ndarray, chunk: int = 2
     """Per pair ``(i, j)``: is the ball with diameter ``x_i x_j`` free of other points (the Gabriel test)?"""
     keep = np.zeros(len(pairs), dtype=bool)
     for s in range(0, len(pairs), chunk):
-        p = pairs[s:s + chunk]
+        p = pairs[s : s + chunk]
         a, b = X[p[:, 0]], X[p[:, 1]]
         r = np.linalg.norm(a - b, axis=1) / 2.0
         d, idx = tree.query((a + b) / 2.0, k=min(3, len(X)), workers=query_workers(len(p)))
         d, idx = d.reshape(len(p), -1), idx.reshape(len(p), -1)
         other = (idx != p[:, :1]) & (idx != p[:, 1:2])
         inside = other & (d < r[:, None] * (1.0 - 1e-9) - 1e-15)
-        keep[s:s + chunk] = ~inside.any(axis=1)
+        keep[s : s + chunk] = ~inside.any(axis=1)
     return keep
 
 
@@ -162,7 +162,7 @@ class TransitionGraph:
             if same.any():
                 allid = np.concatenate([self.ids[pool], ids[same]])
                 sep = separate(np.concatenate([self.points[pool], pts[same]]), allid, gap)
-                d, j = cKDTree(sep[:len(pool)]).query(sep[len(pool):], k=1)
+                d, j = cKDTree(sep[: len(pool)]).query(sep[len(pool) :], k=1)
                 out[np.flatnonzero(same)] = src[pool[j]]
         return out
 
@@ -219,8 +219,9 @@ def _gap(d: int, max_edge: float) -> float:
     return 4.0 * np.sqrt(max(d, 1)) + 2.0 * max_edge + 1.0
 
 
-def _continuations(points: np.ndarray, ids: np.ndarray, stable: np.ndarray, free_dims: int, max_edge: float,
-                   rate: float) -> tuple[np.ndarray, np.ndarray]:
+def _continuations(
+    points: np.ndarray, ids: np.ndarray, stable: np.ndarray, free_dims: int, max_edge: float, rate: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Gabriel edges between states of different identities where one manifold replaced the other."""
     tree = cKDTree(points)
     pairs = tree.query_pairs(max_edge, output_type="ndarray")
@@ -248,13 +249,15 @@ def _continuations(points: np.ndarray, ids: np.ndarray, stable: np.ndarray, free
         mid, r = (points[i[b]] + points[j[b]]) / 2.0, np.linalg.norm(points[i[b]] - points[j[b]], axis=1) / 2.0
         namesake = _namesake_inside(points, rank, i[b], j[b], mid, r, max_edge)
         rest = ~namesake
-        blocked[b[rest]] = _blocked_continuations(tree, points, i[b[rest]], j[b[rest]], mid[rest], r[rest], ids,
-                                                  stable, group * np.int64(n_id), rank, present)
+        blocked[b[rest]] = _blocked_continuations(
+            tree, points, i[b[rest]], j[b[rest]], mid[rest], r[rest], ids, stable, group * np.int64(n_id), rank, present
+        )
     return i[~blocked], j[~blocked]
 
 
-def _namesake_inside(points: np.ndarray, rank: np.ndarray, i: np.ndarray, j: np.ndarray, mid: np.ndarray,
-                     r: np.ndarray, max_edge: float) -> np.ndarray:
+def _namesake_inside(
+    points: np.ndarray, rank: np.ndarray, i: np.ndarray, j: np.ndarray, mid: np.ndarray, r: np.ndarray, max_edge: float
+) -> np.ndarray:
     """Per pair: does a state of ``i``'s or ``j``'s own identity lie strictly inside the ball (``mid``, ``r``) they span?"""
     gap = _gap(points.shape[1], max_edge)
     tree = cKDTree(separate(points, rank, gap))
@@ -290,10 +293,20 @@ def _blocked_continuations(tree, points, i, j, mid, r, ids, stable, group_key, r
     return np.bincount(pair[namesake | ~beside | stable[k]], minlength=len(i)) > 0
 
 
-def transition_graph(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, energy: np.ndarray,
-                     extra: np.ndarray | None = None, *, max_edge: float, ids: tuple | None = None,
-                     free_dims: int | None = None, rate: float = 1.0,
-                     continuation_edge: float | None = None, connections: tuple | None = None) -> TransitionGraph:
+def transition_graph(
+    X: np.ndarray,
+    stable: np.ndarray,
+    rest: np.ndarray,
+    energy: np.ndarray,
+    extra: np.ndarray | None = None,
+    *,
+    max_edge: float,
+    ids: tuple | None = None,
+    free_dims: int | None = None,
+    rate: float = 1.0,
+    continuation_edge: float | None = None,
+    connections: tuple | None = None,
+) -> TransitionGraph:
     """Build Algorithm 8's transition graph.
 
     Parameters
@@ -317,17 +330,28 @@ def transition_graph(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, energy
     labels, node_sizes = _nodes(known.stable, i, j)
     # 4: transitions from each unstable evaluated state's nearest stable Gabriel neighbour
     rest_node = -np.ones(known.n, dtype=int)
-    rest_node[known.rest_idx] = labels[known.n:known.extra0]
+    rest_node[known.rest_idx] = labels[known.n : known.extra0]
     trans = _transitions(known, labels, rest_node, i, j, energy, free_dims)
     edges = _cheapest_edges(trans)
     # where every known state ends up
     end = labels.copy()
-    end[:known.n] = np.where(stable, labels[:known.n], rest_node)
+    end[: known.n] = np.where(stable, labels[: known.n], rest_node)
     if known.nearest is not None:  # an extra state ends where its label came from, unless it is stable
         E0 = known.extra0
-        end[E0:] = np.where(known.stable[E0:], labels[E0:], end[:known.n][known.nearest])
-    return TransitionGraph(known.points, known.stable, labels, end, known.n, node_sizes, edges, trans, int(len(i)),
-                           float(max_edge), known.ids)
+        end[E0:] = np.where(known.stable[E0:], labels[E0:], end[: known.n][known.nearest])
+    return TransitionGraph(
+        known.points,
+        known.stable,
+        labels,
+        end,
+        known.n,
+        node_sizes,
+        edges,
+        trans,
+        int(len(i)),
+        float(max_edge),
+        known.ids,
+    )
 
 
 def _checked_inputs(X, stable, rest, energy, extra, ids) -> tuple:
@@ -349,8 +373,10 @@ def _checked_inputs(X, stable, rest, energy, extra, ids) -> tuple:
     if ids is not None:
         x_id, r_id, e_id = (np.asarray(v, dtype=np.int64).reshape(-1) for v in ids)
         if x_id.shape != (N,) or r_id.shape != (N,) or e_id.shape != (len(extra),):
-            raise InputError(f"ids: expected identities for X ({N}), rest ({N}) and extra ({len(extra)}), "
-                             f"got {x_id.shape}, {r_id.shape}, {e_id.shape}")
+            raise InputError(
+                f"ids: expected identities for X ({N}), rest ({N}) and extra ({len(extra)}), "
+                f"got {x_id.shape}, {r_id.shape}, {e_id.shape}"
+            )
         ids = (x_id, r_id, e_id)
     return X, stable, rest, energy, extra, ids
 
@@ -370,8 +396,9 @@ class _KnownStates:
     nearest: np.ndarray | None  # per extra state, the evaluated state its label comes from
 
 
-def _known_states(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, extra: np.ndarray, ids: tuple | None,
-                  gap: float) -> _KnownStates:
+def _known_states(
+    X: np.ndarray, stable: np.ndarray, rest: np.ndarray, extra: np.ndarray, ids: tuple | None, gap: float
+) -> _KnownStates:
     """Step 1: every known state and its label; an extra state takes its nearest evaluated state's."""
     N = len(X)
     settled = np.all(np.isfinite(rest), axis=1)
@@ -394,8 +421,14 @@ def _known_states(X: np.ndarray, stable: np.ndarray, rest: np.ndarray, extra: np
     return _KnownStates(points, all_ids, space, lab, N, settled, rest_idx, E0, nn)
 
 
-def _graph_edges(known: _KnownStates, max_edge: float, connections: tuple | None, free_dims: int | None,
-                 rate: float, continuation_edge: float | None) -> tuple[np.ndarray, np.ndarray]:
+def _graph_edges(
+    known: _KnownStates,
+    max_edge: float,
+    connections: tuple | None,
+    free_dims: int | None,
+    rate: float,
+    continuation_edge: float | None,
+) -> tuple[np.ndarray, np.ndarray]:
     """Step 2: the given connections, or the Gabriel graph (plus continuations between identities)."""
     points, space, lab, E0 = known.points, known.space, known.stable, known.extra0
     if connections is not None:
@@ -413,8 +446,14 @@ def _graph_edges(known: _KnownStates, max_edge: float, connections: tuple | None
             apart = ~_empty_balls(cKDTree(space), space, np.column_stack([i[both], j[both]]))
             i, j = np.delete(i, both[apart]), np.delete(j, both[apart])
     if connections is None and known.ids is not None and free_dims is not None:
-        ci, cj = _continuations(points, known.ids, lab, free_dims,
-                                max_edge / 2 if continuation_edge is None else min(continuation_edge, max_edge), rate)
+        ci, cj = _continuations(
+            points,
+            known.ids,
+            lab,
+            free_dims,
+            max_edge / 2 if continuation_edge is None else min(continuation_edge, max_edge),
+            rate,
+        )
         i, j = np.concatenate([i, ci]), np.concatenate([j, cj])
     return i, j
 
@@ -435,8 +474,15 @@ def _nodes(lab: np.ndarray, i: np.ndarray, j: np.ndarray) -> tuple[np.ndarray, n
     return labels, counts[order]
 
 
-def _transitions(known: _KnownStates, labels: np.ndarray, rest_node: np.ndarray, i: np.ndarray, j: np.ndarray,
-                 energy: np.ndarray, free_dims: int | None) -> dict:
+def _transitions(
+    known: _KnownStates,
+    labels: np.ndarray,
+    rest_node: np.ndarray,
+    i: np.ndarray,
+    j: np.ndarray,
+    energy: np.ndarray,
+    free_dims: int | None,
+) -> dict:
     """Step 4: one transition per unstable evaluated state that comes to rest, from the node of its nearest
     stable neighbour (its boundary pair) to its resting state's node, where the two nodes differ."""
     points, lab, N = known.points, known.stable, known.n
@@ -455,13 +501,21 @@ def _transitions(known: _KnownStates, labels: np.ndarray, rest_node: np.ndarray,
     u, nb, pair_len = u[keep], nb[keep], pair_len[keep]
     src, dst = labels[nb], rest_node[u]
     ok = (src >= 0) & (dst >= 0) & (src != dst)
-    return {"src": src[ok], "dst": dst[ok], "energy": energy[u[ok]], "witness": u[ok], "partner": nb[ok],
-            "length": pair_len[ok]}
+    return {
+        "src": src[ok],
+        "dst": dst[ok],
+        "energy": energy[u[ok]],
+        "witness": u[ok],
+        "partner": nb[ok],
+        "length": pair_len[ok],
+    }
 
 
 def _cheapest_edges(trans: dict) -> dict:
     """Of the transitions between the same two nodes, the lowest-energy one."""
     o = np.lexsort((trans["energy"], trans["dst"], trans["src"]))
     t = {k: v[o] for k, v in trans.items()}
-    firstpair = np.r_[True, (t["src"][1:] != t["src"][:-1]) | (t["dst"][1:] != t["dst"][:-1])] if len(o) else np.empty(0, bool)
+    firstpair = (
+        np.r_[True, (t["src"][1:] != t["src"][:-1]) | (t["dst"][1:] != t["dst"][:-1])] if len(o) else np.empty(0, bool)
+    )
     return {k: v[firstpair] for k, v in t.items()}

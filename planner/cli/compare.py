@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from contextlib import nullcontext
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 from rich.table import Table
@@ -17,16 +17,23 @@ __all__ = ["compare"]
 def compare(
     plan_dir: Annotated[Path, typer.Argument(help="Plan directory (or its plan.json) from rapt-plan generate.")],
     logs: Annotated[list[Path], typer.Argument(help="MCAP logs of the plan's runs (SIL or the real vehicle).")],
-    out_dir: Annotated[Path, typer.Option("--out", help="Directory for comparison.json and comparison.html.")]
-        = Path("comparison"),
+    out_dir: Annotated[Path, typer.Option("--out", help="Directory for comparison.json and comparison.html.")] = Path(
+        "comparison"
+    ),
     dithers: Annotated[int, typer.Option(help="Stochastic runs checking each adjusted scenario (0: none).")] = 20,
     seed: Annotated[int, typer.Option(help="Seed of every random choice.")] = 0,
-    fit: Annotated[Optional[str], typer.Option(help="Bias parameters to fit, comma-separated (default: all of "
-                                                    "speed, current_scale, current_offset, heading, battery, "
-                                                    "start_time).")] = None,
+    fit: Annotated[
+        str | None,
+        typer.Option(
+            help="Bias parameters to fit, comma-separated (default: all of "
+            "speed, current_scale, current_offset, heading, battery, "
+            "start_time)."
+        ),
+    ] = None,
 ) -> None:
     """Compare run logs with the plan: predicted vs observed, execution bias, re-plan."""
-    from planner.compare import CompareConfig, compare as run_compare
+    from planner.compare import CompareConfig
+    from planner.compare import compare as run_compare
     from sim.uuv.bias import BIAS_NAMES
 
     names = BIAS_NAMES
@@ -41,26 +48,35 @@ def compare(
         if not p.is_file():
             fail(f"LOGS: {p} does not exist; give the .mcap files of the plan's runs")
     with err.status("comparing", spinner="dots") if err.is_terminal else nullcontext() as status:
+
         def progress(stage: str) -> None:
             if status is not None:
                 status.update(stage)
 
         try:
-            result = run_compare(plan_dir, logs, out_dir, CompareConfig(dithers=dithers, seed=seed, fit=names),
-                                 progress)
+            result = run_compare(
+                plan_dir, logs, out_dir, CompareConfig(dithers=dithers, seed=seed, fit=names), progress
+            )
         except ValueError as exc:
             fail(str(exc))
     for lg in result["logs"]:
         for problem in lg["lost"]:
             err.print(f"[yellow]warning:[/] {Path(lg['path']).name}: {problem}", highlight=False, soft_wrap=True)
-    table = Table(title=f"{result['plan']['mission']}: {len(result['scenarios'])} run(s) against plan "
-                        f"{result['plan']['id']}")
+    table = Table(
+        title=f"{result['plan']['mission']}: {len(result['scenarios'])} run(s) against plan {result['plan']['id']}"
+    )
     for col in ("scenario", "predicted", "observed", "corrected", "path error (m)", "corrected (m)"):
         table.add_column(col, justify="left" if col == "scenario" else "right")
     for r in result["scenarios"]:
         pe, pc = r["path_error_m"], r["path_error_corrected_m"]
-        table.add_row(r["id"], r["predicted_mode"], r["observed_mode"] or "end not logged", r["corrected_mode"],
-                      "-" if pe is None else f"{pe:.1f}", "-" if pc is None else f"{pc:.1f}")
+        table.add_row(
+            r["id"],
+            r["predicted_mode"],
+            r["observed_mode"] or "end not logged",
+            r["corrected_mode"],
+            "-" if pe is None else f"{pe:.1f}",
+            "-" if pc is None else f"{pc:.1f}",
+        )
     out.print(table)
     bias = Table(title="execution bias (fitted jointly to all logs)")
     for col in ("parameter", "estimate", "std. error", "unit"):
@@ -71,20 +87,32 @@ def compare(
         bias.add_row(n, f"{v['estimate']:.4g}", se, units[n])
     out.print(bias)
     ag = result["mode_agreement"]
-    pct = (lambda v: "-" if v is None else f"{v:.0%}")
-    out.print(f"mode agreement: {pct(ag['uncorrected'])} as planned, {pct(ag['corrected'])} with the fitted bias "
-              f"({ag['scenarios']} scenarios with a logged end)", highlight=False, soft_wrap=True)
+
+    def pct(v: float | None) -> str:
+        return "-" if v is None else f"{v:.0%}"
+
+    out.print(
+        f"mode agreement: {pct(ag['uncorrected'])} as planned, {pct(ag['corrected'])} with the fitted bias "
+        f"({ag['scenarios']} scenarios with a logged end)",
+        highlight=False,
+        soft_wrap=True,
+    )
     flagged = [p for p in result["pairs"] if p["flagged"]]
     for p in flagged:
-        out.print(f"pair {p['id']} ({' / '.join(p['scenarios'])}) flagged: {p['reason']}", highlight=False,
-                  soft_wrap=True)
+        out.print(
+            f"pair {p['id']} ({' / '.join(p['scenarios'])}) flagged: {p['reason']}", highlight=False, soft_wrap=True
+        )
     for q in result["proposals"]:
         if q["found"]:
             mv = q["moved"]
-            out.print(f"  propose {q['id']}: {mv['parameter']} {mv['from']:.6g} -> {mv['to']:.6g} "
-                      f"(under the bias: {q['predicted_mode_under_bias']})" if isinstance(mv["from"], float) else
-                      f"  propose {q['id']}: {mv['parameter']} {mv['from']} -> {mv['to']}", highlight=False,
-                      soft_wrap=True)
+            out.print(
+                f"  propose {q['id']}: {mv['parameter']} {mv['from']:.6g} -> {mv['to']:.6g} "
+                f"(under the bias: {q['predicted_mode_under_bias']})"
+                if isinstance(mv["from"], float)
+                else f"  propose {q['id']}: {mv['parameter']} {mv['from']} -> {mv['to']}",
+                highlight=False,
+                soft_wrap=True,
+            )
         else:
             out.print(f"  {q['variant_of']}: {q['note']}", highlight=False, soft_wrap=True)
     out.print(f"comparison.json and comparison.html written to {out_dir}", highlight=False, soft_wrap=True)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
@@ -24,31 +24,53 @@ def generate(
     global_fraction: Annotated[float, typer.Option(help="Share of the budget for the space-filling start.")] = 0.2,
     dithers: Annotated[int, typer.Option(help="Stochastic dither runs per pair.")] = 2000,
     seed: Annotated[int, typer.Option(help="Seed of every random choice.")] = 0,
-    batch_size: Annotated[Optional[int], typer.Option("--batch-size", help="Runs per search batch "
-                                                        "(default: about 40 batches of 250 to 5,000).")] = None,
-    resume: Annotated[bool, typer.Option(help="Continue the study stored in OUT/study.db (or start it: "
-                                              "nothing evaluated is run again).")] = False,
+    batch_size: Annotated[
+        int | None,
+        typer.Option("--batch-size", help="Runs per search batch (default: about 40 batches of 250 to 5,000)."),
+    ] = None,
+    resume: Annotated[
+        bool,
+        typer.Option(help="Continue the study stored in OUT/study.db (or start it: nothing evaluated is run again)."),
+    ] = False,
     executor: Annotated[str, typer.Option(help="local, processes or dask://host:port.")] = "local",
-    refine: Annotated[bool, typer.Option("--refine", help="Sharpen each pair with a focused second search "
-                                                         "on its own sub-scores.")] = False,
+    refine: Annotated[
+        bool, typer.Option("--refine", help="Sharpen each pair with a focused second search on its own sub-scores.")
+    ] = False,
     refine_runs: Annotated[int, typer.Option("--refine-runs", help="Runs per pair of --refine.")] = 12,
-    surrogate: Annotated[Optional[Path], typer.Option(
-        "--surrogate", help="Search with a learned surrogate of the autonomy (section 6.2.3): load this .npz "
-                            "(trained for this mission), or train one (75 annotated + 25 held-out expert runs) "
-                            "and save it here; the expert then confirms the candidate pairs.")] = None,
-    confirm_runs: Annotated[int, typer.Option("--confirm-runs", help="Expert runs that check the surrogate's "
-                                                                     "candidate pairs (two per pair).")] = 100,
+    surrogate: Annotated[
+        Path | None,
+        typer.Option(
+            "--surrogate",
+            help="Search with a learned surrogate of the autonomy (section 6.2.3): load this .npz "
+            "(trained for this mission), or train one (75 annotated + 25 held-out expert runs) "
+            "and save it here; the expert then confirms the candidate pairs.",
+        ),
+    ] = None,
+    confirm_runs: Annotated[
+        int,
+        typer.Option("--confirm-runs", help="Expert runs that check the surrogate's candidate pairs (two per pair)."),
+    ] = 100,
 ) -> None:
     """Search a mission, choose boundary pairs, dither them and write a field plan."""
-    from planner.generate import GenerateConfig, generate as run_generate, make_executor
+    from planner.generate import GenerateConfig, make_executor
+    from planner.generate import generate as run_generate
 
     mission = load_mission(mission_file)
     store = out_dir / ("study.db" if surrogate is None else "study-surrogate.db")
     if store.exists() and not resume:
         fail(f"--out: {store} already holds a study; add --resume to continue it or choose another directory")
-    cfg = GenerateConfig(budget=budget, pairs=pairs, global_fraction=global_fraction, seed=seed,
-                         batch_size=batch_size, dithers=dithers, store=store, refine=refine_runs if refine else 0,
-                         confirm_runs=confirm_runs, surrogate_file=str(surrogate or ""))
+    cfg = GenerateConfig(
+        budget=budget,
+        pairs=pairs,
+        global_fraction=global_fraction,
+        seed=seed,
+        batch_size=batch_size,
+        dithers=dithers,
+        store=store,
+        refine=refine_runs if refine else 0,
+        confirm_runs=confirm_runs,
+        surrogate_file=str(surrogate or ""),
+    )
     try:
         cfg.check()
     except ValueError as exc:
@@ -67,9 +89,16 @@ def generate(
     except (ValueError, OSError) as exc:
         fail(str(exc))
     out_dir.mkdir(parents=True, exist_ok=True)
-    with Progress(TextColumn("{task.description:>8}"), BarColumn(), MofNCompleteColumn(),
-                  TextColumn("{task.fields[rate]}"), TimeElapsedColumn(), console=err, transient=True,
-                  disable=not err.is_terminal) as bar:
+    with Progress(
+        TextColumn("{task.description:>8}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("{task.fields[rate]}"),
+        TimeElapsedColumn(),
+        console=err,
+        transient=True,
+        disable=not err.is_terminal,
+    ) as bar:
         tasks: dict = {}
         start = time.perf_counter()
 
@@ -92,13 +121,26 @@ def generate(
     by_id = {sc["id"]: sc for sc in plan["scenarios"]}
     for p in plan["pairs"]:
         probs = [by_id[s]["dithering"].get("p_predicted_mode") for s in p["scenarios"]]
-        table.add_row(str(p["id"]), ", ".join(p["elements"]), " / ".join(p["modes"]), f"{p['distance']:.3f}",
-                      " / ".join("-" if v is None else f"{v:.0%}" for v in probs))
+        table.add_row(
+            str(p["id"]),
+            ", ".join(p["elements"]),
+            " / ".join(p["modes"]),
+            f"{p['distance']:.3f}",
+            " / ".join("-" if v is None else f"{v:.0%}" for v in probs),
+        )
     out.print(table)
-    out.print(f"{plan['study']['valid_runs']:,} valid runs; plan.json and {len(plan['scenarios'])} scenarios "
-              f"(.plan, .waypoints, .geojson) written", soft_wrap=True, highlight=False)
+    out.print(
+        f"{plan['study']['valid_runs']:,} valid runs; plan.json and {len(plan['scenarios'])} scenarios "
+        f"(.plan, .waypoints, .geojson) written",
+        soft_wrap=True,
+        highlight=False,
+    )
     if surrogate is not None:
         s = plan["study"]["surrogate"]
-        out.print(f"surrogate search: {s['confirmed']} of {s['candidates']} candidate pairs confirmed by the expert; "
-                  f"expert runs: {s['expert_runs']['training']} training + {s['expert_runs']['confirmation']} "
-                  "confirmation", soft_wrap=True, highlight=False)
+        out.print(
+            f"surrogate search: {s['confirmed']} of {s['candidates']} candidate pairs confirmed by the expert; "
+            f"expert runs: {s['expert_runs']['training']} training + {s['expert_runs']['confirmation']} "
+            "confirmation",
+            soft_wrap=True,
+            highlight=False,
+        )

@@ -8,23 +8,42 @@ command reports a bad one with the same one-line error.
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
 from planner.cli.console import fail
 
-__all__ = ["SurrogateOpt", "ScenarioOpt", "ZenohListen", "ZenohConnect", "ZenohConfig", "Vehicle", "load_mission",
-           "mission_and_scenario", "load_surrogate", "bus_session"]
+__all__ = [
+    "SurrogateOpt",
+    "ScenarioOpt",
+    "ZenohListen",
+    "ZenohConnect",
+    "ZenohConfig",
+    "Vehicle",
+    "load_mission",
+    "mission_and_scenario",
+    "load_surrogate",
+    "bus_session",
+]
 
 
-SurrogateOpt = Annotated[Optional[Path], typer.Option(
-    "--surrogate", help="A trained surrogate (.npz from `rapt-plan surrogate`) flies instead of the expert "
-                        "autonomy; it must have been trained for this mission.")]
+SurrogateOpt = Annotated[
+    Path | None,
+    typer.Option(
+        "--surrogate",
+        help="A trained surrogate (.npz from `rapt-plan surrogate`) flies instead of the expert "
+        "autonomy; it must have been trained for this mission.",
+    ),
+]
 
 
-ScenarioOpt = Annotated[str, typer.Option("--scenario", help="Row number of the mission's Sobol design, or a "
-                                                              "JSON file with 'u' or 'parameters'.")]
+ScenarioOpt = Annotated[
+    str,
+    typer.Option(
+        "--scenario", help="Row number of the mission's Sobol design, or a JSON file with 'u' or 'parameters'."
+    ),
+]
 
 
 ZenohListen = Annotated[list[str], typer.Option("--zenoh-listen", help="Zenoh endpoints to listen on.")]
@@ -33,7 +52,7 @@ ZenohListen = Annotated[list[str], typer.Option("--zenoh-listen", help="Zenoh en
 ZenohConnect = Annotated[list[str], typer.Option("--zenoh-connect", help="Zenoh endpoints to connect to.")]
 
 
-ZenohConfig = Annotated[Optional[Path], typer.Option("--zenoh-config", help="Zenoh config file (real deployments).")]
+ZenohConfig = Annotated[Path | None, typer.Option("--zenoh-config", help="Zenoh config file (real deployments).")]
 
 
 Vehicle = Annotated[str, typer.Option("--vehicle", help="Vehicle name on the bus.")]
@@ -66,7 +85,7 @@ def mission_and_scenario(mission_file: Path, scenario: str):
     return mission, u, sid
 
 
-def load_surrogate(path: Optional[Path], mission):
+def load_surrogate(path: Path | None, mission):
     """The surrogate file for ``mission``, or a one-line error naming --surrogate."""
     if path is None:
         return None
@@ -78,7 +97,7 @@ def load_surrogate(path: Optional[Path], mission):
         fail(f"--surrogate: {exc}")
 
 
-def bus_session(connect: list[str], config_file: Optional[Path]):
+def bus_session(connect: list[str], config_file: Path | None):
     """A Zenoh session joining the bus: the config file as given, else the endpoints (loopback by default)."""
     from bridge.session import open_session
 

@@ -7,13 +7,22 @@ pieces ``rapt-plan run`` wires together in one process, each until SIGINT or SIG
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
 from planner.cli.console import fail
-from planner.cli.inputs import (ScenarioOpt, SurrogateOpt, Vehicle, ZenohConfig, ZenohConnect, ZenohListen,
-                                bus_session, load_surrogate, mission_and_scenario)
+from planner.cli.inputs import (
+    ScenarioOpt,
+    SurrogateOpt,
+    Vehicle,
+    ZenohConfig,
+    ZenohConnect,
+    ZenohListen,
+    bus_session,
+    load_surrogate,
+    mission_and_scenario,
+)
 from planner.processes import arm_when_heard, run_until_signal, serve_until_signal, wait_for_signal
 
 __all__ = ["frontseat", "bridge", "autonomy", "log"]
@@ -23,7 +32,7 @@ def frontseat(
     mission_file: Annotated[Path, typer.Argument(help="Mission file (TOML).")],
     mavlink: Annotated[str, typer.Option(help="pymavlink connection to serve on, e.g. udpin:127.0.0.1:14550.")],
     scenario: ScenarioOpt = "0",
-    speedup: Annotated[Optional[float], typer.Option(help="Real time times this factor (default: lock-step).")] = None,
+    speedup: Annotated[float | None, typer.Option(help="Real time times this factor (default: lock-step).")] = None,
 ) -> None:
     """Serve the simulated front-seat of one scenario on a MAVLink connection."""
     from sim.uuv.frontseat import FrontSeat
@@ -43,11 +52,12 @@ def bridge(
     zenoh_connect: ZenohConnect = [],
     zenoh_config: ZenohConfig = None,
     allow_commands: Annotated[bool, typer.Option("--allow-commands", help="Forward back-seat set-points.")] = False,
-    signing_key: Annotated[Optional[Path], typer.Option(help="MAVLink 2 signing key file (32 bytes).")] = None,
-    geofence: Annotated[Optional[str], typer.Option(help="north_min,north_max,east_min,east_max in m.")] = None,
-    max_rate: Annotated[Optional[float], typer.Option("--max-rate", help="Set-points per second at most.")] = None,
-    arm: Annotated[bool, typer.Option("--arm", help="Once the vehicle is heard: GUIDED and arm "
-                                                     "(needs --allow-commands).")] = False,
+    signing_key: Annotated[Path | None, typer.Option(help="MAVLink 2 signing key file (32 bytes).")] = None,
+    geofence: Annotated[str | None, typer.Option(help="north_min,north_max,east_min,east_max in m.")] = None,
+    max_rate: Annotated[float | None, typer.Option("--max-rate", help="Set-points per second at most.")] = None,
+    arm: Annotated[
+        bool, typer.Option("--arm", help="Once the vehicle is heard: GUIDED and arm (needs --allow-commands).")
+    ] = False,
 ) -> None:
     """Join a vehicle's MAVLink port (simulated or real) to the Zenoh bus."""
     from bridge.mavlink_bridge import MavlinkBridge
@@ -60,12 +70,22 @@ def bridge(
         except ValueError:
             fail(f"--geofence: expected four numbers north_min,north_max,east_min,east_max, got {geofence!r}")
     try:
-        conf = (make_config(config_file=zenoh_config) if zenoh_config is not None
-                else make_config(listen=zenoh_listen, connect=zenoh_connect))
+        conf = (
+            make_config(config_file=zenoh_config)
+            if zenoh_config is not None
+            else make_config(listen=zenoh_listen, connect=zenoh_connect)
+        )
         if arm and not allow_commands:
             fail("--arm: arming sends commands to the vehicle; add --allow-commands")
-        with MavlinkBridge(mavlink, conf, vehicle=vehicle, allow_commands=allow_commands, geofence=fence,
-                           max_rate_hz=max_rate, signing_key=signing_key) as link:
+        with MavlinkBridge(
+            mavlink,
+            conf,
+            vehicle=vehicle,
+            allow_commands=allow_commands,
+            geofence=fence,
+            max_rate_hz=max_rate,
+            signing_key=signing_key,
+        ) as link:
             if arm and not arm_when_heard(link, timeout_s=30.0):
                 fail("--mavlink: no vehicle HEARTBEAT within 30 s; check the connection string")
             wait_for_signal()

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 from rich.table import Table
@@ -16,18 +16,31 @@ __all__ = ["run"]
 
 
 def run(
-    mission_file: Annotated[Path, typer.Argument(metavar="MISSION_OR_PLAN",
-                                                 help="Mission file (TOML), or a plan.json from rapt-plan generate.")],
-    scenario: Annotated[str, typer.Option("--scenario", help="Row number of the mission's Sobol design, or a JSON "
-                                                            "file with 'u' or 'parameters'; with a plan, a scenario "
-                                                            "id such as pair1a.")] = "0",
-    speedup: Annotated[Optional[float], typer.Option(help="Real time times this factor (default: lock-step).")] = None,
-    log: Annotated[Optional[Path], typer.Option(help="Record the bus to this MCAP file.")] = None,
+    mission_file: Annotated[
+        Path,
+        typer.Argument(metavar="MISSION_OR_PLAN", help="Mission file (TOML), or a plan.json from rapt-plan generate."),
+    ],
+    scenario: Annotated[
+        str,
+        typer.Option(
+            "--scenario",
+            help="Row number of the mission's Sobol design, or a JSON "
+            "file with 'u' or 'parameters'; with a plan, a scenario "
+            "id such as pair1a.",
+        ),
+    ] = "0",
+    speedup: Annotated[float | None, typer.Option(help="Real time times this factor (default: lock-step).")] = None,
+    log: Annotated[Path | None, typer.Option(help="Record the bus to this MCAP file.")] = None,
     timeout: Annotated[float, typer.Option(help="Give up after this many wall seconds.")] = 600.0,
-    inject_bias: Annotated[Optional[str], typer.Option(
-        "--inject-bias", help="Fly a biased vehicle for rehearsal, e.g. speed=1.15,current_offset=0.3 "
-                              "(speed, current_scale, current_offset, heading, battery, start_time; see sim.uuv.bias). "
-                              "Not written to the log.")] = None,
+    inject_bias: Annotated[
+        str | None,
+        typer.Option(
+            "--inject-bias",
+            help="Fly a biased vehicle for rehearsal, e.g. speed=1.15,current_offset=0.3 "
+            "(speed, current_scale, current_offset, heading, battery, start_time; see sim.uuv.bias). "
+            "Not written to the log.",
+        ),
+    ] = None,
     stochastic: Annotated[bool, typer.Option(help="Navigation drift and current perturbations on (seeded).")] = False,
     seed: Annotated[int, typer.Option(help="Seed of the stochastic effects.")] = 0,
     surrogate: SurrogateOpt = None,
@@ -56,8 +69,16 @@ def run(
         fail(f"--speedup: expected a factor > 0, got {speedup}")
     learned = load_surrogate(surrogate, flight.mission)
     try:
-        result = fly(flight, log_path=log, speedup=speedup, timeout_s=timeout, bias=bias, stochastic=stochastic,
-                     seed=seed, surrogate=learned)
+        result = fly(
+            flight,
+            log_path=log,
+            speedup=speedup,
+            timeout_s=timeout,
+            bias=bias,
+            stochastic=stochastic,
+            seed=seed,
+            surrogate=learned,
+        )
     except (RaptError, ValueError, RuntimeError, TimeoutError) as exc:
         fail(str(exc))
     batch = check_against_batch(flight, result.scores, bias=bias, stochastic=stochastic, seed=seed, surrogate=learned)
@@ -77,8 +98,10 @@ def run(
     if stochastic:  # the log holds what the navigation believed, the batch scores ground truth
         table.add_row("batch simulator's mode (ground truth)", batch.mode)
     else:
-        table.add_row("same scores as the batch simulator" + (" (same bias)" if bias is not None else ""),
-                      "yes" if batch.same else "NO")
+        table.add_row(
+            "same scores as the batch simulator" + (" (same bias)" if bias is not None else ""),
+            "yes" if batch.same else "NO",
+        )
     if log is not None:
         table.add_row("log", str(log))
     out.print(table)

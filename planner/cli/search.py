@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
@@ -25,8 +25,16 @@ __all__ = ["run_search", "search", "study"]
 
 def run_search(label: str, fn, bounds, budget: int, **kwargs):
     """``rapt.search`` behind a progress bar on stderr; bad arguments become one-line errors."""
-    with Progress(TextColumn(f"{label:>6}"), BarColumn(), MofNCompleteColumn(), TextColumn("{task.fields[rate]}"),
-                  TimeElapsedColumn(), console=err, transient=True, disable=not err.is_terminal) as bar:
+    with Progress(
+        TextColumn(f"{label:>6}"),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("{task.fields[rate]}"),
+        TimeElapsedColumn(),
+        console=err,
+        transient=True,
+        disable=not err.is_terminal,
+    ) as bar:
         task = bar.add_task(label, total=budget, rate="")
         start = time.perf_counter()
 
@@ -48,12 +56,14 @@ def _methods(method: str, baseline: str) -> list[str]:
 
 def search(
     system: Annotated[str, typer.Argument(help=f"Synthetic system: {', '.join(SYSTEMS)}.")] = "plates2d",
-    budget: Annotated[Optional[int], typer.Option(help="Samples to evaluate (default: the system's reference budget).")] = None,
+    budget: Annotated[
+        int | None, typer.Option(help="Samples to evaluate (default: the system's reference budget).")
+    ] = None,
     method: Annotated[str, typer.Option(help=f"Search method: {', '.join(rapt.METHODS)}.")] = "s-ndv",
     batch_size: Annotated[int, typer.Option("--batch-size", help="Samples per batch.")] = 100,
     seed: Annotated[int, typer.Option(help="Seed of every random choice.")] = 0,
-    store: Annotated[Optional[Path], typer.Option(help="SQLite study store; an existing one is resumed.")] = None,
-    d_eps: Annotated[Optional[float], typer.Option("--d-eps", help="Boundary width for the quality metrics.")] = None,
+    store: Annotated[Path | None, typer.Option(help="SQLite study store; an existing one is resumed.")] = None,
+    d_eps: Annotated[float | None, typer.Option("--d-eps", help="Boundary width for the quality metrics.")] = None,
     baseline: Annotated[str, typer.Option(help="Method to compare against (or 'none').")] = "sobol",
 ) -> None:
     """Search a synthetic system for its performance boundaries and print the quality table."""
@@ -72,8 +82,17 @@ def search(
 
     rows = []
     for i, m in enumerate(_methods(method, baseline)):
-        study, elapsed = run_search(m, sut, bounds, budget, method=m, batch_size=batch_size, seed=seed,
-                                    store=store if i == 0 else None, output_types=types)
+        study, elapsed = run_search(
+            m,
+            sut,
+            bounds,
+            budget,
+            method=m,
+            batch_size=batch_size,
+            seed=seed,
+            store=store if i == 0 else None,
+            output_types=types,
+        )
         q = quality_table(sut, study.X, d_eps, seed=seed)
         rows.append((m, q, elapsed, study))
 
@@ -84,8 +103,15 @@ def search(
     for m, q, elapsed, _ in rows:
         ratio_p = f"{q['precision'] / base['precision']:.2f}" if base and base["precision"] > 0 else "-"
         ratio_c = f"{q['coverage'] / base['coverage']:.2f}" if base and base["coverage"] > 0 else "-"
-        table.add_row(m, f"{q['precision']:.1%}", f"{q['coverage']:.1%}", f"{q['mean_distance']:.4f}",
-                      f"{elapsed:.2f}", ratio_p, ratio_c)
+        table.add_row(
+            m,
+            f"{q['precision']:.1%}",
+            f"{q['coverage']:.1%}",
+            f"{q['mean_distance']:.4f}",
+            f"{elapsed:.2f}",
+            ratio_p,
+            ratio_c,
+        )
     out.print(table)
     study = rows[0][3]
     if study.failures:
@@ -100,7 +126,7 @@ def study(
     method: Annotated[str, typer.Option(help=f"Search method: {', '.join(rapt.METHODS)}.")] = "s-ndv",
     batch_size: Annotated[int, typer.Option("--batch-size", help="Scenarios per batch.")] = 500,
     seed: Annotated[int, typer.Option(help="Seed of every random choice.")] = 0,
-    store: Annotated[Optional[Path], typer.Option(help="SQLite study store; an existing one is resumed.")] = None,
+    store: Annotated[Path | None, typer.Option(help="SQLite study store; an existing one is resumed.")] = None,
     stochastic: Annotated[bool, typer.Option(help="Navigation drift and current perturbations on.")] = False,
     baseline: Annotated[str, typer.Option(help="Method to compare against (or 'none').")] = "sobol",
 ) -> None:
@@ -114,8 +140,17 @@ def study(
     scores = root_scores(mission, seed=seed, stochastic=stochastic)
     results = []
     for i, m in enumerate(_methods(method, baseline)):
-        found, elapsed = run_search(m, scores, mission.space, budget, method=m, batch_size=batch_size,
-                                    seed=seed, store=store if i == 0 else None, output_types=ROOT_OUTPUT_TYPES)
+        found, elapsed = run_search(
+            m,
+            scores,
+            mission.space,
+            budget,
+            method=m,
+            batch_size=batch_size,
+            seed=seed,
+            store=store if i == 0 else None,
+            output_types=ROOT_OUTPUT_TYPES,
+        )
         results.append(ModeSearch.of(m, found, elapsed))
 
     table = Table(title=f"{mission.name}: {budget} scenarios ({mission.dim}-D), seed {seed}")
@@ -127,11 +162,16 @@ def study(
     for k, name in enumerate(MODE_NAMES):
         table.add_row(f"mode {name}", *[f"{r.mode_share(k):.1%}" for r in results])
     for a, b in sorted(set().union(*(r.boundary_types() for r in results))):
-        table.add_row(f"boundary {MODE_NAMES[a]}/{MODE_NAMES[b]}",
-                      *[f"{r.boundary_count(a, b):,} ({r.boundary_count(a, b) / (r.n_pairs or 1):.0%})" for r in results])
-    table.add_row("median pair distance", *["-" if (d := r.median_pair_distance()) is None else f"{d:.3f}"
-                                            for r in results])
+        table.add_row(
+            f"boundary {MODE_NAMES[a]}/{MODE_NAMES[b]}",
+            *[f"{r.boundary_count(a, b):,} ({r.boundary_count(a, b) / (r.n_pairs or 1):.0%})" for r in results],
+        )
+    table.add_row(
+        "median pair distance", *["-" if (d := r.median_pair_distance()) is None else f"{d:.3f}" for r in results]
+    )
     table.add_row("time (s)", *[f"{r.seconds:.1f}" for r in results])
     out.print(table)
     if store is not None:
-        out.print(f"study stored in {store} ({results[0].found.n_evaluated} scenarios)", soft_wrap=True, highlight=False)
+        out.print(
+            f"study stored in {store} ({results[0].found.n_evaluated} scenarios)", soft_wrap=True, highlight=False
+        )

@@ -3,31 +3,56 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated, Optional
+from typing import Annotated
 
 import typer
 
-from planner.cli.console import fail, out as console
+from planner.cli.console import fail
+from planner.cli.console import out as console
 
 __all__ = ["selfright"]
 
 
 def selfright(
-    robot_file: Annotated[Path, typer.Argument(metavar="ROBOT_FILE", help="Robot file, TOML or URDF (by suffix: .toml, "
-                                               ".urdf), e.g. examples/robots/1dof.toml.")],
+    robot_file: Annotated[
+        Path,
+        typer.Argument(
+            metavar="ROBOT_FILE",
+            help="Robot file, TOML or URDF (by suffix: .toml, .urdf), e.g. examples/robots/1dof.toml.",
+        ),
+    ],
     out: Annotated[Path, typer.Option("--out", help="Directory for graph.json, graph.graphml, states.png, report.md.")],
-    slope: Annotated[Optional[float], typer.Option(help="Ground slope in degrees (default: the robot file's, else 0).")] = None,
-    budget: Annotated[int, typer.Option(help="Queries to the stability function (a planar robot's last hull may add a few faces).")] = 1000,
+    slope: Annotated[
+        float | None, typer.Option(help="Ground slope in degrees (default: the robot file's, else 0).")
+    ] = None,
+    budget: Annotated[
+        int, typer.Option(help="Queries to the stability function (a planar robot's last hull may add a few faces).")
+    ] = 1000,
     seed: Annotated[int, typer.Option(help="Seed of every random choice.")] = 0,
     batch_size: Annotated[int, typer.Option("--batch-size", help="Queries per batch.")] = 50,
     r_min: Annotated[float, typer.Option("--r-min", help="Boundary resolution, degrees (search ends below it).")] = 1.0,
     r_max: Annotated[float, typer.Option("--r-max", help="Interior resolution, degrees.")] = 10.0,
-    refine: Annotated[float, typer.Option("--refine", help="Share of the budget kept to bisect each transition's "
-                                          "boundary pair below --r-min (0: off).")] = 0.1,
-    outcomes: Annotated[bool, typer.Option("--outcomes", help="Also steer the search by where states tip to "
-                                           "(finds stable islands narrower than a coarse --r-max such as 45; costs at a fine one).")] = False,
-    max_edge: Annotated[Optional[float], typer.Option("--max-edge", help="Gabriel graph's longest edge, degrees "
-                                                      "(default: 2 to 4 x --r-max, by sample density).")] = None,
+    refine: Annotated[
+        float,
+        typer.Option(
+            "--refine",
+            help="Share of the budget kept to bisect each transition's boundary pair below --r-min (0: off).",
+        ),
+    ] = 0.1,
+    outcomes: Annotated[
+        bool,
+        typer.Option(
+            "--outcomes",
+            help="Also steer the search by where states tip to "
+            "(finds stable islands narrower than a coarse --r-max such as 45; costs at a fine one).",
+        ),
+    ] = False,
+    max_edge: Annotated[
+        float | None,
+        typer.Option(
+            "--max-edge", help="Gabriel graph's longest edge, degrees (default: 2 to 4 x --r-max, by sample density)."
+        ),
+    ] = None,
 ) -> None:
     """Self-righting transition graph of a ground robot by manifold-constrained adaptive sampling (chapter 5)."""
     import numpy as np
@@ -54,14 +79,26 @@ def selfright(
         fail(f"--max-edge: expected degrees > 0, got {max_edge:g}")
     if out.exists() and not out.is_dir():
         fail(f"--out: {out} is a file; give a directory")
-    study = adaptive_study(robot, slope, budget, seed=seed, batch_size=batch_size, r_min_deg=r_min, r_max_deg=r_max,
-                           refine=refine, outcomes=outcomes)
+    study = adaptive_study(
+        robot,
+        slope,
+        budget,
+        seed=seed,
+        batch_size=batch_size,
+        r_min_deg=r_min,
+        r_max_deg=r_max,
+        refine=refine,
+        outcomes=outcomes,
+    )
     result = analyse(study, max_edge=None if max_edge is None else np.radians(max_edge))
     doc = write_outputs(study, result, out)
     energy = doc["mean_energy_to_home_J"]
-    console.print(f"{robot.name} on a {slope:g}° slope: {study.queries:,} queries"
-              f"{' (resolution reached)' if study.extra.get('stopped_by_resolution') else ''}, "
-              f"{len(doc['nodes'])} nodes, {len(doc['edges'])} transitions; "
-              f"self-rightable {doc['self_rightable_fraction']:.1%}, mean energy to home "
-              f"{'n/a' if energy is None else f'{energy:.2f} J'}; wrote {out}/graph.json, graph.graphml, states.png, report.md",
-              soft_wrap=True, highlight=False)
+    console.print(
+        f"{robot.name} on a {slope:g}° slope: {study.queries:,} queries"
+        f"{' (resolution reached)' if study.extra.get('stopped_by_resolution') else ''}, "
+        f"{len(doc['nodes'])} nodes, {len(doc['edges'])} transitions; "
+        f"self-rightable {doc['self_rightable_fraction']:.1%}, mean energy to home "
+        f"{'n/a' if energy is None else f'{energy:.2f} J'}; wrote {out}/graph.json, graph.graphml, states.png, report.md",
+        soft_wrap=True,
+        highlight=False,
+    )

@@ -18,19 +18,34 @@ def surrogate(
     mission_file: Annotated[Path, typer.Argument(help="Mission file (TOML).")],
     out_file: Annotated[Path, typer.Option("--out", help="Surrogate file to write (.npz).")],
     method: Annotated[str, typer.Option(help="qdagger, dagger or supervised (behavioural cloning).")] = "qdagger",
-    quantile: Annotated[float, typer.Option(help="Q-DAgger: aggregate the states predicted worse than this "
-                                                 "quantile of each new set (0.5, 0.75).")] = 0.5,
+    quantile: Annotated[
+        float,
+        typer.Option(
+            help="Q-DAgger: aggregate the states predicted worse than this quantile of each new set (0.5, 0.75)."
+        ),
+    ] = 0.5,
     runs: Annotated[int, typer.Option(help="Annotated expert runs in all.")] = 75,
     runs_per_iteration: Annotated[int, typer.Option("--runs-per-iteration", help="New runs per update.")] = 5,
     epochs: Annotated[int, typer.Option(help="Training epochs per update (warm-started).")] = 30,
-    mixing: Annotated[float, typer.Option(help="Update i's runs obey the expert on a share mixing**i of their steps "
-                                               "(DAgger's beta; 0: the learner flies every step).")] = 0.5,
-    select_runs: Annotated[int, typer.Option("--select-runs", help="Held-out expert runs that choose which update's "
-                                                                 "policy to keep (best mode accuracy; 0: the last) "
-                                                                 "and its goal threshold.")]
-        = 25,
-    validate: Annotated[int, typer.Option(help="Sobol scenarios to measure mode accuracy on after each update "
-                                               "(0: none).")] = 256,
+    mixing: Annotated[
+        float,
+        typer.Option(
+            help="Update i's runs obey the expert on a share mixing**i of their steps "
+            "(DAgger's beta; 0: the learner flies every step)."
+        ),
+    ] = 0.5,
+    select_runs: Annotated[
+        int,
+        typer.Option(
+            "--select-runs",
+            help="Held-out expert runs that choose which update's "
+            "policy to keep (best mode accuracy; 0: the last) "
+            "and its goal threshold.",
+        ),
+    ] = 25,
+    validate: Annotated[
+        int, typer.Option(help="Sobol scenarios to measure mode accuracy on after each update (0: none).")
+    ] = 256,
     seed: Annotated[int, typer.Option(help="Seed of every random choice.")] = 0,
 ) -> None:
     """Train a surrogate of a mission's back-seat autonomy by imitation learning (chapter 6)."""
@@ -44,7 +59,9 @@ def surrogate(
         fail(f"--validate: expected a number of scenarios >= 0, got {validate}")
     accuracy = ModeValidation(mission, validate, seed) if validate else None
     table = Table(title=f"{mission.name}: {method} imitation of the autonomy")
-    for col in ("iteration", "expert runs", "samples", "fit (s)", "train MSE") + (("mode accuracy",) if validate else ()):
+    for col in ("iteration", "expert runs", "samples", "fit (s)", "train MSE") + (
+        ("mode accuracy",) if validate else ()
+    ):
         table.add_column(col, justify="right")
 
     def on_iteration(rec, policy):
@@ -55,16 +72,32 @@ def surrogate(
         err.print(" ".join(row), highlight=False)
 
     try:
-        sur = train_surrogate(mission, method=method, quantile=quantile, runs=runs,
-                              runs_per_iteration=runs_per_iteration, epochs=epochs, mixing=mixing,
-                              select_runs=select_runs, seed=seed, on_iteration=on_iteration)
+        sur = train_surrogate(
+            mission,
+            method=method,
+            quantile=quantile,
+            runs=runs,
+            runs_per_iteration=runs_per_iteration,
+            epochs=epochs,
+            mixing=mixing,
+            select_runs=select_runs,
+            seed=seed,
+            on_iteration=on_iteration,
+        )
     except ValueError as exc:
         fail(f"--{str(exc)}" if str(exc).split(":")[0] in ("method", "quantile", "epochs") else str(exc))
     sur.save(out_file)
     out.print(table)
     t = sur.training
-    kept = (f"update {t['chosen_iteration']} kept ({t['selection_accuracy']:.1%} on {t['select_runs']} held-out runs), "
-            f"goal threshold {sur.goal_threshold:+.1f}" if t["select_runs"] else "last update kept")
-    out.print(f"surrogate of {mission.name} written to {out_file} ({t['runs']} expert runs: {t['annotated_runs']} "
-              f"annotated + {t['select_runs']} held out; {kept}; {sur.spec.size} features)",
-              soft_wrap=True, highlight=False)
+    kept = (
+        f"update {t['chosen_iteration']} kept ({t['selection_accuracy']:.1%} on {t['select_runs']} held-out runs), "
+        f"goal threshold {sur.goal_threshold:+.1f}"
+        if t["select_runs"]
+        else "last update kept"
+    )
+    out.print(
+        f"surrogate of {mission.name} written to {out_file} ({t['runs']} expert runs: {t['annotated_runs']} "
+        f"annotated + {t['select_runs']} held out; {kept}; {sur.spec.size} features)",
+        soft_wrap=True,
+        highlight=False,
+    )

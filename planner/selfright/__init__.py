@@ -30,8 +30,28 @@ from planner.selfright.search import adaptive_study, grid_study, refine_transiti
 from planner.selfright.space import space_bounds
 from planner.selfright.study import SelfRightStudy
 
-__all__ = ["SelfRightStudy", "space_bounds", "adaptive_study", "refine_transitions", "grid_study",
-           "StudyGraph", "build_graph", "default_max_edge", "grid_connections", "Probes", "probe_states",
-           "SelfRightAnalysis", "GraphComparison", "analyse", "compare_graphs", "home_state",
-           "CrossingEnergies", "crossing_energies", "graph_document", "write_graphml", "plot_states", "report_text",
-           "write_outputs"]
+__all__ = [
+    "SelfRightStudy",
+    "space_bounds",
+    "adaptive_study",
+    "refine_transitions",
+    "grid_study",
+    "StudyGraph",
+    "build_graph",
+    "default_max_edge",
+    "grid_connections",
+    "Probes",
+    "probe_states",
+    "SelfRightAnalysis",
+    "GraphComparison",
+    "analyse",
+    "compare_graphs",
+    "home_state",
+    "CrossingEnergies",
+    "crossing_energies",
+    "graph_document",
+    "write_graphml",
+    "plot_states",
+    "report_text",
+    "write_outputs",
+]

@@ -74,8 +74,9 @@ def home_state(study: SelfRightStudy, with_id: bool = False):
     return (U, int(res.start_id[0])) if with_id else U
 
 
-def analyse(study: SelfRightStudy, *, max_edge: float | None = None, probes=None,
-            use_ids: bool | None = None) -> SelfRightAnalysis:
+def analyse(
+    study: SelfRightStudy, *, max_edge: float | None = None, probes=None, use_ids: bool | None = None
+) -> SelfRightAnalysis:
     """Transition graph (:func:`~planner.selfright.graph.build_graph`) and the chapter's figures of merit.
 
     ``probes`` (default: 500 random joint states, seed 0) are the states the
@@ -94,8 +95,16 @@ def analyse(study: SelfRightStudy, *, max_edge: float | None = None, probes=None
         ok, energy = np.zeros(len(probes), bool), np.zeros(len(probes))
     e = graph.edges
     return SelfRightAnalysis(
-        graph=graph, home=home, cost_to_home=cost, graph_seconds=seconds, max_edge=max_edge, extra_states=extra,
-        probes=probes, probe_rightable=ok, queries=study.queries, n_known_states=n_known,
+        graph=graph,
+        home=home,
+        cost_to_home=cost,
+        graph_seconds=seconds,
+        max_edge=max_edge,
+        extra_states=extra,
+        probes=probes,
+        probe_rightable=ok,
+        queries=study.queries,
+        n_known_states=n_known,
         rightable=float(ok.mean()) if len(probes) else float("nan"),
         energy_to_home=float(energy[ok].mean()) if ok.any() else float("nan"),
         pair_length_deg=float(np.degrees(e["length"]).mean()) if graph.n_edges else float("nan"),
@@ -132,8 +141,14 @@ def _edge_set(g: TransitionGraph, keep: set, remap: dict | None = None) -> dict:
     return es
 
 
-def compare_graphs(a: SelfRightAnalysis, study_a: SelfRightStudy, b: SelfRightAnalysis, study_b: SelfRightStudy,
-                   probes, min_share: float = 0.01) -> GraphComparison:
+def compare_graphs(
+    a: SelfRightAnalysis,
+    study_a: SelfRightStudy,
+    b: SelfRightAnalysis,
+    study_b: SelfRightStudy,
+    probes,
+    min_share: float = 0.01,
+) -> GraphComparison:
     """Is graph ``a`` the same as ``b``?  Judged on probe states, since node numbers are arbitrary.
 
     Each truly stable probe state falls in one node of each graph (through its nearest
@@ -165,10 +180,14 @@ def compare_graphs(a: SelfRightAnalysis, study_a: SelfRightStudy, b: SelfRightAn
     ra, rb = (_rightable(r, study, probes) for r, study in ((a, study_a), (b, study_b)))
     mean = lambda v: float(v.mean()) if v.size else float("nan")  # noqa: E731
     return GraphComparison(
-        n_nodes=(len(big_a), len(big_b)), nodes_matched=nodes_matched, n_edges=(len(ea), len(eb)),
-        edges_matched=len(both), same=nodes_matched == len(big_a) == len(big_b) and set(ea) == set(eb),
+        n_nodes=(len(big_a), len(big_b)),
+        nodes_matched=nodes_matched,
+        n_edges=(len(ea), len(eb)),
+        edges_matched=len(both),
+        same=nodes_matched == len(big_a) == len(big_b) and set(ea) == set(eb),
         rightable_agreement=float((ra == rb).mean()),
         # on the matched edges (the same transitions in both graphs): a's and b's means
         pair_length_deg=(mean(np.degrees(pair[:, 0])), mean(np.degrees(pair[:, 1]))),
         transition_energy=(mean(energy[:, 0]), mean(energy[:, 1])),
-        matched_edges=np.array([[ea[k][2], eb[k][2]] for k in both], dtype=int).reshape(-1, 2))
+        matched_edges=np.array([[ea[k][2], eb[k][2]] for k in both], dtype=int).reshape(-1, 2),
+    )

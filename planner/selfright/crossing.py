@@ -67,13 +67,13 @@ def crossing_energies(study: SelfRightStudy, result: SelfRightAnalysis, tol_deg:
         r = F(mid[:, :m], mid[:, m:])
         start, stable, rest, lost = r.start.copy(), r.stable.copy(), r.rest_id.copy(), r.energy.copy()
         for i in np.flatnonzero((r.start_id != face[k]) & (r.start_id != other[k])):  # a neighbouring face: ask
-            on = np.flatnonzero(r.face_ids[i] == face[k[i]])                          # for the pair's own
+            on = np.flatnonzero(r.face_ids[i] == face[k[i]])  # for the pair's own
             if not on.size:
                 on = np.flatnonzero(r.face_ids[i] == other[k[i]])
             if not on.size:
                 ok[k[i]] = False  # both faces are gone between partner and witness
                 continue
-            again = F(mid[i:i + 1, :m], r.faces[i][on[:1]])
+            again = F(mid[i : i + 1, :m], r.faces[i][on[:1]])
             start[i], stable[i], rest[i], lost[i] = again.start[0], again.stable[0], again.rest_id[0], again.energy[0]
         here = ok[k]
         s = here & stable

@@ -53,7 +53,7 @@ def grid_connections(study: SelfRightStudy) -> tuple[np.ndarray, np.ndarray]:
     _, rank = np.unique(np.concatenate([study.ids, study.rest_ids[settled]]), return_inverse=True)
     rank = rank.reshape(-1).astype(np.int64)
     n_id = int(rank.max()) + 1
-    key = flat * n_id + rank[:len(U)]
+    key = flat * n_id + rank[: len(U)]
     order = np.argsort(key, kind="stable")
     skey = key[order]
 
@@ -66,7 +66,7 @@ def grid_connections(study: SelfRightStudy) -> tuple[np.ndarray, np.ndarray]:
     by_flat = np.argsort(flat, kind="stable")
     first = np.searchsorted(flat[by_flat], np.arange(int(np.prod(shape))))
     count = np.bincount(flat, minlength=int(np.prod(shape)))
-    body = study.embed(study.X)[:, 2 * m:]
+    body = study.embed(study.X)[:, 2 * m :]
     step = 2 * np.sin(study.resolution / 2)
     unsettled = 10.0 * step  # ranks an unstable replacement of a stable face after every stable one
     for a in range(m):
@@ -101,8 +101,6 @@ def grid_connections(study: SelfRightStudy) -> tuple[np.ndarray, np.ndarray]:
     i, j = np.concatenate(src), np.concatenate(dst)
     keep = (i >= 0) & (j >= 0)
     return i[keep], j[keep]
-
-
 
 
 def default_max_edge(study: SelfRightStudy, known: np.ndarray | None = None) -> float:
@@ -144,7 +142,15 @@ def build_graph(study: SelfRightStudy, *, max_edge: float | None = None, use_ids
     extra, extra_ids = study.extra_states(with_ids=True, known=known)
     ids = (study.ids, study.rest_ids, extra_ids) if use_ids else None
     connections = grid_connections(study) if use_ids and "grid_shape" in study.extra else None
-    graph = transition_graph(study.embed(study.X), study.stable, study.embed(study.rest), study.energy,
-                             study.embed(extra), max_edge=max_edge, ids=ids,
-                             free_dims=2 * study.n_free, connections=connections)
+    graph = transition_graph(
+        study.embed(study.X),
+        study.stable,
+        study.embed(study.rest),
+        study.energy,
+        study.embed(extra),
+        max_edge=max_edge,
+        ids=ids,
+        free_dims=2 * study.n_free,
+        connections=connections,
+    )
     return StudyGraph(graph, extra, max_edge, len(known[0]))

@@ -38,7 +38,9 @@ def probe_states(robot: Robot, slope: float, n: int, seed: int) -> Probes:
     """Uniform random joint states with every hull face: the population 'self-rightable fraction' counts."""
     F = StabilityFunction(robot, slope)
     bounds = space_bounds(robot, F.planar)
-    theta = bounds[:robot.dof, 0] + np.random.default_rng(seed).random((n, robot.dof)) * np.ptp(bounds[:robot.dof], axis=1)
+    theta = bounds[: robot.dof, 0] + np.random.default_rng(seed).random((n, robot.dof)) * np.ptp(
+        bounds[: robot.dof], axis=1
+    )
     if F.planar:
         res = F.all_faces(theta)
         U = to_unit(np.column_stack([res.theta, res.start]), bounds[:, 0], bounds[:, 1])

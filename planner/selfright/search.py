@@ -21,10 +21,22 @@ from sim.robots import Robot
 __all__ = ["adaptive_study", "refine_transitions", "grid_study"]
 
 
-def adaptive_study(robot: Robot, slope: float, budget: int, *, seed: int = 0, batch_size: int = 50,
-                   r_min_deg: float = 1.0, r_max_deg: float = 10.0, n_initial: int | None = None,
-                   whole_hulls: bool | None = None, refine: float = 0.1, outcomes: bool = False, progress=None,
-                   **options) -> SelfRightStudy:
+def adaptive_study(
+    robot: Robot,
+    slope: float,
+    budget: int,
+    *,
+    seed: int = 0,
+    batch_size: int = 50,
+    r_min_deg: float = 1.0,
+    r_max_deg: float = 10.0,
+    n_initial: int | None = None,
+    whole_hulls: bool | None = None,
+    refine: float = 0.1,
+    outcomes: bool = False,
+    progress=None,
+    **options,
+) -> SelfRightStudy:
     """Algorithm 6 on ``robot`` at ``slope`` degrees, about ``budget`` queries, then the transitions refined.
 
     A query is the stability of one state ``[θ, face]``, as the grid search counts them.
@@ -55,34 +67,53 @@ def adaptive_study(robot: Robot, slope: float, budget: int, *, seed: int = 0, ba
     system.outcomes = bool(outcomes)
     if n_initial is None:
         n_initial = min(max(20 * system.bounds.shape[0], 50), max(budget // 5, 10))
-    sampler = ManifoldSampler(robot.dof, system.bounds, seed=seed, r_min=np.radians(r_min_deg),
-                              r_max=np.radians(r_max_deg), n_initial=n_initial, whole_hulls=whole_hulls, **options)
+    sampler = ManifoldSampler(
+        robot.dof,
+        system.bounds,
+        seed=seed,
+        r_min=np.radians(r_min_deg),
+        r_max=np.radians(r_max_deg),
+        n_initial=n_initial,
+        whole_hulls=whole_hulls,
+        **options,
+    )
     if not 0 <= refine < 1:
         raise ValueError(f"refine: expected a share of the budget in [0, 1), got {refine!r}")
     t0 = time.perf_counter()
     manifold_search(system, sampler, budget - int(round(refine * budget)), batch_size, progress)
-    extra = dict(stopped_by_resolution=sampler.done, r_min_deg=r_min_deg, r_max_deg=r_max_deg,
-                 whole_hulls=whole_hulls)
+    extra = dict(stopped_by_resolution=sampler.done, r_min_deg=r_min_deg, r_max_deg=r_max_deg, whole_hulls=whole_hulls)
     rounds, spent = 0, 0
     for turn in range(4 if refine > 0 else 0):
         before = system.F.n_queries
-        rounds += refine_transitions(system, robot, slope, budget, np.radians(r_min_deg),
-                                     r_max=np.radians(r_max_deg), tell=sampler.tell)
+        rounds += refine_transitions(
+            system, robot, slope, budget, np.radians(r_min_deg), r_max=np.radians(r_max_deg), tell=sampler.tell
+        )
         spent += system.F.n_queries - before
         if turn == 3 or sampler.done or system.F.n_queries >= budget:
             break
         # the pairs took less than was kept back: the search has the rest, bar the same share of it for
         # refining the transitions it finds (the search always ends before a refinement)
-        manifold_search(system, sampler, budget - int(round(refine * (budget - system.F.n_queries))), batch_size,
-                        progress)
+        manifold_search(
+            system, sampler, budget - int(round(refine * (budget - system.F.n_queries))), batch_size, progress
+        )
     extra.update(search_queries=system.F.n_queries - spent, refine_queries=spent, refine_rounds=rounds)
     study = system.study(robot, slope, "adaptive", time.perf_counter() - t0)
     study.extra.update(extra, joint_states=system.F.n_hulls)
     return study
 
 
-def refine_transitions(system: StabilitySystem, robot: Robot, slope: float, budget: int, r_min: float, *,
-                       r_max: float | None = None, max_rounds: int = 12, splits: int = 2, tell=None) -> int:
+def refine_transitions(
+    system: StabilitySystem,
+    robot: Robot,
+    slope: float,
+    budget: int,
+    r_min: float,
+    *,
+    r_max: float | None = None,
+    max_rounds: int = 12,
+    splits: int = 2,
+    tell=None,
+) -> int:
     """Cut every transition's boundary pair in ``splits`` parts until it is shorter than ``r_min`` (joint space).
 
     Section 5.5.1 prizes close boundary pairs (the transition point is known better), but
@@ -124,7 +155,7 @@ def refine_transitions(system: StabilitySystem, robot: Robot, slope: float, budg
         d = toward(w, p, periodic)
         frac = np.arange(1, splits) / splits
         Q = to_unit((w[:, None] + frac[None, :, None] * d[:, None]).reshape(-1, len(lo)), system.lo, system.hi)
-        keys = [k.tobytes() for k in row_keys(Q[:, :study.n_free])]
+        keys = [k.tobytes() for k in row_keys(Q[:, : study.n_free])]
         new, seen = [], set(asked)
         for i, k in enumerate(keys):
             if k not in seen:
@@ -151,8 +182,10 @@ def grid_study(robot: Robot, slope: float, resolution_deg: float) -> SelfRightSt
     theta = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, robot.dof) if axes else np.zeros((1, 0))
     t0 = time.perf_counter()
     system.record(system.F.all_faces(theta))
-    study = system.study(robot, slope, f"grid {resolution_deg:g}°", time.perf_counter() - t0,
-                         resolution=np.radians(resolution_deg))
-    study.extra.update(grid_shape=[len(a) for a in axes],
-                       grid_periodic=[bool(full_turn(lo, hi)) for lo, hi in robot.joint_bounds])
+    study = system.study(
+        robot, slope, f"grid {resolution_deg:g}°", time.perf_counter() - t0, resolution=np.radians(resolution_deg)
+    )
+    study.extra.update(
+        grid_shape=[len(a) for a in axes], grid_periodic=[bool(full_turn(lo, hi)) for lo, hi in robot.joint_bounds]
+    )
     return study

@@ -46,7 +46,7 @@ class SelfRightStudy:
     def known_states(self, with_ids: bool = False):
         """``X^Z``: every hull face of every evaluated joint state, each once (unit cube); and their identities."""
         counts = np.array([len(f) for f in self.faces])
-        K = np.column_stack([np.repeat(self.X[:, :self.n_free], counts, axis=0), np.concatenate(self.faces)])
+        K = np.column_stack([np.repeat(self.X[:, : self.n_free], counts, axis=0), np.concatenate(self.faces)])
         _, first = np.unique(row_keys(K), return_index=True)
         first = np.sort(first)
         if not with_ids:

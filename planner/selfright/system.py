@@ -74,8 +74,9 @@ class StabilitySystem:
             if id(f) not in done:
                 done[id(f)] = self.unit(np.column_stack([np.broadcast_to(t, (len(f), m)), f]))[:, m:]
             faces.append(done[id(f)])
-        self.batches.append(LabelledBatch(X, res.stable.copy(), R, res.energy.copy(), res.start_id, res.rest_id,
-                                          faces, res.face_ids))
+        self.batches.append(
+            LabelledBatch(X, res.stable.copy(), R, res.energy.copy(), res.start_id, res.rest_id, faces, res.face_ids)
+        )
         if self.outcomes:  # the resting face's identity (-1: rolls away), for the search's information
             return Answer(X, res.stable.astype(float), faces, res.start_id, res.face_ids, res.rest_id.astype(float))
         return Answer(X, res.stable.astype(float), faces, res.start_id, res.face_ids)
@@ -84,8 +85,8 @@ class StabilitySystem:
         """Label the states ``U``; ``whole_hulls`` (default: the system's) labels every face of their joint states."""
         a = self.angles(U)
         if self.whole_hulls if whole_hulls is None else whole_hulls:
-            return self.record(self.F.all_faces(np.unique(a[:, :self.m], axis=0)))
-        return self.record(self.F(a[:, :self.m], a[:, self.m:]))
+            return self.record(self.F.all_faces(np.unique(a[:, : self.m], axis=0)))
+        return self.record(self.F(a[:, : self.m], a[:, self.m :]))
 
     def study(self, robot, slope, method, seconds, **kw) -> SelfRightStudy:
         """Every batch so far as one study record."""
@@ -94,5 +95,21 @@ class StabilitySystem:
         ids, rest_ids = np.concatenate([r.ids for r in b]), np.concatenate([r.rest_ids for r in b])
         faces = [f for r in b for f in r.faces]
         face_ids = [f for r in b for f in r.face_ids]
-        return SelfRightStudy(robot, slope, method, self.bounds, self.m, X, s.astype(bool), R, e, faces,
-                              self.F.n_queries, seconds, ids=ids, rest_ids=rest_ids, face_ids=face_ids, **kw)
+        return SelfRightStudy(
+            robot,
+            slope,
+            method,
+            self.bounds,
+            self.m,
+            X,
+            s.astype(bool),
+            R,
+            e,
+            faces,
+            self.F.n_queries,
+            seconds,
+            ids=ids,
+            rest_ids=rest_ids,
+            face_ids=face_ids,
+            **kw,
+        )

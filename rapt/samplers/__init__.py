@@ -11,8 +11,16 @@ from rapt.samplers.base import Sampler
 from rapt.samplers.space_filling import LatinHypercubeSampler, RandomSampler, SobolSampler
 
 __all__ = [
-    "Sampler", "RandomSampler", "SobolSampler", "LatinHypercubeSampler", "InformationSampler",
-    "NNDVSampler", "ScaledNDVSampler", "GPRSampler", "METHODS", "make_sampler",
+    "Sampler",
+    "RandomSampler",
+    "SobolSampler",
+    "LatinHypercubeSampler",
+    "InformationSampler",
+    "NNDVSampler",
+    "ScaledNDVSampler",
+    "GPRSampler",
+    "METHODS",
+    "make_sampler",
 ]
 
 #: ``method=`` names accepted by :func:`rapt.search`, in the order the paper introduces them.

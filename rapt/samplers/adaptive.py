@@ -60,10 +60,20 @@ class InformationSampler(Sampler):
 
     adaptive = True
 
-    def __init__(self, dim: int, *, seed: int = 0, output_types: Sequence[str] | None = None,
-                 g: float = 1.0, v: float = 1.0, candidates_per_point: float = 10.0,
-                 min_candidates: int = 2000, separation: float = 0.5, n_initial: int = 0,
-                 candidate_generator: CandidateGenerator | None = None):
+    def __init__(
+        self,
+        dim: int,
+        *,
+        seed: int = 0,
+        output_types: Sequence[str] | None = None,
+        g: float = 1.0,
+        v: float = 1.0,
+        candidates_per_point: float = 10.0,
+        min_candidates: int = 2000,
+        separation: float = 0.5,
+        n_initial: int = 0,
+        candidate_generator: CandidateGenerator | None = None,
+    ):
         super().__init__(dim, seed=seed, output_types=output_types)
         _check_positive("g", g, allow_zero=True)
         _check_positive("v", v, allow_zero=True)
@@ -211,8 +221,13 @@ class ScaledNDVSampler(NNDVSampler):
         targets = self._targets()
         weights = np.empty((len(targets), self.dim))
         for i, (kind, target, _) in enumerate(targets):
-            vi = tree_importance(X, target, "continuous" if kind == "continuous" else "categorical",
-                                 max_samples=self.importance_samples, random_state=rng)
+            vi = tree_importance(
+                X,
+                target,
+                "continuous" if kind == "continuous" else "categorical",
+                max_samples=self.importance_samples,
+                random_state=rng,
+            )
             weights[i] = importance_weights(vi)
         return weights
 
@@ -286,8 +301,9 @@ class GPRSampler(InformationSampler):
         if X.shape[0] > self.max_fit:
             rows = np.sort(rng.choice(X.shape[0], size=self.max_fit, replace=False))
             X, T = X[rows], T[rows]
-        kernel = ConstantKernel(1.0, (1e-3, 1e3)) * Matern(length_scale=0.2, length_scale_bounds=(1e-3, 10.0), nu=self.nu) \
-            + WhiteKernel(1e-4, (1e-8, 1e-1))
+        kernel = ConstantKernel(1.0, (1e-3, 1e3)) * Matern(
+            length_scale=0.2, length_scale_bounds=(1e-3, 10.0), nu=self.nu
+        ) + WhiteKernel(1e-4, (1e-8, 1e-1))
         # Hyperparameters from a small subset (the optimiser's likelihood evaluations are the
         # O(n³) cost), then the posterior from all fitted samples with those fixed.
         hyper_rows = np.arange(X.shape[0])
@@ -295,8 +311,7 @@ class GPRSampler(InformationSampler):
             hyper_rows = np.sort(rng.choice(X.shape[0], size=self.max_hyper_fit, replace=False))
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)
-            tuned = GaussianProcessRegressor(kernel=kernel, normalize_y=True,
-                                             random_state=int(rng.integers(2**31 - 1)))
+            tuned = GaussianProcessRegressor(kernel=kernel, normalize_y=True, random_state=int(rng.integers(2**31 - 1)))
             tuned.fit(X[hyper_rows], T[hyper_rows])
             gp = GaussianProcessRegressor(kernel=tuned.kernel_, normalize_y=True, optimizer=None)
             gp.fit(X, T)
@@ -311,7 +326,7 @@ class GPRSampler(InformationSampler):
             dn[:, j] = np.maximum(dn[:, j] - h, 0.0)
             width = (up[:, j] - dn[:, j])[:, None]
             diff = (gp.predict(up).reshape(len(up), -1) - gp.predict(dn).reshape(len(dn), -1)) / width
-            grad_sq += (diff ** 2).sum(axis=1)
+            grad_sq += (diff**2).sum(axis=1)
         info = gpr_information(np.sqrt(grad_sq), std, self.g, self.v)
         d_k, _ = cKDTree(self.X).query(candidates, k=1, workers=query_workers(len(candidates)))
         return info, candidates, d_k

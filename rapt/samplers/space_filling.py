@@ -67,6 +67,8 @@ class LatinHypercubeSampler(Sampler):
     def _propose(self, n: int, rng: np.random.Generator) -> np.ndarray:
         if self.size is not None and self.n_asked + n <= self.size:
             if self._design is None:
-                self._design = qmc.LatinHypercube(d=self.dim, seed=np.random.default_rng([self.seed, 0xC0FFEE])).random(self.size)
-            return self._design[self.n_asked:self.n_asked + n]
+                self._design = qmc.LatinHypercube(d=self.dim, seed=np.random.default_rng([self.seed, 0xC0FFEE])).random(
+                    self.size
+                )
+            return self._design[self.n_asked : self.n_asked + n]
         return qmc.LatinHypercube(d=self.dim, seed=rng).random(n)

@@ -8,5 +8,18 @@ quasi-static tipping until a stable face is reached, and the potential energy lo
 from sim.robots.model import Box, Joint, Link, Robot, RobotFileError, load_robot, read_stl
 from sim.robots.stability import GRAVITY, Hull, StabilityFunction, StabilityResult, body_angles, down_normals
 
-__all__ = ["Box", "Joint", "Link", "Robot", "RobotFileError", "load_robot", "read_stl", "GRAVITY", "Hull",
-           "StabilityFunction", "StabilityResult", "body_angles", "down_normals"]
+__all__ = [
+    "Box",
+    "Joint",
+    "Link",
+    "Robot",
+    "RobotFileError",
+    "load_robot",
+    "read_stl",
+    "GRAVITY",
+    "Hull",
+    "StabilityFunction",
+    "StabilityResult",
+    "body_angles",
+    "down_normals",
+]

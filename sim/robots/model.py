@@ -111,9 +111,13 @@ def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
     x, y, z = axis
     c, s = np.cos(angle), np.sin(angle)
     C = 1.0 - c
-    return np.array([[c + x * x * C, x * y * C - z * s, x * z * C + y * s],
-                     [y * x * C + z * s, c + y * y * C, y * z * C - x * s],
-                     [z * x * C - y * s, z * y * C + x * s, c + z * z * C]])
+    return np.array(
+        [
+            [c + x * x * C, x * y * C - z * s, x * z * C + y * s],
+            [y * x * C + z * s, c + y * y * C, y * z * C - x * s],
+            [z * x * C - y * s, z * y * C + x * s, c + z * z * C],
+        ]
+    )
 
 
 class Robot:
@@ -129,14 +133,18 @@ class Robot:
         children = {j.child for j in joints}
         roots = [link.name for link in links if link.name not in children]
         if len(roots) != 1:
-            raise RobotFileError(f"joint: expected exactly one base link (a link that is no joint's child), got {roots}")
+            raise RobotFileError(
+                f"joint: expected exactly one base link (a link that is no joint's child), got {roots}"
+            )
         self.base = roots[0]
         order, placed, pending = [], {self.base}, list(joints)
         while pending:  # topological order: parents before children
             ready = [j for j in pending if j.parent in placed]
             if not ready:
-                raise RobotFileError(f"joint.parent: {pending[0].name!r} hangs off {pending[0].parent!r}, "
-                                     "which is not reachable from the base link")
+                raise RobotFileError(
+                    f"joint.parent: {pending[0].name!r} hangs off {pending[0].parent!r}, "
+                    "which is not reachable from the base link"
+                )
             for j in ready:
                 order.append(j)
                 placed.add(j.child)
@@ -238,8 +246,12 @@ def _vec(value: Any, where: str, n: int = 3, positive: bool = False) -> tuple[fl
 
 
 def _number(value: Any, where: str, minimum: float | None = None) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) \
-            or (minimum is not None and value < minimum):
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, (int, float))
+        or not np.isfinite(value)
+        or (minimum is not None and value < minimum)
+    ):
         bound = "" if minimum is None else f" >= {minimum:g}"
         raise RobotFileError(f"{where}: expected a number{bound}, got {value!r}")
     return float(value)
@@ -251,7 +263,9 @@ def _link(spec: Any, at: Callable[[str], str], folder: Path) -> Link:
         raise RobotFileError(f"{at('')}: expected a table with name, mass and boxes")
     unknown = set(spec) - {"name", "mass", "boxes", "mesh", "mesh_scale", "com"}
     if unknown:
-        raise RobotFileError(f"{at(sorted(unknown)[0])}: unknown field; allowed: name, mass, boxes, mesh, mesh_scale, com")
+        raise RobotFileError(
+            f"{at(sorted(unknown)[0])}: unknown field; allowed: name, mass, boxes, mesh, mesh_scale, com"
+        )
     name = spec.get("name")
     if not isinstance(name, str) or not name:
         raise RobotFileError(f"{at('name')}: expected a non-empty string, got {name!r}")
@@ -263,8 +277,12 @@ def _link(spec: Any, at: Callable[[str], str], folder: Path) -> Link:
     for b, box in enumerate(raw):
         if not isinstance(box, dict) or "size" not in box:
             raise RobotFileError(f"{at(f'boxes[{b}]')}: expected a table with size = [x, y, z] (metres)")
-        boxes.append(Box(_vec(box["size"], at(f"boxes[{b}].size"), positive=True),
-                         _vec(box.get("center", [0, 0, 0]), at(f"boxes[{b}].center"))))
+        boxes.append(
+            Box(
+                _vec(box["size"], at(f"boxes[{b}].size"), positive=True),
+                _vec(box.get("center", [0, 0, 0]), at(f"boxes[{b}].center")),
+            )
+        )
     mesh = None
     if "mesh" in spec:
         path = folder / str(spec["mesh"])
@@ -283,7 +301,9 @@ def _joint(spec: Any, at: Callable[[str], str]) -> Joint:
         raise RobotFileError(f"{at('')}: expected a table with name, parent, child, origin, axis, range")
     unknown = set(spec) - {"name", "parent", "child", "origin", "axis", "range", "home"}
     if unknown:
-        raise RobotFileError(f"{at(sorted(unknown)[0])}: unknown field; allowed: name, parent, child, origin, axis, range, home")
+        raise RobotFileError(
+            f"{at(sorted(unknown)[0])}: unknown field; allowed: name, parent, child, origin, axis, range, home"
+        )
     for key in ("name", "parent", "child"):
         if not isinstance(spec.get(key), str) or not spec[key]:
             raise RobotFileError(f"{at(key)}: expected a link name (string), got {spec.get(key)!r}")
@@ -292,12 +312,22 @@ def _joint(spec: Any, at: Callable[[str], str]) -> Joint:
         raise RobotFileError(f"{at('axis')}: expected a non-zero vector, got {spec.get('axis')!r}")
     lo, hi = _vec(spec.get("range", [-180, 180]), at("range"), 2)
     if not (-360 <= lo < hi <= 360):
-        raise RobotFileError(f"{at('range')}: expected [lower, upper] degrees with lower < upper within ±360, got {spec.get('range')!r}")
+        raise RobotFileError(
+            f"{at('range')}: expected [lower, upper] degrees with lower < upper within ±360, got {spec.get('range')!r}"
+        )
     home = _number(spec.get("home", 0.0), at("home"))
     if not lo <= home <= hi:
         raise RobotFileError(f"{at('home')}: {home:g} lies outside range [{lo:g}, {hi:g}]")
-    return Joint(spec["name"], spec["parent"], spec["child"], _vec(spec.get("origin", [0, 0, 0]), at("origin")),
-                 tuple(axis / np.linalg.norm(axis)), np.radians(lo), np.radians(hi), np.radians(home))
+    return Joint(
+        spec["name"],
+        spec["parent"],
+        spec["child"],
+        _vec(spec.get("origin", [0, 0, 0]), at("origin")),
+        tuple(axis / np.linalg.norm(axis)),
+        np.radians(lo),
+        np.radians(hi),
+        np.radians(home),
+    )
 
 
 def _toml_at(table: str, i: int) -> Callable[[str], str]:
@@ -305,8 +335,13 @@ def _toml_at(table: str, i: int) -> Callable[[str], str]:
     return lambda key: f"{table}[{i}]" + (f".{key}" if key else "")
 
 
-def parse_parts(link_specs: list, joint_specs: list, folder: Path, link_at: Callable[[int], Callable[[str], str]],
-                joint_at: Callable[[int], Callable[[str], str]]) -> tuple[list[Link], list[Joint]]:
+def parse_parts(
+    link_specs: list,
+    joint_specs: list,
+    folder: Path,
+    link_at: Callable[[int], Callable[[str], str]],
+    joint_at: Callable[[int], Callable[[str], str]],
+) -> tuple[list[Link], list[Joint]]:
     """Links and joints from TOML-shaped tables, validated, every joint's parent and child a known link.
 
     Shared by the TOML and URDF readers (:mod:`sim.robots.urdf`); ``link_at(i)`` and
@@ -318,7 +353,9 @@ def parse_parts(link_specs: list, joint_specs: list, folder: Path, link_at: Call
     for i, j in enumerate(joints):
         for key in ("parent", "child"):
             if getattr(j, key) not in names:
-                raise RobotFileError(f"{joint_at(i)(key)}: no link named {getattr(j, key)!r}; links: {', '.join(sorted(names))}")
+                raise RobotFileError(
+                    f"{joint_at(i)(key)}: no link named {getattr(j, key)!r}; links: {', '.join(sorted(names))}"
+                )
     return links, joints
 
 
@@ -340,16 +377,18 @@ def load_robot(path: str | Path) -> Robot:
         raise RobotFileError(f"ROBOT_FILE: {path} is not valid TOML ({exc})") from None
     unknown = set(data) - {"name", "description", "link", "joint", "slope", "planar"}
     if unknown:
-        raise RobotFileError(f"{sorted(unknown)[0]}: unknown top-level field; allowed: name, description, link, joint, "
-                             "slope, planar")
+        raise RobotFileError(
+            f"{sorted(unknown)[0]}: unknown top-level field; allowed: name, description, link, joint, slope, planar"
+        )
     links = data.get("link")
     if not isinstance(links, list) or not links:
         raise RobotFileError("link: expected at least one [[link]] table")
     joints = data.get("joint", [])
     if not isinstance(joints, list):
         raise RobotFileError("joint: expected [[joint]] tables")
-    parsed_links, parsed_joints = parse_parts(links, joints, path.parent, lambda i: _toml_at("link", i),
-                                              lambda i: _toml_at("joint", i))
+    parsed_links, parsed_joints = parse_parts(
+        links, joints, path.parent, lambda i: _toml_at("link", i), lambda i: _toml_at("joint", i)
+    )
     robot = Robot(str(data.get("name", path.stem)), parsed_links, parsed_joints)
     robot.description = str(data.get("description", ""))
     robot.slope = _number(data.get("slope", 0.0), "slope", 0.0)  # degrees, the default ground slope
@@ -366,13 +405,17 @@ def read_stl(path: str | Path) -> np.ndarray:
     """Unique vertices (k, 3) of an ASCII or binary STL file."""
     raw = Path(path).read_bytes()
     if raw[:5].lower() == b"solid" and b"facet" in raw[:2048]:
-        pts = [list(map(float, line.split()[1:4])) for line in raw.decode(errors="replace").splitlines()
-               if line.strip().startswith("vertex")]
+        pts = [
+            list(map(float, line.split()[1:4]))
+            for line in raw.decode(errors="replace").splitlines()
+            if line.strip().startswith("vertex")
+        ]
         verts = np.asarray(pts, dtype=float).reshape(-1, 3)
     else:
         (n,) = struct.unpack("<I", raw[80:84])
-        rec = np.frombuffer(raw, dtype=np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")]),
-                            count=n, offset=84)
+        rec = np.frombuffer(
+            raw, dtype=np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")]), count=n, offset=84
+        )
         verts = rec["v"].reshape(-1, 3).astype(float)
     if verts.size == 0:
         raise RobotFileError(f"mesh: {path} holds no triangles")

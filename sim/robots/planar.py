@@ -45,8 +45,12 @@ def _kinematics(F, theta: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.
         t = pos[name]
         verts.append(np.stack([c * v[:, 0] + s * v[:, 1] + t[:, :1], -s * v[:, 0] + c * v[:, 1] + t[:, 1:]], axis=-1))
         m = robot._com[name][[0, 2]]
-        com += link.mass * np.column_stack([np.cos(ang[name]) * m[0] + np.sin(ang[name]) * m[1] + t[:, 0],
-                                            -np.sin(ang[name]) * m[0] + np.cos(ang[name]) * m[1] + t[:, 1]])
+        com += link.mass * np.column_stack(
+            [
+                np.cos(ang[name]) * m[0] + np.sin(ang[name]) * m[1] + t[:, 0],
+                -np.sin(ang[name]) * m[0] + np.cos(ang[name]) * m[1] + t[:, 1],
+            ]
+        )
     return np.concatenate(verts, axis=1)[:, keep], com / robot.mass
 
 
@@ -57,7 +61,7 @@ def _rings(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     d = P[:, None, :, :] - P[:, :, None, :]  # d[s, a, b] = P_b - P_a
     r = P[:, None, None, :, :] - P[:, :, None, None, :]  # r[s, a, _, p] = P_p - P_a
     cross = d[:, :, :, None, 0] * r[..., 1] - d[:, :, :, None, 1] * r[..., 0]  # (n, a, b, p); > 0: p left of a→b
-    L2 = (d ** 2).sum(axis=-1)[..., None]
+    L2 = (d**2).sum(axis=-1)[..., None]
     t = (d[:, :, :, None, 0] * r[..., 0] + d[:, :, :, None, 1] * r[..., 1]) / np.maximum(L2, 1e-300)
     tol = 1e-9 * np.maximum(scale, 1.0) * np.sqrt(L2)
     right = cross < -tol  # a vertex outside: a→b is no hull edge (counter-clockwise: interior on the left)
@@ -87,9 +91,11 @@ def planar_all_faces(F, theta: np.ndarray, chunk: int = 2000) -> dict:
     away), ``stable``, ``energy``, ``tips``, ``start_id``, ``rest_id``, ``count`` (faces per joint state).
     """
     uniq = np.unique(F._vertex_id)
-    out: dict[str, list[np.ndarray]] = {k: [] for k in ("row", "start", "rest", "stable", "energy", "tips", "start_id", "rest_id", "count")}
+    out: dict[str, list[np.ndarray]] = {
+        k: [] for k in ("row", "start", "rest", "stable", "energy", "tips", "start_id", "rest_id", "count")
+    }
     for s0 in range(0, len(theta), chunk):
-        th = theta[s0:s0 + chunk]
+        th = theta[s0 : s0 + chunk]
         P, com = _kinematics(F, th, uniq)
         ring, k = _rings(P)
         n, K = ring.shape

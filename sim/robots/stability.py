@@ -40,7 +40,7 @@ __all__ = ["GRAVITY", "Hull", "StabilityResult", "StabilityFunction", "body_angl
 
 GRAVITY = 9.81
 _TOL = 1e-9
-_HASH_BASE, _HASH_MOD = 1_000_003, 2 ** 61 - 1  # face identities: a polynomial hash of the spanning vertices
+_HASH_BASE, _HASH_MOD = 1_000_003, 2**61 - 1  # face identities: a polynomial hash of the spanning vertices
 
 
 def planar_face_ids(a: np.ndarray, b: np.ndarray) -> np.ndarray:
@@ -56,8 +56,9 @@ def _rot_xz(v: np.ndarray, c: np.ndarray, s: np.ndarray) -> np.ndarray:
     return np.stack([c * v[..., 0] + s * v[..., 1], -s * v[..., 0] + c * v[..., 1]], axis=-1)
 
 
-def planar_tip_table(A: np.ndarray, B: np.ndarray, p: np.ndarray, com: np.ndarray, k: np.ndarray,
-                     gravity: np.ndarray, mass: float) -> tuple[np.ndarray, np.ndarray]:
+def planar_tip_table(
+    A: np.ndarray, B: np.ndarray, p: np.ndarray, com: np.ndarray, k: np.ndarray, gravity: np.ndarray, mass: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Quasi-static tipping table of n planar hulls: the face each face tips onto and the energy lost, each (n, K).
 
     Face ``f < k[i]`` of hull ``i`` runs counter-clockwise from ``A[i, f]`` to ``B[i, f]`` (x-z,
@@ -119,7 +120,9 @@ def _orientation(angles: np.ndarray, planar: bool) -> np.ndarray:
     """Base-to-ground rotation with yaw 0 for one body angle."""
     if planar:
         return _rotation(np.array([0.0, 1.0, 0.0]), float(angles[0]))
-    return _rotation(np.array([0.0, 1.0, 0.0]), float(angles[1])) @ _rotation(np.array([1.0, 0.0, 0.0]), float(angles[0]))
+    return _rotation(np.array([0.0, 1.0, 0.0]), float(angles[1])) @ _rotation(
+        np.array([1.0, 0.0, 0.0]), float(angles[0])
+    )
 
 
 @dataclass
@@ -242,8 +245,16 @@ class StabilityFunction:
         faces = [np.array([i, (i + 1) % k]) for i in range(k)]
         vid = self._vertex_id[ring]
         ids = planar_face_ids(vid, np.concatenate([vid[1:], vid[:1]]))  # each face runs from vertex i to i + 1
-        return Hull(np.asarray(theta, float), pts, np.array([com[0], 0.0, com[2]]), normals, offsets, faces,
-                    body_angles(normals, True), ids=ids)
+        return Hull(
+            np.asarray(theta, float),
+            pts,
+            np.array([com[0], 0.0, com[2]]),
+            normals,
+            offsets,
+            faces,
+            body_angles(normals, True),
+            ids=ids,
+        )
 
     def _hull3d(self, theta, verts, com) -> Hull:
         h = ConvexHull(verts)
@@ -268,8 +279,17 @@ class StabilityFunction:
         pairs = np.unique(np.column_stack([np.repeat(group, 3), remap[h.simplices].ravel()]), axis=0)
         faces = np.split(pairs[:, 1], np.flatnonzero(np.diff(pairs[:, 0])) + 1)
         ids = self._face_ids([self._vertex_id[used[f]] for f in faces])
-        return Hull(np.asarray(theta, float), pts, com, normals, np.asarray(offsets), faces, body_angles(normals, False),
-                    ordered=False, ids=ids)
+        return Hull(
+            np.asarray(theta, float),
+            pts,
+            com,
+            normals,
+            np.asarray(offsets),
+            faces,
+            body_angles(normals, False),
+            ordered=False,
+            ids=ids,
+        )
 
     @staticmethod
     def _ordered(pts: np.ndarray, idx: np.ndarray, n: np.ndarray) -> np.ndarray:
@@ -345,11 +365,21 @@ class StabilityFunction:
         k = hull.n_faces
         if not self.planar:
             out = [self.settle(hull, f) for f in range(k)]
-            return (np.array([o[0] for o in out]), np.array([o[1] for o in out], dtype=float),
-                    np.array([o[2] for o in out]))
+            return (
+                np.array([o[0] for o in out]),
+                np.array([o[1] for o in out], dtype=float),
+                np.array([o[2] for o in out]),
+            )
         P = hull.points[:, [0, 2]]
-        nxt, step = planar_tip_table(P[None], np.concatenate([P[1:], P[:1]])[None], hull.angles[None, :, 0],
-                                     hull.com[None, [0, 2]], np.array([k]), self.gravity, self.robot.mass)
+        nxt, step = planar_tip_table(
+            P[None],
+            np.concatenate([P[1:], P[:1]])[None],
+            hull.angles[None, :, 0],
+            hull.com[None, [0, 2]],
+            np.array([k]),
+            self.gravity,
+            self.robot.mass,
+        )
         nxt, step = nxt[0].tolist(), step[0].tolist()
         rest = np.empty(k, dtype=int)
         energy = np.empty(k)
@@ -433,14 +463,17 @@ class StabilityFunction:
             start_id_parts.append(hull.ids)
             rest_id_parts.append(np.where(r_all >= 0, hull.ids[np.maximum(r_all, 0)], -1))
             face_ids.extend([hull.ids] * k)
-        rows, start, rest = (np.concatenate(v) if v else np.empty((0, w))
-                             for v, w in ((row_parts, self.robot.dof), (start_parts, self.n_body),
-                                          (rest_parts, self.n_body)))
+        rows, start, rest = (
+            np.concatenate(v) if v else np.empty((0, w))
+            for v, w in ((row_parts, self.robot.dof), (start_parts, self.n_body), (rest_parts, self.n_body))
+        )
         energy = np.concatenate(energy_parts) if energy_parts else np.empty(0)
         tips = np.concatenate(tips_parts).astype(int) if tips_parts else np.empty(0, dtype=int)
         self.n_queries += len(tips)
-        ids = [np.concatenate(v).astype(np.int64) if v else np.empty(0, dtype=np.int64)
-               for v in (start_id_parts, rest_id_parts)]
+        ids = [
+            np.concatenate(v).astype(np.int64) if v else np.empty(0, dtype=np.int64)
+            for v in (start_id_parts, rest_id_parts)
+        ]
         return StabilityResult(rows, start, tips == 0, rest, energy, faces, tips, ids[0], ids[1], face_ids)
 
     def _all_faces_planar(self, theta: np.ndarray) -> StabilityResult:
@@ -455,5 +488,15 @@ class StabilityFunction:
         ids = np.split(b["start_id"], cuts)
         faces = [f for f, k in zip(per_hull, b["count"]) for _ in range(k)]
         face_ids = [f for f, k in zip(ids, b["count"]) for _ in range(k)]
-        return StabilityResult(theta[b["row"]], b["start"][:, None], b["stable"].astype(bool), b["rest"][:, None],
-                               b["energy"], faces, b["tips"].astype(int), b["start_id"], b["rest_id"], face_ids)
+        return StabilityResult(
+            theta[b["row"]],
+            b["start"][:, None],
+            b["stable"].astype(bool),
+            b["rest"][:, None],
+            b["energy"],
+            faces,
+            b["tips"].astype(int),
+            b["start_id"],
+            b["rest_id"],
+            face_ids,
+        )

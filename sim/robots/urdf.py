@@ -51,8 +51,10 @@ def _no_rotation(origin: ET.Element | None, where: str) -> None:
         return
     rpy = _numbers(origin, "rpy", "0 0 0")
     if isinstance(rpy, str) or len(rpy) != 3 or any(abs(v) > 1e-12 for v in rpy):
-        raise RobotFileError(f"{where}/origin/@rpy: rotated frames are not supported, got {origin.get('rpy')!r}; "
-                             "use rpy=\"0 0 0\" and give the geometry or axis in the parent's orientation")
+        raise RobotFileError(
+            f"{where}/origin/@rpy: rotated frames are not supported, got {origin.get('rpy')!r}; "
+            'use rpy="0 0 0" and give the geometry or axis in the parent\'s orientation'
+        )
 
 
 def _child_attr(el: ET.Element, tag: str, attr: str) -> str | None:
@@ -75,8 +77,9 @@ def _link_table(el: ET.Element, where: str) -> tuple[dict, Callable[[str], str],
     else:
         mass = inertial.find("mass")
         if mass is None or mass.get("value") is None:
-            raise RobotFileError(f"{where}/inertial/mass/@value: missing; give <mass value=\"KG\"/> "
-                                 "(value=\"0\" for a massless link)")
+            raise RobotFileError(
+                f'{where}/inertial/mass/@value: missing; give <mass value="KG"/> (value="0" for a massless link)'
+            )
         value = _numbers(mass, "value", "")
         spec["mass"] = value[0] if isinstance(value, list) and len(value) == 1 else mass.get("value")
         # the inertial origin's rpy only orients the inertia tensor, which a quasi-static study does not use
@@ -90,40 +93,53 @@ def _link_table(el: ET.Element, where: str) -> tuple[dict, Callable[[str], str],
         geometry = col.find("geometry")
         shapes = [] if geometry is None else list(geometry)
         if len(shapes) != 1:
-            raise RobotFileError(f"{at}/geometry: expected exactly one <box> or <mesh>, got "
-                                 f"{[s.tag for s in shapes] or 'none'}")
+            raise RobotFileError(
+                f"{at}/geometry: expected exactly one <box> or <mesh>, got {[s.tag for s in shapes] or 'none'}"
+            )
         shape = shapes[0]
         if shape.tag == "box":
             boxes.append({"size": _numbers(shape, "size", ""), "center": xyz})
             box_at.append(at)
         elif shape.tag == "mesh":
             if mesh_at is not None:
-                raise RobotFileError(f"{at}/geometry/mesh: a link may have one mesh ({mesh_at} is the first); "
-                                     "merge the STL files or split the link")
+                raise RobotFileError(
+                    f"{at}/geometry/mesh: a link may have one mesh ({mesh_at} is the first); "
+                    "merge the STL files or split the link"
+                )
             mesh_at = at
             filename = shape.get("filename") or ""
             if filename.startswith("file://"):
-                filename = filename[len("file://"):]
+                filename = filename[len("file://") :]
             if "://" in filename or not filename.lower().endswith(".stl"):
-                raise RobotFileError(f"{at}/geometry/mesh/@filename: expected an STL file path relative to the URDF "
-                                     f"(or file://), got {shape.get('filename')!r}; package:// needs ROS, convert other "
-                                     "formats to STL")
+                raise RobotFileError(
+                    f"{at}/geometry/mesh/@filename: expected an STL file path relative to the URDF "
+                    f"(or file://), got {shape.get('filename')!r}; package:// needs ROS, convert other "
+                    "formats to STL"
+                )
             scale = _numbers(shape, "scale", "1 1 1")
             if isinstance(scale, str) or len(scale) != 3 or len(set(scale)) != 1:
-                raise RobotFileError(f"{at}/geometry/mesh/@scale: expected one factor for all three axes, "
-                                     f"got {shape.get('scale')!r}")
+                raise RobotFileError(
+                    f"{at}/geometry/mesh/@scale: expected one factor for all three axes, got {shape.get('scale')!r}"
+                )
             spec["mesh"], spec["mesh_scale"] = filename, scale[0]
             offset = np.asarray(_vec(xyz, f"{at}/origin/@xyz"))
         else:
             raise RobotFileError(f"{at}/geometry/{shape.tag}: not supported; use <box> (or an STL <mesh>) instead")
     if boxes:
         spec["boxes"] = boxes
-    fields = {"": "", "name": "/@name", "mass": "/inertial/mass/@value", "com": "/inertial/origin/@xyz",
-              "boxes": "/collision", "mesh": "/geometry/mesh/@filename", "mesh_scale": "/geometry/mesh/@scale"}
+    fields = {
+        "": "",
+        "name": "/@name",
+        "mass": "/inertial/mass/@value",
+        "com": "/inertial/origin/@xyz",
+        "boxes": "/collision",
+        "mesh": "/geometry/mesh/@filename",
+        "mesh_scale": "/geometry/mesh/@scale",
+    }
 
     def field_at(key: str) -> str:
         if key.startswith("boxes["):
-            b, _, part = key[len("boxes["):].partition("]")
+            b, _, part = key[len("boxes[") :].partition("]")
             return box_at[int(b)] + ("/origin/@xyz" if part == ".center" else "/geometry/box/@size")
         if key.startswith("mesh"):
             return f"{mesh_at}{fields[key]}"
@@ -138,17 +154,25 @@ def _joint_table(el: ET.Element, where: str) -> tuple[dict, Callable[[str], str]
     if kind not in _JOINT_TYPES:
         raise RobotFileError(f"{where}/@type: {kind!r} joints are not supported; use revolute, continuous or fixed")
     if el.find("mimic") is not None:
-        raise RobotFileError(f"{where}/mimic: coupled joints are not supported; remove <mimic> to make the joint "
-                             "independent")
+        raise RobotFileError(
+            f"{where}/mimic: coupled joints are not supported; remove <mimic> to make the joint independent"
+        )
     origin = el.find("origin")
     _no_rotation(origin, where)
-    spec: dict[str, object] = {"name": el.get("name"), "parent": _child_attr(el, "parent", "link"), "child": _child_attr(el, "child", "link"),
-            "origin": _numbers(origin, "xyz", "0 0 0"), "axis": _numbers(el.find("axis"), "xyz", "1 0 0")}
+    spec: dict[str, object] = {
+        "name": el.get("name"),
+        "parent": _child_attr(el, "parent", "link"),
+        "child": _child_attr(el, "child", "link"),
+        "origin": _numbers(origin, "xyz", "0 0 0"),
+        "axis": _numbers(el.find("axis"), "xyz", "1 0 0"),
+    }
     if kind == "revolute":
         limit = el.find("limit")
         if limit is None or limit.get("lower") is None or limit.get("upper") is None:
-            raise RobotFileError(f"{where}/limit: a revolute joint needs <limit lower=\"RAD\" upper=\"RAD\"/>; "
-                                 "use type=\"continuous\" for a full turn")
+            raise RobotFileError(
+                f'{where}/limit: a revolute joint needs <limit lower="RAD" upper="RAD"/>; '
+                'use type="continuous" for a full turn'
+            )
         lower, upper = _numbers(limit, "lower", ""), _numbers(limit, "upper", "")
         if isinstance(lower, list) and isinstance(upper, list) and len(lower) == len(upper) == 1:
             lo, hi = float(np.degrees(lower[0])), float(np.degrees(upper[0]))
@@ -160,8 +184,16 @@ def _joint_table(el: ET.Element, where: str) -> tuple[dict, Callable[[str], str]
         spec["range"] = [-180.0, 180.0]
         if kind == "fixed":  # locked at 0, so its axis never turns anything; y keeps a planar robot planar
             spec["axis"] = [0.0, 1.0, 0.0]
-    fields = {"": "", "name": "/@name", "parent": "/parent/@link", "child": "/child/@link", "origin": "/origin/@xyz",
-              "axis": "/axis/@xyz", "range": "/limit/@lower and @upper (radians, shown in degrees)", "home": ""}
+    fields = {
+        "": "",
+        "name": "/@name",
+        "parent": "/parent/@link",
+        "child": "/child/@link",
+        "origin": "/origin/@xyz",
+        "axis": "/axis/@xyz",
+        "range": "/limit/@lower and @upper (radians, shown in degrees)",
+        "home": "",
+    }
     return spec, lambda key: where + fields.get(key, "/" + key)
 
 
@@ -181,8 +213,9 @@ def load_urdf(path: str | Path) -> Robot:
         raise RobotFileError("robot/link: expected at least one <link>")
     links = [_link_table(el, _element_name(el, i)) for i, el in enumerate(link_els)]
     joints = [_joint_table(el, _element_name(el, i)) for i, el in enumerate(joint_els)]
-    parsed_links, parsed_joints = parse_parts([t[0] for t in links], [t[0] for t in joints], path.parent,
-                                              lambda i: links[i][1], lambda i: joints[i][1])
+    parsed_links, parsed_joints = parse_parts(
+        [t[0] for t in links], [t[0] for t in joints], path.parent, lambda i: links[i][1], lambda i: joints[i][1]
+    )
     for link, (_, _, offset) in zip(parsed_links, links):
         if link.mesh is not None:
             link.mesh = link.mesh + offset

@@ -30,8 +30,18 @@ from sim.uuv.geometry import inside_rect, rect_closest_point, rect_signed_distan
 from sim.uuv.scenario import Scenarios
 from sim.uuv.vehicle import propulsion_power
 
-__all__ = ["Autonomy", "Observation", "Command", "GOAL_WAYPOINT", "GOAL_TRANSMIT", "GOAL_SURVEY", "GOAL_RETURN",
-           "RETURN_COMPLETE", "RETURN_FUEL", "RETURN_TIME"]
+__all__ = [
+    "Autonomy",
+    "Observation",
+    "Command",
+    "GOAL_WAYPOINT",
+    "GOAL_TRANSMIT",
+    "GOAL_SURVEY",
+    "GOAL_RETURN",
+    "RETURN_COMPLETE",
+    "RETURN_FUEL",
+    "RETURN_TIME",
+]
 
 GOAL_WAYPOINT, GOAL_TRANSMIT, GOAL_SURVEY, GOAL_RETURN = 0, 1, 2, 3
 RETURN_NONE, RETURN_COMPLETE, RETURN_FUEL, RETURN_TIME = 0, 1, 2, 3
@@ -113,8 +123,13 @@ class Autonomy:
         self.tx_cy = (scen.tx_rect[:, 2] + scen.tx_rect[:, 3]) / 2
         # Waypoints too close to a no-go area are abandoned on arrival as goals (known map).
         if W and scen.nogo.shape[1]:
-            near = np.stack([np.any(rect_signed_distance(np.full(n, wx), np.full(n, wy), scen.nogo)
-                                    < WAYPOINT_ABORT_M, axis=1) for wx, wy in scen.waypoints], axis=1)
+            near = np.stack(
+                [
+                    np.any(rect_signed_distance(np.full(n, wx), np.full(n, wy), scen.nogo) < WAYPOINT_ABORT_M, axis=1)
+                    for wx, wy in scen.waypoints
+                ],
+                axis=1,
+            )
         else:
             near = np.zeros((n, W), dtype=bool)
         self.wp_doomed = near
@@ -187,8 +202,9 @@ class Autonomy:
         return kind, gx, gy
 
     @staticmethod
-    def _nogo_push(x: np.ndarray, y: np.ndarray, d: np.ndarray, gx: np.ndarray, gy: np.ndarray, nogo: np.ndarray
-                   ) -> tuple[np.ndarray, np.ndarray]:
+    def _nogo_push(
+        x: np.ndarray, y: np.ndarray, d: np.ndarray, gx: np.ndarray, gy: np.ndarray, nogo: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Push from the known no-go areas: away from the closest point, out of an area, and
         along the area round its nearer end (the map gives its extent, unlike a sonar contact)."""
         cx, cy = rect_closest_point(x, y, nogo)
@@ -226,8 +242,9 @@ class Autonomy:
         return self._command(obs, fx, fy, kind, in_area, in_tx, sending)
 
     # -- behaviours ----------------------------------------------------------------------
-    def _survey(self, obs: Observation, dt: float, kind: np.ndarray, area: np.ndarray, active: np.ndarray
-                ) -> np.ndarray:
+    def _survey(
+        self, obs: Observation, dt: float, kind: np.ndarray, area: np.ndarray, active: np.ndarray
+    ) -> np.ndarray:
         """Loiter progress in the current mission area (what the vehicle believes); returns who is in it."""
         scen = self.scen
         in_area = np.zeros(scen.n, dtype=bool)
@@ -239,8 +256,9 @@ class Autonomy:
             self.area_k[done] += 1
         return in_area
 
-    def _transmit(self, obs: Observation, dt: float, kind: np.ndarray, active: np.ndarray
-                  ) -> tuple[np.ndarray, np.ndarray]:
+    def _transmit(
+        self, obs: Observation, dt: float, kind: np.ndarray, active: np.ndarray
+    ) -> tuple[np.ndarray, np.ndarray]:
         """Transmission progress: who is in the area, and who is sending (in it while the window is open)."""
         scen, n = self.scen, self.scen.n
         in_tx = np.zeros(n, dtype=bool)
@@ -261,8 +279,17 @@ class Autonomy:
             arrived = (kind == GOAL_WAYPOINT) & (np.hypot(gx - obs.x, gy - obs.y) <= self.mission.waypoint_radius)
             self.wp[arrived & active] += 1
 
-    def _give_up_when_stuck(self, obs: Observation, dt: float, kind: np.ndarray, gx: np.ndarray, gy: np.ndarray,
-                            area: np.ndarray, loitering: np.ndarray, active: np.ndarray) -> None:
+    def _give_up_when_stuck(
+        self,
+        obs: Observation,
+        dt: float,
+        kind: np.ndarray,
+        gx: np.ndarray,
+        gy: np.ndarray,
+        area: np.ndarray,
+        loitering: np.ndarray,
+        active: np.ndarray,
+    ) -> None:
         """Stuck detection: abandon a goal (never the way home) not approached by PROGRESS_M in stuck_s."""
         A = self.n_areas
         dist = np.hypot(gx - obs.x, gy - obs.y)
@@ -297,12 +324,15 @@ class Autonomy:
         self._avoid_nogo(obs, gx, gy, fx, fy)
         # keep off the edge of the operational area (known): push inwards within OP_MARGIN_M
         x0, x1, y0, y1 = self._op_bounds
-        fx += NOGO_GAIN * (np.clip(1 - (obs.x - x0) / OP_MARGIN_M, 0, 1) - np.clip(1 - (x1 - obs.x) / OP_MARGIN_M, 0, 1))
-        fy += NOGO_GAIN * (np.clip(1 - (obs.y - y0) / OP_MARGIN_M, 0, 1) - np.clip(1 - (y1 - obs.y) / OP_MARGIN_M, 0, 1))
+        fx += NOGO_GAIN * (
+            np.clip(1 - (obs.x - x0) / OP_MARGIN_M, 0, 1) - np.clip(1 - (x1 - obs.x) / OP_MARGIN_M, 0, 1)
+        )
+        fy += NOGO_GAIN * (
+            np.clip(1 - (obs.y - y0) / OP_MARGIN_M, 0, 1) - np.clip(1 - (y1 - obs.y) / OP_MARGIN_M, 0, 1)
+        )
         return fx, fy
 
-    def _avoid_contacts(self, obs: Observation, ax: np.ndarray, ay: np.ndarray, fx: np.ndarray, fy: np.ndarray
-                        ) -> None:
+    def _avoid_contacts(self, obs: Observation, ax: np.ndarray, ay: np.ndarray, fx: np.ndarray, fy: np.ndarray) -> None:
         """Add (in place) the push of remembered sonar contacts to ``fx``, ``fy``; ``ax``, ``ay`` point to the goal."""
         if not obs.contact_x.shape[1]:
             return
@@ -342,14 +372,23 @@ class Autonomy:
             d = obs.nogo_distance if obs.nogo_distance is not None else rect_signed_distance(obs.x, obs.y, scen.nogo)
             rows = np.flatnonzero(np.any(d < NOGO_INFLUENCE_M, axis=1) & obey)  # only those near an area
             if rows.size:
-                fx_n, fy_n = self._nogo_push(obs.x[rows], obs.y[rows], d[rows], gx[rows], gy[rows],
-                                             self.scen.nogo[rows])
+                fx_n, fy_n = self._nogo_push(
+                    obs.x[rows], obs.y[rows], d[rows], gx[rows], gy[rows], self.scen.nogo[rows]
+                )
                 fx[rows] += fx_n
                 fy[rows] += fy_n
 
     # -- the command -------------------------------------------------------------------------
-    def _command(self, obs: Observation, fx: np.ndarray, fy: np.ndarray, kind: np.ndarray, in_area: np.ndarray,
-                 in_tx: np.ndarray, sending: np.ndarray) -> Command:
+    def _command(
+        self,
+        obs: Observation,
+        fx: np.ndarray,
+        fy: np.ndarray,
+        kind: np.ndarray,
+        in_area: np.ndarray,
+        in_tx: np.ndarray,
+        sending: np.ndarray,
+    ) -> Command:
         """Heading and speed through water along the field (crabbing against the predicted current); loiter
         slowly in an area or at home, and surface to send or to be picked up."""
         spec = self.spec

@@ -80,13 +80,23 @@ class Bias:
 
 
 BIAS_NAMES: tuple[str, ...] = tuple(f.name for f in fields(Bias))
-BIAS_UNITS: dict[str, str] = {"speed": "x", "current_scale": "x", "current_offset": "m/s", "heading": "deg",
-                              "battery": "x", "start_time": "s"}
+BIAS_UNITS: dict[str, str] = {
+    "speed": "x",
+    "current_scale": "x",
+    "current_offset": "m/s",
+    "heading": "deg",
+    "battery": "x",
+    "start_time": "s",
+}
 #: Accepted range of each field (inclusive): wider than any plausible range day, narrow
 #: enough to catch a value in the wrong unit (``heading=0.2`` rad is allowed, 90 is not).
 BIAS_LIMITS: dict[str, tuple[float, float]] = {
-    "speed": (0.5, 2.0), "current_scale": (0.0, 3.0), "current_offset": (-2.0, 2.0), "heading": (-45.0, 45.0),
-    "battery": (0.25, 4.0), "start_time": (-43200.0, 43200.0),
+    "speed": (0.5, 2.0),
+    "current_scale": (0.0, 3.0),
+    "current_offset": (-2.0, 2.0),
+    "heading": (-45.0, 45.0),
+    "battery": (0.25, 4.0),
+    "start_time": (-43200.0, 43200.0),
 }
 _EXAMPLE = "e.g. speed=1.15,current_offset=0.3"
 
@@ -98,8 +108,10 @@ def check_value(name: str, value) -> float:
     except (TypeError, ValueError):
         raise InputError(f"{name}: {value!r} is not a number; write {name}=<number>, {_EXAMPLE}") from None
     if not math.isfinite(v) or not lo <= v <= hi:
-        raise InputError(f"{name}: {value} is outside [{lo:g}, {hi:g}] {BIAS_UNITS[name]}; "
-                         f"give a value in that range (neutral: {NEUTRAL[name]:g})")
+        raise InputError(
+            f"{name}: {value} is outside [{lo:g}, {hi:g}] {BIAS_UNITS[name]}; "
+            f"give a value in that range (neutral: {NEUTRAL[name]:g})"
+        )
     return v
 
 
@@ -158,12 +170,20 @@ def bias_arrays(bias: Bias | BiasArrays | Sequence[Bias] | Mapping[str, np.ndarr
     if isinstance(bias, Bias):
         cols = {name: np.full(n, float(getattr(bias, name))) for name in BIAS_NAMES}
     elif isinstance(bias, Mapping):
-        cols = {name: np.broadcast_to(np.asarray(bias.get(name, NEUTRAL[name]), dtype=float), (n,)).copy()
-                for name in BIAS_NAMES}
+        cols = {
+            name: np.broadcast_to(np.asarray(bias.get(name, NEUTRAL[name]), dtype=float), (n,)).copy()
+            for name in BIAS_NAMES
+        }
     else:
         items = list(bias)
         if len(items) != n:
             raise InputError(f"bias: expected one Bias or {n} of them (one per scenario), got {len(items)}")
         cols = {name: np.array([float(getattr(b, name)) for b in items]) for name in BIAS_NAMES}
-    return BiasArrays(cols["speed"], cols["current_scale"], cols["current_offset"], np.deg2rad(cols["heading"]),
-                      cols["battery"], cols["start_time"])
+    return BiasArrays(
+        cols["speed"],
+        cols["current_scale"],
+        cols["current_offset"],
+        np.deg2rad(cols["heading"]),
+        cols["battery"],
+        cols["start_time"],
+    )

@@ -13,8 +13,7 @@ from sim.uuv.mission import Current
 __all__ = ["tidal_current"]
 
 
-def tidal_current(current: Current, seconds_of_day: np.ndarray, scale=1.0, offset=0.0
-                  ) -> tuple[np.ndarray, np.ndarray]:
+def tidal_current(current: Current, seconds_of_day: np.ndarray, scale=1.0, offset=0.0) -> tuple[np.ndarray, np.ndarray]:
     """Predicted current (east, north) in m/s at each time of day (seconds after midnight).
 
     ``scale`` and ``offset`` (m/s along ``direction_deg``) give the true current of a

@@ -43,8 +43,17 @@ __all__ = ["FrontSeat", "GUIDED", "MANUAL", "SURFACE", "VELOCITY_YAW_MASK"]
 
 mav = mavutil.mavlink
 GUIDED, MANUAL, SURFACE = 4, 19, 9
-MODES = {"STABILIZE": 0, "ACRO": 1, "ALT_HOLD": 2, "AUTO": 3, "GUIDED": 4, "CIRCLE": 7, "SURFACE": 9,
-         "POSHOLD": 16, "MANUAL": 19}
+MODES = {
+    "STABILIZE": 0,
+    "ACRO": 1,
+    "ALT_HOLD": 2,
+    "AUTO": 3,
+    "GUIDED": 4,
+    "CIRCLE": 7,
+    "SURFACE": 9,
+    "POSHOLD": 16,
+    "MANUAL": 19,
+}
 #: Velocity and yaw used; position, acceleration and yaw rate ignored.
 VELOCITY_YAW_MASK = 2503
 #: ArduSub zeroes a velocity target not refreshed within this many seconds.
@@ -75,9 +84,21 @@ class FrontSeatStats:
 class FrontSeat:
     """One simulated vehicle behind a MAVLink endpoint (see module docstring)."""
 
-    def __init__(self, mission: Mission, u, connection: str, *, lockstep: bool = True, speedup: float = 1.0,
-                 stochastic: bool = False, seed: int = 0, failsafe_s: float = 5.0, sysid: int = 1,
-                 telemetry_period_s: float = 0.5, bias=None):
+    def __init__(
+        self,
+        mission: Mission,
+        u,
+        connection: str,
+        *,
+        lockstep: bool = True,
+        speedup: float = 1.0,
+        stochastic: bool = False,
+        seed: int = 0,
+        failsafe_s: float = 5.0,
+        sysid: int = 1,
+        telemetry_period_s: float = 0.5,
+        bias=None,
+    ):
         self.mission = mission
         self.u = np.asarray(u, dtype=float).reshape(1, -1)
         scen = make_scenarios(mission, self.u)
@@ -94,8 +115,9 @@ class FrontSeat:
         self.frame = LocalFrame(mission.origin_lat, mission.origin_lon)
         self.lockstep, self.speedup, self.failsafe_s = lockstep, float(speedup), float(failsafe_s)
         self.telemetry_period_s = telemetry_period_s
-        self.conn = mavutil.mavlink_connection(connection, source_system=sysid, source_component=1,
-                                               dialect="ardupilotmega")
+        self.conn = mavutil.mavlink_connection(
+            connection, source_system=sysid, source_component=1, dialect="ardupilotmega"
+        )
         self.armed = False
         self.mode = MANUAL
         self.k = 0
@@ -180,16 +202,26 @@ class FrontSeat:
     def _failsafe(self) -> None:
         self.stats.failsafes += 1
         self._status(mav.MAV_SEVERITY_WARNING, "failsafe: no back-seat set-point, holding on the surface")
-        self._step(_Setpoint(heading=float(self.tel.heading[0]), speed=0.0, surface=True,
-                             tick_ms=self._tick_ms(), received=self.t))
+        self._step(
+            _Setpoint(
+                heading=float(self.tel.heading[0]), speed=0.0, surface=True, tick_ms=self._tick_ms(), received=self.t
+            )
+        )
 
     def _referee(self) -> None:
         ended = self.referee.update_from(self.tel, np.ones(1, dtype=bool))[0]
         reason = ""
         if ended:
             r = self.referee
-            reason = ("recovered" if r.recovered[0] else "collision" if r.collided[0]
-                      else "left the operational area" if r.left_area[0] else "battery empty")
+            reason = (
+                "recovered"
+                if r.recovered[0]
+                else "collision"
+                if r.collided[0]
+                else "left the operational area"
+                if r.left_area[0]
+                else "battery empty"
+            )
         elif self.t >= self.mission.time_limit_s:
             reason = "time limit"
         if reason:
@@ -218,16 +250,44 @@ class FrontSeat:
         m.local_position_ned_send(ms, north, east, depth, vn, ve, 0.0)
         lat, lon = self.frame.to_latlon(east, north)
         hdg = int(round(np.degrees(tel.heading[0]) % 360 * 100)) % 36000
-        m.global_position_int_send(ms, int(round(lat * 1e7)), int(round(lon * 1e7)), int(-depth * 1000),
-                                   int(-depth * 1000), int(vn * 100), int(ve * 100), 0, hdg)
+        m.global_position_int_send(
+            ms,
+            int(round(lat * 1e7)),
+            int(round(lon * 1e7)),
+            int(-depth * 1000),
+            int(-depth * 1000),
+            int(vn * 100),
+            int(ve * 100),
+            0,
+            hdg,
+        )
         percent = int(np.clip(round(tel.battery[0] * 100), 0, 100))
         volts = [int(14800 * (0.85 + 0.15 * tel.battery[0]))] + [65535] * 9
-        m.battery_status_send(0, mav.MAV_BATTERY_FUNCTION_ALL, mav.MAV_BATTERY_TYPE_LION, 2000, volts, -1,
-                              int(tel.energy_hj[0] * 100 / 3600 / 14.8 * 1000), int(tel.energy_hj[0]), percent)
+        m.battery_status_send(
+            0,
+            mav.MAV_BATTERY_FUNCTION_ALL,
+            mav.MAV_BATTERY_TYPE_LION,
+            2000,
+            volts,
+            -1,
+            int(tel.energy_hj[0] * 100 / 3600 / 14.8 * 1000),
+            int(tel.energy_hj[0]),
+            percent,
+        )
         m.sys_status_send(0, 0, 0, 0, volts[0], -1, percent, 0, 0, 0, 0, 0, 0)
         fix = 3 if tel.surfaced[0] else 0
-        m.gps_raw_int_send(ms * 1000, fix, int(round(lat * 1e7)) if fix else 0, int(round(lon * 1e7)) if fix else 0,
-                           0, 65535, 65535, 65535, 65535, 12 if fix else 0)
+        m.gps_raw_int_send(
+            ms * 1000,
+            fix,
+            int(round(lat * 1e7)) if fix else 0,
+            int(round(lon * 1e7)) if fix else 0,
+            0,
+            65535,
+            65535,
+            65535,
+            65535,
+            12 if fix else 0,
+        )
         self._send_sonar(ms)
         m.system_time_send(int(time.time() * 1e6), ms)  # closes this step's telemetry
 
@@ -239,14 +299,23 @@ class FrontSeat:
         rng = self.mission.vehicle.sonar_range_m
         for j in np.flatnonzero(tel.detected[0]):
             cx, cy = float(tel.contact_x[0, j]), float(tel.contact_y[0, j])
-            m.obstacle_distance_3d_send(ms, mav.MAV_DISTANCE_SENSOR_ULTRASOUND, mav.MAV_FRAME_LOCAL_NED, int(j),
-                                        cy, cx, 0.0, 0.0, rng)
+            m.obstacle_distance_3d_send(
+                ms, mav.MAV_DISTANCE_SENSOR_ULTRASOUND, mav.MAV_FRAME_LOCAL_NED, int(j), cy, cx, 0.0, 0.0, rng
+            )
         assert tel.scan is not None, "the front-seat's world scans (SCAN_BEAMS > 0)"
         cm = np.round(tel.scan[0] * 100.0).astype(np.int64)
         for start in range(0, SCAN_BEAMS, BEAMS_PER_MESSAGE):
-            m.obstacle_distance_send(ms * 1000, mav.MAV_DISTANCE_SENSOR_ULTRASOUND,
-                                     cm[start:start + BEAMS_PER_MESSAGE].tolist(), 0, 0, int(rng * 100),
-                                     1.0, float(start), mav.MAV_FRAME_BODY_FRD)
+            m.obstacle_distance_send(
+                ms * 1000,
+                mav.MAV_DISTANCE_SENSOR_ULTRASOUND,
+                cm[start : start + BEAMS_PER_MESSAGE].tolist(),
+                0,
+                0,
+                int(rng * 100),
+                1.0,
+                float(start),
+                mav.MAV_FRAME_BODY_FRD,
+            )
 
     # -- MAVLink in ------------------------------------------------------------------
     def _handle(self, msg) -> None:
@@ -288,8 +357,11 @@ class FrontSeat:
         self.conn.mav.command_ack_send(cmd, result)
 
     def _setpoint(self, msg, kind: str) -> None:
-        frames = ((mav.MAV_FRAME_LOCAL_NED,) if kind.endswith("LOCAL_NED")
-                  else (mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT))
+        frames = (
+            (mav.MAV_FRAME_LOCAL_NED,)
+            if kind.endswith("LOCAL_NED")
+            else (mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, mav.MAV_FRAME_GLOBAL_RELATIVE_ALT)
+        )
         if self.mode != GUIDED or msg.coordinate_frame not in frames or msg.type_mask != VELOCITY_YAW_MASK:
             self.stats.ignored += 1  # ArduSub drops such set-points silently
             return
@@ -315,6 +387,19 @@ class FrontSeat:
         if 0 <= seq < len(self.mission_items):
             it = self.mission_items[seq]
             x, y = (it.x, it.y) if it.get_type() == "MISSION_ITEM_INT" else (int(it.x * 1e7), int(it.y * 1e7))
-            self.conn.mav.mission_item_int_send(msg.get_srcSystem(), msg.get_srcComponent(), seq, it.frame,
-                                                it.command, 0, 1, it.param1, it.param2, it.param3, it.param4,
-                                                x, y, it.z)
+            self.conn.mav.mission_item_int_send(
+                msg.get_srcSystem(),
+                msg.get_srcComponent(),
+                seq,
+                it.frame,
+                it.command,
+                0,
+                1,
+                it.param1,
+                it.param2,
+                it.param3,
+                it.param4,
+                x,
+                y,
+                it.z,
+            )

@@ -65,7 +65,7 @@ class LocalFrame:
         phi = math.radians(lat)
         w = 1.0 - _E2 * math.sin(phi) ** 2
         object.__setattr__(self, "prime_vertical_radius", WGS84_A / math.sqrt(w))
-        object.__setattr__(self, "meridian_radius", WGS84_A * (1.0 - _E2) / w ** 1.5)
+        object.__setattr__(self, "meridian_radius", WGS84_A * (1.0 - _E2) / w**1.5)
 
     # ------------------------------------------------------------------ forward
     def _enu(self, phi: np.ndarray, dlam: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -73,7 +73,7 @@ class LocalFrame:
         phi0 = math.radians(self.origin_lat)
         s0, c0 = math.sin(phi0), math.cos(phi0)
         sphi, cphi = np.sin(phi), np.cos(phi)
-        n = WGS84_A / np.sqrt(1.0 - _E2 * sphi ** 2)
+        n = WGS84_A / np.sqrt(1.0 - _E2 * sphi**2)
         # ECEF in a frame rotated so the origin's meridian is at longitude 0.
         X = n * cphi * np.cos(dlam)
         Y = n * cphi * np.sin(dlam)

@@ -10,8 +10,14 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["rect_signed_distance", "rect_closest_point", "triangle_vertices", "polygon_signed_distance",
-           "inside_rect", "polygon_edges"]
+__all__ = [
+    "rect_signed_distance",
+    "rect_closest_point",
+    "triangle_vertices",
+    "polygon_signed_distance",
+    "inside_rect",
+    "polygon_edges",
+]
 
 
 def rect_closest_point(x: np.ndarray, y: np.ndarray, rects: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -32,8 +38,12 @@ def rect_signed_distance(x: np.ndarray, y: np.ndarray, rects: np.ndarray) -> np.
 
 def inside_rect(x: np.ndarray, y: np.ndarray, rects: np.ndarray) -> np.ndarray:
     """(N, K) True where (x, y) lies inside the rectangle."""
-    return ((x[:, None] >= rects[..., 0]) & (x[:, None] <= rects[..., 1])
-            & (y[:, None] >= rects[..., 2]) & (y[:, None] <= rects[..., 3]))
+    return (
+        (x[:, None] >= rects[..., 0])
+        & (x[:, None] <= rects[..., 1])
+        & (y[:, None] >= rects[..., 2])
+        & (y[:, None] <= rects[..., 3])
+    )
 
 
 def triangle_vertices(cx: np.ndarray, cy: np.ndarray, side: float | np.ndarray) -> np.ndarray:
@@ -53,8 +63,9 @@ def polygon_edges(vertices: np.ndarray) -> tuple[np.ndarray, ...]:
     return ax, ay, ex, ey, 1.0 / np.where(length2 > 0, length2, 1.0)
 
 
-def polygon_signed_distance(x: np.ndarray, y: np.ndarray, vertices: np.ndarray | tuple
-                            ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+def polygon_signed_distance(
+    x: np.ndarray, y: np.ndarray, vertices: np.ndarray | tuple
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Signed distance from (x, y) to convex polygons (N, K, V, 2, counter-clockwise).
 
     ``vertices`` may be the output of :func:`polygon_edges` (computed once per batch).

@@ -20,8 +20,16 @@ import numpy as np
 
 from sim.uuv.angles import wrap_angle
 
-__all__ = ["report_position", "report_heading", "energy_consumed_hj", "battery_fraction", "encode_command",
-           "decode_command", "DEPTH_M", "HJ_PER_WH"]
+__all__ = [
+    "report_position",
+    "report_heading",
+    "energy_consumed_hj",
+    "battery_fraction",
+    "encode_command",
+    "decode_command",
+    "DEPTH_M",
+    "HJ_PER_WH",
+]
 
 #: Running depth below the surface (m); LOCAL_POSITION_NED.z is 0 on the surface.
 DEPTH_M = 2.0
@@ -53,8 +61,9 @@ def battery_fraction(start_wh: np.ndarray, consumed_hj: np.ndarray, capacity_wh:
     return (np.asarray(start_wh, dtype=float) - np.asarray(consumed_hj, dtype=float) / HJ_PER_WH) / capacity_wh
 
 
-def encode_command(heading: np.ndarray, speed: np.ndarray, surface: np.ndarray
-                   ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def encode_command(
+    heading: np.ndarray, speed: np.ndarray, surface: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(vx north, vy east, vz down, yaw) float32 set-point for a through-water heading and speed."""
     heading = np.asarray(heading, dtype=float)
     speed = np.asarray(speed, dtype=float)

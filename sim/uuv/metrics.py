@@ -39,8 +39,12 @@ RECOVERY_LEAVES = ("distance_m", "time_s", "battery")
 SURFACING_LEAVES = ("outside_s", "count")
 
 #: Leaves that are categorical rather than continuous.
-_CATEGORICAL_LEAVES = {"aborted": "binary", "order": "categorical", "return_reason": "categorical",
-                       "count": "categorical"}
+_CATEGORICAL_LEAVES = {
+    "aborted": "binary",
+    "order": "categorical",
+    "return_reason": "categorical",
+    "count": "categorical",
+}
 
 
 def element_names(mission: Mission, kind: str) -> list[str]:
@@ -83,8 +87,9 @@ def metric_types(mission: Mission) -> list[str]:
     out = []
     for name in metric_names(mission):
         parts = name.split(".")
-        if len(parts) <= 2 and not (len(parts) == 2 and parts[0] in ("transmission", "mission", "operational_area",
-                                                                       "recovery", "surfacing")):
+        if len(parts) <= 2 and not (
+            len(parts) == 2 and parts[0] in ("transmission", "mission", "operational_area", "recovery", "surfacing")
+        ):
             out.append("binary")
         else:
             out.append(_CATEGORICAL_LEAVES.get(parts[-1], "continuous"))

@@ -20,8 +20,17 @@ from typing import Any
 
 from rapt.space import StateSpace
 
-__all__ = ["Rect", "Triangle", "MissionArea", "Transmission", "Vehicle", "Current", "Binding", "Mission",
-           "TARGET_FIELDS"]
+__all__ = [
+    "Rect",
+    "Triangle",
+    "MissionArea",
+    "Transmission",
+    "Vehicle",
+    "Current",
+    "Binding",
+    "Mission",
+    "TARGET_FIELDS",
+]
 
 
 @dataclass(frozen=True)
@@ -187,5 +196,8 @@ class Mission:
 
     def parameter_of(self, coordinate: int) -> str:
         """The name of the parameter that unit-cube ``coordinate`` encodes."""
-        return next(p.name for p in self.space.parameters
-                    if self.space.slice_of(p.name).start <= coordinate < self.space.slice_of(p.name).stop)
+        return next(
+            p.name
+            for p in self.space.parameters
+            if self.space.slice_of(p.name).start <= coordinate < self.space.slice_of(p.name).stop
+        )

@@ -1,4 +1,4 @@
-'''Mission files: a TOML description of a range day, loaded into a :class:`sim.uuv.mission.Mission`.
+"""Mission files: a TOML description of a range day, loaded into a :class:`sim.uuv.mission.Mission`.
 
 :func:`load_mission` reads and checks the whole file; every problem is a
 :class:`MissionFileError` of ONE line naming the file, the field and the fix, e.g.::
@@ -84,7 +84,7 @@ barrier, nogo), which replicates the node once per element of that kind, substit
 rebinds it).  A node replicated over zero elements disappears.  Every score column must
 appear in exactly one node.  The resolved mapping (column indices) is
 ``Mission.score_tree``.
-'''
+"""
 
 from __future__ import annotations
 
@@ -116,8 +116,22 @@ class MissionFileError(FileFormatError):
 _MISSING = object()
 _NAME_RE = re.compile(r"^[A-Za-z0-9_-]+$")
 
-_SECTIONS = ("mission", "operational_area", "launch", "recovery", "waypoints", "mission_areas", "transmission",
-             "nogo", "barriers", "obstacles", "vehicle", "current", "parameters", "score_tree")
+_SECTIONS = (
+    "mission",
+    "operational_area",
+    "launch",
+    "recovery",
+    "waypoints",
+    "mission_areas",
+    "transmission",
+    "nogo",
+    "barriers",
+    "obstacles",
+    "vehicle",
+    "current",
+    "parameters",
+    "score_tree",
+)
 _REQUIRED_SECTIONS = ("mission", "operational_area", "launch", "recovery", "parameters", "score_tree")
 _ARRAY_SECTIONS = ("waypoints", "mission_areas", "nogo", "barriers", "obstacles", "parameters")
 _REQUIRES = ("waypoints", "mission_areas", "transmission", "mission_time")
@@ -174,14 +188,25 @@ class _Loader:
             if key not in allowed:
                 hint = difflib.get_close_matches(key, allowed, n=1)
                 did = f" (did you mean '{hint[0]}'?)" if hint else ""
-                self.fail(f"{where}.{key}" if where else key,
-                          f"unknown key{did}; allowed keys: {_names(allowed)}")
+                self.fail(f"{where}.{key}" if where else key, f"unknown key{did}; allowed keys: {_names(allowed)}")
         for key in required:
             if key not in tbl:
-                self.fail(f"{where}.{key}" if where else key, f"missing required key; add {key} = ... to {where or 'the file'}")
+                self.fail(
+                    f"{where}.{key}" if where else key,
+                    f"missing required key; add {key} = ... to {where or 'the file'}",
+                )
 
-    def number(self, tbl: Mapping, key: str, where: str, default: Any = _MISSING, *, low: float | None = None,
-               high: float | None = None, positive: bool = False) -> float:
+    def number(
+        self,
+        tbl: Mapping,
+        key: str,
+        where: str,
+        default: Any = _MISSING,
+        *,
+        low: float | None = None,
+        high: float | None = None,
+        positive: bool = False,
+    ) -> float:
         field = f"{where}.{key}"
         if key not in tbl:
             if default is _MISSING:
@@ -189,8 +214,9 @@ class _Loader:
             return default
         return self.check_number(tbl[key], field, low=low, high=high, positive=positive)
 
-    def check_number(self, v: Any, field: str, *, low: float | None = None, high: float | None = None,
-                     positive: bool = False) -> float:
+    def check_number(
+        self, v: Any, field: str, *, low: float | None = None, high: float | None = None, positive: bool = False
+    ) -> float:
         if isinstance(v, bool) or not isinstance(v, (int, float)):
             self.fail(field, f"expected a number, got {type(v).__name__} {v!r}; write a plain number such as 10.0")
         v = float(v)
@@ -199,9 +225,15 @@ class _Loader:
         if positive and v <= 0:
             self.fail(field, f"{_fmt(v)} must be > 0; give a positive number")
         if low is not None and v < low:
-            self.fail(field, f"{_fmt(v)} is below the minimum {_fmt(low)}; use a value in [{_fmt(low)}, {_fmt(high) if high is not None else 'inf'}]")
+            self.fail(
+                field,
+                f"{_fmt(v)} is below the minimum {_fmt(low)}; use a value in [{_fmt(low)}, {_fmt(high) if high is not None else 'inf'}]",
+            )
         if high is not None and v > high:
-            self.fail(field, f"{_fmt(v)} is above the maximum {_fmt(high)}; use a value in [{_fmt(low) if low is not None else '-inf'}, {_fmt(high)}]")
+            self.fail(
+                field,
+                f"{_fmt(v)} is above the maximum {_fmt(high)}; use a value in [{_fmt(low) if low is not None else '-inf'}, {_fmt(high)}]",
+            )
         return v
 
     def string(self, tbl: Mapping, key: str, where: str, default: Any = _MISSING) -> str:
@@ -220,8 +252,11 @@ class _Loader:
         if not _NAME_RE.match(name):
             self.fail(f"{where}.name", f"{name!r} is not a valid element name; use letters, digits, '_' or '-' only")
         if name in self.element_owner:
-            self.fail(f"{where}.name", f"duplicate element name {name!r} (already used by {self.element_owner[name]}); "
-                                       "give every element its own name")
+            self.fail(
+                f"{where}.name",
+                f"duplicate element name {name!r} (already used by {self.element_owner[name]}); "
+                "give every element its own name",
+            )
         self.element_owner[name] = where
         return name
 
@@ -234,8 +269,11 @@ class _Loader:
         op = self.op
         x0, x1, y0, y1 = op.x - op.width / 2, op.x + op.width / 2, op.y - op.height / 2, op.y + op.height / 2
         if not (x0 <= x <= x1 and y0 <= y <= y1):
-            self.fail(field, f"{what} (x={_fmt(x)}, y={_fmt(y)}) lies outside the operational area "
-                             f"(x {_fmt(x0)}..{_fmt(x1)}, y {_fmt(y0)}..{_fmt(y1)}); move it inside")
+            self.fail(
+                field,
+                f"{what} (x={_fmt(x)}, y={_fmt(y)}) lies outside the operational area "
+                f"(x {_fmt(x0)}..{_fmt(x1)}, y {_fmt(y0)}..{_fmt(y1)}); move it inside",
+            )
 
     def array(self, data: Mapping, key: str) -> list[dict]:
         v = data.get(key, [])
@@ -288,18 +326,41 @@ class _Loader:
         vehicle = self.overrides(data.get("vehicle", {}), "vehicle", Vehicle)
         current = self.overrides(data.get("current", {}), "current", Current)
 
-        self.elements = {"nogo": [z.name for z in nogo], "barrier": [b.name for b in barriers],
-                         "obstacle": [o.name for o in obstacles], "mission_area": area_names}
+        self.elements = {
+            "nogo": [z.name for z in nogo],
+            "barrier": [b.name for b in barriers],
+            "obstacle": [o.name for o in obstacles],
+            "mission_area": area_names,
+        }
         self.transmission = transmission
         space, bindings = self.parameters(self.array(data, "parameters"), area_names)
 
         mission = Mission(
-            name=name, origin_lat=lat, origin_lon=lon, operational_area=self.op, launch=launch, recovery=recovery,
-            recovery_radius=rec_radius, waypoints=tuple(waypoints), mission_areas=tuple(areas),
-            priority=tuple(priority), transmission=transmission, nogo=nogo, barriers=barriers,
-            obstacles=tuple(obstacles), vehicle=vehicle, current=current, start_time_s=start_time,
-            time_limit_s=time_limit, waypoint_radius=wp_radius, space=space, bindings=bindings, score_tree={},
-            mission_requires=tuple(requires), dt=dt, source=self.label,
+            name=name,
+            origin_lat=lat,
+            origin_lon=lon,
+            operational_area=self.op,
+            launch=launch,
+            recovery=recovery,
+            recovery_radius=rec_radius,
+            waypoints=tuple(waypoints),
+            mission_areas=tuple(areas),
+            priority=tuple(priority),
+            transmission=transmission,
+            nogo=nogo,
+            barriers=barriers,
+            obstacles=tuple(obstacles),
+            vehicle=vehicle,
+            current=current,
+            start_time_s=start_time,
+            time_limit_s=time_limit,
+            waypoint_radius=wp_radius,
+            space=space,
+            bindings=bindings,
+            score_tree={},
+            mission_requires=tuple(requires),
+            dt=dt,
+            source=self.label,
         )
         tree = self.score_tree(data["score_tree"], mission)
         return dataclasses.replace(mission, score_tree=tree)
@@ -322,14 +383,22 @@ class _Loader:
 
     def operational_area_section(self, op: Mapping) -> Rect:
         self.keys(op, "operational_area", ("x", "y", "width", "height"))
-        return Rect("operational_area", self.number(op, "x", "operational_area"), self.number(op, "y", "operational_area"),
-                    self.number(op, "width", "operational_area", positive=True),
-                    self.number(op, "height", "operational_area", positive=True))
+        return Rect(
+            "operational_area",
+            self.number(op, "x", "operational_area"),
+            self.number(op, "y", "operational_area"),
+            self.number(op, "width", "operational_area", positive=True),
+            self.number(op, "height", "operational_area", positive=True),
+        )
 
     def mission_section(self, m: Mapping) -> tuple[str, float, float, float, float, float, float]:
         """[mission]'s name, origin (lat, lon), start time, time limit, waypoint radius and step."""
-        self.keys(m, "mission", ("name", "origin", "start_time_s", "time_limit_s"),
-                  ("waypoint_radius_m", "dt_s", "priority", "requires"))
+        self.keys(
+            m,
+            "mission",
+            ("name", "origin", "start_time_s", "time_limit_s"),
+            ("waypoint_radius_m", "dt_s", "priority", "requires"),
+        )
         name = self.string(m, "name", "mission")
         origin = self.table(m["origin"], "mission.origin", "origin = { lat = ..., lon = ... }")
         self.keys(origin, "mission.origin", ("lat", "lon"))
@@ -340,7 +409,9 @@ class _Loader:
         wp_radius = self.number(m, "waypoint_radius_m", "mission", 25.0, positive=True)
         dt = self.number(m, "dt_s", "mission", 2.0, positive=True)
         if dt > time_limit:
-            self.fail("mission.dt_s", f"step {_fmt(dt)} s exceeds time_limit_s {_fmt(time_limit)} s; use a smaller step")
+            self.fail(
+                "mission.dt_s", f"step {_fmt(dt)} s exceeds time_limit_s {_fmt(time_limit)} s; use a smaller step"
+            )
         return name, lat, lon, start_time, time_limit, wp_radius, dt
 
     def launch_section(self, launch_t: Mapping) -> tuple[float, float]:
@@ -368,9 +439,16 @@ class _Loader:
             self.keys(a, where, ("name", "x", "y", "dwell_s"), ("width", "height"))
             nm = self.element_name(a, where)
             x, y = self.xy(a, where)
-            areas.append(MissionArea(nm, x, y, self.number(a, "width", where, 500.0, positive=True),
-                                     self.number(a, "height", where, 500.0, positive=True),
-                                     self.number(a, "dwell_s", where, low=0.0)))
+            areas.append(
+                MissionArea(
+                    nm,
+                    x,
+                    y,
+                    self.number(a, "width", where, 500.0, positive=True),
+                    self.number(a, "height", where, 500.0, positive=True),
+                    self.number(a, "dwell_s", where, low=0.0),
+                )
+            )
         return areas
 
     def transmission_section(self, data: Mapping) -> Transmission | None:
@@ -383,11 +461,16 @@ class _Loader:
         nm = self.element_name(t, where, "transmission")
         x, y = self.xy(t, where)
         d = Transmission("transmission", 0.0, 0.0)
-        return Transmission(nm, x, y, self.number(t, "width", where, d.width, positive=True),
-                            self.number(t, "height", where, d.height, positive=True),
-                            self.number(t, "window_start_s", where, d.window_start_s, low=0.0),
-                            self.number(t, "window_length_s", where, d.window_length_s, positive=True),
-                            self.number(t, "duration_s", where, d.duration_s, low=0.0))
+        return Transmission(
+            nm,
+            x,
+            y,
+            self.number(t, "width", where, d.width, positive=True),
+            self.number(t, "height", where, d.height, positive=True),
+            self.number(t, "window_start_s", where, d.window_start_s, low=0.0),
+            self.number(t, "window_length_s", where, d.window_length_s, positive=True),
+            self.number(t, "duration_s", where, d.duration_s, low=0.0),
+        )
 
     def rects_section(self, data: Mapping, section: str, width: float, height: float) -> tuple[Rect, ...]:
         """[[nogo]] or [[barriers]]: named rectangles with default sizes."""
@@ -397,8 +480,15 @@ class _Loader:
             self.keys(r, where, ("name", "x", "y"), ("width", "height"))
             nm = self.element_name(r, where)
             x, y = self.xy(r, where)
-            out.append(Rect(nm, x, y, self.number(r, "width", where, width, positive=True),
-                            self.number(r, "height", where, height, positive=True)))
+            out.append(
+                Rect(
+                    nm,
+                    x,
+                    y,
+                    self.number(r, "width", where, width, positive=True),
+                    self.number(r, "height", where, height, positive=True),
+                )
+            )
         return tuple(out)
 
     def obstacles_section(self, data: Mapping) -> list[Triangle]:
@@ -417,29 +507,42 @@ class _Loader:
             return list(area_names)
         priority = self.string_list(m["priority"], "mission.priority")
         if sorted(priority) != sorted(area_names) or len(set(priority)) != len(priority):
-            self.fail("mission.priority", f"{priority!r} is not an ordering of the mission areas; "
-                                          f"list each of {_names(area_names)} exactly once")
+            self.fail(
+                "mission.priority",
+                f"{priority!r} is not an ordering of the mission areas; list each of {_names(area_names)} exactly once",
+            )
         return priority
 
     def requires(self, m: Mapping, waypoints: list, areas: list, transmission: Transmission | None) -> list[str]:
         """mission.requires: objectives the mission has (default: areas, transmission, time, where present)."""
         if "requires" not in m:
-            return [r for r in ("mission_areas", "transmission", "mission_time")
-                    if r == "mission_time" or (r == "mission_areas" and areas)
-                    or (r == "transmission" and transmission is not None)]
+            return [
+                r
+                for r in ("mission_areas", "transmission", "mission_time")
+                if r == "mission_time"
+                or (r == "mission_areas" and areas)
+                or (r == "transmission" and transmission is not None)
+            ]
         requires = self.string_list(m["requires"], "mission.requires")
         for r in requires:
             if r not in _REQUIRES:
                 self.fail("mission.requires", f"unknown objective {r!r}; allowed: {_names(_REQUIRES)}")
         if len(set(requires)) != len(requires):
             self.fail("mission.requires", f"{requires!r} lists an objective twice; list each once")
-        present = {"waypoints": bool(waypoints), "mission_areas": bool(areas),
-                   "transmission": transmission is not None, "mission_time": True}
+        present = {
+            "waypoints": bool(waypoints),
+            "mission_areas": bool(areas),
+            "transmission": transmission is not None,
+            "mission_time": True,
+        }
         header = {"waypoints": "[[waypoints]]", "mission_areas": "[[mission_areas]]", "transmission": "[transmission]"}
         for r in requires:
             if not present[r]:
-                self.fail("mission.requires", f"requires {r!r} but the mission has no {r.replace('_', ' ')}; "
-                                              f"add {header[r]} or drop {r!r} from requires")
+                self.fail(
+                    "mission.requires",
+                    f"requires {r!r} but the mission has no {r.replace('_', ' ')}; "
+                    f"add {header[r]} or drop {r!r} from requires",
+                )
         return requires
 
     # ------------------------------------------------------------------ vehicle and current
@@ -471,13 +574,22 @@ class _Loader:
                     self.fail(f"vehicle.{key}", f"{_fmt(getattr(obj, key))} must be > 0; give a positive number")
             for key in ("start_battery", "critical_battery"):
                 if not 0.0 <= getattr(obj, key) <= 1.0:
-                    self.fail(f"vehicle.{key}", f"{_fmt(getattr(obj, key))} is a fraction of the battery; use a value in [0, 1]")
+                    self.fail(
+                        f"vehicle.{key}",
+                        f"{_fmt(getattr(obj, key))} is a fraction of the battery; use a value in [0, 1]",
+                    )
             if obj.max_speed < obj.cruise_speed:
-                self.fail("vehicle.max_speed", f"{_fmt(obj.max_speed)} is below cruise_speed {_fmt(obj.cruise_speed)}; "
-                                               "raise max_speed or lower cruise_speed")
+                self.fail(
+                    "vehicle.max_speed",
+                    f"{_fmt(obj.max_speed)} is below cruise_speed {_fmt(obj.cruise_speed)}; "
+                    "raise max_speed or lower cruise_speed",
+                )
         if cls is Current:
             if obj.speed < 0 or obj.perturbation < 0:
-                self.fail("current.speed" if obj.speed < 0 else "current.perturbation", "must be >= 0; give a non-negative speed")
+                self.fail(
+                    "current.speed" if obj.speed < 0 else "current.perturbation",
+                    "must be >= 0; give a non-negative speed",
+                )
             if obj.period_h <= 0:
                 self.fail("current.period_h", f"{_fmt(obj.period_h)} must be > 0; give the tidal period in hours")
         return obj
@@ -496,50 +608,73 @@ class _Loader:
             if kind not in _PARAM_KINDS:
                 self.fail(f"{where}.kind", f"unknown kind {kind!r}; allowed: {_names(_PARAM_KINDS)}")
             if p.get("target") == "mission_areas.priority" and kind != "permutation":
-                self.fail(f"{where}.kind", f"kind {kind!r} cannot set mission_areas.priority; use kind = \"permutation\" "
-                                           "with items = the mission-area names")
+                self.fail(
+                    f"{where}.kind",
+                    f'kind {kind!r} cannot set mission_areas.priority; use kind = "permutation" '
+                    "with items = the mission-area names",
+                )
             required, optional = _PARAM_KEYS[kind]
             self.keys(p, where, required, optional)
             pname = self.string(p, "name", where)
             if pname in seen_names:
-                self.fail(f"{where}.name", f"duplicate parameter name {pname!r} (also {seen_names[pname]}); "
-                                           "give every parameter its own name")
+                self.fail(
+                    f"{where}.name",
+                    f"duplicate parameter name {pname!r} (also {seen_names[pname]}); give every parameter its own name",
+                )
             seen_names[pname] = where
             binding = self.target(p, where, pname)
             key = (binding.kind, binding.name, binding.field)
             if key in seen_targets:
-                self.fail(f"{where}.target", f"{p['target']!r} is already set by {seen_targets[key]}; "
-                                             "give each field one parameter")
+                self.fail(
+                    f"{where}.target",
+                    f"{p['target']!r} is already set by {seen_targets[key]}; give each field one parameter",
+                )
             seen_targets[key] = where
             tfield = f"{where}.target"
 
             if binding.field == "priority":
                 items = self.string_list(p["items"], f"{where}.items")
                 if sorted(items) != sorted(area_names) or len(set(items)) != len(items):
-                    self.fail(f"{where}.items", f"{items!r} is not the mission-area names; "
-                                                f"list each of {_names(area_names)} exactly once")
+                    self.fail(
+                        f"{where}.items",
+                        f"{items!r} is not the mission-area names; list each of {_names(area_names)} exactly once",
+                    )
                 if len(items) < 2:
-                    self.fail(f"{tfield}", "a priority permutation needs at least 2 mission areas; "
-                                           "drop this parameter or add [[mission_areas]]")
+                    self.fail(
+                        f"{tfield}",
+                        "a priority permutation needs at least 2 mission areas; "
+                        "drop this parameter or add [[mission_areas]]",
+                    )
                 params.append(Permutation(pname, tuple(items)))
             elif kind == "permutation":
-                self.fail(f"{where}.kind", f"a permutation can only target mission_areas.priority, not {p['target']!r}; "
-                                           "use continuous, integer or categorical")
+                self.fail(
+                    f"{where}.kind",
+                    f"a permutation can only target mission_areas.priority, not {p['target']!r}; "
+                    "use continuous, integer or categorical",
+                )
             elif kind == "categorical":
                 choices = p["choices"]
                 if not isinstance(choices, list):
-                    self.fail(f"{where}.choices", f"expected a list of numbers, got {choices!r}; write e.g. choices = [0.1, 0.2]")
+                    self.fail(
+                        f"{where}.choices",
+                        f"expected a list of numbers, got {choices!r}; write e.g. choices = [0.1, 0.2]",
+                    )
                 values = [self.check_number(c, f"{where}.choices[{j}]") for j, c in enumerate(choices)]
                 if len(values) < 2 or len(set(values)) != len(values):
-                    self.fail(f"{where}.choices", f"{choices!r} needs at least 2 distinct values; add or de-duplicate choices")
+                    self.fail(
+                        f"{where}.choices", f"{choices!r} needs at least 2 distinct values; add or de-duplicate choices"
+                    )
                 self.value_range(binding, min(values), max(values), f"{where}.choices")
                 params.append(Categorical(pname, tuple(values)))
             else:
                 if kind == "integer":
                     for k in ("low", "high"):
                         if isinstance(p[k], bool) or not isinstance(p[k], int):
-                            self.fail(f"{where}.{k}", f"an integer parameter needs whole-number bounds, got {p[k]!r}; "
-                                                      "write e.g. 3, or use kind = \"continuous\"")
+                            self.fail(
+                                f"{where}.{k}",
+                                f"an integer parameter needs whole-number bounds, got {p[k]!r}; "
+                                'write e.g. 3, or use kind = "continuous"',
+                            )
                 low = self.check_number(p["low"], f"{where}.low")
                 high = self.check_number(p["high"], f"{where}.high")
                 if low >= high:
@@ -550,9 +685,13 @@ class _Loader:
                     if not isinstance(log, bool):
                         self.fail(f"{where}.log", f"expected true or false, got {log!r}")
                     if log and low <= 0:
-                        self.fail(f"{where}.low", f"log scale needs low > 0, got {_fmt(low)}; raise low or set log = false")
+                        self.fail(
+                            f"{where}.low", f"log scale needs low > 0, got {_fmt(low)}; raise low or set log = false"
+                        )
                 self.value_range(binding, low, high, where)
-                params.append(Integer(pname, int(low), int(high)) if kind == "integer" else Continuous(pname, low, high, log))
+                params.append(
+                    Integer(pname, int(low), int(high)) if kind == "integer" else Continuous(pname, low, high, log)
+                )
             bindings.append(binding)
         try:
             space = StateSpace(params)
@@ -567,15 +706,21 @@ class _Loader:
         kinds = tuple(TARGET_FIELDS)
         kind = parts[0]
         if kind not in TARGET_FIELDS or not 2 <= len(parts) <= 3 or not all(parts):
-            self.fail(field, f"{target!r} is not a target; write '<kind>.<field>' or '<kind>.<element name>.<field>' "
-                             f"with kind one of {_names(kinds)}")
+            self.fail(
+                field,
+                f"{target!r} is not a target; write '<kind>.<field>' or '<kind>.<element name>.<field>' "
+                f"with kind one of {_names(kinds)}",
+            )
         if kind in _UNNAMED_TARGETS:
             if len(parts) == 3:
                 self.fail(field, f"{kind!r} takes no element name; write '{kind}.{parts[2]}'")
             name, attr = None, parts[1]
             if kind == "transmission" and self.transmission is None:
-                self.fail(field, f"{target!r} targets the transmission area but the file has no [transmission]; "
-                                 "add [transmission] or drop this parameter")
+                self.fail(
+                    field,
+                    f"{target!r} targets the transmission area but the file has no [transmission]; "
+                    "add [transmission] or drop this parameter",
+                )
             if kind == "mission_areas" and not self.elements["mission_area"]:
                 self.fail(field, f"{target!r} but the file has no [[mission_areas]]; add them or drop this parameter")
         else:
@@ -583,12 +728,18 @@ class _Loader:
             known = self.elements[kind]
             if len(parts) == 2:
                 example = known[0] if known else "<name>"
-                self.fail(field, f"{kind!r} needs an element name; write '{kind}.{example}.{parts[1]}' "
-                                 f"(known {words}: {_names(known)})")
+                self.fail(
+                    field,
+                    f"{kind!r} needs an element name; write '{kind}.{example}.{parts[1]}' "
+                    f"(known {words}: {_names(known)})",
+                )
             name, attr = parts[1], parts[2]
             if name not in known:
-                self.fail(field, f"unknown element '{kind}.{name}' (known {words}: {_names(known)}); "
-                                 f"name an element defined in [[{section}]]")
+                self.fail(
+                    field,
+                    f"unknown element '{kind}.{name}' (known {words}: {_names(known)}); "
+                    f"name an element defined in [[{section}]]",
+                )
         if attr not in TARGET_FIELDS[kind]:
             self.fail(field, f"{kind!r} has no settable field {attr!r}; settable: {_names(TARGET_FIELDS[kind])}")
         return Binding(pname, kind, name, attr)
@@ -602,19 +753,27 @@ class _Loader:
             c, size = (op.x, op.width) if field == "x" else (op.y, op.height)
             lo, hi = c - size / 2, c + size / 2
             if low < lo or high > hi:
-                self.fail(bound or f"{where}.{'low' if low < lo else 'high'}", f"{field} range {_fmt(low)}..{_fmt(high)} leaves the operational area "
-                                 f"({field} {_fmt(lo)}..{_fmt(hi)}); keep positions inside it")
+                self.fail(
+                    bound or f"{where}.{'low' if low < lo else 'high'}",
+                    f"{field} range {_fmt(low)}..{_fmt(high)} leaves the operational area "
+                    f"({field} {_fmt(lo)}..{_fmt(hi)}); keep positions inside it",
+                )
             return
-        limits = {"start_time_s": (0.0, 86400.0, "seconds after local midnight"),
-                  "start_battery": (0.0, 1.0, "a fraction of the battery"),
-                  "window_start_s": (0.0, math.inf, "seconds after the mission start"),
-                  "window_length_s": (0.0, math.inf, "a duration in seconds"),
-                  "dwell_s": (0.0, math.inf, "a duration in seconds")}
+        limits = {
+            "start_time_s": (0.0, 86400.0, "seconds after local midnight"),
+            "start_battery": (0.0, 1.0, "a fraction of the battery"),
+            "window_start_s": (0.0, math.inf, "seconds after the mission start"),
+            "window_length_s": (0.0, math.inf, "a duration in seconds"),
+            "dwell_s": (0.0, math.inf, "a duration in seconds"),
+        }
         if field in limits:
             lo, hi, what = limits[field]
             if low < lo or high > hi:
-                self.fail(bound or f"{where}.{'low' if low < lo else 'high'}", f"{b.kind}.{field} is {what}; keep the range {_fmt(low)}..{_fmt(high)} "
-                                 f"within {_fmt(lo)}..{_fmt(hi)}")
+                self.fail(
+                    bound or f"{where}.{'low' if low < lo else 'high'}",
+                    f"{b.kind}.{field} is {what}; keep the range {_fmt(low)}..{_fmt(high)} "
+                    f"within {_fmt(lo)}..{_fmt(hi)}",
+                )
 
     # ------------------------------------------------------------------ score tree
     def score_tree(self, spec: Any, mission: Mission) -> dict:
@@ -626,8 +785,11 @@ class _Loader:
         (tree,) = self.resolve(spec, "score_tree", None)
         for i, metric in enumerate(self.metric_list):
             if i not in self.used:
-                self.fail("score_tree", f"metric {metric!r} (column {i}) is not in the tree; add it to the scores of "
-                                        "one node (every score column must appear exactly once)")
+                self.fail(
+                    "score_tree",
+                    f"metric {metric!r} (column {i}) is not in the tree; add it to the scores of "
+                    "one node (every score column must appear exactly once)",
+                )
         try:
             ScoreTree.from_mapping(tree).validate(len(self.metric_list))
         except ValueError as exc:  # pragma: no cover - checked above
@@ -643,8 +805,10 @@ class _Loader:
             self.fail(f"{where}.name", f'expected a string, got {spec["name"]!r}; write name = "..."')
         scores = spec["scores"]
         if not isinstance(scores, list) or not scores or not all(isinstance(s, str) for s in scores):
-            self.fail(f"{where}.scores", f'expected a non-empty list of metric names, got {scores!r}; '
-                                         'write e.g. scores = ["mission_success"]')
+            self.fail(
+                f"{where}.scores",
+                f'expected a non-empty list of metric names, got {scores!r}; write e.g. scores = ["mission_success"]',
+            )
         if "for_each" in spec:
             fe = spec["for_each"]
             if root:
@@ -653,8 +817,10 @@ class _Loader:
                 self.fail(f"{where}.for_each", f"unknown element kind {fe!r}; allowed: {_names(ELEMENT_KINDS)}")
         children = spec.get("children", [])
         if not isinstance(children, list):
-            self.fail(f"{where}.children", f"expected an array of tables, got {type(children).__name__}; "
-                                           f"write each child as [[{bare}.children]]")
+            self.fail(
+                f"{where}.children",
+                f"expected an array of tables, got {type(children).__name__}; write each child as [[{bare}.children]]",
+            )
         for j, child in enumerate(children):
             self.check_node(child, f"{where}.children[{j}]")
 
@@ -670,8 +836,11 @@ class _Loader:
         def sub(text: str, field: str) -> str:
             if "{name}" in text:
                 if current is None:
-                    self.fail(field, f"{text!r} uses {{name}} outside a for_each node; add for_each = \"...\" to this "
-                                     "node or an ancestor, or write the element name")
+                    self.fail(
+                        field,
+                        f'{text!r} uses {{name}} outside a for_each node; add for_each = "..." to this '
+                        "node or an ancestor, or write the element name",
+                    )
                 text = text.replace("{name}", current[1])
             return text
 
@@ -682,12 +851,18 @@ class _Loader:
             if metric not in self.metric_index:
                 hint = difflib.get_close_matches(metric, self.metric_list, n=1)
                 known = f"did you mean {hint[0]!r}?" if hint else f"known metrics: {_names(self.metric_list)}"
-                self.fail(field, f"unknown metric {metric!r}{elem} ({known}); use a name from "
-                                 "sim.uuv.metrics.metric_names for this mission")
+                self.fail(
+                    field,
+                    f"unknown metric {metric!r}{elem} ({known}); use a name from "
+                    "sim.uuv.metrics.metric_names for this mission",
+                )
             i = self.metric_index[metric]
             if i in self.used:
-                self.fail(field, f"metric {metric!r}{elem} appears twice (also at {self.used[i]}); "
-                                 "list each metric in exactly one node")
+                self.fail(
+                    field,
+                    f"metric {metric!r}{elem} appears twice (also at {self.used[i]}); "
+                    "list each metric in exactly one node",
+                )
             self.used[i] = field + elem
             indices.append(i)
         name = sub(spec["name"], f"{where}.name") if "name" in spec else self.metric_list[indices[0]]

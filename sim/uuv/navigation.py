@@ -29,11 +29,11 @@ class Navigation:
         """Advance by ``dt``; ``z`` holds 4 standard normal draws per vehicle (None: no error)."""
         if z is None:
             return
-        q = self.spec.ins_drift_m_per_s ** 2 * dt
+        q = self.spec.ins_drift_m_per_s**2 * dt
         self.ex += np.sqrt(q) * z[:, 0]
         self.ey += np.sqrt(q) * z[:, 1]
         self.var += q  # predict: P <- F P F' + Q
-        r = self.spec.gps_sigma_m ** 2
+        r = self.spec.gps_sigma_m**2
         gain = np.where(surfaced, self.var / (self.var + r), 0.0)  # update: K = P / (P + R)
         zx = self.spec.gps_sigma_m * z[:, 2]  # error of the GPS fix
         zy = self.spec.gps_sigma_m * z[:, 3]
@@ -53,6 +53,6 @@ def filterpy_filter(spec: Vehicle, dt: float):
     kf.F = np.eye(2)
     kf.H = np.eye(2)
     kf.P = np.zeros((2, 2))
-    kf.Q = np.eye(2) * spec.ins_drift_m_per_s ** 2 * dt
-    kf.R = np.eye(2) * spec.gps_sigma_m ** 2
+    kf.Q = np.eye(2) * spec.ins_drift_m_per_s**2 * dt
+    kf.R = np.eye(2) * spec.gps_sigma_m**2
     return kf

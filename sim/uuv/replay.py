@@ -28,8 +28,13 @@ __all__ = ["TRACK_FIELDS", "score_track", "TrackBuilder"]
 TRACK_FIELDS = ("t", "x", "y", "heading", "energy_hj", "surfaced")
 
 
-def score_track(mission: Mission, u: np.ndarray | Sequence[float], track: np.ndarray, wp_aborted: Sequence[bool] = (),
-                return_reason: int = 0) -> np.ndarray:
+def score_track(
+    mission: Mission,
+    u: np.ndarray | Sequence[float],
+    track: np.ndarray,
+    wp_aborted: Sequence[bool] = (),
+    return_reason: int = 0,
+) -> np.ndarray:
     """Score vector of scenario ``u`` (unit cube) from its ``track`` (steps, TRACK_FIELDS).
 
     Scoring stops where the scorer says the run ended (recovered, collided, out of the
@@ -47,14 +52,26 @@ def score_track(mission: Mission, u: np.ndarray | Sequence[float], track: np.nda
     for t, x, y, heading, hj, surfaced in track[:, :6]:
         qx, qy, qh = np.array([x]), np.array([y]), np.array([heading])
         contacts = sense(qx, qy, qh, scen.obstacle_edges, scen.barriers, mission.vehicle)
-        tel = Telemetry(float(t), qx, qy, qx, qy, qh, np.array([hj]),
-                        battery_fraction(start_wh, np.array([hj]), mission.vehicle.battery_wh),
-                        np.array([surfaced > 0]), contacts.x, contacts.y, contacts.distance, contacts.detected)
+        tel = Telemetry(
+            float(t),
+            qx,
+            qy,
+            qx,
+            qy,
+            qh,
+            np.array([hj]),
+            battery_fraction(start_wh, np.array([hj]), mission.vehicle.battery_wh),
+            np.array([surfaced > 0]),
+            contacts.x,
+            contacts.y,
+            contacts.distance,
+            contacts.detected,
+        )
         nogo = rect_signed_distance(qx, qy, scen.nogo) if scen.nogo.shape[1] else None
         if scorer.update_from(tel, active, nogo)[0]:
             break
     aborted = np.zeros((1, len(mission.waypoints)), dtype=bool)
-    aborted[0, :len(wp_aborted)] = np.asarray(wp_aborted, dtype=bool)[:len(mission.waypoints)]
+    aborted[0, : len(wp_aborted)] = np.asarray(wp_aborted, dtype=bool)[: len(mission.waypoints)]
     return scorer.scores(aborted, np.array([int(return_reason)]))[0]
 
 
@@ -87,8 +104,14 @@ class TrackBuilder:
 
     def _row(self, ms: int, lp, att, bat) -> tuple[float, ...]:
         """One step's row (TRACK_FIELDS) from its reports; a subclass may add columns."""
-        return (ms / 1000.0, float(lp.y), float(lp.x), float(att.yaw), float(bat.energy_consumed),
-                1.0 if lp.z <= 0 else 0.0)
+        return (
+            ms / 1000.0,
+            float(lp.y),
+            float(lp.x),
+            float(att.yaw),
+            float(bat.energy_consumed),
+            1.0 if lp.z <= 0 else 0.0,
+        )
 
     def track(self) -> np.ndarray:
         return np.array(self.rows, dtype=float).reshape(-1, len(TRACK_FIELDS))

@@ -70,10 +70,23 @@ class Scenarios:
     def select(self, rows: np.ndarray) -> Scenarios:
         """The scenarios at ``rows`` (for simulating only the valid ones)."""
         r = np.asarray(rows)
-        return Scenarios(self.mission, self.start_time[r], self.battery0[r], self.tx_rect[r], self.tx_open[r],
-                         self.tx_close[r], self.nogo[r], self.barriers[r], self.obstacles[r], self.area_rect[r],
-                         self.area_dwell[r], self.order[r], self.waypoints, self.valid[r],
-                         [self.invalid_reason[i] for i in np.atleast_1d(r).tolist()])
+        return Scenarios(
+            self.mission,
+            self.start_time[r],
+            self.battery0[r],
+            self.tx_rect[r],
+            self.tx_open[r],
+            self.tx_close[r],
+            self.nogo[r],
+            self.barriers[r],
+            self.obstacles[r],
+            self.area_rect[r],
+            self.area_dwell[r],
+            self.order[r],
+            self.waypoints,
+            self.valid[r],
+            [self.invalid_reason[i] for i in np.atleast_1d(r).tolist()],
+        )
 
 
 def rects_array(rects, n: int) -> np.ndarray:
@@ -95,14 +108,20 @@ def make_scenarios(mission: Mission, U: np.ndarray) -> Scenarios:
     """Decode unit-cube rows ``U`` (N, mission.dim) into a batch of scenarios."""
     U = np.asarray(U, dtype=float)
     if U.ndim != 2 or U.shape[1] != mission.dim:
-        raise InputError(f"X: expected unit-cube rows of shape (N, {mission.dim}) for mission "
-                         f"'{mission.name}', got {U.shape}")
+        raise InputError(
+            f"X: expected unit-cube rows of shape (N, {mission.dim}) for mission '{mission.name}', got {U.shape}"
+        )
     if U.size and (np.nanmin(U) < 0 or np.nanmax(U) > 1 or not np.all(np.isfinite(U))):
-        raise InputError("X: values must be finite and inside the unit cube [0, 1]; scale physical values with "
-                         "mission.space.to_unit_array")
+        raise InputError(
+            "X: values must be finite and inside the unit cube [0, 1]; scale physical values with "
+            "mission.space.to_unit_array"
+        )
     n = U.shape[0]
-    values = {p.name: _decode(p, U[:, mission.space.slice_of(p.name)])
-              for p in mission.space.parameters if p.kind != "permutation"}
+    values = {
+        p.name: _decode(p, U[:, mission.space.slice_of(p.name)])
+        for p in mission.space.parameters
+        if p.kind != "permutation"
+    }
 
     start_time = np.full(n, float(mission.start_time_s))
     battery0 = np.full(n, float(mission.vehicle.start_battery))
@@ -146,8 +165,9 @@ def make_scenarios(mission: Mission, U: np.ndarray) -> Scenarios:
                 tx_len = np.asarray(v, dtype=float)
         elif b.kind in ("nogo", "barrier"):
             k, el = rect_by_name[b.kind][b.name]
-            _set_rect_centre(nogo if b.kind == "nogo" else barriers, k, b.field, np.asarray(v, float),
-                             el.width, el.height)
+            _set_rect_centre(
+                nogo if b.kind == "nogo" else barriers, k, b.field, np.asarray(v, float), el.width, el.height
+            )
         elif b.kind == "obstacle":
             k = obstacle_by_name[b.name]
             (ob_x if b.field == "x" else ob_y)[:, k] = np.asarray(v, dtype=float)
@@ -160,8 +180,23 @@ def make_scenarios(mission: Mission, U: np.ndarray) -> Scenarios:
     side = np.array([o.side for o in mission.obstacles], dtype=float)
     obstacles = triangle_vertices(ob_x, ob_y, side) if mission.obstacles else np.zeros((n, 0, 3, 2))
     waypoints = np.array(mission.waypoints, dtype=float).reshape(-1, 2)
-    s = Scenarios(mission, start_time, battery0, tx_rect, tx_open, tx_open + tx_len, nogo, barriers, obstacles,
-                  area_rect, area_dwell, order, waypoints, np.ones(n, dtype=bool), [""] * n)
+    s = Scenarios(
+        mission,
+        start_time,
+        battery0,
+        tx_rect,
+        tx_open,
+        tx_open + tx_len,
+        nogo,
+        barriers,
+        obstacles,
+        area_rect,
+        area_dwell,
+        order,
+        waypoints,
+        np.ones(n, dtype=bool),
+        [""] * n,
+    )
     _check_validity(s)
     return s
 
@@ -199,8 +234,12 @@ def _check_validity(s: Scenarios) -> None:
         cx = (s.area_rect[..., 0] + s.area_rect[..., 1]) / 2
         cy = (s.area_rect[..., 2] + s.area_rect[..., 3]) / 2
         for a in range(s.area_rect.shape[1]):
-            reasons.append((np.any(inside_rect(cx[:, a], cy[:, a], s.nogo), axis=1),
-                            f"a no-go area on the centre of mission area {m.mission_areas[a].name}"))
+            reasons.append(
+                (
+                    np.any(inside_rect(cx[:, a], cy[:, a], s.nogo), axis=1),
+                    f"a no-go area on the centre of mission area {m.mission_areas[a].name}",
+                )
+            )
     for bad, why in reasons:
         new = bad & s.valid
         for i in np.flatnonzero(new):

@@ -85,12 +85,32 @@ class Scorer:
         """Score one step of telemetry (:class:`sim.uuv.world.Telemetry`); returns the runs that end here."""
         step_m = np.hypot(tel.x - self.prev_x, tel.y - self.prev_y)
         self.prev_x, self.prev_y = tel.x, tel.y
-        return self.update(tel.t, tel.x, tel.y, tel.battery, tel.surfaced, tel.contact_distance, tel.detected,
-                           step_m, active, nogo_distance)
+        return self.update(
+            tel.t,
+            tel.x,
+            tel.y,
+            tel.battery,
+            tel.surfaced,
+            tel.contact_distance,
+            tel.detected,
+            step_m,
+            active,
+            nogo_distance,
+        )
 
-    def update(self, t: float, x: np.ndarray, y: np.ndarray, battery: np.ndarray, surfaced: np.ndarray,
-               contacts_distance: np.ndarray, detected: np.ndarray, step_m: np.ndarray,
-               active: np.ndarray, nogo_distance: np.ndarray | None = None) -> np.ndarray:
+    def update(
+        self,
+        t: float,
+        x: np.ndarray,
+        y: np.ndarray,
+        battery: np.ndarray,
+        surfaced: np.ndarray,
+        contacts_distance: np.ndarray,
+        detected: np.ndarray,
+        step_m: np.ndarray,
+        active: np.ndarray,
+        nogo_distance: np.ndarray | None = None,
+    ) -> np.ndarray:
         """Score one step of the ``active`` runs; returns the runs that end here.
 
         A run ends when the vehicle surfaces at the recovery point (recovered), touches an
@@ -191,13 +211,21 @@ class Scorer:
             areas_pass = np.ones(n, dtype=bool)
         tx_pass = self.tx_time < self.limit if m.transmission is not None else np.ones(n, dtype=bool)
         time_pass = self.recovered & (self.rec_time < self.limit)
-        nodes = {"waypoints": np.all(wp_ok, axis=1) if W else np.ones(n, bool), "mission_areas": areas_pass,
-                 "transmission": tx_pass, "mission_time": time_pass}
+        nodes = {
+            "waypoints": np.all(wp_ok, axis=1) if W else np.ones(n, bool),
+            "mission_areas": areas_pass,
+            "transmission": tx_pass,
+            "mission_time": time_pass,
+        }
         ob_ok = self.ob_closest > 0
         ng_ok = self.ng_inside <= 0
-        safety = {"collisions": np.all(ob_ok, axis=1), "nogo_areas": np.all(ng_ok, axis=1),
-                  "operational_area": ~self.left_area, "recovery": self.recovered,
-                  "surfacing": self.surf_outside <= 0}
+        safety = {
+            "collisions": np.all(ob_ok, axis=1),
+            "nogo_areas": np.all(ng_ok, axis=1),
+            "operational_area": ~self.left_area,
+            "recovery": self.recovered,
+            "surfacing": self.surf_outside <= 0,
+        }
         mission_ok = np.all([nodes[r] for r in m.mission_requires], axis=0) if m.mission_requires else np.ones(n, bool)
         safety_ok = np.all(list(safety.values()), axis=0)
 
@@ -212,8 +240,13 @@ class Scorer:
             cols[f"waypoint.{i}.aborted"] = wp_aborted[:, i]
         for k, area in enumerate(m.mission_areas):
             cols[f"area.{area.name}"] = area_ok[:, k]
-            for leaf, arr in (("dwell_s", self.area_dwell), ("entry_s", self.area_entry), ("done_s", self.area_done),
-                              ("closest_m", self.area_closest), ("order", self.area_rank)):
+            for leaf, arr in (
+                ("dwell_s", self.area_dwell),
+                ("entry_s", self.area_entry),
+                ("done_s", self.area_done),
+                ("closest_m", self.area_closest),
+                ("order", self.area_rank),
+            ):
                 cols[f"area.{area.name}.{leaf}"] = arr[:, k]
         if m.transmission is not None:
             cols["transmission.time_s"] = self.tx_time

@@ -58,8 +58,15 @@ class Result:
         return self.trajectories[row]
 
 
-def simulate(mission: Mission, X: np.ndarray, seed: int = 0, stochastic: bool = False,
-             trajectories: bool = False, bias=None, surrogate=None) -> Result:
+def simulate(
+    mission: Mission,
+    X: np.ndarray,
+    seed: int = 0,
+    stochastic: bool = False,
+    trajectories: bool = False,
+    bias=None,
+    surrogate=None,
+) -> Result:
     """Simulate unit-cube scenarios ``X`` (N, mission.dim) of ``mission``.
 
     ``stochastic`` switches on navigation drift and current perturbations, seeded per
@@ -77,14 +84,18 @@ def simulate(mission: Mission, X: np.ndarray, seed: int = 0, stochastic: bool = 
     if rows.size:
         sub = scen.select(rows)
         rngs = scenario_generators(np.asarray(X, dtype=float)[rows], seed) if stochastic else None
-        got, tr = run_scenarios(sub, rngs, trajectories, bias_arrays(bias, scen.n).select(rows),
-                                **({} if surrogate is None else surrogate.driver_options()))
+        got, tr = run_scenarios(
+            sub,
+            rngs,
+            trajectories,
+            bias_arrays(bias, scen.n).select(rows),
+            **({} if surrogate is None else surrogate.driver_options()),
+        )
         scores[rows] = got
         if trajs is not None:  # trajectories asked for
             for r, t in zip(rows.tolist(), tr):
                 trajs[r] = t
-    return Result(scores, modes_from_scores(scores), scen.valid.copy(), list(scen.invalid_reason), names, types,
-                  trajs)
+    return Result(scores, modes_from_scores(scores), scen.valid.copy(), list(scen.invalid_reason), names, types, trajs)
 
 
 #: Compact the batch when fewer than this share of its rows are still running.
@@ -100,8 +111,16 @@ def _take_rows(obj, keep: np.ndarray, n: int) -> None:
         obj._rows = np.arange(keep.size)
 
 
-def run_scenarios(scen: Scenarios, rngs: list[np.random.Generator] | None, record: bool, bias=None, *,
-                  driver=None, scan_beams: int = 0, on_step=None) -> tuple[np.ndarray, list[np.ndarray]]:
+def run_scenarios(
+    scen: Scenarios,
+    rngs: list[np.random.Generator] | None,
+    record: bool,
+    bias=None,
+    *,
+    driver=None,
+    scan_beams: int = 0,
+    on_step=None,
+) -> tuple[np.ndarray, list[np.ndarray]]:
     """Step valid scenarios to the end; returns (scores, trajectories).
 
     Per step: the world reports telemetry at MAVLink precision, the autonomy decides on it,
@@ -141,8 +160,20 @@ def run_scenarios(scen: Scenarios, rngs: list[np.random.Generator] | None, recor
             on_step(obs, cmd, active, autonomy)
         ended = scorer.update_from(tel, active, nogo)
         if record:
-            frames.append(np.column_stack([np.full(tel.x.shape, t), tel.x, tel.y, tel.heading, tel.energy_hj,
-                                           tel.surfaced, world.state.surge, autonomy.goal_kind]))
+            frames.append(
+                np.column_stack(
+                    [
+                        np.full(tel.x.shape, t),
+                        tel.x,
+                        tel.y,
+                        tel.heading,
+                        tel.energy_hj,
+                        tel.surfaced,
+                        world.state.surge,
+                        autonomy.goal_kind,
+                    ]
+                )
+            )
         active &= ~ended
         if not np.any(active) or k == steps:
             break
@@ -154,7 +185,7 @@ def run_scenarios(scen: Scenarios, rngs: list[np.random.Generator] | None, recor
         stack = np.stack(frames, axis=1)  # (n, steps, fields)
         for i in range(stack.shape[0]):
             last = int(np.searchsorted(stack[i, :, 0], scorer.end_time[i], side="right"))
-            trajs.append(stack[i, :max(last, 1)])
+            trajs.append(stack[i, : max(last, 1)])
     return out, trajs
 
 
@@ -166,5 +197,18 @@ def observation(tel: Telemetry, scen: Scenarios, nogo: np.ndarray | None = None)
     ce, cn = tidal_current(scen.mission.current, scen.start_time + tel.t)
     if nogo is None and scen.nogo.shape[1]:
         nogo = rect_signed_distance(tel.est_x, tel.est_y, scen.nogo)
-    return Observation(tel.t, tel.est_x, tel.est_y, tel.heading, tel.battery, tel.contact_x, tel.contact_y,
-                       tel.contact_distance, tel.detected, ce, cn, nogo, tel.scan)
+    return Observation(
+        tel.t,
+        tel.est_x,
+        tel.est_y,
+        tel.heading,
+        tel.battery,
+        tel.contact_x,
+        tel.contact_y,
+        tel.contact_distance,
+        tel.detected,
+        ce,
+        cn,
+        nogo,
+        tel.scan,
+    )

@@ -28,11 +28,12 @@ class Contacts:
     detected: np.ndarray
 
 
-def sense(x: np.ndarray, y: np.ndarray, heading: np.ndarray, obstacles, barriers: np.ndarray,
-          spec: Vehicle) -> Contacts:
+def sense(
+    x: np.ndarray, y: np.ndarray, heading: np.ndarray, obstacles, barriers: np.ndarray, spec: Vehicle
+) -> Contacts:
     """Contacts of every triangle obstacle (N, T, 3, 2, or its precomputed edges) and barrier (N, B, 4)."""
     parts = []
-    if (obstacles.shape[1] if isinstance(obstacles, np.ndarray) else obstacles[0].shape[1]):
+    if obstacles.shape[1] if isinstance(obstacles, np.ndarray) else obstacles[0].shape[1]:
         parts.append(polygon_signed_distance(x, y, obstacles))
     if barriers.shape[1]:
         cx, cy = rect_closest_point(x, y, barriers)
@@ -70,8 +71,15 @@ def _ray_hits(px, py, bearing, ax, ay, ex, ey) -> np.ndarray:
     return np.where(hit, t, np.inf).min(axis=1)
 
 
-def scan(x: np.ndarray, y: np.ndarray, heading: np.ndarray, obstacles, barriers: np.ndarray, range_m: float,
-         beams: int = SCAN_BEAMS) -> np.ndarray:
+def scan(
+    x: np.ndarray,
+    y: np.ndarray,
+    heading: np.ndarray,
+    obstacles,
+    barriers: np.ndarray,
+    range_m: float,
+    beams: int = SCAN_BEAMS,
+) -> np.ndarray:
     """A 360-degree range scan (N, beams): beam b looks ``b * 360 / beams`` degrees clockwise of the bow.
 
     Ranges are to the first obstacle or barrier edge in whole centimetres (divided by 100,
@@ -85,7 +93,7 @@ def scan(x: np.ndarray, y: np.ndarray, heading: np.ndarray, obstacles, barriers:
     rel = np.deg2rad(np.arange(beams) * (360.0 / beams))
     inside = np.zeros(n, dtype=bool)
     shapes = []
-    if (obstacles.shape[1] if isinstance(obstacles, np.ndarray) else obstacles[0].shape[1]):
+    if obstacles.shape[1] if isinstance(obstacles, np.ndarray) else obstacles[0].shape[1]:
         ax, ay, ex, ey, _ = polygon_edges(obstacles) if isinstance(obstacles, np.ndarray) else obstacles
         d = polygon_signed_distance(x, y, (ax, ay, ex, ey, _))[0]
         shapes.append((d, ax, ay, ex, ey))
@@ -107,15 +115,23 @@ def scan(x: np.ndarray, y: np.ndarray, heading: np.ndarray, obstacles, barriers:
         cx, cy = vx.mean(axis=1), vy.mean(axis=1)
         radius = np.hypot(vx - cx[:, None], vy - cy[:, None]).max(axis=1)
         dist = np.hypot(cx - x[rows], cy - y[rows])
-        half = np.where(dist > radius, np.arcsin(np.clip(radius / np.maximum(dist, 1e-9), 0.0, 1.0)) + 2 * step,
-                        np.pi)  # inside the shape's circumcircle it may fill any beam
+        half = np.where(
+            dist > radius, np.arcsin(np.clip(radius / np.maximum(dist, 1e-9), 0.0, 1.0)) + 2 * step, np.pi
+        )  # inside the shape's circumcircle it may fill any beam
         off = np.mod(np.arctan2(cx - x[rows], cy - y[rows]) - heading[rows], 2 * np.pi)  # centre, from the bow
         gap = np.abs(wrap_angle(rel[None, :] - off[:, None]))  # (P, beams)
         pi, bi = np.nonzero(gap <= half[:, None])
         if pi.size == 0:
             continue
-        hits = _ray_hits(x[rows[pi]], y[rows[pi]], heading[rows[pi]] + rel[bi], vx[pi], vy[pi],
-                         ex[rows[pi], ks[pi]], ey[rows[pi], ks[pi]])
+        hits = _ray_hits(
+            x[rows[pi]],
+            y[rows[pi]],
+            heading[rows[pi]] + rel[bi],
+            vx[pi],
+            vy[pi],
+            ex[rows[pi], ks[pi]],
+            ey[rows[pi], ks[pi]],
+        )
         np.minimum.at(out, (rows[pi], bi), hits)
     cm = np.where(out <= range_m, np.round(out * 100.0), np.floor(range_m * 100.0) + 1.0)
     cm[inside] = 0.0

@@ -37,8 +37,15 @@ class VehicleState:
     @classmethod
     def at_rest(cls, x: np.ndarray, y: np.ndarray, heading: np.ndarray, energy_wh: np.ndarray) -> VehicleState:
         z = np.zeros_like(np.asarray(x, dtype=float))
-        return cls(np.array(x, float), np.array(y, float), np.array(heading, float), z.copy(), z.copy(), z.copy(),
-                   np.array(energy_wh, float))
+        return cls(
+            np.array(x, float),
+            np.array(y, float),
+            np.array(heading, float),
+            z.copy(),
+            z.copy(),
+            z.copy(),
+            np.array(energy_wh, float),
+        )
 
     def select(self, rows: np.ndarray) -> VehicleState:
         return VehicleState(*(getattr(self, f)[rows] for f in self.__dataclass_fields__))
@@ -49,9 +56,20 @@ def propulsion_power(spec: Vehicle, speed: np.ndarray) -> np.ndarray:
     return spec.hotel_w + spec.drag_w * (np.abs(speed) / spec.cruise_speed) ** 3
 
 
-def step_vehicle(s: VehicleState, spec: Vehicle, heading_cmd: np.ndarray, speed_cmd: np.ndarray,
-                 current_e: np.ndarray, current_n: np.ndarray, dt: float, moving: np.ndarray, *,
-                 speed_scale=1.0, course_bias=0.0, energy_scale=1.0) -> None:
+def step_vehicle(
+    s: VehicleState,
+    spec: Vehicle,
+    heading_cmd: np.ndarray,
+    speed_cmd: np.ndarray,
+    current_e: np.ndarray,
+    current_n: np.ndarray,
+    dt: float,
+    moving: np.ndarray,
+    *,
+    speed_scale=1.0,
+    course_bias=0.0,
+    energy_scale=1.0,
+) -> None:
     """Advance every ``moving`` vehicle by ``dt`` seconds in place (the others stay frozen).
 
     Execution bias (:mod:`sim.uuv.bias`): ``speed_scale`` multiplies the speed the vehicle

@@ -94,16 +94,16 @@ class World:
     360-degree range scan to the telemetry (what a learned back-seat sees, section 6.5.3).
     """
 
-    def __init__(self, scen: Scenarios, rngs: list[np.random.Generator] | None = None, bias=None,
-                 scan_beams: int = 0):
+    def __init__(self, scen: Scenarios, rngs: list[np.random.Generator] | None = None, bias=None, scan_beams: int = 0):
         m = scen.mission
         self.scen, self.mission, self.spec = scen, m, m.vehicle
         n = scen.n
         lx, ly = m.launch
         heading0 = np.arctan2(m.waypoints[0][0] - lx, m.waypoints[0][1] - ly) if m.waypoints else 0.0
         self.start_wh = scen.battery0 * self.spec.battery_wh
-        self.state = VehicleState.at_rest(np.full(n, float(lx)), np.full(n, float(ly)), np.full(n, heading0),
-                                          self.start_wh.copy())
+        self.state = VehicleState.at_rest(
+            np.full(n, float(lx)), np.full(n, float(ly)), np.full(n, heading0), self.start_wh.copy()
+        )
         self.noise = NoiseStreams(rngs) if rngs is not None else None
         self.nav = Navigation(n, self.spec)
         self.surfaced = np.zeros(n, dtype=bool)
@@ -138,13 +138,31 @@ class World:
             ex, ey = report_position(ex), report_position(ey)
             cx = report_position(contacts.x + (ex - qx)[:, None])
             cy = report_position(contacts.y + (ey - qy)[:, None])
-        ranges = (scan(qx, qy, qh, scen.obstacle_edges, scen.barriers, self.spec.sonar_range_m, self.scan_beams)
-                  if self.scan_beams else None)
-        return Telemetry(t, qx, qy, ex, ey, qh, hj, battery, self.surfaced.copy(), cx, cy, contacts.distance,
-                         contacts.detected, ranges)
+        ranges = (
+            scan(qx, qy, qh, scen.obstacle_edges, scen.barriers, self.spec.sonar_range_m, self.scan_beams)
+            if self.scan_beams
+            else None
+        )
+        return Telemetry(
+            t,
+            qx,
+            qy,
+            ex,
+            ey,
+            qh,
+            hj,
+            battery,
+            self.surfaced.copy(),
+            cx,
+            cy,
+            contacts.distance,
+            contacts.detected,
+            ranges,
+        )
 
-    def advance(self, t: float, heading: np.ndarray, speed: np.ndarray, surface: np.ndarray,
-                moving: np.ndarray) -> None:
+    def advance(
+        self, t: float, heading: np.ndarray, speed: np.ndarray, surface: np.ndarray, moving: np.ndarray
+    ) -> None:
         """Apply a decoded set-point to the ``moving`` vehicles for one step from time ``t``."""
         m, dt = self.mission, self.mission.dt
         self.surfaced = np.asarray(surface, dtype=bool) & moving
@@ -157,6 +175,17 @@ class World:
             s = m.current.perturbation * np.sqrt(1 - a * a)
             self.drift_e = a * self.drift_e + s * z[:, 0]
             self.drift_n = a * self.drift_n + s * z[:, 1]
-        step_vehicle(self.state, self.spec, heading, speed, ce + self.drift_e, cn + self.drift_n, dt, moving,
-                     speed_scale=b.speed, course_bias=b.heading_rad, energy_scale=b.battery)
+        step_vehicle(
+            self.state,
+            self.spec,
+            heading,
+            speed,
+            ce + self.drift_e,
+            cn + self.drift_n,
+            dt,
+            moving,
+            speed_scale=b.speed,
+            course_bias=b.heading_rad,
+            energy_scale=b.battery,
+        )
         self.nav.step(dt, self.surfaced, None if z is None else z[:, 2:])

@@ -43,13 +43,18 @@ def test_logger_writes_channels_stripped_raw_frames_and_metadata(tmp_path):
             logger = McapLogger(path, logger_session, vehicle=VEHICLE, flush_interval_s=0.2).start()
             try:
                 wait_until(lambda: logger.stats["written"] >= 1, what="the logger's own token")
-                bridge = MavlinkBridge(f"udpin:127.0.0.1:{port}", hub, vehicle=VEHICLE, allow_commands=True,
-                                       signing_key=KEY).start()
+                bridge = MavlinkBridge(
+                    f"udpin:127.0.0.1:{port}", hub, vehicle=VEHICLE, allow_commands=True, signing_key=KEY
+                ).start()
                 vehicle = FakeVehicle(f"udpout:127.0.0.1:{port}", signing_key=KEY)
                 try:
                     wait_until(lambda: bridge.linked, what="the bridge to hear the signed vehicle")
-                    scenario = {"scenario_id": 7, "mission_file": "examples/range2017.toml",
-                                "parameters": {"battery": 0.8}, "plan_id": "p-1"}
+                    scenario = {
+                        "scenario_id": 7,
+                        "mission_file": "examples/range2017.toml",
+                        "parameters": {"battery": 0.8},
+                        "plan_id": "p-1",
+                    }
                     client.put(keys.meta(VEHICLE, "scenario"), json.dumps(scenario))
                     client.put(keys.status(VEHICLE, "autonomy"), json.dumps({"state": "transit", "leg": 2}))
                     client.put(keys.status(VEHICLE, "odd"), b"\xff\x00")
@@ -65,8 +70,12 @@ def test_logger_writes_channels_stripped_raw_frames_and_metadata(tmp_path):
                     vehicle.close()
                     bridge.close()
                 frames_in = bridge.stats["frames_in"]
-                wait_until(lambda: any(t == keys.alive(VEHICLE, "bridge") and p == {"alive": False}
-                                       for t, _, p in read_log(path)), what="the bridge's token to go (flushed)")
+                wait_until(
+                    lambda: any(
+                        t == keys.alive(VEHICLE, "bridge") and p == {"alive": False} for t, _, p in read_log(path)
+                    ),
+                    what="the bridge's token to go (flushed)",
+                )
             finally:
                 logger.close()
             stats = logger.stats
@@ -78,10 +87,15 @@ def test_logger_writes_channels_stripped_raw_frames_and_metadata(tmp_path):
         reader = make_reader(f)
         summary = reader.get_summary()
         channels = {c.topic: c for c in summary.channels.values()}
-        for topic in (keys.telemetry(VEHICLE, "HEARTBEAT"), keys.telemetry(VEHICLE, "LOCAL_POSITION_NED"),
-                      keys.command(VEHICLE, "autonomy"), keys.command(VEHICLE, "operator"),
-                      keys.meta(VEHICLE, "scenario"), keys.status(VEHICLE, "autonomy"),
-                      keys.alive(VEHICLE, "bridge")):
+        for topic in (
+            keys.telemetry(VEHICLE, "HEARTBEAT"),
+            keys.telemetry(VEHICLE, "LOCAL_POSITION_NED"),
+            keys.command(VEHICLE, "autonomy"),
+            keys.command(VEHICLE, "operator"),
+            keys.meta(VEHICLE, "scenario"),
+            keys.status(VEHICLE, "autonomy"),
+            keys.alive(VEHICLE, "bridge"),
+        ):
             assert channels[topic].message_encoding == "json"
             schema = summary.schemas[channels[topic].schema_id]
             assert schema.encoding == "jsonschema" and json.loads(schema.data)["type"] == "object"
@@ -109,17 +123,35 @@ def test_logger_writes_channels_stripped_raw_frames_and_metadata(tmp_path):
     assert by_topic[keys.alive(VEHICLE, "bridge")] == [{"alive": True}, {"alive": False}]
     assert by_topic[keys.meta(VEHICLE, "scenario")][0]["plan_id"] == "p-1"
     meta = read_metadata(path)["scenario"]
-    assert meta == {"scenario_id": "7", "mission_file": "examples/range2017.toml",
-                    "parameters": '{"battery": 0.8}', "plan_id": "p-1"}
+    assert meta == {
+        "scenario_id": "7",
+        "mission_file": "examples/range2017.toml",
+        "parameters": '{"battery": 0.8}',
+        "plan_id": "p-1",
+    }
 
 
 def test_sigkilled_logger_leaves_a_readable_file(tmp_path):
     path = tmp_path / "killed.mcap"
     with bus() as (hub, client, endpoint):
         proc = subprocess.Popen(
-            [sys.executable, "-m", "bridge.logger", str(path), "--vehicle", VEHICLE, "--connect", endpoint,
-             "--flush-interval", "0.1", "--chunk-size", "4096"],
-            cwd=ROOT, stdout=subprocess.PIPE, text=True,
+            [
+                sys.executable,
+                "-m",
+                "bridge.logger",
+                str(path),
+                "--vehicle",
+                VEHICLE,
+                "--connect",
+                endpoint,
+                "--flush-interval",
+                "0.1",
+                "--chunk-size",
+                "4096",
+            ],
+            cwd=ROOT,
+            stdout=subprocess.PIPE,
+            text=True,
             env={**os.environ, "PYTHONPATH": str(ROOT)},
         )
         try:
@@ -161,8 +193,7 @@ def test_no_loss_in_a_burst(tmp_path):
             for i in range(n):
                 pub.put(json.dumps({"i": i, "depth": 3.25, "mode": "transit"}))
             elapsed = time.monotonic() - start
-            wait_until(lambda: logger.stats["written"] >= before + n, timeout=30,
-                       what="every message to be written")
+            wait_until(lambda: logger.stats["written"] >= before + n, timeout=30, what="every message to be written")
             pub.undeclare()
         stats = logger.stats
     assert stats["errors"] == 0 and stats["queued"] == 0
@@ -192,4 +223,5 @@ def test_liveliness_of_processes_is_logged(tmp_path):
     changes = [(t, p["alive"]) for t, _, p in read_log(path)]
     assert changes.count((keys.alive(VEHICLE, "autonomy"), True)) == 1
     assert changes.index((keys.alive(VEHICLE, "autonomy"), True)) < changes.index(
-        (keys.alive(VEHICLE, "autonomy"), False))
+        (keys.alive(VEHICLE, "autonomy"), False)
+    )

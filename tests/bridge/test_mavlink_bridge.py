@@ -66,8 +66,11 @@ class FakeVehicle:
     def send_telemetry(self) -> None:
         m = mavlink2
         base = m.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (m.MAV_MODE_FLAG_SAFETY_ARMED if self.armed else 0)
-        self.send(m.MAVLink_heartbeat_message(m.MAV_TYPE_SUBMARINE, m.MAV_AUTOPILOT_ARDUPILOTMEGA, base,
-                                              self.custom_mode, m.MAV_STATE_ACTIVE, 3))
+        self.send(
+            m.MAVLink_heartbeat_message(
+                m.MAV_TYPE_SUBMARINE, m.MAV_AUTOPILOT_ARDUPILOTMEGA, base, self.custom_mode, m.MAV_STATE_ACTIVE, 3
+            )
+        )
         x, y, z = self.position
         t = self.time_boot_ms()
         self.send(m.MAVLink_local_position_ned_message(t, x, y, z, 0.0, 0.0, 0.0))
@@ -88,8 +91,11 @@ class FakeVehicle:
                 self.custom_mode = int(msg.param2)
             elif msg.command == mavlink2.MAV_CMD_COMPONENT_ARM_DISARM:
                 self.armed = msg.param1 == 1.0
-            self.send(mavlink2.MAVLink_command_ack_message(msg.command, mavlink2.MAV_RESULT_ACCEPTED, 0, 0,
-                                                           msg.get_srcSystem(), msg.get_srcComponent()))
+            self.send(
+                mavlink2.MAVLink_command_ack_message(
+                    msg.command, mavlink2.MAV_RESULT_ACCEPTED, 0, 0, msg.get_srcSystem(), msg.get_srcComponent()
+                )
+            )
 
     def _loop(self) -> None:
         period = 1.0 / self.rate_hz
@@ -196,13 +202,15 @@ def rig(*, signing_key=None, vehicle_key=None, position=(0.0, 0.0, 5.0), rate_hz
     """Vehicle on udpout -> bridge on udpin, Zenoh hub + client; everything closed afterwards."""
     port = free_port(socket.SOCK_DGRAM)
     with bus() as (hub, client, endpoint):
-        bridge = MavlinkBridge(f"udpin:127.0.0.1:{port}", hub, vehicle=VEHICLE, signing_key=signing_key,
-                               heartbeat_hz=20.0, **bridge_kw)
+        bridge = MavlinkBridge(
+            f"udpin:127.0.0.1:{port}", hub, vehicle=VEHICLE, signing_key=signing_key, heartbeat_hz=20.0, **bridge_kw
+        )
         vehicle = None
         try:
             bridge.start()
-            vehicle = FakeVehicle(f"udpout:127.0.0.1:{port}", signing_key=vehicle_key, position=position,
-                                  rate_hz=rate_hz)
+            vehicle = FakeVehicle(
+                f"udpout:127.0.0.1:{port}", signing_key=vehicle_key, position=position, rate_hz=rate_hz
+            )
             yield bridge, vehicle, client, port
         finally:
             if vehicle is not None:
@@ -232,9 +240,13 @@ def test_setpoint_validation_names_the_field():
     sp = Setpoint.from_json(b'{"tick_ms": 7, "vx": 1, "vy": 2.5, "vz": -0.5, "yaw": 0.1}')
     assert (sp.tick_ms, sp.vx, sp.vy, sp.vz, sp.yaw) == (7, 1.0, 2.5, -0.5, 0.1)
     assert Setpoint.from_json(sp.to_json()) == sp
-    for payload, field in [(b'{"vx": 1, "vy": 2, "vz": 3}', "yaw"), (b'{"vx": NaN, "vy": 0, "vz": 0, "yaw": 0}', "vx"),
-                           (b'{"vx": 0, "vy": 0, "vz": 0, "yaw": 0, "tick_ms": -1}', "tick_ms"),
-                           (b'[1, 2]', "payload"), (b"\xff", "payload")]:
+    for payload, field in [
+        (b'{"vx": 1, "vy": 2, "vz": 3}', "yaw"),
+        (b'{"vx": NaN, "vy": 0, "vz": 0, "yaw": 0}', "vx"),
+        (b'{"vx": 0, "vy": 0, "vz": 0, "yaw": 0, "tick_ms": -1}', "tick_ms"),
+        (b"[1, 2]", "payload"),
+        (b"\xff", "payload"),
+    ]:
         with pytest.raises(ValueError, match=field):
             Setpoint.from_json(payload)
 
@@ -323,8 +335,10 @@ def test_telemetry_json_and_raw_frames_in_order():
                     time.sleep(0.01)
             key = keys.telemetry(VEHICLE, "SYSTEM_TIME")
             wait_until(lambda: any(d["time_unix_usec"] == BURST + 299 for d in tel.json(key)), what="the burst")
-            wait_until(lambda: any(d["x"] == 1.5 for d in tel.json(keys.telemetry(VEHICLE, "LOCAL_POSITION_NED"))),
-                       what="the new position")
+            wait_until(
+                lambda: any(d["x"] == 1.5 for d in tel.json(keys.telemetry(VEHICLE, "LOCAL_POSITION_NED"))),
+                what="the new position",
+            )
             hb = tel.json(keys.telemetry(VEHICLE, "HEARTBEAT"))[-1]
             assert hb["mavpackettype"] == "HEARTBEAT" and hb["type"] == mavlink2.MAV_TYPE_SUBMARINE
             assert isinstance(hb["_recv_ns"], int) and abs(hb["_recv_ns"] - time.time_ns()) < 10**10
@@ -333,8 +347,9 @@ def test_telemetry_json_and_raw_frames_in_order():
             # raw: the burst arrives complete and in order, byte-identical frames
             parser = mavlink2.MAVLink(None, 9, 9)
             msgs = [parser.decode(bytearray(p)) for _, _, p in raw.items()]
-            burst = [m.time_boot_ms for m in msgs
-                     if m.get_type() == "SYSTEM_TIME" and BURST <= m.time_unix_usec < 2 * BURST]
+            burst = [
+                m.time_boot_ms for m in msgs if m.get_type() == "SYSTEM_TIME" and BURST <= m.time_unix_usec < 2 * BURST
+            ]
             assert burst == list(range(300))
             assert bridge.stats["bad_frames"] == 0 and bridge.stats["frames_in"] >= 300
             assert bridge.target == (1, 1) and bridge.linked
@@ -428,8 +443,10 @@ def test_rate_limit_drops_the_excess():
         s = bridge.stats
         assert s["commands_forwarded"] + s["commands_rate_limited"] == 40
         assert 1 <= s["commands_forwarded"] <= 2 and s["commands_rate_limited"] >= 38
-        wait_until(lambda: len(vehicle.messages("SET_POSITION_TARGET_LOCAL_NED")) == s["commands_forwarded"],
-                   what="the forwarded set-points")
+        wait_until(
+            lambda: len(vehicle.messages("SET_POSITION_TARGET_LOCAL_NED")) == s["commands_forwarded"],
+            what="the forwarded set-points",
+        )
         assert vehicle.messages("SET_POSITION_TARGET_LOCAL_NED")[0].time_boot_ms == 0
         pub.undeclare()
 
@@ -471,8 +488,9 @@ def test_reconnect_after_the_vehicle_restarts():
         tel = Collector(client, keys.telemetry(VEHICLE, "SYSTEM_TIME"))
         vehicle = FakeVehicle(f"tcpin:127.0.0.1:{port}")
         try:
-            with MavlinkBridge(f"tcp:127.0.0.1:{port}", hub, vehicle=VEHICLE, silence_s=0.5,
-                               allow_commands=True) as bridge:
+            with MavlinkBridge(
+                f"tcp:127.0.0.1:{port}", hub, vehicle=VEHICLE, silence_s=0.5, allow_commands=True
+            ) as bridge:
                 wait_until(lambda: tel.items(), what="first telemetry")
                 vehicle.close()
                 wait_until(lambda: not bridge.linked, what="the link loss")
@@ -539,16 +557,18 @@ def test_fuzzed_datagrams_are_counted_and_skipped():
         mav = mavlink2.MAVLink(None, 1, 1)
         marker = iter(range(1, 10**9))
         try:
-            @settings(max_examples=120, deadline=None, suppress_health_check=list(HealthCheck),
-                      database=None)
+
+            @settings(max_examples=120, deadline=None, suppress_health_check=list(HealthCheck), database=None)
             @given(junk=st.one_of(st.binary(min_size=1, max_size=400), corrupted_frames()))
             def check(junk):
                 before = bridge.stats["bad_frames"]
                 sender.sendto(junk, ("127.0.0.1", port))
                 n = next(marker)
                 sender.sendto(mavlink2.MAVLink_system_time_message(n, 0).pack(mav), ("127.0.0.1", port))
-                wait_until(lambda: any(b'"time_unix_usec":%d,' % n in p for _, _, p in tel.items()),
-                           what="the valid frame after junk")
+                wait_until(
+                    lambda: any(b'"time_unix_usec":%d,' % n in p for _, _, p in tel.items()),
+                    what="the valid frame after junk",
+                )
                 assert bridge.stats["bad_frames"] >= before + 1
 
             check()
@@ -595,6 +615,7 @@ def test_liveliness_token_while_running():
         try:
             with MavlinkBridge(f"udpin:127.0.0.1:{free_port(socket.SOCK_DGRAM)}", hub, vehicle=VEHICLE):
                 wait_until(lambda: alive.items(), what="the token")
+
                 # A late joiner's query finds the token.  Asked again until it does: in the full suite
                 # on a loaded machine one query in a few runs came back empty at once (eclipse-zenoh
                 # 1.10), while the subscriber above had the token; the token itself is never missing.

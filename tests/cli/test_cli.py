@@ -53,9 +53,11 @@ def test_study_of_a_mission_reports_modes_and_boundary_types(tmp_path):
 def test_study_bad_mission_is_one_line_and_exit_2(tmp_path):
     bad = tmp_path / "bad.toml"
     bad.write_text('[mission]\nname = "x"\nbogus = 1\n')
-    for args, expect in [(["study", str(tmp_path / "missing.toml")], "MISSION_FILE: "),
-                         (["study", str(bad)], f"{bad}: "),
-                         (["study", RANGE2017, "--baseline", "grid"], "--baseline: unknown method")]:
+    for args, expect in [
+        (["study", str(tmp_path / "missing.toml")], "MISSION_FILE: "),
+        (["study", str(bad)], f"{bad}: "),
+        (["study", RANGE2017, "--baseline", "grid"], "--baseline: unknown method"),
+    ]:
         result = runner.invoke(app, args)
         assert result.exit_code == 2, (args, result.output)
         assert expect in result.output and "Traceback" not in result.output
@@ -90,13 +92,26 @@ def test_each_piece_runs_as_its_own_process_and_stops_cleanly(tmp_path):
     log = tmp_path / "bus.mcap"
     cli = [sys.executable, "-m", "planner.cli"]
     zen = ["--zenoh-connect", f"tcp/127.0.0.1:{hub}"]
-    procs = [subprocess.Popen(cli + ["bridge", "--mavlink", f"udpout:127.0.0.1:{udp}", "--zenoh-listen",
-                                     f"tcp/127.0.0.1:{hub}", "--allow-commands", "--arm"])]
+    procs = [
+        subprocess.Popen(
+            cli
+            + [
+                "bridge",
+                "--mavlink",
+                f"udpout:127.0.0.1:{udp}",
+                "--zenoh-listen",
+                f"tcp/127.0.0.1:{hub}",
+                "--allow-commands",
+                "--arm",
+            ]
+        )
+    ]
     # No pause: the clients wait for the hub (bridge.session.CONNECT_TIMEOUT_S), in any start order.
-    procs += [subprocess.Popen(cli + ["log", "--out", str(log)] + zen),
-              subprocess.Popen(cli + ["autonomy", RANGE2017, "--scenario", "3"] + zen),
-              subprocess.Popen(cli + ["frontseat", RANGE2017, "--scenario", "3", "--mavlink",
-                                      f"udpin:127.0.0.1:{udp}"])]
+    procs += [
+        subprocess.Popen(cli + ["log", "--out", str(log)] + zen),
+        subprocess.Popen(cli + ["autonomy", RANGE2017, "--scenario", "3"] + zen),
+        subprocess.Popen(cli + ["frontseat", RANGE2017, "--scenario", "3", "--mavlink", f"udpin:127.0.0.1:{udp}"]),
+    ]
     from bridge.logger import read_log
 
     def flown() -> tuple[list, list]:

@@ -42,10 +42,15 @@ def _rapt_plan() -> list[str]:
 
 def _fly(plan_json: Path, sid: str, log: Path) -> subprocess.CompletedProcess:
     bias = ",".join(f"{k}={v}" for k, v in INJECTED.items())
-    return subprocess.run(_rapt_plan() + ["run", str(plan_json), "--scenario", sid, "--inject-bias", bias,
-                                          "--log", str(log), "--timeout", "240"],
-                          capture_output=True, text=True, timeout=300, cwd=ROOT,
-                          env={**os.environ, "COLUMNS": "200"})
+    return subprocess.run(
+        _rapt_plan()
+        + ["run", str(plan_json), "--scenario", sid, "--inject-bias", bias, "--log", str(log), "--timeout", "240"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=ROOT,
+        env={**os.environ, "COLUMNS": "200"},
+    )
 
 
 def _digests(paths) -> dict[str, str]:
@@ -56,8 +61,12 @@ def _digests(paths) -> dict[str, str]:
 def flown(tmp_path_factory):
     base = tmp_path_factory.mktemp("range_day")
     plan_dir = base / "plan"
-    plan = generate(sim.uuv.load_mission(MISSION), MISSION, plan_dir,
-                    GenerateConfig(budget=500, batch_size=250, dithers=0, pairs=2, seed=0))
+    plan = generate(
+        sim.uuv.load_mission(MISSION),
+        MISSION,
+        plan_dir,
+        GenerateConfig(budget=500, batch_size=250, dithers=0, pairs=2, seed=0),
+    )
     logs_dir = base / "logs"
     logs_dir.mkdir()
     ids = [s["id"] for s in plan["scenarios"]]
@@ -78,17 +87,28 @@ def flown(tmp_path_factory):
         chunks = sorted(make_reader(f).get_summary().chunk_indexes, key=lambda c: c.chunk_start_offset)
     middle = chunks[len(chunks) // 2]
     at = middle.chunk_start_offset + middle.chunk_length // 2
-    bad[at:at + 64] = bytes(64)  # inside one chunk's compressed records
+    bad[at : at + 64] = bytes(64)  # inside one chunk's compressed records
     corrupt.write_bytes(bytes(bad))
     inputs = logs + [truncated, corrupt] + sorted(p for p in plan_dir.rglob("*") if p.is_file())
     before = _digests(inputs)
     out = base / "comparison"
-    result = runner.invoke(app, ["compare", str(plan_dir), *map(str, logs), str(truncated), str(corrupt),
-                                 "--out", str(out), "--dithers", "5"])
+    result = runner.invoke(
+        app,
+        ["compare", str(plan_dir), *map(str, logs), str(truncated), str(corrupt), "--out", str(out), "--dithers", "5"],
+    )
     assert result.exit_code == 0, result.output
-    return {"plan_dir": plan_dir, "plan": plan, "logs": logs, "truncated": truncated, "corrupt": corrupt,
-            "out": out, "output": result.output, "inputs": inputs, "before": before,
-            "comparison": json.loads((out / "comparison.json").read_text())}
+    return {
+        "plan_dir": plan_dir,
+        "plan": plan,
+        "logs": logs,
+        "truncated": truncated,
+        "corrupt": corrupt,
+        "out": out,
+        "output": result.output,
+        "inputs": inputs,
+        "before": before,
+        "comparison": json.loads((out / "comparison.json").read_text()),
+    }
 
 
 def test_compare_recovers_the_injected_bias_and_corrects_the_predictions(flown):
@@ -175,15 +195,15 @@ def _rewrite_meta(src: Path, dst: Path, **changes) -> None:
             if schema is not None and schema.id not in schemas:
                 schemas[schema.id] = w.register_schema(schema.name, schema.encoding, schema.data)
             if channel.id not in channels:
-                channels[channel.id] = w.register_channel(channel.topic, channel.message_encoding,
-                                                          schemas.get(channel.schema_id, 0))
+                channels[channel.id] = w.register_channel(
+                    channel.topic, channel.message_encoding, schemas.get(channel.schema_id, 0)
+                )
             data = message.data
             if channel.topic.endswith("/meta/scenario"):
                 obj = {**json.loads(data), **changes}
                 data = json.dumps(obj).encode()
                 w.add_metadata("scenario", {k: v if isinstance(v, str) else json.dumps(v) for k, v in obj.items()})
-            w.add_message(channels[channel.id], log_time=message.log_time, data=data,
-                          publish_time=message.publish_time)
+            w.add_message(channels[channel.id], log_time=message.log_time, data=data, publish_time=message.publish_time)
         w.finish()
 
 
@@ -194,10 +214,15 @@ def test_a_log_of_another_mission_or_plan_is_one_line_and_exit_2(flown, tmp_path
     _rewrite_meta(flown["logs"][0], other_plan, plan_id="0123456789ab")
     not_mcap = tmp_path / "notes.mcap"
     not_mcap.write_text("range day notes, not a log\n")
-    for log, expect in [(other_mission, "was flown on mission 'imitation7'"), (other_plan, "flew plan 0123456789ab"),
-                        (not_mcap, "is not an MCAP file"), (tmp_path / "missing.mcap", "does not exist")]:
-        result = runner.invoke(app, ["compare", str(flown["plan_dir"]), str(flown["logs"][1]), str(log),
-                                     "--out", str(tmp_path / "cmp")])
+    for log, expect in [
+        (other_mission, "was flown on mission 'imitation7'"),
+        (other_plan, "flew plan 0123456789ab"),
+        (not_mcap, "is not an MCAP file"),
+        (tmp_path / "missing.mcap", "does not exist"),
+    ]:
+        result = runner.invoke(
+            app, ["compare", str(flown["plan_dir"]), str(flown["logs"][1]), str(log), "--out", str(tmp_path / "cmp")]
+        )
         assert result.exit_code == 2, (log, result.output)
         assert expect in result.output and "Traceback" not in result.output
         assert len([line for line in result.output.splitlines() if line.strip()]) == 1, result.output
@@ -230,10 +255,10 @@ def test_inject_bias_on_the_command_line(flown):
     plan_json = str(flown["plan_dir"] / "plan.json")
     assert parse_bias(" speed=1.15, current_offset=0.3 ") == Bias(speed=1.15, current_offset=0.3)
     assert parse_bias("none") == Bias() and str(Bias(battery=1.1)) == "battery=1.1"
-    for args, expect in [(["--scenario", "pair1a", "--inject-bias", "speeed=1.1"], "--inject-bias: speeed: unknown"),
-                         (["--scenario", "pair9z"], "--scenario: 'pair9z' is not a scenario of")]:
+    for args, expect in [
+        (["--scenario", "pair1a", "--inject-bias", "speeed=1.1"], "--inject-bias: speeed: unknown"),
+        (["--scenario", "pair9z"], "--scenario: 'pair9z' is not a scenario of"),
+    ]:
         result = runner.invoke(app, ["run", plan_json, *args])
         assert result.exit_code == 2 and expect in result.output, result.output
         assert len([line for line in result.output.splitlines() if line.strip()]) == 1
-
-

@@ -18,8 +18,20 @@ runner = CliRunner()
 
 def test_cli_generate_resume_and_errors(tmp_path):
     out = tmp_path / "plan"
-    args = ["generate", str(EXAMPLES / "imitation7.toml"), "--out", str(out), "--budget", "600",
-            "--batch-size", "200", "--dithers", "40", "--pairs", "2"]
+    args = [
+        "generate",
+        str(EXAMPLES / "imitation7.toml"),
+        "--out",
+        str(out),
+        "--budget",
+        "600",
+        "--batch-size",
+        "200",
+        "--dithers",
+        "40",
+        "--pairs",
+        "2",
+    ]
     first = runner.invoke(app, args)
     assert first.exit_code == 0, first.output
     assert "field plan in" in first.output and (out / "plan.json").is_file()
@@ -31,10 +43,11 @@ def test_cli_generate_resume_and_errors(tmp_path):
     assert re.search(r"\d+ valid runs", again.output) and (out / "plan.json").read_text() == plan_before
     bad = tmp_path / "bad.toml"
     bad.write_text((EXAMPLES / "imitation7.toml").read_text().replace("[vehicle]", "[vehicle]\ncruize_speed = 2.0", 1))
-    for argv, expect in [(["generate", str(bad), "--out", str(tmp_path / "x")], "cruize_speed"),
-                         (["generate", str(tmp_path / "none.toml"), "--out", str(tmp_path / "x")], "MISSION_FILE"),
-                         (["generate", str(EXAMPLES / "imitation7.toml"), "--out", str(tmp_path / "y"),
-                           "--budget", "100"], "--budget")]:
+    for argv, expect in [
+        (["generate", str(bad), "--out", str(tmp_path / "x")], "cruize_speed"),
+        (["generate", str(tmp_path / "none.toml"), "--out", str(tmp_path / "x")], "MISSION_FILE"),
+        (["generate", str(EXAMPLES / "imitation7.toml"), "--out", str(tmp_path / "y"), "--budget", "100"], "--budget"),
+    ]:
         result = runner.invoke(app, argv)
         assert result.exit_code == 2, (argv, result.output)
         assert expect in result.output and "Traceback" not in result.output
@@ -51,11 +64,25 @@ def test_generate_killed_mid_search_resumes_to_the_uninterrupted_plan(tmp_path):
 
     exe = Path(sys.executable).with_name("rapt-plan")
     cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "planner.cli"]
-    args = ["generate", str(EXAMPLES / "imitation7.toml"), "--budget", "2000", "--batch-size", "250",
-            "--dithers", "40", "--pairs", "2"]
+    args = [
+        "generate",
+        str(EXAMPLES / "imitation7.toml"),
+        "--budget",
+        "2000",
+        "--batch-size",
+        "250",
+        "--dithers",
+        "40",
+        "--pairs",
+        "2",
+    ]
     killed = tmp_path / "killed"
-    proc = subprocess.Popen(cmd + args + ["--out", str(killed)], stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL, env={**os.environ, "COLUMNS": "200"})
+    proc = subprocess.Popen(
+        cmd + args + ["--out", str(killed)],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        env={**os.environ, "COLUMNS": "200"},
+    )
     rows, deadline = 0, time.monotonic() + 240
     try:
         while rows < 500 and time.monotonic() < deadline and proc.poll() is None:

@@ -45,7 +45,9 @@ def test_selfright_writes_graph_plots_and_report(tmp_path):
     report = (out / "report.md").read_text()
     assert "self-rightable fraction" in report and "states.png" in report
     # same seed, same graph
-    res2 = runner.invoke(app, ["examples/robots/1dof.toml", "--budget", "300", "--out", str(tmp_path / "two"), "--seed", "2"])
+    res2 = runner.invoke(
+        app, ["examples/robots/1dof.toml", "--budget", "300", "--out", str(tmp_path / "two"), "--seed", "2"]
+    )
     assert res2.exit_code == 0
     assert json.loads((tmp_path / "two" / "graph.json").read_text()) == doc
 
@@ -59,8 +61,21 @@ def test_slope_option_overrides_the_robot_file(tmp_path):
 def test_outcomes_option_steers_the_search_by_where_states_tip(tmp_path):
     """--outcomes at a tenth of the 1° grid's queries and a coarse r_max: the 1-DOF graph's five regions and seven
     transitions (this seed without it: four and five, a narrow stable island stepped over)."""
-    args = ["examples/robots/1dof.toml", "--budget", "210", "--r-min", "0.5", "--r-max", "45", "--batch-size", "10",
-            "--refine", "0.4", "--seed", "1"]
+    args = [
+        "examples/robots/1dof.toml",
+        "--budget",
+        "210",
+        "--r-min",
+        "0.5",
+        "--r-max",
+        "45",
+        "--batch-size",
+        "10",
+        "--refine",
+        "0.4",
+        "--seed",
+        "1",
+    ]
     docs = []
     for extra in ([], ["--outcomes"]):
         out = tmp_path / ("steered" if extra else "plain")

@@ -25,17 +25,54 @@ def test_cli_trains_a_surrogate_and_generate_searches_with_it_and_confirms_with_
     runner = CliRunner()
     model = tmp_path / "imitation7.npz"
     mission = str(EXAMPLES / "imitation7.toml")
-    result = runner.invoke(app, ["surrogate", mission, "--out", str(model), "--runs", "4", "--runs-per-iteration",
-                                 "2", "--epochs", "3", "--validate", "16", "--select-runs", "4"])
+    result = runner.invoke(
+        app,
+        [
+            "surrogate",
+            mission,
+            "--out",
+            str(model),
+            "--runs",
+            "4",
+            "--runs-per-iteration",
+            "2",
+            "--epochs",
+            "3",
+            "--validate",
+            "16",
+            "--select-runs",
+            "4",
+        ],
+    )
     assert result.exit_code == 0, result.output
-    assert model.is_file() and "mode accuracy" in result.output and "8 expert runs: 4 annotated + 4 held out" in result.output
+    assert (
+        model.is_file()
+        and "mode accuracy" in result.output
+        and "8 expert runs: 4 annotated + 4 held out" in result.output
+    )
     policy = Surrogate.load(model, IMITATION7).policy  # the goal decision is its own network, blind to the scan
     (steer_in, steer_out, _), (goal_in, goal_out, _) = policy.heads
     assert steer_in.size == SPEC.size and steer_out.tolist() == [0, 1] and goal_out.tolist() == [2]
     assert goal_in.tolist() == [0, 1, 2, 3, 4, 5, 6, SPEC.size - 1]
     out = tmp_path / "plan"
-    args = ["generate", mission, "--out", str(out), "--budget", "500", "--batch-size", "250", "--pairs", "2",
-            "--dithers", "40", "--surrogate", str(model), "--confirm-runs", "20"]
+    args = [
+        "generate",
+        mission,
+        "--out",
+        str(out),
+        "--budget",
+        "500",
+        "--batch-size",
+        "250",
+        "--pairs",
+        "2",
+        "--dithers",
+        "40",
+        "--surrogate",
+        str(model),
+        "--confirm-runs",
+        "20",
+    ]
     result = runner.invoke(app, args)
     assert result.exit_code == 0, result.output
     plan = json.loads((out / "plan.json").read_text())
@@ -49,13 +86,25 @@ def test_cli_trains_a_surrogate_and_generate_searches_with_it_and_confirms_with_
         assert [("TF", "SS", "MS", "TS")[m] for m in expert.modes] == pair["modes"]
     import jsonschema
 
-    jsonschema.validate(plan, json.loads((Path(__file__).resolve().parents[2] / "planner" / "plan.schema.json")
-                                         .read_text()))
+    jsonschema.validate(
+        plan, json.loads((Path(__file__).resolve().parents[2] / "planner" / "plan.schema.json").read_text())
+    )
     assert (out / "study-surrogate.db").is_file() and not (out / "study.db").exists()
     # a surrogate of another mission is refused in one line, exit code 2
     other = tmp_path / "other"
-    result = runner.invoke(app, ["generate", str(EXAMPLES / "range2017.toml"), "--out", str(other), "--budget",
-                                 "500", "--surrogate", str(model)])
+    result = runner.invoke(
+        app,
+        [
+            "generate",
+            str(EXAMPLES / "range2017.toml"),
+            "--out",
+            str(other),
+            "--budget",
+            "500",
+            "--surrogate",
+            str(model),
+        ],
+    )
     assert result.exit_code == 2 and "--surrogate: surrogate: trained for mission 'imitation7'" in result.output
     assert len([line for line in result.output.splitlines() if line.strip()]) == 1
     result = runner.invoke(app, ["surrogate", mission, "--out", str(tmp_path / "x.npz"), "--method", "bogus"])

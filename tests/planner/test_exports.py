@@ -58,8 +58,16 @@ def test_plan_has_the_exact_qgc_layout(case):
     assert list(plan) == ["fileType", "geoFence", "groundStation", "mission", "rallyPoints", "version"]
     assert (plan["fileType"], plan["version"], plan["groundStation"]) == ("Plan", 1, "RAPT")
     mis = plan["mission"]
-    assert set(mis) == {"version", "firmwareType", "vehicleType", "cruiseSpeed", "hoverSpeed",
-                        "globalPlanAltitudeMode", "plannedHomePosition", "items"}
+    assert set(mis) == {
+        "version",
+        "firmwareType",
+        "vehicleType",
+        "cruiseSpeed",
+        "hoverSpeed",
+        "globalPlanAltitudeMode",
+        "plannedHomePosition",
+        "items",
+    }
     assert (mis["version"], mis["firmwareType"], mis["vehicleType"], mis["globalPlanAltitudeMode"]) == (2, 3, 12, 1)
     assert mis["cruiseSpeed"] == m.vehicle.cruise_speed and mis["hoverSpeed"] == 0
     assert plan["geoFence"]["version"] == 2 and plan["geoFence"]["circles"] == []
@@ -69,8 +77,17 @@ def test_plan_has_the_exact_qgc_layout(case):
     assert len(items) == n
     assert [it["doJumpId"] for it in items] == list(range(1, n + 1))
     for it in items:
-        assert set(it) == {"type", "autoContinue", "command", "doJumpId", "frame", "params", "Altitude",
-                           "AltitudeMode", "AMSLAltAboveTerrain"}
+        assert set(it) == {
+            "type",
+            "autoContinue",
+            "command",
+            "doJumpId",
+            "frame",
+            "params",
+            "Altitude",
+            "AltitudeMode",
+            "AMSLAltAboveTerrain",
+        }
         assert it["type"] == "SimpleItem" and it["autoContinue"] is True and it["frame"] == 3
         assert len(it["params"]) == 7 and it["params"][6] == it["Altitude"] == -2.0
         assert it["AltitudeMode"] == 1 and it["AMSLAltAboveTerrain"] is None
@@ -119,8 +136,7 @@ def test_plan_fence_is_clockwise_and_at_the_scenario_positions(case):
     np.testing.assert_allclose(local[1].mean(axis=0), (nogo_x, nogo_y), atol=0.01)
     if m.obstacles:  # the last exclusion is the last obstacle, a triangle centred on its parameters
         assert len(polys[-1]["polygon"]) == 3
-        np.testing.assert_allclose(local[-1].mean(axis=0), (values["obstacle3_x"], values["obstacle3_y"]),
-                                   atol=0.01)
+        np.testing.assert_allclose(local[-1].mean(axis=0), (values["obstacle3_x"], values["obstacle3_y"]), atol=0.01)
 
 
 def test_wpl_loads_in_pymavlink_and_matches_the_plan(case, tmp_path):
@@ -163,8 +179,14 @@ def test_geojson_is_lon_lat_with_closed_ccw_rings():
     assert launch["type"] == "Point" and launch["coordinates"] == pytest.approx([lon, lat], abs=1e-12)
     assert -123 < launch["coordinates"][0] < -122 and 47 < launch["coordinates"][1] < 48  # Puget Sound, lon first
     assert len(by_kind["waypoint"]) == len(m.waypoints) and len(by_kind["recovery"]) == 1
-    expected = {"operational_area": 1, "mission_area": len(m.mission_areas), "transmission": 1,
-                "nogo": len(m.nogo), "barrier": len(m.barriers), "obstacle": len(m.obstacles)}
+    expected = {
+        "operational_area": 1,
+        "mission_area": len(m.mission_areas),
+        "transmission": 1,
+        "nogo": len(m.nogo),
+        "barrier": len(m.barriers),
+        "obstacle": len(m.obstacles),
+    }
     for kind, count in expected.items():
         assert len(by_kind[kind]) == count, kind
         for f in by_kind[kind]:
@@ -194,8 +216,11 @@ def test_geojson_track_starts_at_launch_and_writes_all_files(tmp_path):
     assert props["surfaced_s"] == pytest.approx(float(np.sum(np.diff(track[:, 0])[track[:-1, 5] > 0.5])))
 
     paths = write_scenario_files(m, u, tmp_path / "out", "s1", track=track)
-    assert {k: p.name for k, p in paths.items()} == {"plan": "s1.plan", "waypoints": "s1.waypoints",
-                                                    "geojson": "s1.geojson"}
+    assert {k: p.name for k, p in paths.items()} == {
+        "plan": "s1.plan",
+        "waypoints": "s1.waypoints",
+        "geojson": "s1.geojson",
+    }
     assert json.loads(paths["plan"].read_text()) == json.loads(json.dumps(qgc_plan(m, u)))
     assert paths["waypoints"].read_text() == wpl(m, u)
     assert json.loads(paths["geojson"].read_text()) == json.loads(json.dumps(g))

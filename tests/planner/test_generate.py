@@ -88,7 +88,9 @@ def test_generate_writes_a_plan_whose_predictions_hold(range2017, plan_dir):
 
 def test_same_seed_same_plan(range2017, plan_dir, tmp_path):
     _, plan = plan_dir
-    again = generate(range2017, EXAMPLES / "range2017.toml", tmp_path / "b", small(tmp_path, pairs=3, fragile_below=0.5))
+    again = generate(
+        range2017, EXAMPLES / "range2017.toml", tmp_path / "b", small(tmp_path, pairs=3, fragile_below=0.5)
+    )
     assert again == plan
 
 
@@ -101,12 +103,20 @@ def test_same_plan_with_processes_and_a_dask_cluster(range2017, tmp_path):
     base = generate(range2017, EXAMPLES / "range2017.toml", tmp_path / "local", GenerateConfig(**cfg))
     pool, close = make_executor("processes")
     try:
-        procs = generate(range2017, EXAMPLES / "range2017.toml", tmp_path / "procs", GenerateConfig(**cfg, executor=pool))
+        procs = generate(
+            range2017, EXAMPLES / "range2017.toml", tmp_path / "procs", GenerateConfig(**cfg, executor=pool)
+        )
     finally:
         close()
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
-                      host="127.0.0.1") as cluster, Client(cluster) as client:
-        dask = generate(range2017, EXAMPLES / "range2017.toml", tmp_path / "dask", GenerateConfig(**cfg, executor=client))
+    with (
+        LocalCluster(
+            n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None, host="127.0.0.1"
+        ) as cluster,
+        Client(cluster) as client,
+    ):
+        dask = generate(
+            range2017, EXAMPLES / "range2017.toml", tmp_path / "dask", GenerateConfig(**cfg, executor=client)
+        )
     assert base == procs == dask
 
 
@@ -127,8 +137,12 @@ def test_refine_sharpens_pairs_and_variants_keep_their_mode(range2017, tmp_path)
     i, j = pair["rows"]
     np.testing.assert_array_equal(r.scores[0, cols], a.result.scores[i, cols])  # still the same sub-boundary
     np.testing.assert_array_equal(r.scores[1, cols], a.result.scores[j, cols])
-    plan = generate(range2017, EXAMPLES / "range2017.toml", tmp_path / "out",
-                    small(tmp_path, dithers=60, refine=8, pairs=2, fragile_below=0.9))
+    plan = generate(
+        range2017,
+        EXAMPLES / "range2017.toml",
+        tmp_path / "out",
+        small(tmp_path, dithers=60, refine=8, pairs=2, fragile_below=0.9),
+    )
     for v in plan["variants"]:
         assert v["p_predicted_mode"] >= 0.9 and v["variant_of"] in plan["run_order"]
         mode = sim.uuv.simulate(range2017, np.array(v["u"])[None, :]).modes[0]
@@ -138,16 +152,22 @@ def test_refine_sharpens_pairs_and_variants_keep_their_mode(range2017, tmp_path)
 def test_generate_runs_end_to_end_on_the_chapter3_mission(tmp_path):
     """uuv18: 18 parameters, the permutation of mission-area priorities, 62 leaf scores."""
     mission = sim.uuv.load_mission(EXAMPLES / "uuv18.toml")
-    plan = generate(mission, EXAMPLES / "uuv18.toml", tmp_path / "out",
-                    GenerateConfig(budget=400, batch_size=200, dithers=20, pairs=2, store=tmp_path / "study.db"))
+    plan = generate(
+        mission,
+        EXAMPLES / "uuv18.toml",
+        tmp_path / "out",
+        GenerateConfig(budget=400, batch_size=200, dithers=20, pairs=2, store=tmp_path / "study.db"),
+    )
     PLAN_VALIDATOR.validate(json.loads((tmp_path / "out" / "plan.json").read_text()))
     assert len(plan["pairs"]) == 2 and plan["mission"]["name"] == mission.name
     modes = sim.uuv.simulate(mission, np.array([s["u"] for s in plan["scenarios"]])).modes
     assert [s["predicted"]["mode"] for s in plan["scenarios"]] == [("TF", "SS", "MS", "TS")[m] for m in modes]
     for p in plan["pairs"]:
         a, b = (next(s for s in plan["scenarios"] if s["id"] == sid) for sid in p["scenarios"])
-        assert any(a["predicted"]["scores"].get(e) != b["predicted"]["scores"].get(e) for e in p["elements"]) \
-            or p["level"] > 1  # deeper elements are not in the predicted top-level scores
+        assert (
+            any(a["predicted"]["scores"].get(e) != b["predicted"]["scores"].get(e) for e in p["elements"])
+            or p["level"] > 1
+        )  # deeper elements are not in the predicted top-level scores
 
 
 def test_search_status_counts_modes_and_cross_mode_links():
@@ -160,5 +180,3 @@ def test_search_status_counts_modes_and_cross_mode_links():
     status(np.array([[0.12, 0.1], [0.88, 0.9]]), np.array([[0.0, 1.0], [0.0, 0.0]]))
     assert status.links == 1 and status.modes_found == 3
     assert status.summary() == "3 modes, 1 boundary links"
-
-

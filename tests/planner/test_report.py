@@ -69,15 +69,27 @@ def planned(mission, tmp_path_factory):
 def _chromium() -> str:
     exe = shutil.which("chromium") or shutil.which("chromium-browser")
     if exe is None:
-        pytest.fail("headless Chromium is needed to render the report and was not found as `chromium` or "
-                    "`chromium-browser`; install it, e.g. `sudo apt-get install -y chromium` (Debian/Ubuntu) "
-                    "or see .ci/run", pytrace=False)
+        pytest.fail(
+            "headless Chromium is needed to render the report and was not found as `chromium` or "
+            "`chromium-browser`; install it, e.g. `sudo apt-get install -y chromium` (Debian/Ubuntu) "
+            "or see .ci/run",
+            pytrace=False,
+        )
     return exe
 
 
 def _run_chromium(exe: str, profile: Path, *args: str) -> subprocess.CompletedProcess:
-    cmd = [exe, "--headless=new", "--no-sandbox", "--disable-gpu", "--hide-scrollbars", "--no-first-run",
-           "--disable-extensions", f"--user-data-dir={profile}", *args]
+    cmd = [
+        exe,
+        "--headless=new",
+        "--no-sandbox",
+        "--disable-gpu",
+        "--hide-scrollbars",
+        "--no-first-run",
+        "--disable-extensions",
+        f"--user-data-dir={profile}",
+        *args,
+    ]
     return subprocess.run(cmd, capture_output=True, text=True, timeout=60)
 
 
@@ -100,8 +112,13 @@ def test_every_figure_is_a_png_on_disk_and_the_page_is_self_contained(planned):
         assert title in page
     # every scenario's files are linked, in run order
     hrefs = [h for h in tags.links if h != "plan.json"]
-    expected = [s["files"][k] for sid in plan["run_order"] for s in plan["scenarios"] if s["id"] == sid
-                for k in ("plan", "waypoints", "geojson")]
+    expected = [
+        s["files"][k]
+        for sid in plan["run_order"]
+        for s in plan["scenarios"]
+        if s["id"] == sid
+        for k in ("plan", "waypoints", "geojson")
+    ]
     assert hrefs == expected and all((out / h).is_file() for h in hrefs)
     for s in plan["scenarios"]:
         assert s["id"] in page and f"{100 * s['dithering']['p_predicted_mode']:.0f}%" in page
@@ -113,8 +130,9 @@ def test_report_renders_in_headless_chromium_with_every_figure_loaded(planned, t
     n_img = len(_tags(path.read_text(encoding="utf-8")).imgs)
 
     shot = tmp_path / "shot.png"
-    r = _run_chromium(exe, tmp_path / "profile1", f"--screenshot={shot}", "--window-size=1280,4000",
-                      path.resolve().as_uri())
+    r = _run_chromium(
+        exe, tmp_path / "profile1", f"--screenshot={shot}", "--window-size=1280,4000", path.resolve().as_uri()
+    )
     assert shot.is_file(), f"chromium wrote no screenshot (exit {r.returncode}): {r.stderr[-2000:]}"
     img = mpimg.imread(shot)
     assert img.shape[:2] == (4000, 1280)
@@ -127,13 +145,17 @@ def test_report_renders_in_headless_chromium_with_every_figure_loaded(planned, t
     # a copy of the page (beside the original, so relative links resolve) with a probe script:
     # once everything has loaded, it counts the images that decoded
     probe = out / "_probe_report.html"
-    script = ("<script>window.addEventListener('load', function () {"
-              "var imgs = Array.prototype.slice.call(document.images);"
-              "document.body.dataset.loaded = imgs.filter(function (i) { return i.complete && i.naturalWidth > 0; }).length;"
-              "document.body.dataset.total = imgs.length; });</script>")
+    script = (
+        "<script>window.addEventListener('load', function () {"
+        "var imgs = Array.prototype.slice.call(document.images);"
+        "document.body.dataset.loaded = imgs.filter(function (i) { return i.complete && i.naturalWidth > 0; }).length;"
+        "document.body.dataset.total = imgs.length; });</script>"
+    )
     probe.write_text(path.read_text(encoding="utf-8").replace("</body>", script + "</body>"), encoding="utf-8")
     try:
-        r = _run_chromium(exe, tmp_path / "profile2", "--virtual-time-budget=5000", "--dump-dom", probe.resolve().as_uri())
+        r = _run_chromium(
+            exe, tmp_path / "profile2", "--virtual-time-budget=5000", "--dump-dom", probe.resolve().as_uri()
+        )
     finally:
         probe.unlink()
     m = re.search(r'<body[^>]*\bdata-loaded="(\d+)"', r.stdout)
@@ -172,8 +194,10 @@ def test_wrong_schema_and_bad_dithers_are_one_line_errors(planned, tmp_path):
 
 def test_a_permutation_spans_one_labelled_coordinate_per_item():
     # items declared (A, B, C) with keys 0.9, 0.2, 0.5: the order is B, C, A
-    plan = {"mission": {"dim": 4, "parameters": ["speed", "priority"]},
-            "scenarios": [{"u": [0.3, 0.9, 0.2, 0.5], "parameters": {"speed": 1.2, "priority": ["B", "C", "A"]}}]}
+    plan = {
+        "mission": {"dim": 4, "parameters": ["speed", "priority"]},
+        "scenarios": [{"u": [0.3, 0.9, 0.2, 0.5], "parameters": {"speed": 1.2, "priority": ["B", "C", "A"]}}],
+    }
     labels, owners = _coordinates(plan)
     assert labels == ["speed", "priority[A]", "priority[B]", "priority[C]"]
     assert owners == ["speed", "priority", "priority", "priority"]

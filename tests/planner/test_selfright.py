@@ -44,8 +44,9 @@ def test_a_tenth_of_the_grid_s_queries_gives_its_graph_with_closer_pairs():
     grid = grid_study(robot, 20.0, 1.0)
     g = analyse(grid, probes=probes)
     for seed in range(4):
-        study = adaptive_study(robot, 20.0, 210, seed=seed, r_min_deg=0.5, r_max_deg=45.0, batch_size=10, refine=0.4,
-                               outcomes=True)
+        study = adaptive_study(
+            robot, 20.0, 210, seed=seed, r_min_deg=0.5, r_max_deg=45.0, batch_size=10, refine=0.4, outcomes=True
+        )
         assert study.queries * 10 <= grid.queries
         a = analyse(study, probes=probes)
         c = compare_graphs(a, study, g, grid, probes)
@@ -62,7 +63,7 @@ def test_refinement_bisects_every_transition_pair_below_the_boundary_resolution(
     assert abs(refined.queries - plain.queries) <= 12  # one hull either way
     assert refined.extra["refine_rounds"] >= 2 and 0 < refined.extra["refine_queries"] <= 70 + 12
     # the search labels whole hulls; a refinement query is one state on its pair's face, not a hull
-    faces_per_joint_state = [np.unique(s.X[:, :s.n_free], axis=0, return_counts=True)[1] for s in (plain, refined)]
+    faces_per_joint_state = [np.unique(s.X[:, : s.n_free], axis=0, return_counts=True)[1] for s in (plain, refined)]
     assert np.all(faces_per_joint_state[0] > 1)
     assert np.sum(faces_per_joint_state[1] == 1) == refined.extra["refine_queries"]
     a, b = analyse(plain), analyse(refined)

@@ -15,8 +15,13 @@ def test_discrete_modes_are_label_combinations():
 
 def test_continuous_modes_by_mean_shift():
     rng = np.random.default_rng(0)
-    Y = np.concatenate([rng.normal(0.0, 0.01, (200, 2)), rng.normal(1.0, 0.01, (300, 2)),
-                        np.column_stack([rng.normal(0.0, 0.01, 100), rng.normal(1.0, 0.01, 100)])])
+    Y = np.concatenate(
+        [
+            rng.normal(0.0, 0.01, (200, 2)),
+            rng.normal(1.0, 0.01, (300, 2)),
+            np.column_stack([rng.normal(0.0, 0.01, 100), rng.normal(1.0, 0.01, 100)]),
+        ]
+    )
     labels = performance_modes(Y, ["continuous", "continuous"], bandwidth=0.2)
     assert np.bincount(labels).tolist() == [200, 100, 300]
     assert performance_modes(np.full((10, 1), 3.5), ["continuous"]).tolist() == [0] * 10
@@ -89,14 +94,17 @@ def test_noise_filter_flags_isolated_endpoints():
     assert bp.likely_noise[true].mean() < bp.likely_noise[~true].mean() - 0.3
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    (dict(X=np.empty((0, 2)), Y=np.empty((0, 1))), "X: expected a non-empty"),
-    (dict(X=np.zeros((3, 2)), Y=np.zeros((2, 1))), "Y: expected 3 score rows"),
-    (dict(X=np.zeros((3, 2))), "give exactly one"),
-    (dict(X=np.zeros((3, 2)), Y=np.zeros((3, 1)), quantile=1.5), "quantile"),
-    (dict(X=np.zeros((3, 2)), Y=np.zeros((3, 1)), d_eps=-1.0), "d_eps"),
-    (dict(X=np.zeros((3, 2)), Y=np.zeros((3, 1)), weights=np.ones(3)), "weights"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(X=np.empty((0, 2)), Y=np.empty((0, 1))), "X: expected a non-empty"),
+        (dict(X=np.zeros((3, 2)), Y=np.zeros((2, 1))), "Y: expected 3 score rows"),
+        (dict(X=np.zeros((3, 2))), "give exactly one"),
+        (dict(X=np.zeros((3, 2)), Y=np.zeros((3, 1)), quantile=1.5), "quantile"),
+        (dict(X=np.zeros((3, 2)), Y=np.zeros((3, 1)), d_eps=-1.0), "d_eps"),
+        (dict(X=np.zeros((3, 2)), Y=np.zeros((3, 1)), weights=np.ones(3)), "weights"),
+    ],
+)
 def test_boundary_pair_errors(kwargs, match):
     with pytest.raises(ValueError, match=match):
         boundary_pairs(**kwargs)

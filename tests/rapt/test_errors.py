@@ -35,13 +35,21 @@ def _one_line(exc: BaseException) -> str:
     return text
 
 
-@pytest.mark.parametrize("call, field", [
-    (lambda: rapt.StateSpace.from_bounds([(0, 1), (2, 1)]), "bounds"),
-    (lambda: rapt.Continuous("depth", 5.0, 1.0), "parameter 'depth'"),
-    (lambda: rapt.boundary_pairs(np.random.default_rng(0).random((20, 2)), np.arange(20.0)[:, None] % 2, d_eps=0.0),
-     "d_eps"),
-    (lambda: rapt.performance_modes(np.zeros((4, 1)), bandwidth=-1.0), "bandwidth"),
-], ids=["from_bounds", "Continuous", "boundary_pairs", "performance_modes"])
+@pytest.mark.parametrize(
+    "call, field",
+    [
+        (lambda: rapt.StateSpace.from_bounds([(0, 1), (2, 1)]), "bounds"),
+        (lambda: rapt.Continuous("depth", 5.0, 1.0), "parameter 'depth'"),
+        (
+            lambda: rapt.boundary_pairs(
+                np.random.default_rng(0).random((20, 2)), np.arange(20.0)[:, None] % 2, d_eps=0.0
+            ),
+            "d_eps",
+        ),
+        (lambda: rapt.performance_modes(np.zeros((4, 1)), bandwidth=-1.0), "bandwidth"),
+    ],
+    ids=["from_bounds", "Continuous", "boundary_pairs", "performance_modes"],
+)
 def test_a_bad_argument_is_an_input_error_naming_the_field(call, field):
     with pytest.raises(InputError) as info:
         call()
@@ -51,8 +59,7 @@ def test_a_bad_argument_is_an_input_error_naming_the_field(call, field):
 
 def test_a_bad_robot_file_is_a_robot_file_error_and_a_rapt_error(tmp_path):
     path = tmp_path / "bad.toml"
-    path.write_text('name = "bad"\n[[link]]\nname = "body"\nmass = -1.0\n'
-                    'boxes = [{ size = [0.6, 0.4, 0.2] }]\n')
+    path.write_text('name = "bad"\n[[link]]\nname = "body"\nmass = -1.0\nboxes = [{ size = [0.6, 0.4, 0.2] }]\n')
     with pytest.raises(RobotFileError) as info:
         load_robot(path)
     assert isinstance(info.value, FileFormatError) and isinstance(info.value, RaptError)

@@ -7,12 +7,14 @@ from rapt.information import gpr_information, neighbour_variance, nndv_informati
 
 
 def test_unalikeability_hand_computed():
-    labels = np.array([
-        [0, 0, 0, 0],      # all alike
-        [0, 1, 2, 3],      # all different
-        [0, 0, 1, 1],      # pairs differing: 8 of 12 ordered pairs
-        [2, 2, 2, 5],      # 6 of 12
-    ])
+    labels = np.array(
+        [
+            [0, 0, 0, 0],  # all alike
+            [0, 1, 2, 3],  # all different
+            [0, 0, 1, 1],  # pairs differing: 8 of 12 ordered pairs
+            [2, 2, 2, 5],  # 6 of 12
+        ]
+    )
     u = unalikeability(labels, 6)
     assert u == pytest.approx([0.0, 1.0, 8 / 12, 6 / 12])
 
@@ -20,9 +22,7 @@ def test_unalikeability_hand_computed():
 def test_unalikeability_matches_pairwise_definition():
     rng = np.random.default_rng(0)
     labels = rng.integers(0, 4, size=(200, 7))
-    brute = np.array([
-        sum(row[i] != row[j] for i in range(7) for j in range(7) if i != j) / (7 * 6) for row in labels
-    ])
+    brute = np.array([sum(row[i] != row[j] for i in range(7) for j in range(7) if i != j) / (7 * 6) for row in labels])
     assert unalikeability(labels) == pytest.approx(brute)
 
 

@@ -102,8 +102,9 @@ def test_outcomes_bracket_a_stable_island_narrower_than_the_interior_resolution(
         return out + (rest,) if with_outcomes else out
 
     def sampler(seed):
-        return ManifoldSampler(1, bounds, seed=seed, r_min=np.radians(0.5), r_max=np.radians(20.0), n_initial=6,
-                               whole_hulls=True)
+        return ManifoldSampler(
+            1, bounds, seed=seed, r_min=np.radians(0.5), r_max=np.radians(20.0), n_initial=6, whole_hulls=True
+        )
 
     # σ at t = 0.5 on face 1, between samples 36° apart that all read unstable there
     told = np.array([[0.1, 0.25], [0.3, 0.25], [0.7, 0.25], [0.9, 0.25]])

@@ -11,8 +11,13 @@ from rapt.scores import infer_output_types, row_codes
 
 
 @settings(max_examples=60, deadline=None)
-@given(arrays(np.float64, st.tuples(st.integers(1, 40), st.integers(1, 6)),
-              elements=st.sampled_from([0.0, 1.0, 2.0, -3.0, 0.5, 7.25])))
+@given(
+    arrays(
+        np.float64,
+        st.tuples(st.integers(1, 40), st.integers(1, 6)),
+        elements=st.sampled_from([0.0, 1.0, 2.0, -3.0, 0.5, 7.25]),
+    )
+)
 def test_row_codes_number_rows_like_unique(A):
     codes, count = row_codes(A)
     _, expected = np.unique(A, axis=0, return_inverse=True)
@@ -29,10 +34,17 @@ def test_row_codes_survive_keys_wider_than_64_bits():
 
 def test_infer_output_types_vectorised():
     rng = np.random.default_rng(1)
-    Y = np.column_stack([rng.integers(0, 2, 500), rng.integers(0, 5, 500), rng.random(500),
-                         rng.integers(0, 40, 500), np.full(500, 3.0), rng.integers(-2, 0, 500)])
-    assert infer_output_types(Y) == ("binary", "categorical", "continuous", "continuous", "categorical",
-                                     "categorical")
+    Y = np.column_stack(
+        [
+            rng.integers(0, 2, 500),
+            rng.integers(0, 5, 500),
+            rng.random(500),
+            rng.integers(0, 40, 500),
+            np.full(500, 3.0),
+            rng.integers(-2, 0, 500),
+        ]
+    )
+    assert infer_output_types(Y) == ("binary", "categorical", "continuous", "continuous", "categorical", "categorical")
     Y[0, 0] = np.nan  # NaNs are ignored when guessing
     assert infer_output_types(Y)[0] == "binary"
 

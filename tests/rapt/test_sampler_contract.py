@@ -92,8 +92,9 @@ def rows(args: tuple, index) -> tuple:
 
 def joined(*parts: tuple) -> tuple:
     """The ``tell`` arguments of several batches as one."""
-    return tuple(np.concatenate(a) if isinstance(a[0], np.ndarray) else [x for part in a for x in part]
-                 for a in zip(*parts))
+    return tuple(
+        np.concatenate(a) if isinstance(a[0], np.ndarray) else [x for part in a for x in part] for a in zip(*parts)
+    )
 
 
 def told(case: Case, seed: int = 0, n: int = 40) -> tuple:

@@ -83,12 +83,15 @@ def test_pluggable_candidate_generator_is_used():
     assert np.allclose(X2[:, 0], X2[:, 1])
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    ({"k": 1}, "k: need at least 2"),
-    ({"g": -1}, "g: expected"),
-    ({"candidates_per_point": 1}, "p > L"),
-    ({"candidate_generator": 3}, "candidate_generator"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        ({"k": 1}, "k: need at least 2"),
+        ({"g": -1}, "g: expected"),
+        ({"candidates_per_point": 1}, "p > L"),
+        ({"candidate_generator": 3}, "candidate_generator"),
+    ],
+)
 def test_bad_sampler_options(kwargs, match):
     with pytest.raises(ValueError, match=match):
         make_sampler("nndv", 2, **kwargs)
@@ -107,7 +110,6 @@ def test_tell_validation():
 
 
 def test_max_reference_bounds_the_neighbour_set_deterministically():
-
 
     def told(**kw):
         s = make_sampler("s-ndv", 2, seed=5, output_types=("binary",), **kw)

@@ -51,8 +51,17 @@ def test_every_method_is_deterministic(method):
 
 def test_failed_rows_are_stored_and_kept_out_of_the_metamodel(tmp_path):
     db = tmp_path / "flaky.db"
-    study = rapt.search(flaky, [(0, 1), (0, 1)], budget=600, method="nndv", batch_size=50, seed=3,
-                        store=db, chunk_size=10, executor=cf.ThreadPoolExecutor(2))
+    study = rapt.search(
+        flaky,
+        [(0, 1), (0, 1)],
+        budget=600,
+        method="nndv",
+        batch_size=50,
+        seed=3,
+        store=db,
+        chunk_size=10,
+        executor=cf.ThreadPoolExecutor(2),
+    )
     assert study.n_evaluated == 600
     assert len(study.failures) == study.X_failed.shape[0] > 0
     assert any(r == "score row contains NaN or inf" for r in study.failures)
@@ -79,15 +88,18 @@ def test_projected_states_are_what_the_study_records():
     assert np.array_equal(study.sampler.X, study.U)
 
 
-@pytest.mark.parametrize("kwargs, match", [
-    (dict(bounds=[(1, 0)]), "bounds: dimension 0 has low=1.0 >= high=0.0"),
-    (dict(budget=50, batch_size=100), "budget: 50 is smaller than batch_size 100"),
-    (dict(method="lola"), "method: unknown method 'lola'; allowed: random, sobol, lhs, gpr, nndv, s-ndv"),
-    (dict(budget=0), "budget: expected a positive integer"),
-    (dict(seed=-1), "seed: expected a non-negative"),
-    (dict(output_types=("ordinal",)), "output_types: unknown type 'ordinal'"),
-    (dict(executor="local"), "executor: expected None"),
-])
+@pytest.mark.parametrize(
+    "kwargs, match",
+    [
+        (dict(bounds=[(1, 0)]), "bounds: dimension 0 has low=1.0 >= high=0.0"),
+        (dict(budget=50, batch_size=100), "budget: 50 is smaller than batch_size 100"),
+        (dict(method="lola"), "method: unknown method 'lola'; allowed: random, sobol, lhs, gpr, nndv, s-ndv"),
+        (dict(budget=0), "budget: expected a positive integer"),
+        (dict(seed=-1), "seed: expected a non-negative"),
+        (dict(output_types=("ordinal",)), "output_types: unknown type 'ordinal'"),
+        (dict(executor="local"), "executor: expected None"),
+    ],
+)
 def test_bad_arguments_raise_value_errors_naming_them(kwargs, match):
     args = dict(fn=disk, bounds=[(0, 1), (0, 1)], budget=200, method="nndv", batch_size=100)
     args.update(kwargs)
@@ -151,15 +163,13 @@ def test_a_sampler_that_finishes_early_ends_the_study(tmp_path, monkeypatch):
         calls.append(len(X))
         return disk(X)
 
-    study = rapt.search(counted, [(0, 1), (0, 1)], budget=100, method="finishes-early", batch_size=10, seed=4,
-                        store=db)
+    study = rapt.search(counted, [(0, 1), (0, 1)], budget=100, method="finishes-early", batch_size=10, seed=4, store=db)
     assert calls == [10, 10, 5]  # the short batch counts 5 against the budget, then the empty ask ends it
     assert study.n_evaluated == 25 and np.bincount(study.batch).tolist() == [10, 10, 5]
     assert study.sampler.done and (study.sampler.n_batches, study.sampler.n_asked) == (3, 25)
     with StudyStore(db) as s:
         assert [len(asked) for _, asked in s.batches()] == [10, 10, 5]  # no empty batch recorded
-    again = rapt.search(counted, [(0, 1), (0, 1)], budget=200, method="finishes-early", batch_size=10, seed=4,
-                        store=db)
+    again = rapt.search(counted, [(0, 1), (0, 1)], budget=200, method="finishes-early", batch_size=10, seed=4, store=db)
     assert calls == [10, 10, 5]  # resumed: the replayed sampler has nothing left to ask
     assert np.array_equal(again.X, study.X) and again.sampler.done
 
@@ -241,8 +251,17 @@ def test_partially_evaluated_batch_is_completed_not_rerun(tmp_path):
         return disk(X)
 
     with pytest.raises(KeyboardInterrupt):
-        rapt.search(dies_in_batch_3, [(0, 1), (0, 1)], budget=400, method="nndv", batch_size=100, seed=2,
-                    store=db, chunk_size=25, executor=_Serial())
+        rapt.search(
+            dies_in_batch_3,
+            [(0, 1), (0, 1)],
+            budget=400,
+            method="nndv",
+            batch_size=100,
+            seed=2,
+            store=db,
+            chunk_size=25,
+            executor=_Serial(),
+        )
     with StudyStore(db) as s:
         stored = s.count()
     # Batches 1-3 are on disk, plus whichever chunks of batch 4 were collected before the
@@ -254,8 +273,17 @@ def test_partially_evaluated_batch_is_completed_not_rerun(tmp_path):
         calls.append(len(X))
         return disk(X)
 
-    resumed = rapt.search(counted, [(0, 1), (0, 1)], budget=400, method="nndv", batch_size=100, seed=2, store=db,
-                          chunk_size=25, executor=_Serial())
+    resumed = rapt.search(
+        counted,
+        [(0, 1), (0, 1)],
+        budget=400,
+        method="nndv",
+        batch_size=100,
+        seed=2,
+        store=db,
+        chunk_size=25,
+        executor=_Serial(),
+    )
     assert sum(calls) == 400 - stored
     straight = rapt.search(disk, [(0, 1), (0, 1)], budget=400, method="nndv", batch_size=100, seed=2)
     assert np.array_equal(resumed.X, straight.X)
@@ -278,18 +306,24 @@ class _Serial(cf.Executor):
 def test_process_pool_gives_the_same_study_as_in_process():
     local = rapt.search(two_outputs, [(0, 1)] * 3, budget=400, method="s-ndv", batch_size=100, seed=4)
     with cf.ProcessPoolExecutor(max_workers=2) as pool:
-        pooled = rapt.search(two_outputs, [(0, 1)] * 3, budget=400, method="s-ndv", batch_size=100, seed=4,
-                             executor=pool)
+        pooled = rapt.search(
+            two_outputs, [(0, 1)] * 3, budget=400, method="s-ndv", batch_size=100, seed=4, executor=pool
+        )
     assert np.array_equal(local.X, pooled.X) and np.array_equal(local.Y, pooled.Y)
 
 
 def test_dask_local_cluster_gives_the_same_study():
     distributed = pytest.importorskip("distributed")
     local = rapt.search(disk, [(0, 1), (0, 1)], budget=300, method="nndv", batch_size=100, seed=8)
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
-                                  host="127.0.0.1") as cluster, distributed.Client(cluster) as client:
-        remote = rapt.search(disk, [(0, 1), (0, 1)], budget=300, method="nndv", batch_size=100, seed=8,
-                             executor=client, chunk_size=30)
+    with (
+        distributed.LocalCluster(
+            n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None, host="127.0.0.1"
+        ) as cluster,
+        distributed.Client(cluster) as client,
+    ):
+        remote = rapt.search(
+            disk, [(0, 1), (0, 1)], budget=300, method="nndv", batch_size=100, seed=8, executor=client, chunk_size=30
+        )
     assert np.array_equal(local.X, remote.X) and np.array_equal(local.Y, remote.Y)
 
 
@@ -303,8 +337,10 @@ def test_general_state_space_passes_unit_rows():
     study = rapt.search(fn, space, budget=200, method="s-ndv", batch_size=50, seed=0)
     assert study.X.shape == (200, 4) and np.array_equal(study.X, study.U)
     assert study.output_types == ("binary", "continuous")
-    assert study.scenarios()[0]["order"] in {p for p in [("A", "B", "C"), ("A", "C", "B"), ("B", "A", "C"),
-                                                         ("B", "C", "A"), ("C", "A", "B"), ("C", "B", "A")]}
+    assert study.scenarios()[0]["order"] in {
+        p
+        for p in [("A", "B", "C"), ("A", "C", "B"), ("B", "A", "C"), ("B", "C", "A"), ("C", "A", "B"), ("C", "B", "A")]
+    }
 
 
 def test_steer_searches_on_some_columns_and_keeps_them_all(tmp_path):

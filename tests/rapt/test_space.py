@@ -5,13 +5,15 @@ from rapt.space import Categorical, Continuous, Integer, Permutation, StateSpace
 
 
 def uuv_like_space():
-    return StateSpace([
-        Continuous("start_time_h", 0.0, 12.0),
-        Integer("battery_pct", 60, 100),
-        Categorical("sea_state", ("calm", "moderate", "rough")),
-        Permutation("area_priority", ("A", "B", "C")),
-        Continuous("window_min", 1.0, 100.0, log=True),
-    ])
+    return StateSpace(
+        [
+            Continuous("start_time_h", 0.0, 12.0),
+            Integer("battery_pct", 60, 100),
+            Categorical("sea_state", ("calm", "moderate", "rough")),
+            Permutation("area_priority", ("A", "B", "C")),
+            Continuous("window_min", 1.0, 100.0, log=True),
+        ]
+    )
 
 
 def test_dim_counts_permutation_keys():
@@ -22,14 +24,21 @@ def test_dim_counts_permutation_keys():
 
 def test_decode_maps_cube_corners_and_slices():
     space = uuv_like_space()
-    U = np.array([
-        [0.0, 0.0, 0.0, 0.1, 0.2, 0.3, 0.0],
-        [1.0, 1.0, 1.0, 0.9, 0.5, 0.1, 1.0],
-        [0.5, 0.5, 0.5, 0.5, 0.6, 0.4, 0.5],
-    ])
+    U = np.array(
+        [
+            [0.0, 0.0, 0.0, 0.1, 0.2, 0.3, 0.0],
+            [1.0, 1.0, 1.0, 0.9, 0.5, 0.1, 1.0],
+            [0.5, 0.5, 0.5, 0.5, 0.6, 0.4, 0.5],
+        ]
+    )
     s = space.decode(U)
-    assert s[0] == {"start_time_h": 0.0, "battery_pct": 60, "sea_state": "calm", "area_priority": ("A", "B", "C"),
-                    "window_min": pytest.approx(1.0)}
+    assert s[0] == {
+        "start_time_h": 0.0,
+        "battery_pct": 60,
+        "sea_state": "calm",
+        "area_priority": ("A", "B", "C"),
+        "window_min": pytest.approx(1.0),
+    }
     assert s[1]["start_time_h"] == 12.0 and s[1]["battery_pct"] == 100 and s[1]["sea_state"] == "rough"
     assert s[1]["area_priority"] == ("C", "B", "A")
     assert s[2]["sea_state"] == "moderate"
@@ -65,12 +74,15 @@ def test_from_bounds_and_affine_maps():
     assert space.to_unit_array(X).tolist() == [[0.5, 0.25]]
 
 
-@pytest.mark.parametrize("bounds, match", [
-    ([(1, 1)], "low=1.0 >= high=1.0"),
-    ([(2, 1), (0, 1)], "dimension 0"),
-    ([(0, np.inf)], "finite"),
-    ([1, 2, 3], "pairs"),
-])
+@pytest.mark.parametrize(
+    "bounds, match",
+    [
+        ([(1, 1)], "low=1.0 >= high=1.0"),
+        ([(2, 1), (0, 1)], "dimension 0"),
+        ([(0, np.inf)], "finite"),
+        ([1, 2, 3], "pairs"),
+    ],
+)
 def test_bad_bounds_name_the_argument(bounds, match):
     with pytest.raises(ValueError, match="bounds") as err:
         StateSpace.from_bounds(bounds)
@@ -93,10 +105,12 @@ def test_bad_parameters():
 
 
 def test_parameter_from_mapping_and_config_round_trip():
-    space = StateSpace([
-        {"name": "t", "type": "continuous", "low": 0, "high": 1},
-        {"name": "k", "type": "integer", "low": 0, "high": 3},
-        {"name": "c", "type": "categorical", "choices": ["a", "b"]},
-        {"name": "p", "type": "permutation", "items": ["x", "y", "z"]},
-    ])
+    space = StateSpace(
+        [
+            {"name": "t", "type": "continuous", "low": 0, "high": 1},
+            {"name": "k", "type": "integer", "low": 0, "high": 3},
+            {"name": "c", "type": "categorical", "choices": ["a", "b"]},
+            {"name": "p", "type": "permutation", "items": ["x", "y", "z"]},
+        ]
+    )
     assert StateSpace(space.to_config()) == space

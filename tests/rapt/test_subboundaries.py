@@ -15,14 +15,17 @@ def test_score_tree_from_nested_mappings():
     assert tree.depth == 3
 
 
-@pytest.mark.parametrize("spec, match", [
-    ({"indices": [0], "children": [{"indices": [7]}]}, "names score column 7, but Y has 3 columns"),
-    ({"indices": [0], "children": [{"indices": [0]}]}, "column 0 appears in two nodes"),
-    ({"indices": []}, "has no score indices"),
-    ({"indices": [0], "kids": []}, r"unknown field\(s\) \['kids'\]"),
-    ({"children": []}, "missing 'indices'"),
-    ({"indices": [0], "children": [{"indices": ["a"]}]}, r"tree.children\[0\].indices: 'a' is not a column number"),
-])
+@pytest.mark.parametrize(
+    "spec, match",
+    [
+        ({"indices": [0], "children": [{"indices": [7]}]}, "names score column 7, but Y has 3 columns"),
+        ({"indices": [0], "children": [{"indices": [0]}]}, "column 0 appears in two nodes"),
+        ({"indices": []}, "has no score indices"),
+        ({"indices": [0], "kids": []}, r"unknown field\(s\) \['kids'\]"),
+        ({"children": []}, "missing 'indices'"),
+        ({"indices": [0], "children": [{"indices": ["a"]}]}, r"tree.children\[0\].indices: 'a' is not a column number"),
+    ],
+)
 def test_bad_trees_name_the_field(spec, match):
     with pytest.raises(ValueError, match=match):
         rapt.subboundary_tree(np.zeros((4, 2)), np.zeros((4, 3)), spec)

@@ -65,10 +65,16 @@ def rect_vertices(center, half):
 
 def outline_2d(system):
     if isinstance(system, Plates2D):
-        (dc, dr), (rc, rh), tri, (ac, ai, ao) = (
-            system.DISK, system.RECT, system.TRIANGLE, system.ANNULUS)
-        return np.vstack([circle_pts(dc, dr), polyline_pts(rect_vertices(rc, rh)),
-                          polyline_pts(tri), circle_pts(ac, ai), circle_pts(ac, ao)])
+        (dc, dr), (rc, rh), tri, (ac, ai, ao) = (system.DISK, system.RECT, system.TRIANGLE, system.ANNULUS)
+        return np.vstack(
+            [
+                circle_pts(dc, dr),
+                polyline_pts(rect_vertices(rc, rh)),
+                polyline_pts(tri),
+                circle_pts(ac, ai),
+                circle_pts(ac, ao),
+            ]
+        )
     if isinstance(system, Custom2D):
         c, r = system.CIRCLE
         return np.vstack([circle_pts(c, r), polyline_pts(system.SEGMENT, closed=False)])
@@ -181,15 +187,17 @@ def test_large_batches_are_fast():
 # ----------------------------------------------------------------- hand-picked values
 def test_plates2d_labels_and_distances_at_known_points():
     p = Plates2D()
-    X = np.array([
-        [0.22, 0.75],   # disk centre
-        [0.68, 0.75],   # rectangle centre
-        [0.25, 0.22],   # inside triangle
-        [0.78, 0.30],   # annulus ring (radius 0.08)
-        [0.70, 0.30],   # annulus hole -> background
-        [0.50, 0.50],   # background
-        [0.02, 0.02],   # corner
-    ])
+    X = np.array(
+        [
+            [0.22, 0.75],  # disk centre
+            [0.68, 0.75],  # rectangle centre
+            [0.25, 0.22],  # inside triangle
+            [0.78, 0.30],  # annulus ring (radius 0.08)
+            [0.70, 0.30],  # annulus hole -> background
+            [0.50, 0.50],  # background
+            [0.02, 0.02],  # corner
+        ]
+    )
     np.testing.assert_array_equal(p(X)[:, 0], [1, 2, 3, 4, 0, 0, 0])
     D = p.boundary_distance(X)[:, 0]
     np.testing.assert_allclose(D[[0, 1, 3, 4]], [0.09, 0.07, 0.03, 0.05], atol=1e-12)
@@ -197,14 +205,16 @@ def test_plates2d_labels_and_distances_at_known_points():
 
 def test_plates3d_labels_and_distances_at_known_points():
     p = Plates3D()
-    X = np.array([
-        [0.25, 0.25, 0.25],        # sphere centre
-        [0.72, 0.26, 0.72],        # box centre
-        [0.84, 0.70, 0.28],        # torus tube centre line
-        [0.70, 0.70, 0.28],        # torus hole -> background
-        [0.27, 0.70, 0.68],        # cylinder centre
-        [0.50, 0.50, 0.50],        # background
-    ])
+    X = np.array(
+        [
+            [0.25, 0.25, 0.25],  # sphere centre
+            [0.72, 0.26, 0.72],  # box centre
+            [0.84, 0.70, 0.28],  # torus tube centre line
+            [0.70, 0.70, 0.28],  # torus hole -> background
+            [0.27, 0.70, 0.68],  # cylinder centre
+            [0.50, 0.50, 0.50],  # background
+        ]
+    )
     np.testing.assert_array_equal(p(X)[:, 0], [1, 2, 3, 0, 4, 0])
     np.testing.assert_allclose(p.boundary_distance(X)[:5, 0], [0.14, 0.11, 0.05, 0.09, 0.12], atol=1e-12)
 
@@ -273,8 +283,9 @@ def test_custom2d_gradient_is_much_steeper_at_the_cliffs():
 
 
 # ---------------------------------------------------------- exact boundary distances
-@pytest.mark.parametrize("system", [Plates2D(), Custom2D(), Rings2D(), Mirrored(Plates2D(), (0, 1))],
-                         ids=lambda s: s.name)
+@pytest.mark.parametrize(
+    "system", [Plates2D(), Custom2D(), Rings2D(), Mirrored(Plates2D(), (0, 1))], ids=lambda s: s.name
+)
 def test_2d_distance_matches_brute_force(system):
     rng = np.random.default_rng(4)
     X = near_and_uniform(2, system.boundary_distance, rng)
@@ -298,8 +309,9 @@ def test_plates3d_distance_matches_brute_force():
     assert np.max((brute - exact)[far]) < 5e-4
 
 
-@pytest.mark.parametrize("system", [Plates2D(), Plates3D(), Rings2D(), Mirrored(Plates2D(), (0,))],
-                         ids=lambda s: s.name)
+@pytest.mark.parametrize(
+    "system", [Plates2D(), Plates3D(), Rings2D(), Mirrored(Plates2D(), (0,))], ids=lambda s: s.name
+)
 def test_label_constant_within_distance_and_changes_just_beyond(system):
     rng = np.random.default_rng(6)
     X = rng.random((20_000, system.dim))
@@ -363,8 +375,11 @@ def test_screened_ignores_noise_columns():
 # ----------------------------------------------------------------------- noisy systems
 def test_fuzzy_boundary_is_seeded():
     X = np.random.default_rng(11).random((5000, 2))
-    a, b, c = FuzzyBoundary(Plates2D(), 0.02, seed=1), FuzzyBoundary(Plates2D(), 0.02, seed=1), \
-        FuzzyBoundary(Plates2D(), 0.02, seed=2)
+    a, b, c = (
+        FuzzyBoundary(Plates2D(), 0.02, seed=1),
+        FuzzyBoundary(Plates2D(), 0.02, seed=1),
+        FuzzyBoundary(Plates2D(), 0.02, seed=2),
+    )
     ya, yb, yc = a(X), b(X), c(X)
     np.testing.assert_array_equal(ya, yb)
     assert not np.array_equal(ya, yc)

@@ -27,8 +27,9 @@ def test_gabriel_graph_matches_brute_force(dim):
     assert set(zip(i.tolist(), j.tolist())) == brute_gabriel(X)
     i2, j2 = gabriel_graph(X, 0.1)  # the length cap only removes edges
     L = np.linalg.norm(X[i2] - X[j2], axis=1)
-    assert np.all(L <= 0.1) and set(zip(i2.tolist(), j2.tolist())) == {e for e in brute_gabriel(X)
-                                                                       if np.linalg.norm(X[e[0]] - X[e[1]]) <= 0.1}
+    assert np.all(L <= 0.1) and set(zip(i2.tolist(), j2.tolist())) == {
+        e for e in brute_gabriel(X) if np.linalg.norm(X[e[0]] - X[e[1]]) <= 0.1
+    }
 
 
 def two_manifolds():
@@ -41,9 +42,9 @@ def two_manifolds():
     X = np.concatenate([np.column_stack([t, np.zeros_like(t)]), np.column_stack([t, np.ones_like(t)])])
     stable = np.concatenate([(t < 0.3) | (t >= 0.6), t > 0.2])
     rest = X.copy()
-    rest[:len(t)][~stable[:len(t)], 1] = 1.0
-    rest[len(t):][~stable[len(t):], 1] = 0.0
-    energy = np.concatenate([np.where(stable[:len(t)], 0.0, 1.0 + t), np.where(stable[len(t):], 0.0, 2.0)])
+    rest[: len(t)][~stable[: len(t)], 1] = 1.0
+    rest[len(t) :][~stable[len(t) :], 1] = 0.0
+    energy = np.concatenate([np.where(stable[: len(t)], 0.0, 1.0 + t), np.where(stable[len(t) :], 0.0, 2.0)])
     return t, X, stable, rest, energy
 
 
@@ -56,8 +57,12 @@ def test_transition_graph_on_a_hand_built_state_set():
     a_low, a_high, b = node(0.1, 0), node(0.8, 0), node(0.5, 1)
     assert len({a_low, a_high, b}) == 3 and b == 0
     assert g.labels[np.flatnonzero((X[:, 1] == 0) & (X[:, 0] >= 0.3) & (X[:, 0] < 0.6))].max() == -1
-    edges = {(int(s), int(d)): (float(e), int(w), float(L)) for s, d, e, w, L in
-             zip(g.edges["src"], g.edges["dst"], g.edges["energy"], g.edges["witness"], g.edges["length"])}
+    edges = {
+        (int(s), int(d)): (float(e), int(w), float(L))
+        for s, d, e, w, L in zip(
+            g.edges["src"], g.edges["dst"], g.edges["energy"], g.edges["witness"], g.edges["length"]
+        )
+    }
     # A's lower region tips onto B from t = 0.3 (energy 1.3); the upper one from t = 0.55 (energy 1.55);
     # B tips onto A's lower region from t = 0.2; duplicates keep their lowest energy
     assert set(edges) == {(a_low, b), (a_high, b), (b, a_low)}
@@ -68,7 +73,9 @@ def test_transition_graph_on_a_hand_built_state_set():
     # each pair's other end is the stable state of the source node it was reached from
     P = g.points[g.edges["partner"]]
     assert g.stable[g.edges["partner"]].all() and np.array_equal(g.labels[g.edges["partner"]], g.edges["src"])
-    assert np.allclose(np.abs(P[:, 0] - X[g.edges["witness"], 0]), 0.05) and np.allclose(P[:, 1], X[g.edges["witness"], 1])
+    assert np.allclose(np.abs(P[:, 0] - X[g.edges["witness"], 0]), 0.05) and np.allclose(
+        P[:, 1], X[g.edges["witness"], 1]
+    )
     # only unstable states next to a stable one are transitions (deeper ones cannot be reached without tipping)
     assert sorted(np.round(X[g.all_transitions["witness"], 0], 6).tolist()) == [0.2, 0.3, 0.55]
     # reachability and lowest-energy paths
@@ -85,7 +92,7 @@ def test_parallel_manifolds_stay_apart_and_extra_states_fill_gaps():
     t, X, stable, rest, energy = two_manifolds()
     # evaluate only every other state of B; the rest are "extra" known states labelled by their nearest neighbour
     keep = np.ones(len(X), dtype=bool)
-    keep[len(t) + 1::2] = False
+    keep[len(t) + 1 :: 2] = False
     g = transition_graph(X[keep], stable[keep], rest[keep], energy[keep], X[~keep], max_edge=0.07)
     assert g.n_nodes == 3  # 0.1-spaced evaluated B states connect only through the extra ones
     g2 = transition_graph(X[keep], stable[keep], rest[keep], energy[keep], max_edge=0.07)
@@ -113,8 +120,9 @@ def test_an_extra_state_guessed_unstable_does_not_hide_a_transition():
     # between two stable states such a guess still stands, as any unstable state does: S1 (0, 0) and S2 (1, 0)
     # span a ball that holds only the guess E (0.5, 0.45), whose nearest evaluated state U (0.5, 0.56) lies outside
     X2 = np.array([[0.0, 0.0], [1.0, 0.0], [0.5, 0.56]])
-    g2 = transition_graph(X2, np.array([True, True, False]), np.full((3, 2), np.nan), np.zeros(3),
-                          np.array([[0.5, 0.45]]), max_edge=2.0)
+    g2 = transition_graph(
+        X2, np.array([True, True, False]), np.full((3, 2), np.nan), np.zeros(3), np.array([[0.5, 0.45]]), max_edge=2.0
+    )
     assert not g2.stable[-1] and g2.labels[0] != g2.labels[1] and g2.n_nodes == 2
 
 
@@ -134,8 +142,9 @@ def test_face_identities_keep_close_faces_apart_and_continuations_join_a_replace
     assert joined.node_of([[0.2, 0.0]], ids=[1])[0] == joined.node_of([[0.8, 0.0]], ids=[3])[0]
     assert joined.node_of([[0.2, 0.02]], ids=[2])[0] != joined.node_of([[0.2, 0.0]], ids=[1])[0]
     # a continuation must be short: a replaced face far away in the free coordinate is not joined
-    far = transition_graph(X, stable, X, energy, max_edge=0.2, ids=(ids, ids, np.empty(0)), free_dims=1,
-                           continuation_edge=0.01)
+    far = transition_graph(
+        X, stable, X, energy, max_edge=0.2, ids=(ids, ids, np.empty(0)), free_dims=1, continuation_edge=0.01
+    )
     assert far.n_nodes == 3
 
 
@@ -148,17 +157,29 @@ def test_a_continuation_is_blocked_by_a_stable_third_face_between_not_by_an_unst
     """
     t = np.round(np.arange(0, 1.0001, 0.05), 10)
     low = t < 0.5
-    X = np.concatenate([np.column_stack([t[low], np.full(low.sum(), 0.01)]),
-                        np.column_stack([t[~low], np.zeros((~low).sum())]),
-                        np.column_stack([t[low], np.full(low.sum(), 0.002)])])
+    X = np.concatenate(
+        [
+            np.column_stack([t[low], np.full(low.sum(), 0.01)]),
+            np.column_stack([t[~low], np.zeros((~low).sum())]),
+            np.column_stack([t[low], np.full(low.sum(), 0.002)]),
+        ]
+    )
     ids = np.concatenate([np.full(low.sum(), 1), np.full((~low).sum(), 3), np.full(low.sum(), 4)])
     d = ids == 4
 
     def graph(d_stable: bool, keep=slice(None)):
         stable = np.where(d, d_stable, True)[keep]
         rest = np.where(stable[:, None], X[keep], np.nan)
-        return transition_graph(X[keep], stable, rest, np.zeros(len(rest)), max_edge=0.2,
-                                ids=(ids[keep], ids[keep], np.empty(0)), free_dims=1, continuation_edge=0.15)
+        return transition_graph(
+            X[keep],
+            stable,
+            rest,
+            np.zeros(len(rest)),
+            max_edge=0.2,
+            ids=(ids[keep], ids[keep], np.empty(0)),
+            free_dims=1,
+            continuation_edge=0.15,
+        )
 
     a, c = [[0.2, 0.01]], [[0.8, 0.0]]
     g = graph(False)

@@ -41,7 +41,9 @@ class PolicyAutonomy:
         self.goal_kind = np.full(n, GOAL_WAYPOINT, dtype=np.int64)
         self.home = np.zeros(n, dtype=bool)  # the policy has given the waypoints up (latched)
         self.was_home = self.home.copy()  # ... before the last step
-        self.last_target: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None  # (x, y, pending) of the next waypoint
+        self.last_target: tuple[np.ndarray, np.ndarray, np.ndarray] | None = (
+            None  # (x, y, pending) of the next waypoint
+        )
         self.last_features: np.ndarray | None = None
 
     def step(self, obs: Observation, dt: float, active: np.ndarray | None = None) -> Command:
@@ -58,8 +60,17 @@ class PolicyAutonomy:
         turn = pending & (action[:, GOAL] > self.goal_threshold)
         if np.any(turn):  # the decision takes effect at once: steer again with no waypoint pending
             rows = np.flatnonzero(turn)
-            G = features(self.spec, m, obs.t, obs.x[rows], obs.y[rows], obs.heading[rows], obs.battery[rows],
-                         obs.scan[rows], (wx[rows], wy[rows], np.zeros(rows.size, dtype=bool)))
+            G = features(
+                self.spec,
+                m,
+                obs.t,
+                obs.x[rows],
+                obs.y[rows],
+                obs.heading[rows],
+                obs.battery[rows],
+                obs.scan[rows],
+                (wx[rows], wy[rows], np.zeros(rows.size, dtype=bool)),
+            )
             action[rows] = self.policy(G, quiet=self.spec.sonar)
         self.home |= turn if active is None else turn & active
         heading, speed = action_command(self.spec, obs.heading, action)

@@ -41,8 +41,18 @@ from sim.uuv.angles import wrap_angle
 from sim.uuv.mission import Mission
 from sim.uuv.sonar import SCAN_BEAMS
 
-__all__ = ["FeatureSpec", "feature_spec", "features", "expert_action", "action_command", "advance_waypoints",
-           "waypoint_target", "policy_heads", "ACTIONS", "GOAL"]
+__all__ = [
+    "FeatureSpec",
+    "feature_spec",
+    "features",
+    "expert_action",
+    "action_command",
+    "advance_waypoints",
+    "waypoint_target",
+    "policy_heads",
+    "ACTIONS",
+    "GOAL",
+]
 
 FEATURE_VERSION = 2
 #: Network outputs: through-water velocity (forward, starboard) and the goal decision.
@@ -81,8 +91,19 @@ class FeatureSpec:
         return slice(7, 7 + self.beams)
 
     def names(self) -> list[str]:
-        return (["fuel", "waypoint_fwd", "waypoint_stbd", "waypoint_distance", "recovery_fwd", "recovery_stbd",
-                 "recovery_distance"] + [f"sonar_{b}" for b in range(self.beams)] + ["clock"])
+        return (
+            [
+                "fuel",
+                "waypoint_fwd",
+                "waypoint_stbd",
+                "waypoint_distance",
+                "recovery_fwd",
+                "recovery_stbd",
+                "recovery_distance",
+            ]
+            + [f"sonar_{b}" for b in range(self.beams)]
+            + ["clock"]
+        )
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -106,9 +127,15 @@ def policy_heads(spec: FeatureSpec) -> tuple[tuple[list[int] | None, list[int]],
 
 def feature_spec(mission: Mission, beams: int = SCAN_BEAMS) -> FeatureSpec:
     op = mission.operational_area
-    return FeatureSpec(FEATURE_VERSION, beams, float(mission.vehicle.sonar_range_m),
-                       float(np.hypot(op.width, op.height)), NEAR_M, float(mission.time_limit_s),
-                       float(mission.vehicle.max_speed))
+    return FeatureSpec(
+        FEATURE_VERSION,
+        beams,
+        float(mission.vehicle.sonar_range_m),
+        float(np.hypot(op.width, op.height)),
+        NEAR_M,
+        float(mission.time_limit_s),
+        float(mission.vehicle.max_speed),
+    )
 
 
 def advance_waypoints(mission: Mission, nxt: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -139,9 +166,17 @@ def _body(dx: np.ndarray, dy: np.ndarray, heading: np.ndarray) -> tuple[np.ndarr
     return dx * s + dy * c, dx * c - dy * s
 
 
-def features(spec: FeatureSpec, mission: Mission, t: float, x: np.ndarray, y: np.ndarray, heading: np.ndarray,
-             battery: np.ndarray, scan: np.ndarray, waypoint: tuple[np.ndarray, np.ndarray, np.ndarray]
-             ) -> np.ndarray:
+def features(
+    spec: FeatureSpec,
+    mission: Mission,
+    t: float,
+    x: np.ndarray,
+    y: np.ndarray,
+    heading: np.ndarray,
+    battery: np.ndarray,
+    scan: np.ndarray,
+    waypoint: tuple[np.ndarray, np.ndarray, np.ndarray],
+) -> np.ndarray:
     """(N, spec.size) float32 features from one step's reports (see the module docstring)."""
     n = x.shape[0]
     out = np.empty((n, spec.size), dtype=np.float32)
@@ -160,8 +195,13 @@ def features(spec: FeatureSpec, mission: Mission, t: float, x: np.ndarray, y: np
     return out
 
 
-def expert_action(spec: FeatureSpec, heading: np.ndarray, cmd_heading: np.ndarray, cmd_speed: np.ndarray,
-                  home: np.ndarray | bool = False) -> np.ndarray:
+def expert_action(
+    spec: FeatureSpec,
+    heading: np.ndarray,
+    cmd_heading: np.ndarray,
+    cmd_speed: np.ndarray,
+    home: np.ndarray | bool = False,
+) -> np.ndarray:
     """(N, 3) float32 action for a commanded through-water heading and speed and the goal decision."""
     rel = wrap_angle(np.asarray(cmd_heading, float) - np.asarray(heading, float))
     mag = np.clip(np.asarray(cmd_speed, float) / spec.max_speed, 0.0, 1.0)

@@ -62,8 +62,17 @@ class MixedDriver(PolicyAutonomy):
         wx, wy, pending = self.last_target
         extra = np.flatnonzero(self.was_home & pending)  # turned home with the waypoint still to reach
         if extra.size:
-            G = features(self.spec, self.mission, obs.t, obs.x[extra], obs.y[extra], obs.heading[extra],
-                         obs.battery[extra], obs.scan[extra], (wx[extra], wy[extra], pending[extra]))
+            G = features(
+                self.spec,
+                self.mission,
+                obs.t,
+                obs.x[extra],
+                obs.y[extra],
+                obs.heading[extra],
+                obs.battery[extra],
+                obs.scan[extra],
+                (wx[extra], wy[extra], pending[extra]),
+            )
             F, rows = np.concatenate([F, G]), np.concatenate([rows, extra])
             heading = np.concatenate([heading, other.heading[extra]])
             speed = np.concatenate([speed, other.speed[extra]])
@@ -72,12 +81,22 @@ class MixedDriver(PolicyAutonomy):
         if self.beta <= 0.0:
             return mine
         obey = self.rng.random(mine.heading.shape[0]) < self.beta
-        return Command(np.where(obey, theirs.heading, mine.heading), np.where(obey, theirs.speed, mine.speed),
-                       np.where(obey, theirs.surface, mine.surface))
+        return Command(
+            np.where(obey, theirs.heading, mine.heading),
+            np.where(obey, theirs.speed, mine.speed),
+            np.where(obey, theirs.surface, mine.surface),
+        )
 
 
-def annotated_runs(mission: Mission, X: np.ndarray, spec: FeatureSpec, policy: MLPPolicy | None = None,
-                   seed: int = 0, stochastic: bool = False, beta: float = 0.0) -> tuple[Result, list[Trajectory]]:
+def annotated_runs(
+    mission: Mission,
+    X: np.ndarray,
+    spec: FeatureSpec,
+    policy: MLPPolicy | None = None,
+    seed: int = 0,
+    stochastic: bool = False,
+    beta: float = 0.0,
+) -> tuple[Result, list[Trajectory]]:
     """Fly the valid scenarios ``X`` and return their scores and per-run (features, expert actions).
 
     With a ``policy`` it flies (obeying the expert on a ``beta`` share of steps, seeded by
@@ -87,11 +106,18 @@ def annotated_runs(mission: Mission, X: np.ndarray, spec: FeatureSpec, policy: M
     rows = np.flatnonzero(scen.valid)
     names = metric_names(mission)
     scores = np.full((scen.n, len(names)), np.nan)
-    trajs = [Trajectory(np.zeros((0, spec.size), np.float32), np.zeros((0, spec.actions), np.float32))
-             for _ in range(scen.n)]
+    trajs = [
+        Trajectory(np.zeros((0, spec.size), np.float32), np.zeros((0, spec.actions), np.float32)) for _ in range(scen.n)
+    ]
     if rows.size == 0:
-        return Result(scores, modes_from_scores(scores), scen.valid.copy(), list(scen.invalid_reason), names,
-                      metric_types(mission)), trajs
+        return Result(
+            scores,
+            modes_from_scores(scores),
+            scen.valid.copy(),
+            list(scen.invalid_reason),
+            names,
+            metric_types(mission),
+        ), trajs
     sub = scen.select(rows)
     nxt = np.zeros(sub.n, dtype=np.int64)
     got_F: list[np.ndarray] = []
@@ -109,8 +135,9 @@ def annotated_runs(mission: Mission, X: np.ndarray, spec: FeatureSpec, policy: M
         else:
             nxt = advance_waypoints(mission, nxt, obs.x, obs.y)
             wx, wy, pending = waypoint_target(mission, nxt)
-            F = features(spec, mission, obs.t, obs.x, obs.y, obs.heading, obs.battery, obs.scan,
-                         (wx, wy, pending & ~expert_home))
+            F = features(
+                spec, mission, obs.t, obs.x, obs.y, obs.heading, obs.battery, obs.scan, (wx, wy, pending & ~expert_home)
+            )
             who, heading, speed, home = np.arange(sub.n), cmd.heading, cmd.speed, driver.returning.copy()
             expert_home[:] = home
         keep = np.flatnonzero(active[who])
@@ -129,9 +156,10 @@ def annotated_runs(mission: Mission, X: np.ndarray, spec: FeatureSpec, policy: M
     F, A, r = F[order], A[order], r[order]
     cuts = np.searchsorted(r, np.arange(sub.n + 1))
     for k, row in enumerate(rows.tolist()):
-        trajs[row] = Trajectory(F[cuts[k]:cuts[k + 1]], A[cuts[k]:cuts[k + 1]])
-    return Result(scores, modes_from_scores(scores), scen.valid.copy(), list(scen.invalid_reason), names,
-                  metric_types(mission)), trajs
+        trajs[row] = Trajectory(F[cuts[k] : cuts[k + 1]], A[cuts[k] : cuts[k + 1]])
+    return Result(
+        scores, modes_from_scores(scores), scen.valid.copy(), list(scen.invalid_reason), names, metric_types(mission)
+    ), trajs
 
 
 def draw_valid(mission: Mission, k: int, rng: np.random.Generator) -> np.ndarray:
@@ -145,18 +173,20 @@ def draw_valid(mission: Mission, k: int, rng: np.random.Generator) -> np.ndarray
     raise InputError(f"mission: fewer than {k} valid scenarios in {100 * max(2 * k, 8)} random draws")
 
 
-def make_rollout(mission: Mission, spec: FeatureSpec, seed: int = 0, stochastic: bool = False,
-                 mixing: float = 0.0):
+def make_rollout(mission: Mission, spec: FeatureSpec, seed: int = 0, stochastic: bool = False, mixing: float = 0.0):
     """A ``rollout(policy, k, iteration)`` for :func:`rapt.imitation.imitate` on random valid scenarios.
 
     Iteration ``i`` draws its scenarios from a generator seeded by ``(seed, i)``, so every
     learner sees the same scenarios at the same iteration.  ``mixing`` p makes iteration i obey the
     expert on a share p**i of its steps (DAgger's decaying beta; 0: Algorithm 9 as written).
     """
+
     def rollout(policy, k, iteration):
         X = draw_valid(mission, k, np.random.default_rng([int(seed), int(iteration)]))
         beta = float(mixing) ** int(iteration) if mixing > 0 else 0.0
-        _, trajs = annotated_runs(mission, X, spec, policy, seed=seed + int(iteration), stochastic=stochastic,
-                                  beta=beta)
+        _, trajs = annotated_runs(
+            mission, X, spec, policy, seed=seed + int(iteration), stochastic=stochastic, beta=beta
+        )
         return trajs
+
     return rollout

@@ -49,14 +49,21 @@ class Surrogate:
     goal_threshold: float = 0.0
 
     @classmethod
-    def for_mission(cls, mission: Mission, policy: MLPPolicy | HeadsPolicy,
-                    training: dict | None = None, goal_threshold: float = 0.0) -> Surrogate:
+    def for_mission(
+        cls,
+        mission: Mission,
+        policy: MLPPolicy | HeadsPolicy,
+        training: dict | None = None,
+        goal_threshold: float = 0.0,
+    ) -> Surrogate:
         spec = feature_spec(mission)
         if policy.n_features != spec.size:
             raise InputError(f"policy: takes {policy.n_features} features, the mission's definition has {spec.size}")
         if policy.n_outputs != spec.actions:
-            raise InputError(f"policy: gives {policy.n_outputs} outputs, a back-seat needs {spec.actions} "
-                             "(velocity forward and starboard, and the goal decision)")
+            raise InputError(
+                f"policy: gives {policy.n_outputs} outputs, a back-seat needs {spec.actions} "
+                "(velocity forward and starboard, and the goal decision)"
+            )
         return cls(policy, spec, mission.name, mission_digest(mission), dict(training or {}), float(goal_threshold))
 
     def check(self, mission: Mission) -> None:
@@ -64,7 +71,8 @@ class Surrogate:
         if mission_digest(mission) != self.mission_sha:
             raise StudyMismatchError(
                 f"surrogate: trained for mission '{self.mission_name}' ({self.mission_sha}), not for "
-                f"'{mission.name}' ({mission_digest(mission)}); train one for this mission")
+                f"'{mission.name}' ({mission_digest(mission)}); train one for this mission"
+            )
         if feature_spec(mission, self.spec.beams) != self.spec:
             raise StudyMismatchError("surrogate: its feature definition does not match this mission's; retrain it")
 
@@ -82,9 +90,15 @@ class Surrogate:
         path = Path(path)
         if path.suffix != ".npz":
             raise InputError(f"path: a surrogate file ends in .npz, got {str(path)!r}")
-        header = {"format": FORMAT, "mission": self.mission_name, "mission_sha": self.mission_sha,
-                  "features": self.spec.to_dict(), "feature_names": self.spec.names(),
-                  "training": self.training, "goal_threshold": self.goal_threshold}
+        header = {
+            "format": FORMAT,
+            "mission": self.mission_name,
+            "mission_sha": self.mission_sha,
+            "features": self.spec.to_dict(),
+            "feature_names": self.spec.names(),
+            "training": self.training,
+            "goal_threshold": self.goal_threshold,
+        }
         arrays = self.policy.to_arrays()
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_name(path.name + ".part.npz")
@@ -106,10 +120,18 @@ class Surrogate:
         except (OSError, ValueError, KeyError) as exc:
             raise FileFormatError(f"surrogate: {str(path)!r} is not a surrogate file ({exc})") from exc
         if header.get("format") not in READS:
-            raise FileFormatError(f"surrogate: {str(path)!r} has format {header.get('format')!r}, expected one of "
-                             f"{', '.join(READS)}; retrain it with `rapt-plan surrogate`")
-        out = cls(policy, FeatureSpec.from_dict(header["features"]), header["mission"], header["mission_sha"],
-                  header.get("training", {}), float(header.get("goal_threshold", 0.0)))
+            raise FileFormatError(
+                f"surrogate: {str(path)!r} has format {header.get('format')!r}, expected one of "
+                f"{', '.join(READS)}; retrain it with `rapt-plan surrogate`"
+            )
+        out = cls(
+            policy,
+            FeatureSpec.from_dict(header["features"]),
+            header["mission"],
+            header["mission_sha"],
+            header.get("training", {}),
+            float(header.get("goal_threshold", 0.0)),
+        )
         if mission is not None:
             out.check(mission)
         return out

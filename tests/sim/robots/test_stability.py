@@ -36,8 +36,12 @@ def test_box_on_slope_tips_at_the_analytic_angle(planar):
     lying, standing = np.degrees(np.arctan(L / H)), np.degrees(np.arctan(H / L))  # 63.43°, 26.57°
     flat = np.zeros((1, 1 if planar else 2))
     on_end = np.array([[np.pi / 2]]) if planar else np.array([[0.0, np.pi / 2]])
-    for slope, lying_ok, standing_ok in [(lying - 0.3, True, False), (lying + 0.3, False, False),
-                                         (standing - 0.3, True, True), (standing + 0.3, True, False)]:
+    for slope, lying_ok, standing_ok in [
+        (lying - 0.3, True, False),
+        (lying + 0.3, False, False),
+        (standing - 0.3, True, True),
+        (standing + 0.3, True, False),
+    ]:
         F = StabilityFunction(box_robot(), slope, planar=planar)
         assert F(NO_JOINTS, flat).stable[0] == lying_ok, slope
         assert F(NO_JOINTS, on_end).stable[0] == standing_ok, slope
@@ -116,7 +120,7 @@ def test_one_dof_robot_rights_itself_with_its_arm():
 
 
 def test_robot_file_errors_name_the_field(tmp_path):
-    good = (tmp_path / "ok.toml")
+    good = tmp_path / "ok.toml"
     good.write_text('[[link]]\nname = "b"\nmass = 1\nboxes = [{ size = [1, 1, 1] }]\n')
     assert load_robot(good).dof == 0
     cases = {
@@ -138,10 +142,20 @@ def test_robot_file_errors_name_the_field(tmp_path):
 
 def test_stl_mesh_link(tmp_path):
     """An ASCII STL tetrahedron is read as its 4 vertices and joins the hull."""
-    tri = [((0, 0, 0), (1, 0, 0), (0, 1, 0)), ((0, 0, 0), (1, 0, 0), (0, 0, 1)),
-           ((0, 0, 0), (0, 1, 0), (0, 0, 1)), ((1, 0, 0), (0, 1, 0), (0, 0, 1))]
-    lines = ["solid t"] + ["facet normal 0 0 0\nouter loop\n" + "".join(f"vertex {x} {y} {z}\n" for x, y, z in t)
-                           + "endloop\nendfacet" for t in tri] + ["endsolid t"]
+    tri = [
+        ((0, 0, 0), (1, 0, 0), (0, 1, 0)),
+        ((0, 0, 0), (1, 0, 0), (0, 0, 1)),
+        ((0, 0, 0), (0, 1, 0), (0, 0, 1)),
+        ((1, 0, 0), (0, 1, 0), (0, 0, 1)),
+    ]
+    lines = (
+        ["solid t"]
+        + [
+            "facet normal 0 0 0\nouter loop\n" + "".join(f"vertex {x} {y} {z}\n" for x, y, z in t) + "endloop\nendfacet"
+            for t in tri
+        ]
+        + ["endsolid t"]
+    )
     (tmp_path / "t.stl").write_text("\n".join(lines))
     assert read_stl(tmp_path / "t.stl").shape == (4, 3)
     (tmp_path / "r.toml").write_text('[[link]]\nname = "b"\nmass = 1\nmesh = "t.stl"\n')
@@ -159,16 +173,32 @@ def test_bulk_planar_faces_equal_the_per_state_path(name, slope):
     F = StabilityFunction(robot, slope)
     rng = np.random.default_rng(7)
     theta = robot.joint_bounds[:, 0] + rng.random((40, robot.dof)) * np.ptp(robot.joint_bounds, axis=1)
-    theta = np.unique(np.concatenate([theta, np.radians(np.round(np.degrees(theta) / 45) * 45)]), axis=0)  # special angles too
+    theta = np.unique(
+        np.concatenate([theta, np.radians(np.round(np.degrees(theta) / 45) * 45)]), axis=0
+    )  # special angles too
     bulk = planar_all_faces(F, theta, chunk=17)
     for i, th in enumerate(theta):
         hull = F.hull(th)
         rest, energy, tips = F.settle_all(hull)
-        want = sorted(zip(np.round(hull.angles[:, 0], 9), tips == 0, np.round(np.where(np.isfinite(energy), energy, -1), 9),
-                          hull.ids, np.where(rest >= 0, hull.ids[np.maximum(rest, 0)], -1)))
+        want = sorted(
+            zip(
+                np.round(hull.angles[:, 0], 9),
+                tips == 0,
+                np.round(np.where(np.isfinite(energy), energy, -1), 9),
+                hull.ids,
+                np.where(rest >= 0, hull.ids[np.maximum(rest, 0)], -1),
+            )
+        )
         m = bulk["row"] == i
-        got = sorted(zip(np.round(bulk["start"][m], 9), bulk["stable"][m], np.round(np.where(np.isfinite(bulk["energy"][m]),
-                     bulk["energy"][m], -1), 9), bulk["start_id"][m], bulk["rest_id"][m]))
+        got = sorted(
+            zip(
+                np.round(bulk["start"][m], 9),
+                bulk["stable"][m],
+                np.round(np.where(np.isfinite(bulk["energy"][m]), bulk["energy"][m], -1), 9),
+                bulk["start_id"][m],
+                bulk["rest_id"][m],
+            )
+        )
         assert got == want, np.degrees(th)
 
 
@@ -203,23 +233,43 @@ def test_urdf_one_dof_robot_equals_the_toml_one():
 _URDF = open("examples/robots/1dof.urdf").read()
 
 
-@pytest.mark.parametrize("old, new, where", [
-    ('type="revolute"', 'type="prismatic"', "joint[@name='shoulder']/@type"),
-    ('<origin xyz="-0.22 0 0.10" rpy="0 0 0"/>', '<origin xyz="-0.22 0 0.10" rpy="0 0.5 0"/>',
-     "joint[@name='shoulder']/origin/@rpy"),
-    ('<origin xyz="0.275 0 0" rpy="0 0 0"/>', '<origin xyz="0.275 0 0" rpy="0.1 0 0"/>',
-     "link[@name='arm']/collision[1]/origin/@rpy"),
-    ('<mass value="10.0"/>', '', "link[@name='body']/inertial/mass/@value"),
-    ('<parent link="body"/>', '<parent link="bodyy"/>', "joint[@name='shoulder']/parent/@link"),
-    ('<box size="0.60 0.40 0.20"/>', '<box size="0.60 -0.40 0.20"/>', "link[@name='body']/collision[1]/geometry/box/@size"),
-    ('<box size="0.55 0.06 0.04"/>', '<cylinder radius="0.03" length="0.55"/>', "link[@name='arm']/collision[1]/geometry/cylinder"),
-    ('<mass value="0.0"/>', '<mass value="-1"/>', "link[@name='arm']/inertial/mass/@value"),
-    ('lower="-3.141592653589793" ', '', "joint[@name='shoulder']/limit"),
-    ('<axis xyz="0 1 0"/>', '<axis xyz="0 0 0"/>', "joint[@name='shoulder']/axis/@xyz"),
-    ('</robot>', '<joint name="j2" type="revolute"><parent link="arm"/><child link="arm"/></joint></robot>',
-     "joint[@name='j2']/limit"),
-    ('<robot name="1dof">', '<robot name="1dof"', "not valid XML"),
-])
+@pytest.mark.parametrize(
+    "old, new, where",
+    [
+        ('type="revolute"', 'type="prismatic"', "joint[@name='shoulder']/@type"),
+        (
+            '<origin xyz="-0.22 0 0.10" rpy="0 0 0"/>',
+            '<origin xyz="-0.22 0 0.10" rpy="0 0.5 0"/>',
+            "joint[@name='shoulder']/origin/@rpy",
+        ),
+        (
+            '<origin xyz="0.275 0 0" rpy="0 0 0"/>',
+            '<origin xyz="0.275 0 0" rpy="0.1 0 0"/>',
+            "link[@name='arm']/collision[1]/origin/@rpy",
+        ),
+        ('<mass value="10.0"/>', "", "link[@name='body']/inertial/mass/@value"),
+        ('<parent link="body"/>', '<parent link="bodyy"/>', "joint[@name='shoulder']/parent/@link"),
+        (
+            '<box size="0.60 0.40 0.20"/>',
+            '<box size="0.60 -0.40 0.20"/>',
+            "link[@name='body']/collision[1]/geometry/box/@size",
+        ),
+        (
+            '<box size="0.55 0.06 0.04"/>',
+            '<cylinder radius="0.03" length="0.55"/>',
+            "link[@name='arm']/collision[1]/geometry/cylinder",
+        ),
+        ('<mass value="0.0"/>', '<mass value="-1"/>', "link[@name='arm']/inertial/mass/@value"),
+        ('lower="-3.141592653589793" ', "", "joint[@name='shoulder']/limit"),
+        ('<axis xyz="0 1 0"/>', '<axis xyz="0 0 0"/>', "joint[@name='shoulder']/axis/@xyz"),
+        (
+            "</robot>",
+            '<joint name="j2" type="revolute"><parent link="arm"/><child link="arm"/></joint></robot>',
+            "joint[@name='j2']/limit",
+        ),
+        ('<robot name="1dof">', '<robot name="1dof"', "not valid XML"),
+    ],
+)
 def test_urdf_errors_name_the_element_and_attribute(tmp_path, old, new, where):
     assert old in _URDF
     bad = tmp_path / "bad.urdf"
@@ -239,8 +289,10 @@ def test_robot_files_are_read_by_suffix(tmp_path):
 
 def test_urdf_fixed_and_continuous_joints_and_an_offset_stl_mesh(tmp_path):
     """A fixed joint is a joint locked at 0 (no coordinate); a continuous one turns fully; a mesh sits at its collision origin."""
-    (tmp_path / "tet.stl").write_text("solid t\nfacet normal 0 0 0\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 0 1\n"
-                                      "endloop\nendfacet\nendsolid t\n")
+    (tmp_path / "tet.stl").write_text(
+        "solid t\nfacet normal 0 0 0\nouter loop\nvertex 0 0 0\nvertex 1 0 0\nvertex 0 0 1\n"
+        "endloop\nendfacet\nendsolid t\n"
+    )
     (tmp_path / "r.urdf").write_text("""<robot name="r">
       <link name="base"><inertial><mass value="2"/></inertial>
         <collision><geometry><box size="1 1 1"/></geometry></collision></link>

@@ -13,16 +13,19 @@ from sim.uuv.bias import Bias, parse_bias
 MISSION = Path(__file__).resolve().parents[3] / "examples" / "range2017.toml"
 
 
-@pytest.mark.parametrize("text,expect", [
-    ("sped=1.1", "sped: unknown bias parameter; choose from speed, current_scale"),
-    ("speed", "speed: no value; write speed=<number>"),
-    ("speed=fast", "speed: 'fast' is not a number"),
-    ("speed=9", "speed: 9 is outside [0.5, 2] x"),
-    ("heading=90", "heading: 90 is outside [-45, 45] deg"),
-    ("speed=1.1,speed=1.2", "speed: given twice"),
-    ("speed=1.1,,battery=1", "empty item"),
-    ("current_offset=nan", "current_offset: nan is outside"),
-])
+@pytest.mark.parametrize(
+    "text,expect",
+    [
+        ("sped=1.1", "sped: unknown bias parameter; choose from speed, current_scale"),
+        ("speed", "speed: no value; write speed=<number>"),
+        ("speed=fast", "speed: 'fast' is not a number"),
+        ("speed=9", "speed: 9 is outside [0.5, 2] x"),
+        ("heading=90", "heading: 90 is outside [-45, 45] deg"),
+        ("speed=1.1,speed=1.2", "speed: given twice"),
+        ("speed=1.1,,battery=1", "empty item"),
+        ("current_offset=nan", "current_offset: nan is outside"),
+    ],
+)
 def test_inject_bias_parse_errors_name_the_field_and_the_fix(text, expect):
     with pytest.raises(ValueError) as info:
         parse_bias(text)

@@ -50,8 +50,9 @@ class Vehicle:
 
 
 def connect(port):
-    gcs = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=1, source_component=191,
-                                     dialect="ardupilotmega")
+    gcs = mavutil.mavlink_connection(
+        f"udpout:127.0.0.1:{port}", source_system=1, source_component=191, dialect="ardupilotmega"
+    )
     gcs.mav.heartbeat_send(18, 8, 0, 0, 0)
     assert gcs.wait_heartbeat(timeout=5) is not None
     return gcs
@@ -94,12 +95,22 @@ def fly_lockstep(mission, u, gcs, fs, limit_s=60.0):
                 for j, (east, north) in tick.get("c", {}).items():
                     cx[0, j], cy[0, j], seen[0, j] = east, north, True
                 battery = battery_fraction(start_wh, np.array([bat.energy_consumed]), mission.vehicle.battery_wh)
-                obs = Observation(ms / 1000, np.array([lp.y]), np.array([lp.x]), np.array([att.yaw]), battery,
-                                  cx, cy, np.zeros((1, k)), seen)
+                obs = Observation(
+                    ms / 1000,
+                    np.array([lp.y]),
+                    np.array([lp.x]),
+                    np.array([att.yaw]),
+                    battery,
+                    cx,
+                    cy,
+                    np.zeros((1, k)),
+                    seen,
+                )
                 cmd = autonomy.step(obs, mission.dt, np.ones(1, bool))
                 vx, vy, vz, yaw = encode_command(cmd.heading, cmd.speed, cmd.surface)
-                gcs.mav.set_position_target_local_ned_send(ms, 1, 1, 1, 2503, 0, 0, 0, float(vx[0]), float(vy[0]),
-                                                          float(vz[0]), 0, 0, 0, float(yaw[0]), 0)
+                gcs.mav.set_position_target_local_ned_send(
+                    ms, 1, 1, 1, 2503, 0, 0, 0, float(vx[0]), float(vy[0]), float(vz[0]), 0, 0, 0, float(yaw[0]), 0
+                )
                 answered = ms
             tick = {}
     return np.array(track), autonomy
@@ -122,7 +133,9 @@ def test_lockstep_flight_over_mavlink_scores_exactly_as_the_batch():
 
 def test_setpoints_need_guided_and_a_velocity_yaw_mask():
     m = sim.uuv.load_mission(EXAMPLES / "range2017.toml")
-    u = np.random.default_rng(9).random((40, m.dim))[np.flatnonzero(sim.uuv.simulate(m, np.random.default_rng(9).random((40, m.dim))).valid)[0]]
+    u = np.random.default_rng(9).random((40, m.dim))[
+        np.flatnonzero(sim.uuv.simulate(m, np.random.default_rng(9).random((40, m.dim))).valid)[0]
+    ]
     with Vehicle(m, u) as v:
         gcs = connect(v.port)
         assert command(gcs, 400, 1) == 0

@@ -104,8 +104,18 @@ def _point_mass_rollout(log):
 @pytest.mark.parametrize("method", ["supervised", "dagger", "qdagger"])
 def test_each_learner_learns_a_tiny_expert(method):
     log = []
-    result = imitate(_point_mass_rollout(log), method=method, quantile=0.5, iterations=6, runs_per_iteration=4,
-                     hidden=(16,), epochs=60, learning_rate=0.01, batch_size=64, seed=1)
+    result = imitate(
+        _point_mass_rollout(log),
+        method=method,
+        quantile=0.5,
+        iterations=6,
+        runs_per_iteration=4,
+        hidden=(16,),
+        epochs=60,
+        learning_rate=0.01,
+        batch_size=64,
+        seed=1,
+    )
     assert [r.runs for r in result.history] == [4, 8, 12, 16, 20, 24, 28]
     grown = np.diff([r.samples for r in result.history])
     if method == "qdagger":
@@ -123,9 +133,15 @@ def test_the_best_policy_on_validation_is_returned():
     """DAgger returns the best policy of the sequence on held-out runs, not the last (ties: the later)."""
     scores = iter([0.1, 0.5, 0.3, 0.5, 0.2])
     seen, weights = [], []
-    result = imitate(_point_mass_rollout([]), method="dagger", iterations=4, runs_per_iteration=2, hidden=(8,),
-                     epochs=5, select=lambda p: (seen.append(p), weights.append([w.copy() for w in p.weights]),
-                                                 next(scores))[2])
+    result = imitate(
+        _point_mass_rollout([]),
+        method="dagger",
+        iterations=4,
+        runs_per_iteration=2,
+        hidden=(8,),
+        epochs=5,
+        select=lambda p: (seen.append(p), weights.append([w.copy() for w in p.weights]), next(scores))[2],
+    )
     assert result.chosen == 3 and result.policy is seen[3] and result.history[3].extra["selection"] == 0.5
     # the kept policy's weights are those it was scored with: later updates do not train it on
     for kept, scored in zip(result.policy.weights, weights[3]):
@@ -137,14 +153,17 @@ def test_the_best_policy_on_validation_is_returned():
 
 def _net(rng, n_in, n_out, hidden=(12, 6)):
     sizes = [n_in, *hidden, n_out]
-    return MLPPolicy([rng.normal(0, 0.5, (a, b)).astype(np.float32) for a, b in zip(sizes, sizes[1:])],
-                     [rng.normal(0, 0.5, b).astype(np.float32) for b in sizes[1:]])
+    return MLPPolicy(
+        [rng.normal(0, 0.5, (a, b)).astype(np.float32) for a, b in zip(sizes, sizes[1:])],
+        [rng.normal(0, 0.5, b).astype(np.float32) for b in sizes[1:]],
+    )
 
 
 def test_a_head_reads_only_its_columns_and_heads_round_trip():
     rng = np.random.default_rng(3)
-    policy = HeadsPolicy(10, [(np.arange(10), np.array([0, 1]), _net(rng, 10, 2)),
-                              (np.array([0, 1, 9]), np.array([2]), _net(rng, 3, 1))])
+    policy = HeadsPolicy(
+        10, [(np.arange(10), np.array([0, 1]), _net(rng, 10, 2)), (np.array([0, 1, 9]), np.array([2]), _net(rng, 3, 1))]
+    )
     F = rng.uniform(-1, 1, (40, 10)).astype(np.float32)
     G = F.copy()
     G[:, 2:9] = rng.uniform(-1, 1, (40, 7))
@@ -172,8 +191,18 @@ def test_heads_learn_their_parts_and_a_decision_ignores_what_it_cannot_see():
             out.append(Trajectory(np.column_stack([t.features, cue]), np.column_stack([t.expert, cue])))
         return out
 
-    result = imitate(rollout, method="dagger", iterations=3, runs_per_iteration=4, hidden=(16,), epochs=60,
-                     learning_rate=0.01, batch_size=64, seed=1, heads=((None, [0]), ([1], [1])))
+    result = imitate(
+        rollout,
+        method="dagger",
+        iterations=3,
+        runs_per_iteration=4,
+        hidden=(16,),
+        epochs=60,
+        learning_rate=0.01,
+        batch_size=64,
+        seed=1,
+        heads=((None, [0]), ([1], [1])),
+    )
     policy = result.policy
     assert isinstance(policy, HeadsPolicy) and policy.n_outputs == 2
     F = np.array([[0.0, 0.6, 1.0], [0.0, 0.6, -1.0], [0.0, -0.6, -1.0], [0.0, -0.6, 1.0]], np.float32)
@@ -305,8 +334,8 @@ def test_the_goal_threshold_is_calibrated_where_the_expert_turned():
         A = np.full((len(goal), 3), -1.0, np.float32)
         if turn_at is not None:
             A[turn_at, 2] = 1.0
-            F = F[:turn_at + 1]
-            A = A[:turn_at + 1]
+            F = F[: turn_at + 1]
+            A = A[: turn_at + 1]
         return Trajectory(F, A)
 
     class Reader:  # a policy whose goal output is feature 0
@@ -384,10 +413,18 @@ def test_agreement_figures_on_labels_with_known_answers():
 
 def test_a_decision_does_not_depend_on_the_batch_it_is_in():
     rng = np.random.default_rng(0)
-    policy = MLPPolicy([rng.normal(0, 0.3, (SPEC.size, 150)).astype(np.float32),
-                        rng.normal(0, 0.3, (150, 50)).astype(np.float32), rng.normal(0, 0.3, (50, 2)).astype(np.float32)],
-                       [rng.normal(size=150).astype(np.float32), rng.normal(size=50).astype(np.float32),
-                        rng.normal(size=2).astype(np.float32)])
+    policy = MLPPolicy(
+        [
+            rng.normal(0, 0.3, (SPEC.size, 150)).astype(np.float32),
+            rng.normal(0, 0.3, (150, 50)).astype(np.float32),
+            rng.normal(0, 0.3, (50, 2)).astype(np.float32),
+        ],
+        [
+            rng.normal(size=150).astype(np.float32),
+            rng.normal(size=50).astype(np.float32),
+            rng.normal(size=2).astype(np.float32),
+        ],
+    )
     F = rng.uniform(-1, 1, (300, SPEC.size)).astype(np.float32)
     F[::3, SPEC.sonar] = 1.0  # open water on a third of the rows
     full = policy(F, quiet=SPEC.sonar)
@@ -439,12 +476,12 @@ def test_the_exact_forward_pass_is_the_plain_network_and_saturates_without_warni
         B = [rng.normal(0, scale, b).astype(np.float32) for b in sizes[1:]]
         F = rng.uniform(-1, 1, (200, SPEC.size)).astype(np.float32)
         F[::2, SPEC.sonar] = 1.0
-        F[1::4, SPEC.sonar] = np.float32(1.0 - 2.0 ** -20)  # off "quiet", yet on the 2^-16 grid it is quiet
-        h = np.round(F.astype(np.float64) * 2 ** 16) / 2 ** 16  # the plain network on the same input grid
+        F[1::4, SPEC.sonar] = np.float32(1.0 - 2.0**-20)  # off "quiet", yet on the 2^-16 grid it is quiet
+        h = np.round(F.astype(np.float64) * 2**16) / 2**16  # the plain network on the same input grid
         for k, (w, b) in enumerate(zip(W, B)):
             h = h @ w.astype(np.float64) + b
             if k < len(W) - 1:
-                h = np.round(expit(h) * 2 ** 16) / 2 ** 16
+                h = np.round(expit(h) * 2**16) / 2**16
         with np.errstate(over="raise", divide="raise", invalid="raise"):  # what numpy warns of by default
             got = MLPPolicy(W, B, "logistic")(F, quiet=SPEC.sonar)
         # weights on their exact grid move an output by far less than the 2^-16 activation grid

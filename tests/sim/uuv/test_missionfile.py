@@ -65,11 +65,26 @@ def test_uuv18_layout_and_tree():
     assert len(m.barriers) == 3 and len(m.obstacles) == 3 and m.recovery_radius == 15
     assert leaf_columns(m) >= 60
     level2 = [c.name for c in tree(m).children]
-    assert level2 == ["waypoints", "mission areas", "transmission", "mission time", "collisions", "no-go areas",
-                      "operational area", "recovery", "surfacing"]
+    assert level2 == [
+        "waypoints",
+        "mission areas",
+        "transmission",
+        "mission time",
+        "collisions",
+        "no-go areas",
+        "operational area",
+        "recovery",
+        "surfacing",
+    ]
     collisions = tree(m).children[4]
-    assert [c.name for c in collisions.children] == ["obstacle O1", "obstacle O2", "obstacle O3",
-                                                     "barrier B1", "barrier B2", "barrier S"]
+    assert [c.name for c in collisions.children] == [
+        "obstacle O1",
+        "obstacle O2",
+        "obstacle O3",
+        "barrier B1",
+        "barrier B2",
+        "barrier S",
+    ]
     # the fixed shoal is not a parameter; barrier positions stay near the centreline
     targets = {(b.kind, b.name, b.field) for b in m.bindings}
     assert ("barrier", "S", "x") not in targets
@@ -96,7 +111,9 @@ def test_range2017_and_imitation7_specifics():
     r = load("range2017")
     assert not r.obstacles and not r.barriers
     assert {z.name for z in r.nogo} == {"NG", "BN1", "BN2"}
-    assert [b for b in r.bindings if b.kind == "vehicle"] == [Binding("start_battery", "vehicle", None, "start_battery")]
+    assert [b for b in r.bindings if b.kind == "vehicle"] == [
+        Binding("start_battery", "vehicle", None, "start_battery")
+    ]
     assert r.time_limit_s <= 2700
 
     m = load("imitation7")
@@ -109,7 +126,7 @@ def test_range2017_and_imitation7_specifics():
 
 
 # --------------------------------------------------------------------------- bad files
-BASE = '''
+BASE = """
 [mission]
 name = "tiny"
 origin = { lat = 47.7, lon = -122.62 }
@@ -186,7 +203,7 @@ name = "leaves"
 scores = ["mission.time_s", "mission.battery_left", "mission.distance_m", "mission.return_reason",
           "operational_area.margin_m", "recovery.distance_m", "recovery.time_s", "recovery.battery",
           "surfacing.outside_s", "surfacing.count"]
-'''
+"""
 
 
 def write(tmp_path: Path, text: str, name: str = "bad.toml") -> Path:
@@ -210,45 +227,88 @@ def test_base_mission_loads(tmp_path):
 
 
 BAD = {
-    "unknown key": (mutate('time_limit_s = 600', 'time_limit_s = 600\ncolour = "red"'),
-                    "mission.colour", "unknown key"),
-    "missing field": (mutate('time_limit_s = 600\n', ''), "mission.time_limit_s", "missing"),
-    "low >= high": (mutate('low = 0\nhigh = 400', 'low = 400\nhigh = 100'), "parameters[0].low", "must be < high"),
-    "missing element": (mutate('target = "nogo.N1.x"', 'target = "nogo.Z.x"'), "parameters[0].target",
-                        "unknown element 'nogo.Z' (known no-go areas: N1)"),
-    "permutation items": (mutate('items = ["A", "B"]', 'items = ["A", "C"]'), "parameters[1].items",
-                          "mission-area names"),
-    "unknown metric": (mutate('scores = ["waypoints",', 'scores = ["waypoint",'), "score_tree.children[0].scores[0]",
-                       "unknown metric 'waypoint'"),
+    "unknown key": (
+        mutate("time_limit_s = 600", 'time_limit_s = 600\ncolour = "red"'),
+        "mission.colour",
+        "unknown key",
+    ),
+    "missing field": (mutate("time_limit_s = 600\n", ""), "mission.time_limit_s", "missing"),
+    "low >= high": (mutate("low = 0\nhigh = 400", "low = 400\nhigh = 100"), "parameters[0].low", "must be < high"),
+    "missing element": (
+        mutate('target = "nogo.N1.x"', 'target = "nogo.Z.x"'),
+        "parameters[0].target",
+        "unknown element 'nogo.Z' (known no-go areas: N1)",
+    ),
+    "permutation items": (
+        mutate('items = ["A", "B"]', 'items = ["A", "C"]'),
+        "parameters[1].items",
+        "mission-area names",
+    ),
+    "unknown metric": (
+        mutate('scores = ["waypoints",', 'scores = ["waypoint",'),
+        "score_tree.children[0].scores[0]",
+        "unknown metric 'waypoint'",
+    ),
     "duplicate element": (mutate('name = "B"', 'name = "A"'), "mission_areas[1].name", "duplicate element name"),
-    "position outside": (mutate('low = 0\nhigh = 400', 'low = 0\nhigh = 900'), "parameters[0].high",
-                         "operational area"),
-    "for_each kind": (mutate('for_each = "area"', 'for_each = "areas"'), "score_tree.children[0].children[0].for_each",
-                      "unknown element kind 'areas'"),
-    "TOML syntax": (mutate('time_limit_s = 600', 'time_limit_s = = 600'), "TOML syntax", "line 6"),
-    "non-finite": (mutate('time_limit_s = 600', 'time_limit_s = inf'), "mission.time_limit_s", "not finite"),
-    "wrong type": (mutate('dwell_s = 60', 'dwell_s = "60"'), "mission_areas[0].dwell_s", "expected a number"),
-    "missing column": (mutate('"surfacing.outside_s", "surfacing.count"', '"surfacing.outside_s"'), "score_tree:",
-                       "'surfacing.count'"),
-    "duplicate column": (mutate('"surfacing.outside_s", "surfacing.count"',
-                                '"surfacing.outside_s", "surfacing.count", "mission.time_s"'),
-                         "score_tree.children[0].children[2].scores[10]", "appears twice"),
-    "name outside for_each": (mutate('name = "leaves"\nscores = ["mission.time_s"', 'name = "leaves"\nscores = ["{name}"'),
-                              "score_tree.children[0].children[2].scores[0]", "outside a for_each"),
-    "unknown section": (BASE + '\n[vehicel]\nbattery_wh = 10\n', "vehicel", "did you mean 'vehicle'"),
-    "unknown vehicle field": (BASE + '\n[vehicle]\nbattery_kwh = 10\n', "vehicle.battery_kwh", "allowed keys"),
-    "duplicate parameter": (mutate('name = "priority"', 'name = "nogo_x"'), "parameters[1].name",
-                            "duplicate parameter name"),
-    "element on unnamed target": (mutate('target = "nogo.N1.x"', 'target = "vehicle.V.start_battery"'),
-                                  "parameters[0].target", "takes no element name"),
-    "bad field": (mutate('target = "nogo.N1.x"', 'target = "nogo.N1.width"'), "parameters[0].target",
-                  "settable: x, y"),
-    "priority not permutation": (mutate('kind = "permutation"', 'kind = "categorical"'), "parameters[1]", "permutation"),
-    "mission priority": (mutate('time_limit_s = 600', 'time_limit_s = 600\npriority = ["A", "A"]'),
-                         "mission.priority", "exactly once"),
-    "requires missing objective": (mutate('time_limit_s = 600', 'time_limit_s = 600\nrequires = ["transmission"]'),
-                                   "mission.requires", "[transmission]"),
-    "element outside": (mutate('x = 300\ny = -300', 'x = 3000\ny = -300'), "nogo[0]", "outside the operational area"),
+    "position outside": (
+        mutate("low = 0\nhigh = 400", "low = 0\nhigh = 900"),
+        "parameters[0].high",
+        "operational area",
+    ),
+    "for_each kind": (
+        mutate('for_each = "area"', 'for_each = "areas"'),
+        "score_tree.children[0].children[0].for_each",
+        "unknown element kind 'areas'",
+    ),
+    "TOML syntax": (mutate("time_limit_s = 600", "time_limit_s = = 600"), "TOML syntax", "line 6"),
+    "non-finite": (mutate("time_limit_s = 600", "time_limit_s = inf"), "mission.time_limit_s", "not finite"),
+    "wrong type": (mutate("dwell_s = 60", 'dwell_s = "60"'), "mission_areas[0].dwell_s", "expected a number"),
+    "missing column": (
+        mutate('"surfacing.outside_s", "surfacing.count"', '"surfacing.outside_s"'),
+        "score_tree:",
+        "'surfacing.count'",
+    ),
+    "duplicate column": (
+        mutate(
+            '"surfacing.outside_s", "surfacing.count"', '"surfacing.outside_s", "surfacing.count", "mission.time_s"'
+        ),
+        "score_tree.children[0].children[2].scores[10]",
+        "appears twice",
+    ),
+    "name outside for_each": (
+        mutate('name = "leaves"\nscores = ["mission.time_s"', 'name = "leaves"\nscores = ["{name}"'),
+        "score_tree.children[0].children[2].scores[0]",
+        "outside a for_each",
+    ),
+    "unknown section": (BASE + "\n[vehicel]\nbattery_wh = 10\n", "vehicel", "did you mean 'vehicle'"),
+    "unknown vehicle field": (BASE + "\n[vehicle]\nbattery_kwh = 10\n", "vehicle.battery_kwh", "allowed keys"),
+    "duplicate parameter": (
+        mutate('name = "priority"', 'name = "nogo_x"'),
+        "parameters[1].name",
+        "duplicate parameter name",
+    ),
+    "element on unnamed target": (
+        mutate('target = "nogo.N1.x"', 'target = "vehicle.V.start_battery"'),
+        "parameters[0].target",
+        "takes no element name",
+    ),
+    "bad field": (mutate('target = "nogo.N1.x"', 'target = "nogo.N1.width"'), "parameters[0].target", "settable: x, y"),
+    "priority not permutation": (
+        mutate('kind = "permutation"', 'kind = "categorical"'),
+        "parameters[1]",
+        "permutation",
+    ),
+    "mission priority": (
+        mutate("time_limit_s = 600", 'time_limit_s = 600\npriority = ["A", "A"]'),
+        "mission.priority",
+        "exactly once",
+    ),
+    "requires missing objective": (
+        mutate("time_limit_s = 600", 'time_limit_s = 600\nrequires = ["transmission"]'),
+        "mission.requires",
+        "[transmission]",
+    ),
+    "element outside": (mutate("x = 300\ny = -300", "x = 3000\ny = -300"), "nogo[0]", "outside the operational area"),
 }
 
 

@@ -27,6 +27,7 @@ def col(result, name):
 
 # -- dynamics -------------------------------------------------------------------------
 
+
 def test_vehicle_turns_at_its_rate_limit_and_settles_on_command():
     spec = Vehicle()
     s = VehicleState.at_rest(np.zeros(1), np.zeros(1), np.zeros(1), np.full(1, 1000.0))
@@ -43,7 +44,7 @@ def test_vehicle_turns_at_its_rate_limit_and_settles_on_command():
 def test_power_grows_with_the_cube_of_speed_and_drains_the_battery():
     spec = Vehicle()
     p2, p3 = propulsion_power(spec, np.array([2.0, 3.0]))
-    assert p3 - spec.hotel_w == pytest.approx((p2 - spec.hotel_w) * 1.5 ** 3)
+    assert p3 - spec.hotel_w == pytest.approx((p2 - spec.hotel_w) * 1.5**3)
     s = VehicleState.at_rest(np.zeros(2), np.zeros(2), np.zeros(2), np.full(2, 100.0))
     for _ in range(100):
         step_vehicle(s, spec, np.zeros(2), np.array([1.0, 3.0]), np.zeros(2), np.zeros(2), 1.0, np.ones(2, bool))
@@ -63,6 +64,7 @@ def test_current_carries_a_vehicle_and_crabbing_cancels_it():
 
 
 # -- behaviours -----------------------------------------------------------------------
+
 
 def test_plain_mission_reaches_the_waypoint_and_recovers():
     r = run(mission())
@@ -104,8 +106,11 @@ def test_low_fuel_turns_the_vehicle_home_before_the_survey():
 
 
 def test_survey_loiters_for_the_dwell_time_in_priority_order():
-    m = mission(mission_areas=(area("A", -300.0, 300.0, dwell=90.0), area("B", 300.0, 300.0, dwell=60.0)),
-                priority=("B", "A"), mission_requires=("mission_areas",))
+    m = mission(
+        mission_areas=(area("A", -300.0, 300.0, dwell=90.0), area("B", 300.0, 300.0, dwell=60.0)),
+        priority=("B", "A"),
+        mission_requires=("mission_areas",),
+    )
     r = run(m)
     assert col(r, "mission_areas") == 1.0
     assert col(r, "area.B.order") == 1 and col(r, "area.A.order") == 2
@@ -121,20 +126,32 @@ def test_transmission_surfaces_inside_the_area_only_while_the_window_is_open():
     assert col(r, "transmission") == 1.0 and col(r, "surfacing.outside_s") == 0.0
     assert surfaced_t.min() >= 300.0 and surfaced_t.max() < 1500.0
     assert col(r, "transmission.time_s") - 300.0 >= 120.0 - 1e-9
-    closed = run(mission(transmission=dataclasses.replace(tx, window_start_s=10.0, window_length_s=30.0),
-                         mission_requires=("transmission",)))
+    closed = run(
+        mission(
+            transmission=dataclasses.replace(tx, window_start_s=10.0, window_length_s=30.0),
+            mission_requires=("transmission",),
+        )
+    )
     assert col(closed, "transmission") == 0.0 and closed.modes[0] == 1  # the window closed before arrival
 
 
 def test_early_transmission_comes_before_the_survey():
     tx = Transmission("TX", -400.0, -400.0, 300.0, 300.0, 0.0, 900.0, 120.0)
     areas = (area("A", 400.0, 400.0),)
-    r = run(mission(transmission=tx, mission_areas=areas, priority=("A",), waypoints=(),
-                    mission_requires=("mission_areas", "transmission")))
+    r = run(
+        mission(
+            transmission=tx,
+            mission_areas=areas,
+            priority=("A",),
+            waypoints=(),
+            mission_requires=("mission_areas", "transmission"),
+        )
+    )
     assert col(r, "transmission.time_s") < col(r, "area.A.entry_s")
 
 
 # -- scoring rules --------------------------------------------------------------------
+
 
 def test_entering_a_no_go_area_fails_safety_but_the_run_goes_on():
     # home lies beyond a no-go area: at critical battery the vehicle goes straight through it
@@ -175,6 +192,7 @@ def test_scores_are_finite_and_named_for_every_column():
 
 # -- validity, determinism, batch == single -------------------------------------------
 
+
 def test_invalid_scenarios_are_reported_not_simulated():
     m = mission(obstacles=(Triangle("O1", 0.0, -820.0, 50.0),))  # on the recovery point
     r = sim.uuv.simulate(m, np.zeros((2, m.dim)))
@@ -196,7 +214,7 @@ def test_a_scenario_scores_the_same_alone_as_in_a_batch(name):
     X = np.random.default_rng(1).random((200, m.dim))
     batch = sim.uuv.simulate(m, X)
     for i in np.flatnonzero(batch.valid)[:6]:
-        alone = sim.uuv.simulate(m, X[i:i + 1])
+        alone = sim.uuv.simulate(m, X[i : i + 1])
         np.testing.assert_array_equal(alone.scores[0], batch.scores[i])
 
 
@@ -211,7 +229,7 @@ def test_stochastic_runs_are_seeded_and_independent_of_the_batch():
     assert np.any(a.scores[a.valid] != c.scores[c.valid])  # another seed, other runs
     assert np.any(a.scores[a.valid] != det.scores[det.valid])  # noise is on
     i = int(np.flatnonzero(a.valid)[3])
-    np.testing.assert_array_equal(sim.uuv.simulate(m, X[i:i + 1], seed=5, stochastic=True).scores[0], a.scores[i])
+    np.testing.assert_array_equal(sim.uuv.simulate(m, X[i : i + 1], seed=5, stochastic=True).scores[0], a.scores[i])
 
 
 def test_navigation_filter_matches_filterpy():
@@ -281,6 +299,7 @@ def test_a_run_rescored_from_its_telemetry_track_matches_the_batch():
     names = r.names
     for i in np.flatnonzero(r.valid)[:15]:
         aborted = [r.scores[i, names.index(f"waypoint.{w}.aborted")] > 0 for w in range(len(m.waypoints))]
-        again = score_track(m, X[i], r.trajectories[i][:, :6], aborted,
-                            int(r.scores[i, names.index("mission.return_reason")]))
+        again = score_track(
+            m, X[i], r.trajectories[i][:, :6], aborted, int(r.scores[i, names.index("mission.return_reason")])
+        )
         np.testing.assert_array_equal(again, r.scores[i])

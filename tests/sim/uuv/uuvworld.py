@@ -16,14 +16,30 @@ def mission(**overrides) -> Mission:
     One parameter (start time) so the unit cube is 1-D unless ``space``/``bindings`` are given.
     """
     base = dict(
-        name="test", origin_lat=47.7, origin_lon=-122.6, operational_area=Rect("op", 0.0, 0.0, 2000.0, 2000.0),
-        launch=(0.0, -800.0), recovery=(0.0, -820.0), recovery_radius=15.0, waypoints=((0.0, 0.0),),
-        mission_areas=(), priority=(), transmission=None, nogo=(), barriers=(), obstacles=(),
-        vehicle=Vehicle(battery_wh=2000.0), current=Current(speed=0.0, perturbation=0.0), start_time_s=0.0,
-        time_limit_s=3600.0, waypoint_radius=25.0,
+        name="test",
+        origin_lat=47.7,
+        origin_lon=-122.6,
+        operational_area=Rect("op", 0.0, 0.0, 2000.0, 2000.0),
+        launch=(0.0, -800.0),
+        recovery=(0.0, -820.0),
+        recovery_radius=15.0,
+        waypoints=((0.0, 0.0),),
+        mission_areas=(),
+        priority=(),
+        transmission=None,
+        nogo=(),
+        barriers=(),
+        obstacles=(),
+        vehicle=Vehicle(battery_wh=2000.0),
+        current=Current(speed=0.0, perturbation=0.0),
+        start_time_s=0.0,
+        time_limit_s=3600.0,
+        waypoint_radius=25.0,
         space=StateSpace([Continuous("start_time", 0.0, 43200.0)]),
-        bindings=(Binding("start_time", "mission", None, "start_time_s"),), score_tree={},
-        mission_requires=("waypoints",), dt=2.0,
+        bindings=(Binding("start_time", "mission", None, "start_time_s"),),
+        score_tree={},
+        mission_requires=("waypoints",),
+        dt=2.0,
     )
     base.update(overrides)
     return Mission(**base)
