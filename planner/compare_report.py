@@ -139,27 +139,9 @@ def _bias_figure(result: dict, path: Path) -> None:
     plt.close(fig)
 
 
-def write_comparison_report(
-    result: dict, plan, tracks: list[tuple[str, np.ndarray]], traj: dict, out_dir: Path
-) -> Path:
-    """Write ``comparison.html`` and its figures into ``out_dir``; returns the page's path."""
-    out_dir = Path(out_dir)
-    fig_dir = out_dir / FIGURES
-    fig_dir.mkdir(parents=True, exist_ok=True)
-    parts = [
-        f"<!doctype html><html><head><meta charset='utf-8'><title>RAPT comparison: {_e(result['plan']['mission'])}"
-        f"</title><style>{CSS}</style></head><body>",
-        f"<h1>Range day against plan {_e(result['plan']['id'])} ({_e(result['plan']['mission'])})</h1>",
-        f"<p>{len(result['logs'])} log(s) of plan <code>{_e(result['plan']['path'])}</code>.</p>",
-    ]
-    lost = [(lg["path"], p) for lg in result["logs"] for p in lg["lost"]]
-    if lost:
-        parts.append(
-            "<div class='warn'><b>What the logs lost</b><ul>"
-            + "".join(f"<li><code>{_e(Path(p).name)}</code>: {_e(msg)}</li>" for p, msg in lost)
-            + "</ul></div>"
-        )
-    # bias
+def _bias_section(result: dict, fig_dir: Path) -> list[str]:
+    """The fitted execution bias, its figure and how often the modes agreed."""
+    parts: list[str] = []
     _bias_figure(result, fig_dir / "bias.png")
     fitd = result["bias_fit"]
     parts.append(
@@ -187,7 +169,12 @@ def write_comparison_report(
         f"</b> of {ag['scenarios']} scenario(s) as planned, and on <b>{pct(ag['corrected'])}</b> with the "
         "fitted bias applied.</p>"
     )
-    # scenarios
+    return parts
+
+
+def _scenario_section(result: dict, plan, tracks: list[tuple[str, np.ndarray]], traj: dict, fig_dir: Path) -> list[str]:
+    """Per scenario: predicted, observed and corrected modes, path errors, and its map."""
+    parts: list[str] = []
     parts.append(
         "<h2>Scenarios</h2><table><tr><th class='l'>scenario</th><th class='l'>log</th><th>predicted</th>"
         "<th>observed</th><th>corrected</th><th>path error (m)</th><th>corrected (m)</th>"
@@ -209,7 +196,12 @@ def write_comparison_report(
         p, c = traj.get(sid, (None, None))
         _map(plan, sid, track, p, c, row, fig_dir / name)
         parts.append(f"<img src='{FIGURES}/{_e(name)}' alt='{_e(sid)}' style='width:48%'>")
-    # pairs
+    return parts
+
+
+def _pair_section(result: dict) -> list[str]:
+    """Per pair: whether it straddled its boundary on the water and still does under the bias."""
+    parts: list[str] = []
     parts.append(
         "<h2>Pairs</h2><table><tr><th>pair</th><th class='l'>scenarios</th><th class='l'>elements</th>"
         "<th>predicted</th><th>observed</th><th>straddled on the water</th><th>under the bias</th></tr>"
@@ -227,7 +219,13 @@ def write_comparison_report(
             f"<td>{'<span class=bad>flagged: ' + _e(p.get('reason')) + '</span>' if p['flagged'] else 'holds'}"
             "</td></tr>"
         )
-    parts.append("</table><h2>Re-plan: adjusted scenarios for the next runs</h2>")
+    parts.append("</table>")
+    return parts
+
+
+def _replan_section(result: dict) -> list[str]:
+    """The adjusted scenarios proposed for the next runs, and the unflown ones re-predicted."""
+    parts = ["<h2>Re-plan: adjusted scenarios for the next runs</h2>"]
     if not result["proposals"]:
         parts.append("<p>Every pair still straddles its boundary under the fitted bias; no adjustment needed.</p>")
     else:
@@ -261,6 +259,33 @@ def write_comparison_report(
                 f"<td class='{'bad' if r['changed'] else 'ok'}'>{_e(r['corrected_mode'])}</td></tr>"
             )
         parts.append("</table>")
+    return parts
+
+
+def write_comparison_report(
+    result: dict, plan, tracks: list[tuple[str, np.ndarray]], traj: dict, out_dir: Path
+) -> Path:
+    """Write ``comparison.html`` and its figures into ``out_dir``; returns the page's path."""
+    out_dir = Path(out_dir)
+    fig_dir = out_dir / FIGURES
+    fig_dir.mkdir(parents=True, exist_ok=True)
+    parts = [
+        f"<!doctype html><html><head><meta charset='utf-8'><title>RAPT comparison: {_e(result['plan']['mission'])}"
+        f"</title><style>{CSS}</style></head><body>",
+        f"<h1>Range day against plan {_e(result['plan']['id'])} ({_e(result['plan']['mission'])})</h1>",
+        f"<p>{len(result['logs'])} log(s) of plan <code>{_e(result['plan']['path'])}</code>.</p>",
+    ]
+    lost = [(lg["path"], p) for lg in result["logs"] for p in lg["lost"]]
+    if lost:
+        parts.append(
+            "<div class='warn'><b>What the logs lost</b><ul>"
+            + "".join(f"<li><code>{_e(Path(p).name)}</code>: {_e(msg)}</li>" for p, msg in lost)
+            + "</ul></div>"
+        )
+    parts += _bias_section(result, fig_dir)
+    parts += _scenario_section(result, plan, tracks, traj, fig_dir)
+    parts += _pair_section(result)
+    parts += _replan_section(result)
     parts.append("</body></html>")
     page = out_dir / REPORT_NAME
     page.write_text("\n".join(parts))

@@ -29,7 +29,7 @@ import math
 import re
 from collections.abc import Iterable, Iterator
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 from urllib.parse import quote
 
 import matplotlib
@@ -707,6 +707,80 @@ def _run_order_table(plan: dict, out_dir: Path) -> str:
     return f"<table>{head}{''.join(rows)}</table>"
 
 
+class _Figures(NamedTuple):
+    """What every pair's figures share: coordinate labels and owners, importances and the dithering axes."""
+
+    labels: list[str]
+    owners: list[str]
+    importance: tuple[np.ndarray, np.ndarray]
+    axes: tuple[int, int]
+    dim: int
+
+
+def _pair_section(
+    pair: dict,
+    by_id: dict[str, dict],
+    out_dir: Path,
+    fig_dir: Path,
+    figures: _Figures,
+    dithers: dict[str, tuple[np.ndarray, np.ndarray]],
+) -> list[str]:
+    """One boundary pair's section: its map, parallel coordinates, dithering plot and tables."""
+    labels, owners, imp, axes_idx, dim = figures
+    body: list[str] = []
+    pid = _slug(pair.get("id"))
+    scen = [by_id[sid] for sid in pair.get("scenarios", []) if sid in by_id]
+    modes = pair.get("modes", [])
+    elements = ", ".join(str(e) for e in pair.get("elements", []))
+    body.append(f'<section class="pair" id="pair-{_e(pid)}"><h3>Pair {_e(pair.get("id"))}: {_e(elements)}</h3>')
+    body.append(
+        f"<p>Score-tree level {_e(pair.get('level', '?'))}; modes "
+        + " / ".join(_mode_badge(m) for m in modes)
+        + f"; distance in the unit cube {_num(pair.get('distance'))}; scenarios "
+        + ", ".join(_e(s["id"]) for s in scen)
+        + ".</p>"
+    )
+    if not scen:
+        body.append('<p class="note">The pair\'s scenarios are missing from the plan.</p></section>')
+        return body
+    note = _fig_map(pair, scen, out_dir, fig_dir / f"pair{pid}_map.png")
+    if note is None:
+        body.append(
+            _img(
+                f"{FIGURES_DIR}/pair{pid}_map.png",
+                f"map of pair {pair.get('id')}",
+                "Mission elements of each scenario in metres east/north of the operational area's "
+                "centre, its predicted track (solid) and the other scenario's track (dotted).",
+            )
+        )
+    else:
+        body.append(f'<p class="note">{_e(note)}</p>')
+    _fig_parallel(pair, scen, labels, owners, imp, fig_dir / f"pair{pid}_parallel.png")
+    body.append(
+        _img(
+            f"{FIGURES_DIR}/pair{pid}_parallel.png",
+            f"parallel coordinates of pair {pair.get('id')}",
+            "Unit-cube coordinates of both scenarios (a permutation spans several shaded "
+            "coordinates, one key per item); below, each coordinate's importance for mission "
+            "and safety success.",
+        )
+    )
+    if dim >= 2 and _fig_dithers(pair, scen, dithers, labels, axes_idx, fig_dir / f"pair{pid}_dithers.png"):
+        body.append(
+            _img(
+                f"{FIGURES_DIR}/pair{pid}_dithers.png",
+                f"dithering of pair {pair.get('id')}",
+                f"Dithering runs around each scenario on {labels[axes_idx[0]]} and "
+                f"{labels[axes_idx[1]]} (the two most sensitive coordinates), coloured by the mode "
+                "the stochastic simulation gave; the star is the scenario.",
+            )
+        )
+    body.append(_scenario_table(scen))
+    body.append(_parameter_table(scen))
+    body.append("</section>")
+    return body
+
+
 def write_report(plan: dict, out_dir: Path, dithers: dict[str, tuple[np.ndarray, np.ndarray]] | None = None) -> Path:
     """Write ``out_dir/report.html`` and its figures (``out_dir/figures/*.png``); return the page's path.
 
@@ -762,57 +836,9 @@ def write_report(plan: dict, out_dir: Path, dithers: dict[str, tuple[np.ndarray,
     body.append("<h2>Boundary pairs</h2>")
     if not plan["pairs"]:
         body.append('<p class="note">The plan holds no boundary pairs.</p>')
+    figures = _Figures(labels, owners, imp, axes_idx, dim)
     for pair in plan["pairs"]:
-        pid = _slug(pair.get("id"))
-        scen = [by_id[sid] for sid in pair.get("scenarios", []) if sid in by_id]
-        modes = pair.get("modes", [])
-        elements = ", ".join(str(e) for e in pair.get("elements", []))
-        body.append(f'<section class="pair" id="pair-{_e(pid)}"><h3>Pair {_e(pair.get("id"))}: {_e(elements)}</h3>')
-        body.append(
-            f"<p>Score-tree level {_e(pair.get('level', '?'))}; modes "
-            + " / ".join(_mode_badge(m) for m in modes)
-            + f"; distance in the unit cube {_num(pair.get('distance'))}; scenarios "
-            + ", ".join(_e(s["id"]) for s in scen)
-            + ".</p>"
-        )
-        if not scen:
-            body.append('<p class="note">The pair\'s scenarios are missing from the plan.</p></section>')
-            continue
-        note = _fig_map(pair, scen, out_dir, fig_dir / f"pair{pid}_map.png")
-        if note is None:
-            body.append(
-                _img(
-                    f"{FIGURES_DIR}/pair{pid}_map.png",
-                    f"map of pair {pair.get('id')}",
-                    "Mission elements of each scenario in metres east/north of the operational area's "
-                    "centre, its predicted track (solid) and the other scenario's track (dotted).",
-                )
-            )
-        else:
-            body.append(f'<p class="note">{_e(note)}</p>')
-        _fig_parallel(pair, scen, labels, owners, imp, fig_dir / f"pair{pid}_parallel.png")
-        body.append(
-            _img(
-                f"{FIGURES_DIR}/pair{pid}_parallel.png",
-                f"parallel coordinates of pair {pair.get('id')}",
-                "Unit-cube coordinates of both scenarios (a permutation spans several shaded "
-                "coordinates, one key per item); below, each coordinate's importance for mission "
-                "and safety success.",
-            )
-        )
-        if dim >= 2 and _fig_dithers(pair, scen, dithers, labels, axes_idx, fig_dir / f"pair{pid}_dithers.png"):
-            body.append(
-                _img(
-                    f"{FIGURES_DIR}/pair{pid}_dithers.png",
-                    f"dithering of pair {pair.get('id')}",
-                    f"Dithering runs around each scenario on {labels[axes_idx[0]]} and "
-                    f"{labels[axes_idx[1]]} (the two most sensitive coordinates), coloured by the mode "
-                    "the stochastic simulation gave; the star is the scenario.",
-                )
-            )
-        body.append(_scenario_table(scen))
-        body.append(_parameter_table(scen))
-        body.append("</section>")
+        body.extend(_pair_section(pair, by_id, out_dir, fig_dir, figures, dithers))
     # run order
     body.append("<h2>Run order</h2>")
     body.append(_run_order_table(plan, out_dir))

@@ -15,6 +15,7 @@ import os
 import socket
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -89,6 +90,16 @@ class _Recorder:
         self._stop.set()
         self.thread.join(timeout=5)
         self.sub.undeclare()
+
+
+def _wait_for(condition: Callable[[], bool], timeout_s: float, poll_s: float = 0.01) -> bool:
+    """Poll ``condition`` until it holds or ``timeout_s`` of wall time pass; whether it held."""
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() >= deadline:
+            return False
+        time.sleep(poll_s)
+    return True
 
 
 def run_sil(
@@ -166,24 +177,15 @@ def run_sil(
                 session, vehicle, mission, u, source=SURROGATE_SOURCE, surrogate=surrogate
             ).start()
         bridge = MavlinkBridge(f"udpout:127.0.0.1:{port}", session, vehicle=vehicle, allow_commands=True).start()
-        deadline = time.monotonic() + 10
-        while bridge.target is None and time.monotonic() < deadline:
-            time.sleep(0.01)
-        if bridge.target is None:
+        if not _wait_for(lambda: bridge.target is not None, 10):
             raise LinkTimeoutError("front-seat: no HEARTBEAT on the MAVLink link within 10 s")
         if surrogate is not None:
             session.put(keys.active(vehicle), SURROGATE_SOURCE)
-            deadline = time.monotonic() + 10
-            while bridge.active != SURROGATE_SOURCE and time.monotonic() < deadline:
-                time.sleep(0.01)
-            if bridge.active != SURROGATE_SOURCE:
+            if not _wait_for(lambda: bridge.active == SURROGATE_SOURCE, 10):
                 raise LinkTimeoutError("bridge: did not take the surrogate as the active source within 10 s")
         bridge.set_mode("GUIDED")
         bridge.arm(True)
-        deadline = time.monotonic() + timeout_s
-        while not fs.ended and time.monotonic() < deadline:
-            time.sleep(0.005)
-        if not fs.ended:
+        if not _wait_for(lambda: fs.ended, timeout_s, poll_s=0.005):
             raise LinkTimeoutError(f"timeout_s: the run did not end within {timeout_s} s of wall time")
         time.sleep(0.3)  # let the last step's telemetry reach the recorder and the logger
         wall = time.perf_counter() - started

@@ -9,8 +9,9 @@ from __future__ import annotations
 import typer
 from rich.console import Console
 from rich.markup import escape
+from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-__all__ = ["err", "out", "fail"]
+__all__ = ["err", "out", "fail", "progress_bar"]
 
 err = Console(stderr=True)
 out = Console()
@@ -20,3 +21,21 @@ def fail(message: str) -> None:
     """One-line error, exit code 2, no traceback.  ``message`` is printed as written (brackets are not rich markup)."""
     err.print(f"[bold red]error:[/] {escape(message)}", highlight=False, soft_wrap=True)
     raise typer.Exit(code=2)
+
+
+def progress_bar(label: str) -> Progress:
+    """A transient progress bar on stderr (label, bar, done/total, rate, elapsed); silent when stderr is no terminal.
+
+    ``label`` is the first column's format, e.g. ``"{task.description:>8}"``; each task
+    carries a ``rate`` field for the fourth column.
+    """
+    return Progress(
+        TextColumn(label),
+        BarColumn(),
+        MofNCompleteColumn(),
+        TextColumn("{task.fields[rate]}"),
+        TimeElapsedColumn(),
+        console=err,
+        transient=True,
+        disable=not err.is_terminal,
+    )

@@ -7,10 +7,9 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from planner.cli.console import err, fail, out
+from planner.cli.console import err, fail, out, progress_bar
 from planner.cli.inputs import load_mission
 
 __all__ = ["generate"]
@@ -89,16 +88,7 @@ def generate(
     except (ValueError, OSError) as exc:
         fail(str(exc))
     out_dir.mkdir(parents=True, exist_ok=True)
-    with Progress(
-        TextColumn("{task.description:>8}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TextColumn("{task.fields[rate]}"),
-        TimeElapsedColumn(),
-        console=err,
-        transient=True,
-        disable=not err.is_terminal,
-    ) as bar:
+    with progress_bar("{task.description:>8}") as bar:
         tasks: dict = {}
         start = time.perf_counter()
 

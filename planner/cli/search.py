@@ -11,11 +11,10 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
-from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
 import rapt
-from planner.cli.console import err, fail, out
+from planner.cli.console import fail, out, progress_bar
 from planner.cli.inputs import load_mission
 from rapt.metrics import quality_table
 from rapt.testfunctions import REFERENCE_SETTINGS, SYSTEMS, get_system, search_output_types
@@ -25,16 +24,7 @@ __all__ = ["run_search", "search", "study"]
 
 def run_search(label: str, fn, bounds, budget: int, **kwargs):
     """``rapt.search`` behind a progress bar on stderr; bad arguments become one-line errors."""
-    with Progress(
-        TextColumn(f"{label:>6}"),
-        BarColumn(),
-        MofNCompleteColumn(),
-        TextColumn("{task.fields[rate]}"),
-        TimeElapsedColumn(),
-        console=err,
-        transient=True,
-        disable=not err.is_terminal,
-    ) as bar:
+    with progress_bar(f"{label:>6}") as bar:
         task = bar.add_task(label, total=budget, rate="")
         start = time.perf_counter()
 

@@ -43,17 +43,8 @@ __all__ = ["FrontSeat", "GUIDED", "MANUAL", "SURFACE", "VELOCITY_YAW_MASK"]
 
 mav = mavutil.mavlink
 GUIDED, MANUAL, SURFACE = 4, 19, 9
-MODES = {
-    "STABILIZE": 0,
-    "ACRO": 1,
-    "ALT_HOLD": 2,
-    "AUTO": 3,
-    "GUIDED": 4,
-    "CIRCLE": 7,
-    "SURFACE": 9,
-    "POSHOLD": 16,
-    "MANUAL": 19,
-}
+#: The modes this front-seat accepts: the ArduSub modes pymavlink names (ArduSub/mode.h).
+MODES = frozenset(mavutil.mode_mapping_sub)
 #: Velocity and yaw used; position, acceleration and yaw rate ignored.
 VELOCITY_YAW_MASK = 2503
 #: ArduSub zeroes a velocity target not refreshed within this many seconds.
@@ -348,7 +339,7 @@ class FrontSeat:
                 self.armed = msg.param1 > 0.5
         elif cmd == mav.MAV_CMD_DO_SET_MODE:
             mode = int(msg.param2)
-            if mode in MODES.values():
+            if mode in MODES:
                 self.mode = mode
             else:
                 result = mav.MAV_RESULT_DENIED

@@ -630,22 +630,8 @@ class _Loader:
                     f"{p['target']!r} is already set by {seen_targets[key]}; give each field one parameter",
                 )
             seen_targets[key] = where
-            tfield = f"{where}.target"
-
             if binding.field == "priority":
-                items = self.string_list(p["items"], f"{where}.items")
-                if sorted(items) != sorted(area_names) or len(set(items)) != len(items):
-                    self.fail(
-                        f"{where}.items",
-                        f"{items!r} is not the mission-area names; list each of {_names(area_names)} exactly once",
-                    )
-                if len(items) < 2:
-                    self.fail(
-                        f"{tfield}",
-                        "a priority permutation needs at least 2 mission areas; "
-                        "drop this parameter or add [[mission_areas]]",
-                    )
-                params.append(Permutation(pname, tuple(items)))
+                params.append(self.priority_parameter(p, where, pname, area_names))
             elif kind == "permutation":
                 self.fail(
                     f"{where}.kind",
@@ -653,51 +639,71 @@ class _Loader:
                     "use continuous, integer or categorical",
                 )
             elif kind == "categorical":
-                choices = p["choices"]
-                if not isinstance(choices, list):
-                    self.fail(
-                        f"{where}.choices",
-                        f"expected a list of numbers, got {choices!r}; write e.g. choices = [0.1, 0.2]",
-                    )
-                values = [self.check_number(c, f"{where}.choices[{j}]") for j, c in enumerate(choices)]
-                if len(values) < 2 or len(set(values)) != len(values):
-                    self.fail(
-                        f"{where}.choices", f"{choices!r} needs at least 2 distinct values; add or de-duplicate choices"
-                    )
-                self.value_range(binding, min(values), max(values), f"{where}.choices")
-                params.append(Categorical(pname, tuple(values)))
+                params.append(self.categorical_parameter(p, where, pname, binding))
             else:
-                if kind == "integer":
-                    for k in ("low", "high"):
-                        if isinstance(p[k], bool) or not isinstance(p[k], int):
-                            self.fail(
-                                f"{where}.{k}",
-                                f"an integer parameter needs whole-number bounds, got {p[k]!r}; "
-                                'write e.g. 3, or use kind = "continuous"',
-                            )
-                low = self.check_number(p["low"], f"{where}.low")
-                high = self.check_number(p["high"], f"{where}.high")
-                if low >= high:
-                    self.fail(f"{where}.low", f"low={_fmt(low)} must be < high={_fmt(high)}; swap or widen the bounds")
-                log = False
-                if "log" in p:
-                    log = p["log"]
-                    if not isinstance(log, bool):
-                        self.fail(f"{where}.log", f"expected true or false, got {log!r}")
-                    if log and low <= 0:
-                        self.fail(
-                            f"{where}.low", f"log scale needs low > 0, got {_fmt(low)}; raise low or set log = false"
-                        )
-                self.value_range(binding, low, high, where)
-                params.append(
-                    Integer(pname, int(low), int(high)) if kind == "integer" else Continuous(pname, low, high, log)
-                )
+                params.append(self.numeric_parameter(p, where, kind, pname, binding))
             bindings.append(binding)
         try:
             space = StateSpace(params)
         except ValueError as exc:  # pragma: no cover - everything is checked above
             self.fail("parameters", str(exc))
         return space, tuple(bindings)
+
+    def priority_parameter(self, p: Mapping, where: str, pname: str, area_names: list[str]) -> Permutation:
+        """A permutation of the mission areas' priority order: every area named exactly once."""
+        tfield = f"{where}.target"
+        items = self.string_list(p["items"], f"{where}.items")
+        if sorted(items) != sorted(area_names) or len(set(items)) != len(items):
+            self.fail(
+                f"{where}.items",
+                f"{items!r} is not the mission-area names; list each of {_names(area_names)} exactly once",
+            )
+        if len(items) < 2:
+            self.fail(
+                f"{tfield}",
+                "a priority permutation needs at least 2 mission areas; drop this parameter or add [[mission_areas]]",
+            )
+        return Permutation(pname, tuple(items))
+
+    def categorical_parameter(self, p: Mapping, where: str, pname: str, binding: Binding) -> Categorical:
+        """A choice among at least two distinct numbers, each within the target field's range."""
+        choices = p["choices"]
+        if not isinstance(choices, list):
+            self.fail(
+                f"{where}.choices",
+                f"expected a list of numbers, got {choices!r}; write e.g. choices = [0.1, 0.2]",
+            )
+        values = [self.check_number(c, f"{where}.choices[{j}]") for j, c in enumerate(choices)]
+        if len(values) < 2 or len(set(values)) != len(values):
+            self.fail(f"{where}.choices", f"{choices!r} needs at least 2 distinct values; add or de-duplicate choices")
+        self.value_range(binding, min(values), max(values), f"{where}.choices")
+        return Categorical(pname, tuple(values))
+
+    def numeric_parameter(
+        self, p: Mapping, where: str, kind: str, pname: str, binding: Binding
+    ) -> Integer | Continuous:
+        """An integer or continuous range (optionally log-scaled) within the target field's range."""
+        if kind == "integer":
+            for k in ("low", "high"):
+                if isinstance(p[k], bool) or not isinstance(p[k], int):
+                    self.fail(
+                        f"{where}.{k}",
+                        f"an integer parameter needs whole-number bounds, got {p[k]!r}; "
+                        'write e.g. 3, or use kind = "continuous"',
+                    )
+        low = self.check_number(p["low"], f"{where}.low")
+        high = self.check_number(p["high"], f"{where}.high")
+        if low >= high:
+            self.fail(f"{where}.low", f"low={_fmt(low)} must be < high={_fmt(high)}; swap or widen the bounds")
+        log = False
+        if "log" in p:
+            log = p["log"]
+            if not isinstance(log, bool):
+                self.fail(f"{where}.log", f"expected true or false, got {log!r}")
+            if log and low <= 0:
+                self.fail(f"{where}.low", f"log scale needs low > 0, got {_fmt(low)}; raise low or set log = false")
+        self.value_range(binding, low, high, where)
+        return Integer(pname, int(low), int(high)) if kind == "integer" else Continuous(pname, low, high, log)
 
     def target(self, p: Mapping, where: str, pname: str) -> Binding:
         field = f"{where}.target"
