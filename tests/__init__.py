@@ -1,0 +1,1 @@
+"""RAPT's tests, one sub-package per package (rapt, sim, bridge, planner, cli)."""

@@ -31,6 +31,8 @@ from tests.bridge.test_mavlink_bridge import (
     wait_until,
 )
 
+pytestmark = [pytest.mark.integration]
+
 ROOT = Path(__file__).resolve().parents[2]
 
 

@@ -34,6 +34,8 @@ VEHICLE = "uuv1"
 
 from tests.loopback import free_port, wait_until  # noqa: E402
 
+pytestmark = [pytest.mark.integration]
+
 
 class FakeVehicle:
     """A minimal ArduSub front-seat: HEARTBEAT (submarine, ArduPilotMega), LOCAL_POSITION_NED and

@@ -1,0 +1,1 @@
+"""Tests of the command line, planner/cli: each command as a user runs it."""

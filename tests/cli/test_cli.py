@@ -1,6 +1,9 @@
+"""The `rapt-plan` commands as a user runs them: output, exit codes, one-line errors, processes that stop cleanly."""
+
 import re
 from pathlib import Path
 
+import pytest
 from typer.testing import CliRunner
 
 from planner.cli import app
@@ -64,6 +67,7 @@ def test_study_bad_mission_is_one_line_and_exit_2(tmp_path):
         assert len([line for line in result.output.splitlines() if line.strip()]) == 1
 
 
+@pytest.mark.integration
 def test_run_flies_a_scenario_in_the_loop_and_logs_it(tmp_path):
     log = tmp_path / "run.mcap"
     result = runner.invoke(app, ["run", RANGE2017, "--scenario", "3", "--log", str(log)])
@@ -76,6 +80,7 @@ def test_run_flies_a_scenario_in_the_loop_and_logs_it(tmp_path):
     assert read_metadata(log)["scenario"]["scenario_id"] == "sobol-3"
 
 
+@pytest.mark.integration
 def test_each_piece_runs_as_its_own_process_and_stops_cleanly(tmp_path):
     import signal
     import socket

@@ -29,6 +29,8 @@ from planner.logs import read_run
 from planner.plans import load_plan
 from sim.uuv.bias import Bias, parse_bias
 
+pytestmark = [pytest.mark.slow, pytest.mark.integration]
+
 ROOT = Path(__file__).resolve().parents[2]
 MISSION = ROOT / "examples" / "range2017.toml"
 INJECTED = {"speed": 1.15, "current_offset": 0.3}

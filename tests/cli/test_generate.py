@@ -1,18 +1,14 @@
 """``rapt-plan generate``: resume, refusal to overwrite, one-line errors, and a study killed mid-search."""
 
-import json
 import re
 from pathlib import Path
 
-import jsonschema
+import pytest
 from typer.testing import CliRunner
 
-import planner
 from planner.cli import app
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
-SCHEMA = json.loads((Path(planner.__file__).parent / "plan.schema.json").read_text())
-PLAN_VALIDATOR = jsonschema.Draft202012Validator(SCHEMA)
 runner = CliRunner()
 
 
@@ -54,6 +50,7 @@ def test_cli_generate_resume_and_errors(tmp_path):
         assert len([line for line in result.output.splitlines() if line.strip()]) == 1
 
 
+@pytest.mark.slow
 def test_generate_killed_mid_search_resumes_to_the_uninterrupted_plan(tmp_path):
     import os
     import signal

@@ -94,6 +94,7 @@ def test_same_seed_same_plan(range2017, plan_dir, tmp_path):
     assert again == plan
 
 
+@pytest.mark.slow
 def test_same_plan_with_processes_and_a_dask_cluster(range2017, tmp_path):
     from distributed import Client, LocalCluster
 
@@ -149,6 +150,7 @@ def test_refine_sharpens_pairs_and_variants_keep_their_mode(range2017, tmp_path)
         assert ("TF", "SS", "MS", "TS")[mode] == v["predicted"]["mode"]
 
 
+@pytest.mark.slow
 def test_generate_runs_end_to_end_on_the_chapter3_mission(tmp_path):
     """uuv18: 18 parameters, the permutation of mission-area priorities, 62 leaf scores."""
     mission = sim.uuv.load_mission(EXAMPLES / "uuv18.toml")

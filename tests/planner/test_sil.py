@@ -8,6 +8,8 @@ import pytest
 import sim.uuv
 from planner.sil import run_sil
 
+pytestmark = [pytest.mark.slow, pytest.mark.integration]
+
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
 

@@ -1,3 +1,5 @@
+"""Performance modes (section 3.3) and boundary pairs by the mutual-nearest-neighbour rule: hand-built cases and errors."""
+
 import numpy as np
 import pytest
 

@@ -1,3 +1,5 @@
+"""The scikit-learn wrappers pass scikit-learn's own estimator checks and agree with the plain functions."""
+
 import numpy as np
 import pytest
 from sklearn.base import clone

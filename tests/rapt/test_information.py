@@ -1,3 +1,5 @@
+"""The information metrics (eqs. 3.4-3.8), tree importances and batch selection, against hand-computed values."""
+
 import numpy as np
 import pytest
 

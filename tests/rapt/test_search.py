@@ -1,3 +1,5 @@
+"""rapt.search as a caller meets it: shapes, units, determinism, failures, resuming a killed study, executors."""
+
 import concurrent.futures as cf
 import os
 import signal

@@ -1,3 +1,5 @@
+"""State spaces: the unit cube's mapping to continuous, integer, categorical and permutation parameters, and back."""
+
 import numpy as np
 import pytest
 

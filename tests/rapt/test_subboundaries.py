@@ -1,3 +1,5 @@
+"""Score trees and sub-boundary trees (section 4.2): hand-built trees, a hierarchical system's known boundaries, errors."""
+
 import numpy as np
 import pytest
 

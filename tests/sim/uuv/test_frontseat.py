@@ -22,6 +22,8 @@ from sim.uuv.interface import battery_fraction, encode_command  # noqa: E402
 from sim.uuv.replay import score_track  # noqa: E402
 from sim.uuv.scenario import make_scenarios  # noqa: E402
 
+pytestmark = [pytest.mark.integration]
+
 EXAMPLES = Path(__file__).resolve().parents[3] / "examples"
 
 
