@@ -14,8 +14,10 @@ from __future__ import annotations
 import typer
 
 from planner.cli import compare, generate, processes, run, search, selfright, surrogate
+from planner.cli.console import print_error
+from rapt.errors import RaptError
 
-__all__ = ["app"]
+__all__ = ["app", "rapt_plan"]
 
 app = typer.Typer(no_args_is_help=True, add_completion=False, help=__doc__.splitlines()[0])
 
@@ -38,3 +40,13 @@ app.command("autonomy")(processes.autonomy)
 app.command("log")(processes.log)
 # Chapter 5's second system under test: self-righting ground robots (planner/selfright/).
 app.command("selfright")(selfright.selfright)
+
+
+def rapt_plan() -> None:
+    """The ``rapt-plan`` script: the app, where a :class:`~rapt.errors.RaptError` that no command turned into its
+    one-line error still ends as one (``error: ...``, exit code 2) rather than a traceback."""
+    try:
+        app()
+    except RaptError as exc:
+        print_error(str(exc))
+        raise SystemExit(2) from None

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import sys
+from planner.cli import rapt_plan
 
-from planner.cli import app
-
-sys.exit(app())
+rapt_plan()

@@ -11,15 +11,20 @@ from rich.console import Console
 from rich.markup import escape
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn
 
-__all__ = ["err", "out", "fail", "progress_bar"]
+__all__ = ["err", "out", "fail", "print_error", "progress_bar"]
 
 err = Console(stderr=True)
 out = Console()
 
 
-def fail(message: str) -> None:
-    """One-line error, exit code 2, no traceback.  ``message`` is printed as written (brackets are not rich markup)."""
+def print_error(message: str) -> None:
+    """``error: message`` on stderr, on one line; ``message`` is printed as written (brackets are not rich markup)."""
     err.print(f"[bold red]error:[/] {escape(message)}", highlight=False, soft_wrap=True)
+
+
+def fail(message: str) -> None:
+    """One-line error, exit code 2, no traceback."""
+    print_error(message)
     raise typer.Exit(code=2)
 
 

@@ -153,3 +153,20 @@ def test_selfright_is_a_rapt_plan_command_with_one_line_errors(tmp_path):
     robot = str(Path(__file__).resolve().parents[2] / "examples" / "robots" / "1dof.toml")
     result = runner.invoke(app, ["selfright", robot, "--out", str(tmp_path / "out"), "--slope", "95"])
     assert result.exit_code == 2 and "--slope" in result.output
+
+
+def test_a_rapt_error_no_command_caught_is_still_one_line_and_exit_2(monkeypatch, capsys):
+    """The rapt-plan script's last line of defence: an error class a command did not expect prints no traceback."""
+    import planner.cli
+    from rapt.errors import RunError
+
+    def broken(*args, **kwargs):
+        raise RunError("front-seat: the simulator stopped answering; run it again")
+
+    monkeypatch.setattr(planner.cli.search, "run_search", broken)
+    monkeypatch.setattr("sys.argv", ["rapt-plan", "search", "plates2d", "--budget", "100"])
+    with pytest.raises(SystemExit) as exit_info:
+        planner.cli.rapt_plan()
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    assert err.strip() == "error: front-seat: the simulator stopped answering; run it again"
