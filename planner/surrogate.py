@@ -71,11 +71,14 @@ def train_surrogate(
     if int(select_runs) != select_runs or select_runs < 0:
         raise InputError(f"--select-runs: expected a number of held-out expert runs >= 0, got {select_runs!r}")
     spec = feature_spec(mission)
-    select = None
+    select: Callable[[Policy], float] | None = None
     if select_runs:
         Xs = draw_valid(mission, int(select_runs), np.random.default_rng([int(seed), 0x73656C]))
         expert, held_out = annotated_runs(mission, Xs, spec)
-        select = lambda policy: mode_agreement(mission, Surrogate.for_mission(mission, policy), Xs, expert)  # noqa: E731
+
+        def select(policy: Policy) -> float:  # the held-out runs' mode agreement picks the best iteration
+            return mode_agreement(mission, Surrogate.for_mission(mission, policy), Xs, expert)
+
     result = imitate(
         make_rollout(mission, spec, seed=seed, mixing=mixing),
         method=method,

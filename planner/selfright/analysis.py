@@ -141,6 +141,10 @@ def _edge_set(g: TransitionGraph, keep: set, remap: dict | None = None) -> dict:
     return es
 
 
+def _mean(v: np.ndarray) -> float:
+    return float(v.mean()) if v.size else float("nan")
+
+
 def compare_graphs(
     a: SelfRightAnalysis,
     study_a: SelfRightStudy,
@@ -178,7 +182,6 @@ def compare_graphs(
     pair = np.array([[ea[k][1], eb[k][1]] for k in both]).reshape(-1, 2)
     energy = np.array([[ea[k][0], eb[k][0]] for k in both]).reshape(-1, 2)
     ra, rb = (_rightable(r, study, probes) for r, study in ((a, study_a), (b, study_b)))
-    mean = lambda v: float(v.mean()) if v.size else float("nan")  # noqa: E731
     return GraphComparison(
         n_nodes=(len(big_a), len(big_b)),
         nodes_matched=nodes_matched,
@@ -187,7 +190,7 @@ def compare_graphs(
         same=nodes_matched == len(big_a) == len(big_b) and set(ea) == set(eb),
         rightable_agreement=float((ra == rb).mean()),
         # on the matched edges (the same transitions in both graphs): a's and b's means
-        pair_length_deg=(mean(np.degrees(pair[:, 0])), mean(np.degrees(pair[:, 1]))),
-        transition_energy=(mean(energy[:, 0]), mean(energy[:, 1])),
+        pair_length_deg=(_mean(np.degrees(pair[:, 0])), _mean(np.degrees(pair[:, 1]))),
+        transition_energy=(_mean(energy[:, 0]), _mean(energy[:, 1])),
         matched_edges=np.array([[ea[k][2], eb[k][2]] for k in both], dtype=int).reshape(-1, 2),
     )
