@@ -36,13 +36,13 @@ from pymavlink import mavutil  # noqa: E402
 from rapt.errors import FileFormatError, InputError, LinkError, LinkTimeoutError, RefusedError, RunError  # noqa: E402
 
 from . import keys  # noqa: E402
-from .command_gate import CommandGate, outward  # noqa: E402
+from .command_gate import CommandGate  # noqa: E402
 from .frames import FrameSplitter, mavlink2, message_json  # noqa: E402
 from .service import Service  # noqa: E402
 from .session import undeclare, use_session  # noqa: E402
 from .setpoint import Setpoint  # noqa: E402
 
-__all__ = ["MavlinkBridge", "ARDUSUB_MODES", "TYPE_MASK_VELOCITY_YAW", "load_signing_key", "outward"]
+__all__ = ["MavlinkBridge", "ARDUSUB_MODES", "TYPE_MASK_VELOCITY_YAW", "load_signing_key"]
 
 log = logging.getLogger(__name__)
 

@@ -104,14 +104,16 @@ def open_session(
     listen: Iterable[str] | str = (),
     connect: Iterable[str] | str = (),
     config_file: str | Path | None = None,
-    **options: Any,
+    *,
+    mode: str | None = None,
+    connect_timeout: float = CONNECT_TIMEOUT_S,
 ) -> zenoh.Session:
-    """Open a session with :func:`zenoh_config` (``options``: its ``mode``, ``connect_timeout``); close it when done.
+    """Open a session with :func:`zenoh_config` (the same arguments); close it when done.
 
     Raises :class:`~rapt.errors.LinkError` (a ``ConnectionError``) naming the endpoints when no hub answered in time.
     """
     connect = [connect] if isinstance(connect, str) else list(connect)
-    config = zenoh_config(listen, connect, config_file, **options)
+    config = zenoh_config(listen, connect, config_file, mode=mode, connect_timeout=connect_timeout)
     try:
         return zenoh.open(config)
     except zenoh.ZError as exc:

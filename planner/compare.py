@@ -37,7 +37,7 @@ from rapt.errors import InputError, StudyMismatchError
 from sim.uuv.bias import BIAS_NAMES, BIAS_UNITS, NEUTRAL
 from sim.uuv.replay import score_track
 from sim.uuv.scenario import make_scenarios
-from sim.uuv.scoring import MODE_NAMES
+from sim.uuv.scoring import MODE_NAMES, mode_name
 
 __all__ = ["compare", "CompareConfig", "COMPARISON_SCHEMA", "match_logs"]
 
@@ -238,7 +238,7 @@ def _score_observed(m, obs: list[Observation]) -> None:
         if o.run.steps.shape[0]:
             o.scores = score_track(m, o.u, o.run.track, o.run.wp_aborted, o.run.return_reason)
             if o.run.has_end:
-                o.mode = MODE_NAMES[int(2 * o.scores[0] + o.scores[1])]
+                o.mode = mode_name(o.scores)
 
 
 def _scenario_rows(m, obs: list[Observation], runs: _PlanRuns) -> list[dict]:

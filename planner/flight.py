@@ -17,7 +17,7 @@ import numpy as np
 from sim.uuv.mission import Mission
 from sim.uuv.scoring import MODE_NAMES
 
-__all__ = ["Flight", "BatchCheck", "is_plan", "flight_from_plan", "fly", "check_against_batch", "mode_name"]
+__all__ = ["Flight", "BatchCheck", "is_plan", "flight_from_plan", "fly", "check_against_batch"]
 
 
 @dataclass(frozen=True)
@@ -97,8 +97,3 @@ def check_against_batch(
     return BatchCheck(
         batch.scores[0], batch.names, MODE_NAMES[int(batch.modes[0])], bool(np.array_equal(scores, batch.scores[0]))
     )
-
-
-def mode_name(scores: np.ndarray) -> str:
-    """The performance mode of a run's scores: ``2 * mission success + safety success``."""
-    return MODE_NAMES[int(2 * scores[0] + scores[1])]

@@ -37,6 +37,7 @@ import rapt
 import sim.uuv
 from planner.exports import write_scenario_files
 from planner.jsonio import jsonable
+from planner.plans import coordinate_sensitivity
 from planner.report import write_report
 from planner.search_status import SearchStatus
 from rapt.errors import InputError, StudyMismatchError
@@ -528,7 +529,7 @@ def generate(
     out_dir.mkdir(parents=True, exist_ok=True)
     clock = _StageClock(timings)
     a, pairs, confirmation = _choose_pairs(mission, cfg, progress, clock)
-    sens = _coordinate_sensitivity(mission, a.sensitivity)
+    sens = coordinate_sensitivity(mission.space, a.sensitivity)
     U = (
         np.vstack([np.asarray(p.get("u_override", [a.X[r] for r in p["rows"]])) for p in pairs])
         if pairs
@@ -774,13 +775,3 @@ class _StageClock:
         if self.into is not None:
             self.into[stage] = self.into.get(stage, 0.0) + now - self.last
         self.last = now
-
-
-def _coordinate_sensitivity(mission: Mission, sensitivity: dict[str, dict[str, float]]) -> np.ndarray:
-    """Importance per unit-cube coordinate, summed over the root scores (a parameter's share split evenly)."""
-    sens = np.zeros(mission.dim)
-    for root in sensitivity.values():
-        for p in mission.space.parameters:
-            sl = mission.space.slice_of(p.name)
-            sens[sl] += root[p.name] / max(sl.stop - sl.start, 1)
-    return sens

@@ -18,9 +18,10 @@ import numpy as np
 
 import sim.uuv
 from rapt.errors import FileFormatError, InputError, StudyMismatchError
+from rapt.space import StateSpace
 from sim.uuv.mission import Mission
 
-__all__ = ["Plan", "load_plan", "plan_id"]
+__all__ = ["Plan", "load_plan", "plan_id", "coordinate_sensitivity"]
 
 SCHEMA = "rapt.plan/1"
 
@@ -71,13 +72,20 @@ class Plan:
 
     def sensitivity(self) -> np.ndarray:
         """Per unit-cube coordinate: the summed root-score importance of its parameter."""
-        space = self.mission.space
-        out = np.zeros(self.mission.dim)
-        for root in self.data.get("sensitivity", {}).values():
-            for p in space.parameters:
-                sl = space.slice_of(p.name)
-                out[sl] += float(root.get(p.name, 0.0)) / max(sl.stop - sl.start, 1)
-        return out
+        return coordinate_sensitivity(self.mission.space, self.data.get("sensitivity", {}))
+
+
+def coordinate_sensitivity(space: StateSpace, sensitivity: dict[str, dict[str, float]]) -> np.ndarray:
+    """Importance per unit-cube coordinate, summed over the root scores (a parameter's share split evenly).
+
+    ``sensitivity`` maps each root score to its parameters' importances, as ``plan.json`` holds it.
+    """
+    out = np.zeros(space.dim)
+    for root in sensitivity.values():
+        for p in space.parameters:
+            sl = space.slice_of(p.name)
+            out[sl] += float(root.get(p.name, 0.0)) / max(sl.stop - sl.start, 1)
+    return out
 
 
 def load_plan(path: str | Path) -> Plan:

@@ -14,17 +14,26 @@ import time
 from collections.abc import Callable
 from contextlib import AbstractContextManager
 
-__all__ = ["wait_for_signal", "serve_until_signal", "run_until_signal", "arm_when_heard"]
+__all__ = ["wait_for", "wait_for_signal", "serve_until_signal", "run_until_signal", "arm_when_heard"]
 
 
-def wait_for_signal(until: Callable[[], bool] | None = None) -> None:
-    """Block until SIGINT/SIGTERM (or ``until()`` is true), so a process stops cleanly."""
+def wait_for(condition: Callable[[], bool], timeout_s: float, poll_s: float = 0.01) -> bool:
+    """Poll ``condition`` until it holds or ``timeout_s`` of wall time pass; whether it held."""
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        if time.monotonic() >= deadline:
+            return False
+        time.sleep(poll_s)
+    return True
+
+
+def wait_for_signal() -> None:
+    """Block until SIGINT/SIGTERM, so a process stops cleanly."""
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
-    while not stop.wait(0.1):
-        if until is not None and until():
-            break
+    while not stop.wait(0.1):  # a timed wait, so the handler runs promptly
+        pass
 
 
 def serve_until_signal(frontseat) -> None:
@@ -48,10 +57,7 @@ def run_until_signal(session, start: Callable[[], AbstractContextManager]) -> No
 
 def arm_when_heard(link, timeout_s: float = 30.0) -> bool:
     """Once the bridge ``link`` hears the vehicle: GUIDED mode and arm.  False if it is not heard in ``timeout_s``."""
-    deadline = time.monotonic() + timeout_s
-    while link.target is None and time.monotonic() < deadline:
-        time.sleep(0.05)
-    if link.target is None:
+    if not wait_for(lambda: link.target is not None, timeout_s, poll_s=0.05):
         return False
     link.set_mode("GUIDED")
     link.arm(True)

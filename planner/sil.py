@@ -15,7 +15,6 @@ import os
 import socket
 import threading
 import time
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -29,6 +28,7 @@ from bridge.mavlink_bridge import MavlinkBridge  # noqa: E402
 from bridge.session import open_session  # noqa: E402
 from planner.backseat import BackSeat  # noqa: E402
 from planner.jsonio import jsonable  # noqa: E402
+from planner.processes import wait_for  # noqa: E402
 from rapt.errors import LinkTimeoutError  # noqa: E402
 from sim.uuv.frontseat import FrontSeat  # noqa: E402
 from sim.uuv.mission import Mission  # noqa: E402
@@ -90,16 +90,6 @@ class _Recorder:
         self._stop.set()
         self.thread.join(timeout=5)
         self.sub.undeclare()
-
-
-def _wait_for(condition: Callable[[], bool], timeout_s: float, poll_s: float = 0.01) -> bool:
-    """Poll ``condition`` until it holds or ``timeout_s`` of wall time pass; whether it held."""
-    deadline = time.monotonic() + timeout_s
-    while not condition():
-        if time.monotonic() >= deadline:
-            return False
-        time.sleep(poll_s)
-    return True
 
 
 def run_sil(
@@ -177,15 +167,15 @@ def run_sil(
                 session, vehicle, mission, u, source=SURROGATE_SOURCE, surrogate=surrogate
             ).start()
         bridge = MavlinkBridge(f"udpout:127.0.0.1:{port}", session, vehicle=vehicle, allow_commands=True).start()
-        if not _wait_for(lambda: bridge.target is not None, 10):
+        if not wait_for(lambda: bridge.target is not None, 10):
             raise LinkTimeoutError("front-seat: no HEARTBEAT on the MAVLink link within 10 s")
         if surrogate is not None:
             session.put(keys.active(vehicle), SURROGATE_SOURCE)
-            if not _wait_for(lambda: bridge.active == SURROGATE_SOURCE, 10):
+            if not wait_for(lambda: bridge.active == SURROGATE_SOURCE, 10):
                 raise LinkTimeoutError("bridge: did not take the surrogate as the active source within 10 s")
         bridge.set_mode("GUIDED")
         bridge.arm(True)
-        if not _wait_for(lambda: fs.ended, timeout_s, poll_s=0.005):
+        if not wait_for(lambda: fs.ended, timeout_s, poll_s=0.005):
             raise LinkTimeoutError(f"timeout_s: the run did not end within {timeout_s} s of wall time")
         time.sleep(0.3)  # let the last step's telemetry reach the recorder and the logger
         wall = time.perf_counter() - started

@@ -146,9 +146,9 @@ def knn_graph(X: np.ndarray, k: int, method: str = "auto") -> tuple[np.ndarray, 
 
 #: HNSW graph parameters (faiss): links per node, candidate list while building and while
 #: searching.  Chosen with benchmarks/boundaries.py on 10^5-10^6 uniform samples in 18-D:
-#: short candidate lists cost clearly less CPU than the former M = 12, efConstruction = 40
-#: and a top-down search with efSearch = 32, for a slightly lower recall of the exact
-#: nearest neighbours, which the boundary pairs tolerate (see :func:`knn_graph`).
+#: short candidate lists cost clearly less CPU than longer ones and a top-down search, for a
+#: slightly lower recall of the exact nearest neighbours, which the boundary pairs tolerate
+#: (see :func:`knn_graph`).
 HNSW_M = 16
 HNSW_EF_CONSTRUCTION = 24
 HNSW_EF_SEARCH = 24

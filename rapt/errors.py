@@ -2,10 +2,10 @@
 
 Every message is one line that names the field (or file) at fault and how to fix it; the
 command line prints it as it is and exits non-zero.  Each class also derives from the
-built-in exception that code written before this hierarchy caught (``ValueError`` for bad
-input, ``RuntimeError`` for a run that cannot go on, ``TimeoutError``, ``ConnectionError``,
-``FileNotFoundError`` for a missing file, ``PermissionError`` for a refusal), so
-``except ValueError`` still works where it was used.
+built-in exception of its kind (``ValueError`` for bad input, ``RuntimeError`` for a run
+that cannot go on, ``TimeoutError``, ``ConnectionError``, ``FileNotFoundError`` for a
+missing file, ``PermissionError`` for a refusal), so a generic handler such as
+``except ValueError`` keeps catching what it means.
 
 The packages built on :mod:`rapt` subclass these for their own inputs (mission files,
 robot files, flight logs, the vehicle link).

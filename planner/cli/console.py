@@ -6,6 +6,8 @@ the fix, exit code 2, no traceback — so the commands share this module's :func
 
 from __future__ import annotations
 
+from typing import NoReturn
+
 import typer
 from rich.console import Console
 from rich.markup import escape
@@ -22,7 +24,7 @@ def print_error(message: str) -> None:
     err.print(f"[bold red]error:[/] {escape(message)}", highlight=False, soft_wrap=True)
 
 
-def fail(message: str) -> None:
+def fail(message: str) -> NoReturn:
     """One-line error, exit code 2, no traceback."""
     print_error(message)
     raise typer.Exit(code=2)

@@ -50,8 +50,9 @@ def run(
     With --surrogate the learned policy commands the vehicle while the expert autonomy
     keeps running beside it; the expert's commands are on the bus and in the log.
     """
-    from planner.flight import Flight, check_against_batch, flight_from_plan, fly, is_plan, mode_name
+    from planner.flight import Flight, check_against_batch, flight_from_plan, fly, is_plan
     from sim.uuv.bias import parse_bias
+    from sim.uuv.scoring import mode_name
 
     try:
         bias = parse_bias(inject_bias) if inject_bias is not None else None

@@ -15,6 +15,7 @@ from planner.selfright.graph import build_graph
 from planner.selfright.space import row_keys, to_unit, toward
 from planner.selfright.study import SelfRightStudy
 from planner.selfright.system import StabilitySystem
+from rapt.errors import InputError
 from rapt.manifold import ManifoldSampler, full_turn, manifold_search
 from sim.robots import Robot
 
@@ -78,7 +79,7 @@ def adaptive_study(
         **options,
     )
     if not 0 <= refine < 1:
-        raise ValueError(f"refine: expected a share of the budget in [0, 1), got {refine!r}")
+        raise InputError(f"refine: expected a share of the budget in [0, 1), got {refine!r}")
     t0 = time.perf_counter()
     manifold_search(system, sampler, budget - int(round(refine * budget)), batch_size, progress)
     extra = dict(stopped_by_resolution=sampler.done, r_min_deg=r_min_deg, r_max_deg=r_max_deg, whole_hulls=whole_hulls)

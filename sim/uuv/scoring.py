@@ -21,10 +21,15 @@ from sim.uuv.geometry import rect_signed_distance
 from sim.uuv.metrics import NEVER_M, metric_names
 from sim.uuv.scenario import Scenarios
 
-__all__ = ["Scorer", "MODE_NAMES", "modes_from_scores"]
+__all__ = ["Scorer", "MODE_NAMES", "mode_name", "modes_from_scores"]
 
 #: Performance modes (section 3.7.1): code = 2 * mission success + safety success.
 MODE_NAMES = ("TF", "SS", "MS", "TS")
+
+
+def mode_name(scores: np.ndarray) -> str:
+    """The performance mode of one run's (finite) scores: ``TF``, ``SS``, ``MS`` or ``TS``."""
+    return MODE_NAMES[int(2 * scores[0] + scores[1])]
 
 
 def modes_from_scores(scores: np.ndarray) -> np.ndarray:

@@ -21,8 +21,9 @@ from hypothesis import strategies as st  # noqa: E402
 from pymavlink import mavutil  # noqa: E402
 
 from bridge import keys  # noqa: E402
+from bridge.command_gate import outward  # noqa: E402
 from bridge.frames import FrameSplitter, is_signed, mavlink2, strip_signature  # noqa: E402
-from bridge.mavlink_bridge import TYPE_MASK_VELOCITY_YAW, MavlinkBridge, load_signing_key, outward  # noqa: E402
+from bridge.mavlink_bridge import TYPE_MASK_VELOCITY_YAW, MavlinkBridge, load_signing_key  # noqa: E402
 from bridge.session import open_session, zenoh_config  # noqa: E402
 from bridge.setpoint import Setpoint  # noqa: E402
 from rapt.errors import LinkError, RefusedError  # noqa: E402

@@ -38,7 +38,7 @@ def test_one_dof_robot_graph_agrees_with_a_grid_search():
 def test_a_tenth_of_the_grid_s_queries_gives_its_graph_with_closer_pairs():
     """Figure 5.3's claim on the 1-DOF robot: an order of magnitude fewer queries than the 1° grid, the same
     graph, and boundary pairs closer on average than the grid's 1° (benchmarks/selfright.py's setting;
-    over seeds 0-119 the graph is the grid's on about nine seeds in ten, README)."""
+    its figures over held-out seeds are in docs/benchmarks.md)."""
     robot = load_robot("examples/robots/1dof.toml")
     probes = probe_states(robot, 20.0, 500, 1)
     grid = grid_study(robot, 20.0, 1.0)
