@@ -31,7 +31,7 @@ from scipy.stats import qmc
 
 import sim.uuv
 from planner.generate import GenerateConfig, analyse, confirm_with_expert, search_mission, select_pairs
-from planner.surrogate import mode_agreement, train_surrogate
+from planner.surrogate import ModeValidation, train_surrogate
 from rapt.agreement import agreement, path_error
 from sim.uuv.autonomy import Autonomy
 from sim.uuv.imitation.surrogate import Surrogate
@@ -179,8 +179,7 @@ def learners(
     mixing: float = 0.5,
     select_runs: int = 25,
 ) -> dict[str, tuple[Surrogate, list]]:
-    Xt = qmc.Sobol(mission.dim, seed=seed + 1).random(track)
-    expert = sim.uuv.simulate(mission, Xt)
+    mode_accuracy = ModeValidation(mission, track, seed + 1)
     out = {}
     print(
         f"2. Learners: {runs} expert-annotated runs ({per} per update), {epochs} epochs per update, "
@@ -194,7 +193,7 @@ def learners(
         curve = []
 
         def on_iteration(rec, policy, name=name, curve=curve):
-            accuracy = mode_agreement(mission, Surrogate.for_mission(mission, policy), Xt, expert)
+            accuracy = mode_accuracy(policy)
             curve.append((rec.runs, rec.samples, rec.fit_cpu_s, accuracy))
             print(
                 f"   {name:<10} runs {rec.runs:>3} samples {rec.samples:>6,} fit {rec.fit_cpu_s:6.1f} CPU s "

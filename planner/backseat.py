@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import json
 import os
-import threading
 import time
 
 import numpy as np
@@ -29,6 +28,8 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from bridge import keys  # noqa: E402
+from bridge.service import Service  # noqa: E402
+from bridge.session import undeclare  # noqa: E402
 from rapt.errors import InputError  # noqa: E402
 from sim.uuv.autonomy import GOAL_RETURN, Autonomy, Observation  # noqa: E402
 from sim.uuv.interface import battery_fraction, encode_command  # noqa: E402
@@ -38,10 +39,17 @@ from sim.uuv.scenario import make_scenarios  # noqa: E402
 __all__ = ["BackSeat"]
 
 
-class BackSeat:
-    """Fly scenario ``u`` of ``mission`` from the bus of ``session`` as ``source``."""
+class BackSeat(Service):
+    """Fly scenario ``u`` of ``mission`` from the bus of ``session`` as ``source``.
+
+    The bus entities are declared at construction; :meth:`start` starts the loop's thread and
+    :meth:`close` stops it and undeclares them (the session is left open).
+    """
+
+    _what = "back-seat"
 
     def __init__(self, session, vehicle: str, mission: Mission, u, source: str = "autonomy", surrogate=None):
+        super().__init__()
         scen = make_scenarios(mission, np.asarray(u, dtype=float).reshape(1, -1))
         if not scen.valid[0]:
             raise InputError(f"scenario: invalid for mission '{mission.name}' ({scen.invalid_reason[0]})")
@@ -62,31 +70,17 @@ class BackSeat:
         self._answered: dict[int, dict] = {}
         self.last_tick_ms = -1
         self.steps = 0
-        self._stop = threading.Event()
         self._sub = session.declare_subscriber(keys.raw(vehicle))  # FIFO channel, read by our thread
         self._pub = session.declare_publisher(keys.command(vehicle, source))
         self._status = session.declare_publisher(keys.status(vehicle, source))
         self._token = session.liveliness().declare_token(keys.alive(vehicle, source))
-        self._thread = threading.Thread(target=self._run, name=f"backseat-{source}", daemon=True)
 
-    def start(self) -> BackSeat:
-        self._thread.start()
-        return self
+    def _open(self) -> None:
+        self._spawn(f"backseat-{self.source}", self._run)
 
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(timeout=5)
-        for entity in (self._sub, self._pub, self._status, self._token):
-            try:
-                entity.undeclare()
-            except Exception:  # already gone with the session
-                pass
-
-    def __enter__(self) -> BackSeat:
-        return self.start()
-
-    def __exit__(self, *exc) -> None:
-        self.close()
+    def _shutdown(self) -> None:
+        self._join(self._threads, timeout=5)
+        undeclare(self._sub, self._pub, self._status, self._token)  # already gone with the session: skipped
 
     # -- the loop --------------------------------------------------------------------
     def _run(self) -> None:

@@ -25,7 +25,8 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from bridge import keys  # noqa: E402
 from bridge.mavlink_bridge import MavlinkBridge  # noqa: E402
-from bridge.session import open_session  # noqa: E402
+from bridge.service import Service  # noqa: E402
+from bridge.session import open_session, undeclare  # noqa: E402
 from planner.backseat import BackSeat  # noqa: E402
 from planner.jsonio import jsonable  # noqa: E402
 from planner.processes import wait_for  # noqa: E402
@@ -65,17 +66,21 @@ class SilResult:
         return self.sim_s / self.wall_s if self.wall_s > 0 else float("inf")
 
 
-class _Recorder:
-    """Builds the track from the bus's ordered raw frames (independent of the back-seat)."""
+class _Recorder(Service):
+    """Builds the track from the bus's ordered raw frames (independent of the back-seat); starts at once."""
+
+    _what = "recorder"
 
     def __init__(self, session, vehicle: str):
+        super().__init__()
         self.builder = TrackBuilder()
         self.parser = mavlink.MAVLink(None)
         self.parser.robust_parsing = True
         self.sub = session.declare_subscriber(keys.raw(vehicle))
-        self._stop = threading.Event()
-        self.thread = threading.Thread(target=self._run, daemon=True)
-        self.thread.start()
+        self.start()
+
+    def _open(self) -> None:
+        self._spawn("sil-recorder", self._run)
 
     def _run(self) -> None:
         while not self._stop.is_set():
@@ -86,10 +91,9 @@ class _Recorder:
             for msg in self.parser.parse_buffer(sample.payload.to_bytes()) or []:
                 self.builder.add(msg)
 
-    def close(self) -> None:
-        self._stop.set()
-        self.thread.join(timeout=5)
-        self.sub.undeclare()
+    def _shutdown(self) -> None:
+        self._join(self._threads, timeout=5)
+        undeclare(self.sub)
 
 
 def run_sil(

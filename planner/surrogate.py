@@ -6,6 +6,10 @@ batch simulator's expert on random valid scenarios of the mission and returns a
 when it was trained for this very mission and trains (and saves) one otherwise.  The
 expert-run counts it records are what the surrogate workflow of ``rapt-plan generate
 --surrogate`` spends on training.
+
+How often a policy ends scenarios in the expert's mode (:func:`policy_mode_agreement`) is
+what judges it, both while training (the held-out runs choose the update kept) and after
+each update (:class:`ModeValidation`, for ``rapt-plan surrogate --validate N``).
 """
 
 from __future__ import annotations
@@ -14,6 +18,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
+from scipy.stats import qmc
 
 import sim.uuv
 from rapt.errors import InputError
@@ -23,7 +28,16 @@ from sim.uuv.imitation.rollouts import annotated_runs, draw_valid, make_rollout
 from sim.uuv.imitation.surrogate import Surrogate
 from sim.uuv.mission import Mission
 
-__all__ = ["train_surrogate", "load_or_train", "calibrate_goal_threshold", "TRAINING_DEFAULTS", "GOAL_THRESHOLDS"]
+__all__ = [
+    "train_surrogate",
+    "load_or_train",
+    "calibrate_goal_threshold",
+    "mode_agreement",
+    "policy_mode_agreement",
+    "ModeValidation",
+    "TRAINING_DEFAULTS",
+    "GOAL_THRESHOLDS",
+]
 
 #: Goal thresholds tried on the held-out expert runs (the goal output is about -1 or +1).
 GOAL_THRESHOLDS = tuple(round(t, 1) for t in np.arange(-0.9, 0.91, 0.1))
@@ -77,7 +91,7 @@ def train_surrogate(
         expert, held_out = annotated_runs(mission, Xs, spec)
 
         def select(policy: Policy) -> float:  # the held-out runs' mode agreement picks the best iteration
-            return mode_agreement(mission, Surrogate.for_mission(mission, policy), Xs, expert)
+            return policy_mode_agreement(mission, policy, Xs, expert)
 
     result = imitate(
         make_rollout(mission, spec, seed=seed, mixing=mixing),
@@ -170,3 +184,27 @@ def mode_agreement(mission: Mission, surrogate: Surrogate, X: np.ndarray, expert
     mine = sim.uuv.simulate(mission, X, surrogate=surrogate)
     ok = expert.valid & mine.valid
     return float(np.mean(mine.modes[ok] == expert.modes[ok])) if ok.any() else float("nan")
+
+
+def policy_mode_agreement(mission: Mission, policy: Policy, X: np.ndarray, expert=None) -> float:
+    """:func:`mode_agreement` of ``policy`` (as a surrogate of ``mission``, default threshold) on ``X``."""
+    return mode_agreement(mission, Surrogate.for_mission(mission, policy), X, expert)
+
+
+class ModeValidation:
+    """``n`` Sobol scenarios of ``mission`` (seeded), flown once by the expert; call it with a policy.
+
+    ``rapt-plan surrogate --validate N`` reports after each imitation update the mode
+    accuracy of the policy so far.  The validation scenarios (the first N of a Sobol
+    sequence) and the expert's runs on them are drawn once, so every update is measured on
+    the same ground and the expert is not flown again.
+    """
+
+    def __init__(self, mission: Mission, n: int, seed: int = 0):
+        self.mission = mission
+        self.X: np.ndarray = qmc.Sobol(mission.dim, seed=seed).random(n)
+        self.expert = sim.uuv.simulate(mission, self.X)
+
+    def __call__(self, policy: Policy) -> float:
+        """Share of the valid validation scenarios where ``policy`` flies into the expert's mode."""
+        return policy_mode_agreement(self.mission, policy, self.X, self.expert)
