@@ -118,7 +118,7 @@ def fig53(quick: bool, seed: int, robots: list[str] | None = None, fine: bool = 
                 f"{bdy[1 - k]:>8.3f} {err[1 - k]:>7.3f}",
                 flush=True,
             )
-        stop = "resolution reached" if ad.extra.get("stopped_by_resolution") else "budget spent"
+        stop = "resolution reached" if ad.stopped_by_resolution else "budget spent"
         pg = np.degrees(g.graph.all_transitions["length"]).mean() / np.degrees(a.graph.all_transitions["length"]).mean()
         eg = g.graph.all_transitions["energy"].mean() / a.graph.all_transitions["energy"].mean()
         print(
@@ -126,7 +126,7 @@ def fig53(quick: bool, seed: int, robots: list[str] | None = None, fine: bool = 
             f"{'same' if c.same else 'differs':>13} {'':>9} {'':>6} {'':>6} {pg:>7.2f}x {eg:>7.2f}x "
             f"{c.pair_length_deg[1] / c.pair_length_deg[0]:>9.2f}x {c.transition_energy[1] / c.transition_energy[0]:>9.2f}x"
             f" {bdy[1] / bdy[0]:>7.3f}x {err[1] / err[0] if err[0] else float('inf'):>6.0f}x"
-            f"   grid/adaptive ({stop}, {ad.extra['joint_states']:,} joint states)",
+            f"   grid/adaptive ({stop}, {ad.joint_states:,} joint states)",
             flush=True,
         )
         studies.append((name, ad, a))
@@ -164,7 +164,7 @@ def one_dof_seeds(seeds: int = 8, held_out: range = range(24, 120)) -> None:
         queries, same, pair, energy, converged = [], 0, [], [], 0
         for seed in seed_range:
             ad = adaptive_study(robot, 20.0, seed=seed, **opts)
-            converged += bool(ad.extra["stopped_by_resolution"])
+            converged += bool(ad.stopped_by_resolution)
             a = analyse(ad, probes=probes)
             c = compare_graphs(a, ad, g, grid, probes)
             queries.append(a.queries)
@@ -271,7 +271,7 @@ def fig56(quick: bool, seed: int) -> None:
         res = analyse(study, probes=probe_states(r, 0.0, 150 if quick else 300, seed + 1))
         faces = np.mean([len(f) for f in study.faces])
         grid = faces * np.prod([np.ptp(b) / np.radians(5.0) for b in r.joint_bounds])
-        stop = "resolution" if study.extra.get("stopped_by_resolution") else "budget"
+        stop = "resolution" if study.stopped_by_resolution else "budget"
         energy = res.energy_to_home
         print(
             f"{m:>6} {', '.join(j.name for j in r.joints):<52} {study.queries:>8,} {stop:>10} {study.seconds:>7.1f} "

@@ -23,6 +23,7 @@ from __future__ import annotations
 import json
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -142,7 +143,7 @@ def compare(
     say("reading logs")
     runs = [read_run(p) for p in log_paths]
     obs = match_logs(plan, runs)
-    ids, U_plan, row_of, pred = _predict_plan(plan)
+    ids, U_plan, pred = _predict_plan(plan)
     say("scoring logged runs")
     _score_observed(m, obs)
     say("fitting the execution bias")
@@ -150,7 +151,7 @@ def compare(
     fit = fit_bias(m, [o.run for o in obs], start_times, fit=tuple(cfg.fit))
     say("re-predicting under the fitted bias")
     corr = sim.uuv.simulate(m, U_plan, trajectories=True, bias=fit.bias)
-    plan_runs = _PlanRuns(ids, U_plan, row_of, pred, corr)
+    plan_runs = _PlanRuns(ids, U_plan, pred, corr)
     scen_rows = _scenario_rows(m, obs, plan_runs)
     agreement = _mode_agreement(scen_rows)
     say("re-planning")
@@ -203,9 +204,13 @@ class _PlanRuns:
 
     ids: list[str]
     U: np.ndarray
-    row_of: dict[str, int]
     pred: sim.uuv.Result
     corr: sim.uuv.Result
+
+    @cached_property
+    def row_of(self) -> dict[str, int]:
+        """The row of each scenario id."""
+        return _rows(self.ids)
 
     def trajectories(self, sid: str) -> tuple[np.ndarray | None, np.ndarray | None]:
         """Scenario ``sid``'s predicted and corrected trajectories (None when it is invalid)."""
@@ -213,14 +218,18 @@ class _PlanRuns:
         return self.pred.trajectory(k), self.corr.trajectory(k)
 
 
-def _predict_plan(plan: Plan) -> tuple[list[str], np.ndarray, dict[str, int], sim.uuv.Result]:
-    """Predictions of every plan scenario, unbiased, as planned: ids, unit-cube rows, row of each id, the
-    runs (with trajectories); StudyMismatchError when they are not the plan's."""
+def _rows(ids: list[str]) -> dict[str, int]:
+    return {sid: k for k, sid in enumerate(ids)}
+
+
+def _predict_plan(plan: Plan) -> tuple[list[str], np.ndarray, sim.uuv.Result]:
+    """Predictions of every plan scenario, unbiased, as planned: ids, unit-cube rows and the runs (with
+    trajectories); StudyMismatchError when they are not the plan's."""
     m = plan.mission
     ids = [s["id"] for s in plan.scenarios + plan.variants]
     U_plan = np.array([plan.u(i) for i in ids]).reshape(-1, m.dim)
     pred = sim.uuv.simulate(m, U_plan, trajectories=True)
-    row_of = {sid: k for k, sid in enumerate(ids)}
+    row_of = _rows(ids)
     for s in plan.scenarios + plan.variants:
         planned = s.get("predicted", {}).get("mode")
         got = MODE_NAMES[pred.modes[row_of[s["id"]]]] if pred.valid[row_of[s["id"]]] else "invalid"
@@ -229,7 +238,7 @@ def _predict_plan(plan: Plan) -> tuple[list[str], np.ndarray, dict[str, int], si
                 f"PLAN: scenario {s['id']} is predicted {got} by {plan.mission_file} but the plan says "
                 f"{planned}; the mission file changed since the plan was made — regenerate the plan"
             )
-    return ids, U_plan, row_of, pred
+    return ids, U_plan, pred
 
 
 def _score_observed(m, obs: list[Observation]) -> None:

@@ -35,7 +35,6 @@ class Flight:
 class BatchCheck:
     """The batch simulator's verdict on the scenario a flight flew."""
 
-    scores: np.ndarray  # the batch's scores of the row
     names: list  # the scores' names
     mode: str  # the batch's performance mode
     same: bool  # the flight scored exactly the batch's scores
@@ -94,6 +93,4 @@ def check_against_batch(
     batch = sim.uuv.simulate(
         flight.mission, flight.u[None, :], bias=bias, seed=seed, stochastic=stochastic, surrogate=surrogate
     )
-    return BatchCheck(
-        batch.scores[0], batch.names, MODE_NAMES[int(batch.modes[0])], bool(np.array_equal(scores, batch.scores[0]))
-    )
+    return BatchCheck(batch.names, MODE_NAMES[int(batch.modes[0])], bool(np.array_equal(scores, batch.scores[0])))

@@ -35,7 +35,7 @@ from rapt.errors import FileFormatError  # noqa: E402
 from sim.uuv.interface import decode_command  # noqa: E402
 from sim.uuv.replay import TrackBuilder  # noqa: E402
 
-__all__ = ["LoggedRun", "read_run", "RunLogReader", "STEP_FIELDS", "LogError"]
+__all__ = ["LoggedRun", "read_run", "STEP_FIELDS", "LogError"]
 
 #: Columns of :attr:`LoggedRun.steps`; the first six are :data:`sim.uuv.replay.TRACK_FIELDS`.
 STEP_FIELDS = ("t", "x", "y", "heading", "energy_hj", "surfaced", "surge", "yaw_rate")

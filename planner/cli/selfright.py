@@ -95,7 +95,7 @@ def selfright(
     energy = doc["mean_energy_to_home_J"]
     console.print(
         f"{robot.name} on a {slope:g}° slope: {study.queries:,} queries"
-        f"{' (resolution reached)' if study.extra.get('stopped_by_resolution') else ''}, "
+        f"{' (resolution reached)' if study.stopped_by_resolution else ''}, "
         f"{len(doc['nodes'])} nodes, {len(doc['edges'])} transitions; "
         f"self-rightable {doc['self_rightable_fraction']:.1%}, mean energy to home "
         f"{'n/a' if energy is None else f'{energy:.2f} J'}; wrote {out}/graph.json, graph.graphml, states.png, report.md",

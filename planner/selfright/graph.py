@@ -39,9 +39,9 @@ def grid_connections(study: SelfRightStudy) -> tuple[np.ndarray, np.ndarray]:
     stable); each resting state is the evaluated state it names.  Indices
     run over ``[X, settled rest states]`` (a grid has no unevaluated known states).
     """
-    if study.resolution is None or "grid_shape" not in study.extra:
+    shape, periodic = study.grid_shape, study.grid_periodic
+    if study.resolution is None or shape is None or periodic is None:
         raise InputError(f"study: a {study.method!r} study is not a grid; grid_connections needs grid_study's")
-    shape, periodic = study.extra["grid_shape"], study.extra["grid_periodic"]
     m = study.n_free
     U = study.X[:, :m]
     idx = np.empty((len(U), m), dtype=np.int64)
@@ -116,7 +116,7 @@ def default_max_edge(study: SelfRightStudy, known: np.ndarray | None = None) -> 
     """
     if study.resolution is not None:
         return 2.5 * study.resolution
-    r_max = np.radians(study.extra.get("r_max_deg", 10.0))
+    r_max = np.radians(10.0 if study.r_max_deg is None else study.r_max_deg)
     base = 3.0 if study.X.shape[1] - study.n_free == 1 else 2.0
     E = study.embed(study.known_states() if known is None else known)
     k = min(len(E) - 1, 2 * study.n_free + 2)
@@ -141,7 +141,7 @@ def build_graph(study: SelfRightStudy, *, max_edge: float | None = None, use_ids
     max_edge = default_max_edge(study, known[0]) if max_edge is None else max_edge
     extra, extra_ids = study.extra_states(with_ids=True, known=known)
     ids = (study.ids, study.rest_ids, extra_ids) if use_ids else None
-    connections = grid_connections(study) if use_ids and "grid_shape" in study.extra else None
+    connections = grid_connections(study) if use_ids and study.grid_shape is not None else None
     graph = transition_graph(
         study.embed(study.X),
         study.stable,

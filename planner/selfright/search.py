@@ -82,7 +82,7 @@ def adaptive_study(
         raise InputError(f"refine: expected a share of the budget in [0, 1), got {refine!r}")
     t0 = time.perf_counter()
     manifold_search(system, sampler, budget - int(round(refine * budget)), batch_size, progress)
-    extra = dict(stopped_by_resolution=sampler.done, r_min_deg=r_min_deg, r_max_deg=r_max_deg, whole_hulls=whole_hulls)
+    stopped_by_resolution = sampler.done
     rounds, spent = 0, 0
     for turn in range(4 if refine > 0 else 0):
         before = system.F.n_queries
@@ -97,10 +97,20 @@ def adaptive_study(
         manifold_search(
             system, sampler, budget - int(round(refine * (budget - system.F.n_queries))), batch_size, progress
         )
-    extra.update(search_queries=system.F.n_queries - spent, refine_queries=spent, refine_rounds=rounds)
-    study = system.study(robot, slope, "adaptive", time.perf_counter() - t0)
-    study.extra.update(extra, joint_states=system.F.n_hulls)
-    return study
+    return system.study(
+        robot,
+        slope,
+        "adaptive",
+        time.perf_counter() - t0,
+        r_min_deg=r_min_deg,
+        r_max_deg=r_max_deg,
+        whole_hulls=whole_hulls,
+        stopped_by_resolution=stopped_by_resolution,
+        search_queries=system.F.n_queries - spent,
+        refine_queries=spent,
+        refine_rounds=rounds,
+        joint_states=system.F.n_hulls,
+    )
 
 
 def refine_transitions(
@@ -142,7 +152,7 @@ def refine_transitions(
         left = budget - system.F.n_queries
         if left < 1:
             return rounds
-        study = system.study(robot, slope, "adaptive", 0.0, extra={"r_max_deg": np.degrees(r_max)} if r_max else {})
+        study = system.study(robot, slope, "adaptive", 0.0, r_max_deg=np.degrees(r_max) if r_max else None)
         built = build_graph(study)
         graph, extra = built.graph, built.extra_states
         e = graph.edges
@@ -183,10 +193,12 @@ def grid_study(robot: Robot, slope: float, resolution_deg: float) -> SelfRightSt
     theta = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, robot.dof) if axes else np.zeros((1, 0))
     t0 = time.perf_counter()
     system.record(system.F.all_faces(theta))
-    study = system.study(
-        robot, slope, f"grid {resolution_deg:g}°", time.perf_counter() - t0, resolution=np.radians(resolution_deg)
+    return system.study(
+        robot,
+        slope,
+        f"grid {resolution_deg:g}°",
+        time.perf_counter() - t0,
+        resolution=np.radians(resolution_deg),
+        grid_shape=tuple(len(a) for a in axes),
+        grid_periodic=tuple(bool(full_turn(lo, hi)) for lo, hi in robot.joint_bounds),
     )
-    study.extra.update(
-        grid_shape=[len(a) for a in axes], grid_periodic=[bool(full_turn(lo, hi)) for lo, hi in robot.joint_bounds]
-    )
-    return study

@@ -7,7 +7,7 @@ same way whichever search ran.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -38,7 +38,18 @@ class SelfRightStudy:
     rest_ids: np.ndarray  # (N,) face identity of each resting state (-1: none)
     face_ids: list  # per state: (k,) identities of ``faces``
     resolution: float | None = None  # grid spacing, radians (grid studies only)
-    extra: dict = field(default_factory=dict)
+    # grid studies: points per joint axis, and whether each axis is a full turn (its ends meet)
+    grid_shape: tuple[int, ...] | None = None
+    grid_periodic: tuple[bool, ...] | None = None
+    # adaptive studies: the search's settings and how it ended
+    r_min_deg: float | None = None  # boundary resolution, degrees
+    r_max_deg: float | None = None  # interior resolution, degrees (None: the 10° default of ``d_max``)
+    whole_hulls: bool | None = None  # every face of each queried joint state was labelled
+    stopped_by_resolution: bool | None = None  # the resolution cut-offs ended the search, not the budget
+    search_queries: int | None = None  # queries the search spent (the rest went to refinement)
+    refine_queries: int | None = None
+    refine_rounds: int | None = None
+    joint_states: int | None = None  # distinct joint states queried
 
     def embed(self, U: np.ndarray) -> np.ndarray:
         return angular_embedding(U, self.bounds)

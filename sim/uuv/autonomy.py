@@ -106,8 +106,7 @@ class Autonomy:
         self.area_k = np.zeros(n, dtype=np.int64)  # position in the priority order
         self.area_aborted = np.zeros((n, A), dtype=bool)
         self.dwell = np.zeros((n, A))
-        self.has_tx = m.transmission is not None
-        self.tx_done = np.zeros(n, dtype=bool) if self.has_tx else np.ones(n, dtype=bool)
+        self.tx_done = np.full(n, m.transmission is None)  # nothing to send: done from the start
         self.tx_aborted = np.zeros(n, dtype=bool)
         self.tx_time = np.zeros(n)
         self.returning = np.zeros(n, dtype=bool)
@@ -263,7 +262,7 @@ class Autonomy:
         scen, n = self.scen, self.scen.n
         in_tx = np.zeros(n, dtype=bool)
         tx = self.mission.transmission
-        if tx is not None:  # self.has_tx
+        if tx is not None:
             in_tx = inside_rect(obs.x, obs.y, scen.tx_rect[:, None, :])[:, 0] & (kind == GOAL_TRANSMIT) & active
             window = (obs.t >= scen.tx_open) & (obs.t < scen.tx_close)
             sending = in_tx & window

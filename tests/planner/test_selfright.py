@@ -61,11 +61,11 @@ def test_refinement_bisects_every_transition_pair_below_the_boundary_resolution(
     plain = adaptive_study(robot, 20.0, 700, seed=0, r_min_deg=0.5, refine=0.0)
     refined = adaptive_study(robot, 20.0, 700, seed=0, r_min_deg=0.5, refine=0.1)
     assert abs(refined.queries - plain.queries) <= 12  # one hull either way
-    assert refined.extra["refine_rounds"] >= 2 and 0 < refined.extra["refine_queries"] <= 70 + 12
+    assert refined.refine_rounds >= 2 and 0 < refined.refine_queries <= 70 + 12
     # the search labels whole hulls; a refinement query is one state on its pair's face, not a hull
     faces_per_joint_state = [np.unique(s.X[:, : s.n_free], axis=0, return_counts=True)[1] for s in (plain, refined)]
     assert np.all(faces_per_joint_state[0] > 1)
-    assert np.sum(faces_per_joint_state[1] == 1) == refined.extra["refine_queries"]
+    assert np.sum(faces_per_joint_state[1] == 1) == refined.refine_queries
     a, b = analyse(plain), analyse(refined)
     la, lb = np.degrees(a.graph.edges["length"]), np.degrees(b.graph.edges["length"])
     assert la.max() > 0.5 and lb.max() <= 0.5
