@@ -122,6 +122,9 @@ class ArduSubSitl:
         log = open(self.directory / "sitl.log", "wb")  # noqa: SIM115 - the process writes it until stop()
         try:
             self.process = subprocess.Popen(command, cwd=self.directory, stdout=log, stderr=subprocess.STDOUT)
+        except OSError:
+            self.stop()  # not executable, wrong architecture: leave no directory behind
+            raise
         finally:
             log.close()
         deadline = time.monotonic() + self.start_timeout_s
