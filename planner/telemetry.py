@@ -1,0 +1,191 @@
+"""A real vehicle's telemetry as it arrives: the latest report of each kind, by the vehicle's clock.
+
+A vehicle we do not simulate streams at its own rates, reports its position in latitude
+and longitude (its ``LOCAL_POSITION_NED`` is relative to wherever its estimator started,
+not to the range's origin), and the network may deliver a report late, twice or out of
+order.  Everything on our side that follows such a vehicle — the back-seat, the virtual
+range elements, the watchdog, the run's referee — reads it through
+:class:`VehicleTelemetry`: it keeps the newest report of each kind with the vehicle's
+``time_boot_ms``, drops (and counts) reports older than one already seen, and gives the
+pose in the mission's local frame (x east, y north) through :class:`sim.uuv.geo.LocalFrame`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+from sim.uuv.geo import LocalFrame
+
+__all__ = ["Pose", "Contact", "VehicleTelemetry", "VIRTUAL_BATTERY_ID", "SURFACED_DEPTH_M"]
+
+#: BATTERY_STATUS.id of the virtual fuel gauge (the scenario's charge; the pack itself is id 0).
+VIRTUAL_BATTERY_ID = 99
+#: A vehicle this close to the surface counts as surfaced (a real depth reading hovers around 0).
+SURFACED_DEPTH_M = 0.3
+#: GLOBAL_POSITION_INT.hdg when the heading is unknown.
+_NO_HDG = 65535
+
+
+@dataclass(frozen=True)
+class Pose:
+    """Where the vehicle reported itself at ``time_ms`` (its ``time_boot_ms``), in the mission frame."""
+
+    time_ms: int
+    east: float
+    north: float
+    depth: float  # metres below the surface
+    heading: float  # compass radians, from ATTITUDE.yaw (or GLOBAL_POSITION_INT.hdg before the first ATTITUDE)
+    heading_ms: int
+
+    @property
+    def surfaced(self) -> bool:
+        return self.depth <= SURFACED_DEPTH_M
+
+
+@dataclass(frozen=True)
+class Contact:
+    """One sonar contact (OBSTACLE_DISTANCE_3D) in the mission frame, as of ``time_ms``."""
+
+    time_ms: int
+    east: float
+    north: float
+
+
+@dataclass
+class TelemetryCounts:
+    """What arrived and what was dropped, for the run's account."""
+
+    messages: int = 0
+    positions: int = 0
+    out_of_order: int = 0  # older than a report of the same kind already seen: dropped
+    duplicates: int = 0  # the same report again (same kind, same time_boot_ms)
+    reboots: int = 0  # the vehicle's clock went back by more than REBOOT_JUMP_MS
+
+
+@dataclass
+class VehicleTelemetry:
+    """Latest reports of one vehicle (see the module docstring); feed decoded pymavlink messages to :meth:`add`.
+
+    ``battery_id`` selects the BATTERY_STATUS the run counts on: the pack (0) or the
+    virtual fuel gauge (:data:`VIRTUAL_BATTERY_ID`).
+    """
+
+    frame: LocalFrame
+    battery_id: int = 0
+    counts: TelemetryCounts = field(default_factory=TelemetryCounts)
+
+    REBOOT_JUMP_MS = 10_000
+
+    def __post_init__(self) -> None:
+        self.now_ms = -1  # the newest vehicle time seen
+        self._last: dict[str, int] = {}  # newest time_boot_ms per kind
+        self._global = None
+        self._yaw: tuple[int, float] | None = None
+        self.pose: Pose | None = None
+        self.energy_hj: int | None = None  # of the selected battery
+        self.energy_ms = -1  # vehicle time when it arrived
+        self.pack = None  # the pack's own BATTERY_STATUS (id 0)
+        self.contacts: dict[int, Contact] = {}
+        self.heartbeat = None
+        self.ekf = None
+        self.gps_fix = 0
+
+    # -- input -------------------------------------------------------------------------
+    def add(self, msg) -> str | None:
+        """Take one decoded message; returns ``"position"`` when it brought a new pose, else None."""
+        kind = msg.get_type()
+        self.counts.messages += 1
+        stamp = getattr(msg, "time_boot_ms", None)
+        if stamp is not None and kind != "SET_POSITION_TARGET_LOCAL_NED":
+            stamp = int(stamp)
+            key = f"{kind}:{msg.obstacle_id}" if kind == "OBSTACLE_DISTANCE_3D" else kind
+            if not self._fresh(key, stamp):
+                return None
+        if kind == "GLOBAL_POSITION_INT":
+            return self._position(msg, stamp)
+        if kind == "ATTITUDE":
+            self._yaw = (stamp, float(msg.yaw))
+        elif kind == "BATTERY_STATUS":
+            self._battery(msg)
+        elif kind == "OBSTACLE_DISTANCE_3D":
+            self._contact(msg, stamp)
+        elif kind == "HEARTBEAT":
+            if msg.autopilot != 8:  # MAV_AUTOPILOT_INVALID: a companion, not the vehicle
+                self.heartbeat = msg
+        elif kind == "EKF_STATUS_REPORT":
+            self.ekf = msg
+        elif kind == "GPS_RAW_INT":
+            self.gps_fix = int(msg.fix_type)
+        return None
+
+    def _fresh(self, kind: str, stamp: int) -> bool:
+        last = self._last.get(kind, -1)
+        if stamp == last:
+            self.counts.duplicates += 1
+            return False
+        if stamp < last:
+            if last - stamp > self.REBOOT_JUMP_MS and stamp < self.REBOOT_JUMP_MS:
+                self.counts.reboots += 1  # the vehicle rebooted: start over with its new clock
+                self._last.clear()
+                self.now_ms = -1
+            else:
+                self.counts.out_of_order += 1
+                return False
+        self._last[kind] = stamp
+        self.now_ms = max(self.now_ms, stamp)
+        return True
+
+    def _position(self, msg, stamp: int) -> str | None:
+        if msg.lat == 0 and msg.lon == 0:
+            return None  # no position estimate yet (ArduSub reports 0, 0 until it has an origin)
+        east, north = self.frame.to_local(msg.lat * 1e-7, msg.lon * 1e-7)
+        if self._yaw is not None:
+            heading_ms, heading = self._yaw
+        elif msg.hdg != _NO_HDG:
+            heading_ms, heading = stamp, _wrap(math.radians(msg.hdg / 100.0))
+        else:
+            heading_ms, heading = stamp, 0.0
+        self.pose = Pose(stamp, float(east), float(north), -msg.relative_alt / 1000.0, heading, heading_ms)
+        self.counts.positions += 1
+        return "position"
+
+    def _battery(self, msg) -> None:
+        if int(msg.id) == 0:
+            self.pack = msg
+        if int(msg.id) != self.battery_id:
+            return
+        energy = int(msg.energy_consumed)
+        if energy < 0:  # not reported: count it from the charge drawn and the pack voltage
+            mah, mv = int(msg.current_consumed), int(msg.voltages[0])
+            if mah < 0 or mv in (0, 65535):
+                return
+            energy = int(mah * mv / 1e6 * 36.0)
+        self.energy_hj, self.energy_ms = energy, self.now_ms
+
+    def _contact(self, msg, stamp: int) -> None:
+        pose = self.pose
+        if msg.frame == 12 and pose is not None:  # MAV_FRAME_BODY_FRD: x forward, y right, from the sensor's pose
+            s, c = math.sin(pose.heading), math.cos(pose.heading)
+            east = pose.east + msg.x * s + msg.y * c
+            north = pose.north + msg.x * c - msg.y * s
+        elif msg.frame == 1:  # MAV_FRAME_LOCAL_NED, taken as the mission frame
+            east, north = float(msg.y), float(msg.x)
+        else:
+            return
+        self.contacts[int(msg.obstacle_id)] = Contact(stamp, float(east), float(north))
+
+    # -- queries ---------------------------------------------------------------------------
+    def recent_contacts(self, since_ms: int) -> dict[int, Contact]:
+        """Contacts reported at or after ``since_ms`` (older ones are out of sight now)."""
+        return {j: c for j, c in self.contacts.items() if c.time_ms >= since_ms}
+
+    def age_ms(self, kind: str) -> int | None:
+        """How long ago, by the vehicle's clock, the newest report of ``kind`` was stamped; None if never."""
+        last = self._last.get(kind)
+        return None if last is None else self.now_ms - last
+
+
+def _wrap(a: float) -> float:
+    """Compass radians into (-pi, pi], as ATTITUDE.yaw reports them."""
+    return math.atan2(math.sin(a), math.cos(a))
