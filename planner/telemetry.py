@@ -37,6 +37,8 @@ class Pose:
     depth: float  # metres below the surface
     heading: float  # compass radians, from ATTITUDE.yaw (or GLOBAL_POSITION_INT.hdg before the first ATTITUDE)
     heading_ms: int
+    speed: float = 0.0  # over ground, m/s (GLOBAL_POSITION_INT vx, vy)
+    yaw_rate: float = 0.0  # rad/s (ATTITUDE.yawspeed)
 
     @property
     def surfaced(self) -> bool:
@@ -81,7 +83,7 @@ class VehicleTelemetry:
         self.now_ms = -1  # the newest vehicle time seen
         self._last: dict[str, int] = {}  # newest time_boot_ms per kind
         self._global = None
-        self._yaw: tuple[int, float] | None = None
+        self._yaw: tuple[int, float, float] | None = None
         self.pose: Pose | None = None
         self.energy_hj: int | None = None  # of the selected battery
         self.energy_ms = -1  # vehicle time when it arrived
@@ -96,16 +98,16 @@ class VehicleTelemetry:
         """Take one decoded message; returns ``"position"`` when it brought a new pose, else None."""
         kind = msg.get_type()
         self.counts.messages += 1
-        stamp = getattr(msg, "time_boot_ms", None)
-        if stamp is not None and kind != "SET_POSITION_TARGET_LOCAL_NED":
-            stamp = int(stamp)
+        raw_stamp = getattr(msg, "time_boot_ms", None)
+        stamp = self.now_ms if raw_stamp is None else int(raw_stamp)
+        if raw_stamp is not None:
             key = f"{kind}:{msg.obstacle_id}" if kind == "OBSTACLE_DISTANCE_3D" else kind
             if not self._fresh(key, stamp):
                 return None
         if kind == "GLOBAL_POSITION_INT":
             return self._position(msg, stamp)
         if kind == "ATTITUDE":
-            self._yaw = (stamp, float(msg.yaw))
+            self._yaw = (stamp, float(msg.yaw), float(msg.yawspeed))
         elif kind == "BATTERY_STATUS":
             self._battery(msg)
         elif kind == "OBSTACLE_DISTANCE_3D":
@@ -140,13 +142,16 @@ class VehicleTelemetry:
         if msg.lat == 0 and msg.lon == 0:
             return None  # no position estimate yet (ArduSub reports 0, 0 until it has an origin)
         east, north = self.frame.to_local(msg.lat * 1e-7, msg.lon * 1e-7)
+        yaw_rate = 0.0
         if self._yaw is not None:
-            heading_ms, heading = self._yaw
+            heading_ms, heading, yaw_rate = self._yaw
         elif msg.hdg != _NO_HDG:
             heading_ms, heading = stamp, _wrap(math.radians(msg.hdg / 100.0))
         else:
             heading_ms, heading = stamp, 0.0
-        self.pose = Pose(stamp, float(east), float(north), -msg.relative_alt / 1000.0, heading, heading_ms)
+        speed = math.hypot(msg.vx, msg.vy) / 100.0
+        depth = -msg.relative_alt / 1000.0
+        self.pose = Pose(stamp, float(east), float(north), depth, heading, heading_ms, speed, yaw_rate)
         self.counts.positions += 1
         return "position"
 

@@ -27,6 +27,7 @@ __all__ = [
     "battery_fraction",
     "encode_command",
     "decode_command",
+    "depth_rate",
     "DEPTH_M",
     "HJ_PER_WH",
 ]
@@ -79,3 +80,20 @@ def decode_command(vx, vy, vz, yaw) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     vy = np.asarray(vy, dtype=np.float32).astype(np.float64)
     heading = np.asarray(yaw, dtype=np.float32).astype(np.float64)
     return heading, np.hypot(vx, vy), np.asarray(vz, dtype=np.float32) < 0
+
+
+#: Depth-holding gain (1/s) and vertical speed limit (m/s) for a vehicle whose depth is a real state.
+DEPTH_GAIN = 0.25
+MAX_VZ = 0.5
+
+
+def depth_rate(depth: float, surface: bool, target_m: float = DEPTH_M) -> float:
+    """Vertical velocity (NED, + down) that takes a real vehicle to ``target_m``, or up to the surface.
+
+    A real autopilot in GUIDED integrates ``vz``: a constant "stay down" would drive it to the
+    bottom.  So a back-seat flying a vehicle at its own pace holds depth with a proportional
+    rate, limited to :data:`MAX_VZ`, and rises at :data:`SURFACE_VZ` to surface.
+    """
+    if surface:
+        return SURFACE_VZ
+    return float(np.clip(DEPTH_GAIN * (target_m - depth), -MAX_VZ, MAX_VZ))

@@ -22,7 +22,7 @@ from sim.uuv.scoring import Scorer
 from sim.uuv.sonar import sense
 from sim.uuv.world import Telemetry
 
-__all__ = ["TRACK_FIELDS", "score_track", "TrackBuilder"]
+__all__ = ["TRACK_FIELDS", "score_track", "TrackScorer", "TrackBuilder"]
 
 #: Columns of a track: one row per reported step.
 TRACK_FIELDS = ("t", "x", "y", "heading", "energy_hj", "surfaced")
@@ -40,16 +40,36 @@ def score_track(
     Scoring stops where the scorer says the run ended (recovered, collided, out of the
     area, out of battery) or at the end of the track.
     """
-    scen = make_scenarios(mission, np.asarray(u, dtype=float)[None, :])
-    if not scen.valid[0]:
-        raise InputError(f"u: scenario is invalid ({scen.invalid_reason[0]}); it has no score")
     track = np.asarray(track, dtype=float)
     if track.ndim != 2 or track.shape[1] < len(TRACK_FIELDS) or track.shape[0] == 0:
         raise InputError(f"track: expected rows of {', '.join(TRACK_FIELDS)}, got shape {track.shape}")
-    scorer = Scorer(scen)
-    start_wh = scen.battery0 * mission.vehicle.battery_wh
-    active = np.ones(1, dtype=bool)
-    for t, x, y, heading, hj, surfaced in track[:, :6]:
+    scorer = TrackScorer(mission, u)
+    for row in track[:, :6]:
+        if scorer.add(*row):
+            break
+    return scorer.scores(wp_aborted, return_reason)
+
+
+class TrackScorer:
+    """The batch scorer fed one reported step at a time: what a live referee and :func:`score_track` share.
+
+    :meth:`add` takes one row of TRACK_FIELDS and returns whether the run ends there;
+    :attr:`ended` then names why, in the front-seat's words.
+    """
+
+    def __init__(self, mission: Mission, u: np.ndarray | Sequence[float]):
+        scen = make_scenarios(mission, np.asarray(u, dtype=float)[None, :])
+        if not scen.valid[0]:
+            raise InputError(f"u: scenario is invalid ({scen.invalid_reason[0]}); it has no score")
+        self.mission, self.scen = mission, scen
+        self.scorer = Scorer(scen)
+        self.start_wh = scen.battery0 * mission.vehicle.battery_wh
+        self.ended = ""
+        self._active = np.ones(1, dtype=bool)
+
+    def add(self, t: float, x: float, y: float, heading: float, hj: float, surfaced: float) -> bool:
+        """Score one step; True when the run ends here (:attr:`ended` says why)."""
+        scen, mission = self.scen, self.mission
         qx, qy, qh = np.array([x]), np.array([y]), np.array([heading])
         contacts = sense(qx, qy, qh, scen.obstacle_edges, scen.barriers, mission.vehicle)
         tel = Telemetry(
@@ -60,7 +80,7 @@ def score_track(
             qy,
             qh,
             np.array([hj]),
-            battery_fraction(start_wh, np.array([hj]), mission.vehicle.battery_wh),
+            battery_fraction(self.start_wh, np.array([hj]), mission.vehicle.battery_wh),
             np.array([surfaced > 0]),
             contacts.x,
             contacts.y,
@@ -68,11 +88,25 @@ def score_track(
             contacts.detected,
         )
         nogo = rect_signed_distance(qx, qy, scen.nogo) if scen.nogo.shape[1] else None
-        if scorer.update_from(tel, active, nogo)[0]:
-            break
-    aborted = np.zeros((1, len(mission.waypoints)), dtype=bool)
-    aborted[0, : len(wp_aborted)] = np.asarray(wp_aborted, dtype=bool)[: len(mission.waypoints)]
-    return scorer.scores(aborted, np.array([int(return_reason)]))[0]
+        if self.scorer.update_from(tel, self._active, nogo)[0]:
+            r = self.scorer
+            self.ended = (
+                "recovered"
+                if r.recovered[0]
+                else "collision"
+                if r.collided[0]
+                else "left the operational area"
+                if r.left_area[0]
+                else "battery empty"
+            )
+            return True
+        return False
+
+    def scores(self, wp_aborted: Sequence[bool] = (), return_reason: int = 0) -> np.ndarray:
+        """The score vector so far, with the autonomy's account of aborted waypoints and why it turned home."""
+        aborted = np.zeros((1, len(self.mission.waypoints)), dtype=bool)
+        aborted[0, : len(wp_aborted)] = np.asarray(wp_aborted, dtype=bool)[: len(self.mission.waypoints)]
+        return self.scorer.scores(aborted, np.array([int(return_reason)]))[0]
 
 
 class TrackBuilder:
