@@ -31,7 +31,10 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from bridge import keys  # noqa: E402
 from bridge.logger import RAW_TOPIC  # noqa: E402
+from planner.referee import TrackSampler  # noqa: E402
+from planner.telemetry import VIRTUAL_BATTERY_ID, VehicleTelemetry  # noqa: E402
 from rapt.errors import FileFormatError  # noqa: E402
+from sim.uuv.geo import LocalFrame  # noqa: E402
 from sim.uuv.interface import decode_command  # noqa: E402
 from sim.uuv.replay import TrackBuilder  # noqa: E402
 
@@ -60,6 +63,7 @@ class LoggedRun:
     complete_file: bool
     problems: list[str] = field(default_factory=list)
     messages: int = 0
+    events: list[dict] = field(default_factory=list)  # bring-up steps, watchdog interventions, the referee's end
 
     @property
     def track(self) -> np.ndarray:
@@ -96,8 +100,31 @@ class _Steps(TrackBuilder):
         return super()._row(ms, lp, att, bat) + (surge, float(att.yawspeed))
 
 
+class _PacedSteps:
+    """The track of a vehicle-paced run: the referee's sampling (:class:`planner.referee.TrackSampler`) of the log."""
+
+    def __init__(self, frame: LocalFrame, dt: float):
+        self.telemetry = VehicleTelemetry(frame, VIRTUAL_BATTERY_ID)
+        self.period_ms = int(round(dt * 1000))
+        self.sampler: TrackSampler | None = None
+        self.ended = ""
+
+    def begin(self, start_ms: int) -> None:
+        self.sampler = TrackSampler(self.telemetry, start_ms, self.period_ms)
+
+    @property
+    def rows(self) -> list:
+        return self.sampler.rows if self.sampler is not None else []
+
+    def add(self, msg) -> None:
+        if self.telemetry.add(msg) == "position" and self.sampler is not None and self.telemetry.pose is not None:
+            if not self.ended:
+                self.sampler.add(self.telemetry.pose)
+
+
 #: MAVLink message ids a run's track needs (everything else on /mavlink/raw is skipped unparsed).
 WANTED_IDS = {
+    mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT,
     mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED,
     mavlink.MAVLINK_MSG_ID_ATTITUDE,
     mavlink.MAVLINK_MSG_ID_BATTERY_STATUS,
@@ -138,6 +165,8 @@ class RunLogReader:
         self.path = Path(path)
         self.channels: dict[int, Channel] = {}
         self.steps = _Steps()
+        self.paced: _PacedSteps | None = None  # a vehicle-paced run (meta pacing "vehicle")
+        self.start_ms = 0
         self.parser = mavlink.MAVLink(None)
         self.parser.robust_parsing = True
         self.meta: dict = {}
@@ -145,6 +174,7 @@ class RunLogReader:
         self.status: dict = {}
         self.active = keys.DEFAULT_ACTIVE
         self.problems: list[str] = []
+        self.events: list[dict] = []  # bring-up steps, watchdog interventions, the referee's end
         self.lost_chunks: list[tuple[int, int]] = []
         self.footer = False
         self.n_messages = 0
@@ -166,13 +196,14 @@ class RunLogReader:
                 f"LOG: {path} has no scenario metadata (meta/scenario); it was not written by "
                 "rapt-plan run or a logger beside a planned run"
             )
-        rows = np.array(self.steps.rows, dtype=float).reshape(-1, len(STEP_FIELDS))
+        steps = self.paced if self.paced is not None else self.steps
+        rows = np.array(steps.rows, dtype=float).reshape(-1, len(STEP_FIELDS))
         if rows.shape[0] == 0:
             self.problems.append("no complete telemetry step in the log")
         source, setpoints = self._setpoints(rows)
         status = self.status
         st = status.get(source or keys.DEFAULT_ACTIVE) or (next(iter(status.values())) if status else {})
-        if not self.steps.ended:
+        if not steps.ended:
             last = rows[-1, 0] if rows.shape[0] else 0.0
             self.problems.append(f"the run's end is not in the log (track stops at {last:,.0f} s): no observed mode")
         return LoggedRun(
@@ -180,12 +211,13 @@ class RunLogReader:
             self.meta,
             rows,
             setpoints,
-            self.steps.ended,
+            steps.ended,
             [bool(v) for v in st.get("wp_aborted", [])],
             int(st.get("return_reason", 0)),
             self.footer,
             self.problems,
             self.n_messages,
+            self.events,
         )
 
     # -- the file ----------------------------------------------------------------------
@@ -268,11 +300,17 @@ class RunLogReader:
         """A vehicle MAVLink frame: telemetry of the track and the run's end."""
         m = _decode_frame(self.parser, bytes(msg.data))
         if m is not None:
-            self.steps.add(m)
+            (self.paced or self.steps).add(m)
 
     def on_meta(self, name: str, obj) -> None:
         if name == "scenario" and isinstance(obj, dict):
             self.meta.update(obj)
+            origin = obj.get("origin")
+            if obj.get("pacing") == "vehicle" and self.paced is None and isinstance(origin, list) and len(origin) == 2:
+                self.paced = _PacedSteps(LocalFrame(float(origin[0]), float(origin[1])), float(obj.get("dt", 2.0)))
+        elif name == "clock" and isinstance(obj, dict) and self.paced is not None:
+            self.start_ms = int(obj.get("start_ms", 0))
+            self.paced.begin(self.start_ms)
 
     def on_command(self, name: str, obj) -> None:
         """A back-seat set-point of source ``name``, by the step (tick) it answers."""
@@ -285,7 +323,13 @@ class RunLogReader:
             )
 
     def on_status(self, name: str, obj) -> None:
-        if isinstance(obj, dict):
+        if not isinstance(obj, dict):
+            return
+        if name == "referee" and self.paced is not None and obj.get("ended"):
+            self.paced.ended = str(obj["ended"])
+        elif name in ("referee", "bringup", "watchdog"):
+            self.events.append({"source": name, **obj})
+        else:
             self.status[name] = obj
 
     def on_control(self, name: str, obj) -> None:
@@ -304,7 +348,7 @@ class RunLogReader:
             table = commands[source]
             ticks = np.array(sorted(table))
             values = np.array([table[k] for k in ticks], dtype=np.float32)
-            step_ms = np.round(rows[:, 0] * 1000).astype(np.int64)
+            step_ms = np.round(rows[:, 0] * 1000).astype(np.int64) + self.start_ms
             # the set-point the front-seat flew after each step: the latest one issued for a tick <= this step
             idx = np.searchsorted(ticks, step_ms, side="right") - 1
             ok = idx >= 0
