@@ -101,14 +101,25 @@ def autonomy(
     zenoh_connect: ZenohConnect = ["tcp/127.0.0.1:7447"],
     zenoh_config: ZenohConfig = None,
     surrogate: SurrogateOpt = None,
+    pacing: Annotated[
+        str,
+        typer.Option(
+            help="lockstep (our simulated front-seat closes each step) or vehicle (decide every mission step of "
+            "the vehicle's clock, from the start_ms put on meta/clock)."
+        ),
+    ] = "lockstep",
 ) -> None:
     """Run the back-seat autonomy of one scenario on the bus (or a trained surrogate of it)."""
-    from planner.backseat import BackSeat
+    from planner.backseat import PACINGS, BackSeat
 
+    if pacing not in PACINGS:
+        fail(f"--pacing: expected one of {', '.join(PACINGS)}, got {pacing!r}")
     mission, u, _ = mission_and_scenario(mission_file, scenario)
     learned = load_surrogate(surrogate, mission)
     session = bus_session(zenoh_connect, zenoh_config)
-    run_until_signal(session, lambda: BackSeat(session, vehicle, mission, u, source=source, surrogate=learned))
+    run_until_signal(
+        session, lambda: BackSeat(session, vehicle, mission, u, source=source, surrogate=learned, pacing=pacing)
+    )
 
 
 def log(
