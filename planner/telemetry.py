@@ -96,9 +96,9 @@ class VehicleTelemetry:
         """Take one decoded message; returns ``"position"`` when it brought a new pose, else None."""
         kind = msg.get_type()
         self.counts.messages += 1
-        stamp = getattr(msg, "time_boot_ms", None)
-        if stamp is not None and kind != "SET_POSITION_TARGET_LOCAL_NED":
-            stamp = int(stamp)
+        boot_ms = getattr(msg, "time_boot_ms", None)
+        stamp = -1 if boot_ms is None else int(boot_ms)  # every kind used below with it carries one
+        if boot_ms is not None and kind != "SET_POSITION_TARGET_LOCAL_NED":
             key = f"{kind}:{msg.obstacle_id}" if kind == "OBSTACLE_DISTANCE_3D" else kind
             if not self._fresh(key, stamp):
                 return None
