@@ -43,7 +43,7 @@ class FakeVehicle:
         self.mav.seq = (self.mav.seq + 1) % 256
         self.pub.put(frame)
 
-    def pose(self, time_ms: int, east: float, north: float, heading: float, depth: float = 2.0) -> None:
+    def pose(self, time_ms: int, east: float, north: float, heading: float = 0.0, depth: float = 2.0) -> None:
         """ATTITUDE then GLOBAL_POSITION_INT, both stamped ``time_ms``."""
         lat, lon = self.frame.to_latlon(east, north)
         hdg = int(round(math.degrees(heading) % 360 * 100)) % 36000
