@@ -13,6 +13,7 @@ pose in the mission's local frame (x east, y north) through :class:`sim.uuv.geo.
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, field
 
 from sim.uuv.geo import LocalFrame
@@ -76,6 +77,8 @@ class VehicleTelemetry:
     counts: TelemetryCounts = field(default_factory=TelemetryCounts)
 
     REBOOT_JUMP_MS = 10_000
+    #: Poses kept to place a body-frame contact relative to the pose it was measured from.
+    POSE_HISTORY = 32
 
     def __post_init__(self) -> None:
         self.now_ms = -1  # the newest vehicle time seen
@@ -83,6 +86,7 @@ class VehicleTelemetry:
         self._global = None
         self._yaw: tuple[int, float] | None = None
         self.pose: Pose | None = None
+        self._poses: deque[Pose] = deque(maxlen=self.POSE_HISTORY)
         self.energy_hj: int | None = None  # of the selected battery
         self.energy_ms = -1  # vehicle time when it arrived
         self.pack = None  # the pack's own BATTERY_STATUS (id 0)
@@ -128,6 +132,7 @@ class VehicleTelemetry:
             if last - stamp > self.REBOOT_JUMP_MS and stamp < self.REBOOT_JUMP_MS:
                 self.counts.reboots += 1  # the vehicle rebooted: start over with its new clock
                 self._last.clear()
+                self._poses.clear()
                 self.now_ms = -1
             else:
                 self.counts.out_of_order += 1
@@ -147,6 +152,7 @@ class VehicleTelemetry:
         else:
             heading_ms, heading = stamp, 0.0
         self.pose = Pose(stamp, float(east), float(north), -msg.relative_alt / 1000.0, heading, heading_ms)
+        self._poses.append(self.pose)
         self.counts.positions += 1
         return "position"
 
@@ -164,7 +170,8 @@ class VehicleTelemetry:
         self.energy_hj, self.energy_ms = energy, self.now_ms
 
     def _contact(self, msg, stamp: int) -> None:
-        pose = self.pose
+        # a sensor stamps a body-frame contact with its pose's time: a newer pose may have arrived since
+        pose = next((p for p in reversed(self._poses) if p.time_ms == stamp), self.pose)
         if msg.frame == 12 and pose is not None:  # MAV_FRAME_BODY_FRD: x forward, y right, from the sensor's pose
             s, c = math.sin(pose.heading), math.cos(pose.heading)
             east = pose.east + msg.x * s + msg.y * c

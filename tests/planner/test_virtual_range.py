@@ -7,10 +7,12 @@ import math
 
 import numpy as np
 import pytest
+from pymavlink.dialects.v20 import ardupilotmega as mavlink
 
 from bridge import keys
-from planner.telemetry import VIRTUAL_BATTERY_ID
+from planner.telemetry import VIRTUAL_BATTERY_ID, VehicleTelemetry
 from planner.virtual_range import SENSOR_COMPONENT, VirtualRange, body_frd
+from sim.uuv.geo import LocalFrame
 from sim.uuv.mission import Rect, Triangle, Vehicle
 from sim.uuv.sonar import sense
 from tests.loopback import no_new_threads, wait_until
@@ -144,3 +146,26 @@ def test_the_fuel_gauge_counts_the_packs_draw_from_begin_against_the_scenario_ch
     # a back-seat reading the gauge instead of the pack; the pack's own report is still there beside it
     both = telemetry_of(m, frames[:n_first], battery_id=VIRTUAL_BATTERY_ID)
     assert both.pack is not None and both.pack.energy_consumed == 1360 and both.energy_hj == 360
+
+
+def test_a_contact_overtaken_by_a_newer_pose_is_placed_from_its_own_pose():
+    """The bus may deliver the vehicle's next pose before the contacts computed from the previous one."""
+    m = _mission()
+    tel = VehicleTelemetry(LocalFrame(m.origin_lat, m.origin_lon))
+    mav = mavlink.MAVLink(None, srcSystem=1, srcComponent=1)
+    poses = []
+    for t, north, heading in ((1000, 0.0, 0.0), (1250, 0.5, 0.2)):
+        lat, lon = tel.frame.to_latlon(0.0, north)
+        tel.add(mavlink.MAVLink_attitude_message(t, 0.0, 0.0, heading, 0.0, 0.0, 0.0))
+        tel.add(
+            mavlink.MAVLink_global_position_int_message(t, round(lat * 1e7), round(lon * 1e7), 0, -2000, 0, 0, 0, 0)
+        )
+        poses.append(tel.pose)
+    first = poses[0]
+    assert first is not None and first.time_ms == 1000 and tel.pose is not None and tel.pose.time_ms == 1250
+    x, y = body_frd(first, 0.0, 40.0)
+    msg = mavlink.MAVLink_obstacle_distance_3d_message(1000, 1, 12, 1, x, y, 0.0, 0.0, 100.0)
+    frame = mavlink.MAVLink(None).parse_buffer(msg.pack(mav))
+    tel.add(frame[0])
+    contact = tel.contacts[1]
+    assert (contact.east, contact.north) == (pytest.approx(0.0, abs=1e-4), pytest.approx(40.0, abs=1e-4))
