@@ -6,7 +6,12 @@ Everything about a vehicle lives under ``rapt/<vehicle>/``:
 ``rapt/<v>/mavlink/<MSG_NAME>``             one decoded MAVLink message as JSON (``msg.to_dict()``,
                                             bytes base64, NaN as null) plus ``"_recv_ns"``
 ``rapt/<v>/mavlink/raw``                    every received MAVLink frame's bytes, in order, one
-                                            reliable publisher, signature blocks left intact
+                                            reliable publisher, signature blocks left intact (and
+                                            the live-virtual range's frames, see ``virtual/``)
+``rapt/<v>/virtual/<MSG_NAME>``             a message the live-virtual range made up for the
+                                            vehicle (virtual sonar contact, virtual fuel gauge),
+                                            JSON as under ``mavlink/``; its frame is also on
+                                            ``mavlink/raw`` with the attachment ``b"virtual"``
 ``rapt/<v>/command/<source>``               a back-seat set-point, JSON ``{"tick_ms": int|null,
                                             "vx": m/s north, "vy": m/s east, "vz": m/s down
                                             (negative rises), "yaw": rad}``
@@ -38,6 +43,8 @@ __all__ = [
     "DEFAULT_ACTIVE",
     "telemetry",
     "raw",
+    "virtual",
+    "VIRTUAL_ATTACHMENT",
     "command",
     "active",
     "status",
@@ -50,6 +57,8 @@ __all__ = [
 PREFIX = "rapt"
 DEFAULT_VEHICLE = "uuv1"
 DEFAULT_ACTIVE = "autonomy"
+#: The Zenoh attachment of a frame on ``mavlink/raw`` that no vehicle sent (see :func:`virtual`).
+VIRTUAL_ATTACHMENT = b"virtual"
 
 _CHUNK = re.compile(r"[A-Za-z0-9_.\-]+\Z")
 
@@ -75,6 +84,11 @@ def telemetry(vehicle: str, msg_name: str) -> str:
 def raw(vehicle: str) -> str:
     """``rapt/<vehicle>/mavlink/raw``: every received frame's bytes, in order."""
     return f"{PREFIX}/{_chunk(vehicle, 'vehicle')}/mavlink/raw"
+
+
+def virtual(vehicle: str, msg_name: str) -> str:
+    """``rapt/<vehicle>/virtual/<MSG_NAME>``: a made-up (live-virtual) message as JSON, logged apart from real ones."""
+    return f"{PREFIX}/{_chunk(vehicle, 'vehicle')}/virtual/{_chunk(msg_name, 'msg_name', wildcard=True)}"
 
 
 def command(vehicle: str, source: str) -> str:

@@ -68,7 +68,7 @@ _STOP = object()
 
 
 def _schema_for(kind: str, name: str) -> tuple[str, dict]:
-    if kind == "mavlink":
+    if kind in ("mavlink", "virtual"):  # a virtual message has the same fields as a real one
         return f"mavlink.{name}", {
             "type": "object",
             "title": f"MAVLink {name}",

@@ -13,6 +13,7 @@ pose in the mission's local frame (x east, y north) through :class:`sim.uuv.geo.
 from __future__ import annotations
 
 import math
+from collections import deque
 from dataclasses import dataclass, field
 
 from sim.uuv.geo import LocalFrame
@@ -78,6 +79,8 @@ class VehicleTelemetry:
     counts: TelemetryCounts = field(default_factory=TelemetryCounts)
 
     REBOOT_JUMP_MS = 10_000
+    #: Poses kept to place a body-frame contact relative to the pose it was measured from.
+    POSE_HISTORY = 32
 
     def __post_init__(self) -> None:
         self.now_ms = -1  # the newest vehicle time seen
@@ -85,6 +88,7 @@ class VehicleTelemetry:
         self._global = None
         self._yaw: tuple[int, float, float] | None = None
         self.pose: Pose | None = None
+        self._poses: deque[Pose] = deque(maxlen=self.POSE_HISTORY)
         self.energy_hj: int | None = None  # of the selected battery
         self.energy_ms = -1  # vehicle time when it arrived
         self.pack = None  # the pack's own BATTERY_STATUS (id 0)
@@ -98,9 +102,9 @@ class VehicleTelemetry:
         """Take one decoded message; returns ``"position"`` when it brought a new pose, else None."""
         kind = msg.get_type()
         self.counts.messages += 1
-        raw_stamp = getattr(msg, "time_boot_ms", None)
-        stamp = self.now_ms if raw_stamp is None else int(raw_stamp)
-        if raw_stamp is not None:
+        boot_ms = getattr(msg, "time_boot_ms", None)
+        stamp = self.now_ms if boot_ms is None else int(boot_ms)
+        if boot_ms is not None and kind != "SET_POSITION_TARGET_LOCAL_NED":
             key = f"{kind}:{msg.obstacle_id}" if kind == "OBSTACLE_DISTANCE_3D" else kind
             if not self._fresh(key, stamp):
                 return None
@@ -130,6 +134,7 @@ class VehicleTelemetry:
             if last - stamp > self.REBOOT_JUMP_MS and stamp < self.REBOOT_JUMP_MS:
                 self.counts.reboots += 1  # the vehicle rebooted: start over with its new clock
                 self._last.clear()
+                self._poses.clear()
                 self.now_ms = -1
             else:
                 self.counts.out_of_order += 1
@@ -152,6 +157,7 @@ class VehicleTelemetry:
         speed = math.hypot(msg.vx, msg.vy) / 100.0
         depth = -msg.relative_alt / 1000.0
         self.pose = Pose(stamp, float(east), float(north), depth, heading, heading_ms, speed, yaw_rate)
+        self._poses.append(self.pose)
         self.counts.positions += 1
         return "position"
 
@@ -169,7 +175,8 @@ class VehicleTelemetry:
         self.energy_hj, self.energy_ms = energy, self.now_ms
 
     def _contact(self, msg, stamp: int) -> None:
-        pose = self.pose
+        # a sensor stamps a body-frame contact with its pose's time: a newer pose may have arrived since
+        pose = next((p for p in reversed(self._poses) if p.time_ms == stamp), self.pose)
         if msg.frame == 12 and pose is not None:  # MAV_FRAME_BODY_FRD: x forward, y right, from the sensor's pose
             s, c = math.sin(pose.heading), math.cos(pose.heading)
             east = pose.east + msg.x * s + msg.y * c

@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import socket
+import threading
 import time
 
 
@@ -21,3 +23,14 @@ def wait_until(predicate, timeout: float = 5.0, what: str = "condition"):
         if time.monotonic() > deadline:
             raise AssertionError(f"timed out waiting for {what}")
         time.sleep(0.005)
+
+
+@contextlib.contextmanager
+def no_new_threads(timeout: float = 5.0):
+    """Assert that every thread started inside the block has ended (within ``timeout``) when it exits."""
+    before = set(threading.enumerate())
+    yield
+    deadline = time.monotonic() + timeout
+    while (left := [t.name for t in threading.enumerate() if t not in before]) and time.monotonic() < deadline:
+        time.sleep(0.01)
+    assert not left, f"threads left running: {left}"
