@@ -4,7 +4,8 @@ Never imports :mod:`sim`; the planner wires the autonomy to the bus.
 
 Modules: :mod:`bridge.keys` (the key scheme), :mod:`bridge.session` (loopback Zenoh
 sessions), :mod:`bridge.setpoint` (the back-seat set-point), :mod:`bridge.frames` (MAVLink
-frame handling), :mod:`bridge.command_gate` (:class:`CommandGate`, the bridge's safety
+frame handling), :mod:`bridge.mission_upload` (the mission upload protocol, no I/O),
+:mod:`bridge.command_gate` (:class:`CommandGate`, the bridge's safety
 gates), :mod:`bridge.service` (the start/close life cycle), :mod:`bridge.mavlink_bridge`
 (:class:`MavlinkBridge`) and :mod:`bridge.logger` (:class:`McapLogger`). The names below are
 imported on first use, so ``import bridge.keys`` stays cheap for a back-seat process.
@@ -16,6 +17,7 @@ _EXPORTS = {
     "CommandGate": "bridge.command_gate",
     "MavlinkBridge": "bridge.mavlink_bridge",
     "McapLogger": "bridge.logger",
+    "MissionItem": "bridge.mission_upload",
     "read_log": "bridge.logger",
     "read_metadata": "bridge.logger",
     "Setpoint": "bridge.setpoint",

@@ -8,6 +8,16 @@ gates of :class:`bridge.command_gate.CommandGate`, which the bridge asks for eve
 link may drop or go silent at any time: the bridge then forwards nothing and keeps reopening
 the connection until frames come back.
 
+An operator's bring-up runs through the same object, under the same gates (``allow_commands``,
+an autopilot heard within ``silence_s``; each call checks its arguments and the gates before
+anything is sent): :meth:`MavlinkBridge.latest` and :attr:`MavlinkBridge.autopilot` read the
+latest message of each type, :meth:`~MavlinkBridge.command_long` (and ``set_mode``, ``arm``,
+``set_message_interval`` on top of it) waits for the final COMMAND_ACK,
+:meth:`~MavlinkBridge.request_data_stream` sets a stream group's rate and
+:meth:`~MavlinkBridge.upload_mission` runs :mod:`bridge.mission_upload`'s protocol, the reader
+thread handing it the vehicle's MISSION_REQUEST(_INT) and MISSION_ACK as it hands COMMAND_ACK
+to a waiting command.
+
 Benchmarking the round trip: a vehicle stamps ``time_boot_ms`` on a telemetry message, the
 back-seat echoes it as the set-point's ``tick_ms``, and the vehicle receives it back as
 ``SET_POSITION_TARGET_LOCAL_NED.time_boot_ms``; wall time between the two, measured at the
@@ -20,11 +30,13 @@ from __future__ import annotations
 import logging
 import math
 import os
+import queue
 import select
 import socket
 import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
@@ -38,11 +50,12 @@ from rapt.errors import FileFormatError, InputError, LinkError, LinkTimeoutError
 from . import keys  # noqa: E402
 from .command_gate import CommandGate  # noqa: E402
 from .frames import FrameSplitter, mavlink2, message_json  # noqa: E402
+from .mission_upload import COUNT, MissionItem, MissionUpload, describe, mission_items  # noqa: E402
 from .service import Service  # noqa: E402
 from .session import undeclare, use_session  # noqa: E402
 from .setpoint import Setpoint  # noqa: E402
 
-__all__ = ["MavlinkBridge", "ARDUSUB_MODES", "TYPE_MASK_VELOCITY_YAW", "load_signing_key"]
+__all__ = ["MavlinkBridge", "Autopilot", "MissionItem", "ARDUSUB_MODES", "TYPE_MASK_VELOCITY_YAW", "load_signing_key"]
 
 log = logging.getLogger(__name__)
 
@@ -65,6 +78,7 @@ ARDUSUB_MODES = {
 TYPE_MASK_VELOCITY_YAW = 2503
 
 _DIALECT = "ardupilotmega"
+_MISSION_REPLIES = frozenset(("MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"))
 _POLL_S = 0.1  # idle wake-up: silence detection and resync of a stalled partial frame
 _MAX_BACKOFF_S = 0.5
 
@@ -90,6 +104,39 @@ def load_signing_key(signing_key: bytes | str | os.PathLike) -> bytes:
         except (ValueError, UnicodeDecodeError):
             pass
     raise FileFormatError(f"signing_key: {str(path)!r} holds neither 32 bytes nor 64 hex digits")
+
+
+@dataclass(frozen=True)
+class Autopilot:
+    """The autopilot's latest HEARTBEAT: MAV_TYPE, MAV_AUTOPILOT, base_mode flags, custom_mode
+    (the ArduSub mode number), MAV_STATE, and when it arrived (``time.monotonic()``)."""
+
+    type: int
+    autopilot: int
+    base_mode: int
+    custom_mode: int
+    system_status: int
+    monotonic_s: float
+
+    @property
+    def armed(self) -> bool:
+        return bool(self.base_mode & mavlink2.MAV_MODE_FLAG_SAFETY_ARMED)
+
+    @property
+    def mode(self) -> str | None:
+        """The ArduSub mode's name (see :data:`ARDUSUB_MODES`), None for a number ArduSub does not define."""
+        for name, number in ARDUSUB_MODES.items():
+            if number == self.custom_mode:
+                return name
+        return None
+
+
+def _is_int(value: Any, low: int, high: int) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and low <= value <= high
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
 class MavlinkBridge(Service):
@@ -167,9 +214,14 @@ class MavlinkBridge(Service):
         self._last_frame = -math.inf
         self._heard = False  # frames seen on the current connection
         self._lost = False  # a link loss happened after frames were seen
-        self._acks: dict[int, tuple[int, int]] = {}
+        # the latest message of each type from the autopilot's system: written by the reader thread
+        # only (one dict store per frame), read anywhere; replaced by an empty dict when the link is lost
+        self._latest: dict[str, tuple[Any, float]] = {}
+        self._acks: dict[int, tuple[int, int, int]] = {}  # command -> (result, progress, serial)
         self._ack_cond = threading.Condition()
         self._ack_serial = 0
+        self._mission_lock = threading.Lock()  # one upload at a time
+        self._mission_inbox: queue.SimpleQueue | None = None  # the running upload's replies, from the reader
         self._counts = dict.fromkeys(
             (
                 "frames_in",
@@ -293,6 +345,23 @@ class MavlinkBridge(Service):
         return self._target
 
     @property
+    def autopilot(self) -> Autopilot | None:
+        """The autopilot's latest HEARTBEAT (type, autopilot, base_mode, custom_mode, system_status), or None."""
+        latest = self._latest.get("HEARTBEAT")
+        if latest is None:
+            return None
+        msg, at = latest
+        return Autopilot(msg.type, msg.autopilot, msg.base_mode, msg.custom_mode, msg.system_status, at)
+
+    def latest(self, name: str) -> tuple[Any, float] | None:
+        """``(message, time.monotonic() at arrival)``: the latest ``name`` message (e.g. ``"EKF_STATUS_REPORT"``)
+        from the autopilot's system, like pymavlink's ``conn.messages``; None if none came since the
+        autopilot was last heard (a lost link forgets them all). Cheap, and safe from any thread."""
+        if not isinstance(name, str) or not name:
+            raise InputError(f"name: expected a MAVLink message name such as 'HEARTBEAT', got {name!r}")
+        return self._latest.get(name)
+
+    @property
     def active(self) -> str:
         """The source whose set-points are forwarded."""
         self._drain_active()
@@ -341,6 +410,7 @@ class MavlinkBridge(Service):
         self._last_frame = -math.inf
         self._target = None  # nothing stale: a vehicle that comes back announces itself again
         self._position = None
+        self._latest = {}
         with self._send_lock:
             self._close_conn()
 
@@ -413,16 +483,26 @@ class MavlinkBridge(Service):
         self._last_frame = now
         self._counts["frames_in"] += 1
         name = msg.get_type()
+        source = (msg.get_srcSystem(), msg.get_srcComponent())
         if name == "HEARTBEAT":
             if msg.autopilot != mavlink2.MAV_AUTOPILOT_INVALID:
-                self._target = (msg.get_srcSystem(), msg.get_srcComponent())
+                self._target = source
         elif name == "LOCAL_POSITION_NED":
             self._position = (msg.x, msg.y, now)
-        elif name == "COMMAND_ACK" and msg.result != mavlink2.MAV_RESULT_IN_PROGRESS:
-            with self._ack_cond:
-                self._ack_serial += 1
-                self._acks[msg.command] = (msg.result, self._ack_serial)
-                self._ack_cond.notify_all()
+        target = self._target
+        if target is not None and source[0] == target[0]:
+            if name != "HEARTBEAT" or source == target:  # another component's heartbeat is not the autopilot's
+                self._latest[name] = (msg, now)
+            if source == target and self._addressed_to_us(msg):
+                if name == "COMMAND_ACK":
+                    with self._ack_cond:
+                        self._ack_serial += 1
+                        self._acks[msg.command] = (msg.result, msg.progress, self._ack_serial)
+                        self._ack_cond.notify_all()
+                elif name in _MISSION_REPLIES:
+                    inbox = self._mission_inbox
+                    if inbox is not None:
+                        inbox.put(msg)
         try:
             session, raw_pub = self._session, self._raw_pub
             assert session is not None and raw_pub is not None, "the reader starts after _open declared both"
@@ -440,6 +520,12 @@ class MavlinkBridge(Service):
         except Exception as error:  # a closing session, an unencodable field: count, keep reading
             self._counts["publish_errors"] += 1
             log.warning("bridge %s: cannot publish %s: %s", self.vehicle, name, error)
+
+    def _addressed_to_us(self, msg: Any) -> bool:
+        """A reply addressed to this bridge (or broadcast, as some autopilots send COMMAND_ACK)."""
+        system = getattr(msg, "target_system", 0)
+        component = getattr(msg, "target_component", 0)
+        return system in (0, self.source_system) and component in (0, self.source_component)
 
     def _send(self, msg: Any) -> bool:
         """Send under the lock; False when there is no open connection."""
@@ -555,7 +641,23 @@ class MavlinkBridge(Service):
         else:
             c["commands_stale"] += 1
 
-    # ----------------------------------------------------------------- COMMAND_LONG helpers
+    # ----------------------------------------------------------------- commands to the autopilot
+    # Every one checks its arguments, then the gates (allow_commands, an autopilot heard within
+    # silence_s), before anything is sent: nothing but HEARTBEAT reaches a vehicle otherwise.
+    def _ready(self, what: str) -> tuple[int, int]:
+        """The autopilot's (system, component), once the gates allow a command; otherwise a one-line error."""
+        if not self.allow_commands:
+            self._counts["commands_refused"] += 1
+            raise RefusedError(f"{what}: allow_commands is False, nothing but HEARTBEAT is sent to the vehicle")
+        target = self._target  # read once: the reader may forget it (link lost) at any time
+        if target is None or not self.linked:
+            raise LinkError(f"{what}: no autopilot heard within the last {self.silence_s} s")
+        return target
+
+    def _send_or_raise(self, msg: Any, what: str) -> None:
+        if not self._send(msg):
+            raise LinkError(f"{what}: the link to {self.device} closed; nothing was sent")
+
     def arm(self, armed: bool = True, *, force: bool = False, timeout: float = 1.0, retries: int = 3) -> int:
         """Arm (or disarm) with MAV_CMD_COMPONENT_ARM_DISARM; returns the COMMAND_ACK result (0 = accepted)."""
         params = (1.0 if armed else 0.0, 21196.0 if force else 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
@@ -574,29 +676,156 @@ class MavlinkBridge(Service):
         params = (float(mavlink2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED), float(number), 0.0, 0.0, 0.0, 0.0, 0.0)
         return self._command_long(mavlink2.MAV_CMD_DO_SET_MODE, params, timeout, retries, "set_mode")
 
+    def command_long(
+        self, command: int, params: Sequence[float] = (), *, timeout: float = 1.0, retries: int = 3
+    ) -> int:
+        """Send COMMAND_LONG ``command`` (a MAV_CMD) with up to 7 ``params`` (the rest 0) and return its final
+        COMMAND_ACK result (a MAV_RESULT: 0 accepted, 3 unsupported, 4 failed, ...).
+
+        Sent again up to ``retries`` times while no COMMAND_ACK comes within ``timeout`` seconds
+        (the ``confirmation`` field counts the tries). A ``MAV_RESULT_IN_PROGRESS`` ACK stops the
+        retries and restarts the timeout: the final ACK is awaited (``latest("COMMAND_ACK")``
+        shows the progress). Raises RefusedError (allow_commands False), LinkError (no autopilot
+        heard) before sending anything, and LinkTimeoutError when no final ACK comes.
+        """
+        if not _is_int(command, 0, 0xFFFF):
+            raise InputError(f"command: expected a MAV_CMD number in 0..65535, got {command!r}")
+        if isinstance(params, (str, bytes)) or not isinstance(params, Sequence) or len(params) > 7:
+            raise InputError(f"params: expected a sequence of at most 7 numbers, got {params!r}")
+        for i, value in enumerate(params):
+            if not _is_number(value):
+                raise InputError(
+                    f"params[{i}]: expected a number (NaN allowed where the command says so), got {value!r}"
+                )
+        full = [float(v) for v in params] + [0.0] * (7 - len(params))
+        return self._command_long(command, full, timeout, retries, "command_long")
+
+    def set_message_interval(self, msg_id: int, rate_hz: float, *, timeout: float = 1.0, retries: int = 3) -> int:
+        """Ask for message ``msg_id`` at ``rate_hz`` (0 stops it) with MAV_CMD_SET_MESSAGE_INTERVAL (511);
+        returns the COMMAND_ACK result. Rates are in the vehicle's time: an ArduSub SITL at speed-up S
+        sends S times as many per wall second. A vehicle that answers MAV_RESULT_UNSUPPORTED (3)
+        may still take :meth:`request_data_stream`."""
+        if not _is_int(msg_id, 0, 0xFFFFFF):
+            raise InputError(f"msg_id: expected a MAVLink message id in 0..16777215, got {msg_id!r}")
+        if not (_is_number(rate_hz) and math.isfinite(rate_hz) and rate_hz >= 0):
+            raise InputError(f"rate_hz: expected a rate >= 0 (0 stops the message), got {rate_hz!r}")
+        interval_us = -1 if rate_hz == 0 else max(1, round(1e6 / rate_hz))
+        if interval_us > 2**31 - 1:
+            raise InputError(f"rate_hz: {rate_hz!r} is below the slowest rate MAVLink can ask for (1 per 2147 s)")
+        params = (float(msg_id), float(interval_us), 0.0, 0.0, 0.0, 0.0, 0.0)
+        return self._command_long(
+            mavlink2.MAV_CMD_SET_MESSAGE_INTERVAL, params, timeout, retries, "set_message_interval"
+        )
+
+    def request_data_stream(self, stream_id: int, rate_hz: int, start: bool = True) -> None:
+        """Start (or stop) a MAV_DATA_STREAM group at ``rate_hz`` with REQUEST_DATA_STREAM (66), the older
+        way ArduPilot and MAVProxy set rates. No reply exists: check the rate in :meth:`latest`."""
+        if not _is_int(stream_id, 0, 0xFF):
+            raise InputError(f"stream_id: expected a MAV_DATA_STREAM number in 0..255, got {stream_id!r}")
+        if not _is_int(rate_hz, 0, 0xFFFF):
+            raise InputError(f"rate_hz: expected an int rate in 0..65535 Hz, got {rate_hz!r}")
+        if not isinstance(start, bool):
+            raise InputError(f"start: expected True (start) or False (stop), got {start!r}")
+        target = self._ready("request_data_stream")
+        msg = mavlink2.MAVLink_request_data_stream_message(target[0], target[1], stream_id, rate_hz, int(start))
+        self._send_or_raise(msg, "request_data_stream")
+
     def _command_long(self, command: int, params: Sequence[float], timeout: float, retries: int, what: str) -> int:
-        if not self.allow_commands:
-            self._counts["commands_refused"] += 1
-            raise RefusedError(f"{what}: allow_commands is False, nothing but HEARTBEAT is sent to the vehicle")
-        target = self._target  # read once: the reader may forget it (link lost) at any time
-        if target is None or not self.linked:
-            raise LinkError(f"{what}: no autopilot heard within the last {self.silence_s} s")
+        if not (_is_number(timeout) and timeout > 0):
+            raise InputError(f"timeout: expected a number of seconds > 0, got {timeout!r}")
+        if not _is_int(retries, 0, 1000):
+            raise InputError(f"retries: expected an int in 0..1000, got {retries!r}")
+        target = self._ready(what)
+        progress: int | None = None  # set once the vehicle reports MAV_RESULT_IN_PROGRESS
         for attempt in range(retries + 1):
             with self._ack_cond:
                 serial = self._ack_serial
-            msg = mavlink2.MAVLink_command_long_message(target[0], target[1], command, attempt, *params)
+            msg = mavlink2.MAVLink_command_long_message(target[0], target[1], command, min(attempt, 255), *params)
             self._send(msg)
             deadline = time.monotonic() + timeout
             with self._ack_cond:
                 while True:
                     ack = self._acks.get(command)
-                    if ack is not None and ack[1] > serial:
-                        return ack[0]
+                    if ack is not None and ack[2] > serial:
+                        if ack[0] != mavlink2.MAV_RESULT_IN_PROGRESS:
+                            return ack[0]
+                        # running: sending it again would restart or be refused; wait for the final ACK
+                        serial, progress = ack[2], ack[1]
+                        deadline = time.monotonic() + timeout
                     remaining = deadline - time.monotonic()
-                    if remaining <= 0 or self._stop.is_set():
+                    if self._stop.is_set():
+                        raise LinkError(f"{what}: the bridge closed while waiting for COMMAND_ACK")
+                    if remaining <= 0:
                         break
                     self._ack_cond.wait(remaining)
+            if progress is not None:
+                shown = "progress unknown" if progress == 255 else f"{progress}% done"
+                raise LinkTimeoutError(
+                    f"{what}: command {command} is IN_PROGRESS ({shown}) but no final COMMAND_ACK came within {timeout:g} s"
+                )
         raise LinkTimeoutError(f"{what}: no COMMAND_ACK after {retries + 1} tries")
+
+    # ----------------------------------------------------------------- mission upload
+    def upload_mission(
+        self,
+        items: Iterable[MissionItem | Any],
+        *,
+        mission_type: int = mavlink2.MAV_MISSION_TYPE_MISSION,
+        timeout: float = 1.5,
+        retries: int = 5,
+    ) -> int:
+        """Upload ``items`` (:class:`MissionItem` or ``MAVLink_mission_item_int_message``, item i with seq i) with
+        MAVLink's mission protocol; returns the MAV_MISSION_RESULT (0 = MAV_MISSION_ACCEPTED).
+
+        On ArduPilot item 0 is home, and the vehicle keeps its own home there. ``mission_type``:
+        0 mission, 1 fence, 2 rally. ``timeout`` runs from the vehicle's last progress; the last
+        message is sent again up to ``retries`` times before LinkTimeoutError names the step.
+        An empty list clears the mission. The protocol's rules are :mod:`bridge.mission_upload`'s.
+        """
+        what = "upload_mission"
+        checked = mission_items(items)
+        upload = MissionUpload(len(checked), mission_type=mission_type, timeout_s=timeout, retries=retries, what=what)
+        target = self._ready(what)
+        if not self._mission_lock.acquire(blocking=False):
+            raise RunError(f"{what}: another upload is running on this bridge; wait for it to end")
+        inbox: queue.SimpleQueue = queue.SimpleQueue()
+        try:
+            self._mission_inbox = inbox  # before MISSION_COUNT goes out: the first request may come at once
+            self._send_mission(upload.start(time.monotonic()), checked, target, mission_type)
+            while not upload.done:
+                if self._stop.is_set():
+                    raise LinkError(f"{what}: the bridge closed during the upload ({upload.step})")
+                now = time.monotonic()
+                if now >= upload.deadline:
+                    sends = upload.on_timeout(now)  # raises once the retries are spent
+                else:
+                    try:
+                        msg = inbox.get(timeout=min(upload.deadline - now, _POLL_S))
+                    except queue.Empty:
+                        continue
+                    now = time.monotonic()
+                    if msg.get_type() == "MISSION_ACK":
+                        sends = upload.on_ack(msg.type, msg.mission_type, now)
+                        if msg.type != mavlink2.MAV_MISSION_ACCEPTED:
+                            log.info("bridge %s: %s NACK %s (%s)", self.vehicle, what, describe(msg.type), upload.step)
+                    else:
+                        sends = upload.on_request(msg.seq, msg.mission_type, now)
+                self._send_mission(sends, checked, target, mission_type)
+        finally:
+            self._mission_inbox = None
+            self._mission_lock.release()
+        assert upload.result is not None, "the loop ends only when the upload is done"
+        if upload.result != mavlink2.MAV_MISSION_ACCEPTED:
+            log.warning("bridge %s: %s ended with %s", self.vehicle, what, describe(upload.result))
+        return upload.result
+
+    def _send_mission(self, sends: list[int], items: list[MissionItem], target: tuple[int, int], kind: int) -> None:
+        for seq in sends:
+            if seq == COUNT:
+                msg = mavlink2.MAVLink_mission_count_message(target[0], target[1], len(items), kind)
+            else:
+                msg = items[seq].to_message(target[0], target[1], kind)
+            self._send(msg)  # a closed link is a timeout for the upload, as a lost frame is
 
 
 def _refuse_unsigned(mav: Any, msg_id: int) -> bool:

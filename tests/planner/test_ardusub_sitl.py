@@ -9,12 +9,16 @@ session; every process and thread is gone when a test ends.
 from __future__ import annotations
 
 import json
+import os
 import time
 
 import pytest
 
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavutil  # noqa: E402
+
 from bridge import keys
-from bridge.mavlink_bridge import MavlinkBridge
+from bridge.mavlink_bridge import MavlinkBridge, MissionItem
 from bridge.session import open_session
 from planner.ardusub_sitl import ENV, ArduSubSitl, sitl_binary
 from rapt.errors import InputError, MissingFileError
@@ -23,6 +27,8 @@ from tests.loopback import free_port, wait_until
 #: range2017's launch point (lat, lon, alt, heading), where a range team would put the vehicle.
 LAUNCH = (47.6953287, -122.6264071, 0.0, 0.0)
 MAV_RESULT_ACCEPTED, MAV_RESULT_FAILED = 0, 4
+MAV_MISSION_ACCEPTED = 0
+ATTITUDE = 30  # message id
 GUIDED = 4
 SAFETY_ARMED = 128  # MAV_MODE_FLAG_SAFETY_ARMED
 
@@ -79,3 +85,79 @@ def test_the_bridge_gets_guided_only_once_the_estimator_is_ready_then_arms_and_d
             session.close()
         process = sitl.process
     assert process is not None and process.poll() is not None  # stopped by its id at exit
+
+
+@needs_firmware
+@pytest.mark.sitl
+@pytest.mark.integration
+def test_the_bridge_sets_a_message_rate_and_uploads_a_mission_that_reads_back():
+    """SET_MESSAGE_INTERVAL is ACCEPTED and changes ATTITUDE's rate (in vehicle time); a home and two
+    waypoints at depth upload with MAV_MISSION_ACCEPTED; read back on SERIAL1, the waypoints are as sent
+    and item 0 holds the vehicle's own home, not the uploaded one."""
+    lat, lon = LAUNCH[:2]
+    items = [
+        MissionItem.waypoint(0, lat + 1e-3, lon + 1e-3, 0.0),  # a home ArduSub will not keep
+        MissionItem.waypoint(1, lat + 2e-4, lon, -2.0),
+        MissionItem.waypoint(2, lat + 2e-4, lon + 3e-4, -3.0),
+    ]
+    with ArduSubSitl(LAUNCH, speedup=10) as sitl:
+        session = open_session(listen=[f"tcp/127.0.0.1:{free_port()}"])
+        stamps: list[int] = []  # ATTITUDE.time_boot_ms: rates in vehicle time, whatever the speed-up
+        sub = session.declare_subscriber(
+            keys.telemetry("uuv1", "ATTITUDE"),
+            lambda s: stamps.append(json.loads(s.payload.to_bytes())["time_boot_ms"]),
+        )
+
+        def rate_hz(wall_s: float = 1.0) -> float:
+            start = len(stamps)
+            time.sleep(wall_s)
+            got = stamps[start:]
+            return (len(got) - 1) / ((got[-1] - got[0]) / 1000)
+
+        try:
+            with MavlinkBridge(sitl.connection, session, vehicle="uuv1", allow_commands=True) as bridge:
+                wait_until(lambda: bridge.autopilot is not None, timeout=30, what="ArduSub's first HEARTBEAT")
+                assert (bridge.autopilot.type, bridge.autopilot.autopilot, bridge.autopilot.mode) == (12, 3, "MANUAL")
+                wait_until(lambda: len(stamps) > 20, timeout=10, what="ATTITUDE")
+                before = rate_hz()
+                assert bridge.set_message_interval(ATTITUDE, 25.0) == MAV_RESULT_ACCEPTED
+                time.sleep(0.2)
+                after = rate_hz()
+                assert before < 15 and 20 < after < 30, (before, after)
+                assert bridge.latest("COMMAND_ACK")[0].command == 511
+
+                assert bridge.upload_mission(items) == MAV_MISSION_ACCEPTED
+
+                gcs = mavutil.mavlink_connection(
+                    f"tcp:127.0.0.1:{sitl.port + 2}", source_system=1, source_component=190, dialect="ardupilotmega"
+                )
+                try:
+                    assert gcs.wait_heartbeat(timeout=10) is not None
+                    stored = download_mission(gcs)
+                finally:
+                    gcs.close()
+        finally:
+            sub.undeclare()
+            session.close()
+    assert len(stored) == 3
+    # the frame comes back as GLOBAL_RELATIVE_ALT (3): ArduPilot stores no _INT variant, and x/y are degE7 anyway
+    assert [(m.seq, m.frame, m.command, m.x, m.y, m.z) for m in stored[1:]] == [
+        (i.seq, 3, i.command, i.x, i.y, i.z) for i in items[1:]
+    ]
+    home = stored[0]  # ArduPilot's seq 0 is home: its own, in the absolute frame
+    assert home.frame == 0 and abs(home.x - round(lat * 1e7)) < 100 and abs(home.y - round(lon * 1e7)) < 100
+
+
+def download_mission(gcs, timeout: float = 5.0) -> list:
+    """MISSION_REQUEST_LIST -> MISSION_COUNT -> MISSION_REQUEST_INT for each item, over a separate link."""
+    gcs.mav.mission_request_list_send(1, 1, 0)
+    count = gcs.recv_match(type="MISSION_COUNT", blocking=True, timeout=timeout)
+    assert count is not None, "no MISSION_COUNT"
+    stored = []
+    for seq in range(count.count):
+        gcs.mav.mission_request_int_send(1, 1, seq, 0)
+        item = gcs.recv_match(type="MISSION_ITEM_INT", blocking=True, timeout=timeout)
+        assert item is not None and item.seq == seq, f"item {seq}"
+        stored.append(item)
+    gcs.mav.mission_ack_send(1, 1, 0, 0)
+    return stored
