@@ -1,0 +1,205 @@
+"""One scenario of a field plan flown on a vehicle we do not simulate, through its MAVLink port.
+
+This is where the whole stack meets a real vehicle (or the simulated one as a bare
+autopilot): the bridge on the vehicle's port, the vehicle-paced back-seat, the virtual
+range elements (sonar returns of the scenario's barriers and obstacles, the fuel gauge
+counted from the scenario's charge), the watchdog, the referee and the MCAP logger, all on
+one Zenoh bus.  The bring-up (:mod:`planner.bringup`) takes the vehicle to the scenario's
+start; the run ends when the referee says so (recovered, collision, out of the area,
+battery empty, time limit) or the watchdog takes over, and the vehicle is then surfaced
+and disarmed — as it is on Ctrl-C.  Nothing here knows whether the far end is ArduSub on
+the water, ArduSub SITL or our bare-autopilot front-seat.
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from bridge import keys
+from bridge.mavlink_bridge import MavlinkBridge
+from bridge.session import open_session
+from planner.backseat import BackSeat
+from planner.bringup import BringUp, BringUpTimeouts, Step
+from planner.jsonio import jsonable
+from planner.referee import Referee
+from planner.sil import free_port
+from planner.virtual_range import VirtualRange
+from planner.watchdog import Watchdog
+from rapt.errors import InputError
+from sim.uuv.scenario import make_scenarios
+
+__all__ = ["VehicleRunResult", "run_vehicle", "WATCHDOG_ACTIONS"]
+
+#: What the watchdog does when it takes over.
+WATCHDOG_ACTIONS = ("surface", "hold")
+#: Wall seconds to wait for the vehicle to reach the surface before disarming it anyway.
+SURFACE_WAIT_S = 60.0
+
+
+@dataclass
+class VehicleRunResult:
+    scores: np.ndarray
+    track: np.ndarray  # (n, 8) rows of planner.referee.TrackSampler
+    ended: str  # the referee's reason, "watchdog: <reason>", or "stopped by the operator"
+    watchdog: str  # the watchdog's reason, "" if it never intervened
+    sim_s: float  # scenario seconds flown
+    wall_s: float
+    start_ms: int  # the vehicle's time_boot_ms at the scenario clock's start
+    decisions: dict = field(default_factory=dict)
+    telemetry: dict = field(default_factory=dict)
+    timeline: list[Step] = field(default_factory=list)
+    bridge_stats: dict = field(default_factory=dict)
+    log_path: Path | None = None
+    decision_ticks: list[int] = field(default_factory=list)  # time_boot_ms each decision was taken on
+    input_age_ms: list[int] = field(default_factory=list)  # the oldest input of each decision
+
+
+def run_vehicle(
+    flight,
+    connection: str,
+    *,
+    vehicle: str = keys.DEFAULT_VEHICLE,
+    log_path: str | Path | None = None,
+    action: str = "surface",
+    timeouts: BringUpTimeouts | None = None,
+    timeout_s: float | None = None,
+    say: Callable[[Step], None] | None = None,
+) -> VehicleRunResult:
+    """Fly ``flight`` (:class:`planner.flight.Flight`) on the vehicle at ``connection`` (a pymavlink string).
+
+    Raises a :class:`rapt.errors.RaptError` with one line when bring-up fails; by then nothing
+    has been commanded that the failed check could have prevented.  ``timeout_s`` bounds the
+    run's wall time (None: the mission's time limit on the vehicle's clock ends it).
+    """
+    if action not in WATCHDOG_ACTIONS:
+        raise InputError(f"--watchdog-action: expected one of {', '.join(WATCHDOG_ACTIONS)}, got {action!r}")
+    if not isinstance(connection, str) or not connection.strip():
+        raise InputError("--mavlink: expected a pymavlink connection string such as tcp:127.0.0.1:5760")
+    mission, u = flight.mission, np.asarray(flight.u, dtype=float)
+    scen = make_scenarios(mission, u[None, :])
+    if not scen.valid[0]:
+        raise InputError(
+            f"--scenario {flight.scenario_id}: invalid for mission '{mission.name}' ({scen.invalid_reason[0]})"
+        )
+    session = open_session(listen=[f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"])
+    parts: list = []
+    bringup = None
+    started = time.perf_counter()
+    try:
+        if log_path is not None:
+            from bridge.logger import McapLogger
+
+            parts.append(McapLogger(log_path, session, vehicle=vehicle).start())
+        session.put(keys.meta(vehicle, "scenario"), json.dumps(_scenario_meta(flight, connection)))
+        bridge = MavlinkBridge(connection, session, vehicle=vehicle, allow_commands=True).start()
+        parts.append(bridge)
+        virtual = VirtualRange(session, vehicle, mission, u).start()
+        referee = Referee(session, vehicle, mission, u).start()
+        backseat = BackSeat(session, vehicle, mission, u, pacing="vehicle").start()
+        watchdog = Watchdog(session, vehicle, mission, u, bridge, action=action).start()
+        parts += [virtual, referee, backseat, watchdog]
+        bringup = BringUp(bridge, session, vehicle, mission, connection, timeouts or BringUpTimeouts(), say)
+        try:
+            start_ms = bringup.run()
+            for part in (virtual, referee, backseat):
+                part.begin(start_ms)
+            watchdog.begin(start_ms)
+            session.put(keys.active(vehicle), keys.DEFAULT_ACTIVE)
+            ended = _fly(referee, watchdog, timeout_s)
+        except KeyboardInterrupt:
+            referee.end("stopped by the operator")
+            _recover(bridge, referee, bringup, "surface", say)
+            raise
+        _recover(bridge, referee, bringup, "hold" if watchdog.intervention and action == "hold" else "surface", say)
+        wall = time.perf_counter() - started
+        autonomy = backseat.autonomy
+        track = referee.track()
+        scores = referee.scorer.scores([bool(v) for v in autonomy.wp_aborted[0]], int(autonomy.return_reason[0]))
+        time.sleep(0.3)  # the last reports reach the logger
+        return VehicleRunResult(
+            scores,
+            track,
+            ended,
+            watchdog.intervention or "",
+            float(track[-1, 0]) if len(track) else 0.0,
+            wall,
+            start_ms,
+            backseat.stats.as_dict(),
+            dict(vars(backseat.telemetry.counts)),
+            list(bringup.timeline),
+            dict(bridge.stats),
+            Path(log_path) if log_path else None,
+            list(backseat.stats.ticks),
+            list(backseat.stats.input_age_ms),
+        )
+    finally:
+        if bringup is not None:
+            bringup.close()
+        for part in reversed(parts):
+            part.close()
+        session.close()
+
+
+def _scenario_meta(flight, connection: str) -> dict:
+    mission = flight.mission
+    return {
+        "mission": mission.name,
+        "mission_file": flight.mission_file or mission.source,
+        "scenario_id": flight.scenario_id,
+        "plan_id": flight.plan_id,
+        "u": np.asarray(flight.u, dtype=float).tolist(),
+        "parameters": jsonable(mission.space.decode(np.asarray(flight.u, dtype=float)[None, :])[0]),
+        "vehicle_link": connection,
+        "pacing": "vehicle",
+        "origin": [mission.origin_lat, mission.origin_lon],
+        "dt": mission.dt,
+    }
+
+
+def _fly(referee: Referee, watchdog: Watchdog, timeout_s: float | None) -> str:
+    """Wait for the run's end: the referee's, the watchdog's, or the wall-time limit's."""
+    deadline = None if timeout_s is None else time.monotonic() + timeout_s
+    while True:
+        if referee.ended:
+            return referee.ended
+        if watchdog.intervention:
+            reason = f"watchdog: {watchdog.intervention}"
+            referee.end(reason)
+            return reason
+        if deadline is not None and time.monotonic() > deadline:
+            reason = f"wall-time limit of {timeout_s:g} s"
+            referee.end(reason)
+            return reason
+        time.sleep(0.02)
+
+
+def _recover(bridge: MavlinkBridge, referee: Referee, bringup: BringUp, action: str, say) -> None:
+    """After the run (or on Ctrl-C): SURFACE, wait for the surface, disarm; or leave it holding in GUIDED."""
+    hb = bridge.autopilot
+    if hb is None or not hb.base_mode & 128:  # MAV_MODE_FLAG_SAFETY_ARMED
+        return
+    if action == "hold":
+        bringup.note("recover", "ok", "left holding in GUIDED for the operator (watchdog action: hold)")
+        return
+    try:
+        bridge.set_mode("SURFACE")
+        deadline = time.monotonic() + SURFACE_WAIT_S
+        while time.monotonic() < deadline:
+            pose = referee.telemetry.pose
+            if pose is not None and pose.surfaced:
+                break
+            time.sleep(0.05)
+    except Exception as exc:  # a lost link or a refusal must not keep us from disarming
+        bringup.note("recover", "failed", f"SURFACE: {exc}")
+    try:
+        bridge.arm(False)
+        bringup.note("recover", "ok", "surfaced and disarmed")
+    except Exception as exc:
+        bringup.note("recover", "failed", f"disarm: {exc}; the vehicle's own failsafe must act")
