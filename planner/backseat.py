@@ -67,6 +67,7 @@ class BackSeatStats:
         self.refreshes = 0  # the last set-point re-sent within its period
         self.latency_s: list[float] = []  # report received -> set-point published, wall seconds
         self.input_age_ms: list[int] = []  # the oldest input of each decision, vehicle ms
+        self.ticks: list[int] = []  # time_boot_ms of the report each decision was taken on
 
     def as_dict(self) -> dict:
         lat = np.asarray(self.latency_s) * 1000.0
@@ -303,6 +304,7 @@ class BackSeat(Service):
         self._pub.put(json.dumps(answer))
         self.stats.latency_s.append(time.perf_counter() - received)
         self.stats.input_age_ms.append(int(age))
+        self.stats.ticks.append(t_ms)
         self.stats.decisions += 1
         self._last_answer, self._last_decision_ms, self._last_sent_ms = answer, t_ms, t_ms
         self.last_tick_ms = t_ms

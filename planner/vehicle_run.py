@@ -108,9 +108,10 @@ def run_vehicle(
         bringup = BringUp(bridge, session, vehicle, mission, connection, timeouts or BringUpTimeouts(), say)
         try:
             start_ms = bringup.run()
-            for part in (virtual, referee, backseat):
-                part.begin(start_ms)
-            watchdog.begin(start_ms)
+            virtual.begin()
+            referee.begin(start_ms)
+            backseat.begin(start_ms)
+            watchdog.begin()
             session.put(keys.active(vehicle), keys.DEFAULT_ACTIVE)
             ended = _fly(referee, watchdog, timeout_s)
         except KeyboardInterrupt:

@@ -31,7 +31,10 @@ def run(
     ] = "0",
     speedup: Annotated[float | None, typer.Option(help="Real time times this factor (default: lock-step).")] = None,
     log: Annotated[Path | None, typer.Option(help="Record the bus to this MCAP file.")] = None,
-    timeout: Annotated[float, typer.Option(help="Give up after this many wall seconds.")] = 600.0,
+    timeout: Annotated[
+        float | None,
+        typer.Option(help="Give up after this many wall seconds (default: 600 in the loop; with --mavlink none)."),
+    ] = None,
     inject_bias: Annotated[
         str | None,
         typer.Option(
@@ -44,11 +47,26 @@ def run(
     stochastic: Annotated[bool, typer.Option(help="Navigation drift and current perturbations on (seeded).")] = False,
     seed: Annotated[int, typer.Option(help="Seed of the stochastic effects.")] = 0,
     surrogate: SurrogateOpt = None,
+    mavlink: Annotated[
+        str | None,
+        typer.Option(
+            "--mavlink",
+            help="Fly a vehicle we do not simulate at this pymavlink connection (tcp:HOST:PORT, udpin:..., "
+            "a serial port): bring-up, vehicle-paced autonomy, virtual range elements, watchdog.",
+        ),
+    ] = None,
+    watchdog_action: Annotated[
+        str, typer.Option("--watchdog-action", help="With --mavlink: what the watchdog does when it takes over.")
+    ] = "surface",
+    heartbeat_timeout: Annotated[
+        float, typer.Option("--heartbeat-timeout", help="With --mavlink: seconds to wait for the vehicle's HEARTBEAT.")
+    ] = 15.0,
 ) -> None:
     """Fly one scenario software-in-the-loop: front-seat, bridge, autonomy (and logger).
 
     With --surrogate the learned policy commands the vehicle while the expert autonomy
     keeps running beside it; the expert's commands are on the bus and in the log.
+    With --mavlink the scenario is flown on the vehicle at that address instead.
     """
     from planner.flight import Flight, check_against_batch, flight_from_plan, fly, is_plan
     from sim.uuv.bias import parse_bias
@@ -66,6 +84,27 @@ def run(
     else:
         mission, u, sid = mission_and_scenario(mission_file, scenario)
         flight = Flight(mission, u, sid, str(mission_file))
+    if mavlink is not None:
+        for name, given in (
+            ("--speedup", speedup is not None),
+            ("--inject-bias", bias is not None),
+            ("--stochastic", stochastic),
+            ("--surrogate", surrogate is not None),
+        ):
+            if given:
+                fail(f"{name}: not with --mavlink (the vehicle keeps its own pace and physics); drop one of them")
+        from planner.cli.vehicle import run_on_vehicle
+
+        run_on_vehicle(
+            flight,
+            mission_file,
+            mavlink,
+            log=log,
+            timeout=timeout,
+            action=watchdog_action,
+            heartbeat_timeout=heartbeat_timeout,
+        )
+        return
     if speedup is not None and speedup <= 0:
         fail(f"--speedup: expected a factor > 0, got {speedup}")
     learned = load_surrogate(surrogate, flight.mission)
@@ -74,7 +113,7 @@ def run(
             flight,
             log_path=log,
             speedup=speedup,
-            timeout_s=timeout,
+            timeout_s=600.0 if timeout is None else timeout,
             bias=bias,
             stochastic=stochastic,
             seed=seed,
