@@ -161,3 +161,38 @@ def download_mission(gcs, timeout: float = 5.0) -> list:
         stored.append(item)
     gcs.mav.mission_ack_send(1, 1, 0, 0)
     return stored
+
+
+@needs_firmware
+@pytest.mark.sitl
+@pytest.mark.integration
+def test_a_plan_scenario_flown_on_ardusub_like_on_the_range(tmp_path):
+    """`rapt-plan run PLAN --scenario pair2b --mavlink` on the real firmware: bring-up, a vehicle-paced flight
+    towards the first waypoint, the vehicle surfaced and disarmed at the end, a log read back as a run."""
+    from pathlib import Path
+
+    from planner.flight import flight_from_plan
+    from planner.logs import read_run
+    from planner.vehicle_run import run_vehicle
+
+    flight = flight_from_plan(Path("field_plans/range2017/plan.json"), "pair2b")
+    log = tmp_path / "pair2b.mcap"
+    with ArduSubSitl(LAUNCH, speedup=10) as sitl:
+        result = run_vehicle(flight, sitl.connection, log_path=log, timeout_s=20.0)
+    steps = [(s.name, s.status) for s in result.timeline]
+    names = ["heartbeat", "streams", "estimate", "area", "mission", "guided", "arm", "depth", "clock"]
+    assert steps[: len(names)] == [(n, "ok") for n in names], steps
+    assert steps[-1] == ("recover", "ok") and "disarmed" in result.timeline[-1].detail
+    assert result.ended.startswith("wall-time limit") and not result.watchdog
+    d = result.decisions
+    assert d["missed"] == 0 and d["decisions"] >= 0.8 * result.sim_s / flight.mission.dt
+    assert d["latency_ms_p99"] < 50
+    # it flew towards the first waypoint (ArduSub's BlueROV2 is slower than the modelled vehicle)
+    wx, wy = flight.mission.waypoints[0]
+    track = result.track
+    start = ((track[0, 1] - wx) ** 2 + (track[0, 2] - wy) ** 2) ** 0.5
+    end = ((track[-1, 1] - wx) ** 2 + (track[-1, 2] - wy) ** 2) ** 0.5
+    assert start - end > 50, (start, end)
+    run = read_run(log)
+    assert run.scenario_id == "pair2b" and run.has_end and len(run.steps) == len(track)
+    assert [e["name"] for e in run.events if e["source"] == "bringup"][: len(names)] == names
