@@ -17,6 +17,8 @@ The gates, in the order they are checked (each refusal names the bridge counter
 
    * ``"refused"`` — ``allow_commands`` is off;
    * ``"stale"`` — no autopilot known, or none heard within ``silence_s``;
+   * ``"mode"`` — ``required_mode`` is set and the autopilot's last HEARTBEAT is in another
+     mode (a real vehicle is commanded in GUIDED only, never in a pilot's mode);
    * ``"geofence"`` — a horizontal velocity while the position is unknown or older than
      ``silence_s``, or heading out through an edge the vehicle is within the margin of;
    * ``"rate_limited"`` — less than ``1 / max_rate_hz`` since the last set-point let through.
@@ -34,7 +36,7 @@ from rapt.errors import InputError
 from . import keys
 from .setpoint import Setpoint
 
-__all__ = ["GEOFENCE", "INACTIVE", "RATE_LIMITED", "REFUSED", "STALE", "CommandGate", "Fence", "outward"]
+__all__ = ["GEOFENCE", "INACTIVE", "MODE", "RATE_LIMITED", "REFUSED", "STALE", "CommandGate", "Fence", "outward"]
 
 #: (north_min, north_max, east_min, east_max) in metres, local NED.
 Fence = tuple[float, float, float, float]
@@ -43,6 +45,7 @@ Fence = tuple[float, float, float, float]
 INACTIVE = "inactive"
 REFUSED = "refused"
 STALE = "stale"
+MODE = "mode"
 GEOFENCE = "geofence"
 RATE_LIMITED = "rate_limited"
 
@@ -90,6 +93,7 @@ class CommandGate:
         geofence_margin_m: float = 20.0,
         max_rate_hz: float | None = None,
         active: str = keys.DEFAULT_ACTIVE,
+        required_mode: int | None = None,
     ):
         if not (isinstance(geofence_margin_m, (int, float)) and geofence_margin_m >= 0):
             raise InputError(f"geofence_margin_m: expected a number >= 0, got {geofence_margin_m!r}")
@@ -103,6 +107,7 @@ class CommandGate:
         self.geofence_margin_m = float(geofence_margin_m)
         self.max_rate_hz = None if max_rate_hz is None else float(max_rate_hz)
         self.active = active
+        self.required_mode = required_mode
         self.last_forward = -math.inf
 
     def __repr__(self) -> str:
@@ -121,18 +126,22 @@ class CommandGate:
         now: float,
         position: tuple[float, float, float] | None,
         heard: float | None,
+        mode: int | None = None,
     ) -> str | None:
         """Why ``setpoint`` may not go to the vehicle at ``now``, or None to forward it.
 
         ``position``: the last ``(north, east, at)`` in metres (local NED) and monotonic
         seconds, None when unknown. ``heard``: monotonic time of the last frame while an
-        autopilot is known, None when none is. A None answer is a decision to forward: it
+        autopilot is known, None when none is. ``mode``: the autopilot's custom mode from its last
+        HEARTBEAT (None: unknown). A None answer is a decision to forward: it
         starts the rate limit's next interval at ``now``, whether or not the send succeeds.
         """
         if not self.allow_commands:
             return REFUSED
         if heard is None or now - heard > self.silence_s:
             return STALE
+        if self.required_mode is not None and mode != self.required_mode:
+            return MODE
         if self.geofence is not None and (setpoint.vx or setpoint.vy):
             if (
                 position is None

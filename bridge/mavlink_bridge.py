@@ -131,6 +131,13 @@ class Autopilot:
         return None
 
 
+def _mode_number(name: str) -> int:
+    number = ARDUSUB_MODES.get(str(name).strip().upper())
+    if number is None:
+        raise InputError(f"required_mode: unknown ArduSub mode {name!r} (known: {', '.join(ARDUSUB_MODES)})")
+    return number
+
+
 def _is_int(value: Any, low: int, high: int) -> bool:
     return isinstance(value, int) and not isinstance(value, bool) and low <= value <= high
 
@@ -144,7 +151,8 @@ class MavlinkBridge(Service):
 
     ``session`` is an open ``zenoh.Session`` (not closed by the bridge), a ``zenoh.Config``
     or None (the bridge opens and closes its own session; None means in-process only).
-    Use as a context manager, or call :meth:`start` and :meth:`close` (:class:`~bridge.service.Service`).
+    ``required_mode`` (e.g. ``"GUIDED"``) forwards set-points only while the autopilot's last
+    HEARTBEAT reports that mode. Use as a context manager, or call :meth:`start` and :meth:`close` (:class:`~bridge.service.Service`).
     """
 
     _what = "bridge"
@@ -159,6 +167,7 @@ class MavlinkBridge(Service):
         geofence: Sequence[float] | None = None,
         geofence_margin_m: float = 20.0,
         max_rate_hz: float | None = None,
+        required_mode: str | None = None,
         signing_key: bytes | str | os.PathLike | None = None,
         silence_s: float = 2.0,
         heartbeat_hz: float = 1.0,
@@ -177,6 +186,7 @@ class MavlinkBridge(Service):
             geofence=geofence,
             geofence_margin_m=geofence_margin_m,
             max_rate_hz=max_rate_hz,
+            required_mode=_mode_number(required_mode) if required_mode is not None else None,
         )
         if not (isinstance(heartbeat_hz, (int, float)) and heartbeat_hz > 0):
             raise InputError(f"heartbeat_hz: expected a number > 0, got {heartbeat_hz!r}")
@@ -236,6 +246,7 @@ class MavlinkBridge(Service):
                 "commands_stale",
                 "commands_geofence",
                 "commands_rate_limited",
+                "commands_mode",
                 "commands_forwarded",
                 "reconnects",
                 "link_losses",
@@ -613,7 +624,8 @@ class MavlinkBridge(Service):
         now = time.monotonic()
         target = self._target
         heard = None if target is None else self._last_frame
-        reason = self.gate.check(sp, now, self._position, heard)
+        hb = self.autopilot
+        reason = self.gate.check(sp, now, self._position, heard, None if hb is None else hb.custom_mode)
         if reason is not None:
             c["commands_" + reason] += 1
             return

@@ -98,7 +98,9 @@ def run_vehicle(
 
             parts.append(McapLogger(log_path, session, vehicle=vehicle).start())
         session.put(keys.meta(vehicle, "scenario"), json.dumps(_scenario_meta(flight, connection)))
-        bridge = MavlinkBridge(connection, session, vehicle=vehicle, allow_commands=True).start()
+        bridge = MavlinkBridge(
+            connection, session, vehicle=vehicle, allow_commands=True, required_mode="GUIDED"
+        ).start()
         parts.append(bridge)
         virtual = VirtualRange(session, vehicle, mission, u).start()
         referee = Referee(session, vehicle, mission, u).start()

@@ -7,7 +7,7 @@ import math
 import pytest
 
 from bridge import keys
-from bridge.command_gate import GEOFENCE, INACTIVE, RATE_LIMITED, REFUSED, STALE, CommandGate
+from bridge.command_gate import GEOFENCE, INACTIVE, MODE, RATE_LIMITED, REFUSED, STALE, CommandGate
 from bridge.setpoint import Setpoint
 
 HOLD = Setpoint(0.0, 0.0, 0.0, 0.0)  # no horizontal velocity: the geofence never refuses it
@@ -35,6 +35,15 @@ def test_only_the_active_source_passes_and_the_active_source_can_change():
 
 def test_a_fresh_link_and_allow_commands_let_a_set_point_through():
     assert gate().check(NORTH, T, None, T) is None  # no geofence, no rate limit: position not needed
+
+
+def test_a_required_mode_refuses_set_points_in_any_other_mode_or_an_unknown_one():
+    g = gate(required_mode=4)  # GUIDED
+    assert g.check(HOLD, T, None, T, 4) is None
+    assert g.check(HOLD, T, None, T, 19) == MODE  # MANUAL: a pilot's mode is never commanded
+    assert g.check(HOLD, T, None, T, None) == MODE  # no HEARTBEAT yet
+    assert g.check(HOLD, T, None, T - 10, 19) == STALE  # a silent link is named first
+    assert gate().check(HOLD, T, None, T, 19) is None  # no required mode: the lock-step simulator's case
 
 
 def test_without_allow_commands_everything_is_refused_first():
