@@ -33,13 +33,28 @@ def frontseat(
     mavlink: Annotated[str, typer.Option(help="pymavlink connection to serve on, e.g. udpin:127.0.0.1:14550.")],
     scenario: ScenarioOpt = "0",
     speedup: Annotated[float | None, typer.Option(help="Real time times this factor (default: lock-step).")] = None,
+    bare: Annotated[
+        bool,
+        typer.Option("--bare", help="Behave like a bare ArduSub: its streams, EKF start-up, no sonar, no referee."),
+    ] = False,
+    ekf_ready: Annotated[
+        float, typer.Option("--ekf-ready", help="With --bare: vehicle seconds until the position estimate is ready.")
+    ] = 5.0,
 ) -> None:
     """Serve the simulated front-seat of one scenario on a MAVLink connection."""
     from sim.uuv.frontseat import FrontSeat
 
     mission, u, _ = mission_and_scenario(mission_file, scenario)
     try:
-        fs = FrontSeat(mission, u, mavlink, lockstep=speedup is None, speedup=speedup or 1.0)
+        fs = FrontSeat(
+            mission,
+            u,
+            mavlink,
+            lockstep=speedup is None and not bare,
+            speedup=speedup or 1.0,
+            bare=bare,
+            ekf_ready_s=ekf_ready,
+        )
     except (ValueError, OSError) as exc:
         fail(f"--mavlink: {exc}")
     serve_until_signal(fs)

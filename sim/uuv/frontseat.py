@@ -16,6 +16,11 @@ the latest set-point.  SYSTEM_TIME closes every step's telemetry.  Failsafe: no 
 for ``failsafe_s`` wall seconds (lock-step) or simulated seconds (real time) -> hold
 position and surface, as an autopilot would.  A referee scorer ends the run (recovered,
 collision, out of the area, battery empty, time limit) and the vehicle disarms.
+
+With ``bare`` it is none of that but a bare ArduSub (:mod:`sim.uuv.bare`): real time times
+``speedup``, each message streamed at ArduSub's own rate, a position estimate that is
+ready only ``ekf_ready_s`` after boot, GUIDED set-points as ArduSub reads them, depth as
+a state, no sonar and no referee.
 """
 
 from __future__ import annotations
@@ -31,6 +36,7 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
 from rapt.errors import InputError  # noqa: E402
+from sim.uuv.bare import BareAutopilot  # noqa: E402
 from sim.uuv.geo import LocalFrame  # noqa: E402
 from sim.uuv.interface import DEPTH_M, decode_command  # noqa: E402
 from sim.uuv.mission import Mission  # noqa: E402
@@ -89,22 +95,28 @@ class FrontSeat:
         sysid: int = 1,
         telemetry_period_s: float = 0.5,
         bias=None,
+        bare: bool = False,
+        ekf_ready_s: float = 5.0,
+        gcs_failsafe_s: float | None = 5.0,
     ):
         self.mission = mission
         self.u = np.asarray(u, dtype=float).reshape(1, -1)
         scen = make_scenarios(mission, self.u)
         if not scen.valid[0]:
             raise InputError(f"scenario: invalid for mission '{mission.name}' ({scen.invalid_reason[0]})")
-        if speedup <= 0:
+        if not speedup > 0:
             raise InputError(f"speedup: expected a factor > 0, got {speedup}")
+        if not ekf_ready_s >= 0:
+            raise InputError(f"ekf_ready_s: expected vehicle seconds >= 0, got {ekf_ready_s}")
         self.scen = scen
         # a biased vehicle (sim.uuv.bias) flies like a real one whose speed, tide, compass or
         # battery differ from the model; the back-seat on the far side does not know
         self.bias = bias
-        self.world = World(scen, scenario_generators(self.u, seed) if stochastic else None, bias, SCAN_BEAMS)
+        rngs = scenario_generators(self.u, seed) if stochastic else None
+        self.world = World(scen, rngs, bias, 0 if bare else SCAN_BEAMS)
         self.referee = Scorer(scen)
         self.frame = LocalFrame(mission.origin_lat, mission.origin_lon)
-        self.lockstep, self.speedup, self.failsafe_s = lockstep, float(speedup), float(failsafe_s)
+        self.lockstep, self.speedup, self.failsafe_s = lockstep and not bare, float(speedup), float(failsafe_s)
         self.telemetry_period_s = telemetry_period_s
         self.conn = mavutil.mavlink_connection(
             connection, source_system=sysid, source_component=1, dialect="ardupilotmega"
@@ -119,7 +131,11 @@ class FrontSeat:
         self._stop = threading.Event()
         self._boot = time.time()
         self.tel: Telemetry = self.world.telemetry(0.0)
-        self._referee()  # the first report counts, as in a batch
+        self.bare: BareAutopilot | None = None
+        if bare:  # a real vehicle knows no referee
+            self.bare = BareAutopilot(self, ekf_ready_s, gcs_failsafe_s)
+        else:
+            self._referee()  # the first report counts, as in a batch
 
     # -- public ----------------------------------------------------------------------
     @property
@@ -139,6 +155,9 @@ class FrontSeat:
 
     def serve(self, duration_s: float | None = None) -> None:
         """Run until :meth:`stop` (or ``duration_s`` wall seconds)."""
+        if self.bare is not None:
+            self.bare.serve(duration_s)
+            return
         deadline = None if duration_s is None else time.monotonic() + duration_s
         last_hb = last_tel = 0.0
         last_tick = time.monotonic()

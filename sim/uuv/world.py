@@ -161,10 +161,21 @@ class World:
         )
 
     def advance(
-        self, t: float, heading: np.ndarray, speed: np.ndarray, surface: np.ndarray, moving: np.ndarray
+        self,
+        t: float,
+        heading: np.ndarray,
+        speed: np.ndarray,
+        surface: np.ndarray,
+        moving: np.ndarray,
+        dt: float | None = None,
     ) -> None:
-        """Apply a decoded set-point to the ``moving`` vehicles for one step from time ``t``."""
-        m, dt = self.mission, self.mission.dt
+        """Apply a decoded set-point to the ``moving`` vehicles for one step from time ``t``.
+
+        ``dt`` defaults to the mission's step; the bare front-seat advances in shorter
+        sub-steps so that positions move smoothly between its reports.
+        """
+        m = self.mission
+        dt = m.dt if dt is None else float(dt)
         self.surfaced = np.asarray(surface, dtype=bool) & moving
         b = self.bias
         ce, cn = tidal_current(m.current, self.scen.start_time + b.start_time + t, b.current_scale, b.current_offset)

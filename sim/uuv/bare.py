@@ -1,0 +1,364 @@
+"""The front-seat as a bare ArduSub: what a client meets on a real vehicle, no lock-step, no referee.
+
+``FrontSeat(..., bare=True)`` hands its link to :class:`BareAutopilot`.  The vehicle boots
+disarmed in MANUAL on the surface at the mission's launch point, heading for the first
+waypoint; vehicle time is wall time since boot times ``speedup`` and every
+``time_boot_ms`` is vehicle time.  Physics advances in sub-steps of at most ``SUBSTEP_S``
+vehicle seconds, cut at every report, so positions move smoothly between reports.
+
+Streamed with no request, each at its own rate (vehicle time, ArduSub's defaults as
+measured on ArduSub SITL 4.7.0-dev, see :mod:`sim.uuv.streams`): HEARTBEAT 1 Hz;
+ATTITUDE, VFR_HUD 10 Hz; GLOBAL_POSITION_INT, LOCAL_POSITION_NED (only once the position
+estimate is ready, relative to the EKF origin = where the vehicle booted), SYSTEM_TIME,
+BATTERY_STATUS, EKF_STATUS_REPORT 3 Hz; SYS_STATUS, GPS_RAW_INT (3-D fix only when
+surfaced) 2 Hz; HOME_POSITION and GPS_GLOBAL_ORIGIN once when the estimate is ready.  No
+sonar.  SET_MESSAGE_INTERVAL, GET_MESSAGE_INTERVAL, REQUEST_MESSAGE and
+REQUEST_DATA_STREAM are answered as ArduSub answers them.  The position estimate is ready
+``ekf_ready_s`` after boot (:mod:`sim.uuv.ekf`); GUIDED and POSHOLD are refused before.
+
+Modes: GUIDED flies set-points (:mod:`sim.uuv.guided`); SURFACE rises to the surface;
+STABILIZE, ALT_HOLD, POSHOLD, AUTO and CIRCLE keep depth with no horizontal drive (no
+pilot, no mission here); MANUAL and ACRO and a disarmed vehicle apply no thrust — the
+vehicle keeps its depth (neutral buoyancy) and drifts with the current.  The vehicle never
+disarms itself except by ArduSub's GCS failsafe (FS_GCS_ENABLE 2, FS_GCS_TIMEOUT 5 s):
+once a heartbeat from system 255 has been heard, ``gcs_failsafe_s`` vehicle seconds
+without one disarm it.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavutil  # noqa: E402
+
+from sim.uuv.depth import SURFACE_VZ, Depth  # noqa: E402
+from sim.uuv.ekf import EkfReadiness  # noqa: E402
+from sim.uuv.guided import Target, from_global_int, from_local_ned  # noqa: E402
+from sim.uuv.interface import battery_fraction, energy_consumed_hj  # noqa: E402
+from sim.uuv.streams import StreamSchedule, message_name  # noqa: E402
+
+if TYPE_CHECKING:
+    from sim.uuv.frontseat import FrontSeat
+
+__all__ = ["BareAutopilot", "Truth", "SUBSTEP_S"]
+
+mav = mavutil.mavlink
+
+#: Longest physics sub-step (vehicle seconds).
+SUBSTEP_S = 0.1
+#: Longest wait for input (wall seconds) when nothing is due: commands are answered within it anyway.
+IDLE_S = 0.05
+GUIDED, SURFACE, MANUAL, ACRO = 4, 9, 19, 1
+#: The modes ArduSub has (ArduSub/mode.h); any other gets MAV_RESULT_FAILED.
+MODES = frozenset(mavutil.mode_mapping_sub)
+#: ArduSub's MAV_GCS_SYSID: the ground station whose heartbeat the GCS failsafe watches.
+GCS_SYSID = 255
+#: SYS_STATUS sensor bits as ArduSub SITL reports them (present, enabled, healthy).
+SENSORS = (322043151, 302095631, 319921423)
+#: AUTOPILOT_VERSION capabilities and version of the firmware measured (4.7.0-dev).
+CAPABILITIES, SW_VERSION = 0xF9E7, 0x04070000
+
+
+@dataclass(frozen=True)
+class Truth:
+    """The vehicle's true state for tests: ``x, y`` in the mission frame (east, north),
+    ``north, east`` from where it booted, depth (m, + down), heading (compass rad), speed
+    through water (m/s) and vehicle time ``t`` (s)."""
+
+    t: float
+    x: float
+    y: float
+    north: float
+    east: float
+    depth: float
+    heading: float
+    speed: float
+
+
+class BareAutopilot:
+    """A FrontSeat's vehicle run as ArduSub runs it (see module docstring)."""
+
+    def __init__(self, fs: FrontSeat, ekf_ready_s: float, gcs_failsafe_s: float | None):
+        self.fs, self.conn, self.world = fs, fs.conn, fs.world
+        self.spec = fs.mission.vehicle
+        self.ekf = EkfReadiness(float(ekf_ready_s))
+        self.gcs_failsafe_s = gcs_failsafe_s
+        s = self.world.state
+        self.x0, self.y0 = float(s.x[0]), float(s.y[0])  # the EKF origin and home
+        self.t = 0.0
+        self.depth = Depth()
+        self.target = Target.hold(0.0, 0.0)
+        self.streams = StreamSchedule()
+        self.vn = self.ve = 0.0  # ground velocity over the last sub-step
+        self._origin_sent = False
+        self._gcs_heard: float | None = None
+        self._texts: list[tuple[int, str]] = []  # STATUSTEXT to send after the COMMAND_ACK, as ArduSub orders them
+        self._boot = time.monotonic()
+
+    # -- clock and physics -------------------------------------------------------------
+    def now(self) -> float:
+        """Vehicle seconds since boot."""
+        return (time.monotonic() - self._boot) * self.fs.speedup
+
+    def truth(self) -> Truth:
+        s = self.world.state
+        x, y = float(s.x[0]), float(s.y[0])
+        return Truth(self.t, x, y, y - self.y0, x - self.x0, self.depth.depth, float(s.heading[0]), float(s.surge[0]))
+
+    def serve(self, duration_s: float | None = None) -> None:
+        deadline = None if duration_s is None else time.monotonic() + duration_s
+        stop = self.fs._stop
+        while not stop.is_set() and (deadline is None or time.monotonic() < deadline):
+            now = self.now()
+            while True:
+                event = min(self.t + SUBSTEP_S, self.streams.next_time())
+                if event > now:
+                    break
+                if event > self.t:
+                    self._substep(event - self.t)
+                for name in self.streams.due(self.t):
+                    self._send(name)
+            self._housekeeping()
+            wait = (min(self.t + SUBSTEP_S, self.streams.next_time()) - self.now()) / self.fs.speedup
+            msg = self.conn.recv_match(blocking=True, timeout=min(max(wait, 0.0005), IDLE_S))
+            while msg is not None:  # answer everything that is waiting
+                self.handle(msg)
+                msg = self.conn.recv_match(blocking=False)
+
+    def _housekeeping(self) -> None:
+        if self.ekf.ready(self.t) and not self._origin_sent:
+            self._origin_sent = True
+            self._status(mav.MAV_SEVERITY_INFO, "EKF3 IMU0 is using GPS")
+            self._send("GPS_GLOBAL_ORIGIN")
+            self._send("HOME_POSITION")
+        heard = self._gcs_heard
+        if self.gcs_failsafe_s is not None and heard is not None and self.fs.armed:
+            if self.t - heard > self.gcs_failsafe_s:
+                self._status(mav.MAV_SEVERITY_CRITICAL, f"MYGCS: {GCS_SYSID}, heartbeat lost")
+                self._arm(False)
+                self.fs.stats.failsafes += 1
+
+    def _here(self) -> tuple[float, float]:
+        s = self.world.state
+        return float(s.y[0]) - self.y0, float(s.x[0]) - self.x0
+
+    def _substep(self, dt: float) -> None:
+        fs, s = self.fs, self.world.state
+        heading, speed, vz = float(s.heading[0]), 0.0, 0.0
+        if fs.armed and fs.mode == GUIDED:
+            if self.target.expired(self.t):
+                self.target = self.target.timed_out(self.depth.depth)
+            self.target = self.target.advanced(dt)
+            north, east = self._here()
+            heading, speed, want = self.target.command(north, east, heading, self.spec.cruise_speed)
+            if want is None:
+                assert self.target.depth is not None
+                want = self.depth.toward(self.target.depth, dt)
+            vz = want
+        elif fs.armed and fs.mode == SURFACE:
+            vz = -SURFACE_VZ
+        x, y = float(s.x[0]), float(s.y[0])
+        self.depth.step(vz, dt)
+        one = np.ones(1, dtype=bool)
+        self.world.advance(self.t, np.array([heading]), np.array([speed]), np.array([self.depth.surfaced]), one, dt=dt)
+        self.t += dt
+        self.vn, self.ve = (float(s.y[0]) - y) / dt, (float(s.x[0]) - x) / dt
+        fs.stats.ticks += 1
+
+    # -- MAVLink out -------------------------------------------------------------------
+    def _status(self, severity: int, text: str) -> None:
+        self.fs._status(severity, text)
+
+    def _estimate(self) -> tuple[float, float]:
+        """Where the vehicle believes it is (mission frame east, north)."""
+        s, w = self.world.state, self.world
+        if w.noise is None:
+            return float(s.x[0]), float(s.y[0])
+        ex, ey = w.nav.estimate(s.x, s.y)
+        return float(ex[0]), float(ey[0])
+
+    def _battery(self) -> tuple[int, int, int]:
+        """(energy used in hJ, percent left, volts in mV) of the vehicle's own pack."""
+        w = self.world
+        hj = energy_consumed_hj(w.start_wh, w.state.energy_wh)
+        frac = float(battery_fraction(w.start_wh, hj, self.spec.battery_wh)[0])
+        return int(hj[0]), int(np.clip(round(frac * 100), 0, 100)), int(14800 * (0.85 + 0.15 * min(max(frac, 0), 1)))
+
+    def _send(self, name: str) -> None:
+        m, ms = self.conn.mav, int(self.t * 1000)
+        s = self.world.state
+        heading = float(s.heading[0])
+        yaw = math.atan2(math.sin(heading), math.cos(heading))
+        hdg = int(round(math.degrees(heading) % 360 * 100)) % 36000
+        depth, vz = self.depth.depth, self.depth.vz
+        ready, gps = self.ekf.ready(self.t), self.ekf.gps_found(self.t)
+        if name == "HEARTBEAT":
+            fs = self.fs
+            base = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mav.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
+            base |= mav.MAV_MODE_FLAG_STABILIZE_ENABLED
+            if fs.mode in (3, 4, 7, 16):
+                base |= mav.MAV_MODE_FLAG_GUIDED_ENABLED
+            if fs.armed:
+                base |= mav.MAV_MODE_FLAG_SAFETY_ARMED
+            state = mav.MAV_STATE_ACTIVE if fs.armed else mav.MAV_STATE_STANDBY
+            m.heartbeat_send(mav.MAV_TYPE_SUBMARINE, mav.MAV_AUTOPILOT_ARDUPILOTMEGA, base, fs.mode, state)
+        elif name == "ATTITUDE":
+            m.attitude_send(ms, 0.0, 0.0, yaw, 0.0, 0.0, float(s.yaw_rate[0]))
+        elif name == "VFR_HUD":
+            throttle = int(round(100 * float(s.surge[0]) / self.spec.max_speed)) if self.fs.armed else 0
+            m.vfr_hud_send(0.0, math.hypot(self.vn, self.ve), hdg // 100, throttle, -depth, -vz)
+        elif name == "GLOBAL_POSITION_INT":
+            lat = lon = 0
+            if gps:
+                la, lo = self.fs.frame.to_latlon(*self._estimate())
+                lat, lon = int(round(la * 1e7)), int(round(lo * 1e7))
+            mm = int(round(-depth * 1000))
+            m.global_position_int_send(
+                ms, lat, lon, mm, mm, int(self.vn * 100), int(self.ve * 100), int(vz * 100), hdg if gps else 0
+            )
+        elif name == "LOCAL_POSITION_NED":
+            if ready:  # ArduSub sends none before its EKF has a horizontal position
+                ex, ey = self._estimate()
+                m.local_position_ned_send(ms, ey - self.y0, ex - self.x0, depth, self.vn, self.ve, vz)
+        elif name == "GPS_RAW_INT":
+            fix = (mav.GPS_FIX_TYPE_3D_FIX if self.depth.surfaced else mav.GPS_FIX_TYPE_NO_FIX) if gps else 0
+            lat = lon = 0
+            if fix == mav.GPS_FIX_TYPE_3D_FIX:
+                la, lo = self.fs.frame.to_latlon(float(s.x[0]), float(s.y[0]))
+                lat, lon = int(round(la * 1e7)), int(round(lo * 1e7))
+            ground = math.hypot(self.vn, self.ve)
+            cog = int(round(math.degrees(math.atan2(self.ve, self.vn)) % 360 * 100)) % 36000
+            m.gps_raw_int_send(
+                ms * 1000, fix, lat, lon, 0, 121 if fix == 3 else 65535, 200 if fix == 3 else 65535,
+                int(ground * 100), cog, 10 if fix == 3 else 0,
+            )  # fmt: skip
+        elif name == "SYS_STATUS":
+            _, percent, mv = self._battery()
+            m.sys_status_send(*SENSORS, 0, mv, -1, percent, 0, 0, 0, 0, 0, 0)
+        elif name == "BATTERY_STATUS":
+            hj, percent, mv = self._battery()
+            mah = int(hj * 100 / 3600 / 14.8 * 1000)
+            m.battery_status_send(
+                0, mav.MAV_BATTERY_FUNCTION_ALL, mav.MAV_BATTERY_TYPE_LION, 32767, [mv] + [65535] * 9, -1, mah, hj,
+                percent,
+            )  # fmt: skip
+        elif name == "EKF_STATUS_REPORT":
+            var = 0.01 if ready else 0.0
+            m.ekf_status_report_send(self.ekf.flags(self.t), var, var, var, 0.0, 0.0)
+        elif name == "SYSTEM_TIME":
+            m.system_time_send(int(time.time() * 1e6), ms)
+        elif name in ("GPS_GLOBAL_ORIGIN", "HOME_POSITION"):
+            la, lo = self.fs.frame.to_latlon(self.x0, self.y0)
+            lat, lon = int(round(la * 1e7)), int(round(lo * 1e7))
+            if name == "GPS_GLOBAL_ORIGIN":
+                m.gps_global_origin_send(lat, lon, 0, ms * 1000)
+            else:
+                m.home_position_send(lat, lon, 0, 0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, ms * 1000)
+        elif name == "AUTOPILOT_VERSION":
+            m.autopilot_version_send(CAPABILITIES, SW_VERSION, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 0)
+
+    # -- MAVLink in --------------------------------------------------------------------
+    def handle(self, msg) -> None:
+        kind = msg.get_type()
+        if kind == "BAD_DATA":
+            return
+        if kind == "HEARTBEAT":
+            if msg.get_srcSystem() == GCS_SYSID:
+                self._gcs_heard = self.t
+        elif kind == "COMMAND_LONG":
+            self._command(msg)
+        elif kind == "SET_MODE":
+            self.conn.mav.command_ack_send(mav.MAVLINK_MSG_ID_SET_MODE, self._set_mode(int(msg.custom_mode)))
+            self._flush_texts()
+        elif kind == "SET_POSITION_TARGET_LOCAL_NED":
+            north, east = self._here()
+            heading = float(self.world.state.heading[0])
+            self._accept(from_local_ned(msg, north, east, self.depth.depth, heading, self.t))
+        elif kind == "SET_POSITION_TARGET_GLOBAL_INT":
+            self._accept(from_global_int(msg, self._north_east, self.t))
+        elif kind == "REQUEST_DATA_STREAM":
+            self.streams.request_data_stream(int(msg.req_stream_id), int(msg.req_message_rate), msg.start_stop, self.t)
+        else:
+            self.fs._handle(msg)  # the mission protocol, as in the other modes
+
+    def _flush_texts(self) -> None:
+        for severity, text in self._texts:
+            self._status(severity, text)
+        self._texts.clear()
+
+    def _north_east(self, lat: float, lon: float) -> tuple[float, float]:
+        x, y = self.fs.frame.to_local(lat, lon)
+        return y - self.y0, x - self.x0
+
+    def _accept(self, target: Target | None) -> None:
+        if target is None or self.fs.mode != GUIDED:
+            self.fs.stats.ignored += 1  # ArduSub drops these silently
+            return
+        self.target = target
+        self.fs.stats.setpoints += 1
+
+    def _arm(self, on: bool) -> None:
+        if on != self.fs.armed:
+            self._status(mav.MAV_SEVERITY_INFO, "Arming motors" if on else "Disarming motors")
+        self.fs.armed = on
+        self.target = Target.hold(self.depth.depth, self.t)
+
+    def _set_mode(self, mode: int) -> int:
+        if mode not in MODES:
+            self._texts.append((mav.MAV_SEVERITY_WARNING, f"No such mode {mode}"))
+            return mav.MAV_RESULT_FAILED
+        if not self.ekf.mode_allowed(mode, self.t):
+            name = mavutil.mode_mapping_sub[mode]
+            self._texts.append((mav.MAV_SEVERITY_WARNING, f"Mode change failed: {name} requires position"))
+            return mav.MAV_RESULT_FAILED
+        if mode != self.fs.mode:
+            self.target = Target.hold(self.depth.depth, self.t)  # GUIDED starts by holding where it is
+        self.fs.mode = mode
+        return mav.MAV_RESULT_ACCEPTED
+
+    def _command(self, msg) -> None:
+        cmd, result = int(msg.command), mav.MAV_RESULT_ACCEPTED
+        after = None
+        if cmd == mav.MAV_CMD_COMPONENT_ARM_DISARM:
+            self._arm(msg.param1 > 0.5)  # ARMING_CHECK 448: ArduSub arms in any mode, before the EKF is ready
+        elif cmd == mav.MAV_CMD_DO_SET_MODE:
+            result = self._set_mode(int(msg.param2))
+        elif cmd == mav.MAV_CMD_SET_MESSAGE_INTERVAL:
+            msg_id = int(msg.param1)
+            result = self.streams.set_interval(msg_id, msg.param2, self.t)
+            if result != mav.MAV_RESULT_ACCEPTED:
+                self._texts.append((mav.MAV_SEVERITY_INFO, f"No ap_message for mavlink id ({msg_id})"))
+        elif cmd == mav.MAV_CMD_GET_MESSAGE_INTERVAL:
+            msg_id = int(msg.param1)
+            us = self.streams.interval_us(msg_id)
+            if us is None:
+                result = mav.MAV_RESULT_FAILED
+            else:
+                after = lambda: self.conn.mav.message_interval_send(msg_id, us)  # noqa: E731
+        elif cmd == mav.MAV_CMD_REQUEST_MESSAGE:
+            name = message_name(int(msg.param1)) or _ON_REQUEST.get(int(msg.param1))
+            if name is None or (name in ("HOME_POSITION", "GPS_GLOBAL_ORIGIN") and not self.ekf.ready(self.t)):
+                result = mav.MAV_RESULT_FAILED
+            else:
+                after = lambda: self._send(name)  # noqa: E731
+        else:
+            result = mav.MAV_RESULT_UNSUPPORTED
+        self.conn.mav.command_ack_send(cmd, result)
+        self._flush_texts()
+        if after is not None:
+            after()
+
+
+#: Messages sent only on request (MAV_CMD_REQUEST_MESSAGE), beside the streamed ones.
+_ON_REQUEST = {
+    int(mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION): "AUTOPILOT_VERSION",
+    int(mav.MAVLINK_MSG_ID_HOME_POSITION): "HOME_POSITION",
+    int(mav.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN): "GPS_GLOBAL_ORIGIN",
+}
