@@ -144,6 +144,18 @@ class FrameSplitter:
         return out
 
 
+def message_id(frame: bytes) -> int | None:
+    """The message id in a frame's header (MAVLink 2 or 1), None when it is not a frame's start.
+
+    Lets a reader skip the messages it has no use for without decoding them.
+    """
+    if len(frame) >= 10 and frame[0] == _V2:
+        return frame[7] | frame[8] << 8 | frame[9] << 16
+    if len(frame) >= 6 and frame[0] == 0xFE:
+        return frame[5]
+    return None
+
+
 def is_signed(frame: bytes) -> bool:
     """True for a MAVLink2 frame carrying a signature block."""
     return len(frame) > 2 and frame[0] == _V2 and bool(frame[2] & _SIGNED)

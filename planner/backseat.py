@@ -43,7 +43,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 from bridge import keys  # noqa: E402
 from bridge.service import Service  # noqa: E402
 from bridge.session import undeclare  # noqa: E402
-from planner.telemetry import VIRTUAL_BATTERY_ID, VehicleTelemetry  # noqa: E402
+from planner.telemetry import KINDS, VIRTUAL_BATTERY_ID, FrameDecoder, VehicleTelemetry  # noqa: E402
 from rapt.errors import InputError  # noqa: E402
 from sim.uuv.autonomy import GOAL_RETURN, Autonomy, Observation  # noqa: E402
 from sim.uuv.geo import LocalFrame  # noqa: E402
@@ -53,6 +53,15 @@ from sim.uuv.scenario import make_scenarios  # noqa: E402
 
 __all__ = ["BackSeat", "BackSeatStats", "DecisionClock", "PACINGS"]
 
+#: What a lock-step back-seat reads of the stream.
+LOCKSTEP_KINDS = (
+    "SYSTEM_TIME",
+    "LOCAL_POSITION_NED",
+    "ATTITUDE",
+    "BATTERY_STATUS",
+    "OBSTACLE_DISTANCE_3D",
+    "OBSTACLE_DISTANCE",
+)
 #: How the back-seat is timed (module docstring).
 PACINGS = ("lockstep", "vehicle")
 
@@ -160,8 +169,7 @@ class BackSeat(Service):
         self.clock: DecisionClock | None = None
         self.stats = BackSeatStats()
         self.session = session
-        self._parser = mavlink.MAVLink(None)
-        self._parser.robust_parsing = True
+        self._decoder = FrameDecoder(KINDS if pacing == "vehicle" else LOCKSTEP_KINDS)
         self._tick: dict = {}
         self._answered: dict[int, dict] = {}
         self._last_answer: dict | None = None
@@ -197,7 +205,7 @@ class BackSeat(Service):
                 time.sleep(0.0002)
                 continue
             received = time.perf_counter()
-            for msg in self._parser.parse_buffer(sample.payload.to_bytes()) or []:
+            for msg in self._decoder.decode(sample.payload.to_bytes()):
                 on_message(msg, received)
 
     def _read_clock(self) -> None:
@@ -329,6 +337,7 @@ class BackSeat(Service):
             cy,
             np.zeros((1, k)),
             seen,
+            surfaced=np.array([pose.surfaced]),
         )
 
     def _publish_status(self, tick_ms: int) -> None:

@@ -18,12 +18,11 @@ import time
 import numpy as np
 
 os.environ.setdefault("MAVLINK20", "1")
-from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from bridge import keys  # noqa: E402
 from bridge.service import Service  # noqa: E402
 from bridge.session import undeclare  # noqa: E402
-from planner.telemetry import VIRTUAL_BATTERY_ID, Pose, VehicleTelemetry  # noqa: E402
+from planner.telemetry import VIRTUAL_BATTERY_ID, FrameDecoder, Pose, VehicleTelemetry  # noqa: E402
 from sim.uuv.geo import LocalFrame  # noqa: E402
 from sim.uuv.mission import Mission  # noqa: E402
 from sim.uuv.replay import TrackScorer  # noqa: E402
@@ -82,8 +81,7 @@ class Referee(Service):
         self.sampler: TrackSampler | None = None
         self.ended = ""
         self.ended_ms = -1
-        self._parser = mavlink.MAVLink(None)
-        self._parser.robust_parsing = True
+        self._decoder = FrameDecoder()
         self._sub = session.declare_subscriber(keys.raw(vehicle))
         self._pub = session.declare_publisher(keys.status(vehicle, "referee"))
 
@@ -107,7 +105,7 @@ class Referee(Service):
             if sample is None:
                 time.sleep(0.0005)
                 continue
-            for msg in self._parser.parse_buffer(sample.payload.to_bytes()) or []:
+            for msg in self._decoder.decode(sample.payload.to_bytes()):
                 if self.telemetry.add(msg) == "position" and self.sampler is not None and not self.ended:
                     assert self.telemetry.pose is not None
                     row = self.sampler.add(self.telemetry.pose)

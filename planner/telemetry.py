@@ -13,12 +13,28 @@ pose in the mission's local frame (x east, y north) through :class:`sim.uuv.geo.
 from __future__ import annotations
 
 import math
+import os
 from collections import deque
 from dataclasses import dataclass, field
 
+from bridge.frames import message_id
 from sim.uuv.geo import LocalFrame
 
-__all__ = ["Pose", "Contact", "VehicleTelemetry", "VIRTUAL_BATTERY_ID", "SURFACED_DEPTH_M"]
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
+
+__all__ = ["Pose", "Contact", "VehicleTelemetry", "FrameDecoder", "KINDS", "VIRTUAL_BATTERY_ID", "SURFACED_DEPTH_M"]
+
+#: The messages :class:`VehicleTelemetry` reads; anything else on the stream is skipped undecoded.
+KINDS = (
+    "HEARTBEAT",
+    "GLOBAL_POSITION_INT",
+    "ATTITUDE",
+    "BATTERY_STATUS",
+    "OBSTACLE_DISTANCE_3D",
+    "EKF_STATUS_REPORT",
+    "GPS_RAW_INT",
+)
 
 #: BATTERY_STATUS.id of the virtual fuel gauge (the scenario's charge; the pack itself is id 0).
 VIRTUAL_BATTERY_ID = 99
@@ -26,6 +42,29 @@ VIRTUAL_BATTERY_ID = 99
 SURFACED_DEPTH_M = 0.3
 #: GLOBAL_POSITION_INT.hdg when the heading is unknown.
 _NO_HDG = 65535
+
+
+class FrameDecoder:
+    """Decodes the wanted messages of the bus's raw stream and skips the rest by the id in their header.
+
+    A real vehicle streams dozens of message types; every reader on the bus (back-seat,
+    virtual range, watchdog, referee) needs a few, and decoding all of them in each reader is
+    what would make set-points late at a high simulator speed-up.  Samples hold one frame
+    each (the bridge publishes them so); anything else is parsed in full.
+    """
+
+    def __init__(self, kinds=KINDS):
+        self.ids = frozenset(getattr(mavlink, f"MAVLINK_MSG_ID_{k}") for k in kinds)
+        self.parser = mavlink.MAVLink(None)
+        self.parser.robust_parsing = True
+        self.skipped = 0
+
+    def decode(self, payload: bytes) -> list:
+        msg_id = message_id(payload)
+        if msg_id is not None and msg_id not in self.ids:
+            self.skipped += 1
+            return []
+        return self.parser.parse_buffer(payload) or []
 
 
 @dataclass(frozen=True)

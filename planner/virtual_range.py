@@ -29,7 +29,7 @@ from bridge import keys  # noqa: E402
 from bridge.frames import message_json  # noqa: E402
 from bridge.service import Service  # noqa: E402
 from bridge.session import undeclare  # noqa: E402
-from planner.telemetry import VIRTUAL_BATTERY_ID, Pose, VehicleTelemetry  # noqa: E402
+from planner.telemetry import VIRTUAL_BATTERY_ID, FrameDecoder, Pose, VehicleTelemetry  # noqa: E402
 from rapt.errors import InputError  # noqa: E402
 from sim.uuv.geo import LocalFrame  # noqa: E402
 from sim.uuv.interface import HJ_PER_WH  # noqa: E402
@@ -81,8 +81,7 @@ class VirtualRange(Service):
         self.capacity_wh = float(spec.battery_wh)
         self.start_wh = float(self.scen.battery0[0]) * self.capacity_wh
         self.telemetry = VehicleTelemetry(LocalFrame(mission.origin_lat, mission.origin_lon))
-        self._parser = mavlink.MAVLink(None)
-        self._parser.robust_parsing = True
+        self._decoder = FrameDecoder()
         self._encoders: dict[int, mavlink.MAVLink] = {}  # by the vehicle's system id: own sequence numbers
         self._lock = threading.Lock()
         self._begun = False
@@ -152,7 +151,7 @@ class VirtualRange(Service):
             if attachment is not None and attachment.to_bytes() == keys.VIRTUAL_ATTACHMENT:
                 self._counts["virtual_skipped"] += 1  # ours (or another virtual source's): not the vehicle
                 continue
-            for msg in self._parser.parse_buffer(sample.payload.to_bytes()) or []:
+            for msg in self._decoder.decode(sample.payload.to_bytes()):
                 self._on_message(msg)
 
     def _on_message(self, msg) -> None:

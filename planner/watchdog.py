@@ -27,13 +27,12 @@ import numpy as np
 
 os.environ.setdefault("MAVLINK20", "1")
 import zenoh  # noqa: E402
-from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from bridge import keys  # noqa: E402
 from bridge.service import Service  # noqa: E402
 from bridge.session import undeclare  # noqa: E402
 from bridge.setpoint import Setpoint  # noqa: E402
-from planner.telemetry import VIRTUAL_BATTERY_ID, Pose, VehicleTelemetry  # noqa: E402
+from planner.telemetry import VIRTUAL_BATTERY_ID, FrameDecoder, Pose, VehicleTelemetry  # noqa: E402
 from planner.virtual_range import scenario_of  # noqa: E402
 from rapt.errors import InputError, LinkError, LinkTimeoutError, RaptError  # noqa: E402
 from sim.uuv.geo import LocalFrame  # noqa: E402
@@ -238,8 +237,7 @@ class Watchdog(Service):
         self.scen = scenario_of(mission, u)
         self.start_wh = float(self.scen.battery0[0]) * float(mission.vehicle.battery_wh)
         self.telemetry = VehicleTelemetry(LocalFrame(mission.origin_lat, mission.origin_lon), VIRTUAL_BATTERY_ID)
-        self._parser = mavlink.MAVLink(None)
-        self._parser.robust_parsing = True
+        self._decoder = FrameDecoder()
         self._begin = threading.Event()
         self._armed = False
         self._armed_at = math.inf  # monotonic
@@ -325,7 +323,7 @@ class Watchdog(Service):
                 self._counts["virtual_in"] += 1
             else:
                 self._last_frame = time.monotonic()
-            for msg in self._parser.parse_buffer(sample.payload.to_bytes()) or []:
+            for msg in self._decoder.decode(sample.payload.to_bytes()):
                 if msg.get_type() == "BAD_DATA":
                     continue
                 self._counts["frames_in"] += 1
