@@ -82,6 +82,7 @@ class Observation:
     current_n: np.ndarray | None = None
     nogo_distance: np.ndarray | None = None  # (N, Z) from the estimated position; None: computed here
     scan: np.ndarray | None = None  # (N, beams) 360-degree sonar ranges (m), when the world scans
+    surfaced: np.ndarray | None = None  # (N,) bool, from a real depth reading; None: surfacing is immediate
 
 
 @dataclass
@@ -265,8 +266,10 @@ class Autonomy:
         if tx is not None:
             in_tx = inside_rect(obs.x, obs.y, scen.tx_rect[:, None, :])[:, 0] & (kind == GOAL_TRANSMIT) & active
             window = (obs.t >= scen.tx_open) & (obs.t < scen.tx_close)
-            sending = in_tx & window
-            self.tx_time[sending] += dt
+            sending = in_tx & window  # on the surface, or rising to it
+            # a real vehicle takes seconds to rise: its data goes out only once it is up
+            sent = sending if obs.surfaced is None else sending & obs.surfaced
+            self.tx_time[sent] += dt
             self.tx_done |= self.tx_time >= tx.duration_s
         else:
             sending = np.zeros(n, dtype=bool)
