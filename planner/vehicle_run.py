@@ -118,8 +118,12 @@ def run_vehicle(
             ended = _fly(referee, watchdog, timeout_s)
         except KeyboardInterrupt:
             referee.end("stopped by the operator")
+            backseat.close()
+            watchdog.close()
             _recover(bridge, referee, bringup, "surface", say)
             raise
+        backseat.close()  # the run is over: no more set-points of the scenario's
+        watchdog.close()
         _recover(bridge, referee, bringup, "hold" if watchdog.intervention and action == "hold" else "surface", say)
         wall = time.perf_counter() - started
         autonomy = backseat.autonomy

@@ -100,6 +100,7 @@ class BareAutopilot:
         self._origin_sent = False
         self._gcs_heard: float | None = None
         self._texts: list[tuple[int, str]] = []  # STATUSTEXT to send after the COMMAND_ACK, as ArduSub orders them
+        self._sent_at: dict[int, float] = {}  # GLOBAL_POSITION_INT time_boot_ms -> wall time sent
         self._boot = time.monotonic()
 
     # -- clock and physics -------------------------------------------------------------
@@ -220,6 +221,7 @@ class BareAutopilot:
                 la, lo = self.fs.frame.to_latlon(*self._estimate())
                 lat, lon = int(round(la * 1e7)), int(round(lo * 1e7))
             mm = int(round(-depth * 1000))
+            self._sent_at.setdefault(ms, time.perf_counter())
             m.global_position_int_send(
                 ms, lat, lon, mm, mm, int(self.vn * 100), int(self.ve * 100), int(vz * 100), hdg if gps else 0
             )
@@ -278,6 +280,7 @@ class BareAutopilot:
             self.conn.mav.command_ack_send(mav.MAVLINK_MSG_ID_SET_MODE, self._set_mode(int(msg.custom_mode)))
             self._flush_texts()
         elif kind == "SET_POSITION_TARGET_LOCAL_NED":
+            self._round_trip(int(msg.time_boot_ms))
             north, east = self._here()
             heading = float(self.world.state.heading[0])
             self._accept(from_local_ned(msg, north, east, self.depth.depth, heading, self.t))
@@ -287,6 +290,15 @@ class BareAutopilot:
             self.streams.request_data_stream(int(msg.req_stream_id), int(msg.req_message_rate), msg.start_stop, self.t)
         else:
             self.fs._handle(msg)  # the mission protocol, as in the other modes
+
+    def _round_trip(self, stamp: int) -> None:
+        """Time from the position report stamped ``stamp`` leaving to the first set-point that answers it."""
+        sent = self._sent_at.get(stamp)
+        if sent is not None and stamp not in self.fs.stats.latency_s:
+            self.fs.stats.latency_s[stamp] = time.perf_counter() - sent
+        if len(self._sent_at) > 4096:  # keep the last minutes' reports only
+            for old in list(self._sent_at)[:2048]:
+                del self._sent_at[old]
 
     def _flush_texts(self) -> None:
         for severity, text in self._texts:

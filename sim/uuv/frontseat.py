@@ -76,6 +76,9 @@ class FrontSeatStats:
     ended: str = ""
     ticks_at_end: int = 0
     log: list = field(default_factory=list)
+    #: Bare mode: a position report's time_boot_ms -> wall seconds from sending it to the first
+    #: set-point stamped with it (what a benchmark calls telemetry in -> set-point out).
+    latency_s: dict = field(default_factory=dict)
 
 
 class FrontSeat:
