@@ -106,14 +106,20 @@ def _positive(value: float, name: str) -> float:
 class WatchdogRules:
     """The thresholds; :meth:`check` applies them to explicit values (no clock, no bus).
 
-    ``critical_battery`` is a fraction of the mission's battery capacity (the scenario's
-    virtual gauge), ``command_stale_s`` vehicle seconds without a set-point from the watched
-    back-seat, ``link_lost_s`` wall seconds without a frame from the vehicle.
+    ``critical_battery`` is a fraction of the mission's battery capacity on the scenario's
+    virtual gauge (0: empty, the scenario's own end — the pack behind it is real and fine),
+    ``pack_critical_percent`` the vehicle's real pack (its BATTERY_STATUS id 0
+    ``battery_remaining``), ``command_stale_s`` vehicle seconds without a set-point from the
+    watched back-seat, ``link_lost_s`` wall seconds without a frame from the vehicle.
+    ``record_only`` names reasons that are published as a violation but do not take control
+    (a virtual no-go area the plan predicts the vehicle to enter, for instance).
     """
 
-    critical_battery: float = 0.02
+    critical_battery: float = 0.0
     command_stale_s: float = 6.0
     link_lost_s: float = 3.0
+    pack_critical_percent: float = 10.0
+    record_only: frozenset[str] = frozenset()
 
     def __post_init__(self) -> None:
         b = self.critical_battery
@@ -121,6 +127,13 @@ class WatchdogRules:
             raise InputError(f"critical_battery: expected a fraction in [0, 1), got {b!r}")
         _positive(self.command_stale_s, "command_stale_s")
         _positive(self.link_lost_s, "link_lost_s")
+        p = self.pack_critical_percent
+        if isinstance(p, bool) or not isinstance(p, (int, float)) or not 0 <= p < 100:
+            raise InputError(f"pack_critical_percent: expected a percentage in [0, 100), got {p!r}")
+        unknown = set(self.record_only) - set(REASONS)
+        if unknown:
+            raise InputError(f"record_only: unknown reason(s) {sorted(unknown)}; known: {', '.join(REASONS)}")
+        object.__setattr__(self, "record_only", frozenset(self.record_only))
 
     def check(
         self,
@@ -130,14 +143,37 @@ class WatchdogRules:
         battery: float | None,
         command_age_s: float | None,
         link_silence_s: float | None,
+        pack_percent: float | None = None,
     ) -> Trigger | None:
-        """The first rule of :data:`REASONS` that the values break, or None.
+        """The first rule of :data:`REASONS` that the values break, or None (:meth:`broken` has them all).
 
         ``pose`` (None: no position yet, the area rules wait), ``contact_distance`` (K,) as
         :func:`contact_distances` gives, ``battery`` the charge fraction (None: unknown),
-        ``command_age_s`` vehicle seconds since the last set-point (None: unknown) and
-        ``link_silence_s`` wall seconds since the vehicle's last frame.
+        ``command_age_s`` vehicle seconds since the last set-point (None: unknown),
+        ``link_silence_s`` wall seconds since the vehicle's last frame and ``pack_percent`` the
+        real pack's charge (None: unknown).
         """
+        broken = self.broken(scen, pose, contact_distance, battery, command_age_s, link_silence_s, pack_percent)
+        return broken[0] if broken else None
+
+    def broken(
+        self,
+        scen: Scenarios,
+        pose: Pose | None,
+        contact_distance: np.ndarray | None,
+        battery: float | None,
+        command_age_s: float | None,
+        link_silence_s: float | None,
+        pack_percent: float | None = None,
+    ) -> list[Trigger]:
+        """Every rule the values break, in the order of :data:`REASONS` (arguments as :meth:`check`)."""
+        return [
+            t
+            for t in self._each(scen, pose, contact_distance, battery, command_age_s, link_silence_s, pack_percent)
+            if t
+        ]
+
+    def _each(self, scen, pose, contact_distance, battery, command_age_s, link_silence_s, pack_percent):
         m = scen.mission
         if pose is not None:
             x, y = np.array([pose.east]), np.array([pose.north])
@@ -150,12 +186,12 @@ class WatchdogRules:
                         if j < n_obstacles
                         else f"barrier {m.barriers[j - n_obstacles].name}"
                     )
-                    return Trigger(COLLISION, f"touched {what} (signed distance {contact_distance[j]:.1f} m)")
+                    yield Trigger(COLLISION, f"touched {what} (signed distance {contact_distance[j]:.1f} m)")
             if scen.nogo.shape[1]:
                 d = rect_signed_distance(x, y, scen.nogo[:1])[0]
                 k = int(np.argmin(d))
                 if d[k] <= 0:
-                    return Trigger(NOGO, f"inside no-go area {m.nogo[k].name} ({-d[k]:.1f} m from its edge)")
+                    yield Trigger(NOGO, f"inside no-go area {m.nogo[k].name} ({-d[k]:.1f} m from its edge)")
             op = m.operational_area
             xmin, xmax, ymin, ymax = (
                 op.x - op.width / 2,
@@ -165,19 +201,25 @@ class WatchdogRules:
             )
             margin = min(pose.east - xmin, xmax - pose.east, pose.north - ymin, ymax - pose.north)
             if margin < 0:
-                return Trigger(
+                yield Trigger(
                     OPERATIONAL_AREA,
                     f"{-margin:.1f} m outside the operational area at ({pose.east:.1f}, {pose.north:.1f})",
                 )
         if battery is not None and battery <= self.critical_battery:
-            return Trigger(BATTERY, f"battery at {100 * battery:.1f}% (critical: {100 * self.critical_battery:.1f}%)")
+            yield Trigger(
+                BATTERY, f"scenario battery at {100 * battery:.1f}% (critical: {100 * self.critical_battery:.1f}%)"
+            )
+        if pack_percent is not None and 0 <= pack_percent <= self.pack_critical_percent:
+            yield Trigger(
+                BATTERY, f"the vehicle's pack at {pack_percent:g}% (critical: {self.pack_critical_percent:g}%)"
+            )
         if command_age_s is not None and command_age_s > self.command_stale_s:
-            return Trigger(
+            yield Trigger(
                 STALE_COMMANDS,
                 f"no set-point for {command_age_s:.1f} s of vehicle time (limit {self.command_stale_s:g} s)",
             )
         if link_silence_s is not None and link_silence_s > self.link_lost_s:
-            return Trigger(
+            yield Trigger(
                 LINK_LOST, f"no frame from the vehicle for {link_silence_s:.1f} s (limit {self.link_lost_s:g} s)"
             )
         return None
@@ -230,6 +272,8 @@ class Watchdog(Service):
         if watched == SOURCE:
             raise InputError(f"watched: {SOURCE!r} is the watchdog's own source")
         self.mission, self.vehicle, self.watched, self.action = mission, vehicle, watched, action
+        #: Rules broken that were only recorded (``rules.record_only``): reason -> detail.
+        self.violations: dict[str, str] = {}
         self.commander = commander
         self.rules = rules if rules is not None else WatchdogRules()
         self.setpoint_period_s = 1.0 / _positive(setpoint_hz, "setpoint_hz")
@@ -299,16 +343,20 @@ class Watchdog(Service):
             if not self._armed and self._begin.is_set():
                 self._arm()
             if self._armed and self._trigger is None:
-                trigger = self.rules.check(
+                broken = self.rules.broken(
                     self.scen,
                     self.telemetry.pose,
                     self._distances,
                     self._battery(),
                     self._command_age_s(),
                     self._silence_s(),
+                    self._pack_percent(),
                 )
-                if trigger is not None:
-                    self._take_over(trigger)
+                for trigger in broken:
+                    if trigger.reason not in self.rules.record_only:
+                        self._take_over(trigger)
+                        break
+                    self._record(trigger)
             if self._setpoint is not None and time.monotonic() >= self._next_setpoint:
                 self._send_setpoint()
             if not busy:
@@ -351,6 +399,25 @@ class Watchdog(Service):
     def _arm(self) -> None:
         self._armed, self._armed_at = True, time.monotonic()
         self._since_ms = self.telemetry.now_ms if self.telemetry.now_ms >= 0 else None
+
+    def _pack_percent(self) -> float | None:
+        pack = self.telemetry.pack
+        return None if pack is None or pack.battery_remaining < 0 else float(pack.battery_remaining)
+
+    def _record(self, trigger: Trigger) -> None:
+        """A rule broken that the range lets the run go on through: published once per reason."""
+        if trigger.reason in self.violations:
+            return
+        self.violations[trigger.reason] = trigger.detail
+        now = self.telemetry.now_ms
+        self._publish(
+            {
+                "event": "violation",
+                "reason": trigger.reason,
+                "detail": trigger.detail,
+                "time_boot_ms": now if now >= 0 else None,
+            }
+        )
 
     def _battery(self) -> float | None:
         hj = self.telemetry.energy_hj

@@ -69,9 +69,9 @@ def test_each_rule_fires_with_its_reason_and_the_first_one_wins():
     scen = scenario_of(m, U)
     rules = WatchdogRules()
 
-    def check(pose=None, battery=0.5, age=0.0, silence=0.0):
+    def check(pose=None, battery=0.5, age=0.0, silence=0.0, pack=None):
         d = None if pose is None else contact_distances(scen, pose)
-        return rules.check(scen, pose, d, battery, age, silence)
+        return rules.check(scen, pose, d, battery, age, silence, pack)
 
     assert check(_pose(*SAFE)) is None
     hit = check(_pose(30.0, 45.0))  # inside the barrier
@@ -84,8 +84,12 @@ def test_each_rule_fires_with_its_reason_and_the_first_one_wins():
     out = check(_pose(0.0, 1000.5))
     assert out is not None and out.reason == OPERATIONAL_AREA and "0.5 m outside" in out.detail
     assert check(_pose(0.0, 1000.0)) is None  # on the edge is still inside, as the scorer has it
-    assert check(_pose(*SAFE), battery=0.021) is None
-    assert check(_pose(*SAFE), battery=0.02).reason == BATTERY
+    assert check(_pose(*SAFE), battery=0.001) is None
+    empty = check(_pose(*SAFE), battery=0.0)  # the scenario's virtual gauge ran dry
+    assert empty.reason == BATTERY and "scenario battery" in empty.detail
+    assert check(_pose(*SAFE), pack=10.5) is None
+    low = check(_pose(*SAFE), pack=10)  # the vehicle's real pack
+    assert low.reason == BATTERY and "pack at 10%" in low.detail
     assert check(_pose(*SAFE), age=6.0) is None
     assert check(_pose(*SAFE), age=6.01).reason == STALE_COMMANDS
     assert check(_pose(*SAFE), silence=3.0) is None
@@ -101,6 +105,19 @@ def test_bad_thresholds_are_refused():
         WatchdogRules(critical_battery=1.5)
     with pytest.raises(InputError, match="command_stale_s"):
         WatchdogRules(command_stale_s=0)
+    with pytest.raises(InputError, match="pack_critical_percent"):
+        WatchdogRules(pack_critical_percent=100)
+    with pytest.raises(InputError, match=r"record_only: unknown reason\(s\) \['nowhere'\]"):
+        WatchdogRules(record_only=frozenset({"nowhere"}))
+
+
+def test_every_broken_rule_is_listed_in_order_for_record_only_reasons():
+    m = _mission()
+    scen = scenario_of(m, U)
+    pose = _pose(310.0, 280.0)  # inside the no-go area
+    rules = WatchdogRules(record_only=frozenset({NOGO}))
+    broken = rules.broken(scen, pose, contact_distances(scen, pose), 0.5, 99.0, 0.0)
+    assert [t.reason for t in broken] == [NOGO, STALE_COMMANDS]
 
 
 # --------------------------------------------------------------------------- the service, on a bus
@@ -181,8 +198,8 @@ def _poses_then(r: Rig, scene: str) -> None:
         v.pose(2000, 310.0, 280.0, 0.0)
     elif scene == OPERATIONAL_AREA:
         v.pose(2000, 0.0, 1010.0, 0.0)
-    elif scene == BATTERY:  # the virtual gauge says 1% of 1000 Wh is left
-        v.battery(int(990 * 36), battery_id=VIRTUAL_BATTERY_ID)
+    elif scene == BATTERY:  # the virtual gauge says the scenario's charge is spent
+        v.battery(int(1000 * 36), battery_id=VIRTUAL_BATTERY_ID)
     else:
         raise AssertionError(scene)
 
@@ -308,3 +325,20 @@ def test_on_a_real_link_the_watchdog_puts_the_vehicle_in_surface_mode():
         fs.close()
     assert event["reason"] == STALE_COMMANDS and event["mode_result"] == 0
     assert event["time_boot_ms"] >= 2000 and math.isfinite(event["time_boot_ms"])
+
+
+def test_a_record_only_reason_is_published_once_and_the_run_goes_on(rig):
+    """A virtual no-go area the plan expects the vehicle to enter: recorded, not taken over."""
+    r = rig(rules=WatchdogRules(record_only=frozenset({NOGO}), link_lost_s=30.0))
+    r.vehicle.pose(1000, *SAFE, 0.3)
+    wait_until(lambda: r.dog.stats["poses"] == 1, what="the first pose")
+    r.begin()
+    r.vehicle.pose(2000, 310.0, 280.0, 0.0)
+    r.vehicle.pose(2100, 311.0, 280.0, 0.0)
+    (event,) = r.wait_event()
+    time.sleep(0.1)
+    assert event["event"] == "violation" and event["reason"] == NOGO and len(r.events()) == 1
+    assert r.dog.intervention is None and r.dog.violations.keys() == {NOGO}
+    assert r.active.payloads(keys.active(VEHICLE)) == [] and r.sent() == [] and r.commander.modes == []
+    r.vehicle.pose(2200, 0.0, 1010.0, 0.0)  # then out of the operational area: that one takes over
+    assert r.wait_event(2)[1]["reason"] == OPERATIONAL_AREA and r.dog.intervention == OPERATIONAL_AREA
