@@ -186,10 +186,15 @@ class BareAutopilot:
         return float(ex[0]), float(ey[0])
 
     def _battery(self) -> tuple[int, int, int]:
-        """(energy used in hJ, percent left, volts in mV) of the vehicle's own pack."""
+        """(energy used in hJ, percent left, volts in mV) of the vehicle's own pack, full at boot.
+
+        The scenario's starting charge is virtual (the range's fuel gauge counts it); the
+        pack in a real vehicle is whatever the range charged, here a full one.
+        """
         w = self.world
         hj = energy_consumed_hj(w.start_wh, w.state.energy_wh)
-        frac = float(battery_fraction(w.start_wh, hj, self.spec.battery_wh)[0])
+        cap = np.array([self.spec.battery_wh])
+        frac = float(battery_fraction(cap, hj, self.spec.battery_wh)[0])
         return int(hj[0]), int(np.clip(round(frac * 100), 0, 100)), int(14800 * (0.85 + 0.15 * min(max(frac, 0), 1)))
 
     def _send(self, name: str) -> None:
