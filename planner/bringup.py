@@ -73,6 +73,7 @@ class BringUpTimeouts:
     guided: float = 60.0
     arm: float = 20.0
     depth: float = 120.0
+    surface: float = 60.0  # after the run: for the vehicle to reach the surface before it is disarmed
 
     def scaled(self, factor: float) -> BringUpTimeouts:
         return BringUpTimeouts(**{k: v * factor for k, v in asdict(self).items()})
@@ -195,21 +196,21 @@ class BringUp:
     def streams(self) -> None:
         b = self.bridge
         asked = time.monotonic()
-        refused = []
+        refused = ""
         for name, hz in STREAMS.items():
             msg_id = getattr(mavlink, f"MAVLINK_MSG_ID_{name}")
             try:
-                result = b.set_message_interval(msg_id, hz)
+                result = b.set_message_interval(msg_id, hz, timeout=0.5, retries=1)
             except TimeoutError:
-                result = -1
+                refused = f"no answer to SET_MESSAGE_INTERVAL for {name}"
+                break  # an older firmware: asking for the rest would only take longer
             if result != mavlink.MAV_RESULT_ACCEPTED:
-                refused.append(name)
+                refused = f"SET_MESSAGE_INTERVAL refused for {name} ({_result_name(result)})"
+                break
         if refused:
             for stream, hz in DATA_STREAMS.items():
                 b.request_data_stream(stream, hz)
-            self.note(
-                "streams", "fallback", f"SET_MESSAGE_INTERVAL refused for {', '.join(refused)}: REQUEST_DATA_STREAM"
-            )
+            self.note("streams", "fallback", f"{refused}: REQUEST_DATA_STREAM for all")
         needed = ("GLOBAL_POSITION_INT", "ATTITUDE", "BATTERY_STATUS")
         fresh = self._wait(lambda: all(self._since(n, asked) for n in needed) or None, self.timeouts.streams)
         if fresh is None:
@@ -367,7 +368,7 @@ class BringUp:
             if last == mavlink.MAV_RESULT_ACCEPTED:
                 return
             time.sleep(0.5)
-        name = "no COMMAND_ACK" if last is None else mavlink.enums["MAV_RESULT"][last].name
+        name = "no COMMAND_ACK" if last is None else _result_name(last)
         self._fail(step, RefusedError(f"bring-up {step}: refused {tries} times in {timeout:g} s (last: {name})"))
 
     def _wait(self, get: Callable[[], object], timeout: float):
@@ -404,3 +405,8 @@ class BringUp:
     def _fail(self, name: str, error: Exception) -> NoReturn:
         self._record(name, "failed", str(error))
         raise error
+
+
+def _result_name(result: int) -> str:
+    entry = mavlink.enums["MAV_RESULT"].get(result)
+    return entry.name if entry is not None else str(result)

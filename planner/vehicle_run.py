@@ -16,7 +16,7 @@ from __future__ import annotations
 import json
 import socket
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -31,7 +31,7 @@ from planner.jsonio import jsonable
 from planner.referee import Referee
 from planner.sil import free_port
 from planner.virtual_range import VirtualRange
-from planner.watchdog import Watchdog
+from planner.watchdog import REASONS, Watchdog, WatchdogRules
 from rapt.errors import InputError
 from sim.uuv.scenario import make_scenarios
 
@@ -39,8 +39,6 @@ __all__ = ["VehicleRunResult", "run_vehicle", "WATCHDOG_ACTIONS"]
 
 #: What the watchdog does when it takes over.
 WATCHDOG_ACTIONS = ("surface", "hold")
-#: Wall seconds to wait for the vehicle to reach the surface before disarming it anyway.
-SURFACE_WAIT_S = 60.0
 
 
 @dataclass
@@ -59,6 +57,7 @@ class VehicleRunResult:
     log_path: Path | None = None
     decision_ticks: list[int] = field(default_factory=list)  # time_boot_ms each decision was taken on
     input_age_ms: list[int] = field(default_factory=list)  # the oldest input of each decision
+    violations: dict = field(default_factory=dict)  # record-only watchdog reasons broken: reason -> detail
 
 
 def run_vehicle(
@@ -68,6 +67,7 @@ def run_vehicle(
     vehicle: str = keys.DEFAULT_VEHICLE,
     log_path: str | Path | None = None,
     action: str = "surface",
+    record_only: Iterable[str] = (),
     timeouts: BringUpTimeouts | None = None,
     timeout_s: float | None = None,
     say: Callable[[Step], None] | None = None,
@@ -77,9 +77,14 @@ def run_vehicle(
     Raises a :class:`rapt.errors.RaptError` with one line when bring-up fails; by then nothing
     has been commanded that the failed check could have prevented.  ``timeout_s`` bounds the
     run's wall time (None: the mission's time limit on the vehicle's clock ends it).
+    ``record_only`` names watchdog reasons (:data:`planner.watchdog.REASONS`) that are logged
+    as violations without taking control, e.g. ``nogo`` where the no-go areas are virtual.
     """
     if action not in WATCHDOG_ACTIONS:
         raise InputError(f"--watchdog-action: expected one of {', '.join(WATCHDOG_ACTIONS)}, got {action!r}")
+    unknown = sorted(set(record_only) - set(REASONS))
+    if unknown:
+        raise InputError(f"--watchdog-record: unknown reason {unknown[0]!r}; known: {', '.join(REASONS)}")
     if not isinstance(connection, str) or not connection.strip():
         raise InputError("--mavlink: expected a pymavlink connection string such as tcp:127.0.0.1:5760")
     mission, u = flight.mission, np.asarray(flight.u, dtype=float)
@@ -105,7 +110,8 @@ def run_vehicle(
         virtual = VirtualRange(session, vehicle, mission, u).start()
         referee = Referee(session, vehicle, mission, u).start()
         backseat = BackSeat(session, vehicle, mission, u, pacing="vehicle").start()
-        watchdog = Watchdog(session, vehicle, mission, u, bridge, action=action).start()
+        rules = WatchdogRules(record_only=frozenset(record_only))
+        watchdog = Watchdog(session, vehicle, mission, u, bridge, action=action, rules=rules).start()
         parts += [virtual, referee, backseat, watchdog]
         bringup = BringUp(bridge, session, vehicle, mission, connection, timeouts or BringUpTimeouts(), say)
         try:
@@ -145,6 +151,7 @@ def run_vehicle(
             Path(log_path) if log_path else None,
             list(backseat.stats.ticks),
             list(backseat.stats.input_age_ms),
+            dict(watchdog.violations),
         )
     finally:
         if bringup is not None:
@@ -197,7 +204,7 @@ def _recover(bridge: MavlinkBridge, referee: Referee, bringup: BringUp, action: 
         return
     try:
         bridge.set_mode("SURFACE")
-        deadline = time.monotonic() + SURFACE_WAIT_S
+        deadline = time.monotonic() + bringup.timeouts.surface
         while time.monotonic() < deadline:
             pose = referee.telemetry.pose
             if pose is not None and pose.surfaced:

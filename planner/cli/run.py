@@ -58,6 +58,15 @@ def run(
     watchdog_action: Annotated[
         str, typer.Option("--watchdog-action", help="With --mavlink: what the watchdog does when it takes over.")
     ] = "surface",
+    watchdog_record: Annotated[
+        list[str] | None,
+        typer.Option(
+            "--watchdog-record",
+            help="With --mavlink: a watchdog reason to log without taking control (repeatable), e.g. nogo "
+            "where the no-go areas are virtual; reasons: collision, nogo, operational_area, battery, "
+            "stale_commands, link_lost.",
+        ),
+    ] = None,
     heartbeat_timeout: Annotated[
         float, typer.Option("--heartbeat-timeout", help="With --mavlink: seconds to wait for the vehicle's HEARTBEAT.")
     ] = 15.0,
@@ -102,6 +111,7 @@ def run(
             log=log,
             timeout=timeout,
             action=watchdog_action,
+            record_only=watchdog_record or [],
             heartbeat_timeout=heartbeat_timeout,
         )
         return

@@ -19,6 +19,7 @@ def run_on_vehicle(
     log: Path | None,
     timeout: float | None,
     action: str,
+    record_only: list[str] | None = None,
     heartbeat_timeout: float = 15.0,
 ) -> None:
     """Fly ``flight`` at ``connection``; print the bring-up timeline, the end, the mode and the decisions' figures."""
@@ -42,7 +43,14 @@ def run_on_vehicle(
 
     try:
         result = run_vehicle(
-            flight, connection, log_path=log, action=action, timeout_s=timeout, timeouts=timeouts, say=say
+            flight,
+            connection,
+            log_path=log,
+            action=action,
+            record_only=record_only or [],
+            timeout_s=timeout,
+            timeouts=timeouts,
+            say=say,
         )
     except KeyboardInterrupt:
         fail("stopped by the operator: the vehicle was told to surface and disarm")
@@ -54,6 +62,8 @@ def run_on_vehicle(
     table.add_column("value", justify="right")
     table.add_row("ended", result.ended)
     table.add_row("watchdog", result.watchdog or "did not intervene")
+    for reason, detail in result.violations.items():
+        table.add_row(f"recorded: {reason}", detail)
     table.add_row("observed mode", mode_name(result.scores))
     if predicted is not None:
         table.add_row("predicted mode", predicted)

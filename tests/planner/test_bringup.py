@@ -1,0 +1,122 @@
+"""Bring-up like a careful operator: each step's success, and each step's failure in one line, on loopback MAVLink."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import socket
+from pathlib import Path
+
+import pytest
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavutil  # noqa: E402
+
+from planner.bringup import BringUpTimeouts  # noqa: E402
+from planner.flight import Flight, flight_from_plan  # noqa: E402
+from planner.vehicle_run import run_vehicle  # noqa: E402
+from rapt.errors import InputError, LinkTimeoutError, RefusedError  # noqa: E402
+from sim.uuv.missionfile import load_mission  # noqa: E402
+from tests.loopback import free_port, no_new_threads  # noqa: E402
+from tests.planner.fake_ardusub import Behaviour, FakeArduSub  # noqa: E402
+
+M = mavutil.mavlink
+ROOT = Path(__file__).resolve().parents[2]
+FAST = BringUpTimeouts(heartbeat=5, streams=2, estimate=1.5, mission=3, guided=1.5, arm=1.5, depth=5, surface=5)
+STEPS = ["heartbeat", "streams", "estimate", "area", "mission", "guided", "arm", "depth", "clock"]
+
+
+@pytest.fixture(scope="module")
+def flight():
+    return flight_from_plan(ROOT / "field_plans" / "range2017" / "plan.json", "pair2b")
+
+
+@contextlib.contextmanager
+def fake(route, **behaviour):
+    port = free_port(socket.SOCK_DGRAM)
+    with no_new_threads():
+        vehicle = FakeArduSub(f"udpout:127.0.0.1:{port}", route, Behaviour(**behaviour))
+        try:
+            yield f"udpin:127.0.0.1:{port}", vehicle
+        finally:
+            vehicle.close()
+
+
+def _fly(flight, connection, steps: list, **kw):
+    return run_vehicle(flight, connection, timeouts=FAST, timeout_s=0.5, say=steps.append, **kw)
+
+
+def _commanded(vehicle) -> list[str]:
+    """What the vehicle was told beyond our heartbeat and the message rates."""
+    out = []
+    for m in vehicle.received:
+        kind = m.get_type()
+        if kind == "COMMAND_LONG" and m.command == M.MAV_CMD_SET_MESSAGE_INTERVAL or kind == "HEARTBEAT":
+            continue
+        out.append(kind if kind != "COMMAND_LONG" else f"COMMAND_LONG {m.command}")
+    return out
+
+
+def test_every_step_in_order_and_set_points_only_in_guided(flight):
+    steps: list = []
+    with fake(flight.mission) as (conn, vehicle):
+        result = _fly(flight, conn, steps)
+    assert [s.name for s in steps][: len(STEPS)] == STEPS and all(s.status == "ok" for s in steps)
+    assert result.timeline[-1].name == "recover" and "disarmed" in result.timeline[-1].detail
+    told = _commanded(vehicle)
+    guided = told.index(f"COMMAND_LONG {M.MAV_CMD_DO_SET_MODE}")
+    assert told.index("MISSION_COUNT") < guided  # the mission is uploaded before anything moves
+    assert "SET_POSITION_TARGET_LOCAL_NED" not in told[:guided]  # nothing is commanded outside GUIDED
+    assert vehicle.mode == 9 and vehicle.depth == 0.0 and not vehicle.armed  # surfaced, then disarmed
+
+
+@pytest.mark.parametrize(
+    ("behaviour", "error", "line", "last_step"),
+    [
+        (
+            {"intervals": False, "stream": False},
+            LinkTimeoutError,
+            "bring-up streams: no GLOBAL_POSITION_INT",
+            "streams",
+        ),
+        ({"ekf_flags": 0x00A7}, LinkTimeoutError, "bring-up estimate: no position estimate within 1.5 s", "estimate"),
+        ({"mission": M.MAV_MISSION_NO_SPACE}, RefusedError, "refused the upload (MAV_MISSION_NO_SPACE)", "mission"),
+        ({"mission": None}, LinkTimeoutError, "bring-up mission:", "mission"),
+        ({"guided": M.MAV_RESULT_FAILED}, RefusedError, "bring-up guided: refused", "guided"),
+        ({"arm": M.MAV_RESULT_DENIED}, RefusedError, "bring-up arm: refused", "arm"),
+        ({"dives": False}, LinkTimeoutError, "bring-up depth: not at 2 m within 5 s", "depth"),
+    ],
+)
+def test_a_step_that_fails_stops_the_run_with_one_line(flight, behaviour, error, line, last_step):
+    steps: list = []
+    with fake(flight.mission, **behaviour) as (conn, vehicle):
+        with pytest.raises(error) as info:
+            _fly(flight, conn, steps)
+    assert line in str(info.value) and "\n" not in str(info.value)
+    assert steps[-1].name == last_step and steps[-1].status == "failed"
+    told = _commanded(vehicle)
+    if last_step in ("streams", "estimate", "mission", "guided"):
+        assert "COMMAND_LONG 400" not in told  # never armed
+        assert "SET_POSITION_TARGET_LOCAL_NED" not in told
+    if last_step == "streams":
+        assert "REQUEST_DATA_STREAM" in told  # the fallback was tried
+
+
+def test_streams_fall_back_to_request_data_stream(flight):
+    steps: list = []
+    with fake(flight.mission, intervals=False) as (conn, vehicle):
+        _fly(flight, conn, steps)
+    fallback = [s for s in steps if s.status == "fallback"]
+    assert fallback and fallback[0].name == "streams" and "REQUEST_DATA_STREAM" in fallback[0].detail
+    assert "REQUEST_DATA_STREAM" in vehicle.kinds()
+
+
+def test_a_vehicle_outside_the_scenarios_area_is_refused_before_anything_is_commanded(flight):
+    """range2017's launch point is south of imitation7's operational area (y -500..500)."""
+    mission = load_mission(ROOT / "examples" / "imitation7.toml")
+    other = Flight(mission, flight.u[: mission.dim] * 0 + 0.5, "centre", "examples/imitation7.toml")
+    steps: list = []
+    with fake(flight.mission) as (conn, vehicle):
+        with pytest.raises(InputError, match=r"--scenario: the vehicle is at \(-480, -520\) m, outside mission"):
+            _fly(other, conn, steps)
+    assert steps[-1].name == "area" and _commanded(vehicle) == []
