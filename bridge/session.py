@@ -15,7 +15,7 @@ with a back-seat on another computer) is taken as-is.
 from __future__ import annotations
 
 import json
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -133,6 +133,20 @@ def use_session(session: zenoh.Session | zenoh.Config | None) -> tuple[zenoh.Ses
     if isinstance(session, zenoh.Session):
         return session, False
     return zenoh.open(session if session is not None else zenoh_config()), True
+
+
+def receive(subscriber: Any) -> Iterator[Any]:
+    """The samples of a channel subscriber as they arrive, blocking, until it is undeclared.
+
+    A reader thread iterates this rather than polling ``try_recv`` (which keeps a core busy
+    waking up on an idle bus); its owner undeclares the subscriber to end the iteration.
+    """
+    handler = subscriber.handler
+    while True:
+        try:
+            yield handler.recv()
+        except zenoh.ZError:  # undeclared (or its session closed): the reader is done
+            return
 
 
 def undeclare(*entities: Any) -> None:

@@ -42,7 +42,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from bridge import keys  # noqa: E402
 from bridge.service import Service  # noqa: E402
-from bridge.session import undeclare  # noqa: E402
+from bridge.session import receive, undeclare  # noqa: E402
 from planner.telemetry import KINDS, VIRTUAL_BATTERY_ID, FrameDecoder, VehicleTelemetry  # noqa: E402
 from rapt.errors import InputError  # noqa: E402
 from sim.uuv.autonomy import GOAL_RETURN, Autonomy, Observation  # noqa: E402
@@ -178,7 +178,10 @@ class BackSeat(Service):
         self.last_tick_ms = -1
         self.steps = 0
         self._sub = session.declare_subscriber(keys.raw(vehicle))  # FIFO channel, read by our thread
-        self._clock_sub = session.declare_subscriber(keys.meta(vehicle, "clock")) if pacing == "vehicle" else None
+        # the clock arrives once, by callback: parsing it is all the callback does (no Zenoh call, no wait)
+        self._clock_sub = (
+            session.declare_subscriber(keys.meta(vehicle, "clock"), self._on_clock) if pacing == "vehicle" else None
+        )
         self._pub = session.declare_publisher(keys.command(vehicle, source))
         self._status = session.declare_publisher(keys.status(vehicle, source))
         self._token = session.liveliness().declare_token(keys.alive(vehicle, source))
@@ -191,27 +194,20 @@ class BackSeat(Service):
         self._spawn(f"backseat-{self.source}", self._run)
 
     def _shutdown(self) -> None:
+        undeclare(self._sub)  # ends the loop's receive()
         self._join(self._threads, timeout=5)
-        undeclare(self._sub, self._clock_sub, self._pub, self._status, self._token)
+        undeclare(self._clock_sub, self._pub, self._status, self._token)
 
     # -- the loop --------------------------------------------------------------------
     def _run(self) -> None:
         on_message = self._on_message if self.pacing == "lockstep" else self._on_report
-        while not self._stop.is_set():
-            if self._clock_sub is not None and self.clock is None:
-                self._read_clock()
-            sample = self._sub.try_recv()
-            if sample is None:
-                time.sleep(0.0002)
-                continue
+        for sample in receive(self._sub):
             received = time.perf_counter()
             for msg in self._decoder.decode(sample.payload.to_bytes()):
                 on_message(msg, received)
 
-    def _read_clock(self) -> None:
-        assert self._clock_sub is not None
-        sample = self._clock_sub.try_recv()
-        if sample is None:
+    def _on_clock(self, sample) -> None:
+        if self.clock is not None:
             return
         try:
             start_ms = int(json.loads(sample.payload.to_bytes())["start_ms"])

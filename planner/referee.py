@@ -13,7 +13,6 @@ from __future__ import annotations
 
 import json
 import os
-import time
 
 import numpy as np
 
@@ -21,7 +20,7 @@ os.environ.setdefault("MAVLINK20", "1")
 
 from bridge import keys  # noqa: E402
 from bridge.service import Service  # noqa: E402
-from bridge.session import undeclare  # noqa: E402
+from bridge.session import receive, undeclare  # noqa: E402
 from planner.telemetry import VIRTUAL_BATTERY_ID, FrameDecoder, Pose, VehicleTelemetry  # noqa: E402
 from sim.uuv.geo import LocalFrame  # noqa: E402
 from sim.uuv.mission import Mission  # noqa: E402
@@ -96,15 +95,12 @@ class Referee(Service):
         self._spawn("referee", self._run)
 
     def _shutdown(self) -> None:
+        undeclare(self._sub)  # ends the reader's receive()
         self._join(self._threads, timeout=5)
-        undeclare(self._sub, self._pub)
+        undeclare(self._pub)
 
     def _run(self) -> None:
-        while not self._stop.is_set():
-            sample = self._sub.try_recv()
-            if sample is None:
-                time.sleep(0.0005)
-                continue
+        for sample in receive(self._sub):
             for msg in self._decoder.decode(sample.payload.to_bytes()):
                 if self.telemetry.add(msg) == "position" and self.sampler is not None and not self.ended:
                     assert self.telemetry.pose is not None

@@ -26,7 +26,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 from bridge import keys  # noqa: E402
 from bridge.mavlink_bridge import MavlinkBridge  # noqa: E402
 from bridge.service import Service  # noqa: E402
-from bridge.session import open_session, undeclare  # noqa: E402
+from bridge.session import open_session, receive, undeclare  # noqa: E402
 from planner.backseat import BackSeat  # noqa: E402
 from planner.jsonio import jsonable  # noqa: E402
 from planner.processes import wait_for  # noqa: E402
@@ -83,17 +83,13 @@ class _Recorder(Service):
         self._spawn("sil-recorder", self._run)
 
     def _run(self) -> None:
-        while not self._stop.is_set():
-            sample = self.sub.try_recv()
-            if sample is None:
-                time.sleep(0.0005)
-                continue
+        for sample in receive(self.sub):
             for msg in self.parser.parse_buffer(sample.payload.to_bytes()) or []:
                 self.builder.add(msg)
 
     def _shutdown(self) -> None:
+        undeclare(self.sub)  # ends the reader's receive()
         self._join(self._threads, timeout=5)
-        undeclare(self.sub)
 
 
 def run_sil(

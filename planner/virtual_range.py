@@ -28,7 +28,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 from bridge import keys  # noqa: E402
 from bridge.frames import message_json  # noqa: E402
 from bridge.service import Service  # noqa: E402
-from bridge.session import undeclare  # noqa: E402
+from bridge.session import receive, undeclare  # noqa: E402
 from planner.telemetry import VIRTUAL_BATTERY_ID, FrameDecoder, Pose, VehicleTelemetry  # noqa: E402
 from rapt.errors import InputError  # noqa: E402
 from sim.uuv.geo import LocalFrame  # noqa: E402
@@ -117,8 +117,9 @@ class VirtualRange(Service):
         self._spawn(f"virtual-range-{self.vehicle}", self._run)
 
     def _shutdown(self) -> None:
+        undeclare(self._sub)  # ends the reader's receive()
         self._join(self._threads, timeout=5)
-        undeclare(self._sub, self._raw, *self._json.values(), self._token)
+        undeclare(self._raw, *self._json.values(), self._token)
 
     def begin(self) -> None:
         """The scenario clock starts: the gauge counts the pack's consumption from its last report on."""
@@ -142,11 +143,7 @@ class VirtualRange(Service):
 
     # -- the loop --------------------------------------------------------------------
     def _run(self) -> None:
-        while not self._stop.is_set():
-            sample = self._sub.try_recv()
-            if sample is None:
-                time.sleep(0.0005)
-                continue
+        for sample in receive(self._sub):
             attachment = sample.attachment
             if attachment is not None and attachment.to_bytes() == keys.VIRTUAL_ATTACHMENT:
                 self._counts["virtual_skipped"] += 1  # ours (or another virtual source's): not the vehicle

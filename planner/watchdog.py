@@ -360,7 +360,7 @@ class Watchdog(Service):
             if self._setpoint is not None and time.monotonic() >= self._next_setpoint:
                 self._send_setpoint()
             if not busy:
-                time.sleep(0.002)
+                time.sleep(0.005)
 
     def _drain_raw(self) -> bool:
         got = False

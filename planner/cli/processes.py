@@ -29,7 +29,12 @@ __all__ = ["frontseat", "bridge", "autonomy", "log"]
 
 
 def frontseat(
-    mission_file: Annotated[Path, typer.Argument(help="Mission file (TOML).")],
+    mission_file: Annotated[
+        Path,
+        typer.Argument(
+            metavar="MISSION_OR_PLAN", help="Mission file (TOML), or a plan.json (then --scenario is an id)."
+        ),
+    ],
     mavlink: Annotated[str, typer.Option(help="pymavlink connection to serve on, e.g. udpin:127.0.0.1:14550.")],
     scenario: ScenarioOpt = "0",
     speedup: Annotated[float | None, typer.Option(help="Real time times this factor (default: lock-step).")] = None,
@@ -42,9 +47,17 @@ def frontseat(
     ] = 5.0,
 ) -> None:
     """Serve the simulated front-seat of one scenario on a MAVLink connection."""
+    from planner.flight import flight_from_plan, is_plan
     from sim.uuv.frontseat import FrontSeat
 
-    mission, u, _ = mission_and_scenario(mission_file, scenario)
+    if is_plan(mission_file):
+        try:
+            flight = flight_from_plan(mission_file, scenario)
+        except ValueError as exc:
+            fail(str(exc))
+        mission, u = flight.mission, flight.u
+    else:
+        mission, u, _ = mission_and_scenario(mission_file, scenario)
     try:
         fs = FrontSeat(
             mission,

@@ -1,0 +1,144 @@
+"""A plan's scenario flown on a vehicle we do not simulate in lock-step: our front-seat as a bare ArduSub.
+
+The vehicle keeps its own pace (speed-up 50), streams at its own rates, has no sonar and
+refuses GUIDED until its estimator is ready; the whole range-day stack flies it through
+``--mavlink`` on loopback MAVLink and a real Zenoh session.  Each test starts and stops its
+vehicle; no process, socket or thread outlives it.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import signal
+import socket
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import numpy as np
+import pytest
+from typer.testing import CliRunner
+
+from planner.cli import app
+from planner.flight import Flight, flight_from_plan
+from planner.logs import read_run
+from planner.vehicle_run import run_vehicle
+from sim.uuv.frontseat import FrontSeat
+from sim.uuv.geometry import polygon_signed_distance
+from sim.uuv.missionfile import load_mission
+from sim.uuv.scenario import make_scenarios
+from tests.loopback import free_port, no_new_threads
+
+pytestmark = pytest.mark.integration
+
+ROOT = Path(__file__).resolve().parents[2]
+PLAN = ROOT / "field_plans" / "range2017" / "plan.json"
+runner = CliRunner()
+
+
+@contextlib.contextmanager
+def bare_vehicle(mission, u, speedup: float = 50.0):
+    """Our front-seat as a bare ArduSub on a UDP port; yields (the bridge's connection string, the front-seat)."""
+    port = free_port(socket.SOCK_DGRAM)
+    with no_new_threads():
+        fs = FrontSeat(mission, u, f"udpin:127.0.0.1:{port}", bare=True, speedup=speedup)
+        thread = threading.Thread(target=fs.serve, name="bare-vehicle", daemon=True)
+        thread.start()
+        try:
+            yield f"udpout:127.0.0.1:{port}", fs
+        finally:
+            fs.stop()
+            thread.join(timeout=5)
+            fs.close()
+
+
+def _rapt_plan() -> list[str]:
+    exe = Path(sys.executable).with_name("rapt-plan")
+    return [str(exe)] if exe.exists() else [sys.executable, "-m", "planner.cli"]
+
+
+def test_an_operators_range_day_on_a_bare_autopilot_is_accepted_by_compare(tmp_path):
+    """`rapt-plan frontseat --bare` stands in for the vehicle; `rapt-plan run --mavlink --log` flies pair1a on it,
+    where the plan predicts a no-go area entered: the watchdog takes over there and ends the run;
+    `rapt-plan compare` reads the log like a SIL one and finds the predicted mode."""
+    port = free_port(socket.SOCK_DGRAM)
+    env = {**os.environ, "COLUMNS": "200"}
+    vehicle = subprocess.Popen(
+        _rapt_plan()
+        + ["frontseat", str(PLAN), "--scenario", "pair1a", "--mavlink", f"udpin:127.0.0.1:{port}"]
+        + ["--bare", "--speedup", "50"],
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+    )
+    log = tmp_path / "pair1a.mcap"
+    try:
+        run = subprocess.run(
+            _rapt_plan()
+            + ["run", str(PLAN), "--scenario", "pair1a", "--mavlink", f"udpout:127.0.0.1:{port}", "--log", str(log)]
+            + ["--timeout", "150"],
+            cwd=ROOT,
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=240,
+        )
+    finally:
+        vehicle.send_signal(signal.SIGINT)
+        vehicle.communicate(timeout=30)
+    assert run.returncode == 0, run.stderr + run.stdout
+    for step in ("heartbeat", "streams", "estimate", "area", "mission", "guided", "arm", "depth", "clock"):
+        assert f" {step} " in run.stderr, run.stderr  # the bring-up, step by step, as it happens
+    assert "watchdog: nogo" in run.stdout, run.stdout
+    observed = next(line for line in run.stdout.splitlines() if "observed mode" in line)
+    assert "TF" in observed, run.stdout  # the plan's prediction for pair1a: a no-go area entered
+
+    logged = read_run(log)
+    assert logged.ended == "watchdog: nogo" and logged.meta["pacing"] == "vehicle" and not logged.problems
+    sources = {e["source"]: e for e in logged.events}
+    assert {"bringup", "referee", "watchdog"} <= set(sources)
+    assert sources["watchdog"]["event"] == "intervention" and sources["watchdog"]["reason"] == "nogo"
+    out = tmp_path / "comparison"
+    result = runner.invoke(app, ["compare", str(PLAN), str(log), "--out", str(out), "--dithers", "0"])
+    assert result.exit_code == 0, result.output
+    assert (out / "comparison.json").exists() and "pair1a" in result.output
+
+
+def _obstacle_scenario():
+    """imitation7 scenario whose route passes 10 m from an obstacle the sonar must find (batch: no collision)."""
+    mission = load_mission(ROOT / "examples" / "imitation7.toml")
+    u = np.random.default_rng(1).random((400, mission.dim))[231]
+    return mission, u
+
+
+def test_a_virtual_obstacle_is_seen_and_avoided_on_a_vehicle_without_sonar():
+    mission, u = _obstacle_scenario()
+    flight = Flight(mission, u, "obstacle", str(ROOT / "examples" / "imitation7.toml"))
+    with bare_vehicle(mission, u) as (connection, fs):
+        result = run_vehicle(flight, connection, timeout_s=60)
+    assert fs.stats.setpoints > 0 and result.ended == "recovered" and not result.watchdog
+    scen = make_scenarios(mission, u[None, :])
+    x, y = result.track[:, 1], result.track[:, 2]
+    d = polygon_signed_distance(x, y, np.repeat(scen.obstacles, len(x), axis=0))[0]
+    closest = d.min(axis=0)
+    assert closest.min() > 0  # never touched one
+    assert closest.min() < 30  # but passed close: it was in the way and the vehicle went round it
+    assert result.decisions["missed"] == 0
+
+
+def test_ctrl_c_surfaces_and_disarms_the_vehicle():
+    flight = flight_from_plan(PLAN, "pair2b")
+
+    def operator(step):
+        if step.name == "clock":
+            raise KeyboardInterrupt
+
+    with bare_vehicle(flight.mission, flight.u) as (connection, fs):
+        with pytest.raises(KeyboardInterrupt):
+            run_vehicle(flight, connection, say=operator)
+        truth = fs.bare.truth()
+        assert fs.mode == 9 and not fs.armed  # SURFACE, then disarmed
+        assert truth.depth < 0.3
