@@ -25,6 +25,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from bridge import keys  # noqa: E402
 from bridge.mavlink_bridge import ARDUSUB_MODES, MavlinkBridge  # noqa: E402
+from bridge.mission_upload import MissionItem  # noqa: E402
 from bridge.setpoint import Setpoint  # noqa: E402
 from planner.telemetry import VehicleTelemetry  # noqa: E402
 from rapt.errors import InputError, LinkTimeoutError, RefusedError, RunError  # noqa: E402
@@ -79,33 +80,13 @@ class BringUpTimeouts:
         return BringUpTimeouts(**{k: v * factor for k, v in asdict(self).items()})
 
 
-def mission_items(mission: Mission, home: tuple[float, float]) -> list:
-    """The scenario's route as MISSION_ITEM_INTs: home (seq 0, ArduPilot's), waypoints at depth, recovery on top."""
+def mission_items(mission: Mission, home: tuple[float, float]) -> list[MissionItem]:
+    """The scenario's route as mission items: home (seq 0, ArduPilot's), waypoints at depth, recovery on top."""
     frame = LocalFrame(mission.origin_lat, mission.origin_lon)
     points = [(*frame.to_latlon(x, y), -DEPTH_M) for x, y in mission.waypoints]
     points.append((*frame.to_latlon(*mission.recovery), 0.0))
-    items = [(home[0], home[1], 0.0, mavlink.MAV_FRAME_GLOBAL)]
-    items += [(lat, lon, z, mavlink.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT) for lat, lon, z in points]
-    return [
-        mavlink.MAVLink_mission_item_int_message(
-            0,
-            0,
-            seq,
-            fr,
-            mavlink.MAV_CMD_NAV_WAYPOINT,
-            0,
-            1,
-            0.0,
-            0.0,
-            0.0,
-            float("nan"),
-            int(round(lat * 1e7)),
-            int(round(lon * 1e7)),
-            float(z),
-            mavlink.MAV_MISSION_TYPE_MISSION,
-        )
-        for seq, (lat, lon, z, fr) in enumerate(items)
-    ]
+    items = [MissionItem.waypoint(0, home[0], home[1], 0.0, frame=mavlink.MAV_FRAME_GLOBAL)]
+    return items + [MissionItem.waypoint(seq, lat, lon, z) for seq, (lat, lon, z) in enumerate(points, start=1)]
 
 
 @dataclass

@@ -35,9 +35,9 @@ from sim.uuv.geo import LocalFrame  # noqa: E402
 from sim.uuv.interface import HJ_PER_WH  # noqa: E402
 from sim.uuv.mission import Mission  # noqa: E402
 from sim.uuv.scenario import Scenarios, make_scenarios  # noqa: E402
-from sim.uuv.sonar import sense  # noqa: E402
+from sim.uuv.sonar import Contacts, sense  # noqa: E402
 
-__all__ = ["VirtualRange", "SENSOR_COMPONENT", "body_frd", "scenario_of"]
+__all__ = ["VirtualRange", "SENSOR_COMPONENT", "body_frd", "scenario_of", "sense_at"]
 
 #: The component id the virtual sonar and gauge send from (MAV_COMP_ID_OBSTACLE_AVOIDANCE).
 SENSOR_COMPONENT = mavlink.MAV_COMP_ID_OBSTACLE_AVOIDANCE
@@ -50,6 +50,18 @@ def scenario_of(mission: Mission, u) -> Scenarios:
     if not scen.valid[0]:
         raise InputError(f"scenario: invalid for mission '{mission.name}' ({scen.invalid_reason[0]})")
     return scen
+
+
+def sense_at(scen: Scenarios, pose: Pose) -> Contacts:
+    """The sonar's view (:func:`sim.uuv.sonar.sense`) of scenario row 0's obstacles and barriers from ``pose``."""
+    return sense(
+        np.array([pose.east]),
+        np.array([pose.north]),
+        np.array([pose.heading]),
+        scen.obstacle_edges,
+        scen.barriers,
+        scen.mission.vehicle,
+    )
 
 
 def body_frd(pose: Pose, east: float, north: float) -> tuple[float, float]:
@@ -165,15 +177,8 @@ class VirtualRange(Service):
     def _contacts(self, sysid: int) -> None:
         pose = self.telemetry.pose
         assert pose is not None, "a position report just set the pose"
-        spec, scen = self.mission.vehicle, self.scen
-        c = sense(
-            np.array([pose.east]),
-            np.array([pose.north]),
-            np.array([pose.heading]),
-            scen.obstacle_edges,
-            scen.barriers,
-            spec,
-        )
+        spec = self.mission.vehicle
+        c = sense_at(self.scen, pose)
         for j in np.flatnonzero(c.detected[0]):
             x, y = body_frd(pose, float(c.x[0, j]), float(c.y[0, j]))
             msg = mavlink.MAVLink_obstacle_distance_3d_message(

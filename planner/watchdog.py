@@ -33,14 +33,13 @@ from bridge.service import Service  # noqa: E402
 from bridge.session import undeclare  # noqa: E402
 from bridge.setpoint import Setpoint  # noqa: E402
 from planner.telemetry import VIRTUAL_BATTERY_ID, FrameDecoder, Pose, VehicleTelemetry  # noqa: E402
-from planner.virtual_range import scenario_of  # noqa: E402
+from planner.virtual_range import scenario_of, sense_at  # noqa: E402
 from rapt.errors import InputError, LinkError, LinkTimeoutError, RaptError  # noqa: E402
 from sim.uuv.geo import LocalFrame  # noqa: E402
 from sim.uuv.geometry import rect_signed_distance  # noqa: E402
 from sim.uuv.interface import HJ_PER_WH  # noqa: E402
 from sim.uuv.mission import Mission  # noqa: E402
 from sim.uuv.scenario import Scenarios  # noqa: E402
-from sim.uuv.sonar import sense  # noqa: E402
 
 __all__ = [
     "COLLISION",
@@ -85,15 +84,7 @@ class Trigger:
 
 def contact_distances(scen: Scenarios, pose: Pose) -> np.ndarray:
     """(K,) signed distances from ``pose`` to scenario row 0's obstacles then barriers (negative inside)."""
-    c = sense(
-        np.array([pose.east]),
-        np.array([pose.north]),
-        np.array([pose.heading]),
-        scen.obstacle_edges,
-        scen.barriers,
-        scen.mission.vehicle,
-    )
-    return c.distance[0]
+    return sense_at(scen, pose).distance[0]
 
 
 def _positive(value: float, name: str) -> float:

@@ -225,16 +225,7 @@ class FrontSeat:
         ended = self.referee.update_from(self.tel, np.ones(1, dtype=bool))[0]
         reason = ""
         if ended:
-            r = self.referee
-            reason = (
-                "recovered"
-                if r.recovered[0]
-                else "collision"
-                if r.collided[0]
-                else "left the operational area"
-                if r.left_area[0]
-                else "battery empty"
-            )
+            reason = self.referee.end_reason()
         elif self.t >= self.mission.time_limit_s:
             reason = "time limit"
         if reason:

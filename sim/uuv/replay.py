@@ -89,16 +89,7 @@ class TrackScorer:
         )
         nogo = rect_signed_distance(qx, qy, scen.nogo) if scen.nogo.shape[1] else None
         if self.scorer.update_from(tel, self._active, nogo)[0]:
-            r = self.scorer
-            self.ended = (
-                "recovered"
-                if r.recovered[0]
-                else "collision"
-                if r.collided[0]
-                else "left the operational area"
-                if r.left_area[0]
-                else "battery empty"
-            )
+            self.ended = self.scorer.end_reason()
             return True
         return False
 

@@ -196,6 +196,16 @@ class Scorer:
         self.end_time = np.where(ended, t, self.end_time)
         return ended
 
+    def end_reason(self, row: int = 0) -> str:
+        """Why run ``row`` ended, in the front-seat's words (its last :meth:`update` said it ended)."""
+        if self.recovered[row]:
+            return "recovered"
+        if self.collided[row]:
+            return "collision"
+        if self.left_area[row]:
+            return "left the operational area"
+        return "battery empty"
+
     def scores(self, wp_aborted: np.ndarray, return_reason: np.ndarray) -> np.ndarray:
         """The (N, m) score matrix in :func:`sim.uuv.metrics.metric_names` order.
 
