@@ -14,6 +14,8 @@ import time
 from collections.abc import Callable
 from contextlib import AbstractContextManager
 
+from rapt.errors import RefusedError
+
 __all__ = ["wait_for", "wait_for_signal", "serve_until_signal", "run_until_signal", "arm_when_heard"]
 
 
@@ -55,10 +57,22 @@ def run_until_signal(session, start: Callable[[], AbstractContextManager]) -> No
         session.close()
 
 
-def arm_when_heard(link, timeout_s: float = 30.0) -> bool:
-    """Once the bridge ``link`` hears the vehicle: GUIDED mode and arm.  False if it is not heard in ``timeout_s``."""
+def arm_when_heard(link, timeout_s: float = 30.0, *, guided_s: float = 120.0) -> bool:
+    """Once the bridge ``link`` hears the vehicle: GUIDED, then arm.  False if it is not heard in ``timeout_s``.
+
+    ArduSub refuses GUIDED until its position estimate is ready (about 40 s after a cold
+    boot), so GUIDED is asked again every half second for up to ``guided_s``, and the
+    vehicle is armed only once GUIDED was accepted; RefusedError if it never is.
+    """
     if not wait_for(lambda: link.target is not None, timeout_s, poll_s=0.05):
         return False
-    link.set_mode("GUIDED")
-    link.arm(True)
-    return True
+    deadline, result = time.monotonic() + guided_s, None
+    while time.monotonic() < deadline:
+        result = link.set_mode("GUIDED")
+        if result == 0:  # MAV_RESULT_ACCEPTED
+            link.arm(True)
+            return True
+        time.sleep(0.5)
+    raise RefusedError(
+        f"--arm: the vehicle refused GUIDED for {guided_s:g} s (last result {result}); is its position estimate ready?"
+    )

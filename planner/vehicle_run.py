@@ -58,6 +58,7 @@ class VehicleRunResult:
     decision_ticks: list[int] = field(default_factory=list)  # time_boot_ms each decision was taken on
     input_age_ms: list[int] = field(default_factory=list)  # the oldest input of each decision
     violations: dict = field(default_factory=dict)  # record-only watchdog reasons broken: reason -> detail
+    virtual: dict = field(default_factory=dict)  # the virtual range's counters (contacts_sent, gauge_sent, ...)
 
 
 def run_vehicle(
@@ -152,6 +153,7 @@ def run_vehicle(
             list(backseat.stats.ticks),
             list(backseat.stats.input_age_ms),
             dict(watchdog.violations),
+            virtual.stats,
         )
     finally:
         if bringup is not None:
