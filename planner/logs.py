@@ -31,7 +31,9 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from bridge import keys  # noqa: E402
 from bridge.logger import RAW_TOPIC  # noqa: E402
+from planner.bringup import BRINGUP_SOURCE  # noqa: E402
 from planner.referee import TrackSampler  # noqa: E402
+from planner.watchdog import SOURCE as WATCHDOG_SOURCE  # noqa: E402
 from planner.telemetry import VIRTUAL_BATTERY_ID, VehicleTelemetry  # noqa: E402
 from rapt.errors import FileFormatError  # noqa: E402
 from sim.uuv.geo import LocalFrame  # noqa: E402
@@ -325,17 +327,20 @@ class RunLogReader:
     def on_status(self, name: str, obj) -> None:
         if not isinstance(obj, dict):
             return
-        if name == "referee" and self.paced is not None and obj.get("ended"):
-            self.paced.ended = str(obj["ended"])
-        elif name in ("referee", "bringup", "watchdog"):
+        if name in ("referee", "bringup", "watchdog"):
             self.events.append({"source": name, **obj})
+            if name == "referee" and self.paced is not None and obj.get("ended"):
+                self.paced.ended = str(obj["ended"])
         else:
             self.status[name] = obj
 
     def on_control(self, name: str, obj) -> None:
-        """Which back-seat source the bridge obeys."""
+        """Which back-seat source the bridge obeys: the last one that flew the scenario, not the
+        bring-up's or the watchdog's (they take over before and after it)."""
         if name == "active":
-            self.active = str(obj.get("value", obj)) if isinstance(obj, dict) else str(obj)
+            value = str(obj.get("value", obj)) if isinstance(obj, dict) else str(obj)
+            if value not in (BRINGUP_SOURCE, WATCHDOG_SOURCE):
+                self.active = value
 
     # -- set-points ---------------------------------------------------------------------
     def _setpoints(self, rows: np.ndarray) -> tuple[str | None, np.ndarray]:

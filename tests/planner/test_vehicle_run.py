@@ -1,6 +1,6 @@
 """A plan's scenario flown on a vehicle we do not simulate in lock-step: our front-seat as a bare ArduSub.
 
-The vehicle keeps its own pace (speed-up 50), streams at its own rates, has no sonar and
+The vehicle keeps its own pace (speed-up 25), streams at its own rates, has no sonar and
 refuses GUIDED until its estimator is ready; the whole range-day stack flies it through
 ``--mavlink`` on loopback MAVLink and a real Zenoh session.  Each test starts and stops its
 vehicle; no process, socket or thread outlives it.
@@ -36,10 +36,12 @@ pytestmark = pytest.mark.integration
 ROOT = Path(__file__).resolve().parents[2]
 PLAN = ROOT / "field_plans" / "range2017" / "plan.json"
 runner = CliRunner()
+#: Fast, yet slow enough that a loaded 2-core machine does not starve the vehicle for seconds of its time.
+SPEEDUP = 25.0
 
 
 @contextlib.contextmanager
-def bare_vehicle(mission, u, speedup: float = 50.0):
+def bare_vehicle(mission, u, speedup: float = SPEEDUP):
     """Our front-seat as a bare ArduSub on a UDP port; yields (the bridge's connection string, the front-seat)."""
     port = free_port(socket.SOCK_DGRAM)
     with no_new_threads():
@@ -59,6 +61,7 @@ def _rapt_plan() -> list[str]:
     return [str(exe)] if exe.exists() else [sys.executable, "-m", "planner.cli"]
 
 
+@pytest.mark.slow
 def test_an_operators_range_day_on_a_bare_autopilot_is_accepted_by_compare(tmp_path):
     """`rapt-plan frontseat --bare` stands in for the vehicle; `rapt-plan run --mavlink --log` flies pair1a on it,
     where the plan predicts a no-go area entered: the watchdog takes over there and ends the run;
@@ -68,7 +71,7 @@ def test_an_operators_range_day_on_a_bare_autopilot_is_accepted_by_compare(tmp_p
     vehicle = subprocess.Popen(
         _rapt_plan()
         + ["frontseat", str(PLAN), "--scenario", "pair1a", "--mavlink", f"udpin:127.0.0.1:{port}"]
-        + ["--bare", "--speedup", "50"],
+        + ["--bare", "--speedup", str(SPEEDUP)],
         cwd=ROOT,
         env=env,
         stdout=subprocess.PIPE,
@@ -118,8 +121,8 @@ def test_a_virtual_obstacle_is_seen_and_avoided_on_a_vehicle_without_sonar():
     mission, u = _obstacle_scenario()
     flight = Flight(mission, u, "obstacle", str(ROOT / "examples" / "imitation7.toml"))
     with bare_vehicle(mission, u) as (connection, fs):
-        result = run_vehicle(flight, connection, timeout_s=60)
-    assert fs.stats.setpoints > 0 and result.ended == "recovered" and not result.watchdog
+        result = run_vehicle(flight, connection, timeout_s=450 / SPEEDUP)  # past all three obstacles by 330 s
+    assert fs.stats.setpoints > 0 and result.ended.startswith("wall-time limit") and not result.watchdog
     scen = make_scenarios(mission, u[None, :])
     x, y = result.track[:, 1], result.track[:, 2]
     d = polygon_signed_distance(x, y, np.repeat(scen.obstacles, len(x), axis=0))[0]
@@ -127,6 +130,8 @@ def test_a_virtual_obstacle_is_seen_and_avoided_on_a_vehicle_without_sonar():
     assert closest.min() > 0  # never touched one
     assert closest.min() < 30  # but passed close: it was in the way and the vehicle went round it
     assert result.decisions["missed"] == 0
+    # what the back-seat went round came from the virtual sonar, in the vehicle's own sensor stream
+    assert result.virtual["contacts_sent"] > 0 and result.virtual["gauge_sent"] > 0
 
 
 def test_ctrl_c_surfaces_and_disarms_the_vehicle():
