@@ -33,8 +33,8 @@ from bridge import keys  # noqa: E402
 from bridge.logger import RAW_TOPIC  # noqa: E402
 from planner.bringup import BRINGUP_SOURCE  # noqa: E402
 from planner.referee import TrackSampler  # noqa: E402
-from planner.watchdog import SOURCE as WATCHDOG_SOURCE  # noqa: E402
 from planner.telemetry import VIRTUAL_BATTERY_ID, VehicleTelemetry  # noqa: E402
+from planner.watchdog import SOURCE as WATCHDOG_SOURCE  # noqa: E402
 from rapt.errors import FileFormatError  # noqa: E402
 from sim.uuv.geo import LocalFrame  # noqa: E402
 from sim.uuv.interface import decode_command  # noqa: E402
