@@ -46,6 +46,7 @@ __all__ = [
     "NOGO",
     "OPERATIONAL_AREA",
     "BATTERY",
+    "POSITION_LOST",
     "STALE_COMMANDS",
     "LINK_LOST",
     "REASONS",
@@ -63,9 +64,13 @@ COLLISION = "collision"
 NOGO = "nogo"
 OPERATIONAL_AREA = "operational_area"
 BATTERY = "battery"
+POSITION_LOST = "position_lost"
 STALE_COMMANDS = "stale_commands"
 LINK_LOST = "link_lost"
-REASONS = (COLLISION, NOGO, OPERATIONAL_AREA, BATTERY, STALE_COMMANDS, LINK_LOST)
+REASONS = (COLLISION, NOGO, OPERATIONAL_AREA, BATTERY, POSITION_LOST, STALE_COMMANDS, LINK_LOST)
+#: EKF_STATUS_REPORT flags: an absolute horizontal position, and the constant-position fallback.
+_EKF_POS_HORIZ_ABS = 16
+_EKF_CONST_POS_MODE = 128
 #: What the watchdog does when it takes over.
 ACTIONS = ("surface", "hold")
 #: The source name the watchdog commands under (and its status key).
@@ -101,7 +106,9 @@ class WatchdogRules:
     virtual gauge (0: empty, the scenario's own end — the pack behind it is real and fine),
     ``pack_critical_percent`` the vehicle's real pack (its BATTERY_STATUS id 0
     ``battery_remaining``), ``command_stale_s`` vehicle seconds without a set-point from the
-    watched back-seat, ``link_lost_s`` wall seconds without a frame from the vehicle.
+    watched back-seat, ``link_lost_s`` wall seconds without a frame from the vehicle,
+    ``position_stale_s`` vehicle seconds without a position report while other reports come
+    (the estimator lost, or stopped reporting: the back-seat is flying blind).
     ``record_only`` names reasons that are published as a violation but do not take control
     (a virtual no-go area the plan predicts the vehicle to enter, for instance).
     """
@@ -110,6 +117,7 @@ class WatchdogRules:
     command_stale_s: float = 6.0
     link_lost_s: float = 3.0
     pack_critical_percent: float = 10.0
+    position_stale_s: float = 3.0
     record_only: frozenset[str] = frozenset()
 
     def __post_init__(self) -> None:
@@ -118,6 +126,7 @@ class WatchdogRules:
             raise InputError(f"critical_battery: expected a fraction in [0, 1), got {b!r}")
         _positive(self.command_stale_s, "command_stale_s")
         _positive(self.link_lost_s, "link_lost_s")
+        _positive(self.position_stale_s, "position_stale_s")
         p = self.pack_critical_percent
         if isinstance(p, bool) or not isinstance(p, (int, float)) or not 0 <= p < 100:
             raise InputError(f"pack_critical_percent: expected a percentage in [0, 100), got {p!r}")
@@ -135,6 +144,9 @@ class WatchdogRules:
         command_age_s: float | None,
         link_silence_s: float | None,
         pack_percent: float | None = None,
+        *,
+        position_age_s: float | None = None,
+        ekf_flags: int | None = None,
     ) -> Trigger | None:
         """The first rule of :data:`REASONS` that the values break, or None (:meth:`broken` has them all).
 
@@ -142,9 +154,20 @@ class WatchdogRules:
         :func:`contact_distances` gives, ``battery`` the charge fraction (None: unknown),
         ``command_age_s`` vehicle seconds since the last set-point (None: unknown),
         ``link_silence_s`` wall seconds since the vehicle's last frame and ``pack_percent`` the
-        real pack's charge (None: unknown).
+        real pack's charge (None: unknown); ``position_age_s`` vehicle seconds since the last
+        position report and ``ekf_flags`` the last EKF_STATUS_REPORT's flags (None: unknown).
         """
-        broken = self.broken(scen, pose, contact_distance, battery, command_age_s, link_silence_s, pack_percent)
+        broken = self.broken(
+            scen,
+            pose,
+            contact_distance,
+            battery,
+            command_age_s,
+            link_silence_s,
+            pack_percent,
+            position_age_s=position_age_s,
+            ekf_flags=ekf_flags,
+        )
         return broken[0] if broken else None
 
     def broken(
@@ -156,15 +179,39 @@ class WatchdogRules:
         command_age_s: float | None,
         link_silence_s: float | None,
         pack_percent: float | None = None,
+        *,
+        position_age_s: float | None = None,
+        ekf_flags: int | None = None,
     ) -> list[Trigger]:
         """Every rule the values break, in the order of :data:`REASONS` (arguments as :meth:`check`)."""
         return [
             t
-            for t in self._each(scen, pose, contact_distance, battery, command_age_s, link_silence_s, pack_percent)
+            for t in self._each(
+                scen,
+                pose,
+                contact_distance,
+                battery,
+                command_age_s,
+                link_silence_s,
+                pack_percent,
+                position_age_s,
+                ekf_flags,
+            )
             if t
         ]
 
-    def _each(self, scen, pose, contact_distance, battery, command_age_s, link_silence_s, pack_percent):
+    def _each(
+        self,
+        scen,
+        pose,
+        contact_distance,
+        battery,
+        command_age_s,
+        link_silence_s,
+        pack_percent,
+        position_age_s,
+        ekf_flags,
+    ):
         m = scen.mission
         if pose is not None:
             x, y = np.array([pose.east]), np.array([pose.north])
@@ -203,6 +250,15 @@ class WatchdogRules:
         if pack_percent is not None and 0 <= pack_percent <= self.pack_critical_percent:
             yield Trigger(
                 BATTERY, f"the vehicle's pack at {pack_percent:g}% (critical: {self.pack_critical_percent:g}%)"
+            )
+        if ekf_flags is not None and (not ekf_flags & _EKF_POS_HORIZ_ABS or ekf_flags & _EKF_CONST_POS_MODE):
+            yield Trigger(
+                POSITION_LOST, f"the vehicle's estimator has no absolute position (EKF flags 0x{ekf_flags:04x})"
+            )
+        elif position_age_s is not None and position_age_s > self.position_stale_s:
+            yield Trigger(
+                POSITION_LOST,
+                f"no position report for {position_age_s:.1f} s of vehicle time (limit {self.position_stale_s:g} s)",
             )
         if command_age_s is not None and command_age_s > self.command_stale_s:
             yield Trigger(
@@ -342,6 +398,8 @@ class Watchdog(Service):
                     self._command_age_s(),
                     self._silence_s(),
                     self._pack_percent(),
+                    position_age_s=self._position_age_s(),
+                    ekf_flags=None if self.telemetry.ekf is None else int(self.telemetry.ekf.flags),
                 )
                 for trigger in broken:
                     if trigger.reason not in self.rules.record_only:
@@ -390,6 +448,10 @@ class Watchdog(Service):
     def _arm(self) -> None:
         self._armed, self._armed_at = True, time.monotonic()
         self._since_ms = self.telemetry.now_ms if self.telemetry.now_ms >= 0 else None
+
+    def _position_age_s(self) -> float | None:
+        pose, now = self.telemetry.pose, self.telemetry.now_ms
+        return None if pose is None or now < 0 else (now - pose.time_ms) / 1000.0
 
     def _pack_percent(self) -> float | None:
         pack = self.telemetry.pack

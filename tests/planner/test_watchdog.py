@@ -22,6 +22,7 @@ from planner.watchdog import (
     BATTERY,
     COLLISION,
     LINK_LOST,
+    POSITION_LOST,
     NOGO,
     OPERATIONAL_AREA,
     SOURCE,
@@ -98,6 +99,24 @@ def test_each_rule_fires_with_its_reason_and_the_first_one_wins():
     assert check(_pose(30.0, 45.0), battery=0.0, age=99.0, silence=99.0).reason == COLLISION
     assert check(None, battery=0.0, age=99.0).reason == BATTERY
     assert rules.check(scen, None, None, None, None, 99.0).reason == LINK_LOST
+
+
+def test_a_lost_estimate_or_silent_position_reports_are_a_lost_position():
+    scen = scenario_of(_mission(), U)
+    rules = WatchdogRules()
+    pose = _pose(*SAFE)
+
+    def check(**kw):
+        return rules.check(scen, pose, contact_distances(scen, pose), 0.5, 0.0, 0.0, None, **kw)
+
+    assert check(position_age_s=3.0, ekf_flags=0x033F) is None  # ArduSub's flags once it uses GPS
+    lost = check(ekf_flags=0x00A7)  # attitude and velocities only: no absolute horizontal position
+    assert lost.reason == POSITION_LOST and "0x00a7" in lost.detail
+    assert check(ekf_flags=0x033F | 128).reason == POSITION_LOST  # constant-position mode
+    silent = check(position_age_s=3.5)  # ATTITUDE keeps coming, GLOBAL_POSITION_INT stopped
+    assert silent.reason == POSITION_LOST and "3.5 s of vehicle time" in silent.detail
+    # before the stale set-points the back-seat's silence would cause next
+    assert rules.check(scen, pose, None, 0.5, 99.0, 0.0, position_age_s=9.0).reason == POSITION_LOST
 
 
 def test_bad_thresholds_are_refused():
