@@ -123,11 +123,11 @@ def run_vehicle(
             watchdog.begin()
             session.put(keys.active(vehicle), keys.DEFAULT_ACTIVE)
             ended = _fly(referee, watchdog, timeout_s)
-        except KeyboardInterrupt:
-            referee.end("stopped by the operator")
+        except BaseException as exc:  # Ctrl-C, or a bring-up step that failed after GUIDED and arming
+            referee.end("stopped by the operator" if isinstance(exc, KeyboardInterrupt) else f"stopped: {exc}")
             backseat.close()
             watchdog.close()
-            _recover(bridge, referee, bringup, "surface", say)
+            _recover(bridge, referee, bringup, "surface", say)  # nothing to do unless it is armed
             raise
         backseat.close()  # the run is over: no more set-points of the scenario's
         watchdog.close()
