@@ -116,6 +116,9 @@ class BringUp:
     timeline: list[Step] = field(default_factory=list)
 
     def __post_init__(self) -> None:
+        #: GUIDED was accepted: from here on the vehicle is ours to bring back (never before:
+        #: a vehicle refused at the heartbeat may be armed and flown by someone else).
+        self.took_control = False
         self._t0 = time.monotonic()
         self.telemetry = VehicleTelemetry(LocalFrame(self.mission.origin_lat, self.mission.origin_lon))
         self._status = self.session.declare_publisher(keys.status(self.vehicle, "bringup"))
@@ -264,6 +267,7 @@ class BringUp:
 
     def guided(self) -> None:
         self._command_until("guided", lambda: self.bridge.set_mode("GUIDED"), self.timeouts.guided)
+        self.took_control = True
         if self._wait(lambda: self._mode() == GUIDED or None, 5.0) is None:
             self._fail("guided", RunError("bring-up guided: GUIDED was accepted but the heartbeat does not show it"))
         self._ok("guided", "GUIDED")

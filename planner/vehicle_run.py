@@ -127,7 +127,8 @@ def run_vehicle(
             referee.end("stopped by the operator" if isinstance(exc, KeyboardInterrupt) else f"stopped: {exc}")
             backseat.close()
             watchdog.close()
-            _recover(bridge, referee, bringup, "surface", say)  # nothing to do unless it is armed
+            if bringup.took_control:  # never touch a vehicle the checks refused: someone else may fly it
+                _recover(bridge, referee, bringup, "surface", say)
             raise
         backseat.close()  # the run is over: no more set-points of the scenario's
         watchdog.close()
