@@ -135,39 +135,9 @@ class WatchdogRules:
             raise InputError(f"record_only: unknown reason(s) {sorted(unknown)}; known: {', '.join(REASONS)}")
         object.__setattr__(self, "record_only", frozenset(self.record_only))
 
-    def check(
-        self,
-        scen: Scenarios,
-        pose: Pose | None,
-        contact_distance: np.ndarray | None,
-        battery: float | None,
-        command_age_s: float | None,
-        link_silence_s: float | None,
-        pack_percent: float | None = None,
-        *,
-        position_age_s: float | None = None,
-        ekf_flags: int | None = None,
-    ) -> Trigger | None:
-        """The first rule of :data:`REASONS` that the values break, or None (:meth:`broken` has them all).
-
-        ``pose`` (None: no position yet, the area rules wait), ``contact_distance`` (K,) as
-        :func:`contact_distances` gives, ``battery`` the charge fraction (None: unknown),
-        ``command_age_s`` vehicle seconds since the last set-point (None: unknown),
-        ``link_silence_s`` wall seconds since the vehicle's last frame and ``pack_percent`` the
-        real pack's charge (None: unknown); ``position_age_s`` vehicle seconds since the last
-        position report and ``ekf_flags`` the last EKF_STATUS_REPORT's flags (None: unknown).
-        """
-        broken = self.broken(
-            scen,
-            pose,
-            contact_distance,
-            battery,
-            command_age_s,
-            link_silence_s,
-            pack_percent,
-            position_age_s=position_age_s,
-            ekf_flags=ekf_flags,
-        )
+    def check(self, *args: Any, **kwargs: Any) -> Trigger | None:
+        """The first rule of :data:`REASONS` that the values break, or None (arguments as :meth:`broken`)."""
+        broken = self.broken(*args, **kwargs)
         return broken[0] if broken else None
 
     def broken(
@@ -183,22 +153,17 @@ class WatchdogRules:
         position_age_s: float | None = None,
         ekf_flags: int | None = None,
     ) -> list[Trigger]:
-        """Every rule the values break, in the order of :data:`REASONS` (arguments as :meth:`check`)."""
-        return [
-            t
-            for t in self._each(
-                scen,
-                pose,
-                contact_distance,
-                battery,
-                command_age_s,
-                link_silence_s,
-                pack_percent,
-                position_age_s,
-                ekf_flags,
-            )
-            if t
-        ]
+        """Every rule the values break, in the order of :data:`REASONS`.
+
+        ``pose`` (None: no position yet, the area rules wait), ``contact_distance`` (K,) as
+        :func:`contact_distances` gives, ``battery`` the charge fraction (None: unknown),
+        ``command_age_s`` vehicle seconds since the last set-point (None: unknown),
+        ``link_silence_s`` wall seconds since the vehicle's last frame and ``pack_percent`` the
+        real pack's charge (None: unknown); ``position_age_s`` vehicle seconds since the last
+        position report and ``ekf_flags`` the last EKF_STATUS_REPORT's flags (None: unknown).
+        """
+        values = (scen, pose, contact_distance, battery, command_age_s, link_silence_s, pack_percent)
+        return [t for t in self._each(*values, position_age_s, ekf_flags) if t]
 
     def _each(
         self,
