@@ -30,6 +30,7 @@ from mcap.stream_reader import StreamReader, breakup_chunk  # noqa: E402
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from bridge import keys  # noqa: E402
+from bridge.frames import message_id  # noqa: E402
 from bridge.logger import RAW_TOPIC  # noqa: E402
 from planner.bringup import BRINGUP_SOURCE  # noqa: E402
 from planner.referee import TrackSampler  # noqa: E402
@@ -137,13 +138,7 @@ WANTED_IDS = {
 
 def _decode_frame(parser, frame: bytes):
     """One logged frame (the logger stores one per message) decoded if it is wanted; CRC-checked."""
-    if len(frame) >= 10 and frame[0] == 0xFD:  # MAVLink 2: the id is bytes 7..9, little-endian
-        msg_id = frame[7] | frame[8] << 8 | frame[9] << 16
-    elif len(frame) >= 6 and frame[0] == 0xFE:  # MAVLink 1
-        msg_id = frame[5]
-    else:
-        return None
-    if msg_id not in WANTED_IDS:
+    if message_id(frame) not in WANTED_IDS:  # not a frame's start, or not wanted
         return None
     try:
         return parser.decode(bytearray(frame))

@@ -124,7 +124,6 @@ class VehicleTelemetry:
     def __post_init__(self) -> None:
         self.now_ms = -1  # the newest vehicle time seen
         self._last: dict[str, int] = {}  # newest time_boot_ms per kind
-        self._global = None
         self._yaw: tuple[int, float, float] | None = None
         self.pose: Pose | None = None
         self._poses: deque[Pose] = deque(maxlen=self.POSE_HISTORY)
@@ -230,11 +229,6 @@ class VehicleTelemetry:
     def recent_contacts(self, since_ms: int) -> dict[int, Contact]:
         """Contacts reported at or after ``since_ms`` (older ones are out of sight now)."""
         return {j: c for j, c in self.contacts.items() if c.time_ms >= since_ms}
-
-    def age_ms(self, kind: str) -> int | None:
-        """How long ago, by the vehicle's clock, the newest report of ``kind`` was stamped; None if never."""
-        last = self._last.get(kind)
-        return None if last is None else self.now_ms - last
 
 
 def _wrap(a: float) -> float:

@@ -200,7 +200,7 @@ def _fly(referee: Referee, watchdog: Watchdog, timeout_s: float | None) -> str:
 def _recover(bridge: MavlinkBridge, referee: Referee, bringup: BringUp, action: str, say) -> None:
     """After the run (or on Ctrl-C): SURFACE, wait for the surface, disarm; or leave it holding in GUIDED."""
     hb = bridge.autopilot
-    if hb is None or not hb.base_mode & 128:  # MAV_MODE_FLAG_SAFETY_ARMED
+    if hb is None or not hb.armed:
         return
     if action == "hold":
         bringup.note("recover", "ok", "left holding in GUIDED for the operator (watchdog action: hold)")
