@@ -1,29 +1,19 @@
-"""Estimate the execution bias (:mod:`sim.uuv.bias`) from logged runs, jointly, with an uncertainty.
+"""Estimate the execution bias (:mod:`sim.uuv.bias`) from logged runs, with what the logs can tell.
 
-Why replay rather than re-fly.  Re-simulating each scenario closed loop under a trial
-bias and matching its trajectory is what a range team does by eye, but as a function of
-the bias it jumps: a waypoint reached one 2-s step earlier, a no-go area avoided on the
-other side, and the rest of the run differs.  A least-squares fit on that surface stalls.
-The log holds more than the track, though: it holds the set-point the back-seat gave at
-every step.  So each run is cut into short segments (:data:`SEGMENT_STEPS` steps); each
-segment starts from the logged state (position, heading, speed, turn rate; the sway is
-rebuilt from the logged speed and turn rate) and is flown *open loop* on the logged
-set-points through the simulator's own vehicle and tide models (:func:`sim.uuv.vehicle.
-step_vehicle`, :func:`sim.uuv.environment.tidal_current`) under the trial bias.  The predicted
-positions and energy used are compared with the logged ones.  No autonomy decision sits
-inside the residual, so it is smooth in the bias, every log of every scenario counts,
-and a truncated log counts as far as it goes.  Segments are short so that a real
-vehicle's unmodelled disturbances do not accumulate.
+Each run is cut into short open-loop segments replayed on the logged set-points through
+the simulator's own vehicle and tide models (:mod:`planner.segments`), and the six bias
+parameters are fitted to the logged positions and energy used: a maximum a posteriori
+estimate (:func:`rapt.mapfit.fit_map`) under :data:`PRIORS`, one documented prior per
+parameter centred on neutral with a width a range engineer would accept.  A parameter
+whose posterior is not clearly narrower than its prior is *not identified*: the logs
+cannot tell it (one run, one tide phase: a tide-table error against a clock error), so
+it stays neutral for prediction and is reported so.
 
-:func:`fit_bias` minimises those residuals over the six bias parameters with
-``scipy.optimize.least_squares`` (all segments of all logs in one vectorised batch) and
-gives each parameter a standard error from the Jacobian at the solution,
-``(J^T J)^-1 s^2`` with ``s^2`` the residual variance — or, when larger, the cluster-robust
-(sandwich) estimate by segment, since an unmodelled current or navigation drift makes a
-segment's residuals move together and the plain formula would then be optimistic.  A weak prior around neutral
-(:data:`PRIOR_SD`) keeps a direction the logs barely inform (one run, one tide phase)
-from wandering to a bound; a parameter the logs carry no information about at all (a
-mission without current, say) stays neutral and is reported as not identifiable.  The fitted bias is then checked closed loop by :mod:`planner.compare`.
+The standard errors must hold when the residuals are not independent: a real vehicle's
+navigation drift or an unmodelled current moves a whole segment, and the segments of a
+run together.  The reported s.e. is the largest of the Laplace, the cluster-robust and a
+block-bootstrap estimate whose blocks are whole runs when there are enough of them
+(:data:`BOOTSTRAP_BY_RUN_FROM`), consecutive segments otherwise.
 """
 
 from __future__ import annotations
@@ -31,172 +21,134 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 
 import numpy as np
-from scipy.optimize import least_squares
 
+from planner.segments import SEGMENT_STEPS, Segments, replay, segment_batch
 from rapt.errors import InputError
+from rapt.mapfit import MapEstimate, Prior, fit_map
 from sim.uuv.bias import BIAS_LIMITS, BIAS_NAMES, NEUTRAL, Bias
-from sim.uuv.environment import tidal_current
 from sim.uuv.mission import Mission
-from sim.uuv.vehicle import SWAY_COUPLING, VehicleState, step_vehicle
 
-__all__ = ["BiasFit", "fit_bias", "segment_batch", "SEGMENT_STEPS"]
+__all__ = ["BiasFit", "fit_bias", "PRIORS", "bias_priors"]
 
-#: Steps per open-loop segment (2 s steps: two minutes of flight).
-SEGMENT_STEPS = 60
 #: Residual units: metres of position, watt-hours of energy used.
 SIGMA_POSITION_M = 1.0
 SIGMA_ENERGY_WH = 0.05
-#: A weak prior around neutral, one standard deviation per parameter: far wider than any
-#: range day's bias, so informative logs are not pulled, but a direction the logs say
-#: nothing about (one run, one tide phase: current scale against offset) stays put.
+#: One standard deviation of each parameter's prior, around neutral: what a range day's
+#: vehicle and tide table plausibly get wrong (a speed loop 15 % off, a tide table 30 %
+#: or 0.3 m/s off, a compass 5 degrees off, a battery gauge 15 % off, a tidal file half
+#: an hour off).  Larger biases are still found when the logs show them clearly.
 PRIOR_SD = {
-    "speed": 0.5,
-    "current_scale": 1.0,
-    "current_offset": 1.0,
-    "heading": 15.0,
-    "battery": 1.0,
-    "start_time": 3 * 3600.0,
+    "speed": 0.15,
+    "current_scale": 0.3,
+    "current_offset": 0.3,
+    "heading": 5.0,
+    "battery": 0.15,
+    "start_time": 1800.0,
 }
-#: Parameter scaling for the optimiser (a unit step of each is a comparable effect).
-SCALE = {"speed": 0.1, "current_scale": 0.1, "current_offset": 0.1, "heading": 1.0, "battery": 0.1, "start_time": 600.0}
+#: Runs needed before the bootstrap resamples whole runs rather than blocks of segments.
+BOOTSTRAP_BY_RUN_FROM = 6
+#: Consecutive segments per bootstrap block when there are too few runs.
+SEGMENTS_PER_BLOCK = 3
+#: Bootstrap refits (0: analytic standard errors only).
+BOOTSTRAP = 40
 
 
-@dataclass
-class Segments:
-    """Open-loop segments of logged runs, as (N, L) arrays; ``valid`` masks padding."""
-
-    start: dict  # x, y, heading, surge, sway, yaw_rate, energy_hj, t: (N,)
-    t: np.ndarray  # (N, L) time of each step's start
-    start_time: np.ndarray  # (N,) the scenario's start time (s after midnight)
-    heading_cmd: np.ndarray
-    speed_cmd: np.ndarray
-    obs_x: np.ndarray  # (N, L) logged position after each step
-    obs_y: np.ndarray
-    obs_energy_wh: np.ndarray  # (N, L) energy used since the segment's start
-    valid: np.ndarray
-    run: np.ndarray  # (N,) index of the run each segment comes from
+def bias_priors(names: tuple[str, ...] = BIAS_NAMES) -> list[Prior]:
+    """The priors of ``names`` (:data:`PRIOR_SD` around neutral, within :data:`sim.uuv.bias.BIAS_LIMITS`)."""
+    return [Prior(n, NEUTRAL[n], PRIOR_SD[n], *BIAS_LIMITS[n]) for n in names]
 
 
-def _sway(steps: np.ndarray, mission: Mission) -> np.ndarray:
-    """Sway rebuilt from logged surge and turn rate with the vehicle model's sway equation."""
-    dt = mission.dt
-    a_v = 1.0 - np.exp(-dt * mission.vehicle.sway_damping)
-    v = np.zeros(steps.shape[0])
-    for k in range(1, steps.shape[0]):
-        u, r = steps[k, 6], steps[k, 7]
-        v[k] = v[k - 1] + (-SWAY_COUPLING * u * r - v[k - 1]) * a_v
-    return v
-
-
-def segment_batch(mission: Mission, runs: list, start_times: list[float], length: int = SEGMENT_STEPS) -> Segments:
-    """Cut every run (a :class:`planner.logs.LoggedRun`) into segments of ``length`` steps.
-
-    A step counts when the next step follows it by exactly ``mission.dt`` (no gap from a
-    lost chunk) and the set-point flown after it is in the log.
-    """
-    dt = mission.dt
-    rows = []
-    for i, (run, t0) in enumerate(zip(runs, start_times)):
-        s, sp = run.steps, run.setpoints
-        if s.shape[0] < 2:
-            continue
-        sway = _sway(s, mission)
-        ok = (np.abs(np.diff(s[:, 0]) - dt) < 1e-6) & np.isfinite(sp[:-1, 1])
-        k = 0
-        while k < len(ok):
-            if not ok[k]:
-                k += 1
-                continue
-            end = k
-            while end < len(ok) and ok[end] and end - k < length:
-                end += 1
-            rows.append((i, t0, k, end, s, sp, sway))
-            k = end
-    n = len(rows)
-    L = length
-    t = np.zeros((n, L))
-    hc, sc = np.zeros((n, L)), np.zeros((n, L))
-    ox, oy, oe = np.zeros((n, L)), np.zeros((n, L)), np.zeros((n, L))
-    valid = np.zeros((n, L), dtype=bool)
-    start = {key: np.zeros(n) for key in ("x", "y", "heading", "surge", "sway", "yaw_rate")}
-    st, run_index = np.zeros(n), np.zeros(n, dtype=np.int64)
-    for j, (i, t0, k, end, s, sp, sway) in enumerate(rows):
-        m = end - k
-        start["x"][j], start["y"][j], start["heading"][j] = s[k, 1], s[k, 2], s[k, 3]
-        start["surge"][j], start["sway"][j], start["yaw_rate"][j] = s[k, 6], sway[k], s[k, 7]
-        st[j], run_index[j] = t0, i
-        t[j, :m] = s[k:end, 0]
-        hc[j, :m], sc[j, :m] = sp[k:end, 0], sp[k:end, 1]
-        ox[j, :m], oy[j, :m] = s[k + 1 : end + 1, 1], s[k + 1 : end + 1, 2]
-        oe[j, :m] = (s[k + 1 : end + 1, 4] - s[k, 4]) / 36.0
-        valid[j, :m] = True
-    return Segments(start, t, st, hc, sc, ox, oy, oe, valid, run_index)
-
-
-def replay(mission: Mission, seg: Segments, bias: Bias) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Predicted (x, y, energy used) of every segment step under ``bias``: (N, L) each."""
-    n, L = seg.t.shape
-    spec, dt = mission.vehicle, mission.dt
-    s = VehicleState(
-        seg.start["x"].copy(),
-        seg.start["y"].copy(),
-        seg.start["heading"].copy(),
-        seg.start["surge"].copy(),
-        seg.start["sway"].copy(),
-        seg.start["yaw_rate"].copy(),
-        np.zeros(n),
-    )
-    px, py, pe = np.zeros((n, L)), np.zeros((n, L)), np.zeros((n, L))
-    course = np.deg2rad(bias.heading)
-    for j in range(L):
-        moving = seg.valid[:, j]
-        ce, cn = tidal_current(
-            mission.current, seg.start_time + bias.start_time + seg.t[:, j], bias.current_scale, bias.current_offset
-        )
-        step_vehicle(
-            s,
-            spec,
-            seg.heading_cmd[:, j],
-            seg.speed_cmd[:, j],
-            ce,
-            cn,
-            dt,
-            moving,
-            speed_scale=bias.speed,
-            course_bias=course,
-            energy_scale=bias.battery,
-        )
-        px[:, j], py[:, j], pe[:, j] = s.x, s.y, -s.energy_wh
-    return px, py, pe
+PRIORS = {p.name: p for p in bias_priors()}
 
 
 @dataclass
 class BiasFit:
-    """The fitted bias with a standard error per parameter (None: not identifiable)."""
+    """The fitted bias (unidentified parameters at neutral) with the fit behind it."""
 
     bias: Bias
-    stderr: dict[str, float | None]
+    estimate: MapEstimate  # per parameter: MAP value, posterior s.e., identified
     rms_position_m: float
     rms_energy_wh: float
     rms_position_neutral_m: float
     segments: int
     residuals: int
     runs: int
-    success: bool
-    message: str
-    correlation: dict[str, dict[str, float]] = field(default_factory=dict)
+    fitted: tuple[str, ...] = BIAS_NAMES
+    end_conditions: dict = field(default_factory=dict)  # how the closed-loop check used the runs' ends
+
+    @property
+    def stderr(self) -> dict[str, float]:
+        return {n: self.estimate.stderr.get(n, 0.0) for n in BIAS_NAMES}
+
+    @property
+    def identified(self) -> dict[str, bool]:
+        return {n: self.estimate.identified.get(n, False) for n in BIAS_NAMES}
+
+    @property
+    def success(self) -> bool:
+        return self.estimate.success
+
+    @property
+    def message(self) -> str:
+        return self.estimate.message
+
+    @property
+    def correlation(self) -> dict[str, dict[str, float]]:
+        return self.estimate.correlation
+
+    def with_bias(self, bias: Bias, end_conditions: dict) -> BiasFit:
+        """The same fit with the bias chosen by the closed-loop check of the runs' ends."""
+        return BiasFit(
+            bias,
+            self.estimate,
+            self.rms_position_m,
+            self.rms_energy_wh,
+            self.rms_position_neutral_m,
+            self.segments,
+            self.residuals,
+            self.runs,
+            self.fitted,
+            end_conditions,
+        )
 
     def to_dict(self) -> dict:
-        return {name: {"estimate": float(getattr(self.bias, name)), "stderr": self.stderr[name]} for name in BIAS_NAMES}
+        """Per parameter: the estimate used for prediction, its s.e., whether the logs identify it, its prior."""
+        out = {}
+        for n in BIAS_NAMES:
+            fitted = n in self.fitted
+            out[n] = {
+                "estimate": float(getattr(self.bias, n)),
+                "stderr": self.estimate.stderr[n] if fitted else 0.0,
+                "identified": bool(fitted and self.estimate.identified[n]),
+                "map_estimate": self.estimate.map_value[n] if fitted else NEUTRAL[n],
+                "prior": {"centre": PRIORS[n].centre, "sd": PRIORS[n].sd} if fitted else None,
+            }
+        return out
 
 
-def _residuals(mission: Mission, seg: Segments, bias: Bias) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    px, py, pe = replay(mission, seg, bias)
+def _residuals(mission: Mission, seg: Segments, bias: Bias) -> np.ndarray:
+    px, py, pe, _ = replay(mission, seg, bias)
     v = seg.valid
     dx = (px - seg.obs_x)[v] / SIGMA_POSITION_M
     dy = (py - seg.obs_y)[v] / SIGMA_POSITION_M
     de = (pe - seg.obs_energy_wh)[v] / SIGMA_ENERGY_WH
-    return dx, dy, de
+    return np.concatenate([dx, dy, de])
+
+
+def bootstrap_blocks(seg: Segments) -> np.ndarray:
+    """The bootstrap block of every segment: its run when there are :data:`BOOTSTRAP_BY_RUN_FROM` runs
+    or more, else runs of :data:`SEGMENTS_PER_BLOCK` consecutive segments of one run."""
+    runs = seg.run
+    if len(set(runs.tolist())) >= BOOTSTRAP_BY_RUN_FROM:
+        return runs.copy()
+    block = np.zeros(runs.size, dtype=np.int64)
+    nxt, last_run, count = -1, None, 0
+    for j, r in enumerate(runs.tolist()):
+        if r != last_run or count == SEGMENTS_PER_BLOCK:
+            nxt, last_run, count = nxt + 1, r, 0
+        block[j] = nxt
+        count += 1
+    return block
 
 
 def fit_bias(
@@ -205,76 +157,42 @@ def fit_bias(
     start_times: list[float],
     fit: tuple[str, ...] = BIAS_NAMES,
     length: int = SEGMENT_STEPS,
+    bootstrap: int = BOOTSTRAP,
+    seed: int = 0,
 ) -> BiasFit:
-    """Fit the parameters ``fit`` (the others stay neutral) to all ``runs`` jointly."""
+    """MAP fit of the parameters ``fit`` (the others stay neutral) to all ``runs`` jointly."""
     seg = segment_batch(mission, runs, start_times, length)
     if not seg.valid.any():
         raise InputError(
             "LOGS: no replayable flight in the logs (no telemetry steps with set-points); the bias cannot be estimated"
         )
-    names = [n for n in BIAS_NAMES if n in fit]
-    scale = np.array([SCALE[n] for n in names])
-    base = np.array([NEUTRAL[n] for n in names])
-    lo = np.array([(BIAS_LIMITS[n][0] - NEUTRAL[n]) / SCALE[n] for n in names])
-    hi = np.array([(BIAS_LIMITS[n][1] - NEUTRAL[n]) / SCALE[n] for n in names])
+    names = tuple(n for n in BIAS_NAMES if n in fit)
 
-    def to_bias(p: np.ndarray) -> Bias:
-        return Bias(**{n: float(v) for n, v in zip(names, base + scale * p)})
+    def bias_of(theta: np.ndarray) -> Bias:
+        return Bias(**{n: float(v) for n, v in zip(names, theta)})
 
-    prior = scale / np.array([PRIOR_SD[n] for n in names])
-    weight = [0.0]  # the prior's rows, in units of the data's residual scale (set after a first fit)
-
-    def fun(p: np.ndarray) -> np.ndarray:
-        return np.concatenate([*_residuals(mission, seg, to_bias(p)), weight[0] * prior * p])
-
-    p0 = np.zeros(len(names))
-    r0 = _residuals(mission, seg, to_bias(p0))
-    opts = dict(bounds=(lo, hi), method="trf", loss="soft_l1", f_scale=5.0, diff_step=1e-6, x_scale=1.0)
-    sol = least_squares(fun, p0, max_nfev=200, **opts)  # the data alone
-    m = sol.fun.size - len(names)
-    s2 = float(sol.fun[:m] @ sol.fun[:m]) / max(m - len(names), 1)
-    weight[0] = float(np.sqrt(s2))  # then the prior, weighed against the data's own noise
-    sol = least_squares(fun, sol.x, max_nfev=100, **opts)
-    J = sol.jac[:m]  # the data's Jacobian (the prior rows last)
-    col = np.linalg.norm(J, axis=0)
-    known = col > 1e-8 * max(col.max(), 1e-300)
-    res = sol.fun[:m]
-    s2 = float(res @ res) / max(m - int(known.sum()), 1)
-    stderr: dict[str, float | None] = {n: None for n in BIAS_NAMES}
-    correlation: dict[str, dict[str, float]] = {}
-    if known.any():
-        Jk = J[:, known]
-        bread = np.linalg.pinv(Jk.T @ Jk / s2 + np.diag(prior[known] ** 2))
-        # residuals within a segment are correlated (an unmodelled current displaces every later
-        # step): a cluster-robust (sandwich) covariance by segment, and the larger of the two
-        seg_of = np.nonzero(seg.valid)[0]
-        groups = np.concatenate([seg_of, seg_of, seg_of])
-        score = np.zeros((seg.valid.shape[0], Jk.shape[1]))
-        np.add.at(score, groups, Jk * (res / s2)[:, None])
-        robust = bread @ (score.T @ score) @ bread
-        sd = np.sqrt(np.clip(np.maximum(np.diag(bread), np.diag(robust)), 0, None))
-        kn = [n for n, ok in zip(names, known) if ok]
-        for n, v, sc in zip(kn, sd, scale[known]):
-            stderr[n] = float(v * sc)
-        bsd = np.sqrt(np.clip(np.diag(bread), 1e-300, None))
-        corr = bread / np.outer(bsd, bsd)
-        correlation = {a: {b: float(corr[i, j]) for j, b in enumerate(kn) if b != a} for i, a in enumerate(kn)}
-    p = np.where(known, sol.x, 0.0)
-    for n in BIAS_NAMES:  # parameters left out of the fit stay neutral, exactly
-        if n not in names:
-            stderr[n] = 0.0
-    best = to_bias(p)
-    dx, dy, de = _residuals(mission, seg, best)
+    per_segment = np.nonzero(seg.valid)[0]
+    blocks = bootstrap_blocks(seg)[per_segment]
+    groups = np.concatenate([blocks, blocks, blocks])
+    est = fit_map(
+        lambda th: _residuals(mission, seg, bias_of(th)),
+        bias_priors(names),
+        groups=groups,
+        bootstrap=bootstrap,
+        seed=seed,
+    )
+    best = bias_of(np.array([est.value[n] for n in names]))
+    r = _residuals(mission, seg, best)
+    r0 = _residuals(mission, seg, Bias())
+    k = int(seg.valid.sum())
     return BiasFit(
         best,
-        stderr,
-        float(np.sqrt(np.mean(dx**2 + dy**2))) * SIGMA_POSITION_M,
-        float(np.sqrt(np.mean(de**2))) * SIGMA_ENERGY_WH,
-        float(np.sqrt(np.mean(r0[0] ** 2 + r0[1] ** 2))) * SIGMA_POSITION_M,
+        est,
+        float(np.sqrt(np.mean(r[:k] ** 2 + r[k : 2 * k] ** 2))) * SIGMA_POSITION_M,
+        float(np.sqrt(np.mean(r[2 * k :] ** 2))) * SIGMA_ENERGY_WH,
+        float(np.sqrt(np.mean(r0[:k] ** 2 + r0[k : 2 * k] ** 2))) * SIGMA_POSITION_M,
         int(seg.valid.shape[0]),
-        int(m),
+        int(r.size),
         int(len(set(seg.run.tolist()))),
-        bool(sol.success),
-        str(sol.message),
-        correlation,
+        names,
     )

@@ -28,7 +28,21 @@ from sim.uuv.world import Telemetry, World, scenario_generators
 __all__ = ["Result", "simulate", "run_scenarios", "TRAJECTORY_FIELDS"]
 
 #: Per-step columns of a recorded trajectory.
-TRAJECTORY_FIELDS = ("t", "x", "y", "heading", "energy_hj", "surfaced", "speed", "goal")
+#: ``speed`` and ``yaw_rate`` are the vehicle's through-water surge and turn rate; ``heading_cmd``
+#: and ``speed_cmd`` the set-point it was given after the step, as MAVLink carried it.
+TRAJECTORY_FIELDS = (
+    "t",
+    "x",
+    "y",
+    "heading",
+    "energy_hj",
+    "surfaced",
+    "speed",
+    "goal",
+    "yaw_rate",
+    "heading_cmd",
+    "speed_cmd",
+)
 
 
 @dataclass
@@ -159,6 +173,7 @@ def run_scenarios(
         if on_step is not None:
             on_step(obs, cmd, active, autonomy)
         ended = scorer.update_from(tel, active, nogo)
+        heading, speed, surface = decode_command(*encode_command(cmd.heading, cmd.speed, cmd.surface))
         if record:
             frames.append(
                 np.column_stack(
@@ -171,13 +186,15 @@ def run_scenarios(
                         tel.surfaced,
                         world.state.surge,
                         autonomy.goal_kind,
+                        world.state.yaw_rate,
+                        heading,
+                        speed,
                     ]
                 )
             )
         active &= ~ended
         if not np.any(active) or k == steps:
             break
-        heading, speed, surface = decode_command(*encode_command(cmd.heading, cmd.speed, cmd.surface))
         world.advance(t, heading, speed, surface, active)
     out[where] = scorer.scores(autonomy.wp_aborted, autonomy.return_reason)
     trajs = []

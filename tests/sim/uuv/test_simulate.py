@@ -11,6 +11,7 @@ from sim.uuv.autonomy import RETURN_COMPLETE, RETURN_FUEL, RETURN_TIME
 from sim.uuv.metrics import metric_names
 from sim.uuv.mission import Vehicle
 from sim.uuv.navigation import Navigation, filterpy_filter
+from sim.uuv.simulate import TRAJECTORY_FIELDS
 from sim.uuv.vehicle import VehicleState, propulsion_power, step_vehicle
 from tests.sim.uuv.uuvworld import Current, Rect, Transmission, Triangle, area, mission, vehicle
 
@@ -250,7 +251,7 @@ def test_navigation_filter_matches_filterpy():
 def test_trajectories_cover_the_run():
     r = run(mission())
     track = r.trajectories[0]
-    assert track.shape[1] == 8 and track[-1, 0] == pytest.approx(col(r, "mission.time_s"))
+    assert track.shape[1] == len(TRAJECTORY_FIELDS) and track[-1, 0] == pytest.approx(col(r, "mission.time_s"))
     assert np.hypot(track[-1, 1] - 0.0, track[-1, 2] + 820.0) <= 15.0 + 1e-6
 
 

@@ -1,0 +1,275 @@
+"""A maximum a posteriori fit of a few physical parameters, and what the data identify.
+
+Fitting an execution bias or a vehicle model from a handful of field logs is a small
+nonlinear least-squares problem whose data often say nothing about some parameters (one
+tide phase cannot separate a tide-table error from a clock error).  A plain fit then
+sends those parameters anywhere and a prediction built on them is worse than none.
+:func:`fit_map` therefore gives every parameter a prior (:class:`Prior`: a centre, the
+neutral or nominal value, and a width a test engineer would accept), minimises
+
+    sum_i rho((r_i(theta) / s)^2) + sum_j ((theta_j - centre_j) / sd_j)^2
+
+(``scipy.optimize.least_squares``, robust ``soft_l1`` loss against outliers, ``s`` the
+data's own robust noise scale), and calls a parameter *identified* when its posterior
+standard deviation is clearly below its prior's (:data:`IDENTIFIED_BELOW` of it).
+An unidentified parameter is put back at its prior centre and the others are refitted
+without it: prediction uses only what the data support.
+
+Standard errors: the Laplace approximation ``(J^T J + I)^-1`` in prior-scaled units, the
+cluster-robust (sandwich) estimate by ``groups`` when residuals within a group move
+together (a segment of a track shares one unmodelled current), and, when asked, a block
+bootstrap that resamples whole groups and refits: the largest of the three is reported,
+since errors that are correlated across groups make the analytic ones optimistic.
+Knows nothing of vehicles: the caller's ``residuals(theta)`` does the physics.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.optimize import least_squares
+
+__all__ = ["Prior", "MapEstimate", "fit_map", "IDENTIFIED_BELOW"]
+
+#: A parameter is identified when its posterior s.d. is below this share of its prior s.d.
+IDENTIFIED_BELOW = 0.5
+#: Residuals beyond this many noise scales are down-weighted (``soft_l1``).
+ROBUST_SCALE = 3.0
+
+
+@dataclass(frozen=True)
+class Prior:
+    """A Gaussian prior on one parameter, truncated to ``[low, high]``."""
+
+    name: str
+    centre: float
+    sd: float
+    low: float = -math.inf
+    high: float = math.inf
+
+    def __post_init__(self):
+        if not (self.sd > 0 and math.isfinite(self.sd)):
+            raise ValueError(f"prior {self.name}: sd must be a positive number, got {self.sd}")
+        if not self.low <= self.centre <= self.high:
+            raise ValueError(f"prior {self.name}: centre {self.centre} is outside [{self.low}, {self.high}]")
+
+
+@dataclass
+class MapEstimate:
+    """The fit: per parameter the value to predict with, the MAP value, a posterior s.d. and whether identified."""
+
+    priors: tuple[Prior, ...]
+    value: dict[str, float]  # identified: the MAP estimate; not identified: the prior centre
+    map_value: dict[str, float]  # the MAP estimate with every parameter free
+    stderr: dict[str, float]  # posterior standard deviation
+    identified: dict[str, bool]
+    noise_scale: float  # robust scale of the residuals at the estimate, in the residuals' units
+    residuals: int
+    success: bool
+    message: str
+    correlation: dict[str, dict[str, float]] = field(default_factory=dict)
+    covariance: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # identified ones, in value units
+    bootstrap: int = 0  # refits in the block bootstrap (0: none)
+    stderr_sources: dict[str, str] = field(default_factory=dict)  # which estimate gave each s.e.
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return tuple(p.name for p in self.priors)
+
+    @property
+    def identified_names(self) -> tuple[str, ...]:
+        return tuple(n for n in self.names if self.identified[n])
+
+    def vector(self) -> np.ndarray:
+        return np.array([self.value[n] for n in self.names])
+
+    def draws(self, k: int, seed: int = 0) -> np.ndarray:
+        """``k`` posterior draws (rows in :attr:`names` order) of the identified parameters around
+        :attr:`value`, the others at their centre; clipped to the priors' bounds."""
+        rng = np.random.default_rng(seed)
+        out = np.tile(self.vector(), (k, 1))
+        idx = [i for i, n in enumerate(self.names) if self.identified[n]]
+        if idx and k:
+            cov = self.covariance
+            z = rng.multivariate_normal(np.zeros(len(idx)), cov, size=k, method="eigh")
+            out[:, idx] += z
+        lo = np.array([p.low for p in self.priors])
+        hi = np.array([p.high for p in self.priors])
+        return np.clip(out, lo, hi)
+
+
+def _robust_scale(r: np.ndarray) -> float:
+    """1.4826 x median |r| (the normal s.d. for clean data), floored so a perfect fit is not singular."""
+    if r.size == 0:
+        return 1.0
+    s = 1.4826 * float(np.median(np.abs(r)))
+    rms = float(np.sqrt(np.mean(r**2)))
+    return max(s, 1e-3 * rms, 1e-12)
+
+
+def fit_map(
+    residuals: Callable[[np.ndarray], np.ndarray],
+    priors: Sequence[Prior],
+    *,
+    groups: np.ndarray | None = None,
+    bootstrap: int = 0,
+    seed: int = 0,
+    identify_below: float = IDENTIFIED_BELOW,
+    max_nfev: int = 200,
+    diff_step: float = 1e-6,
+) -> MapEstimate:
+    """MAP estimate of ``priors``' parameters from ``residuals(theta) -> (m,)`` (see the module docstring).
+
+    ``residuals`` takes parameter values in ``priors`` order and returns residuals in units
+    of a nominal noise (their actual scale is estimated); its length must not depend on
+    ``theta``.  ``groups`` (m,) labels residuals that share an error (a segment, a log):
+    the robust and bootstrap standard errors treat each group as one draw.
+    """
+    priors = tuple(priors)
+    names = [p.name for p in priors]
+    centre = np.array([p.centre for p in priors])
+    sd = np.array([p.sd for p in priors])
+    lo = (np.array([p.low for p in priors]) - centre) / sd
+    hi = (np.array([p.high for p in priors]) - centre) / sd
+
+    def theta_of(z: np.ndarray, free: np.ndarray) -> np.ndarray:
+        full = np.zeros(len(priors))
+        full[free] = z
+        return centre + sd * full
+
+    r0 = np.asarray(residuals(centre), dtype=float)
+    m = r0.size
+    if groups is not None:
+        groups = np.asarray(groups)
+        if groups.shape != (m,):
+            raise ValueError(f"groups: expected one label per residual ({m}), got shape {groups.shape}")
+
+    def solve(free: np.ndarray, z0: np.ndarray, scale: float, weight: np.ndarray | None = None, nfev: int = max_nfev):
+        w = None if weight is None else np.sqrt(weight)
+
+        def fun(z: np.ndarray) -> np.ndarray:
+            r = np.asarray(residuals(theta_of(z, free)), dtype=float) / scale
+            if w is not None:
+                r = r * w
+            return np.concatenate([r, z])
+
+        return least_squares(
+            fun,
+            np.clip(z0, lo[free] + 1e-9, hi[free] - 1e-9),
+            bounds=(lo[free], hi[free]),
+            method="trf",
+            loss="soft_l1",
+            f_scale=ROBUST_SCALE,
+            diff_step=diff_step,
+            x_scale=1.0,
+            max_nfev=nfev,
+        )
+
+    every = np.ones(len(priors), dtype=bool)
+    # the data's noise scale: from a fit with nominal units, then the MAP with the data's own scale
+    first = solve(every, np.zeros(len(priors)), 1.0)
+    scale = _robust_scale(first.fun[:m])
+    sol = solve(every, first.x, scale)
+    scale = _robust_scale(sol.fun[:m] * scale)
+    sol = solve(every, sol.x, scale)
+    map_value = theta_of(sol.x, every)
+    stderr_z, _, _ = _covariances(sol, m, groups)
+    sources = {n: "laplace" for n in names}
+    free = stderr_z < identify_below
+    final, cov_f, n_boot = sol, np.zeros((0, 0)), 0
+    for _ in range(len(priors)):  # drop what the data do not identify, refit, until what is left is identified
+        if not free.any():
+            break
+        if not free.all():
+            final = solve(free, sol.x[free], scale)
+        sd_f, cov_f, source = _covariances(final, m, groups)
+        if bootstrap > 0 and groups is not None:
+            boot = _bootstrap(solve, free, final.x, scale, groups, bootstrap, seed)
+            n_boot = boot.shape[0]
+            if n_boot > 1:
+                sd_b = boot.std(axis=0, ddof=1)
+                for i in range(sd_f.size):
+                    if sd_b[i] > sd_f[i]:
+                        sd_f[i], source[i] = sd_b[i], "bootstrap"
+                d = np.sqrt(np.clip(np.diag(cov_f), 1e-300, None))
+                cov_f = cov_f / np.outer(d, d) * np.outer(sd_f, sd_f)  # the correlations, at the chosen widths
+        stderr_z[free] = sd_f
+        for n, src in zip([n for n, f in zip(names, free) if f], source):
+            sources[n] = src
+        still = sd_f < identify_below
+        if still.all():
+            break
+        free[np.flatnonzero(free)[~still]] = False
+        final = sol
+    for n, f in zip(names, free):
+        if not f:
+            sources[n] = "not identified"
+    corr: dict[str, dict[str, float]] = {}
+    cov_value = np.zeros((int(free.sum()), int(free.sum())))
+    if free.any():
+        cov_value = cov_f * np.outer(sd[free], sd[free])
+        d = np.sqrt(np.clip(np.diag(cov_f), 1e-300, None))
+        c = cov_f / np.outer(d, d)
+        kn = [n for n, f in zip(names, free) if f]
+        corr = {a: {b: float(c[i, j]) for j, b in enumerate(kn) if b != a} for i, a in enumerate(kn)}
+    value = theta_of(final.x, free) if free.any() else centre.copy()
+    res = np.asarray(residuals(value), dtype=float)
+    return MapEstimate(
+        priors,
+        {n: float(v) for n, v in zip(names, value)},
+        {n: float(v) for n, v in zip(names, map_value)},
+        {n: float(v * s) for n, v, s in zip(names, stderr_z, sd)},
+        {n: bool(f) for n, f in zip(names, free)},
+        _robust_scale(res),
+        int(m),
+        bool(final.success),
+        str(final.message),
+        corr,
+        cov_value,
+        n_boot,
+        sources,
+    )
+
+
+def _covariances(sol, m: int, groups: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, list[str]]:
+    """Posterior s.d. (prior-scaled units) of the solution's free parameters: the larger of the
+    Laplace and the cluster-robust estimate; with the covariance and which one won, per parameter."""
+    J = sol.jac[:m]  # data rows, already divided by the noise scale
+    k = J.shape[1]
+    H = J.T @ J + np.eye(k)  # the prior adds the identity in these units
+    bread = np.linalg.pinv(H)
+    sd = np.sqrt(np.clip(np.diag(bread), 0, None))
+    cov = bread.copy()
+    source = ["laplace"] * k
+    if groups is not None and m:
+        res = sol.fun[:m]
+        _, g = np.unique(groups, return_inverse=True)
+        score = np.zeros((int(g.max()) + 1, k))
+        np.add.at(score, g, J * res[:, None])
+        robust = bread @ (score.T @ score + np.eye(k)) @ bread
+        rsd = np.sqrt(np.clip(np.diag(robust), 0, None))
+        for i in range(k):
+            if rsd[i] > sd[i]:
+                sd[i], source[i] = rsd[i], "cluster-robust"
+        if np.any(rsd > np.sqrt(np.clip(np.diag(bread), 0, None))):
+            cov = robust
+    return sd, cov, source
+
+
+def _bootstrap(
+    solve, free: np.ndarray, z: np.ndarray, scale: float, groups: np.ndarray, b: int, seed: int
+) -> np.ndarray:
+    """Refits on ``b`` resamples of whole groups (with replacement, seeded): (draws, free) in prior units."""
+    labels, g = np.unique(groups, return_inverse=True)
+    if labels.size < 3:
+        return np.zeros((0, int(free.sum())))
+    rng = np.random.default_rng(seed)
+    out = []
+    for _ in range(b):
+        counts = np.bincount(rng.integers(0, labels.size, labels.size), minlength=labels.size)
+        sol = solve(free, z, scale, weight=counts[g].astype(float), nfev=60)
+        out.append(sol.x)
+    return np.array(out)
