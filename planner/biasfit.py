@@ -12,8 +12,9 @@ it stays neutral for prediction and is reported so.
 The standard errors must hold when the residuals are not independent: a real vehicle's
 navigation drift or an unmodelled current moves a whole segment, and the segments of a
 run together.  The reported s.e. is the largest of the Laplace, the cluster-robust and a
-block-bootstrap estimate whose blocks are whole runs when there are enough of them
-(:data:`BOOTSTRAP_BY_RUN_FROM`), consecutive segments otherwise.
+resampling estimate: with :data:`BOOTSTRAP_BY_RUN_FROM` runs or more, a delete-one-run
+jackknife (runs are the independent draws; a bootstrap over a dozen of them is
+optimistic); with fewer, a block bootstrap over consecutive segments.
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ from planner.segments import SEGMENT_STEPS, Segments, replay, segment_batch
 from rapt.errors import InputError
 from rapt.mapfit import MapEstimate, Prior, fit_map
 from sim.uuv.bias import BIAS_LIMITS, BIAS_NAMES, NEUTRAL, Bias
-from sim.uuv.mission import Mission
+from sim.uuv.mission import Mission, Vehicle
 
 __all__ = ["BiasFit", "fit_bias", "PRIORS", "bias_priors"]
 
@@ -127,8 +128,8 @@ class BiasFit:
         return out
 
 
-def _residuals(mission: Mission, seg: Segments, bias: Bias) -> np.ndarray:
-    px, py, pe, _ = replay(mission, seg, bias)
+def _residuals(mission: Mission, seg: Segments, bias: Bias, vehicle: Vehicle | None = None) -> np.ndarray:
+    px, py, pe, _ = replay(mission, seg, bias, vehicle)
     v = seg.valid
     dx = (px - seg.obs_x)[v] / SIGMA_POSITION_M
     dy = (py - seg.obs_y)[v] / SIGMA_POSITION_M
@@ -160,8 +161,13 @@ def fit_bias(
     length: int = SEGMENT_STEPS,
     bootstrap: int = BOOTSTRAP,
     seed: int = 0,
+    vehicle: Vehicle | None = None,
 ) -> BiasFit:
-    """MAP fit of the parameters ``fit`` (the others stay neutral) to all ``runs`` jointly."""
+    """MAP fit of the parameters ``fit`` (the others stay neutral) to all ``runs`` jointly.
+
+    ``vehicle`` (default the mission's) is the vehicle model the segments are replayed with:
+    a calibrated one (:mod:`planner.calibrate`) leaves the bias only what calibration did not explain.
+    """
     seg = segment_batch(mission, runs, start_times, length)
     if not seg.valid.any():
         raise InputError(
@@ -175,17 +181,19 @@ def fit_bias(
     per_segment = np.nonzero(seg.valid)[0]
     blocks = bootstrap_blocks(seg)[per_segment]
     groups = np.concatenate([blocks, blocks, blocks])
+    by_run = len(set(seg.run.tolist())) >= BOOTSTRAP_BY_RUN_FROM
     est = fit_map(
-        lambda th: _residuals(mission, seg, bias_of(th)),
+        lambda th: _residuals(mission, seg, bias_of(th), vehicle),
         bias_priors(names),
         groups=groups,
+        jackknife=by_run and bootstrap > 0,
         kinds=np.repeat(np.array(["position", "position", "energy"]), per_segment.size),
         bootstrap=bootstrap,
         seed=seed,
     )
     best = bias_of(np.array([est.value[n] for n in names]))
-    r = _residuals(mission, seg, best)
-    r0 = _residuals(mission, seg, Bias())
+    r = _residuals(mission, seg, best, vehicle)
+    r0 = _residuals(mission, seg, Bias(), vehicle)
     k = int(seg.valid.sum())
     return BiasFit(
         best,
@@ -234,6 +242,7 @@ def check_end_conditions(
     candidates: int = END_CANDIDATES,
     seed: int = 0,
     length: int = SEGMENT_STEPS,
+    vehicle: Vehicle | None = None,
 ) -> BiasFit:
     """The fit with its bias chosen, among the estimate and ``candidates`` posterior draws, by the
     segments' posterior times the likelihood of the logged end conditions (``observed``: each run's
@@ -252,7 +261,8 @@ def check_end_conditions(
     thetas = np.vstack([fit.estimate.vector()[None, :], draws])
     biases = [Bias(**{n: float(v) for n, v in zip(names, th)}) for th in thetas]
     Ue = np.asarray(U, dtype=float)[ended]
-    r = sim.uuv.simulate(mission, np.tile(Ue, (len(biases), 1)), bias=[b for b in biases for _ in ended])
+    plant = {} if vehicle is None else {"plant": vehicle}
+    r = sim.uuv.simulate(mission, np.tile(Ue, (len(biases), 1)), bias=[b for b in biases for _ in ended], **plant)
     sims = r.scores.reshape(len(biases), len(ended), -1)
     obs = np.array([observed[k] for k in ended])
     end_ll = end_condition_loglik(r.names, sims, obs).sum(axis=1)
@@ -267,7 +277,7 @@ def check_end_conditions(
         per_segment,
     )
     prior = np.array([[(th[i] - PRIORS[n].centre) / PRIORS[n].sd for i, n in enumerate(names)] for th in thetas])
-    seg_ll = np.array([-0.5 * np.sum((_residuals(mission, seg, b) / kind_scale) ** 2) for b in biases])
+    seg_ll = np.array([-0.5 * np.sum((_residuals(mission, seg, b, vehicle) / kind_scale) ** 2) for b in biases])
     seg_ll -= 0.5 * np.sum(prior**2, axis=1)
     total = seg_ll + end_ll
     best = int(np.argmax(total))

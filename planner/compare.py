@@ -27,6 +27,7 @@ to identify and apply this bias to our predictions").  :func:`compare`
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
@@ -43,6 +44,7 @@ from planner.plans import Plan, load_plan
 from planner.replan import adjust_for_bias
 from rapt.errors import InputError, StudyMismatchError
 from sim.uuv.bias import BIAS_NAMES, BIAS_UNITS, NEUTRAL, Bias
+from sim.uuv.mission import Vehicle
 from sim.uuv.replay import score_track
 from sim.uuv.scenario import make_scenarios
 from sim.uuv.scoring import MODE_NAMES, mode_name
@@ -65,6 +67,7 @@ class CompareConfig:
     fit: tuple[str, ...] = BIAS_NAMES  # bias parameters to fit; the others stay neutral
     p_target: float = 0.8
     bootstrap: int = 40  # block-bootstrap refits for the standard errors (0: analytic only)
+    plant: Vehicle | None = None  # a calibrated vehicle (rapt-plan calibrate): flown in every prediction
 
 
 @dataclass
@@ -159,15 +162,25 @@ def compare(
     ids, U_plan, pred = _predict_plan(plan)
     say("scoring logged runs")
     _score_observed(m, obs)
+    plant = cfg.plant
+    calib = None
+    if plant is not None:
+        say("predicting with the calibrated vehicle")
+        calib = sim.uuv.simulate(m, U_plan, trajectories=True, plant=plant)
+    baseline = calib if calib is not None else pred
     say("fitting the execution bias")
     start_times = [float(make_scenarios(m, o.u[None, :]).start_time[0]) for o in obs]
     fit = _fit(m, obs, start_times, cfg, cfg.bootstrap)
     say("cross-validating the correction")
-    cv = cross_validate(m, obs, start_times, pred, _rows(ids), cfg)
+    cv = cross_validate(m, obs, start_times, baseline, _rows(ids), cfg)
     bias_used = fit.bias if cv["correction_used"] else Bias()
     say("re-predicting under the fitted bias")
-    corr = sim.uuv.simulate(m, U_plan, trajectories=True, bias=bias_used) if cv["correction_used"] else pred
-    plan_runs = _PlanRuns(ids, U_plan, pred, corr)
+    corr = (
+        sim.uuv.simulate(m, U_plan, trajectories=True, bias=bias_used, **_plant(cfg))
+        if cv["correction_used"]
+        else baseline
+    )
+    plan_runs = _PlanRuns(ids, U_plan, pred, corr, calib)
     scen_rows = _scenario_rows(m, obs, plan_runs)
     agreement = _mode_agreement(scen_rows)
     say("re-planning")
@@ -187,6 +200,7 @@ def compare(
         ],
         "bias": fit.to_dict(),
         "bias_fit": _bias_fit(fit, cfg),
+        "calibrated_vehicle": None if plant is None else jsonable(dataclasses.asdict(plant)),
         "cross_validation": cv,
         "correction": {
             "used": cv["correction_used"],
@@ -208,9 +222,15 @@ def compare(
 def _fit(m, obs: list[Observation], start_times: list[float], cfg: CompareConfig, bootstrap: int) -> BiasFit:
     """The bias fit of ``obs``'s logs, its bias chosen against their observed end conditions."""
     runs = [o.run for o in obs]
-    fit = fit_bias(m, runs, start_times, fit=tuple(cfg.fit), bootstrap=bootstrap, seed=cfg.seed)
+    fit = fit_bias(m, runs, start_times, fit=tuple(cfg.fit), bootstrap=bootstrap, seed=cfg.seed, vehicle=cfg.plant)
     ends = [o.scores if o.mode is not None else None for o in obs]
-    return check_end_conditions(m, fit, runs, start_times, np.array([o.u for o in obs]), ends, seed=cfg.seed)
+    U = np.array([o.u for o in obs])
+    return check_end_conditions(m, fit, runs, start_times, U, ends, seed=cfg.seed, vehicle=cfg.plant)
+
+
+def _plant(cfg: CompareConfig) -> dict:
+    """``sim.uuv.simulate``'s keyword for the calibrated vehicle, when there is one."""
+    return {} if cfg.plant is None else {"plant": cfg.plant}
 
 
 def cross_validate(
@@ -222,7 +242,8 @@ def cross_validate(
     cfg: CompareConfig,
 ) -> dict:
     """Leave one log out: fit on the others, predict the left-out run's mode and path with and
-    without that bias; and whether the correction is to be used (module docstring, step 4)."""
+    without that bias; and whether the correction is to be used (module docstring, step 4).
+    ``pred`` are the predictions without a bias (with the calibrated vehicle when there is one)."""
     folds = []
     for i, o in enumerate(obs):
         rest = [j for j in range(len(obs)) if j != i]
@@ -238,7 +259,7 @@ def cross_validate(
             row.update(corrected_mode=None, path_error_corrected_m=None, bias=None, note=str(exc))
             folds.append(row)
             continue
-        r = sim.uuv.simulate(m, o.u[None, :], trajectories=True, bias=fit.bias)
+        r = sim.uuv.simulate(m, o.u[None, :], trajectories=True, bias=fit.bias, **_plant(cfg))
         row["corrected_mode"] = MODE_NAMES[r.modes[0]] if r.valid[0] else "invalid"
         row["path_error_corrected_m"] = _round(_path_error(o.run.track, r.trajectory(0)), "rms_m")
         row["bias"] = {n: v for n, v in fit.bias.to_dict().items() if v != NEUTRAL[n]}
@@ -304,6 +325,7 @@ class _PlanRuns:
     U: np.ndarray
     pred: sim.uuv.Result
     corr: sim.uuv.Result
+    calib: sim.uuv.Result | None = None  # with the calibrated vehicle, no bias (when one is given)
 
     @cached_property
     def row_of(self) -> dict[str, int]:
@@ -314,6 +336,10 @@ class _PlanRuns:
         """Scenario ``sid``'s predicted and corrected trajectories (None when it is invalid)."""
         k = self.row_of[sid]
         return self.pred.trajectory(k), self.corr.trajectory(k)
+
+    def calibrated_trajectory(self, sid: str) -> np.ndarray | None:
+        """Scenario ``sid``'s trajectory with the calibrated vehicle (None without one, or when invalid)."""
+        return None if self.calib is None else self.calib.trajectory(self.row_of[sid])
 
 
 def _rows(ids: list[str]) -> dict[str, int]:
@@ -379,6 +405,11 @@ def _scenario_rows(m, obs: list[Observation], runs: _PlanRuns) -> list[dict]:
                 "sub_scores": sub,
             }
         )
+        if runs.calib is not None:  # before (as planned) and after calibrating the vehicle model
+            scen_rows[-1]["calibrated_mode"] = MODE_NAMES[runs.calib.modes[k]]
+            scen_rows[-1]["path_error_calibrated_m"] = _round(
+                _path_error(o.run.track, runs.calibrated_trajectory(o.sid)), "rms_m"
+            )
     return scen_rows
 
 
@@ -390,8 +421,11 @@ def _mode_agreement(scen_rows: list[dict]) -> dict:
             by_sid.setdefault(r["id"], []).append(r)
     agree_u = [all(r["predicted_mode"] == r["observed_mode"] for r in rs) for rs in by_sid.values()]
     agree_c = [all(r["corrected_mode"] == r["observed_mode"] for r in rs) for rs in by_sid.values()]
+    agree_k = [all(r.get("calibrated_mode") == r["observed_mode"] for r in rs) for rs in by_sid.values()]
+    calibrated = any("calibrated_mode" in r for r in scen_rows)
     return {
         "uncorrected": float(np.mean(agree_u)) if agree_u else None,
+        "calibrated": float(np.mean(agree_k)) if agree_k and calibrated else None,
         "corrected": float(np.mean(agree_c)) if agree_c else None,
         "scenarios": len(by_sid),
         "runs_without_end": [r["log"] for r in scen_rows if r["observed_mode"] is None],
@@ -565,7 +599,7 @@ def _write(result: dict, plan: Plan, obs: list[Observation], runs: _PlanRuns, ou
     (out_dir / RESULT_NAME).write_text(json.dumps(result, indent=2))
     from planner.compare_report import write_comparison_report
 
-    traj = {o.sid: runs.trajectories(o.sid) for o in obs}
+    traj = {o.sid: (*runs.trajectories(o.sid), runs.calibrated_trajectory(o.sid)) for o in obs}
     write_comparison_report(result, plan, [(o.sid, o.run.track) for o in obs], traj, out_dir)
 
 

@@ -69,7 +69,7 @@ def _rects(ax, rects: np.ndarray, face: str, edge: str, alpha: float, label: str
         )
 
 
-def _map(plan, sid: str, track: np.ndarray, predicted, corrected, row: dict, path: Path) -> None:
+def _map(plan, sid: str, track: np.ndarray, predicted, corrected, row: dict, path: Path, calibrated=None) -> None:
     m = plan.mission
     scen = make_scenarios(m, plan.u(sid)[None, :])
     fig, ax = plt.subplots(figsize=(5.2, 6.0))
@@ -99,6 +99,15 @@ def _map(plan, sid: str, track: np.ndarray, predicted, corrected, row: dict, pat
             lw=2.4,
             alpha=0.55,
             label=f"observed ({row['observed_mode'] or 'end not logged'})",
+        )
+    if calibrated is not None:
+        ax.plot(
+            calibrated[:, 1],
+            calibrated[:, 2],
+            "-.",
+            color="#2ca02c",
+            lw=1.3,
+            label=f"calibrated vehicle ({row.get('calibrated_mode')})",
         )
     if corrected is not None:  # on top: where it overlays the observed track, the bias explains the run
         ax.plot(
@@ -211,11 +220,25 @@ def _scenario_section(result: dict, plan, tracks: list[tuple[str, np.ndarray]], 
             f"<td class='l'>{_e(_differ(r))}</td></tr>"
         )
     parts.append("</table>")
+    calibrated = any("calibrated_mode" in r for r in result["scenarios"])
+    if calibrated:
+        parts.append(
+            "<p>Calibrated: predicted with the calibrated vehicle model (rapt-plan calibrate), before any bias.</p>"
+            "<table><tr><th class='l'>scenario</th><th>predicted</th><th>calibrated</th><th>observed</th>"
+            "<th>path error as planned (m)</th><th>calibrated (m)</th></tr>"
+        )
+        for r in result["scenarios"]:
+            parts.append(
+                f"<tr><td class='l'>{_e(r['id'])}</td><td>{_e(r['predicted_mode'])}</td>"
+                f"<td>{_e(r['calibrated_mode'])}</td><td>{_e(r['observed_mode'] or '–')}</td>"
+                f"<td>{_num(r['path_error_m'])}</td><td>{_num(r['path_error_calibrated_m'])}</td></tr>"
+            )
+        parts.append("</table>")
     for i, (sid, track) in enumerate(tracks):
         row = result["scenarios"][i]
         name = f"run{i + 1}_{sid}.png".replace("/", "_")
-        p, c = traj.get(sid, (None, None))
-        _map(plan, sid, track, p, c, row, fig_dir / name)
+        p, c, k = traj.get(sid, (None, None, None))
+        _map(plan, sid, track, p, c, row, fig_dir / name, k)
         parts.append(f"<img src='{FIGURES}/{_e(name)}' alt='{_e(sid)}' style='width:48%'>")
     return parts
 

@@ -22,8 +22,9 @@ survivor then stands for the group and is kept only when the data need it (its e
 Standard errors: the Laplace approximation ``(J^T J + I)^-1`` in prior-scaled units, the
 cluster-robust (sandwich) estimate by ``groups`` when residuals within a group move
 together (a segment of a track shares one unmodelled current), and, when asked, a block
-bootstrap that resamples whole groups and refits: the largest of the three is reported,
-since errors that are correlated across groups make the analytic ones optimistic.
+bootstrap that resamples whole groups and refits, or a delete-one-group jackknife (with
+few groups, the bootstrap's spread is optimistic; the jackknife's is not): the largest is
+reported, since errors that are correlated across groups make the analytic ones optimistic.
 Knows nothing of vehicles: the caller's ``residuals(theta)`` does the physics.
 """
 
@@ -78,7 +79,7 @@ class MapEstimate:
     message: str
     correlation: dict[str, dict[str, float]] = field(default_factory=dict)
     covariance: np.ndarray = field(default_factory=lambda: np.zeros((0, 0)))  # identified ones, in value units
-    bootstrap: int = 0  # refits in the block bootstrap (0: none)
+    bootstrap: int = 0  # refits of the block bootstrap or jackknife (0: none)
     stderr_sources: dict[str, str] = field(default_factory=dict)  # which estimate gave each s.e.
 
     @property
@@ -123,6 +124,7 @@ def fit_map(
     groups: np.ndarray | None = None,
     kinds: np.ndarray | None = None,
     bootstrap: int = 0,
+    jackknife: bool = False,
     seed: int = 0,
     identify_below: float = IDENTIFIED_BELOW,
     max_nfev: int = 200,
@@ -207,15 +209,18 @@ def fit_map(
         if not free.all():
             final = solve(free, sol.x[free], scale)
         sd_f, cov_f, source = _covariances(final, m, groups)
-        if sd_f.max() < identify_below and bootstrap > 0 and groups is not None:
+        if sd_f.max() < identify_below and (bootstrap > 0 or jackknife) and groups is not None:
             booted = True
-            boot = _bootstrap(solve, free, final.x, scale, groups, bootstrap, seed)
-            n_boot = boot.shape[0]
+            if jackknife:
+                sd_b, n_boot, how = _jackknife(solve, free, final.x, scale, groups), np.unique(groups).size, "jackknife"
+            else:
+                boot = _bootstrap(solve, free, final.x, scale, groups, bootstrap, seed)
+                n_boot, how = boot.shape[0], "bootstrap"
+                sd_b = boot.std(axis=0, ddof=1) if n_boot > 1 else np.zeros(sd_f.size)
             if n_boot > 1:
-                sd_b = boot.std(axis=0, ddof=1)
                 for i in range(sd_f.size):
                     if sd_b[i] > sd_f[i]:
-                        sd_f[i], source[i] = sd_b[i], "bootstrap"
+                        sd_f[i], source[i] = sd_b[i], how
                 d = np.sqrt(np.clip(np.diag(cov_f), 1e-300, None))
                 cov_f = cov_f / np.outer(d, d) * np.outer(sd_f, sd_f)  # the correlations, at the chosen widths
         stderr_z[free] = sd_f
@@ -301,6 +306,16 @@ def _covariances(sol, m: int, groups: np.ndarray | None) -> tuple[np.ndarray, np
         if np.any(rsd > np.sqrt(np.clip(np.diag(bread), 0, None))):
             cov = robust
     return sd, cov, source
+
+
+def _jackknife(solve, free: np.ndarray, z: np.ndarray, scale: np.ndarray | float, groups: np.ndarray) -> np.ndarray:
+    """Delete-one-group jackknife s.d. (prior units) of the free parameters: each group left out once, refitted."""
+    labels, g = np.unique(groups, return_inverse=True)
+    if labels.size < 3:
+        return np.zeros(int(free.sum()))
+    out = np.array([solve(free, z, scale, weight=(g != j).astype(float), nfev=100).x for j in range(labels.size)])
+    n = labels.size
+    return np.sqrt((n - 1) / n * np.sum((out - out.mean(axis=0)) ** 2, axis=0))
 
 
 def _bootstrap(

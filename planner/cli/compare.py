@@ -20,6 +20,12 @@ def compare(
     out_dir: Annotated[Path, typer.Option("--out", help="Directory for comparison.json and comparison.html.")] = Path(
         "comparison"
     ),
+    calibrated: Annotated[
+        Path | None,
+        typer.Option(
+            help="A calibrated mission file (rapt-plan calibrate): predict with its vehicle, then fit the bias."
+        ),
+    ] = None,
     dithers: Annotated[int, typer.Option(help="Stochastic runs checking each adjusted scenario (0: none).")] = 20,
     seed: Annotated[int, typer.Option(help="Seed of every random choice.")] = 0,
     fit: Annotated[
@@ -47,6 +53,9 @@ def compare(
     for p in logs:
         if not p.is_file():
             fail(f"LOGS: {p} does not exist; give the .mcap files of the plan's runs")
+    plant = None
+    if calibrated is not None:
+        plant = _calibrated_vehicle(plan_dir, calibrated)
     with err.status("comparing", spinner="dots") if err.is_terminal else nullcontext() as status:
 
         def progress(stage: str) -> None:
@@ -55,7 +64,7 @@ def compare(
 
         try:
             result = run_compare(
-                plan_dir, logs, out_dir, CompareConfig(dithers=dithers, seed=seed, fit=names), progress
+                plan_dir, logs, out_dir, CompareConfig(dithers=dithers, seed=seed, fit=names, plant=plant), progress
             )
         except ValueError as exc:
             fail(str(exc))
@@ -132,3 +141,23 @@ def compare(
         else:
             out.print(f"  {q['variant_of']}: {q['note']}", highlight=False, soft_wrap=True)
     out.print(f"comparison.json and comparison.html written to {out_dir}", highlight=False, soft_wrap=True)
+
+
+def _calibrated_vehicle(plan_dir: Path, calibrated: Path):
+    """The vehicle of a calibrated mission file of the plan's mission; a one-line error otherwise."""
+    import sim.uuv
+    from planner.plans import load_plan
+
+    if not calibrated.is_file():
+        fail(f"--calibrated: {calibrated} does not exist; give the file rapt-plan calibrate wrote")
+    try:
+        mission = sim.uuv.load_mission(calibrated)
+        plan_mission = load_plan(plan_dir).mission
+    except ValueError as exc:
+        fail(str(exc))
+    if mission.name != plan_mission.name:
+        fail(
+            f"--calibrated: {calibrated} is mission {mission.name!r}, but the plan is for {plan_mission.name!r}; "
+            "calibrate from the plan's own mission file"
+        )
+    return mission.vehicle
