@@ -270,3 +270,34 @@ def test_inject_bias_on_the_command_line(flown):
         result = runner.invoke(app, ["run", plan_json, *args])
         assert result.exit_code == 2 and expect in result.output, result.output
         assert len([line for line in result.output.splitlines() if line.strip()]) == 1
+
+
+def test_a_calibrated_vehicle_is_flown_in_every_prediction_beside_the_plan(flown, tmp_path):
+    text = MISSION.read_text()
+    hungry = tmp_path / "calibrated.toml"
+    hungry.write_text(text.replace("hotel_w = 40.0", "hotel_w = 55.0", 1))
+    out = tmp_path / "cmp"
+    result = runner.invoke(
+        app,
+        ["compare", str(flown["plan_dir"]), *map(str, flown["logs"]), "--calibrated", str(hungry)]
+        + ["--out", str(out), "--dithers", "0"],
+    )
+    assert result.exit_code == 0, result.output
+    c = json.loads((out / "comparison.json").read_text())
+    assert c["calibrated_vehicle"]["hotel_w"] == 55.0
+    plan = load_plan(flown["plan_dir"])
+    vehicle = sim.uuv.load_mission(hungry).vehicle
+    for r in c["scenarios"]:  # the plan's autonomy, flying the calibrated vehicle
+        expect = sim.uuv.simulate(plan.mission, plan.u(r["id"])[None, :], plant=vehicle)
+        assert r["calibrated_mode"] == ("TF", "SS", "MS", "TS")[int(expect.modes[0])]
+        assert r["path_error_calibrated_m"] is not None
+    assert c["mode_agreement"]["calibrated"] is not None
+    assert "calibrated vehicle" in (out / "comparison.html").read_text()
+    other = tmp_path / "other.toml"
+    other.write_text(text.replace('name = "range2017"', 'name = "elsewhere"', 1))
+    assert 'name = "elsewhere"' in other.read_text()
+    bad = runner.invoke(
+        app, ["compare", str(flown["plan_dir"]), str(flown["logs"][0]), "--calibrated", str(other), "--out", str(out)]
+    )
+    assert bad.exit_code == 2 and "--calibrated:" in bad.output and "'elsewhere'" in bad.output
+    assert len([line for line in bad.output.splitlines() if line.strip()]) == 1, bad.output
