@@ -83,7 +83,9 @@ def step_vehicle(
     a_u = 1.0 - np.exp(-dt / spec.surge_time_constant_s)
     a_v = 1.0 - np.exp(-dt * spec.sway_damping)
     r = s.yaw_rate + (r_des - s.yaw_rate) * a_r
-    u = s.surge + (np.clip(speed_cmd, 0.0, spec.max_speed) * speed_scale - s.surge) * a_u
+    # the speed loop's target: speed_gain x the command, at most max_speed (gain 1: clip(cmd, 0, max_speed))
+    target = np.minimum(spec.speed_gain * np.maximum(speed_cmd, 0.0), spec.max_speed)
+    u = s.surge + (target * speed_scale - s.surge) * a_u
     v = s.sway + (-SWAY_COUPLING * u * r - s.sway) * a_v
     psi = wrap_angle(s.heading + r * dt)
     course = psi + course_bias
