@@ -63,14 +63,14 @@ def step_vehicle(
     speed_cmd: np.ndarray,
     current_e: np.ndarray,
     current_n: np.ndarray,
-    dt: float,
+    dt: float | np.ndarray,
     moving: np.ndarray,
     *,
     speed_scale=1.0,
     course_bias=0.0,
     energy_scale=1.0,
 ) -> None:
-    """Advance every ``moving`` vehicle by ``dt`` seconds in place (the others stay frozen).
+    """Advance every ``moving`` vehicle by ``dt`` seconds (one, or one per vehicle) in place; the others stay frozen.
 
     Execution bias (:mod:`sim.uuv.bias`): ``speed_scale`` multiplies the speed the vehicle
     achieves, ``course_bias`` (radians) turns its track through water clockwise of its
