@@ -34,12 +34,24 @@ from sim.uuv.environment import tidal_current
 from sim.uuv.mission import Mission, Vehicle
 from sim.uuv.vehicle import SWAY_COUPLING, VehicleState, step_vehicle
 
-__all__ = ["Segments", "segment_batch", "replay", "SEGMENT_STEPS", "PACED_SUBSTEPS", "substeps_of"]
+__all__ = [
+    "Segments",
+    "segment_batch",
+    "replay",
+    "SEGMENT_STEPS",
+    "PACED_SUBSTEPS",
+    "MAX_SETPOINT_DELAY_S",
+    "substeps_of",
+]
 
 #: Steps per open-loop segment (2 s steps: two minutes of flight).
 SEGMENT_STEPS = 60
 #: Physics sub-steps per step when replaying a vehicle-paced run (0.2 s at 2 s steps).
 PACED_SUBSTEPS = 10
+#: A step whose set-point reached the bus more than this many vehicle seconds after it is not
+#: replayed: the vehicle flew the previous set-point for a noticeable share of the step (or,
+#: unanswered for 3 s, stopped), which the logged set-point does not say.
+MAX_SETPOINT_DELAY_S = 0.3
 
 
 @dataclass
@@ -127,7 +139,8 @@ def segment_batch(mission: Mission, runs: list, start_times: list[float], length
     """Cut every run (a :class:`planner.logs.LoggedRun`) into segments of ``length`` steps.
 
     A step counts when the next step follows it by exactly ``mission.dt`` (no gap from a
-    lost chunk) and the set-point flown after it is in the log.
+    lost chunk), the set-point flown after it is in the log, and that set-point answered
+    this step within :data:`MAX_SETPOINT_DELAY_S` (``LoggedRun.setpoint_delay_s``).
     """
     dt = mission.dt
     rows = []
@@ -140,6 +153,9 @@ def segment_batch(mission: Mission, runs: list, start_times: list[float], length
         sway = _sway(s, mission, surge)
         ground = _ground_velocity(s, dt, central=nsub > 1)
         ok = (np.abs(np.diff(s[:, 0]) - dt) < 1e-6) & np.isfinite(sp[:-1, 1])
+        delay = getattr(run, "setpoint_delay_s", None)
+        if delay is not None and len(delay) == s.shape[0]:
+            ok &= np.asarray(delay[:-1]) <= MAX_SETPOINT_DELAY_S
         k = 0
         while k < len(ok):
             if not ok[k]:

@@ -20,7 +20,7 @@ import planner.calibrate as calibration
 import sim.uuv
 from planner.calibrate import FITTED, MIN_LOGS, calibrate, calibrated_text, fit_vehicle
 from planner.logs import LogError
-from planner.segments import replay, segment_batch
+from planner.segments import MAX_SETPOINT_DELAY_S, replay, segment_batch
 from rapt.errors import InputError
 from sim.uuv.scenario import make_scenarios
 from tests.planner.simlogs import sim_runs
@@ -225,3 +225,17 @@ def test_logs_of_another_mission_or_without_flight_are_refused_naming_the_log(fa
         calibrate(wrong, paths, tmp_path / "c.toml")
     _one_line(e.value, f"LOG: {paths[1].name} has no replayable step")
     assert not (tmp_path / "c.toml").exists()
+
+
+def test_a_step_whose_set_point_came_late_is_not_replayed(true_mission, flown):
+    """A vehicle-paced run flies the previous set-point until the next arrives: such a step is cut out."""
+    _, runs, starts = flown
+    run = dataclasses.replace(runs[0])
+    n = run.steps.shape[0]
+    delay = np.zeros(n)
+    delay[[10, 11, 200]] = [MAX_SETPOINT_DELAY_S * 2, np.inf, MAX_SETPOINT_DELAY_S]  # late, unanswered, in time
+    run.setpoint_delay_s = delay  # type: ignore[attr-defined]
+    full = segment_batch(true_mission, runs[:1], starts[:1])
+    cut = segment_batch(true_mission, [run], starts[:1])
+    assert int(full.valid.sum()) - int(cut.valid.sum()) == 2
+    assert not np.isin(cut.t[cut.valid], [run.steps[10, 0], run.steps[11, 0]]).any()
