@@ -571,8 +571,15 @@ class _Loader:
                 values[key] = v
         obj = dataclasses.replace(defaults, **values)
         if cls is Vehicle:
-            positive = ("cruise_speed", "max_speed", "battery_wh", "speed_gain")
-            positive += ("surge_time_constant_s", "yaw_time_constant_s", "max_turn_rate_dps")
+            positive = (
+                "cruise_speed",
+                "max_speed",
+                "battery_wh",
+                "speed_gain",
+                "surge_time_constant_s",
+                "yaw_time_constant_s",
+                "max_turn_rate_dps",
+            )
             for key in positive:
                 if getattr(obj, key) <= 0:
                     self.fail(f"vehicle.{key}", f"{_fmt(getattr(obj, key))} must be > 0; give a positive number")
