@@ -193,8 +193,7 @@ def evaluate(plan_json: Path, logs: dict[str, Path], work: Path, seed: int = 0) 
                 }
             )
         fitted = {
-            n: (float(getattr(cal.vehicle, n)), float(cal.estimate.stderr[n]), bool(cal.estimate.identified[n]))
-            for n in FITTED
+            n: (float(getattr(cal.vehicle, n)), float(cal.stderr[n]), bool(cal.estimate.identified[n])) for n in FITTED
         }
         folds.append(
             {

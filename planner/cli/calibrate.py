@@ -46,7 +46,7 @@ def calibrate(
             n,
             f"{getattr(result.original, n):.5g}",
             f"{getattr(result.vehicle, n):.5g}" if ident else "(kept)",
-            f"{est.stderr[n]:.2g}" if ident else "-",
+            f"{result.stderr[n]:.2g}" if ident else "-",
             UNITS[n],
             "yes" if ident else "no: file value kept",
         )
