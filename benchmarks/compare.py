@@ -1,15 +1,22 @@
 """After the range day, rehearsed: fly a plan in SIL with an injected bias, then `rapt-plan compare` it.
 
-    python benchmarks/compare.py [--budget 1000] [--pairs 4] [--workers 2] [--only TEXT] [--quick]
+    python benchmarks/compare.py [--budget 4000] [--pairs 3] [--seed 2] [--workers 2] [--only TEXT] [--quick]
 
-Generates a plan of the 2017 range mission, flies every scenario through the whole
+Generates the plan the issue's new user made (`examples/range2017.toml`, 4,000 runs,
+`--seed 2 --pairs 3`: 6 scenarios), flies every scenario through the whole
 software-in-the-loop stack (`rapt-plan run PLAN --scenario ID --inject-bias ... --log`) for
-each injected bias below, runs `rapt-plan compare` on the logs and prints, per case, the
-injected against the recovered value of each bias parameter (with its standard error)
-and the mode agreement of the predictions as planned and with the fitted bias.
+each case below, runs `rapt-plan compare` on the logs and prints, per case:
 
-``--quick`` prints the same table for the first case only, from a plan of one pair
-(budget 500, 2 scenarios): well under a minute on 2 cores.
+* each bias parameter: injected, estimate, standard error, identified, and the error as a
+  share of the injected shift (an injected parameter must come back within 20 % of its
+  shift; the others must be unidentified or near neutral: within 2 s.e. or 5 % of their prior s.d.);
+* the leave-one-log-out mode agreement uncorrected and corrected, the held-out path errors,
+  and whether the correction was used (held-out corrected agreement must be >= 90 % and
+  never below uncorrected).
+
+A summary table of all cases closes the run.  ``--quick``: the first case on a one-pair
+plan (budget 500), about a minute.  ``--vehicle`` also runs part C, a vehicle that is not
+the planner's model (:mod:`benchmarks.calibrate`).
 """
 
 from __future__ import annotations
@@ -28,16 +35,24 @@ sys.path.insert(0, str(ROOT))
 
 import sim.uuv  # noqa: E402
 from planner.generate import GenerateConfig, generate  # noqa: E402
-from sim.uuv.bias import BIAS_NAMES, Bias, parse_bias  # noqa: E402
+from sim.uuv.bias import BIAS_NAMES, NEUTRAL, parse_bias  # noqa: E402
 
 CASES = {  # label: (--inject-bias, stochastic effects on)
-    "issue 7: faster vehicle, tide offset": ("speed=1.15,current_offset=0.3", False),
-    "all six parameters": (
-        "speed=1.1,current_scale=0.8,current_offset=-0.2,heading=3,battery=1.2,start_time=1800",
-        False,
+    "speed +15 %": ("speed=1.15", False),
+    "current offset +0.3 m/s": ("current_offset=0.3", False),
+    "start time +900 s": ("start_time=900", False),
+    "combined": ("speed=1.15,current_offset=0.3,start_time=900", False),
+    "stochastic: speed +15 %, offset +0.3 m/s, drift and unmodelled current": (
+        "speed=1.15,current_offset=0.3",
+        True,
     ),
-    "issue 7 with navigation drift and current perturbations": ("speed=1.15,current_offset=0.3", True),
 }
+#: An injected parameter must come back within this share of its shift from neutral.
+WITHIN_SHIFT = 0.20
+#: A parameter not injected counts as near neutral within this share of its prior s.d. (or 2 s.e.).
+NEAR_NEUTRAL = 0.05
+#: Held-out corrected mode agreement required.
+HELD_OUT_AGREEMENT = 0.90
 
 
 def rapt_plan() -> list[str]:
@@ -45,27 +60,71 @@ def rapt_plan() -> list[str]:
     return [str(exe)] if exe.exists() else [sys.executable, "-m", "planner.cli"]
 
 
-def main() -> None:
+def fly_case(plan_dir: Path, ids: list[str], logs: Path, text: str, noisy: bool, seed: int, workers: int) -> float:
+    """Every scenario of the plan flown in lock-step SIL with bias ``text``; seconds taken."""
+    logs.mkdir(parents=True, exist_ok=True)
+
+    def fly(sid: str) -> None:
+        subprocess.run(
+            rapt_plan()
+            + ["run", str(plan_dir / "plan.json"), "--scenario", sid, "--inject-bias", text]
+            + ["--log", str(logs / f"{sid}.mcap")]
+            + (["--stochastic", "--seed", str(seed + ids.index(sid))] if noisy else []),
+            check=True,
+            capture_output=True,
+            cwd=ROOT,
+        )
+
+    t0 = time.perf_counter()
+    with ThreadPoolExecutor(workers) as pool:
+        list(pool.map(fly, ids))
+    return time.perf_counter() - t0
+
+
+def judge(injected, bias: dict) -> tuple[bool, list[tuple]]:
+    """Per parameter (name, injected, estimate, s.e., identified, verdict); all verdicts good?"""
+    rows, ok = [], True
+    for n in BIAS_NAMES:
+        inj, v = getattr(injected, n), bias[n]
+        est, se, ident = v["estimate"], v["stderr"], v["identified"]
+        shift = inj - NEUTRAL[n]
+        if shift:
+            rel = abs(est - inj) / abs(shift)
+            good = ident and rel <= WITHIN_SHIFT
+            verdict = f"{rel:.1%} of shift"
+        else:  # near neutral: within 2 s.e., or a negligible share of what the prior allows
+            off = abs(est - NEUTRAL[n])
+            prior_sd = v["prior"]["sd"]
+            good = not ident or off <= max(2 * se, NEAR_NEUTRAL * prior_sd)
+            verdict = "unidentified" if not ident else f"{off / prior_sd:.1%} of its prior s.d. from neutral"
+        ok &= good
+        rows.append((n, inj, est, se, ident, verdict + ("" if good else " FAIL")))
+    return ok, rows
+
+
+def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--budget", type=int, default=None, help="search budget of the plan (default 1000; --quick: 500)")
-    ap.add_argument("--pairs", type=int, default=None, help="pairs in the plan (default 4; --quick: 1)")
+    ap.add_argument("--budget", type=int, default=None, help="search budget of the plan (default 4000; --quick: 500)")
+    ap.add_argument("--pairs", type=int, default=None, help="pairs in the plan (default 3; --quick: 1)")
+    ap.add_argument("--seed", type=int, default=2, help="seed of the plan and of every run")
     ap.add_argument("--workers", type=int, default=2)
-    ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--only", default="", help="Run only the cases whose label contains this text.")
-    ap.add_argument("--quick", action="store_true", help="the first case only, from a one-pair plan (under a minute)")
-    args = ap.parse_args()
+    ap.add_argument("--quick", action="store_true", help="the first case only, from a one-pair plan (about a minute)")
+    ap.add_argument("--keep", type=Path, default=None, help="keep the plan, logs and comparisons in this directory")
+    ap.add_argument("--vehicle", action="store_true", help="also part C: calibrate a vehicle that is not the model")
+    args = ap.parse_args(argv)
     if args.budget is None:
-        args.budget = 500 if args.quick else 1000
+        args.budget = 500 if args.quick else 4000
     if args.pairs is None:
-        args.pairs = 1 if args.quick else 4
-    cases = list(CASES)
-    if args.only:
-        cases = [label for label in cases if args.only in label]
-    elif args.quick:
+        args.pairs = 1 if args.quick else 3
+    cases = [label for label in CASES if args.only in label] if args.only else list(CASES)
+    if args.quick and not args.only:
         cases = cases[:1]
     mission_file = ROOT / "examples" / "range2017.toml"
-    with tempfile.TemporaryDirectory() as tmp:
-        tmp = Path(tmp)
+    summary = []
+    with tempfile.TemporaryDirectory() as scratch:
+        tmp = Path(scratch) if args.keep is None else args.keep
+        tmp.mkdir(parents=True, exist_ok=True)
         t0 = time.perf_counter()
         plan = generate(
             sim.uuv.load_mission(mission_file),
@@ -78,75 +137,57 @@ def main() -> None:
         for label in cases:
             text, noisy = CASES[label]
             logs = tmp / f"case{list(CASES).index(label)}"
-            logs.mkdir()
-
-            def fly(sid: str, text: str = text, logs: Path = logs, noisy: bool = noisy) -> float:
-                start = time.perf_counter()
-                subprocess.run(
-                    rapt_plan()
-                    + [
-                        "run",
-                        str(tmp / "plan" / "plan.json"),
-                        "--scenario",
-                        sid,
-                        "--inject-bias",
-                        text,
-                        "--log",
-                        str(logs / f"{sid}.mcap"),
-                    ]
-                    + (["--stochastic", "--seed", str(args.seed + ids.index(sid))] if noisy else []),
-                    check=True,
-                    capture_output=True,
-                    cwd=ROOT,
-                )
-                return time.perf_counter() - start
-
-            t0 = time.perf_counter()
-            with ThreadPoolExecutor(args.workers) as pool:
-                list(pool.map(fly, ids))
-            t_fly = time.perf_counter() - t0
+            t_fly = fly_case(tmp / "plan", ids, logs, text, noisy, args.seed, args.workers)
             t0 = time.perf_counter()
             subprocess.run(
                 rapt_plan()
-                + [
-                    "compare",
-                    str(tmp / "plan"),
-                    *[str(logs / f"{s}.mcap") for s in ids],
-                    "--out",
-                    str(logs / "cmp"),
-                    "--seed",
-                    str(args.seed),
-                ],
+                + ["compare", str(tmp / "plan"), *[str(logs / f"{s}.mcap") for s in ids]]
+                + ["--out", str(logs / "cmp"), "--seed", str(args.seed)],
                 check=True,
                 capture_output=True,
                 cwd=ROOT,
             )
             t_cmp = time.perf_counter() - t0
             c = json.loads((logs / "cmp" / "comparison.json").read_text())
-            injected = parse_bias(text)
+            params_ok, rows = judge(parse_bias(text), c["bias"])
             print(f"\n## {label}: --inject-bias {text}" + (" --stochastic" if noisy else ""))
             print(f"{len(ids)} SIL runs in {t_fly:.0f} s ({args.workers} at a time); compare in {t_cmp:.0f} s")
-            print("| parameter | injected | recovered | std. error | error / injected shift |")
-            print("|---|---:|---:|---:|---:|")
-            neutral = Bias()
-            for n in BIAS_NAMES:
-                inj, est = getattr(injected, n), c["bias"][n]["estimate"]
-                se = c["bias"][n]["stderr"]
-                shift = inj - getattr(neutral, n)
-                rel = f"{abs(est - inj) / abs(shift):.2%}" if shift else f"(abs. {abs(est - inj):.2g})"
-                print(f"| {n} | {inj:g} | {est:.5g} | {'n/a' if se is None else f'{se:.2g}'} | {rel} |")
-            ag = c["mode_agreement"]
+            print("| parameter | injected | estimate | std. error | identified | verdict |")
+            print("|---|---:|---:|---:|:---:|---|")
+            for n, inj, est, se, ident, verdict in rows:
+                print(f"| {n} | {inj:g} | {est:.5g} | {se:.2g} | {'yes' if ident else 'no'} | {verdict} |")
+            cv = c["cross_validation"]
+            held, path = cv["held_out_mode_agreement"], cv["held_out_path_error_m"]
+            cv_ok = held["corrected"] is not None and held["corrected"] >= HELD_OUT_AGREEMENT
+            cv_ok &= held["uncorrected"] is None or held["corrected"] >= held["uncorrected"]
             print(
-                f"mode agreement over {ag['scenarios']} scenarios: as planned {ag['uncorrected']:.0%}, "
-                f"with the fitted bias {ag['corrected']:.0%}"
+                f"held-out (leave one log out) mode agreement: uncorrected {held['uncorrected']:.0%}, "
+                f"corrected {held['corrected']:.0%} over {held['runs']} runs; held-out path error "
+                f"{path['uncorrected']:.1f} m -> {path['corrected']:.1f} m"
             )
-            flagged = [p["id"] for p in c["pairs"] if p["flagged"]]
-            props = [q["id"] for q in c["proposals"] if q["found"]]
-            print(f"pairs flagged under the bias: {flagged or 'none'}; adjusted scenarios proposed: {props or 'none'}")
+            print(f"{c['correction']['note']}")
+            ends = c["bias_fit"]["end_conditions"]
             print(
-                f"position residual after the fit {c['bias_fit']['rms_position_m']:.2g} m RMS "
-                f"(unbiased model {c['bias_fit']['rms_position_unbiased_m']:.3g} m)"
+                f"end conditions: {ends.get('logs_with_end', 0)} logged ends, chosen bias: {ends.get('chosen')} "
+                f"(reproduces {ends.get('ends_reproduced_by_chosen', '-')} of them)"
             )
+            summary.append((label, params_ok, held, path, c["correction"]["used"], cv_ok))
+    print("\n## Summary")
+    print(
+        "| case | parameters within 20 % of shift, others neutral | held-out agreement uncorrected -> corrected "
+        "| held-out path error (m) | correction used | >= 90 % and never below |"
+    )
+    print("|---|:---:|---:|---:|:---:|:---:|")
+    for label, params_ok, held, path, used, cv_ok in summary:
+        print(
+            f"| {label} | {'yes' if params_ok else 'NO'} | {held['uncorrected']:.0%} -> {held['corrected']:.0%} "
+            f"| {path['uncorrected']:.1f} -> {path['corrected']:.1f} | {'yes' if used else 'no'} "
+            f"| {'yes' if cv_ok else 'NO'} |"
+        )
+    if args.vehicle:
+        from benchmarks import calibrate
+
+        calibrate.main([])
 
 
 if __name__ == "__main__":

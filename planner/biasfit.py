@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+import sim.uuv
 from planner.segments import SEGMENT_STEPS, Segments, replay, segment_batch
 from rapt.errors import InputError
 from rapt.mapfit import MapEstimate, Prior, fit_map
@@ -178,6 +179,7 @@ def fit_bias(
         lambda th: _residuals(mission, seg, bias_of(th)),
         bias_priors(names),
         groups=groups,
+        kinds=np.repeat(np.array(["position", "position", "energy"]), per_segment.size),
         bootstrap=bootstrap,
         seed=seed,
     )
@@ -195,4 +197,91 @@ def fit_bias(
         int(r.size),
         int(len(set(seg.run.tolist()))),
         names,
+    )
+
+
+#: How far a re-simulated run may end from the logged end before it counts against a bias (s).
+END_TIME_SD_S = 60.0
+#: Log-likelihood lost when a re-simulated run ends in another condition than the logged one
+#: (a fuel return instead of a completed mission, a collision, a missed window): as unlikely
+#: as an end time four standard deviations off.
+END_MISMATCH_LOGLIK = -8.0
+#: Posterior draws tried against the logged ends, besides the estimate itself.
+END_CANDIDATES = 16
+#: Log-likelihood by which a posterior draw must beat the estimate when it reproduces no more ends.
+DRAW_MARGIN = 2.0
+#: Score columns that make a run's end condition.
+END_COLUMNS = ("mission.return_reason", "collisions", "transmission", "recovery", "mission_success")
+
+
+def end_condition_loglik(names: list[str], simulated: np.ndarray, observed: np.ndarray) -> np.ndarray:
+    """Log-likelihood of each observed end under each simulated run: (k, n) from (k, n, m) and (n, m)."""
+    cols = [names.index(c) for c in END_COLUMNS if c in names]
+    t = names.index("mission.time_s")
+    same = np.all(np.isclose(simulated[..., cols], observed[None, :, cols], equal_nan=True), axis=-1)
+    dt = (simulated[..., t] - observed[None, :, t]) / END_TIME_SD_S
+    return np.where(same, -0.5 * np.nan_to_num(dt, nan=0.0) ** 2, END_MISMATCH_LOGLIK)
+
+
+def check_end_conditions(
+    mission: Mission,
+    fit: BiasFit,
+    runs: list,
+    start_times: list[float],
+    U: np.ndarray,
+    observed: list[np.ndarray | None],
+    *,
+    candidates: int = END_CANDIDATES,
+    seed: int = 0,
+    length: int = SEGMENT_STEPS,
+) -> BiasFit:
+    """The fit with its bias chosen, among the estimate and ``candidates`` posterior draws, by the
+    segments' posterior times the likelihood of the logged end conditions (``observed``: each run's
+    scores from its log, None when its end is not in the log) under a closed-loop re-simulation.
+
+    The segments see how the vehicle moves; only a closed-loop run sees where a decision falls
+    (the fuel return, the transmission window, a collision).  With exact logs the segments
+    dominate and the estimate stands; with noisy ones, a draw that also reproduces how the runs
+    ended is preferred.
+    """
+    ended = [k for k, s in enumerate(observed) if s is not None]
+    names = [n for n in BIAS_NAMES if n in fit.fitted]
+    if not ended or not any(fit.identified[n] for n in names):
+        return fit.with_bias(fit.bias, {"logs_with_end": len(ended), "candidates": 0, "chosen": "estimate"})
+    draws = fit.estimate.draws(candidates, seed)
+    thetas = np.vstack([fit.estimate.vector()[None, :], draws])
+    biases = [Bias(**{n: float(v) for n, v in zip(names, th)}) for th in thetas]
+    Ue = np.asarray(U, dtype=float)[ended]
+    r = sim.uuv.simulate(mission, np.tile(Ue, (len(biases), 1)), bias=[b for b in biases for _ in ended])
+    sims = r.scores.reshape(len(biases), len(ended), -1)
+    obs = np.array([observed[k] for k in ended])
+    end_ll = end_condition_loglik(r.names, sims, obs).sum(axis=1)
+    seg = segment_batch(mission, runs, start_times, length)
+    per_segment = np.nonzero(seg.valid)[0].size
+    kind_scale = np.repeat(
+        [
+            fit.estimate.noise_scale.get("position", 1.0),
+            fit.estimate.noise_scale.get("position", 1.0),
+            fit.estimate.noise_scale.get("energy", 1.0),
+        ],
+        per_segment,
+    )
+    prior = np.array([[(th[i] - PRIORS[n].centre) / PRIORS[n].sd for i, n in enumerate(names)] for th in thetas])
+    seg_ll = np.array([-0.5 * np.sum((_residuals(mission, seg, b) / kind_scale) ** 2) for b in biases])
+    seg_ll -= 0.5 * np.sum(prior**2, axis=1)
+    total = seg_ll + end_ll
+    best = int(np.argmax(total))
+    agree = end_condition_loglik(r.names, sims, obs) > END_MISMATCH_LOGLIK
+    if agree[best].sum() <= agree[0].sum() and total[best] - total[0] < DRAW_MARGIN:
+        best = 0  # a draw must earn its place over the estimate
+    return fit.with_bias(
+        biases[best],
+        {
+            "logs_with_end": len(ended),
+            "candidates": len(biases),
+            "chosen": "estimate" if best == 0 else "posterior draw",
+            "ends_reproduced_by_estimate": int(agree[0].sum()),
+            "ends_reproduced_by_chosen": int(agree[best].sum()),
+            "end_time_sd_s": END_TIME_SD_S,
+        },
     )

@@ -10,12 +10,19 @@ to identify and apply this bias to our predictions").  :func:`compare`
    (:func:`sim.uuv.replay.score_track`), and sets predicted against observed mode and
    sub-scores per scenario and per pair (did the pair straddle its boundary?), with the
    path error in metres against the predicted trajectory;
-3. fits the execution bias (:mod:`sim.uuv.bias`) to all logs jointly (:mod:`planner.biasfit`),
-   with a standard error per parameter;
-4. re-predicts every run and every plan scenario under the fitted bias — the corrected
+3. fits the execution bias (:mod:`sim.uuv.bias`) to all logs jointly (:mod:`planner.biasfit`):
+   a MAP estimate under documented priors, each parameter with a standard error and whether
+   the logs identify it (an unidentified one stays neutral), the runs' observed end
+   conditions weighed in by a closed-loop re-simulation;
+4. checks the correction before using it (:func:`cross_validate`): leave one log out, fit
+   on the others, predict the left-out run's mode and path with and without the fitted
+   bias.  The correction is used only when it predicts held-out runs at least as well in
+   mode and better in mode or path; otherwise the report says "the logs do not support a
+   correction; plan unchanged" and the corrected predictions are the uncorrected ones;
+5. re-predicts every run and every plan scenario under the bias used — the corrected
    predictions — and flags the pairs that no longer straddle their boundary, with an
    adjusted "M" scenario for each side that moved (:mod:`planner.replan`);
-5. writes ``comparison.json`` and ``comparison.html`` (:mod:`planner.compare_report`).
+6. writes ``comparison.json`` and ``comparison.html`` (:mod:`planner.compare_report`).
 """
 
 from __future__ import annotations
@@ -29,20 +36,25 @@ from pathlib import Path
 import numpy as np
 
 import sim.uuv
-from planner.biasfit import fit_bias
+from planner.biasfit import BiasFit, check_end_conditions, fit_bias
 from planner.jsonio import json_value, jsonable
 from planner.logs import LogError, LoggedRun, read_run
 from planner.plans import Plan, load_plan
 from planner.replan import adjust_for_bias
 from rapt.errors import InputError, StudyMismatchError
-from sim.uuv.bias import BIAS_NAMES, BIAS_UNITS, NEUTRAL
+from sim.uuv.bias import BIAS_NAMES, BIAS_UNITS, NEUTRAL, Bias
 from sim.uuv.replay import score_track
 from sim.uuv.scenario import make_scenarios
 from sim.uuv.scoring import MODE_NAMES, mode_name
 
-__all__ = ["compare", "CompareConfig", "COMPARISON_SCHEMA", "match_logs"]
+__all__ = ["compare", "CompareConfig", "COMPARISON_SCHEMA", "match_logs", "cross_validate", "NO_SUPPORT"]
 
-COMPARISON_SCHEMA = "rapt.comparison/1"
+COMPARISON_SCHEMA = "rapt.comparison/2"
+#: What the report says when cross-validation does not support the fitted correction.
+NO_SUPPORT = "the logs do not support a correction; plan unchanged"
+#: Share by which the held-out path error must shrink for the correction to count as helping
+#: on paths alone (a smaller change is within what refitting on other logs moves anyway).
+PATH_GAIN = 0.1
 RESULT_NAME = "comparison.json"
 
 
@@ -52,6 +64,7 @@ class CompareConfig:
     seed: int = 0
     fit: tuple[str, ...] = BIAS_NAMES  # bias parameters to fit; the others stay neutral
     p_target: float = 0.8
+    bootstrap: int = 40  # block-bootstrap refits for the standard errors (0: analytic only)
 
 
 @dataclass
@@ -148,14 +161,17 @@ def compare(
     _score_observed(m, obs)
     say("fitting the execution bias")
     start_times = [float(make_scenarios(m, o.u[None, :]).start_time[0]) for o in obs]
-    fit = fit_bias(m, [o.run for o in obs], start_times, fit=tuple(cfg.fit))
+    fit = _fit(m, obs, start_times, cfg, cfg.bootstrap)
+    say("cross-validating the correction")
+    cv = cross_validate(m, obs, start_times, pred, _rows(ids), cfg)
+    bias_used = fit.bias if cv["correction_used"] else Bias()
     say("re-predicting under the fitted bias")
-    corr = sim.uuv.simulate(m, U_plan, trajectories=True, bias=fit.bias)
+    corr = sim.uuv.simulate(m, U_plan, trajectories=True, bias=bias_used) if cv["correction_used"] else pred
     plan_runs = _PlanRuns(ids, U_plan, pred, corr)
     scen_rows = _scenario_rows(m, obs, plan_runs)
     agreement = _mode_agreement(scen_rows)
     say("re-planning")
-    pair_rows, proposals = _pair_rows(plan, obs, plan_runs, fit.bias, cfg)
+    pair_rows, proposals = _pair_rows(plan, obs, plan_runs, bias_used, cfg)
     result = {
         "schema": COMPARISON_SCHEMA,
         "plan": {"id": plan.id, "path": str(plan.path), "mission": m.name, "mission_file": str(plan.mission_file)},
@@ -171,6 +187,12 @@ def compare(
         ],
         "bias": fit.to_dict(),
         "bias_fit": _bias_fit(fit, cfg),
+        "cross_validation": cv,
+        "correction": {
+            "used": cv["correction_used"],
+            "bias": bias_used.to_dict(),
+            "note": cv["note"],
+        },
         "scenarios": scen_rows,
         "mode_agreement": agreement,
         "pairs": pair_rows,
@@ -181,6 +203,82 @@ def compare(
         say("writing the report")
         _write(result, plan, obs, plan_runs, Path(out_dir))
     return result
+
+
+def _fit(m, obs: list[Observation], start_times: list[float], cfg: CompareConfig, bootstrap: int) -> BiasFit:
+    """The bias fit of ``obs``'s logs, its bias chosen against their observed end conditions."""
+    runs = [o.run for o in obs]
+    fit = fit_bias(m, runs, start_times, fit=tuple(cfg.fit), bootstrap=bootstrap, seed=cfg.seed)
+    ends = [o.scores if o.mode is not None else None for o in obs]
+    return check_end_conditions(m, fit, runs, start_times, np.array([o.u for o in obs]), ends, seed=cfg.seed)
+
+
+def cross_validate(
+    m,
+    obs: list[Observation],
+    start_times: list[float],
+    pred: sim.uuv.Result,
+    row_of: dict[str, int],
+    cfg: CompareConfig,
+) -> dict:
+    """Leave one log out: fit on the others, predict the left-out run's mode and path with and
+    without that bias; and whether the correction is to be used (module docstring, step 4)."""
+    folds = []
+    for i, o in enumerate(obs):
+        rest = [j for j in range(len(obs)) if j != i]
+        row: dict = {"log": o.run.path.name, "scenario": o.sid, "observed_mode": o.mode}
+        k = row_of[o.sid]
+        row["uncorrected_mode"] = MODE_NAMES[pred.modes[k]]
+        row["path_error_uncorrected_m"] = _round(_path_error(o.run.track, pred.trajectory(k)), "rms_m")
+        try:
+            if not rest:
+                raise InputError("no other log to fit on")
+            fit = _fit(m, [obs[j] for j in rest], [start_times[j] for j in rest], cfg, 0)
+        except InputError as exc:
+            row.update(corrected_mode=None, path_error_corrected_m=None, bias=None, note=str(exc))
+            folds.append(row)
+            continue
+        r = sim.uuv.simulate(m, o.u[None, :], trajectories=True, bias=fit.bias)
+        row["corrected_mode"] = MODE_NAMES[r.modes[0]] if r.valid[0] else "invalid"
+        row["path_error_corrected_m"] = _round(_path_error(o.run.track, r.trajectory(0)), "rms_m")
+        row["bias"] = {n: v for n, v in fit.bias.to_dict().items() if v != NEUTRAL[n]}
+        folds.append(row)
+    scored = [f for f in folds if f["observed_mode"] is not None and f["corrected_mode"] is not None]
+    pathed = [f for f in folds if f["path_error_uncorrected_m"] is not None and f["path_error_corrected_m"] is not None]
+    agree_u = float(np.mean([f["uncorrected_mode"] == f["observed_mode"] for f in scored])) if scored else None
+    agree_c = float(np.mean([f["corrected_mode"] == f["observed_mode"] for f in scored])) if scored else None
+    path_u = float(np.mean([f["path_error_uncorrected_m"] for f in pathed])) if pathed else None
+    path_c = float(np.mean([f["path_error_corrected_m"] for f in pathed])) if pathed else None
+    used, note = _support(agree_u, agree_c, path_u, path_c)
+    return {
+        "folds": folds,
+        "held_out_mode_agreement": {"uncorrected": agree_u, "corrected": agree_c, "runs": len(scored)},
+        "held_out_path_error_m": {"uncorrected": path_u, "corrected": path_c, "runs": len(pathed)},
+        "correction_used": used,
+        "note": note,
+    }
+
+
+def _support(agree_u, agree_c, path_u, path_c) -> tuple[bool, str]:
+    """Use the correction only when held-out runs show it helps: mode agreement no worse, and
+    better mode agreement or a path error at least :data:`PATH_GAIN` smaller."""
+    if agree_c is None and path_c is None:
+        return False, NO_SUPPORT + " (no held-out prediction: give at least two logs)"
+    if agree_c is not None and agree_u is not None and agree_c < agree_u:
+        return (
+            False,
+            NO_SUPPORT + f" (held-out mode agreement {agree_c:.0%} corrected against {agree_u:.0%} uncorrected)",
+        )
+    better_mode = agree_c is not None and agree_u is not None and agree_c > agree_u
+    better_path = path_c is not None and path_u is not None and path_c < (1.0 - PATH_GAIN) * path_u
+    if not (better_mode or better_path):
+        return False, NO_SUPPORT + " (the correction does not improve held-out predictions)"
+    parts = []
+    if agree_c is not None and agree_u is not None:
+        parts.append(f"held-out mode agreement {agree_u:.0%} -> {agree_c:.0%}")
+    if path_c is not None and path_u is not None:
+        parts.append(f"held-out path error {path_u:.1f} -> {path_c:.1f} m")
+    return True, "correction used: " + ", ".join(parts)
 
 
 def _check_out_dir(plan_path: str | Path, log_paths: Sequence[str | Path], out_dir: str | Path) -> None:
@@ -443,6 +541,12 @@ def _bias_fit(fit, cfg: CompareConfig) -> dict:
         "units": dict(BIAS_UNITS),
         "neutral": dict(NEUTRAL),
         "fitted": list(cfg.fit),
+        "priors": {n: p["prior"] for n, p in fit.to_dict().items()},
+        "identified": [n for n, ok in fit.identified.items() if ok],
+        "noise_scale": fit.estimate.noise_scale,
+        "stderr_source": fit.estimate.stderr_sources,
+        "bootstrap": fit.estimate.bootstrap,
+        "end_conditions": fit.end_conditions,
         "rms_position_m": fit.rms_position_m,
         "rms_position_unbiased_m": fit.rms_position_neutral_m,
         "rms_energy_wh": fit.rms_energy_wh,

@@ -128,12 +128,18 @@ def _bias_figure(result: dict, path: Path) -> None:
     fig, axes = plt.subplots(1, len(names), figsize=(1.7 * len(names), 2.6))
     for ax, n in zip(np.atleast_1d(axes), names):
         est, se = bias[n]["estimate"], bias[n]["stderr"]
+        prior = bias[n].get("prior")
         ax.axhline(neutral[n], color="#999", lw=1)
-        ax.errorbar([0], [est], yerr=[[2 * se if se else 0]], fmt="o", color="#1f77b4", capsize=4)
+        if prior:  # the prior's +- 2 s.d. band: an estimate as wide as this was not identified
+            ax.axhspan(prior["centre"] - 2 * prior["sd"], prior["centre"] + 2 * prior["sd"], color="#eee")
+        colour = "#1f77b4" if bias[n].get("identified") else "#999"
+        ax.errorbar([0], [est], yerr=[[2 * se if se else 0]], fmt="o", color=colour, capsize=4)
         ax.set_xticks([])
         ax.set_title(f"{n}\n({units[n]})", fontsize=8)
         ax.tick_params(labelsize=7)
-    fig.suptitle("execution bias: estimate ± 2 s.e. (grey: neutral)", fontsize=9)
+    fig.suptitle(
+        "execution bias: estimate ± 2 s.e. (line: neutral, band: prior ± 2 s.d., grey: not identified)", fontsize=9
+    )
     fig.tight_layout()
     fig.savefig(path, dpi=90)
     plt.close(fig)
@@ -146,13 +152,15 @@ def _bias_section(result: dict, fig_dir: Path) -> list[str]:
     fitd = result["bias_fit"]
     parts.append(
         "<h2>Execution bias</h2><table><tr><th class='l'>parameter</th><th>estimate</th><th>std. error</th>"
-        "<th>neutral</th><th class='l'>unit</th></tr>"
+        "<th>prior</th><th class='l'>identified</th><th class='l'>unit</th></tr>"
     )
     for n, v in result["bias"].items():
-        se = "not identifiable" if v["stderr"] is None else f"{v['stderr']:.2g}"
+        prior = v.get("prior")
+        prior_text = "not fitted" if prior is None else f"{prior['centre']:g} ± {prior['sd']:g}"
+        ident = "yes" if v["identified"] else "no: kept neutral"
         parts.append(
-            f"<tr><td class='l'>{_e(n)}</td><td>{v['estimate']:.4g}</td><td>{se}</td>"
-            f"<td>{fitd['neutral'][n]:g}</td><td class='l'>{_e(fitd['units'][n])}</td></tr>"
+            f"<tr><td class='l'>{_e(n)}</td><td>{v['estimate']:.4g}</td><td>{v['stderr']:.2g}</td>"
+            f"<td>{_e(prior_text)}</td><td class='l'>{ident}</td><td class='l'>{_e(fitd['units'][n])}</td></tr>"
         )
     parts.append(
         f"</table><p>Fitted on {fitd['runs']} run(s), {fitd['segments']} open-loop segments: position "
@@ -164,10 +172,23 @@ def _bias_section(result: dict, fig_dir: Path) -> list[str]:
     def pct(v: float | None) -> str:
         return "–" if v is None else f"{v:.0%}"
 
+    cv = result["cross_validation"]
+    held, path = cv["held_out_mode_agreement"], cv["held_out_path_error_m"]
+
+    def metres(v: float | None) -> str:
+        return "–" if v is None else f"{v:.1f} m"
+
+    parts.append(
+        "<h2>Is the correction worth using?</h2><p>Leave one log out: fit on the others, predict the "
+        f"left-out run. Held-out mode agreement <b>{pct(held['uncorrected'])}</b> uncorrected, "
+        f"<b>{pct(held['corrected'])}</b> corrected ({held['runs']} runs); held-out path error "
+        f"{metres(path['uncorrected'])} uncorrected, {metres(path['corrected'])} corrected.</p>"
+        f"<p><b>{_e(result['correction']['note'])}</b></p>"
+    )
     parts.append(
         f"<h2>Mode agreement</h2><p>Predicted modes matched the observed ones on <b>{pct(ag['uncorrected'])}"
         f"</b> of {ag['scenarios']} scenario(s) as planned, and on <b>{pct(ag['corrected'])}</b> with the "
-        "fitted bias applied.</p>"
+        "correction used (the same as planned when it is not used).</p>"
     )
     return parts
 

@@ -13,7 +13,11 @@ neutral or nominal value, and a width a test engineer would accept), minimises
 data's own robust noise scale), and calls a parameter *identified* when its posterior
 standard deviation is clearly below its prior's (:data:`IDENTIFIED_BELOW` of it).
 An unidentified parameter is put back at its prior centre and the others are refitted
-without it: prediction uses only what the data support.
+without it: prediction uses only what the data support.  Parameters the data confound
+(one tide phase: a tide-table offset, a tide-table scale and a clock error all look the
+same) are eliminated one at a time, the one whose fixing costs the fit least first; the
+survivor then stands for the group and is kept only when the data need it (its estimate
+:data:`SIGNIFICANT` s.e. off its centre), so noise is not attributed to a clock error.
 
 Standard errors: the Laplace approximation ``(J^T J + I)^-1`` in prior-scaled units, the
 cluster-robust (sandwich) estimate by ``groups`` when residuals within a group move
@@ -36,6 +40,8 @@ __all__ = ["Prior", "MapEstimate", "fit_map", "IDENTIFIED_BELOW"]
 
 #: A parameter is identified when its posterior s.d. is below this share of its prior s.d.
 IDENTIFIED_BELOW = 0.5
+#: A parameter identified only after its confounders were fixed must be this many s.e. off its centre.
+SIGNIFICANT = 2.0
 #: Residuals beyond this many noise scales are down-weighted (``soft_l1``).
 ROBUST_SCALE = 3.0
 
@@ -66,7 +72,7 @@ class MapEstimate:
     map_value: dict[str, float]  # the MAP estimate with every parameter free
     stderr: dict[str, float]  # posterior standard deviation
     identified: dict[str, bool]
-    noise_scale: float  # robust scale of the residuals at the estimate, in the residuals' units
+    noise_scale: dict  # robust scale of each kind of residual at the estimate, in the residuals' units
     residuals: int
     success: bool
     message: str
@@ -115,6 +121,7 @@ def fit_map(
     priors: Sequence[Prior],
     *,
     groups: np.ndarray | None = None,
+    kinds: np.ndarray | None = None,
     bootstrap: int = 0,
     seed: int = 0,
     identify_below: float = IDENTIFIED_BELOW,
@@ -126,7 +133,9 @@ def fit_map(
     ``residuals`` takes parameter values in ``priors`` order and returns residuals in units
     of a nominal noise (their actual scale is estimated); its length must not depend on
     ``theta``.  ``groups`` (m,) labels residuals that share an error (a segment, a log):
-    the robust and bootstrap standard errors treat each group as one draw.
+    the robust and bootstrap standard errors treat each group as one draw.  ``kinds`` (m,)
+    labels residuals of one kind (position, energy): each kind's noise scale is estimated
+    on its own, so a precise kind is not drowned by a noisy one.
     """
     priors = tuple(priors)
     names = [p.name for p in priors]
@@ -147,7 +156,13 @@ def fit_map(
         if groups.shape != (m,):
             raise ValueError(f"groups: expected one label per residual ({m}), got shape {groups.shape}")
 
-    def solve(free: np.ndarray, z0: np.ndarray, scale: float, weight: np.ndarray | None = None, nfev: int = max_nfev):
+    def solve(
+        free: np.ndarray,
+        z0: np.ndarray,
+        scale: np.ndarray | float,
+        weight: np.ndarray | None = None,
+        nfev: int = max_nfev,
+    ):
         w = None if weight is None else np.sqrt(weight)
 
         def fun(z: np.ndarray) -> np.ndarray:
@@ -170,23 +185,30 @@ def fit_map(
 
     every = np.ones(len(priors), dtype=bool)
     # the data's noise scale: from a fit with nominal units, then the MAP with the data's own scale
+    kind = np.zeros(m, dtype=np.int64) if kinds is None else np.unique(np.asarray(kinds), return_inverse=True)[1]
+
+    def scales(r: np.ndarray) -> np.ndarray:
+        return np.array([_robust_scale(r[kind == k]) for k in range(int(kind.max(initial=0)) + 1)])[kind]
+
     first = solve(every, np.zeros(len(priors)), 1.0)
-    scale = _robust_scale(first.fun[:m])
+    scale = scales(first.fun[:m])
     sol = solve(every, first.x, scale)
-    scale = _robust_scale(sol.fun[:m] * scale)
+    scale = scales(sol.fun[:m] * scale)
     sol = solve(every, sol.x, scale)
     map_value = theta_of(sol.x, every)
-    stderr_z, _, _ = _covariances(sol, m, groups)
+    stderr_z = np.ones(len(priors))
+    own = _covariances(sol, m, groups)[0] < identify_below  # identified with every parameter free
     sources = {n: "laplace" for n in names}
-    free = stderr_z < identify_below
-    final, cov_f, n_boot = sol, np.zeros((0, 0)), 0
-    for _ in range(len(priors)):  # drop what the data do not identify, refit, until what is left is identified
-        if not free.any():
-            break
+    free = every.copy()
+    final, cov_f, n_boot, booted = sol, np.zeros((0, 0)), 0, False
+    # backward elimination: while some free parameter is not identified, fix the least
+    # identified one at its centre and refit (a confounded pair keeps its better-seen half)
+    while free.any():
         if not free.all():
             final = solve(free, sol.x[free], scale)
         sd_f, cov_f, source = _covariances(final, m, groups)
-        if bootstrap > 0 and groups is not None:
+        if sd_f.max() < identify_below and bootstrap > 0 and groups is not None:
+            booted = True
             boot = _bootstrap(solve, free, final.x, scale, groups, bootstrap, seed)
             n_boot = boot.shape[0]
             if n_boot > 1:
@@ -199,11 +221,18 @@ def fit_map(
         stderr_z[free] = sd_f
         for n, src in zip([n for n, f in zip(names, free) if f], source):
             sources[n] = src
-        still = sd_f < identify_below
-        if still.all():
+        if sd_f.max() >= identify_below:
+            free = _drop_one(solve, free, sol.x, scale, np.flatnonzero(free)[sd_f >= identify_below])
+            continue
+        # a parameter identified only once its confounders were fixed stands for all of them:
+        # keep it only if the data need it (its estimate significantly off its centre)
+        idx = np.flatnonzero(free)
+        z = np.abs(final.x) / np.maximum(sd_f, 1e-300)
+        weak = [i for i in range(idx.size) if not own[idx[i]] and z[i] < SIGNIFICANT]
+        if not weak:
             break
-        free[np.flatnonzero(free)[~still]] = False
-        final = sol
+        free[idx[min(weak, key=lambda i: z[i])]] = False
+    del booted
     for n, f in zip(names, free):
         if not f:
             sources[n] = "not identified"
@@ -223,7 +252,7 @@ def fit_map(
         {n: float(v) for n, v in zip(names, map_value)},
         {n: float(v * s) for n, v, s in zip(names, stderr_z, sd)},
         {n: bool(f) for n, f in zip(names, free)},
-        _robust_scale(res),
+        {str(k): _robust_scale(res[kind == i]) for i, k in enumerate(np.unique(kinds) if kinds is not None else [0])},
         int(m),
         bool(final.success),
         str(final.message),
@@ -234,13 +263,28 @@ def fit_map(
     )
 
 
+def _drop_one(solve, free: np.ndarray, z: np.ndarray, scale, candidates: np.ndarray) -> np.ndarray:
+    """``free`` without the candidate whose fixing at its centre costs the fit least: of parameters
+    the data confound, the one they explain least goes (likelihood-ratio backward elimination)."""
+    best, best_cost = free, np.inf
+    for c in candidates.tolist():
+        trial = free.copy()
+        trial[c] = False
+        cost = solve(trial, z[trial], scale, nfev=60).cost if trial.any() else -1.0
+        if cost < best_cost:
+            best, best_cost = trial, cost
+    return best
+
+
 def _covariances(sol, m: int, groups: np.ndarray | None) -> tuple[np.ndarray, np.ndarray, list[str]]:
     """Posterior s.d. (prior-scaled units) of the solution's free parameters: the larger of the
     Laplace and the cluster-robust estimate; with the covariance and which one won, per parameter."""
     J = sol.jac[:m]  # data rows, already divided by the noise scale
     k = J.shape[1]
-    H = J.T @ J + np.eye(k)  # the prior adds the identity in these units
-    bread = np.linalg.pinv(H)
+    # (J^T J + I)^-1 from the SVD of [J; I]: its singular values are >= 1 (the prior), so a
+    # direction the data do not see keeps its prior width however precise the rest is
+    _, sv, vt = np.linalg.svd(np.vstack([J, np.eye(k)]), full_matrices=False)
+    bread = (vt.T / sv**2) @ vt
     sd = np.sqrt(np.clip(np.diag(bread), 0, None))
     cov = bread.copy()
     source = ["laplace"] * k
@@ -260,7 +304,7 @@ def _covariances(sol, m: int, groups: np.ndarray | None) -> tuple[np.ndarray, np
 
 
 def _bootstrap(
-    solve, free: np.ndarray, z: np.ndarray, scale: float, groups: np.ndarray, b: int, seed: int
+    solve, free: np.ndarray, z: np.ndarray, scale: np.ndarray | float, groups: np.ndarray, b: int, seed: int
 ) -> np.ndarray:
     """Refits on ``b`` resamples of whole groups (with replacement, seeded): (draws, free) in prior units."""
     labels, g = np.unique(groups, return_inverse=True)

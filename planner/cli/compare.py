@@ -78,21 +78,37 @@ def compare(
             "-" if pc is None else f"{pc:.1f}",
         )
     out.print(table)
-    bias = Table(title="execution bias (fitted jointly to all logs)")
-    for col in ("parameter", "estimate", "std. error", "unit"):
-        bias.add_column(col, justify="left" if col in ("parameter", "unit") else "right")
+    bias = Table(title="execution bias (MAP fit to all logs; unidentified parameters stay neutral)")
+    for col in ("parameter", "estimate", "std. error", "prior", "identified", "unit"):
+        bias.add_column(col, justify="left" if col in ("parameter", "unit", "identified") else "right")
     units = result["bias_fit"]["units"]
     for n, v in result["bias"].items():
-        se = "not identifiable" if v["stderr"] is None else f"{v['stderr']:.2g}"
-        bias.add_row(n, f"{v['estimate']:.4g}", se, units[n])
+        prior = v.get("prior")
+        bias.add_row(
+            n,
+            f"{v['estimate']:.4g}",
+            f"{v['stderr']:.2g}",
+            "-" if prior is None else f"{prior['centre']:g} ± {prior['sd']:g}",
+            "yes" if v["identified"] else "no (neutral)",
+            units[n],
+        )
     out.print(bias)
     ag = result["mode_agreement"]
+    cv = result["cross_validation"]
 
     def pct(v: float | None) -> str:
         return "-" if v is None else f"{v:.0%}"
 
+    held = cv["held_out_mode_agreement"]
     out.print(
-        f"mode agreement: {pct(ag['uncorrected'])} as planned, {pct(ag['corrected'])} with the fitted bias "
+        f"held-out (leave one log out) mode agreement: {pct(held['uncorrected'])} uncorrected, "
+        f"{pct(held['corrected'])} corrected ({held['runs']} runs)",
+        highlight=False,
+        soft_wrap=True,
+    )
+    out.print(result["correction"]["note"], highlight=False, soft_wrap=True)
+    out.print(
+        f"mode agreement: {pct(ag['uncorrected'])} as planned, {pct(ag['corrected'])} with the correction used "
         f"({ag['scenarios']} scenarios with a logged end)",
         highlight=False,
         soft_wrap=True,

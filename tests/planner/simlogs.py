@@ -8,6 +8,7 @@ the reported steps and the set-point flown after each.  The slow tests fly real 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -26,6 +27,12 @@ class SimRun:
     steps: np.ndarray
     setpoints: np.ndarray
     meta: dict = field(default_factory=dict)
+    scores: np.ndarray | None = None  # the batch's score vector of the run
+    path: Path = Path("sim.mcap")
+
+    @property
+    def track(self) -> np.ndarray:
+        return self.steps[:, :6]
 
 
 def sim_runs(mission, U, bias=None, stochastic: bool = False, seed: int = 0, vehicle=None) -> list[SimRun]:
@@ -42,5 +49,5 @@ def sim_runs(mission, U, bias=None, stochastic: bool = False, seed: int = 0, veh
         assert steps.shape[1] == len(STEP_FIELDS)
         sp = np.column_stack([tr[:, _CMD], tr[:, TRAJECTORY_FIELDS.index("surfaced")] * 0.0])
         sp[-1] = np.nan  # nothing is flown after the last step
-        out.append(SimRun(steps, sp, {"mission": mission.name}))
+        out.append(SimRun(steps, sp, {"mission": mission.name}, r.scores[k].copy(), Path(f"run{k}.mcap")))
     return out

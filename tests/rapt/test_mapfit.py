@@ -1,0 +1,93 @@
+"""rapt.mapfit: a MAP fit that says which parameters its data identify, with honest standard errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from rapt.mapfit import IDENTIFIED_BELOW, Prior, fit_map
+
+X = np.linspace(0.0, 10.0, 200)
+
+
+def line_residuals(y: np.ndarray, sigma: float = 0.5):
+    """y = a x + b fitted with a third parameter c the data cannot see."""
+
+    def res(theta: np.ndarray) -> np.ndarray:
+        a, b, _ = theta
+        return (a * X + b - y) / sigma
+
+    return res
+
+
+PRIORS = [Prior("a", 1.0, 0.3, 0.0, 3.0), Prior("b", 0.0, 1.0), Prior("c", 0.0, 1.0, -5.0, 5.0)]
+
+
+def test_identified_parameters_are_estimated_and_an_unseen_one_stays_at_its_prior():
+    y = 1.3 * X + 0.4 + np.random.default_rng(0).normal(0, 0.5, X.size)
+    fit = fit_map(line_residuals(y), PRIORS)
+    assert fit.identified == {"a": True, "b": True, "c": False}
+    assert fit.value["a"] == pytest.approx(1.3, abs=3 * fit.stderr["a"])
+    assert fit.value["b"] == pytest.approx(0.4, abs=3 * fit.stderr["b"])
+    assert fit.value["c"] == 0.0  # kept at the prior's centre for prediction
+    assert fit.stderr["c"] == pytest.approx(1.0, rel=1e-3)  # its posterior is its prior
+    assert fit.stderr["a"] < IDENTIFIED_BELOW * 0.3
+
+
+def test_of_two_confounded_parameters_the_one_the_data_explain_better_is_kept():
+    # b and d enter as b + 0.98 d: neither alone is identified with both free; fixing the
+    # one the data explain least (d, whose prior is narrow) leaves b identified
+    y = 1.0 * X + 0.8 + np.random.default_rng(1).normal(0, 0.05, X.size)
+
+    def res(theta):
+        a, b, d = theta
+        return (a * X + b + 0.98 * d - y) / 0.05
+
+    fit = fit_map(res, [Prior("a", 1.0, 0.3), Prior("b", 0.0, 1.0), Prior("d", 0.0, 0.05)])
+    assert fit.identified["b"] and not fit.identified["d"]
+    assert fit.value["b"] == pytest.approx(0.8, abs=0.05)
+    assert fit.value["d"] == 0.0
+
+
+def test_block_bootstrap_widens_errors_that_are_correlated_within_groups():
+    rng = np.random.default_rng(2)
+    groups = np.repeat(np.arange(20), 10)
+    shared = rng.normal(0, 1.0, 20)[groups]  # each group of 10 residuals moves together
+    y = 1.3 * X + shared + rng.normal(0, 0.1, X.size)
+    res = line_residuals(y, 0.1)
+    plain = fit_map(res, PRIORS)
+    robust = fit_map(res, PRIORS, groups=groups, bootstrap=60, seed=0)
+    assert robust.stderr["b"] > 3 * plain.stderr["b"]
+    assert robust.bootstrap == 60
+    assert abs(robust.value["b"]) < 3 * robust.stderr["b"]  # the truth (0) is covered
+
+
+def test_each_kind_of_residual_gets_its_own_noise_scale():
+    rng = np.random.default_rng(3)
+    precise = 2.0 * X + rng.normal(0, 0.01, X.size)
+    noisy = 2.0 * X + rng.normal(0, 5.0, X.size)
+
+    def res(theta):
+        return np.concatenate([theta[0] * X - precise, theta[0] * X - noisy])
+
+    kinds = np.repeat(["precise", "noisy"], X.size)
+    fit = fit_map(res, [Prior("a", 1.0, 2.0)], kinds=kinds)
+    assert fit.noise_scale["precise"] == pytest.approx(0.01, rel=0.3)
+    assert fit.noise_scale["noisy"] == pytest.approx(5.0, rel=0.3)
+    assert fit.stderr["a"] < 1e-3  # the precise kind is not drowned by the noisy one
+
+
+def test_draws_vary_only_identified_parameters_and_respect_bounds():
+    y = 1.3 * X + np.random.default_rng(4).normal(0, 0.5, X.size)
+    fit = fit_map(line_residuals(y), PRIORS)
+    d = fit.draws(50, seed=1)
+    assert d.shape == (50, 3)
+    assert np.all(d[:, 2] == 0.0) and np.std(d[:, 0]) > 0
+    assert np.array_equal(d, fit.draws(50, seed=1))  # seeded
+
+
+def test_a_prior_without_width_or_with_its_centre_outside_its_bounds_is_refused():
+    with pytest.raises(ValueError, match="sd must be a positive"):
+        Prior("a", 0.0, 0.0)
+    with pytest.raises(ValueError, match="outside"):
+        Prior("a", 5.0, 1.0, 0.0, 1.0)
