@@ -10,7 +10,9 @@ costs.  :func:`calibrate` fits the observable properties of the ``[vehicle]`` bl
   the logged state (:mod:`planner.segments`), so no autonomy decision sits inside a
   prediction and the fit is smooth in the parameters;
 - the residuals are the predicted minus logged positions (:data:`SIGMA_POSITION_M`),
-  headings (wrapped, :data:`SIGMA_HEADING_DEG`) and energy used (:data:`SIGMA_ENERGY_WH`);
+  headings (wrapped, :data:`SIGMA_HEADING_DEG`) and energy used (:data:`SIGMA_ENERGY_WH`),
+  each kind weighted by its own robust noise scale, so a precise kind is not drowned by
+  a noisy one;
 - the estimate is the maximum a posteriori fit of :func:`rapt.mapfit.fit_map` under one
   prior per property centred on the file's value, :data:`PRIOR_SHARE` of it wide (what a
   test engineer would accept a datasheet to be off by), with standard errors that hold
@@ -268,6 +270,7 @@ def fit_vehicle(
         residuals,
         vehicle_priors(base, names),
         groups=np.concatenate([blocks] * 4),
+        kinds=np.repeat(np.array(["position", "position", "heading", "energy"]), per_step.size),
         bootstrap=bootstrap,
         seed=seed,
     )
