@@ -37,8 +37,8 @@ def calibrate(
         except ValueError as exc:
             fail(str(exc))
     table = Table(title=f"[vehicle] calibrated from {result.runs} run(s), {result.segments} segments")
-    for col in ("parameter", "file value", "calibrated", "std. error", "unit", "identified"):
-        table.add_column(col, justify="left" if col in ("parameter", "unit", "identified") else "right")
+    for col in ("parameter", "file", "calibrated", "s.e.", "unit", "identified"):
+        table.add_column(col, justify="left" if col in ("parameter", "unit", "identified") else "right", no_wrap=True)
     est = result.estimate
     for n in result.fitted:
         ident = est.identified[n]
@@ -48,9 +48,12 @@ def calibrate(
             f"{getattr(result.vehicle, n):.5g}" if ident else "(kept)",
             f"{result.stderr[n]:.2g}" if ident else "-",
             UNITS[n],
-            "yes" if ident else "no: file value kept",
+            "yes" if ident else "no",
         )
     out.print(table)
+    kept = [n for n in result.fitted if not est.identified[n]]
+    if kept:
+        out.print(f"not identified by these logs, file value kept: {', '.join(kept)}", highlight=False, soft_wrap=True)
     b, a = result.rms_before, result.rms_after
     out.print(
         f"segment residual RMS, file vehicle -> calibrated: position {b['position_m']:.3g} -> {a['position_m']:.3g} m, "
