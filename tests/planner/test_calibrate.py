@@ -22,7 +22,9 @@ from planner.calibrate import FITTED, MIN_LOGS, calibrate, calibrated_text, fit_
 from planner.logs import LogError
 from planner.segments import MAX_SETPOINT_DELAY_S, replay, segment_batch
 from rapt.errors import InputError
+from sim.uuv.environment import tidal_current
 from sim.uuv.scenario import make_scenarios
+from sim.uuv.vehicle import VehicleState, step_vehicle
 from tests.planner.simlogs import sim_runs
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -239,3 +241,44 @@ def test_a_step_whose_set_point_came_late_is_not_replayed(true_mission, flown):
     cut = segment_batch(true_mission, [run], starts[:1])
     assert int(full.valid.sum()) - int(cut.valid.sum()) == 2
     assert not np.isin(cut.t[cut.valid], [run.steps[10, 0], run.steps[11, 0]]).any()
+
+
+def _continuous_vehicle_runs(mission, runs, starts, vehicle, substep: float = 0.1, steps: int = 900) -> list:
+    """What a vehicle-paced log of another, continuously moving vehicle holds: each run's first
+    ``steps`` set-points flown in ``substep`` s steps, ground speed in the speed column,
+    positions to the centimetre, energy in whole hectojoules."""
+    out = []
+    for run, t0 in zip(runs, starts):
+        s, sp = run.steps[:steps].copy(), run.setpoints[:steps]
+        v = VehicleState.at_rest(s[:1, 1], s[:1, 2], s[:1, 3], np.array([1000.0]))
+        one = np.ones(1, dtype=bool)
+        n_sub = int(round(mission.dt / substep))
+        for k in range(s.shape[0] - 1):
+            x0, y0 = v.x[0], v.y[0]
+            for q in range(n_sub):
+                ce, cn = tidal_current(mission.current, t0 + s[k, 0] + q * substep)
+                step_vehicle(v, vehicle, sp[k, :1], sp[k, 1:2], ce, cn, substep, one)
+            s[k + 1, 1:4] = np.round(v.x[0], 2), np.round(v.y[0], 2), v.heading[0]
+            s[k + 1, 4] = np.floor((1000.0 - v.energy_wh[0]) * 36.0)
+            s[k + 1, 6] = np.hypot(v.x[0] - x0, v.y[0] - y0) / mission.dt  # ground speed, as GLOBAL_POSITION_INT
+            s[k + 1, 7] = v.yaw_rate[0]
+        out.append(dataclasses.replace(run, steps=s, setpoints=sp, meta={**run.meta, "pacing": "vehicle"}))
+    return out
+
+
+def test_a_continuously_moving_vehicle_of_another_block_is_recovered(true_mission, flown):
+    """Not our simulator's 2 s steps: a vehicle flown in 0.1 s steps, logged as a real vehicle logs."""
+    _, runs, starts = flown
+    other = dataclasses.replace(
+        true_mission.vehicle, speed_gain=0.8, max_turn_rate_dps=8.0, yaw_time_constant_s=5.0, hotel_w=60.0, drag_w=220.0
+    )
+    logged = _continuous_vehicle_runs(true_mission, runs[:2], starts[:2], other)
+    cal = fit_vehicle(true_mission, logged, starts[:2], bootstrap=0)
+    for n in FITTED:
+        if n == "max_speed":
+            assert not cal.estimate.identified[n]
+            continue
+        assert cal.estimate.identified[n], n
+        assert getattr(cal.vehicle, n) == pytest.approx(getattr(other, n), rel=0.1), n
+        assert abs(getattr(cal.vehicle, n) - getattr(other, n)) < 3 * cal.stderr[n], n  # honest s.e.
+    assert cal.model_share > 0
