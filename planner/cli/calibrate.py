@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
+from rich.markup import escape
 from rich.table import Table
 
 from planner.cli.console import err, fail, out
@@ -36,7 +37,7 @@ def calibrate(
             result = run_calibrate(mission, logs, out_path, seed=seed)
         except ValueError as exc:
             fail(str(exc))
-    table = Table(title=f"[vehicle] calibrated from {result.runs} run(s), {result.segments} segments")
+    table = Table(title=escape(f"[vehicle] calibrated from {result.runs} run(s), {result.segments} segments"))
     for col in ("parameter", "file", "calibrated", "s.e.", "unit", "identified"):
         table.add_column(col, justify="left" if col in ("parameter", "unit", "identified") else "right", no_wrap=True)
     est = result.estimate

@@ -101,7 +101,13 @@ def test_calibrate_recovers_the_true_vehicle_block_from_sil_logs(flown):
         assert getattr(cal.vehicle, n) == pytest.approx(getattr(true, n), rel=0.1), n
         assert p["stderr"] < 0.05 * getattr(true, n), n
     assert side["residual_rms"]["after"]["position_m"] < 0.05 * side["residual_rms"]["before"]["position_m"]
-    for word in ("surge_time_constant_s", "drag_w", "file value kept: max_speed", "calibrated.json written"):
+    for word in (
+        "[vehicle] calibrated from 4 run(s)",
+        "surge_time_constant_s",
+        "drag_w",
+        "file value kept: max_speed",
+        "calibrated.json written",
+    ):
         assert word in flown["output"], flown["output"]
 
 
