@@ -67,6 +67,9 @@ class LoggedRun:
     problems: list[str] = field(default_factory=list)
     messages: int = 0
     events: list[dict] = field(default_factory=list)  # bring-up steps, watchdog interventions, the referee's end
+    # (n,) vehicle seconds from each step to the set-point flown after it reaching the bus: 0 on a
+    # lock-step front-seat (it waits for it), inf where no set-point answered this very step, NaN: none
+    setpoint_delay_s: np.ndarray | None = None
 
     @property
     def track(self) -> np.ndarray:
@@ -111,6 +114,7 @@ class _PacedSteps:
         self.period_ms = int(round(dt * 1000))
         self.sampler: TrackSampler | None = None
         self.ended = ""
+        self.row_log_ns: list[int] = []  # log time of the report that opened each row
 
     def begin(self, start_ms: int) -> None:
         self.sampler = TrackSampler(self.telemetry, start_ms, self.period_ms)
@@ -119,10 +123,10 @@ class _PacedSteps:
     def rows(self) -> list:
         return self.sampler.rows if self.sampler is not None else []
 
-    def add(self, msg) -> None:
+    def add(self, msg, log_ns: int = 0) -> None:
         if self.telemetry.add(msg) == "position" and self.sampler is not None and self.telemetry.pose is not None:
-            if not self.ended:
-                self.sampler.add(self.telemetry.pose)
+            if not self.ended and self.sampler.add(self.telemetry.pose) is not None:
+                self.row_log_ns.append(int(log_ns))
 
 
 #: MAVLink message ids a run's track needs (everything else on /mavlink/raw is skipped unparsed).
@@ -168,6 +172,8 @@ class RunLogReader:
         self.parser.robust_parsing = True
         self.meta: dict = {}
         self.commands: dict[str, dict[int, tuple[float, float, float, float]]] = {}
+        self.command_log_ns: dict[str, dict[int, int]] = {}  # first log time of each tick's set-point
+        self.log_ns = 0  # log time of the message being read
         self.status: dict = {}
         self.active = keys.DEFAULT_ACTIVE
         self.problems: list[str] = []
@@ -198,6 +204,7 @@ class RunLogReader:
         if rows.shape[0] == 0:
             self.problems.append("no complete telemetry step in the log")
         source, setpoints = self._setpoints(rows)
+        delay = self._setpoint_delay(rows, source, setpoints)
         status = self.status
         st = status.get(source or keys.DEFAULT_ACTIVE) or (next(iter(status.values())) if status else {})
         if not steps.ended:
@@ -215,6 +222,7 @@ class RunLogReader:
             self.problems,
             self.n_messages,
             self.events,
+            delay,
         )
 
     # -- the file ----------------------------------------------------------------------
@@ -276,6 +284,7 @@ class RunLogReader:
         if ch is None:
             return
         self.n_messages += 1
+        self.log_ns = int(msg.log_time)
         if ch.topic == RAW_TOPIC:
             self.on_raw(msg)
             return
@@ -297,7 +306,10 @@ class RunLogReader:
         """A vehicle MAVLink frame: telemetry of the track and the run's end."""
         m = _decode_frame(self.parser, bytes(msg.data))
         if m is not None:
-            (self.paced or self.steps).add(m)
+            if self.paced is not None:
+                self.paced.add(m, self.log_ns)
+            else:
+                self.steps.add(m)
 
     def on_meta(self, name: str, obj) -> None:
         if name == "scenario" and isinstance(obj, dict):
@@ -312,6 +324,7 @@ class RunLogReader:
     def on_command(self, name: str, obj) -> None:
         """A back-seat set-point of source ``name``, by the step (tick) it answers."""
         if isinstance(obj, dict) and obj.get("tick_ms") is not None:
+            self.command_log_ns.setdefault(name, {}).setdefault(int(obj["tick_ms"]), self.log_ns)
             self.commands.setdefault(name, {})[int(obj["tick_ms"])] = (
                 float(obj["vx"]),
                 float(obj["vy"]),
@@ -338,6 +351,32 @@ class RunLogReader:
                 self.active = value
 
     # -- set-points ---------------------------------------------------------------------
+    def _setpoint_delay(self, rows: np.ndarray, source: str | None, setpoints: np.ndarray) -> np.ndarray:
+        """Per step, vehicle seconds until the set-point answering it reached the bus (see :class:`LoggedRun`).
+
+        A vehicle-paced front-seat flies the previous set-point until the next arrives (and
+        stops 3 s after the last one): a step answered late, or not at all, was not flown
+        on its logged set-point.  Bus arrival times (log time) are put on the vehicle's
+        clock through the log times of the reports that opened the steps.
+        """
+        n = rows.shape[0]
+        delay = np.where(np.isfinite(setpoints[:, 1]), 0.0, np.nan) if n else np.zeros(0)
+        paced = self.paced
+        if paced is None or source is None or not n or len(paced.row_log_ns) != n:
+            return delay
+        first = self.command_log_ns.get(source, {})
+        step_ms = np.round(rows[:, 0] * 1000).astype(np.int64) + self.start_ms
+        wall = np.array(paced.row_log_ns, dtype=float)
+        for k in range(n):
+            if not np.isfinite(setpoints[k, 1]):
+                continue
+            at = first.get(int(step_ms[k]))
+            if at is None:  # the back-seat did not answer this step: the vehicle flew an older set-point
+                delay[k] = np.inf
+            else:
+                delay[k] = max(0.0, float(np.interp(float(at), wall, rows[:, 0])) - rows[k, 0])
+        return delay
+
     def _setpoints(self, rows: np.ndarray) -> tuple[str | None, np.ndarray]:
         """The source flown (the active one, else the one with most set-points) and, per step, the
         set-point the front-seat flew after it (NaN where none)."""

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import typer
 
-from planner.cli import compare, generate, processes, run, search, selfright, surrogate
+from planner.cli import calibrate, compare, generate, processes, run, search, selfright, surrogate
 from planner.cli.console import print_error
 from rapt.errors import RaptError
 
@@ -34,6 +34,7 @@ app.command("run")(run.run)
 app.command("generate")(generate.generate)
 app.command("surrogate")(surrogate.surrogate)
 app.command("compare")(compare.compare)
+app.command("calibrate")(calibrate.calibrate)
 app.command("frontseat")(processes.frontseat)
 app.command("bridge")(processes.bridge)
 app.command("autonomy")(processes.autonomy)

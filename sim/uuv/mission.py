@@ -87,6 +87,9 @@ class Transmission:
 class Vehicle:
     """A torpedo UUV: speeds, a 3-DOF manoeuvring model, battery and sensors.
 
+    The speed loop drives the through-water surge towards ``speed_gain`` times the
+    commanded speed, at most ``max_speed`` (1: the vehicle reaches what it is asked; a
+    vehicle without a speed loop, e.g. a thruster-throttle ROV, reaches a fixed share).
     Propulsion power is ``drag_w * (speed / cruise_speed)^3`` plus ``hotel_w``; the
     battery starts at ``start_battery`` of ``battery_wh``.  The autonomy returns home when
     its estimate of the energy to get there, times ``reserve_factor``, reaches the charge
@@ -109,6 +112,7 @@ class Vehicle:
     sonar_fov_deg: float = 120.0
     ins_drift_m_per_s: float = 0.05
     gps_sigma_m: float = 3.0
+    speed_gain: float = 1.0
 
 
 @dataclass(frozen=True)

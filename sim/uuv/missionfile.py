@@ -34,7 +34,9 @@ centre.  Keys marked ``=value`` are optional with that default; the others are r
     [[nogo]]                      # name, x, y, width=400, height=500
     [[barriers]]                  # name, x, y, width=40, height=700
     [[obstacles]]                 # name, x, y, side=50  (equilateral triangle)
-    [vehicle]                     # optional overrides of sim.uuv.mission.Vehicle fields
+    [vehicle]                     # optional overrides of sim.uuv.mission.Vehicle fields, e.g.
+                                  #   speed_gain=1: through-water speed reached per unit commanded
+                                  #   (at most max_speed); rapt-plan calibrate fits it from logs
     [current]                     # optional overrides of sim.uuv.mission.Current fields
 
     [[parameters]]                # one per state-space parameter, in state-space order
@@ -569,7 +571,16 @@ class _Loader:
                 values[key] = v
         obj = dataclasses.replace(defaults, **values)
         if cls is Vehicle:
-            for key in ("cruise_speed", "max_speed", "battery_wh"):
+            positive = (
+                "cruise_speed",
+                "max_speed",
+                "battery_wh",
+                "speed_gain",
+                "surge_time_constant_s",
+                "yaw_time_constant_s",
+                "max_turn_rate_dps",
+            )
+            for key in positive:
                 if getattr(obj, key) <= 0:
                     self.fail(f"vehicle.{key}", f"{_fmt(getattr(obj, key))} must be > 0; give a positive number")
             for key in ("start_battery", "critical_battery"):

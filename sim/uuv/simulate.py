@@ -20,7 +20,7 @@ from sim.uuv.environment import tidal_current
 from sim.uuv.geometry import rect_signed_distance
 from sim.uuv.interface import decode_command, encode_command
 from sim.uuv.metrics import metric_names, metric_types
-from sim.uuv.mission import Mission
+from sim.uuv.mission import Mission, Vehicle
 from sim.uuv.scenario import Scenarios, make_scenarios
 from sim.uuv.scoring import MODE_NAMES, Scorer, modes_from_scores
 from sim.uuv.world import Telemetry, World, scenario_generators
@@ -80,6 +80,7 @@ def simulate(
     trajectories: bool = False,
     bias=None,
     surrogate=None,
+    plant: Vehicle | None = None,
 ) -> Result:
     """Simulate unit-cube scenarios ``X`` (N, mission.dim) of ``mission``.
 
@@ -89,6 +90,10 @@ def simulate(
     with a biased vehicle and range while the autonomy plans unbiased; None or the
     neutral bias gives exactly the unbiased results.  ``surrogate`` (a
     :class:`sim.uuv.imitation.surrogate.Surrogate`) flies the vehicles in place of the expert.
+    ``plant`` (a :class:`sim.uuv.mission.Vehicle`) flies the vehicles with its dynamics,
+    power and battery while the autonomy plans with ``mission.vehicle``: how runs of the
+    plan's autonomy go on a vehicle calibrated from logs (``rapt-plan calibrate``); None or
+    a plant equal to ``mission.vehicle`` gives exactly the results without one.
     """
     scen = make_scenarios(mission, X)
     names, types = metric_names(mission), metric_types(mission)
@@ -103,6 +108,7 @@ def simulate(
             rngs,
             trajectories,
             bias_arrays(bias, scen.n).select(rows),
+            plant=plant,
             **({} if surrogate is None else surrogate.driver_options()),
         )
         scores[rows] = got
@@ -134,6 +140,7 @@ def run_scenarios(
     driver=None,
     scan_beams: int = 0,
     on_step=None,
+    plant: Vehicle | None = None,
 ) -> tuple[np.ndarray, list[np.ndarray]]:
     """Step valid scenarios to the end; returns (scores, trajectories).
 
@@ -142,10 +149,11 @@ def run_scenarios(
     ``driver(scen)`` builds another back-seat in place of the expert :class:`Autonomy`
     (a learned one needs ``scan_beams``); ``on_step(obs, cmd, active, driver)`` sees every
     decision (the batch is then never compacted, so rows keep their place).
+    ``plant`` is the vehicle the world flies (default ``scen.mission.vehicle``; see :func:`simulate`).
     """
     m = scen.mission
     dt, n = m.dt, scen.n
-    world = World(scen, rngs, bias, scan_beams)
+    world = World(scen, rngs, bias, scan_beams, plant)
     autonomy = Autonomy(scen) if driver is None else driver(scen)
     scorer = Scorer(scen)
     active = np.ones(n, dtype=bool)

@@ -63,14 +63,14 @@ def step_vehicle(
     speed_cmd: np.ndarray,
     current_e: np.ndarray,
     current_n: np.ndarray,
-    dt: float,
+    dt: float | np.ndarray,
     moving: np.ndarray,
     *,
     speed_scale=1.0,
     course_bias=0.0,
     energy_scale=1.0,
 ) -> None:
-    """Advance every ``moving`` vehicle by ``dt`` seconds in place (the others stay frozen).
+    """Advance every ``moving`` vehicle by ``dt`` seconds (one, or one per vehicle) in place; the others stay frozen.
 
     Execution bias (:mod:`sim.uuv.bias`): ``speed_scale`` multiplies the speed the vehicle
     achieves, ``course_bias`` (radians) turns its track through water clockwise of its
@@ -83,7 +83,9 @@ def step_vehicle(
     a_u = 1.0 - np.exp(-dt / spec.surge_time_constant_s)
     a_v = 1.0 - np.exp(-dt * spec.sway_damping)
     r = s.yaw_rate + (r_des - s.yaw_rate) * a_r
-    u = s.surge + (np.clip(speed_cmd, 0.0, spec.max_speed) * speed_scale - s.surge) * a_u
+    # the speed loop's target: speed_gain x the command, at most max_speed (gain 1: clip(cmd, 0, max_speed))
+    target = np.minimum(spec.speed_gain * np.maximum(speed_cmd, 0.0), spec.max_speed)
+    u = s.surge + (target * speed_scale - s.surge) * a_u
     v = s.sway + (-SWAY_COUPLING * u * r - s.sway) * a_v
     psi = wrap_angle(s.heading + r * dt)
     course = psi + course_bias

@@ -17,6 +17,7 @@ import numpy as np
 from sim.uuv.bias import bias_arrays
 from sim.uuv.environment import tidal_current
 from sim.uuv.interface import battery_fraction, energy_consumed_hj, report_heading, report_position
+from sim.uuv.mission import Vehicle
 from sim.uuv.navigation import Navigation
 from sim.uuv.scenario import Scenarios
 from sim.uuv.sonar import scan, sense
@@ -92,11 +93,20 @@ class World:
     ``bias`` (one :class:`sim.uuv.bias.Bias`, or one per scenario) makes the vehicles behave
     like biased real ones; the autonomy never sees it.  ``scan_beams`` > 0 adds a
     360-degree range scan to the telemetry (what a learned back-seat sees, section 6.5.3).
+    ``plant`` (a :class:`sim.uuv.mission.Vehicle`, default the mission's) is the vehicle that
+    actually flies: its dynamics, power, battery and sensors; the autonomy keeps the mission's.
     """
 
-    def __init__(self, scen: Scenarios, rngs: list[np.random.Generator] | None = None, bias=None, scan_beams: int = 0):
+    def __init__(
+        self,
+        scen: Scenarios,
+        rngs: list[np.random.Generator] | None = None,
+        bias=None,
+        scan_beams: int = 0,
+        plant: Vehicle | None = None,
+    ):
         m = scen.mission
-        self.scen, self.mission, self.spec = scen, m, m.vehicle
+        self.scen, self.mission, self.spec = scen, m, m.vehicle if plant is None else plant
         n = scen.n
         lx, ly = m.launch
         heading0 = np.arctan2(m.waypoints[0][0] - lx, m.waypoints[0][1] - ly) if m.waypoints else 0.0

@@ -1,0 +1,66 @@
+"""``rapt-plan calibrate``: fit a mission's vehicle block to run logs and write a calibrated mission file."""
+
+from __future__ import annotations
+
+from contextlib import nullcontext
+from pathlib import Path
+from typing import Annotated
+
+import typer
+from rich.markup import escape
+from rich.table import Table
+
+from planner.cli.console import err, fail, out
+
+__all__ = ["calibrate"]
+
+
+def calibrate(
+    mission: Annotated[Path, typer.Argument(help="The mission file (.toml) whose [vehicle] block is calibrated.")],
+    logs: Annotated[list[Path], typer.Argument(help="MCAP logs of runs of this mission (SIL or a real vehicle).")],
+    out_path: Annotated[
+        Path, typer.Option("--out", help="Calibrated mission file to write (a .json sidecar is written beside it).")
+    ] = Path("calibrated.toml"),
+    seed: Annotated[int, typer.Option(help="Seed of the bootstrap behind the standard errors.")] = 0,
+) -> None:
+    """Fit the vehicle's speed, turn and power terms to logs; write a mission file the planner can use."""
+    from planner.calibrate import UNITS, sidecar_path
+    from planner.calibrate import calibrate as run_calibrate
+
+    if not mission.is_file():
+        fail(f"MISSION: {mission} does not exist; give the mission file (.toml) the runs were flown on")
+    for p in logs:
+        if not p.is_file():
+            fail(f"LOGS: {p} does not exist; give the .mcap files of the mission's runs")
+    with err.status("calibrating", spinner="dots") if err.is_terminal else nullcontext():
+        try:
+            result = run_calibrate(mission, logs, out_path, seed=seed)
+        except ValueError as exc:
+            fail(str(exc))
+    table = Table(title=escape(f"[vehicle] calibrated from {result.runs} run(s), {result.segments} segments"))
+    for col in ("parameter", "file", "calibrated", "s.e.", "unit", "identified"):
+        table.add_column(col, justify="left" if col in ("parameter", "unit", "identified") else "right", no_wrap=True)
+    est = result.estimate
+    for n in result.fitted:
+        ident = est.identified[n]
+        table.add_row(
+            n,
+            f"{getattr(result.original, n):.5g}",
+            f"{getattr(result.vehicle, n):.5g}" if ident else "(kept)",
+            f"{result.stderr[n]:.2g}" if ident else "-",
+            UNITS[n],
+            "yes" if ident else "no",
+        )
+    out.print(table)
+    kept = [n for n in result.fitted if not est.identified[n]]
+    if kept:
+        out.print(f"not identified by these logs, file value kept: {', '.join(kept)}", highlight=False, soft_wrap=True)
+    b, a = result.rms_before, result.rms_after
+    out.print(
+        f"segment residual RMS, file vehicle -> calibrated: position {b['position_m']:.3g} -> {a['position_m']:.3g} m, "
+        f"heading {b['heading_deg']:.3g} -> {a['heading_deg']:.3g} deg, energy {b['energy_wh']:.3g} -> "
+        f"{a['energy_wh']:.3g} Wh",
+        highlight=False,
+        soft_wrap=True,
+    )
+    out.print(f"{out_path} and {sidecar_path(out_path)} written", highlight=False, soft_wrap=True)
