@@ -14,7 +14,10 @@ against what was logged: mode agreement (observed mode = the logged track scored
 mission's scorer) and RMS path error (distance at the same scenario times).  Then the
 halves swap.  Fitted versus true values are printed too.
 
-Run:  python benchmarks/calibrate.py [--speedup 10] [--jobs 2] [--work DIR]
+Run:  python benchmarks/calibrate.py [--speedup 10] [--jobs 2] [--work DIR] [--quick]
+
+``--quick``: a 2-pair plan (4 scenarios) at speed-up 25, each flight cut after 30 s wall
+(about 750 vehicle seconds); the fit and its residuals only, no modes.
 
 ``--work`` keeps the plan and logs; run again with it, only what is missing there is flown.  At
 speed-up 10 each scenario takes up to 4.5 minutes of wall time; two fly side by side.  A
@@ -50,6 +53,8 @@ TRUE_VEHICLE = {
     "hotel_w": 60.0,
     "drag_w": 220.0,
 }
+#: --quick: wall seconds each flight is cut at (calibration needs segments, not ends).
+QUICK_CUT_S = 30.0
 
 
 def _rapt_plan() -> list[str]:
@@ -68,8 +73,8 @@ def other_vehicle_mission(path: Path) -> Path:
     return path
 
 
-def make_plan(work: Path, seed: int = 0) -> Path:
-    """A small plan of the mission (budget 1000, 4 pairs, no dithers) in ``work/plan``."""
+def make_plan(work: Path, seed: int = 0, pairs: int = 4) -> Path:
+    """A small plan of the mission (budget 1000, ``pairs`` pairs, no dithers) in ``work/plan``."""
     import sim.uuv
     from planner.generate import GenerateConfig, generate
 
@@ -79,13 +84,16 @@ def make_plan(work: Path, seed: int = 0) -> Path:
             sim.uuv.load_mission(MISSION),
             MISSION,
             plan_dir,
-            GenerateConfig(budget=1000, batch_size=250, dithers=0, pairs=4, seed=seed),
+            GenerateConfig(budget=1000, batch_size=250, dithers=0, pairs=pairs, seed=seed),
         )
     return plan_dir / "plan.json"
 
 
-def fly(plan_json: Path, vehicle_toml: Path, sid: str, u: np.ndarray, log: Path, speedup: float) -> str:
-    """One scenario on the bare front-seat running ``vehicle_toml``; returns "" or what went wrong."""
+def fly(
+    plan_json: Path, vehicle_toml: Path, sid: str, u: np.ndarray, log: Path, speedup: float, cut_s: float | None = None
+) -> str:
+    """One scenario on the bare front-seat running ``vehicle_toml`` (stopped after ``cut_s`` wall seconds
+    when given); returns "" or what went wrong."""
     from planner.sil import free_port
 
     port = free_port()
@@ -103,7 +111,7 @@ def fly(plan_json: Path, vehicle_toml: Path, sid: str, u: np.ndarray, log: Path,
         env=env,
     )
     try:
-        limit = 2700 / speedup * 1.5 + 120
+        limit = cut_s if cut_s is not None else 2700 / speedup * 1.5 + 120
         tmp = log.with_suffix(".partial.mcap")
         run = subprocess.run(
             _rapt_plan()
@@ -139,13 +147,15 @@ def _observed(mission, u, run) -> str | None:
     return mode_name(score_track(mission, u, run.track, run.wp_aborted, run.return_reason))
 
 
-def fly_checked(plan_json: Path, vehicle_toml: Path, sid: str, u: np.ndarray, log: Path, speedup: float) -> str:
+def fly_checked(
+    plan_json: Path, vehicle_toml: Path, sid: str, u: np.ndarray, log: Path, speedup: float, cut_s: float | None = None
+) -> str:
     """:func:`fly`, once more when the watchdog ended the run (the rig fell behind the vehicle's clock)."""
     from planner.logs import read_run
 
     error = ""
     for _ in range(2):
-        error = fly(plan_json, vehicle_toml, sid, u, log, speedup)
+        error = fly(plan_json, vehicle_toml, sid, u, log, speedup, cut_s)
         if error or not read_run(log).ended.startswith("watchdog"):
             return error
         error = f"ended by the watchdog ({read_run(log).ended})"
@@ -160,7 +170,7 @@ def _path_rms(track: np.ndarray, pred: np.ndarray | None) -> float:
     return float(np.sqrt(np.mean((track[:n, 1] - pred[:n, 1]) ** 2 + (track[:n, 2] - pred[:n, 2]) ** 2)))
 
 
-def evaluate(plan_json: Path, logs: dict[str, Path], work: Path, seed: int = 0) -> dict:
+def evaluate(plan_json: Path, logs: dict[str, Path], work: Path, seed: int = 0, modes: bool = True) -> dict:
     """Calibrate on each half, predict the other; returns the rows and the fitted values per fold."""
     import sim.uuv
     from planner.calibrate import FITTED, calibrate
@@ -188,7 +198,7 @@ def evaluate(plan_json: Path, logs: dict[str, Path], work: Path, seed: int = 0) 
             rows.append(
                 {
                     "scenario": sid,
-                    "observed": _observed(m, plan.u(sid), run),
+                    "observed": _observed(m, plan.u(sid), run) if modes else None,
                     "before": MODE_NAMES[before.modes[i]],
                     "after": MODE_NAMES[after.modes[i]],
                     "path_before_m": _path_rms(run.track, before.trajectory(i)),
@@ -212,20 +222,21 @@ def evaluate(plan_json: Path, logs: dict[str, Path], work: Path, seed: int = 0) 
     return {"folds": folds, "file": dataclasses.asdict(m.vehicle)}
 
 
-def rows(speedup: float = 10.0, jobs: int = 2, work: Path | None = None, seed: int = 0) -> dict:
+def rows(speedup: float = 10.0, jobs: int = 2, work: Path | None = None, seed: int = 0, quick: bool = False) -> dict:
     """Fly (what is missing in ``work``), calibrate and predict: :func:`evaluate`'s result plus flight notes."""
     import sim.uuv  # noqa: F401  (imported before the pool, once)
     from planner.plans import load_plan
 
     work = Path(work) if work is not None else Path(tempfile.mkdtemp(prefix="rapt_calibrate_"))
     work.mkdir(parents=True, exist_ok=True)
-    plan_json = make_plan(work, seed)
+    plan_json = make_plan(work, seed, pairs=2 if quick else 4)
     vehicle_toml = other_vehicle_mission(work / "other_vehicle.toml")
     plan = load_plan(plan_json)
     ids = [s["id"] for s in plan.scenarios]
     logs_dir = work / "logs"
     logs_dir.mkdir(exist_ok=True)
     todo = [sid for sid in ids if not (logs_dir / f"{sid}.mcap").is_file()]
+    cut = QUICK_CUT_S if quick else None
     started = time.perf_counter()
     with ThreadPoolExecutor(max_workers=max(1, jobs)) as pool:
         errors = dict(
@@ -233,7 +244,7 @@ def rows(speedup: float = 10.0, jobs: int = 2, work: Path | None = None, seed: i
                 todo,
                 pool.map(
                     lambda sid: fly_checked(
-                        plan_json, vehicle_toml, sid, plan.u(sid), logs_dir / f"{sid}.mcap", speedup
+                        plan_json, vehicle_toml, sid, plan.u(sid), logs_dir / f"{sid}.mcap", speedup, cut
                     ),
                     todo,
                 ),
@@ -241,7 +252,7 @@ def rows(speedup: float = 10.0, jobs: int = 2, work: Path | None = None, seed: i
         )
     flown_s = time.perf_counter() - started
     logs = {sid: logs_dir / f"{sid}.mcap" for sid in ids if (logs_dir / f"{sid}.mcap").is_file()}
-    result = evaluate(plan_json, logs, work, seed)
+    result = evaluate(plan_json, logs, work, seed, modes=not quick)
     result.update({"work": str(work), "flight_errors": {k: v for k, v in errors.items() if v}, "flown_s": flown_s})
     return result
 
@@ -314,12 +325,18 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--jobs", type=int, default=2)
     ap.add_argument("--work", type=Path, default=None, help="Directory for the plan, logs and calibrated files.")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument(
+        "--quick", action="store_true", help="4 scenarios, each cut after 30 s wall: the fit only, no modes (~2 min)"
+    )
     args = ap.parse_args(argv)
-    result = rows(args.speedup, args.jobs, args.work, args.seed)
+    if args.quick and args.speedup == 10.0:
+        args.speedup = 25.0
+    result = rows(args.speedup, args.jobs, args.work, args.seed, quick=args.quick)
     if result["flight_errors"]:
         for sid, e in result["flight_errors"].items():
             print(f"warning: {sid}: {e}", file=sys.stderr)
-    print(f"# Vehicle calibration (8 scenarios on the bare front-seat at speed-up {args.speedup:g}; "
+    n = len(result["folds"][0]["rows"]) * 2
+    print(f"# Vehicle calibration ({n} scenarios on the bare front-seat at speed-up {args.speedup:g}; "
           f"{result['flown_s']:.0f} s flying what was missing; work in {result['work']})\n")  # fmt: skip
     print(report(result))
     print(fitted_table(result))
