@@ -112,6 +112,8 @@ PRIOR_SD_FLOOR = {
     "hotel_w": 5.0,
     "drag_w": 10.0,
 }
+#: Upper bound of the power terms (W): the logs decide within it, however far from the file.
+POWER_HIGH_W = 20000.0
 #: Residual units: metres of position, degrees of heading, watt-hours of energy used.
 SIGMA_POSITION_M = 1.0
 SIGMA_HEADING_DEG = 2.0
@@ -132,7 +134,8 @@ def vehicle_priors(vehicle: Vehicle, names: Sequence[str] = FITTED) -> list[Prio
     """One prior per field: centred on the file's value, :data:`PRIOR_SHARE` of it wide.
 
     Bounds keep the file loadable and the model physical: positive time constants and
-    rates, power terms >= 0, ``max_speed`` >= ``cruise_speed`` (the mission file's rule).
+    rates, power terms >= 0 (and up to :data:`POWER_HIGH_W`: a thruster vehicle's pack may
+    draw ten times a torpedo's), ``max_speed`` >= ``cruise_speed`` (the mission file's rule).
     """
     out = []
     for n in names:
@@ -140,8 +143,8 @@ def vehicle_priors(vehicle: Vehicle, names: Sequence[str] = FITTED) -> list[Prio
         sd = max(PRIOR_SHARE * abs(c), PRIOR_SD_FLOOR[n])
         if n == "max_speed":
             low, high = float(vehicle.cruise_speed), max(4.0 * c, c + 4 * sd)
-        elif n in ("hotel_w", "drag_w"):
-            low, high = 0.0, max(5.0 * c, c + 5 * sd)
+        elif n in ("hotel_w", "drag_w"):  # a real pack may draw kilowatts where the file says watts
+            low, high = 0.0, max(POWER_HIGH_W, 50.0 * c)
         else:
             low, high = min(c / 5.0, c), max(5.0 * c, c + 5 * sd)
             low = max(low, 1e-3)
