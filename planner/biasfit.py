@@ -19,7 +19,9 @@ optimistic); with fewer, a block bootstrap over consecutive segments.
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -52,7 +54,7 @@ BOOTSTRAP_BY_RUN_FROM = 6
 #: Consecutive segments per bootstrap block when there are too few runs.
 SEGMENTS_PER_BLOCK = 3
 #: Bootstrap refits (0: analytic standard errors only).
-BOOTSTRAP = 40
+BOOTSTRAP = 20
 
 
 def bias_priors(names: tuple[str, ...] = BIAS_NAMES) -> list[Prior]:
@@ -137,6 +139,19 @@ def _residuals(mission: Mission, seg: Segments, bias: Bias, vehicle: Vehicle | N
     return np.concatenate([dx, dy, de])
 
 
+def _tile(seg: Segments, p: int) -> Segments:
+    """``seg`` repeated ``p`` times along its segments (one copy per bias of a batched replay)."""
+
+    def rep(v):
+        if isinstance(v, np.ndarray) and v.ndim and v.shape[0] == seg.valid.shape[0]:
+            return np.concatenate([v] * p, axis=0)
+        if isinstance(v, dict):
+            return {key: rep(x) for key, x in v.items()}
+        return v
+
+    return Segments(**{f.name: rep(getattr(seg, f.name)) for f in dataclasses.fields(seg)})
+
+
 def bootstrap_blocks(seg: Segments) -> np.ndarray:
     """The bootstrap block of every segment: its run when there are :data:`BOOTSTRAP_BY_RUN_FROM` runs
     or more, else runs of :data:`SEGMENTS_PER_BLOCK` consecutive segments of one run."""
@@ -182,9 +197,25 @@ def fit_bias(
     blocks = bootstrap_blocks(seg)[per_segment]
     groups = np.concatenate([blocks, blocks, blocks])
     by_run = len(set(seg.run.tolist())) >= BOOTSTRAP_BY_RUN_FROM
+    tiled: dict[int, Segments] = {}
+
+    def residuals_many(thetas: np.ndarray) -> np.ndarray:
+        """Residuals of several biases in one replay: the segments repeated once per bias."""
+        p, n = thetas.shape[0], seg.valid.shape[0]
+        if p not in tiled:
+            tiled[p] = _tile(seg, p)
+        values = {name: np.full(n * p, NEUTRAL[name]) for name in BIAS_NAMES}
+        for i, name in enumerate(names):
+            values[name] = np.repeat(thetas[:, i], n)
+        r = _residuals(mission, tiled[p], SimpleNamespace(**values), vehicle)  # type: ignore[arg-type]
+        k = int(seg.valid.sum())
+        parts = r.reshape(3, p, k)  # dx, dy, de, each in segment order within each copy
+        return parts.transpose(1, 0, 2).reshape(p, 3 * k)
+
     est = fit_map(
         lambda th: _residuals(mission, seg, bias_of(th), vehicle),
         bias_priors(names),
+        residuals_many=residuals_many,
         groups=groups,
         jackknife=by_run and bootstrap > 0,
         kinds=np.repeat(np.array(["position", "position", "energy"]), per_segment.size),
@@ -261,8 +292,7 @@ def check_end_conditions(
     thetas = np.vstack([fit.estimate.vector()[None, :], draws])
     biases = [Bias(**{n: float(v) for n, v in zip(names, th)}) for th in thetas]
     Ue = np.asarray(U, dtype=float)[ended]
-    plant = {} if vehicle is None else {"plant": vehicle}
-    r = sim.uuv.simulate(mission, np.tile(Ue, (len(biases), 1)), bias=[b for b in biases for _ in ended], **plant)
+    r = sim.uuv.simulate(mission, np.tile(Ue, (len(biases), 1)), bias=[b for b in biases for _ in ended], plant=vehicle)
     sims = r.scores.reshape(len(biases), len(ended), -1)
     obs = np.array([observed[k] for k in ended])
     end_ll = end_condition_loglik(r.names, sims, obs).sum(axis=1)

@@ -66,7 +66,7 @@ class CompareConfig:
     seed: int = 0
     fit: tuple[str, ...] = BIAS_NAMES  # bias parameters to fit; the others stay neutral
     p_target: float = 0.8
-    bootstrap: int = 40  # block-bootstrap refits for the standard errors (0: analytic only)
+    bootstrap: int = 20  # block-bootstrap refits for the standard errors (0: analytic only)
     plant: Vehicle | None = None  # a calibrated vehicle (rapt-plan calibrate): flown in every prediction
 
 
@@ -176,7 +176,7 @@ def compare(
     bias_used = fit.bias if cv["correction_used"] else Bias()
     say("re-predicting under the fitted bias")
     corr = (
-        sim.uuv.simulate(m, U_plan, trajectories=True, bias=bias_used, **_plant(cfg))
+        sim.uuv.simulate(m, U_plan, trajectories=True, bias=bias_used, plant=cfg.plant)
         if cv["correction_used"]
         else baseline
     )
@@ -228,11 +228,6 @@ def _fit(m, obs: list[Observation], start_times: list[float], cfg: CompareConfig
     return check_end_conditions(m, fit, runs, start_times, U, ends, seed=cfg.seed, vehicle=cfg.plant)
 
 
-def _plant(cfg: CompareConfig) -> dict:
-    """``sim.uuv.simulate``'s keyword for the calibrated vehicle, when there is one."""
-    return {} if cfg.plant is None else {"plant": cfg.plant}
-
-
 def cross_validate(
     m,
     obs: list[Observation],
@@ -259,7 +254,7 @@ def cross_validate(
             row.update(corrected_mode=None, path_error_corrected_m=None, bias=None, note=str(exc))
             folds.append(row)
             continue
-        r = sim.uuv.simulate(m, o.u[None, :], trajectories=True, bias=fit.bias, **_plant(cfg))
+        r = sim.uuv.simulate(m, o.u[None, :], trajectories=True, bias=fit.bias, plant=cfg.plant)
         row["corrected_mode"] = MODE_NAMES[r.modes[0]] if r.valid[0] else "invalid"
         row["path_error_corrected_m"] = _round(_path_error(o.run.track, r.trajectory(0)), "rms_m")
         row["bias"] = {n: v for n, v in fit.bias.to_dict().items() if v != NEUTRAL[n]}
