@@ -28,6 +28,13 @@ def compare(
     ] = None,
     dithers: Annotated[int, typer.Option(help="Stochastic runs checking each adjusted scenario (0: none).")] = 20,
     seed: Annotated[int, typer.Option(help="Seed of every random choice.")] = 0,
+    bootstrap: Annotated[
+        int,
+        typer.Option(
+            help="Resampling of the bias's standard errors: block-bootstrap refits with fewer than 6 logs, "
+            "a delete-one-log jackknife with more (0: analytic standard errors only, faster)."
+        ),
+    ] = 20,
     fit: Annotated[
         str | None,
         typer.Option(
@@ -50,6 +57,8 @@ def compare(
             fail(f"--fit: unknown bias parameter {bad[0] if bad else fit!r}; choose from {', '.join(BIAS_NAMES)}")
     if dithers < 0:
         fail(f"--dithers: expected a number of runs >= 0, got {dithers}")
+    if bootstrap < 0:
+        fail(f"--bootstrap: expected a number of refits >= 0, got {bootstrap}")
     for p in logs:
         if not p.is_file():
             fail(f"LOGS: {p} does not exist; give the .mcap files of the plan's runs")
@@ -64,7 +73,11 @@ def compare(
 
         try:
             result = run_compare(
-                plan_dir, logs, out_dir, CompareConfig(dithers=dithers, seed=seed, fit=names, plant=plant), progress
+                plan_dir,
+                logs,
+                out_dir,
+                CompareConfig(dithers=dithers, seed=seed, fit=names, plant=plant, bootstrap=bootstrap),
+                progress,
             )
         except ValueError as exc:
             fail(str(exc))

@@ -103,7 +103,7 @@ def test_an_operators_range_day_on_a_bare_autopilot_is_accepted_by_compare(tmp_p
     assert sources["watchdog"]["event"] == "intervention" and sources["watchdog"]["reason"] == "nogo"
     out = tmp_path / "comparison"
     compare = subprocess.run(
-        _rapt_plan() + ["compare", str(PLAN), str(log), "--out", str(out), "--dithers", "0"],
+        _rapt_plan() + ["compare", str(PLAN), str(log), "--out", str(out), "--dithers", "0", "--bootstrap", "0"],
         cwd=ROOT,
         env=env,
         capture_output=True,
