@@ -7,13 +7,7 @@ logs calibrate a copy of the mission whose [vehicle] block is 20-40 % off.
 
 from __future__ import annotations
 
-import hashlib
 import json
-import os
-import subprocess
-import sys
-from concurrent.futures import ThreadPoolExecutor
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -22,35 +16,13 @@ from typer.testing import CliRunner
 import sim.uuv
 from planner.calibrate import FITTED, MIN_LOGS
 from planner.cli import app
-from planner.generate import GenerateConfig, generate
 from planner.logs import read_run
 from sim.uuv.replay import score_track
 from sim.uuv.scoring import MODE_NAMES, mode_name
+from tests.cli.sil_day import MISSION, digests, fly_plan
 from tests.planner.test_calibrate import wrong_mission_text
 
-ROOT = Path(__file__).resolve().parents[2]
-MISSION = ROOT / "examples" / "range2017.toml"
 runner = CliRunner()
-
-
-def _rapt_plan() -> list[str]:
-    exe = Path(sys.executable).with_name("rapt-plan")
-    return [str(exe)] if exe.exists() else [sys.executable, "-m", "planner.cli"]
-
-
-def _fly(plan_json: Path, sid: str, log: Path) -> subprocess.CompletedProcess:
-    return subprocess.run(
-        _rapt_plan() + ["run", str(plan_json), "--scenario", sid, "--log", str(log), "--timeout", "240"],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        cwd=ROOT,
-        env={**os.environ, "COLUMNS": "200"},
-    )
-
-
-def _digests(paths) -> dict[str, str]:
-    return {str(p): hashlib.sha256(Path(p).read_bytes()).hexdigest() for p in paths}
 
 
 def _one_line_error(result, expect: str) -> None:
@@ -62,25 +34,15 @@ def _one_line_error(result, expect: str) -> None:
 @pytest.fixture(scope="module")
 def flown(tmp_path_factory):
     base = tmp_path_factory.mktemp("calibration_day")
-    plan_dir = base / "plan"
-    plan = generate(
-        sim.uuv.load_mission(MISSION),
-        MISSION,
-        plan_dir,
-        GenerateConfig(budget=500, batch_size=250, dithers=0, pairs=2, seed=0),
-    )
+    plan_dir, plan, ids, done = fly_plan(base, [])
     logs_dir = base / "logs"
-    logs_dir.mkdir()
-    ids = [s["id"] for s in plan["scenarios"]]
-    with ThreadPoolExecutor(max_workers=2) as pool:  # two cores
-        done = list(pool.map(lambda sid: _fly(plan_dir / "plan.json", sid, logs_dir / f"{sid}.mcap"), ids))
     for sid, proc in zip(ids, done):
         assert proc.returncode == 0, (sid, proc.stdout, proc.stderr)
     wrong = base / "wrong.toml"
     wrong.write_text(wrong_mission_text())
     logs = [logs_dir / f"{sid}.mcap" for sid in ids]
     inputs = [wrong, *logs]
-    before = _digests(inputs)
+    before = digests(inputs)
     out = base / "calibrated.toml"
     result = runner.invoke(app, ["calibrate", str(wrong), *map(str, logs), "--out", str(out)])
     assert result.exit_code == 0, result.output
@@ -113,7 +75,7 @@ def test_calibrate_recovers_the_true_vehicle_block_from_sil_logs(flown):
 
 @pytest.mark.slow
 def test_no_input_is_modified_and_the_output_predicts_the_logged_modes(flown):
-    assert _digests(flown["before"]) == flown["before"]
+    assert digests(flown["before"]) == flown["before"]
     cal = sim.uuv.load_mission(flown["out"])
     runs = [read_run(p) for p in flown["logs"]]
     U = np.array([r.meta["u"] for r in runs])
@@ -125,7 +87,7 @@ def test_no_input_is_modified_and_the_output_predicts_the_logged_modes(flown):
 @pytest.mark.slow
 def test_too_few_logs_another_mission_and_an_out_over_an_input_are_one_line_errors(flown, tmp_path):
     wrong, logs = flown["wrong"], flown["logs"]
-    before = _digests([wrong, *logs])
+    before = digests([wrong, *logs])
     out = tmp_path / "c.toml"
     _one_line_error(
         runner.invoke(app, ["calibrate", str(wrong), *map(str, logs[: MIN_LOGS - 1]), "--out", str(out)]),
@@ -141,7 +103,7 @@ def test_too_few_logs_another_mission_and_an_out_over_an_input_are_one_line_erro
         runner.invoke(app, ["calibrate", str(wrong), *map(str, logs), "--out", str(wrong)]),
         "would overwrite an input",
     )
-    assert not out.exists() and _digests([wrong, *logs]) == before
+    assert not out.exists() and digests([wrong, *logs]) == before
 
 
 def test_a_missing_log_or_mission_is_a_one_line_error(tmp_path):

@@ -9,12 +9,7 @@ logs.
 
 from __future__ import annotations
 
-import hashlib
 import json
-import os
-import subprocess
-import sys
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
@@ -24,56 +19,23 @@ from typer.testing import CliRunner
 
 import sim.uuv
 from planner.cli import app
-from planner.generate import GenerateConfig, generate
 from planner.logs import read_run
 from planner.plans import load_plan
 from sim.uuv.bias import Bias, parse_bias
+from tests.cli.sil_day import MISSION, digests, fly_plan
 
 pytestmark = [pytest.mark.slow, pytest.mark.integration]
 
-ROOT = Path(__file__).resolve().parents[2]
-MISSION = ROOT / "examples" / "range2017.toml"
 INJECTED = {"speed": 1.15, "current_offset": 0.3}
 runner = CliRunner()
-
-
-def _rapt_plan() -> list[str]:
-    exe = Path(sys.executable).with_name("rapt-plan")
-    return [str(exe)] if exe.exists() else [sys.executable, "-m", "planner.cli"]
-
-
-def _fly(plan_json: Path, sid: str, log: Path) -> subprocess.CompletedProcess:
-    bias = ",".join(f"{k}={v}" for k, v in INJECTED.items())
-    return subprocess.run(
-        _rapt_plan()
-        + ["run", str(plan_json), "--scenario", sid, "--inject-bias", bias, "--log", str(log), "--timeout", "240"],
-        capture_output=True,
-        text=True,
-        timeout=300,
-        cwd=ROOT,
-        env={**os.environ, "COLUMNS": "200"},
-    )
-
-
-def _digests(paths) -> dict[str, str]:
-    return {str(p): hashlib.sha256(Path(p).read_bytes()).hexdigest() for p in paths}
 
 
 @pytest.fixture(scope="module")
 def flown(tmp_path_factory):
     base = tmp_path_factory.mktemp("range_day")
-    plan_dir = base / "plan"
-    plan = generate(
-        sim.uuv.load_mission(MISSION),
-        MISSION,
-        plan_dir,
-        GenerateConfig(budget=500, batch_size=250, dithers=0, pairs=2, seed=0),
-    )
+    bias = ",".join(f"{k}={v}" for k, v in INJECTED.items())
+    plan_dir, plan, ids, done = fly_plan(base, ["--inject-bias", bias])
     logs_dir = base / "logs"
-    logs_dir.mkdir()
-    ids = [s["id"] for s in plan["scenarios"]]
-    with ThreadPoolExecutor(max_workers=2) as pool:  # CI has two cores
-        done = list(pool.map(lambda sid: _fly(plan_dir / "plan.json", sid, logs_dir / f"{sid}.mcap"), ids))
     for sid, proc in zip(ids, done):
         assert proc.returncode == 0, (sid, proc.stdout, proc.stderr)
         row = next(line for line in proc.stdout.splitlines() if "same scores as the batch simulator" in line)
@@ -92,7 +54,7 @@ def flown(tmp_path_factory):
     bad[at : at + 64] = bytes(64)  # inside one chunk's compressed records
     corrupt.write_bytes(bytes(bad))
     inputs = logs + [truncated, corrupt] + sorted(p for p in plan_dir.rglob("*") if p.is_file())
-    before = _digests(inputs)
+    before = digests(inputs)
     out = base / "comparison"
     result = runner.invoke(
         app,
@@ -177,7 +139,7 @@ def test_truncated_and_damaged_logs_are_read_as_far_as_they_go(flown):
 
 
 def test_compare_never_modifies_its_inputs(flown):
-    assert _digests(flown["inputs"]) == flown["before"]
+    assert digests(flown["inputs"]) == flown["before"]
 
 
 def test_logs_name_plan_and_scenario_but_not_the_injected_bias(flown):

@@ -132,6 +132,11 @@ def test_the_fuel_gauge_counts_the_packs_draw_from_begin_against_the_scenario_ch
             vr.begin()
             vehicle.battery(-1, mah=776)  # 676 mAh at 14.8 V: 10.0048 Wh
             wait_until(lambda: vr.stats["gauge_sent"] == 1, what="a gauge report")
+        # sent is not yet received: wait for every gauge frame to reach the listeners
+        wait_until(lambda: len(decoded(_virtual(raw.items()))) == 3, what="three gauge frames on the raw stream")
+        wait_until(
+            lambda: len(virtual.payloads(keys.virtual(VEHICLE, "BATTERY_STATUS"))) == 3, what="three gauge copies"
+        )
         vehicle.close()
         frames, logged = raw.items(), [json.loads(p) for p in virtual.payloads(keys.virtual(VEHICLE, "BATTERY_STATUS"))]
         raw.close()
