@@ -223,15 +223,14 @@ def fit_map(
     own = _covariances(sol, m, groups)[0] < identify_below  # identified with every parameter free
     sources = {n: "laplace" for n in names}
     free = every.copy()
-    final, cov_f, n_boot, booted = sol, np.zeros((0, 0)), 0, False
-    # backward elimination: while some free parameter is not identified, fix the least
-    # identified one at its centre and refit (a confounded pair keeps its better-seen half)
+    final, cov_f, n_boot = sol, np.zeros((0, 0)), 0
+    # backward elimination: while some free parameter is not identified, fix at its centre
+    # the one whose loss costs the fit least (:func:`_drop_one`) and refit
     while free.any():
         if not free.all():
             final = solve(free, sol.x[free], scale)
         sd_f, cov_f, source = _covariances(final, m, groups)
         if sd_f.max() < identify_below and (bootstrap > 0 or jackknife) and groups is not None:
-            booted = True
             if jackknife:
                 sd_b, n_boot, how = _jackknife(solve, free, final.x, scale, groups), np.unique(groups).size, "jackknife"
             else:
@@ -258,7 +257,6 @@ def fit_map(
         if not weak:
             break
         free[idx[min(weak, key=lambda i: z[i])]] = False
-    del booted
     for n, f in zip(names, free):
         if not f:
             sources[n] = "not identified"
