@@ -125,6 +125,8 @@ def test_the_fuel_gauge_counts_the_packs_draw_from_begin_against_the_scenario_ch
             vehicle.battery(1360)  # 10 Wh more
             wait_until(lambda: vr.stats["gauge_sent"] == 2, what="two gauge reports")
             assert vr.used_wh == pytest.approx(10.0)
+            # the listener has its own subscriber: wait for the pack's three reports and the two gauges
+            wait_until(lambda: len(raw.items()) == 5, what="the first range's five raw frames")
         n_first = len(raw.items())
         with VirtualRange(s, VEHICLE, m, U) as vr:  # a pack that counts only charge: mAh times its voltage
             vehicle.battery(-1, mah=100)
