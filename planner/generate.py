@@ -8,12 +8,16 @@ The stages of ``rapt-plan generate``, each a function a test can run on a small 
    the sub-boundary tree over the mission's score tree, sensitivity of each root score.
 3. :func:`select_pairs` — K boundary pairs on different sub-boundaries, shortest first,
    kept clear of invalid scenarios and of isolated samples (noise rather than behaviour);
-   with ``--refine``, :func:`refine_pairs` bisects each pair on its own sub-scores.
-4. :func:`dither_many` — Gaussian dithers around every chosen scenario re-simulated with
-   the stochastic effects on: how likely each shows its predicted mode, the nearest
-   boundary in its neighbourhood, and sub-boundaries there that the pair does not test
-   (orthogonal: another kind of element; parallel: another element of the same kind).
-5. :func:`robust_variants` — fragile scenarios moved away from their boundary ("M").
+   with ``--refine``, :func:`planner.refinement.refine_pairs` focuses a search on each
+   candidate's own sub-scores and keeps the first K it makes sharp.
+4. :func:`planner.dithering.dither_many` — Gaussian dithers of the expected execution
+   noise (:class:`~planner.dithering.DitherNoise`) around every chosen scenario,
+   re-simulated with the stochastic effects on: how likely each shows its predicted
+   outcome, the nearest boundary in its neighbourhood, and sub-boundaries there that the
+   pair does not test (orthogonal: another kind of element; parallel: another element of
+   the same kind).
+5. :func:`planner.dithering.robust_variants` — fragile scenarios moved away from their
+   boundary ("M") until they hold; each pair gets a verdict: sharp, robust or fragile.
 
 :func:`generate` runs them all and writes ``plan.json`` (schema ``rapt.plan/1``,
 documented in ``planner/plan.schema.json``) and, per scenario, a QGroundControl
@@ -25,7 +29,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -35,9 +39,11 @@ from scipy.spatial import cKDTree
 
 import rapt
 import sim.uuv
+from planner.dithering import DEFAULT_NOISE, DitherNoise, Outcome, dither_many, robust_variants
 from planner.exports import write_scenario_files
 from planner.jsonio import jsonable
 from planner.plans import coordinate_sensitivity
+from planner.refinement import MIN_REFINE_RUNS, outcome_columns, refine_pairs
 from planner.report import write_report
 from planner.search_status import SearchStatus
 from rapt.errors import InputError, StudyMismatchError
@@ -51,9 +57,6 @@ __all__ = [
     "search_mission",
     "analyse",
     "select_pairs",
-    "dither_many",
-    "robust_variants",
-    "refine_pairs",
     "generate",
     "auto_batch_size",
     "PLAN_SCHEMA",
@@ -80,12 +83,13 @@ class GenerateConfig:
     seed: int = 0
     batch_size: int | None = None  # None: auto_batch_size(budget)
     dithers: int = 2000
-    dither_sigma: float = 0.02
+    dither_sigma: str | float = DEFAULT_NOISE  # expected execution noise (planner.dithering.DitherNoise)
     executor: Any = None
     store: Path | None = None
-    refine: int = 0  # runs per pair of the focused second search (0: off)
+    refine: int = 0  # runs per candidate pair of the focused second search (0: off)
     refine_min_distance: float = 0.02  # refined pairs stay at least this far apart (unit cube)
-    fragile_below: float = 0.8  # P(predicted mode) under which a scenario gets a robust variant
+    refine_max_distance: float = 0.05  # a refined pair further apart than this is not shipped
+    fragile_below: float = 0.8  # P(predicted outcome) under which a scenario gets a robust variant
     surrogate: Any = None  # a sim.uuv.imitation Surrogate: search and dither with it, confirm pairs with the expert
     surrogate_file: str = ""
     confirm_runs: int = 100  # expert runs that check candidate pairs (two per pair)
@@ -93,6 +97,24 @@ class GenerateConfig:
     def __post_init__(self) -> None:
         if self.batch_size is None and isinstance(self.budget, int):
             self.batch_size = auto_batch_size(self.budget)
+
+    @property
+    def pairs_wanted(self) -> int:
+        """Pairs the selection must deliver: the plan's, or on the surrogate workflow the candidates to confirm."""
+        return self.pairs if self.surrogate is None else self.confirm_runs // 2
+
+    @property
+    def refine_candidates(self) -> int:
+        """Candidate pairs the refinement may try: twice the pairs wanted, so each can be replaced once."""
+        return 2 * self.pairs_wanted if self.refine else 0
+
+    @property
+    def search_budget(self) -> int:
+        """The runs left for the search once the refinement's are set aside (all count in ``budget``)."""
+        return self.budget - self.refine * self.refine_candidates
+
+    def noise(self) -> DitherNoise:
+        return DitherNoise.parse(self.dither_sigma)
 
     def check(self) -> None:
         if not isinstance(self.batch_size, int) or self.batch_size < 1:
@@ -103,8 +125,20 @@ class GenerateConfig:
             raise InputError(f"--global-fraction: expected a share in (0, 1), got {self.global_fraction}")
         if not isinstance(self.pairs, int) or self.pairs < 1:
             raise InputError(f"--pairs: expected a positive number of pairs, got {self.pairs}")
-        if not isinstance(self.refine, int) or self.refine < 0:
-            raise InputError(f"--refine-runs: expected runs per pair >= 0, got {self.refine}")
+        if not isinstance(self.refine, int) or self.refine < 0 or 0 < self.refine < MIN_REFINE_RUNS:
+            raise InputError(f"--refine-runs: expected at least {MIN_REFINE_RUNS} runs per pair, got {self.refine}")
+        if self.refine and self.search_budget < 2 * self.batch_size:
+            raise InputError(
+                f"--refine-runs: {self.refine} runs for each of {self.refine_candidates} candidate pairs leave "
+                f"{self.search_budget} of --budget {self.budget} for the search, under two batches "
+                f"({2 * self.batch_size}); lower --refine-runs or --pairs, or raise --budget"
+            )
+        if not (0 < self.refine_min_distance < self.refine_max_distance):
+            raise InputError(
+                f"refine_max_distance: expected more than refine_min_distance ({self.refine_min_distance}), "
+                f"got {self.refine_max_distance}"
+            )
+        self.noise()
         if not isinstance(self.dithers, int) or self.dithers < 0:
             raise InputError(f"--dithers: expected a number of runs >= 0, got {self.dithers}")
         if not isinstance(self.confirm_runs, int) or self.confirm_runs < 2 * self.pairs:
@@ -168,7 +202,7 @@ def search_mission(
     return rapt.search(
         MissionScores(mission, cfg.surrogate),
         mission.space,
-        cfg.budget,
+        cfg.search_budget,
         method="s-ndv",
         batch_size=batch_size,
         seed=cfg.seed,
@@ -177,7 +211,7 @@ def search_mission(
         output_types=("binary", "binary"),
         steer=ROOT_COLUMNS,
         sampler_options={"max_reference": SEARCH_REFERENCE},
-        n_initial=int(round(cfg.budget * cfg.global_fraction)),
+        n_initial=int(round(cfg.search_budget * cfg.global_fraction)),
         progress=progress,
         on_batch=on_batch,
     )
@@ -272,213 +306,6 @@ def select_pairs(a: Analysis, k: int, min_cluster: int = 3) -> list[dict]:
     return chosen
 
 
-# -- 4. dithering ---------------------------------------------------------------------------
-def dither_many(
-    mission: Mission,
-    centres: np.ndarray,
-    predicted: np.ndarray | Sequence[int],
-    elements: Sequence[list[str]],
-    n: int,
-    sigma: float,
-    seed: int,
-    surrogate=None,
-) -> tuple[list[dict], np.ndarray, np.ndarray]:
-    """Stochastic runs of ``n`` Gaussian dithers around each centre, all in one batch.
-
-    Returns per centre the statistics of :func:`dither_stats`, and the dithers' unit-cube
-    rows and modes, (k, n, d) and (k, n), for the report.  The first dither of each centre
-    is the centre itself, with the stochastic effects on.
-    """
-    centres = np.atleast_2d(np.asarray(centres, dtype=float))
-    k, d = centres.shape
-    rng = np.random.default_rng(seed)
-    U = np.clip(centres[:, None, :] + sigma * rng.standard_normal((k, n, d)), 0.0, 1.0)
-    U[:, 0] = centres
-    r = sim.uuv.simulate(mission, U.reshape(k * n, d), seed=seed, stochastic=True, surrogate=surrogate)
-    stats = []
-    for c in range(k):
-        rows = slice(c * n, (c + 1) * n)
-        stats.append(
-            dither_stats(
-                U[c],
-                r.scores[rows],
-                r.modes[rows],
-                r.valid[rows],
-                r.names,
-                r.output_types,
-                int(predicted[c]),
-                list(elements[c]),
-                sigma,
-            )
-        )
-    return stats, U, r.modes.reshape(k, n)
-
-
-def dither_stats(
-    U: np.ndarray,
-    scores: np.ndarray,
-    modes: np.ndarray,
-    valid: np.ndarray,
-    names: list[str],
-    types: Sequence[str],
-    predicted_mode: int,
-    elements: list[str],
-    sigma: float,
-) -> dict:
-    """Reproducibility and neighbours of one dithered scenario (sections 4.4.5-4.4.7).
-
-    How often the predicted mode shows, how close the nearest run of another mode lies,
-    and which sub-boundaries the neighbourhood holds that the pair does not test: an
-    element that flips among runs of the predicted mode is *parallel* when it is of the
-    same kind as the pair's elements (another no-go area), *orthogonal* otherwise.
-    """
-    u = U[0]
-    out: dict[str, Any] = {"runs": int(U.shape[0]), "valid": int(valid.sum()), "sigma": sigma}
-    if not valid.any():
-        return out
-    dist = np.linalg.norm(U[valid] - u, axis=1)
-    modes = modes[valid]
-    out["p_predicted_mode"] = float(np.mean(modes == predicted_mode))
-    out["modes"] = {MODE_NAMES[m]: int(c) for m, c in zip(*np.unique(modes, return_counts=True))}
-    other = modes != predicted_mode
-    out["nearest_other_mode"] = float(dist[other].min()) if other.any() else None
-    same = scores[valid][~other]
-    flips: list[dict[str, str | float]] = []
-    if same.shape[0] > 1 and valid[0]:
-        ref = scores[0]
-        for c, (name, t) in enumerate(zip(names, types)):
-            if t == "continuous" or "." not in name or name in elements:
-                continue
-            differ = same[:, c] != ref[c]
-            if differ.any():
-                kind = name.split(".")[0]
-                relation = "parallel" if any(e.split(".")[0] == kind for e in elements) else "orthogonal"
-                flips.append(
-                    {
-                        "element": name,
-                        "relation": relation,
-                        "share": float(differ.mean()),
-                        "nearest": float(dist[~other][differ].min()),
-                    }
-                )
-    out["sub_boundaries"] = sorted(flips, key=lambda f: f["nearest"])[:8]
-    return out
-
-
-# -- 5. robust variants ---------------------------------------------------------------------
-VARIANT_STEPS = (0.02, 0.05, 0.1)
-VARIANT_COORDINATES = 2  # the most sensitive coordinates tried
-
-
-def robust_variants(
-    mission: Mission,
-    fragile: np.ndarray,
-    partners: np.ndarray,
-    modes: np.ndarray | Sequence[int],
-    sensitivity: np.ndarray,
-    n: int,
-    sigma: float,
-    target: float,
-    seed: int,
-    surrogate=None,
-) -> list[dict | None]:
-    """Move fragile scenarios away from their boundary along their most sensitive coordinates.
-
-    For each scenario the candidates step away from the pair's other scenario along the
-    ``VARIANT_COORDINATES`` most sensitive coordinates by ``VARIANT_STEPS`` (unit cube); the
-    first candidate, in that order, whose deterministic run keeps the predicted mode and
-    whose dithers show it at least ``target`` of the time wins (section 4.5.3's "M"
-    scenarios); None where none does.  All candidates run in two batches.
-    """
-    fragile = np.atleast_2d(np.asarray(fragile, dtype=float))
-    cands, owner, meta = [], [], []
-    for s, (u, partner) in enumerate(zip(fragile, np.atleast_2d(partners))):
-        for c in np.argsort(-sensitivity, kind="stable")[:VARIANT_COORDINATES]:
-            direction = np.sign(u[c] - partner[c]) or 1.0
-            for step in VARIANT_STEPS:
-                v = u.copy()
-                v[c] = np.clip(v[c] + direction * step, 0.0, 1.0)
-                if v[c] == u[c]:
-                    break
-                cands.append(v)
-                owner.append(s)
-                meta.append((int(c), float(v[c] - u[c])))
-    out: list[dict | None] = [None] * len(fragile)
-    if not cands:
-        return out
-    V, owners = np.array(cands), np.array(owner)
-    det = sim.uuv.simulate(mission, V, surrogate=surrogate)
-    keep = np.flatnonzero(det.valid & (det.modes == np.asarray(modes)[owners]))
-    if keep.size == 0:
-        return out
-    stats, _, _ = dither_many(
-        mission, V[keep], np.asarray(modes)[owners[keep]], [[]] * keep.size, n, sigma, seed, surrogate
-    )
-    for idx, st in zip(keep.tolist(), stats):
-        s = owners[idx]
-        if out[s] is None and st.get("p_predicted_mode", 0.0) >= target:
-            c, step = meta[idx]
-            out[s] = {
-                "u": [float(x) for x in V[idx]],
-                "coordinate": c,
-                "step": step,
-                "p_predicted_mode": st["p_predicted_mode"],
-            }
-    return out
-
-
-# -- 6. refinement ----------------------------------------------------------------------------
-def refine_pairs(
-    mission: Mission, a: Analysis, pairs: list[dict], runs: int, min_distance: float = 0.02, surrogate=None
-) -> list[dict]:
-    """Sharpen pairs with a search focused on their own sub-scores (section 4.3.6).
-
-    Bisection on the segment between each pair's two scenarios: each run is scored on the
-    pair's elements only, and replaces the end whose element values it shares, so the pair
-    keeps straddling the same sub-boundary while its length halves per run (``runs`` at
-    most).  A run showing a third combination (another sub-boundary between them) or an
-    invalid scenario stops that pair's search, and so does ``min_distance``: two scenarios
-    closer than that cannot be told apart on the water (section 4.1: straddle the boundary
-    without being too close together).  All pairs bisect in step, one batch per run.
-    """
-    names = a.result.names
-    cols = [[names.index(e) for e in pair["elements"]] for pair in pairs]
-    lo = np.array([a.X[pair["rows"][0]] for pair in pairs]).reshape(len(pairs), -1)
-    hi = np.array([a.X[pair["rows"][1]] for pair in pairs]).reshape(len(pairs), -1)
-    side_lo = [a.result.scores[p["rows"][0], c] for p, c in zip(pairs, cols)]
-    side_hi = [a.result.scores[p["rows"][1], c] for p, c in zip(pairs, cols)]
-    active = np.ones(len(pairs), dtype=bool)
-    for _ in range(runs):
-        active &= np.linalg.norm(hi - lo, axis=1) / 2 >= min_distance
-        rows = np.flatnonzero(active)
-        if rows.size == 0:
-            break
-        mid = (lo[rows] + hi[rows]) / 2
-        r = sim.uuv.simulate(mission, mid, surrogate=surrogate)
-        for k, row in enumerate(rows.tolist()):
-            y = r.scores[k, cols[row]]
-            if r.valid[k] and np.array_equal(y, side_lo[row]):
-                lo[row] = mid[k]
-            elif r.valid[k] and np.array_equal(y, side_hi[row]):
-                hi[row] = mid[k]
-            else:
-                active[row] = False
-    d = np.linalg.norm(hi - lo, axis=1)
-    better = np.flatnonzero(d < np.array([p["distance"] for p in pairs]))
-    out = list(pairs)
-    if better.size:
-        r = sim.uuv.simulate(mission, np.vstack([lo[better], hi[better]]), surrogate=surrogate)
-        for k, row in enumerate(better.tolist()):
-            out[row] = {
-                **pairs[row],
-                "distance": float(d[row]),
-                "refined": True,
-                "u_override": [lo[row], hi[row]],
-                "modes": [MODE_NAMES[r.modes[k]], MODE_NAMES[r.modes[better.size + k]]],
-            }
-    return out
-
-
 # -- 7. expert confirmation (surrogate workflow) ------------------------------------------------
 def confirm_with_expert(mission: Mission, a: Analysis, candidates: list[dict], k: int) -> tuple[list[dict], int]:
     """Run the expert on both scenarios of each candidate pair; keep the first ``k`` it confirms.
@@ -525,10 +352,11 @@ def generate(
     wall seconds of each stage (kept out of the plan, which depends on the seed only).
     """
     cfg.check()
+    sigma = cfg.noise().sigmas(mission)  # a noise too wide for a parameter fails before the search
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     clock = _StageClock(timings)
-    a, pairs, confirmation = _choose_pairs(mission, cfg, progress, clock)
+    a, pairs, confirmation, refinement = _choose_pairs(mission, cfg, progress, clock)
     sens = coordinate_sensitivity(mission.space, a.sensitivity)
     U = (
         np.vstack([np.asarray(p.get("u_override", [a.X[r] for r in p["rows"]])) for p in pairs])
@@ -538,29 +366,45 @@ def generate(
     ids = [f"pair{p}{side}" for p in range(1, len(pairs) + 1) for side in "ab"]
     partners = U[np.arange(len(U)) ^ 1]  # a's partner is b and b's is a
     chosen = sim.uuv.simulate(mission, U, trajectories=True)
-    stats, dither_runs = _dither_chosen(mission, cfg, U, ids, chosen, pairs, progress)
+    root = list(a.tree.levels[0])
+    outcomes = []
+    for k in range(len(U)):
+        cols = outcome_columns(root, chosen.names, pairs[k // 2]["elements"])
+        outcomes.append(Outcome(int(chosen.modes[k]), tuple(cols), tuple(float(v) for v in chosen.scores[k, cols])))
+    stats, dither_runs, shown = _dither_chosen(mission, cfg, U, ids, outcomes, pairs, sigma, progress)
     clock.lap("dithering")
-    fragile = [k for k, st in enumerate(stats) if st.get("p_predicted_mode", 1.0) < cfg.fragile_below]
-    found = (
-        robust_variants(
+    fragile = [k for k, st in enumerate(stats) if st.get("p_predicted", 1.0) < cfg.fragile_below]
+    found: list[dict] = []
+    variant_runs = 0
+    if fragile and cfg.dithers:
+        found, variant_runs = robust_variants(
             mission,
             U[fragile],
             partners[fragile],
-            chosen.modes[fragile],
+            [outcomes[k] for k in fragile],
+            [(dither_runs[ids[k]][0], shown[k]) for k in fragile],
             sens,
-            max(cfg.dithers // 10, 20),
-            cfg.dither_sigma,
+            sigma,
+            max(cfg.dithers // 20, 40),
+            cfg.dithers // 2,
             cfg.fragile_below,
             cfg.seed + 1,
             cfg.surrogate,
         )
-        if fragile and cfg.dithers
-        else []
-    )
     clock.lap("variants")
     scenarios = _scenario_entries(mission, a, U, ids, chosen, stats, out_dir)
     variants = _variant_entries(mission, ids, fragile, found, chosen, out_dir)
-    plan = _plan_document(mission, mission_path, cfg, a, pairs, confirmation, scenarios, variants)
+    verdicts = _verdicts(cfg, pairs, stats, dict(zip(fragile, found)))
+    runs = {
+        "search": cfg.search_budget,
+        "refinement": refinement["runs"] if refinement else 0,
+        "dithering": len(U) * (cfg.dithers // 2) if cfg.dithers else 0,
+        "variants": variant_runs,
+    }
+    noise = {"expected": cfg.noise().as_dict(), "sigma_u": [float(v) for v in sigma], "target": cfg.fragile_below}
+    plan = _plan_document(
+        mission, mission_path, cfg, a, pairs, verdicts, confirmation, refinement, runs, noise, scenarios, variants
+    )
     (out_dir / "plan.json").write_text(json.dumps(plan, indent=2))
     write_report(plan, out_dir, dither_runs)
     clock.lap("files")
@@ -569,11 +413,12 @@ def generate(
 
 def _choose_pairs(
     mission: Mission, cfg: GenerateConfig, progress: Callable[[str, int, int, str], None] | None, clock: _StageClock
-) -> tuple[Analysis, list[dict], tuple[int, int] | None]:
+) -> tuple[Analysis, list[dict], tuple[int, int] | None, dict | None]:
     """Stages 1-3 (with refinement, and the expert's confirmation on the surrogate workflow).
 
-    Returns the analysis, the chosen pairs, and on the surrogate workflow the number of
-    candidate pairs and the expert runs that checked them (None otherwise).
+    Returns the analysis, the chosen pairs, on the surrogate workflow the number of
+    candidate pairs and the expert runs that checked them (None otherwise), and the
+    refinement's account (None without ``--refine``).
     """
     status: SearchStatus | None = None
     searched: Callable[[int, int], None] | None = None
@@ -585,12 +430,24 @@ def _choose_pairs(
     sur = cfg.surrogate
     a = analyse(mission, study, sur)
     clock.lap("analysis")
-    pairs = select_pairs(a, cfg.pairs if sur is None else cfg.confirm_runs // 2)
+    wanted = cfg.pairs_wanted
+    pairs = select_pairs(a, cfg.refine_candidates if cfg.refine else wanted)
     clock.lap("selection")
+    refinement = None
     if cfg.refine:
-        pairs = refine_pairs(mission, a, pairs, cfg.refine, cfg.refine_min_distance, sur)
+        pairs, refinement = refine_pairs(
+            mission,
+            a,
+            pairs,
+            wanted,
+            runs=cfg.refine,
+            min_distance=cfg.refine_min_distance,
+            max_distance=cfg.refine_max_distance,
+            seed=cfg.seed,
+            surrogate=sur,
+        )
         if progress is not None:
-            progress("refine", len(pairs), len(pairs), "")
+            progress("refine", refinement["sharp"], refinement["candidates"], f"{refinement['runs']:,} runs")
         clock.lap("refinement")
     confirmation = None
     if sur is not None:
@@ -600,7 +457,7 @@ def _choose_pairs(
             progress("confirm", len(pairs), candidates, f"{len(pairs)} of {candidates} candidate pairs confirmed")
         clock.lap("confirmation")
         confirmation = (candidates, confirm_spent)
-    return a, pairs, confirmation
+    return a, pairs, confirmation, refinement
 
 
 def _search_progress(
@@ -615,22 +472,53 @@ def _dither_chosen(
     cfg: GenerateConfig,
     U: np.ndarray,
     ids: list[str],
-    chosen: sim.uuv.Result,
+    outcomes: list[Outcome],
     pairs: list[dict],
+    sigma: np.ndarray,
     progress: Callable[[str, int, int, str], None] | None,
-) -> tuple[list[dict], dict[str, tuple[np.ndarray, np.ndarray]]]:
-    """Stage 4 on the chosen scenarios: their dither statistics, and the dithers by scenario for the report."""
+) -> tuple[list[dict], dict[str, tuple[np.ndarray, np.ndarray]], np.ndarray]:
+    """Stage 4 on the chosen scenarios: their dither statistics, the dithers by scenario, which held."""
     elements = [pair["elements"] for pair in pairs for _ in "ab"]
     stats: list[dict] = [{} for _ in ids]
     dither_runs: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    shown = np.zeros((len(ids), 0), dtype=bool)
     if cfg.dithers and len(U):
-        stats, dU, dmodes = dither_many(
-            mission, U, chosen.modes, elements, cfg.dithers // 2, cfg.dither_sigma, cfg.seed, cfg.surrogate
+        stats, dU, dmodes, shown = dither_many(
+            mission, U, outcomes, elements, cfg.dithers // 2, sigma, cfg.seed, cfg.surrogate
         )
         dither_runs = {sid: (dU[k], dmodes[k]) for k, sid in enumerate(ids)}
         if progress is not None:
             progress("dither", len(ids), len(ids), "")
-    return stats, dither_runs
+    return stats, dither_runs, shown
+
+
+def _verdicts(cfg: GenerateConfig, pairs: list[dict], stats: list[dict], found: dict[int, dict]) -> list[dict]:
+    """Per pair: P(predicted outcome) of each side and of its variant, and a one-word verdict.
+
+    *sharp*: refined to at most ``refine_max_distance`` and both sides hold as planned;
+    *robust*: every side holds, as planned or through its variant; *fragile*: a side that
+    does not hold has no variant (``reason`` says why). No verdict without dithering.
+    """
+    out: list[dict] = []
+    for p, pair in enumerate(pairs):
+        sides = [2 * p, 2 * p + 1]
+        if not cfg.dithers or any(stats[k].get("p_predicted") is None for k in sides):
+            out.append({})
+            continue
+        probs: list[float] = [stats[k]["p_predicted"] for k in sides]
+        variant_p = [found[k]["p_predicted"] if found.get(k, {}).get("found") else None for k in sides]
+        holds = [pr >= cfg.fragile_below or vp is not None for pr, vp in zip(probs, variant_p)]
+        if all(pr >= cfg.fragile_below for pr in probs) and pair["distance"] <= cfg.refine_max_distance:
+            verdict = "sharp"
+        else:
+            verdict = "robust" if all(holds) else "fragile"
+        entry: dict[str, Any] = {"p_predicted": probs, "variant_p_predicted": variant_p, "verdict": verdict}
+        if verdict == "fragile":
+            entry["reason"] = "; ".join(
+                f"side {'ab'[i]}: {found[k]['reason']}" for i, k in enumerate(sides) if not holds[i]
+            )
+        out.append(entry)
+    return out
 
 
 def _scenario_entries(
@@ -670,14 +558,14 @@ def _variant_entries(
     mission: Mission,
     ids: list[str],
     fragile: list[int],
-    found: list[dict | None],
+    found: list[dict],
     chosen: sim.uuv.Result,
     out_dir: Path,
 ) -> list[dict]:
     """The robust "M" variants found for fragile scenarios, their files written."""
     variants = []
     for k, v in zip(fragile, found):
-        if v is None:
+        if not v["found"]:
             continue
         vid = f"{ids[k]}M"
         variants.append(
@@ -686,9 +574,12 @@ def _variant_entries(
                 "variant_of": ids[k],
                 "u": v["u"],
                 "parameters": jsonable(mission.space.decode(np.array(v["u"])[None, :])[0]),
-                "moved": {"parameter": mission.parameter_of(v["coordinate"]), "unit_step": v["step"]},
+                "moved": v["moved"],
+                "direction": v["direction"],
+                "noise_sigmas": v["sigmas"],
                 "predicted": {"mode": MODE_NAMES[int(chosen.modes[k])]},
                 "p_predicted_mode": v["p_predicted_mode"],
+                "p_predicted": v["p_predicted"],
                 "files": {
                     kind: path.name
                     for kind, path in write_scenario_files(mission, np.array(v["u"]), out_dir, vid).items()
@@ -704,25 +595,36 @@ def _plan_document(
     cfg: GenerateConfig,
     a: Analysis,
     pairs: list[dict],
+    verdicts: list[dict],
     confirmation: tuple[int, int] | None,
+    refinement: dict | None,
+    runs: dict[str, int],
+    noise: dict,
     scenarios: list[dict],
     variants: list[dict],
 ) -> dict:
     """What ``plan.json`` holds (schema ``rapt.plan/1``)."""
     sur = cfg.surrogate
-    plan_pairs = [
-        {
+    variant_ids = {v["id"] for v in variants}
+    plan_pairs = []
+    for p, (pair, verdict) in enumerate(zip(pairs, verdicts), start=1):
+        sides = [f"pair{p}a", f"pair{p}b"]
+        entry = {
             "id": p,
             "level": pair["level"],
             "elements": pair["elements"],
             "modes": pair["modes"],
             "distance": pair["distance"],
-            "scenarios": [f"pair{p}a", f"pair{p}b"],
+            "scenarios": sides,
             "refined": bool(pair.get("refined", False)),
             **({"confirmed_by_expert": True, "surrogate_modes": pair["surrogate_modes"]} if sur is not None else {}),
         }
-        for p, pair in enumerate(pairs, start=1)
-    ]
+        if pair.get("refined"):
+            entry["refinement"] = {"start_distance": pair["start_distance"], "runs": pair["refine_runs"]}
+        if verdict:
+            entry.update(verdict)
+            entry["variants"] = [f"{sid}M" if f"{sid}M" in variant_ids else None for sid in sides]
+        plan_pairs.append(entry)
     modes = a.result.modes
     return {
         "schema": PLAN_SCHEMA,
@@ -740,6 +642,9 @@ def _plan_document(
             "invalid_runs": int(len(a.X_invalid)),
             "modes": {MODE_NAMES[m]: int(c) for m, c in zip(*np.unique(modes, return_counts=True))},
             "boundary_types": a.boundary_types[:30],
+            "runs": runs,
+            "dithering": {**noise, "runs_per_scenario": cfg.dithers // 2},
+            **({"refinement": refinement} if refinement is not None else {}),
             **({"surrogate": _surrogate_summary(cfg, confirmation, len(pairs))} if confirmation is not None else {}),
         },
         "sensitivity": a.sensitivity,

@@ -625,6 +625,33 @@ def _header(plan: dict) -> str:
     return f"<header><h1>Field-test plan: {_e(m.get('name', '?'))}</h1><dl>{dl}</dl></header>"
 
 
+def _summary_table(plan: dict) -> str:
+    """Per pair: distance, P(predicted outcome) of each side and of its variant, and the verdict."""
+    dith = (plan.get("study") or {}).get("dithering") or {}
+    noise = ", ".join(f"{_e(k)} {_num(v)}" for k, v in (dith.get("expected") or {}).items()) or "—"
+    head = (
+        "<tr><th>pair</th><th>sub-boundary</th><th>modes</th><th>distance</th><th>P a / b</th>"
+        "<th>variant P a / b</th><th>verdict</th></tr>"
+    )
+    rows = []
+    for p in plan["pairs"]:
+        probs = p.get("p_predicted") or [None, None]
+        var = p.get("variant_p_predicted") or [None, None]
+        verdict = p.get("verdict", "—")
+        reason = f'<br><span class="note">{_e(p["reason"])}</span>' if p.get("reason") else ""
+        rows.append(
+            f"<tr><td class='num'>{_e(p['id'])}</td><td>{_e(', '.join(p['elements']))}</td>"
+            f"<td>{' / '.join(_mode_badge(m) for m in p['modes'])}</td><td class='num'>{_num(p['distance'], 3)}</td>"
+            f"<td class='num'>{_pct(probs[0])} / {_pct(probs[1])}</td>"
+            f"<td class='num'>{_pct(var[0])} / {_pct(var[1])}</td><td>{_e(verdict)}{reason}</td></tr>"
+        )
+    note = (
+        f"<p class=\"muted\">P: share of dithers that show the side's predicted outcome (mode and the pair's "
+        f"elements) under the expected execution noise ({noise}); a side needs {_pct(dith.get('target'))}.</p>"
+    )
+    return f"<table>{head}{''.join(rows)}</table>{note}"
+
+
 def _scenario_table(scen: list[dict]) -> str:
     head = (
         "<tr><th>scenario</th><th>predicted mode</th><th>P(predicted mode)</th><th>dithering runs "
@@ -801,7 +828,7 @@ def write_report(plan: dict, out_dir: Path, dithers: dict[str, tuple[np.ndarray,
     order = np.argsort(-total_imp, kind="stable")
     axes_idx = (int(order[0]), int(order[1])) if dim >= 2 else (0, 0)
 
-    body = [_header(plan), "<main>"]
+    body = [_header(plan), "<main>", "<h2>Summary</h2>", _summary_table(plan)]
     # overview
     _fig_modes(plan, fig_dir / "modes.png")
     top = _fig_boundary_types(plan, fig_dir / "boundary_types.png")

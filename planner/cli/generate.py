@@ -12,7 +12,29 @@ from rich.table import Table
 from planner.cli.console import err, fail, out, progress_bar
 from planner.cli.inputs import load_mission
 
-__all__ = ["generate"]
+__all__ = ["generate", "summary_table"]
+
+
+def summary_table(plan: dict, title: str) -> Table:
+    """Per pair: its sub-boundary and modes, distance, P(predicted outcome) of each side and variant, verdict."""
+    table = Table(title=title)
+    for col in ("pair", "sub-boundary", "modes", "distance", "P a / b", "variant P a / b", "verdict"):
+        table.add_column(col, justify="left" if col in ("sub-boundary", "verdict") else "right")
+
+    def pct(values) -> str:
+        return " / ".join("-" if v is None else f"{v:.0%}" for v in values or (None, None))
+
+    for p in plan["pairs"]:
+        table.add_row(
+            str(p["id"]),
+            ", ".join(p["elements"]),
+            " / ".join(p["modes"]),
+            f"{p['distance']:.3f}",
+            pct(p.get("p_predicted")),
+            pct(p.get("variant_p_predicted")),
+            p.get("verdict", "-"),
+        )
+    return table
 
 
 def generate(
@@ -22,6 +44,15 @@ def generate(
     pairs: Annotated[int, typer.Option(help="Boundary pairs in the plan.")] = 5,
     global_fraction: Annotated[float, typer.Option(help="Share of the budget for the space-filling start.")] = 0.2,
     dithers: Annotated[int, typer.Option(help="Stochastic dither runs per pair.")] = 2000,
+    dither_sigma: Annotated[
+        str,
+        typer.Option(
+            "--dither-sigma",
+            help="Expected execution noise the dithers model: position=M,time=S,battery=PCT "
+            "(metres, seconds, percent of capacity; kinds left out keep their default) or one "
+            "unit-cube sigma for every parameter, e.g. 0.02.",
+        ),
+    ] = "position=10,time=30,battery=1",
     seed: Annotated[int, typer.Option(help="Seed of every random choice.")] = 0,
     batch_size: Annotated[
         int | None,
@@ -33,9 +64,19 @@ def generate(
     ] = False,
     executor: Annotated[str, typer.Option(help="local, processes or dask://host:port.")] = "local",
     refine: Annotated[
-        bool, typer.Option("--refine", help="Sharpen each pair with a focused second search on its own sub-scores.")
+        bool,
+        typer.Option(
+            "--refine",
+            help="Sharpen candidate pairs with a focused search on their own sub-scores; ship only sharp ones.",
+        ),
     ] = False,
-    refine_runs: Annotated[int, typer.Option("--refine-runs", help="Runs per pair of --refine.")] = 12,
+    refine_runs: Annotated[
+        int,
+        typer.Option(
+            "--refine-runs",
+            help="Runs per candidate pair of --refine (twice --pairs candidates; counted in --budget).",
+        ),
+    ] = 160,
     surrogate: Annotated[
         Path | None,
         typer.Option(
@@ -65,6 +106,7 @@ def generate(
         seed=seed,
         batch_size=batch_size,
         dithers=dithers,
+        dither_sigma=dither_sigma,
         store=store,
         refine=refine_runs if refine else 0,
         confirm_runs=confirm_runs,
@@ -72,6 +114,7 @@ def generate(
     )
     try:
         cfg.check()
+        cfg.noise().sigmas(mission)  # a noise wider than a parameter's range fails before the search
     except ValueError as exc:
         fail(str(exc))
     if surrogate is not None:
@@ -105,20 +148,10 @@ def generate(
             fail(str(exc))
         finally:
             close_executor()
-    table = Table(title=f"{mission.name}: field plan in {out_dir}")
-    for col in ("pair", "sub-boundary", "modes", "distance", "P(predicted mode) a / b"):
-        table.add_column(col, justify="left" if col == "sub-boundary" else "right")
-    by_id = {sc["id"]: sc for sc in plan["scenarios"]}
+    out.print(summary_table(plan, f"{mission.name}: field plan in {out_dir}"))
     for p in plan["pairs"]:
-        probs = [by_id[s]["dithering"].get("p_predicted_mode") for s in p["scenarios"]]
-        table.add_row(
-            str(p["id"]),
-            ", ".join(p["elements"]),
-            " / ".join(p["modes"]),
-            f"{p['distance']:.3f}",
-            " / ".join("-" if v is None else f"{v:.0%}" for v in probs),
-        )
-    out.print(table)
+        if p.get("reason"):
+            out.print(f"pair {p['id']} is fragile: {p['reason']}", soft_wrap=True, highlight=False)
     out.print(
         f"{plan['study']['valid_runs']:,} valid runs; plan.json and {len(plan['scenarios'])} scenarios "
         f"(.plan, .waypoints, .geojson) written",

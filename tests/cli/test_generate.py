@@ -43,6 +43,38 @@ def test_cli_generate_resume_and_errors(tmp_path):
         (["generate", str(bad), "--out", str(tmp_path / "x")], "cruize_speed"),
         (["generate", str(tmp_path / "none.toml"), "--out", str(tmp_path / "x")], "MISSION_FILE"),
         (["generate", str(EXAMPLES / "imitation7.toml"), "--out", str(tmp_path / "y"), "--budget", "100"], "--budget"),
+        (
+            ["generate", str(EXAMPLES / "range2017.toml"), "--out", str(tmp_path / "y"), "--dither-sigma", "0.4"],
+            "(0, 0.25]",
+        ),
+        (
+            ["generate", str(EXAMPLES / "range2017.toml"), "--out", str(tmp_path / "y"), "--dither-sigma", "time=600"],
+            "time=600.0 is 1.00 of tx_window_start's range",
+        ),
+        (
+            [
+                "generate",
+                str(EXAMPLES / "range2017.toml"),
+                "--out",
+                str(tmp_path / "y"),
+                "--budget",
+                "1000",
+                "--refine",
+            ],
+            "--refine-runs: 160 runs for each of 10 candidate pairs leave -600 of --budget 1000",
+        ),
+        (
+            [
+                "generate",
+                str(EXAMPLES / "range2017.toml"),
+                "--out",
+                str(tmp_path / "y"),
+                "--refine",
+                "--refine-runs",
+                "4",
+            ],
+            "--refine-runs: expected at least 16 runs per pair, got 4",
+        ),
     ]:
         result = runner.invoke(app, argv)
         assert result.exit_code == 2, (argv, result.output)

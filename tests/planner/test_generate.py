@@ -11,6 +11,7 @@ from typer.testing import CliRunner
 import planner
 import sim.uuv
 from planner.generate import PLAN_SCHEMA, GenerateConfig, analyse, generate, search_mission, select_pairs
+from rapt.errors import InputError
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 SCHEMA = json.loads((Path(planner.__file__).parent / "plan.schema.json").read_text())
@@ -121,33 +122,55 @@ def test_same_plan_with_processes_and_a_dask_cluster(range2017, tmp_path):
     assert base == procs == dask
 
 
-def test_refine_sharpens_pairs_and_variants_keep_their_mode(range2017, tmp_path):
-    from planner.generate import refine_pairs
+def test_refined_pairs_are_sharp_counted_in_the_budget_and_every_side_holds_or_says_why(range2017, tmp_path):
+    cfg = small(tmp_path, budget=1500, dithers=200, refine=48, pairs=2)
+    plan = generate(range2017, EXAMPLES / "range2017.toml", tmp_path / "out", cfg)
+    PLAN_VALIDATOR.validate(plan)
+    runs, ref = plan["study"]["runs"], plan["study"]["refinement"]
+    assert runs["search"] + 48 * 4 == 1500 and runs["refinement"] == ref["runs"] <= 48 * ref["candidates"]
+    assert ref["sharp"] >= len(plan["pairs"]) and len(ref["dropped"]) == ref["candidates"] - ref["sharp"]
+    by_id = {s["id"]: s for s in plan["scenarios"] + plan["variants"]}
+    for p in plan["pairs"]:
+        assert p["refined"] and 0.02 <= p["distance"] <= 0.05 < p["refinement"]["start_distance"]
+        a, b = (by_id[s] for s in p["scenarios"])
+        r = sim.uuv.simulate(range2017, np.array([a["u"], b["u"]]))
+        cols = [r.names.index(e) for e in p["elements"]]
+        assert not np.array_equal(r.scores[0, cols], r.scores[1, cols])  # still straddles its sub-boundary
+        for side, (prob, vid, vp) in enumerate(zip(p["p_predicted"], p["variants"], p["variant_p_predicted"])):
+            if prob >= 0.8:
+                assert vid is None
+            elif vid is not None:  # the variant holds, keeps its side's mode, and its partner holds too
+                v = by_id[vid]
+                assert v["variant_of"] == p["scenarios"][side] and vp == v["p_predicted"] >= 0.8
+                mode = sim.uuv.simulate(range2017, np.array(v["u"])[None, :]).modes[0]
+                assert ("TF", "SS", "MS", "TS")[mode] == p["modes"][side]
+            else:
+                assert p["verdict"] == "fragile" and f"side {'ab'[side]}: no variant found" in p["reason"]
+        holds = [pr >= 0.8 or v is not None for pr, v in zip(p["p_predicted"], p["variant_p_predicted"])]
+        assert p["verdict"] == ("sharp" if min(p["p_predicted"]) >= 0.8 else "robust" if all(holds) else "fragile")
 
-    cfg = small(tmp_path)
-    a = analyse(range2017, search_mission(range2017, cfg))
-    chosen = select_pairs(a, 4)
-    refined = list(zip(chosen, refine_pairs(range2017, a, chosen, runs=12, min_distance=0.02)))
-    refined = [(p, q) for p, q in refined if q.get("refined")]
-    assert refined  # bisection stops early only at a third behaviour or an invalid scenario
-    pair, sharp = refined[0]
-    assert 0.02 <= sharp["distance"] < pair["distance"] / 4
-    lo, hi = sharp["u_override"]
-    r = sim.uuv.simulate(range2017, np.vstack([lo, hi]))
-    cols = [r.names.index(e) for e in pair["elements"]]
-    i, j = pair["rows"]
-    np.testing.assert_array_equal(r.scores[0, cols], a.result.scores[i, cols])  # still the same sub-boundary
-    np.testing.assert_array_equal(r.scores[1, cols], a.result.scores[j, cols])
-    plan = generate(
-        range2017,
-        EXAMPLES / "range2017.toml",
-        tmp_path / "out",
-        small(tmp_path, dithers=60, refine=8, pairs=2, fragile_below=0.9),
-    )
-    for v in plan["variants"]:
-        assert v["p_predicted_mode"] >= 0.9 and v["variant_of"] in plan["run_order"]
-        mode = sim.uuv.simulate(range2017, np.array(v["u"])[None, :]).modes[0]
-        assert ("TF", "SS", "MS", "TS")[mode] == v["predicted"]["mode"]
+
+def test_dither_noise_in_physical_units_becomes_a_sigma_per_coordinate(range2017):
+    from planner.dithering import DitherNoise
+
+    sigma = DitherNoise.parse("position=20,time=60").sigmas(range2017)
+    by_name = {n: sigma[range2017.space.slice_of(n)] for n in range2017.space.names}
+    assert by_name["start_time"] == pytest.approx([60 / 43200])  # seconds over the 12-hour range
+    assert by_name["tx_window_start"] == pytest.approx([60 / 600])
+    assert by_name["nogo_x"] == pytest.approx([20 / 400])  # metres over the no-go area's 400 m
+    assert by_name["start_battery"] == pytest.approx([0.01 / (0.4 - 0.05)])  # 1 % of capacity: the default
+    assert not by_name["priority"].any()  # the plan's order is not execution noise
+    unit = DitherNoise.parse("0.02").sigmas(range2017)
+    keys = range2017.space.slice_of("priority")
+    assert not unit[keys].any() and (np.delete(unit, np.arange(range2017.dim)[keys]) == 0.02).all()
+    for spec, message in (
+        ("time=300", r"^--dither-sigma: time=300.0 is 0.50 of tx_window_start's range; expected at most 0.25"),
+        ("0.5", r"^--dither-sigma: a unit-cube sigma must be in \(0, 0.25\], got 0.5"),
+        ("depth=3", r"^--dither-sigma: cannot read 'depth=3'"),
+        ("position=-1", r"^--dither-sigma: position must be a positive number"),
+    ):
+        with pytest.raises(InputError, match=message):
+            DitherNoise.parse(spec).sigmas(range2017)
 
 
 @pytest.mark.slow
