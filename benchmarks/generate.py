@@ -1,21 +1,27 @@
-"""``rapt-plan generate`` end to end: the time per stage of a 100,000-run field plan (issue 6).
+"""``rapt-plan generate`` end to end: sharp pairs and robust sides per mission, and time per stage.
 
-Runs the same code as the command (:func:`planner.generate.generate`, progress tracking
-included) on the 2017 range mission with the default plan settings — 5 pairs, 2,000
-stochastic dithers per pair, robust variants — and prints, per stage, the wall time and
-its share, next to the target of 10 minutes for the whole plan.  The study store is a
-fresh SQLite file, as on a first run.
+Default: the README main job's settings (``--budget 20000 --refine``, 5 pairs, 2,000
+dithers per pair, seed 0) on each bundled mission (range2017, uuv18, imitation7). Each runs
+twice, side by side: on this checkout, and on a baseline revision checked out into a
+temporary git worktree (bisection refinement, unit-cube dithering). The table gives per
+mission the pair distances, the share of sides whose dithers show their prediction at
+P >= 0.8 (variants included), the runs spent on refinement, dithering and variants, and
+the seconds per stage.
 
-Run:  python benchmarks/generate.py [--budget 100000] [--batch-size N] [--executor local|processes] [--quick]
+Run:  python benchmarks/generate.py [--budget 20000] [--baseline REV] [--missions ...] [--quick]
+      python benchmarks/generate.py --stages [--budget 100000] [--executor ...]  (issue 6's stage table)
 
-``--quick`` prints the same table for a 5,000-run plan with 200 dithers per pair (about a
-minute on 2 cores); the 10-minute target is for the full 100,000 runs and is not judged.
+``--quick`` runs range2017 alone with 5,000 runs and 200 dithers per pair (about 3 minutes).
+``--stages`` times one 100,000-run plan stage by stage, against the 10-minute target.
 """
 
 from __future__ import annotations
 
 import argparse
+import json
 import os
+import subprocess
+import sys
 import tempfile
 import time
 from pathlib import Path
@@ -27,8 +33,9 @@ MISSION = Path(__file__).resolve().parents[1] / "examples" / "range2017.toml"
 TARGET_S = 600.0
 
 
-def main() -> None:
+def stages() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--stages", action="store_true")
     ap.add_argument("--budget", type=int, default=None, help="search runs (default 100000; --quick: 5000)")
     ap.add_argument("--batch-size", type=int, default=None, help="default: as rapt-plan generate chooses")
     ap.add_argument("--dithers", type=int, default=None, help="dithers per pair (default 2000; --quick: 200)")
@@ -97,5 +104,127 @@ def main() -> None:
         )
 
 
+# -- issue 24: sharp pairs and robust sides, against a baseline revision ----------------------
+MISSIONS = ("range2017", "uuv18", "imitation7")
+BASELINE_REV = "4f1aaac"  # main before the focused refinement and the noise-based dithering
+ROOT = Path(__file__).resolve().parents[1]
+
+#: Runs in a subprocess on either revision's code; prints one JSON line of figures.
+DRIVER = r"""
+import json, sys, time
+from pathlib import Path
+import sim.uuv
+from planner.generate import GenerateConfig, generate
+mission_file, out, budget, dithers, refine = sys.argv[1], Path(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4]), int(sys.argv[5])
+mission = sim.uuv.load_mission(mission_file)
+timings = {}
+cfg = GenerateConfig(budget=budget, dithers=dithers, pairs=5, seed=0, refine=refine, store=out / "study.db")
+t0 = time.perf_counter()
+plan = generate(mission, Path(mission_file), out / "plan", cfg, None, timings)
+total = time.perf_counter() - t0
+held, sides = 0, 0
+variants = {v["variant_of"]: v for v in plan["variants"]}
+for s in plan["scenarios"]:
+    d = s["dithering"]
+    p = d.get("p_predicted", d.get("p_predicted_mode"))
+    v = variants.get(s["id"])
+    pv = None if v is None else v.get("p_predicted", v.get("p_predicted_mode"))
+    sides += 1
+    held += (p is not None and p >= 0.8) or (pv is not None and pv >= 0.8)
+runs = plan["study"].get("runs", {})
+print(json.dumps({
+    "distances": [p["distance"] for p in plan["pairs"]],
+    "verdicts": [p.get("verdict", "-") for p in plan["pairs"]],
+    "held": held, "sides": sides,
+    "refinement_runs": runs.get("refinement"), "dithering_runs": runs.get("dithering", len(plan["scenarios"]) * (dithers // 2)),
+    "variant_runs": runs.get("variants"), "timings": timings, "total": total,
+}))
+"""
+
+
+def _run(code_root: Path, mission: str, tmp: Path, budget: int, dithers: int, refine: int) -> dict:
+    out = tmp / f"{code_root.name}-{mission}"
+    out.mkdir(parents=True)
+    env = {**os.environ, "PYTHONPATH": str(code_root)}
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-c",
+            DRIVER,
+            str(ROOT / "examples" / f"{mission}.toml"),
+            str(out),
+            str(budget),
+            str(dithers),
+            str(refine),
+        ],
+        env=env,
+        cwd=code_root,
+        capture_output=True,
+        text=True,
+        check=True,
+    )
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def compare() -> None:
+    ap = argparse.ArgumentParser(
+        description="Sharp pairs and robust sides per bundled mission, against a baseline revision"
+    )
+    ap.add_argument("--budget", type=int, default=20_000, help="the README main job's budget")
+    ap.add_argument("--dithers", type=int, default=2000)
+    ap.add_argument("--baseline", default=BASELINE_REV, help="git revision of the code to compare against")
+    ap.add_argument("--missions", nargs="*", default=list(MISSIONS))
+    ap.add_argument("--quick", action="store_true", help="range2017 only, 5,000 runs, 200 dithers per pair")
+    args = ap.parse_args()
+    if args.quick:
+        args.budget, args.dithers, args.missions = 5_000, 200, ["range2017"]
+    with tempfile.TemporaryDirectory() as tmp_name:
+        tmp = Path(tmp_name)
+        base_root = tmp / "baseline"
+        subprocess.run(
+            ["git", "-C", str(ROOT), "worktree", "add", "--detach", str(base_root), args.baseline],
+            check=True,
+            capture_output=True,
+        )
+        try:
+            rows = []
+            for mission in args.missions:
+                before = _run(base_root, mission, tmp, args.budget, args.dithers, 12)  # the old --refine default
+                after = _run(ROOT, mission, tmp, args.budget, args.dithers, 160)  # the new one
+                rows.append((mission, before, after))
+        finally:
+            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(base_root)], check=False)
+    print(
+        f"rapt-plan generate MISSION --budget {args.budget:,} --refine, {args.dithers:,} dithers per pair, seed 0, "
+        f"{os.cpu_count()} cores; baseline {args.baseline} (bisection, unit-cube sigma 0.02, P of the mode)"
+    )
+    print(
+        f"{'mission':<11} {'code':<9} {'pair distances':<36} {'max':>6} {'sides P>=0.8':>12} "
+        f"{'refine runs':>11} {'dither runs':>11} {'variant runs':>12} {'total s':>8}"
+    )
+    for mission, before, after in rows:
+        for name, r in (("baseline", before), ("now", after)):
+            d = r["distances"]
+            print(
+                f"{mission:<11} {name:<9} {', '.join(f'{x:.3f}' for x in d):<36} {max(d, default=0):>6.3f} "
+                f"{r['held']:>5}/{r['sides']:<6} {str(r['refinement_runs'] or '-'):>11} {r['dithering_runs']:>11,} "
+                f"{str(r['variant_runs'] if r['variant_runs'] is not None else '-'):>12} {r['total']:>8.1f}"
+            )
+        print(
+            f"{'':<11} {'verdicts':<9} {', '.join(after['verdicts'])}; max distance ratio now/baseline "
+            f"{max(after['distances']) / max(before['distances']):.2f}"
+        )
+    print("seconds per stage (baseline -> now):")
+    for mission, before, after in rows:
+        stages = dict.fromkeys(list(before["timings"]) + list(after["timings"]))
+        print(
+            f"  {mission}: "
+            + ", ".join(f"{s} {before['timings'].get(s, 0):.0f} -> {after['timings'].get(s, 0):.0f}" for s in stages)
+        )
+
+
 if __name__ == "__main__":
-    main()
+    if "--stages" in sys.argv:
+        stages()
+    else:
+        compare()
