@@ -8,7 +8,7 @@ fitted bias (the autonomy unbiased, the vehicle biased, as on the water); a pair
 flagged when a side no longer shows the values of its pair's score elements that the
 plan predicted; and for each such side :func:`adjust_for_bias` searches the smallest move
 along the plan's most sensitive coordinates, away from the pair's other scenario (the
-direction :func:`planner.generate.robust_variants` moves too), that brings the intended
+direction :func:`planner.dithering.robust_variants` also tries), that brings the intended
 values back under the bias — checked by seeded stochastic dithers of the candidate, with
 the bias, when asked.
 """
