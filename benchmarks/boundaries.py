@@ -15,12 +15,23 @@ Three parts, each printed as a table:
    (share of the exact 12 nearest neighbours found, 10^4 sampled rows, brute force), and
    — at the smallest size — the old all-leaves-at-once method (modes from all 66
    leaves, pairs between every two modes) for comparison.
+4. Analysis ready when the search ends: the neighbour graph grown batch by batch
+   (:class:`rapt.neighbours.GrowingGraph`, as ``rapt.search(neighbour_graph=12)`` grows it)
+   on 10^6 uniform samples and on an S-NDV study of ``HierarchicalND``: the growth cost
+   per batch and in total, then the sub-boundary tree with the grown graph (the analysis
+   left after the last batch) against today's from scratch, with both graphs' recall.
 
 Run:  python benchmarks/boundaries.py [--sizes 10000 100000 1000000] [--skip-noise] [--quick]
+                                      [--grow N] [--grow-sndv N] [--skip-cost]
 
 ``--quick`` prints the same three tables from a small run (about a minute on 2 cores):
 2000 samples for part 1, 1000 per noise level for part 2, and 3,000 and 30,000 samples
-(one exact, one HNSW graph) for part 3.
+(one exact, one HNSW graph) for part 3, 30,000 uniform and 10,000 S-NDV samples for part 4.
+
+The S-NDV study of part 4 runs as ``rapt-plan generate`` runs its search: steered on the
+root scores, a 20 % space-filling start, ``max_reference`` 10,000, batches of 5,000.
+Its search alone takes about 10 s per batch here (the sampler, not the graph), so
+``--grow-sndv`` defaults to 10^5 samples; 10^6 takes about 40 minutes.
 """
 
 from __future__ import annotations
@@ -133,6 +144,70 @@ def cost(sizes: list[int]) -> None:
     print(f"All 66 leaves at once (Algorithm 2), {n:,} samples: {t:.2f} s ({labels.max() + 1} modes, {i.size:,} pairs)")
 
 
+def analysis_ready(n_uniform: int, n_sndv: int, batch: int = 5000) -> None:
+    """Part 4: grow the graph batch by batch, then the analysis with it vs the tree from scratch."""
+    from rapt.neighbours import GrowingGraph
+
+    h = HierarchicalND()
+    print(
+        f"\n4. Analysis ready when the search ends: {h.name} sub-boundary tree with the graph grown during the "
+        f"search (batches of {batch:,}) vs built from scratch; target at 10^6: analysis <= 20 s"
+    )
+    print(
+        f"{'data':>8} {'samples':>9} {'search (s)':>10} {'growth (s)':>10} {'per batch':>15} "
+        f"{'analysis (s)':>12} {'from scratch (s)':>16} {'ratio':>6} {'recall grown':>12} {'from scratch':>12}"
+    )
+    for data, n in (("uniform", n_uniform), ("S-NDV", n_sndv)):
+        t0 = time.perf_counter()
+        if data == "uniform":
+            X = np.random.default_rng(1).random((n, h.dim))
+            Y = h(X)
+            batches = [np.arange(s, min(s + batch, n)) for s in range(0, n, batch)]
+        else:
+            study = rapt.search(
+                h,
+                [(0, 1)] * h.dim,
+                n,
+                method="s-ndv",
+                batch_size=batch,
+                seed=0,
+                steer=[0, 1],
+                output_types=("binary", "binary"),
+                sampler_options={"max_reference": 10_000},
+                n_initial=int(0.2 * n),
+            )
+            X, Y = study.U, study.Y
+            batches = [np.flatnonzero(study.batch == b) for b in np.unique(study.batch)]
+        searched = time.perf_counter() - t0
+        g = GrowingGraph(h.dim, 12)
+        per_batch = []
+        for rows in batches:  # the same work rapt.search(neighbour_graph=12) does after each batch
+            t0 = time.perf_counter()
+            g.add(X[rows])
+            per_batch.append(time.perf_counter() - t0)
+        grown = g.graph()
+        t0 = time.perf_counter()
+        fast = rapt.subboundary_tree(X, Y, h.score_tree, graph=grown)
+        t_fast = time.perf_counter() - t0
+        t0 = time.perf_counter()
+        slow = rapt.subboundary_tree(X, Y, h.score_tree)
+        t_slow = time.perf_counter() - t0
+        same = np.array_equal(fast.assignment, slow.assignment)
+        pb = f"{np.mean(per_batch):.2f}/{np.max(per_batch):.2f}"
+        print(
+            f"{data:>8} {n:>9,} {searched:>10.1f} {sum(per_batch):>10.1f} {pb:>15} {t_fast:>12.2f} {t_slow:>16.1f} "
+            f"{t_slow / t_fast:>5.1f}x {graph_recall(X, grown[1]):>12.1%} {graph_recall(X, slow.neighbours):>12.1%}",
+            flush=True,
+        )
+        print(
+            f"{'':>8} pairs: {fast.pairs()[0].size:,} grown vs {slow.pairs()[0].size:,} from scratch; same clusters: "
+            f"{same}; analysis split/order/pairs {fast.timings['split']:.2f}/{fast.timings['graph']:.2f}/"
+            f"{fast.timings['pairs']:.2f} s",
+            flush=True,
+        )
+        del fast, slow, grown, g, X, Y
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument(
@@ -143,13 +218,22 @@ def main() -> None:
         help="samples for part 3 (default 10000 100000 1000000; --quick: 3000 30000)",
     )
     ap.add_argument("--skip-noise", action="store_true")
+    ap.add_argument("--skip-cost", action="store_true", help="skip part 3")
+    ap.add_argument("--grow", type=int, default=None, help="uniform samples for part 4 (default 10^6)")
+    ap.add_argument("--grow-sndv", type=int, default=None, help="S-NDV samples for part 4 (default 10^5)")
     ap.add_argument("--quick", action="store_true", help="the same tables from a small run (about a minute)")
     args = ap.parse_args()
     sizes = args.sizes or ([3_000, 30_000] if args.quick else [10_000, 100_000, 1_000_000])
     correctness(2000 if args.quick else 4000)
     if not args.skip_noise:
         noise(1000 if args.quick else 3000)
-    cost(sorted(sizes))
+    if not args.skip_cost:
+        cost(sorted(sizes))
+    analysis_ready(
+        args.grow or (30_000 if args.quick else 1_000_000),
+        args.grow_sndv or (10_000 if args.quick else 100_000),
+        1_000 if args.quick else 5_000,
+    )
 
 
 if __name__ == "__main__":

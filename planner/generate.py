@@ -196,7 +196,9 @@ def search_mission(
 ) -> rapt.Study:
     """Global then adaptive search steered by mission and safety success; invalid scenarios fail.
 
-    Every score is stored with its run, so the sub-boundary analysis needs no second run.
+    Every score is stored with its run, so the sub-boundary analysis needs no second run,
+    and the neighbour graph the analysis pairs through grows with the batches (and is
+    stored with them), so it need not be built once the search ends.
     """
     batch_size = auto_batch_size(cfg.budget) if cfg.batch_size is None else cfg.batch_size  # as __post_init__
     return rapt.search(
@@ -214,6 +216,7 @@ def search_mission(
         n_initial=int(round(cfg.search_budget * cfg.global_fraction)),
         progress=progress,
         on_batch=on_batch,
+        neighbour_graph=12,  # subboundary_tree's k
     )
 
 
@@ -237,7 +240,9 @@ def analyse(mission: Mission, study: rapt.Study, surrogate=None) -> Analysis:
             "study: the stored runs do not match the mission file (was it edited?); plan into a new --out directory"
         )
     result = sim.uuv.Result(Y, modes_from_scores(Y), np.ones(len(Y), dtype=bool), [""] * len(Y), names, types)
-    tree = rapt.subboundary_tree(X, result.scores, mission.score_tree, output_types=result.output_types)
+    tree = rapt.subboundary_tree(
+        X, result.scores, mission.score_tree, output_types=result.output_types, graph=study.neighbours
+    )
     imp = output_importance(X, result.scores[:, :2], ("binary", "binary"), random_state=0)
     sensitivity = {}
     for row, name in zip(imp, ("mission_success", "safety_success")):

@@ -11,6 +11,13 @@ Tables
 ``samples(batch, row, x, y, status, reason)``
                                          one row per evaluated point; ``status`` is ``ok`` or
                                          ``failed`` (``reason`` says why; ``y`` is NULL).
+``neighbours(node, idx, dist)``          the study's k-nearest-neighbour graph (:mod:`rapt.neighbours`):
+                                         node n's current list (int32 ids, float32 distances),
+                                         for the n-th successful row; meta ``neighbour_graph``
+                                         says for which k and up to which batch.
+
+Schema 2 added the ``neighbours`` table.  A schema-1 store opens as schema 2 (the table
+is created empty); a resumed search then rebuilds the graph from the stored rows.
 """
 
 from __future__ import annotations
@@ -28,7 +35,7 @@ from rapt.errors import FileFormatError, InputError, RunError
 
 __all__ = ["StudyStore", "SCHEMA_VERSION"]
 
-SCHEMA_VERSION = 1
+SCHEMA_VERSION = 2
 
 _SCHEMA = """
 CREATE TABLE IF NOT EXISTS meta (key TEXT PRIMARY KEY, value TEXT NOT NULL);
@@ -45,6 +52,11 @@ CREATE TABLE IF NOT EXISTS samples (
     status TEXT NOT NULL CHECK (status IN ('ok', 'failed')),
     reason TEXT,
     PRIMARY KEY (batch, row)
+);
+CREATE TABLE IF NOT EXISTS neighbours (
+    node INTEGER PRIMARY KEY,
+    idx BLOB NOT NULL,
+    dist BLOB NOT NULL
 );
 """
 
@@ -73,6 +85,8 @@ class StudyStore:
             raise FileFormatError(
                 f"store: {self.path} is not a RAPT study database ({exc}); choose another path"
             ) from None
+        if self.get_meta().get("schema_version") == 1:  # only the neighbours table is new
+            self.set_meta({"schema_version": SCHEMA_VERSION})
 
     # -- lifecycle ----------------------------------------------------------------------
     def close(self) -> None:
@@ -172,6 +186,49 @@ class StudyStore:
                 )
             )
         return out
+
+    # -- neighbour graph ------------------------------------------------------------------
+    def put_neighbours(self, state: dict[str, Any], nodes: np.ndarray, idx: np.ndarray, dist: np.ndarray) -> None:
+        """Write the lists of ``nodes`` (rows of ``idx``/``dist``) and the graph's ``state`` in one transaction.
+
+        ``state`` (meta ``neighbour_graph``) names the batches the stored lists cover, so a
+        stop between a batch's samples and its graph leaves a store that says so.
+        """
+        idx = np.ascontiguousarray(idx, dtype="<i4")
+        dist = np.ascontiguousarray(dist, dtype="<f4")
+        with self._tx():
+            self._db.executemany(
+                "INSERT OR REPLACE INTO neighbours(node, idx, dist) VALUES (?, ?, ?)",
+                [(int(n), i.tobytes(), d.tobytes()) for n, i, d in zip(nodes, idx, dist)],
+            )
+            self._db.execute(
+                "INSERT OR REPLACE INTO meta(key, value) VALUES ('neighbour_graph', ?)", (json.dumps(state),)
+            )
+
+    def neighbours(self, k: int) -> tuple[np.ndarray, np.ndarray]:
+        """The stored graph: (idx, dist), (N, k) in node order; FileFormatError when nodes are missing."""
+        idx = bytearray()
+        dist = bytearray()
+        n = 0
+        for node, i, d in self._db.execute("SELECT node, idx, dist FROM neighbours ORDER BY node"):
+            if node != n or len(i) != 4 * k or len(d) != 4 * k:
+                raise FileFormatError(
+                    f"store: {self.path} holds a damaged neighbour graph (node {node}); "
+                    "delete its neighbours table to rebuild it"
+                )
+            idx += i
+            dist += d
+            n += 1
+        return (
+            np.frombuffer(bytes(idx), dtype="<i4").reshape(n, k).astype(np.int32),
+            np.frombuffer(bytes(dist), dtype="<f4").reshape(n, k).astype(np.float32),
+        )
+
+    def clear_neighbours(self) -> None:
+        """Forget the stored graph (another k was asked for): it is rebuilt from the rows."""
+        with self._tx():
+            self._db.execute("DELETE FROM neighbours")
+            self._db.execute("DELETE FROM meta WHERE key = 'neighbour_graph'")
 
     def count(self) -> int:
         return int(self._db.execute("SELECT COUNT(*) FROM samples").fetchone()[0])

@@ -148,6 +148,7 @@ def subboundary_tree(
     k: int = 12,
     exact_below: int = 2000,
     neighbours: str = "auto",
+    graph: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> SubBoundaryTree:
     """Algorithm 3: split by the score tree level by level and pair sub-clusters within parents.
 
@@ -170,6 +171,16 @@ def subboundary_tree(
     neighbours:
         How the k-graph is built: ``"exact"``, ``"hnsw"`` (approximate, for 10^5+ samples
         in many dimensions) or ``"auto"`` (see :func:`rapt.boundaries.knn_graph`).
+    graph:
+        A ready k-nearest-neighbour graph of ``X``'s rows, ``(dist, idx)`` both (N, k'),
+        nearest first (e.g. ``Study.neighbours``, grown during the search): used instead
+        of building one, which is most of the cost for large studies.  Only its first
+        ``k`` columns are used; each row's neighbours are re-ordered by their exact
+        distance in ``X`` and the pairs' distances measured there, so a graph stored in
+        float32 gives the same pairs as the exact graph it holds.  Below ``exact_below``
+        samples it is ignored and the complete graph built as without it, so small studies
+        keep their results.  It cannot be combined with ``weights``, which change the
+        distances the graph was built on.
     """
     started = time.perf_counter()
     X = check_states(X)
@@ -186,6 +197,8 @@ def subboundary_tree(
     types = infer_output_types(columns.T) if output_types is None else check_output_types(output_types, Y.shape[1])
     Xs = X if weights is None else X * _check_weights(weights, X.shape[1])
     n = X.shape[0]
+    if graph is not None:
+        graph = _check_graph(graph, n, weights)
     levels = tree.levels()
 
     assignment = np.empty((len(levels), n), dtype=np.int64)
@@ -206,15 +219,16 @@ def subboundary_tree(
         previous = inverse
 
     split_done = time.perf_counter()
-    dist, idx = knn_graph(Xs, n - 1 if n <= exact_below else int(k), method=neighbours)
+    if graph is None or n <= exact_below:
+        dist, idx = knn_graph(Xs, n - 1 if n <= exact_below else int(k), method=neighbours)
+    else:
+        dist, idx = _exact_order(Xs, graph[1][:, : int(k)])
     graph_done = time.perf_counter()
     pairs = []
     for lv in range(len(levels)):
         parent = assignment[lv - 1] if lv else None
         pairs.append(graph_mutual_pairs(dist, idx, assignment[lv], parent))
-    result = SubBoundaryTree(
-        tree, X, Y, tuple(types), assignment, values, parents, pairs, n - 1 if n <= exact_below else int(k)
-    )
+    result = SubBoundaryTree(tree, X, Y, tuple(types), assignment, values, parents, pairs, idx.shape[1])
     result.neighbours = idx  # the (N, k) neighbour graph the pairs came from (nearest first)
     result.timings = {
         "split": split_done - started,
@@ -242,6 +256,38 @@ def _split(parent: np.ndarray, columns: np.ndarray, types: list[str], bandwidth:
             lab[rows] = mean_shift_normalised(Z[rows], bandwidth)
         parts.append(lab)
     return row_codes(parts)
+
+
+def _check_graph(graph: Any, n: int, weights: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+    """A given neighbour graph checked against the samples: (dist, idx), (n, k) with indices in range."""
+    if weights is not None:
+        raise InputError("graph: a ready neighbour graph cannot be combined with weights; pass one or the other")
+    if not (isinstance(graph, (tuple, list)) and len(graph) == 2):
+        raise InputError("graph: expected (dist, idx), two (N, k) arrays such as Study.neighbours")
+    dist, idx = np.asarray(graph[0]), np.asarray(graph[1])
+    if dist.ndim != 2 or dist.shape != idx.shape or dist.shape[0] != n or dist.shape[1] < 1:
+        raise InputError(
+            f"graph: expected (dist, idx) of shape ({n}, k) each, one row per sample; got {dist.shape} and {idx.shape}"
+        )
+    if not np.issubdtype(idx.dtype, np.integer) or (idx.size and (idx.min() < 0 or idx.max() >= n)):
+        raise InputError(f"graph: idx must hold integer sample indices in [0, {n})")
+    return dist, idx
+
+
+def _exact_order(X: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each row's neighbours ``idx`` with their exact distances in ``X``, nearest first.
+
+    A row's own index (padding of a short list) gets an infinite distance.
+    """
+    n, k = idx.shape
+    d = np.empty(idx.shape)
+    for s in range(0, n, 65_536):  # blocks: (rows, k, dim) differences stay small
+        rows = np.arange(s, min(s + 65_536, n))
+        diff = X[idx[rows]] - X[rows][:, None, :]
+        d[rows] = np.sqrt(np.einsum("rkd,rkd->rk", diff, diff))
+    d[idx == np.arange(n)[:, None]] = np.inf
+    order = np.argsort(d, axis=1, kind="stable")
+    return np.take_along_axis(d, order, axis=1), np.take_along_axis(idx, order, axis=1).astype(np.int64)
 
 
 def _check_weights(weights: np.ndarray, d: int) -> np.ndarray:

@@ -129,3 +129,60 @@ def test_hnsw_pairs_are_deterministic():
     b = rapt.subboundary_tree(X, h(X), h.score_tree, exact_below=0, neighbours="hnsw")
     for lv in range(4):
         assert all(np.array_equal(u, v) for u, v in zip(a.pairs(lv), b.pairs(lv)))
+
+
+# -- the graph grown batch by batch (rapt.neighbours) ------------------------------------
+def _grown(X, sizes, **kw):
+    from rapt.neighbours import GrowingGraph
+
+    g = GrowingGraph(X.shape[1], **kw)
+    edges = np.r_[0, np.cumsum(sizes)]
+    for a, b in zip(edges[:-1], edges[1:]):
+        g.add(X[a:b])
+    assert g.n == X.shape[0]
+    return g
+
+
+def test_grown_graph_is_the_exact_knn_graph_while_small():
+    X = np.random.default_rng(11).random((1500, 5))
+    sizes = [1, 0, 7, 300, 2, 690, 500]  # a lone row, an empty batch, uneven batches
+    dist, idx = _grown(X, sizes, k=12).graph()
+    d_ref, i_ref = knn_graph(X, 12, method="exact")
+    assert dist.dtype == np.float32 and idx.dtype == np.int32 and idx.shape == (1500, 12)
+    assert all(set(a) == set(b) for a, b in zip(idx.tolist(), i_ref.tolist()))
+    np.testing.assert_allclose(dist, d_ref, rtol=1e-6)
+    assert np.all(np.diff(dist, axis=1) >= 0)  # nearest first
+
+
+def test_grown_graph_pads_short_lists_with_the_row_itself():
+    from rapt.neighbours import GrowingGraph
+
+    g = GrowingGraph(2, k=4)
+    g.add(np.array([[0.0, 0.0], [1.0, 0.0]]))
+    dist, idx = g.graph()
+    assert idx.tolist() == [[1, 0, 0, 0], [0, 1, 1, 1]]
+    assert np.isinf(dist[:, 1:]).all() and dist[0, 0] == np.float32(1.0)
+
+
+def test_grown_hnsw_graph_recall_and_determinism():
+    """Beyond exact_max the batches are linked through HNSW: most exact neighbours found, the same every time."""
+    X = np.random.default_rng(12).random((4000, 18))
+    sizes = [400] * 10
+    a = _grown(X, sizes, k=12, exact_max=800)
+    b = _grown(X, sizes, k=12, exact_max=800)
+    (da, ia), (db, ib) = a.graph(), b.graph()
+    assert ia.tobytes() == ib.tobytes() and da.tobytes() == db.tobytes()
+    _, exact = knn_graph(X, 12, method="exact")
+    recall = np.mean([len(set(p) & set(q)) for p, q in zip(ia.tolist(), exact.tolist())]) / 12
+    assert recall >= 0.9, recall
+    true_d = np.linalg.norm(X[ia] - X[:, None, :], axis=2)
+    np.testing.assert_allclose(da, true_d, rtol=1e-5)  # distances are the rows' own
+
+
+def test_grown_graph_rejects_bad_rows_and_k():
+    from rapt.neighbours import GrowingGraph
+
+    with pytest.raises(ValueError, match="neighbour_graph: expected a positive number"):
+        GrowingGraph(3, k=0)
+    with pytest.raises(ValueError, match="U: expected rows of 3 inputs"):
+        GrowingGraph(3).add(np.zeros((4, 2)))

@@ -359,3 +359,80 @@ def test_steer_searches_on_some_columns_and_keeps_them_all(tmp_path):
         rapt.search(two_outputs, steer=[5], **kw)
     with pytest.raises(ValueError, match="steer: expected distinct"):
         rapt.search(two_outputs, steer=[0, 0], **kw)
+
+
+class _Killed(BaseException):
+    """Stands for the process dying: not an Exception, so the runner does not record it as a failed chunk."""
+
+
+def _graph_study(store, k=12, kill_at=None, fn=None):
+    calls = [0]
+
+    def system(X):
+        calls[0] += 1
+        if kill_at is not None and calls[0] == kill_at:
+            raise _Killed
+        return (fn or two_outputs)(X)
+
+    return rapt.search(
+        system, [(0, 1)] * 4, 3000, method="s-ndv", batch_size=250, seed=4, store=store, neighbour_graph=k
+    )
+
+
+def _same_graph(a, b):
+    return (
+        a.neighbours[0].tobytes() == b.neighbours[0].tobytes()
+        and a.neighbours[1].tobytes() == b.neighbours[1].tobytes()
+    )
+
+
+@pytest.fixture
+def small_exact_regime(monkeypatch):
+    """Studies of a few thousand rows cross into the HNSW regime, as 10^5-row ones do."""
+    import rapt.neighbours
+
+    monkeypatch.setattr(rapt.neighbours, "EXACT_GRAPH_MAX_SAMPLES", 1000)
+
+
+def test_neighbour_graph_is_stored_and_a_killed_study_resumes_to_the_same_graph(tmp_path, small_exact_regime):
+    straight = _graph_study(None)
+    assert straight.neighbours[1].shape == (len(straight.X), 12)
+    db = tmp_path / "s.db"
+    with pytest.raises(_Killed):
+        _graph_study(db, kill_at=7)  # mid-study: six batches stored, the seventh in flight
+    with StudyStore(db) as s:
+        assert s.get_meta()["neighbour_graph"] == {"k": 12, "batches": 6, "rows": 1500}
+    resumed = _graph_study(db)
+    assert np.array_equal(resumed.X, straight.X) and _same_graph(resumed, straight)
+    again = _graph_study(db)  # a finished study replays its stored graph without linking a row
+    assert _same_graph(again, straight)
+
+
+def test_store_without_a_graph_rebuilds_it_on_resume(tmp_path, small_exact_regime):
+    """A schema-1 store (no neighbours table), or one searched without the graph or with another k."""
+    straight = _graph_study(None)
+    db = tmp_path / "old.db"
+    with pytest.raises(_Killed):
+        _graph_study(db, k=5, kill_at=9)
+    with StudyStore(db) as s:  # make it a schema-1 store: no graph table
+        s._db.execute("DROP TABLE neighbours")
+        s._db.execute("DELETE FROM meta WHERE key = 'neighbour_graph'")
+        s._db.execute("UPDATE meta SET value = '1' WHERE key = 'schema_version'")
+    resumed = _graph_study(db)
+    assert _same_graph(resumed, straight)
+    with StudyStore(db) as s:
+        assert s.get_meta()["schema_version"] == 2
+    other_k = tmp_path / "k5.db"
+    with pytest.raises(_Killed):
+        _graph_study(other_k, k=5, kill_at=4)
+    assert _same_graph(_graph_study(other_k), straight)  # the k=5 graph is dropped and rebuilt for k=12
+
+
+def test_neighbour_graph_skips_failed_rows():
+    def half_invalid(X):
+        return np.where(X[:, :1] < 0.3, np.nan, disk(X))
+
+    study = rapt.search(half_invalid, [(0, 1)] * 2, budget=400, method="random", batch_size=100, neighbour_graph=6)
+    assert len(study.X_failed) and study.neighbours[1].shape == (len(study.X), 6)
+    _, exact = rapt.boundaries.knn_graph(study.U, 6, method="exact")
+    assert all(set(a) == set(b) for a, b in zip(study.neighbours[1].tolist(), exact.tolist()))

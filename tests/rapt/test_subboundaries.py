@@ -114,3 +114,53 @@ def test_children_and_members_follow_the_hierarchy():
         kids = T.children(0, c)
         assert kids.size >= 1
         assert sorted(np.concatenate([T.members(1, kc) for kc in kids]).tolist()) == T.members(0, c).tolist()
+
+
+def _hierarchical_sample(n, seed=6):
+    h = Hierarchical2D()
+    X = np.random.default_rng(seed).random((n, 2))
+    return h, X, h(X)
+
+
+def test_a_given_graph_gives_the_pairs_of_the_graph_it_replaces():
+    from rapt.neighbours import GrowingGraph
+
+    h, X, Y = _hierarchical_sample(2500)
+    grown = GrowingGraph(2, k=12)
+    for s in range(0, 2500, 300):
+        grown.add(X[s : s + 300])
+    built = rapt.subboundary_tree(X, Y, h.score_tree, exact_below=100)
+    given = rapt.subboundary_tree(X, Y, h.score_tree, exact_below=100, graph=grown.graph())
+    (bi, bj, bd, bl), (gi, gj, gd, gl) = built.pairs(), given.pairs()
+    assert bi.size > 100
+    assert np.array_equal(bi, gi) and np.array_equal(bj, gj) and np.array_equal(bl, gl)
+    np.testing.assert_allclose(gd, bd, rtol=1e-12)  # measured in X, not the graph's float32
+    assert given.timings["graph"] < built.timings["graph"]
+
+
+def test_a_given_graph_is_ignored_below_exact_below():
+    """Small studies keep the complete graph, so their pairs do not change with the option."""
+    h, X, Y = _hierarchical_sample(400)
+    nonsense = (np.ones((400, 3)), np.zeros((400, 3), dtype=np.int32))
+    plain = rapt.subboundary_tree(X, Y, h.score_tree)
+    given = rapt.subboundary_tree(X, Y, h.score_tree, graph=nonsense)
+    assert all(np.array_equal(a, b) for a, b in zip(plain.pairs(), given.pairs()))
+    with_graph = rapt.subboundary_tree(X, Y, h.score_tree, graph=nonsense, exact_below=0)
+    assert with_graph.pairs()[0].size == 0  # above exact_below it is what the pairs come from
+
+
+@pytest.mark.parametrize(
+    ("graph", "weights", "match"),
+    [
+        ((np.zeros((9, 3)), np.zeros((9, 3), dtype=int)), None, r"graph: expected \(dist, idx\) of shape \(10, k\)"),
+        ((np.zeros((10, 3)), np.zeros((10, 2), dtype=int)), None, r"graph: expected \(dist, idx\) of shape"),
+        (np.zeros((10, 3)), None, r"graph: expected \(dist, idx\), two"),
+        ((np.zeros((10, 3)), np.full((10, 3), 10)), None, r"graph: idx must hold integer sample indices in \[0, 10\)"),
+        ((np.zeros((10, 3)), np.zeros((10, 3), dtype=int)), np.ones(2), "graph: a ready neighbour graph cannot"),
+    ],
+)
+def test_bad_graph_is_a_one_line_input_error(graph, weights, match):
+    h, X, Y = _hierarchical_sample(10)
+    with pytest.raises(rapt.InputError, match=match) as err:
+        rapt.subboundary_tree(X, Y, h.score_tree, graph=graph, weights=weights)
+    assert "\n" not in str(err.value)
