@@ -18,8 +18,13 @@ __all__ = ["generate", "summary_table"]
 def summary_table(plan: dict, title: str) -> Table:
     """Per pair: its sub-boundary and modes, distance, P(predicted outcome) of each side and variant, verdict."""
     table = Table(title=title)
-    for col in ("pair", "sub-boundary", "modes", "distance", "P a / b", "variant P a / b", "verdict"):
-        table.add_column(col, justify="left" if col in ("sub-boundary", "verdict") else "right")
+    for col in ("pair", "sub-boundary", "modes", "distance", "P a / b", "variant P", "verdict"):
+        table.add_column(
+            col,
+            justify="left" if col in ("sub-boundary", "verdict") else "right",
+            overflow="fold" if col == "sub-boundary" else "ellipsis",
+            no_wrap=col != "sub-boundary",
+        )
 
     def pct(values) -> str:
         return " / ".join("-" if v is None else f"{v:.0%}" for v in values or (None, None))
