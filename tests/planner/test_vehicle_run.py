@@ -9,6 +9,7 @@ vehicle; no process, socket or thread outlives it.
 from __future__ import annotations
 
 import contextlib
+import json
 import os
 import signal
 import socket
@@ -58,27 +59,38 @@ def _rapt_plan() -> list[str]:
     return [str(exe)] if exe.exists() else [sys.executable, "-m", "planner.cli"]
 
 
+def _nogo_scenario() -> str:
+    """The first plan scenario predicted to enter a no-go area (a TF run the watchdog ends)."""
+    plan = json.loads(PLAN.read_text())
+    return next(
+        s["id"]
+        for s in plan["scenarios"]
+        if s["predicted"]["mode"] == "TF" and s["predicted"]["scores"].get("nogo_areas") == 0.0
+    )
+
+
 @pytest.mark.slow
 def test_an_operators_range_day_on_a_bare_autopilot_is_accepted_by_compare(tmp_path):
-    """`rapt-plan frontseat --bare` stands in for the vehicle; `rapt-plan run --mavlink --log` flies pair1a on it,
-    where the plan predicts a no-go area entered: the watchdog takes over there and ends the run;
+    """`rapt-plan frontseat --bare` stands in for the vehicle; `rapt-plan run --mavlink --log` flies on it the
+    plan's scenario where a no-go area is predicted entered: the watchdog takes over there and ends the run;
     `rapt-plan compare` reads the log like a SIL one and finds the predicted mode."""
+    sid = _nogo_scenario()
     port = free_port(socket.SOCK_DGRAM)
     env = {**os.environ, "COLUMNS": "200"}
     vehicle = subprocess.Popen(
         _rapt_plan()
-        + ["frontseat", str(PLAN), "--scenario", "pair1a", "--mavlink", f"udpin:127.0.0.1:{port}"]
+        + ["frontseat", str(PLAN), "--scenario", sid, "--mavlink", f"udpin:127.0.0.1:{port}"]
         + ["--bare", "--speedup", str(SPEEDUP)],
         cwd=ROOT,
         env=env,
         stdout=subprocess.PIPE,
         stderr=subprocess.PIPE,
     )
-    log = tmp_path / "pair1a.mcap"
+    log = tmp_path / f"{sid}.mcap"
     try:
         run = subprocess.run(
             _rapt_plan()
-            + ["run", str(PLAN), "--scenario", "pair1a", "--mavlink", f"udpout:127.0.0.1:{port}", "--log", str(log)]
+            + ["run", str(PLAN), "--scenario", sid, "--mavlink", f"udpout:127.0.0.1:{port}", "--log", str(log)]
             + ["--timeout", "150"],
             cwd=ROOT,
             env=env,
@@ -94,7 +106,7 @@ def test_an_operators_range_day_on_a_bare_autopilot_is_accepted_by_compare(tmp_p
         assert f" {step} " in run.stderr, run.stderr  # the bring-up, step by step, as it happens
     assert "watchdog: nogo" in run.stdout, run.stdout
     observed = next(line for line in run.stdout.splitlines() if "observed mode" in line)
-    assert "TF" in observed, run.stdout  # the plan's prediction for pair1a: a no-go area entered
+    assert "TF" in observed, run.stdout  # the plan's prediction: a no-go area entered
 
     logged = read_run(log)
     assert logged.ended == "watchdog: nogo" and logged.meta["pacing"] == "vehicle" and not logged.problems
@@ -111,7 +123,7 @@ def test_an_operators_range_day_on_a_bare_autopilot_is_accepted_by_compare(tmp_p
         timeout=240,
     )
     assert compare.returncode == 0, compare.stderr + compare.stdout
-    assert (out / "comparison.json").exists() and "pair1a" in compare.stdout
+    assert (out / "comparison.json").exists() and sid in compare.stdout
 
 
 def _obstacle_scenario():
