@@ -11,7 +11,7 @@ the seconds per stage.
 Run:  python benchmarks/generate.py [--budget 20000] [--baseline REV] [--missions ...] [--quick]
       python benchmarks/generate.py --stages [--budget 100000] [--executor ...]  (issue 6's stage table)
 
-``--quick`` runs range2017 alone with 5,000 runs and 200 dithers per pair (about 3 minutes).
+``--quick`` runs range2017 alone with 5,000 runs and 200 dithers per pair (under 2 minutes).
 ``--stages`` times one 100,000-run plan stage by stage, against the 10-minute target.
 """
 
