@@ -390,7 +390,7 @@ def generate(
             [(dither_runs[ids[k]][0], shown[k]) for k in fragile],
             sens,
             sigma,
-            max(cfg.dithers // 20, 40),
+            min(max(cfg.dithers // 20, 40), cfg.dithers // 2),  # screening never outweighs confirming
             cfg.dithers // 2,
             cfg.fragile_below,
             cfg.seed + 1,
