@@ -104,6 +104,9 @@ def test_generate_killed_mid_search_resumes_to_the_uninterrupted_plan(tmp_path):
         "40",
         "--pairs",
         "2",
+        "--refine",  # the focused searches after a resume are those of an uninterrupted run
+        "--refine-runs",
+        "16",
     ]
     killed = tmp_path / "killed"
     proc = subprocess.Popen(

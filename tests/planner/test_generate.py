@@ -87,14 +87,6 @@ def test_generate_writes_a_plan_whose_predictions_hold(range2017, plan_dir):
         assert set(s["parameters"]) == set(range2017.space.names)
 
 
-def test_same_seed_same_plan(range2017, plan_dir, tmp_path):
-    _, plan = plan_dir
-    again = generate(
-        range2017, EXAMPLES / "range2017.toml", tmp_path / "b", small(tmp_path, pairs=3, fragile_below=0.5)
-    )
-    assert again == plan
-
-
 @pytest.mark.slow
 def test_same_plan_with_processes_and_a_dask_cluster(range2017, tmp_path):
     from distributed import Client, LocalCluster
@@ -123,13 +115,14 @@ def test_same_plan_with_processes_and_a_dask_cluster(range2017, tmp_path):
 
 
 def test_refined_pairs_are_sharp_counted_in_the_budget_and_every_side_holds_or_says_why(range2017, tmp_path):
-    cfg = small(tmp_path, budget=1500, dithers=200, refine=48, pairs=2)
+    cfg = small(tmp_path, budget=1200, dithers=60, refine=40, pairs=2)
     plan = generate(range2017, EXAMPLES / "range2017.toml", tmp_path / "out", cfg)
     PLAN_VALIDATOR.validate(plan)
     runs, ref = plan["study"]["runs"], plan["study"]["refinement"]
-    assert runs["search"] + 48 * 4 == 1500 and runs["refinement"] == ref["runs"] <= 48 * ref["candidates"]
+    assert runs["search"] + 40 * 4 == 1200 and runs["refinement"] == ref["runs"] <= 40 * ref["candidates"]
     assert ref["sharp"] >= len(plan["pairs"]) and len(ref["dropped"]) == ref["candidates"] - ref["sharp"]
     by_id = {s["id"]: s for s in plan["scenarios"] + plan["variants"]}
+    assert len(plan["pairs"]) == 2 and {p["verdict"] for p in plan["pairs"]} <= {"sharp", "robust", "fragile"}
     for p in plan["pairs"]:
         assert p["refined"] and 0.02 <= p["distance"] <= 0.05 < p["refinement"]["start_distance"]
         a, b = (by_id[s] for s in p["scenarios"])

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import sim.uuv
 from planner.flight import Flight, flight_from_plan
 from planner.logs import read_run
 from planner.vehicle_run import run_vehicle
@@ -60,13 +61,27 @@ def _rapt_plan() -> list[str]:
 
 
 def _nogo_scenario() -> str:
-    """The first plan scenario predicted to enter a no-go area (a TF run the watchdog ends)."""
+    """The plan's scenario (or variant) predicted TF that enters a no-go area soonest: the watchdog ends it there."""
+    from sim.uuv.scenario import make_scenarios
+
     plan = json.loads(PLAN.read_text())
-    return next(
-        s["id"]
-        for s in plan["scenarios"]
-        if s["predicted"]["mode"] == "TF" and s["predicted"]["scores"].get("nogo_areas") == 0.0
-    )
+    mission = sim.uuv.load_mission(ROOT / "examples" / "range2017.toml")
+    tf = [s for s in plan["scenarios"] + plan["variants"] if s["predicted"]["mode"] == "TF"]
+    U = np.array([s["u"] for s in tf])
+    runs, rects = sim.uuv.simulate(mission, U, trajectories=True), make_scenarios(mission, U).nogo
+    entry = {}
+    for k, s in enumerate(tf):
+        t, x, y = (runs.trajectory(k)[:, c] for c in range(3))
+        inside = np.any(
+            (rects[k, :, 0] <= x[:, None])
+            & (x[:, None] <= rects[k, :, 1])
+            & (rects[k, :, 2] <= y[:, None])
+            & (y[:, None] <= rects[k, :, 3]),
+            axis=1,
+        )
+        if inside.any():
+            entry[s["id"]] = float(t[np.argmax(inside)])
+    return min(entry, key=entry.__getitem__)
 
 
 @pytest.mark.slow
