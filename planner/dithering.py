@@ -36,6 +36,7 @@ __all__ = [
     "DEFAULT_NOISE",
     "MAX_SIGMA_SHARE",
     "Outcome",
+    "outcome_columns",
     "dither_many",
     "dither_stats",
     "robust_variants",
@@ -157,6 +158,11 @@ def _noise_kind(field: str) -> str | None:
     return None
 
 
+def outcome_columns(root: list[int], names: list[str], elements: list[str]) -> list[int]:
+    """Score columns that make up a pair's outcome: the root scores, then the pair's elements."""
+    return list(root) + [c for c in (names.index(e) for e in elements) if c not in root]
+
+
 @dataclass(frozen=True)
 class Outcome:
     """What the plan predicts a scenario shows: its mode, and its pair's element values.
@@ -195,11 +201,8 @@ def dither_many(
     centre is the centre itself, run with the stochastic effects on.
     """
     centres = np.atleast_2d(np.asarray(centres, dtype=float))
-    k, d = centres.shape
-    rng = np.random.default_rng(seed)
-    U = np.clip(centres[:, None, :] + np.asarray(sigma) * rng.standard_normal((k, n, d)), 0.0, 1.0)
-    U[:, 0] = centres
-    r = sim.uuv.simulate(mission, U.reshape(k * n, d), seed=seed, stochastic=True, surrogate=surrogate)
+    k = centres.shape[0]
+    U, r = _dithered(mission, centres, n, sigma, seed, surrogate)
     stats = []
     shown = np.zeros((k, n), dtype=bool)
     for c in range(k):
@@ -432,11 +435,8 @@ def _p_shown(
     mission: Mission, V: np.ndarray, outcomes: Sequence[Outcome], n: int, sigma: np.ndarray, seed: int, surrogate
 ) -> tuple[np.ndarray, np.ndarray]:
     """Shares of ``n`` stochastic dithers of each row of ``V`` that show its outcome, and its mode."""
-    rng = np.random.default_rng(seed)
-    k, d = V.shape
-    D = np.clip(V[:, None, :] + sigma * rng.standard_normal((k, n, d)), 0.0, 1.0)
-    D[:, 0] = V
-    r = sim.uuv.simulate(mission, D.reshape(k * n, d), seed=seed, stochastic=True, surrogate=surrogate)
+    k = V.shape[0]
+    _, r = _dithered(mission, V, n, sigma, seed, surrogate)
     p, p_mode = np.zeros(k), np.zeros(k)
     for c in range(k):
         rows = slice(c * n, (c + 1) * n)
@@ -445,3 +445,17 @@ def _p_shown(
             p[c] = float(outcomes[c].shown(r.scores[rows], valid)[valid].mean())
             p_mode[c] = float(np.mean(r.modes[rows][valid] == outcomes[c].mode))
     return p, p_mode
+
+
+def _dithered(
+    mission: Mission, centres: np.ndarray, n: int, sigma: np.ndarray, seed: int, surrogate
+) -> tuple[np.ndarray, sim.uuv.Result]:
+    """``n`` seeded Gaussian dithers of each centre, the first the centre itself, run stochastic in one batch.
+
+    Returns the dithers' unit-cube rows, (k, n, d), and their runs in that order (k * n rows).
+    """
+    k, d = centres.shape
+    rng = np.random.default_rng(seed)
+    U = np.clip(centres[:, None, :] + np.asarray(sigma) * rng.standard_normal((k, n, d)), 0.0, 1.0)
+    U[:, 0] = centres
+    return U, sim.uuv.simulate(mission, U.reshape(k * n, d), seed=seed, stochastic=True, surrogate=surrogate)

@@ -39,11 +39,11 @@ from scipy.spatial import cKDTree
 
 import rapt
 import sim.uuv
-from planner.dithering import DEFAULT_NOISE, DitherNoise, Outcome, dither_many, robust_variants
+from planner.dithering import DEFAULT_NOISE, DitherNoise, Outcome, dither_many, outcome_columns, robust_variants
 from planner.exports import write_scenario_files
 from planner.jsonio import jsonable
 from planner.plans import coordinate_sensitivity
-from planner.refinement import MIN_REFINE_RUNS, outcome_columns, refine_pairs
+from planner.refinement import MIN_REFINE_RUNS, refine_pairs
 from planner.report import write_report
 from planner.search_status import SearchStatus
 from rapt.errors import InputError, StudyMismatchError
@@ -357,7 +357,8 @@ def generate(
     wall seconds of each stage (kept out of the plan, which depends on the seed only).
     """
     cfg.check()
-    sigma = cfg.noise().sigmas(mission)  # a noise too wide for a parameter fails before the search
+    noise = cfg.noise()
+    sigma = noise.sigmas(mission)  # a noise too wide for a parameter fails before the search
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     clock = _StageClock(timings)
@@ -406,9 +407,9 @@ def generate(
         "dithering": len(U) * (cfg.dithers // 2) if cfg.dithers else 0,
         "variants": variant_runs,
     }
-    noise = {"expected": cfg.noise().as_dict(), "sigma_u": [float(v) for v in sigma], "target": cfg.fragile_below}
+    dithering = {"expected": noise.as_dict(), "sigma_u": [float(v) for v in sigma], "target": cfg.fragile_below}
     plan = _plan_document(
-        mission, mission_path, cfg, a, pairs, verdicts, confirmation, refinement, runs, noise, scenarios, variants
+        mission, mission_path, cfg, a, pairs, verdicts, confirmation, refinement, runs, dithering, scenarios, variants
     )
     (out_dir / "plan.json").write_text(json.dumps(plan, indent=2))
     write_report(plan, out_dir, dither_runs)
@@ -604,7 +605,7 @@ def _plan_document(
     confirmation: tuple[int, int] | None,
     refinement: dict | None,
     runs: dict[str, int],
-    noise: dict,
+    dithering: dict,
     scenarios: list[dict],
     variants: list[dict],
 ) -> dict:
@@ -648,7 +649,7 @@ def _plan_document(
             "modes": {MODE_NAMES[m]: int(c) for m, c in zip(*np.unique(modes, return_counts=True))},
             "boundary_types": a.boundary_types[:30],
             "runs": runs,
-            "dithering": {**noise, "runs_per_scenario": cfg.dithers // 2},
+            "dithering": {**dithering, "runs_per_scenario": cfg.dithers // 2},
             **({"refinement": refinement} if refinement is not None else {}),
             **({"surrogate": _surrogate_summary(cfg, confirmation, len(pairs))} if confirmation is not None else {}),
         },

@@ -17,20 +17,17 @@ from typing import Any
 import numpy as np
 
 import sim.uuv
+from planner.dithering import Outcome, outcome_columns
 from rapt.focus import OTHER, SIDE_A, SIDE_B, sharpen_pairs
 from sim.uuv.mission import Mission
+from sim.uuv.scoring import MODE_NAMES
 
-__all__ = ["FOCUS_BATCH", "MIN_REFINE_RUNS", "refine_pairs", "outcome_columns"]
+__all__ = ["FOCUS_BATCH", "MIN_REFINE_RUNS", "refine_pairs"]
 
 #: Runs per round of one pair's focused search: a midpoint and S-NDV's picks around it.
 FOCUS_BATCH = 8
 #: Fewer runs than two rounds cannot both bisect and go round a third combination.
 MIN_REFINE_RUNS = 2 * FOCUS_BATCH
-
-
-def outcome_columns(root: list[int], names: list[str], elements: list[str]) -> list[int]:
-    """Score columns that make up a pair's outcome: the root scores, then the pair's elements."""
-    return list(root) + [c for c in (names.index(e) for e in elements) if c not in root]
 
 
 def refine_pairs(
@@ -54,16 +51,22 @@ def refine_pairs(
     """
     names = a.result.names
     root = list(a.tree.levels[0])
-    cols = [outcome_columns(root, names, p["elements"]) for p in candidates]
-    sides = [(a.result.scores[p["rows"][0], c], a.result.scores[p["rows"][1], c]) for p, c in zip(candidates, cols)]
+    sides = []  # per candidate, the outcomes of its two scenarios
+    for p in candidates:
+        cols = outcome_columns(root, names, p["elements"])
+        sides.append(
+            tuple(
+                Outcome(MODE_NAMES.index(mode), tuple(cols), tuple(float(v) for v in a.result.scores[row, cols]))
+                for row, mode in zip(p["rows"], p["modes"])
+            )
+        )
     X_known = np.vstack([a.X, a.X_invalid]) if len(a.X_invalid) else a.X
     n_valid = len(a.X)
 
     def label_rows(scores: np.ndarray, valid: np.ndarray, c: int) -> np.ndarray:
-        y = scores[:, cols[c]]
         out = np.full(len(scores), OTHER)
-        out[valid & np.all(y == sides[c][0], axis=1)] = SIDE_A
-        out[valid & np.all(y == sides[c][1], axis=1)] = SIDE_B
+        out[sides[c][0].shown(scores, valid)] = SIDE_A
+        out[sides[c][1].shown(scores, valid)] = SIDE_B
         return out
 
     def known_labels(c: int) -> np.ndarray:
