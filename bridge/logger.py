@@ -155,6 +155,7 @@ class McapLogger(Service):
         self._bus_gaps = PublicationGaps()
         self._bridge_status_key = keys.status(vehicle, "bridge")
         self._own_status_key = keys.status(vehicle, "logger")
+        self._lost_said = 0  # the total last warned about
         self._bridges: dict[Any, tuple[dict, dict]] = {}  # started_ns -> (first, last) status of a bridge
         self._token: Any = None
         self._writer_thread: threading.Thread | None = None
@@ -195,7 +196,7 @@ class McapLogger(Service):
             self._writer_thread.join(timeout=60)
         if self._writer is not None:
             if self._writer_thread is None or not self._writer_thread.is_alive():
-                losses = {k: v if isinstance(v, str) else json.dumps(v) for k, v in self.losses().items()}
+                losses = {k: v if isinstance(v, str) else json.dumps(v) for k, v in self._say_losses().items()}
                 self._writer.add_metadata(LOSSES_METADATA, losses)
             self._writer.finish()
         undeclare(self._status_pub)
@@ -215,20 +216,22 @@ class McapLogger(Service):
     def losses(self) -> dict[str, Any]:
         """What this log is missing, as ``rapt.losses`` records it (the values as JSON-ready numbers).
 
-        ``link_lost``: MAVLink frames the bridge's senders numbered but the bridge never got (its
-        sequence-gap count from ``status/bridge``, counted from the first status this logger saw
-        of each bridge to the last; "unknown" without any), ``kernel_dropped`` (the part of them
-        the bridge's UDP socket dropped, "unknown" where not known), ``bus_lost`` (bridge
-        publications that never reached this logger), ``write_errors``; ``total`` is
-        link_lost + bus_lost + write_errors (kernel drops are already link losses).
+        From the bridge's ``status/bridge`` (counted from the first status this logger saw of
+        each bridge to the last; "unknown" without any): ``link_seq_gaps``, MAVLink sequence
+        numbers that never reached the bridge, and ``kernel_dropped``, datagrams its UDP socket
+        had no room for. A burst of 256 or more lost frames hides from a modulo-256 counter
+        while the kernel's count is exact, so ``link_lost`` is the larger of the two (exact when
+        one cause is at work, a lower bound when both are). From the logger itself: ``bus_lost``
+        (bridge publications that never arrived) and ``write_errors``. ``total`` is link_lost +
+        bus_lost + write_errors.
         """
-        link: int | str = "unknown"
+        gaps: int | str = "unknown"
         kernel: int | str = "unknown"
         by_source: dict[str, int] = {}
         if self._bridges:
-            link = kernel = 0
+            gaps = kernel = 0
             for first, last in list(self._bridges.values()):
-                link += int(last.get("link_lost", 0)) - int(first.get("link_lost", 0))
+                gaps += int(last.get("link_lost", 0)) - int(first.get("link_lost", 0))
                 if isinstance(kernel, int) and int(last.get("kernel_dropped", -1)) >= 0:
                     kernel += int(last["kernel_dropped"]) - max(0, int(first.get("kernel_dropped", 0)))
                 else:
@@ -236,10 +239,12 @@ class McapLogger(Service):
                 before = first.get("link_lost_by_source") or {}
                 for source, n in (last.get("link_lost_by_source") or {}).items():
                     by_source[source] = by_source.get(source, 0) + int(n) - int(before.get(source, 0))
+        link = gaps if not isinstance(gaps, int) or not isinstance(kernel, int) else max(gaps, kernel)
         bus, errors = self._bus_gaps.lost, self._counts["errors"]
         return {
             "total": (link if isinstance(link, int) else 0) + bus + errors,
             "link_lost": link,
+            "link_seq_gaps": gaps,
             "link_lost_by_source": by_source,
             "kernel_dropped": kernel,
             "bus_lost": bus,
@@ -335,10 +340,27 @@ class McapLogger(Service):
         self._bridges[started] = (first, status)
 
     def _publish_status(self) -> None:
+        losses = self._say_losses()
         try:
-            self._status_pub.put(json.dumps({**self.stats, **self.losses()}))
+            self._status_pub.put(json.dumps({**self.stats, **losses}))
         except Exception as error:  # a closing session
             log.debug("logger: status not published: %s", error)
+
+    def _say_losses(self) -> dict[str, Any]:
+        """:meth:`losses`, and a warning on the console when their total changed since the last one."""
+        losses = self.losses()
+        if losses["total"] != self._lost_said:  # said on the console too, not only on the bus and in the log
+            log.warning(
+                "logger %s: %d frame(s) lost on the way to %s so far (link %s, bus %d, write errors %d)",
+                self.vehicle,
+                losses["total"],
+                self.path.name,
+                losses["link_lost"],
+                losses["bus_lost"],
+                losses["write_errors"],
+            )
+            self._lost_said = losses["total"]
+        return losses
 
     def _channel(
         self, writer: Writer, topic: str, encoding: str, schema: tuple[str, dict] | None

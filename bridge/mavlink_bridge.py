@@ -239,6 +239,7 @@ class MavlinkBridge(Service):
         self._gaps = SequenceGaps()
         self._rcvbuf = 0
         self._kernel_dropped_before = 0  # kernel drops of the UDP sockets closed so far
+        self._lost_said = (0, 0)  # the losses last warned about
         self._cmd_sub: Any = None
         self._active_sub: Any = None
         self._cmd_handler: Any = None
@@ -411,8 +412,19 @@ class MavlinkBridge(Service):
         pub = self._status_pub
         if pub is None:
             return
+        status = self.status()
+        lost = (status["link_lost"], max(0, status["kernel_dropped"]))
+        if lost != self._lost_said:  # said out loud, not only on the bus: an operator may watch only the console
+            log.warning(
+                "bridge %s: MAVLink frames lost so far: %d by sequence gaps, %d dropped by the UDP socket "
+                "(%s frames received)",
+                self.vehicle,
+                *lost,
+                status["frames_in"],
+            )
+            self._lost_said = lost
         try:
-            pub.put(json.dumps(self.status()))
+            pub.put(json.dumps(status))
         except Exception as error:  # a closing session
             log.debug("bridge %s: status not published: %s", self.vehicle, error)
 
