@@ -23,6 +23,7 @@ Run:  python benchmarks/sil.py [--scenarios 5] [--trips 2000] [--rates 20000,500
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import socket
 import subprocess
@@ -129,11 +130,34 @@ def _cli(*args: str) -> subprocess.Popen:
     return subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
 
-def _read(path: Path) -> list:
-    try:
-        return read_log(path)
-    except Exception:  # not written yet
-        return []
+class _BridgeStatus:
+    """The latest ``status/bridge`` of a bridge, heard on the bus from a client session of our own."""
+
+    def __init__(self, endpoint: str):
+        self.latest: dict = {}
+        self.session = open_session(connect=[endpoint])
+        self.sub = self.session.declare_subscriber("rapt/uuv1/status/bridge", self._on)
+
+    def _on(self, sample) -> None:  # a Zenoh callback: only store
+        self.latest = json.loads(sample.payload.to_bytes())
+
+    def drained(self, sent: int, quiet_s: float = 3.0, timeout_s: float = 120.0) -> None:
+        """Wait until the bridge has read all ``sent`` frames (or its counters stop moving for ``quiet_s``)."""
+        deadline, last, since = time.monotonic() + timeout_s, None, time.monotonic()
+        while time.monotonic() < deadline:
+            b = self.latest
+            seen = b.get("frames_in", 0) + max(0, b.get("kernel_dropped", 0))
+            if seen >= sent:
+                return
+            if seen != last:
+                last, since = seen, time.monotonic()
+            elif time.monotonic() - since > quiet_s:
+                return
+            time.sleep(0.1)
+
+    def close(self) -> None:
+        self.sub.undeclare()
+        self.session.close()
 
 
 def sustained_processes(rate: int, seconds: float) -> dict:
@@ -141,16 +165,21 @@ def sustained_processes(rate: int, seconds: float) -> dict:
     port, zport = free_port(), free_port(socket.SOCK_STREAM)
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "load.mcap"
-        bridge = _cli("bridge", "--mavlink", f"udpin:127.0.0.1:{port}", "--zenoh-listen", f"tcp/127.0.0.1:{zport}")
-        logger = _cli("log", "--out", str(path), "--zenoh-connect", f"tcp/127.0.0.1:{zport}")
+        endpoint = f"tcp/127.0.0.1:{zport}"
+        bridge = _cli("bridge", "--mavlink", f"udpin:127.0.0.1:{port}", "--zenoh-listen", endpoint)
+        logger = _cli("log", "--out", str(path), "--zenoh-connect", endpoint)
+        status = _BridgeStatus(endpoint)
         try:
             deadline = time.monotonic() + 60
-            while time.monotonic() < deadline and not any(t.endswith("/status/bridge") for t, _, _ in _read(path)):
-                time.sleep(0.2)  # both up, and the logger hears the bridge
+            while time.monotonic() < deadline and not (status.latest and path.exists()):
+                time.sleep(0.2)
+            time.sleep(2.0)  # the logger's subscription reaches the bridge
             sender = [sys.executable, "-c", _SENDER, str(port), str(rate), str(seconds)]
             sent = int(subprocess.run(sender, capture_output=True, text=True, check=True).stdout.split()[0])
-            time.sleep(2.0)  # the bridge's status after the last frame reaches the log
+            status.drained(sent)
+            time.sleep(2.5)  # two more statuses: the last counts reach the logger
         finally:
+            status.close()
             for proc in (logger, bridge):  # the logger first, as an operator ends a run
                 proc.send_signal(2)
                 proc.communicate(timeout=120)
@@ -190,8 +219,11 @@ def sustained_one(rate: int, seconds: float) -> dict:
                     check=True,
                 )
                 sent = int(out.stdout.split()[0])
-                deadline = time.monotonic() + 30
-                while bridge.stats["frames_in"] + bridge.stats["link_lost"] < sent and time.monotonic() < deadline:
+                deadline = time.monotonic() + 120
+                while time.monotonic() < deadline:  # until the bridge has read (or lost) every frame
+                    b = bridge.stats
+                    if b["frames_in"] + max(0, b["kernel_dropped"]) >= sent:
+                        break
                     time.sleep(0.05)
                 time.sleep(0.5)
                 b = bridge.stats
