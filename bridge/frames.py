@@ -200,12 +200,11 @@ def _not_plain(value: Any) -> Any:
 
 # json.dumps builds an encoder on every call; a bridge at 20,000 frames/s cannot afford that.
 # Arguments: markers, default, encoder, indent, key and item separators, sort_keys, skipkeys, allow_nan.
+_make_encoder: Any = getattr(json.encoder, "c_make_encoder", None)
 _plain_json = (
-    json.encoder.c_make_encoder(
-        None, _not_plain, json.encoder.encode_basestring_ascii, None, ":", ",", False, False, False
-    )  # type: ignore[attr-defined]
-    if json.encoder.c_make_encoder is not None  # type: ignore[attr-defined]
-    else None
+    None
+    if _make_encoder is None
+    else _make_encoder(None, _not_plain, json.encoder.encode_basestring_ascii, None, ":", ",", False, False, False)
 )
 
 
