@@ -91,7 +91,7 @@ _DIALECT = "ardupilotmega"
 _MISSION_REPLIES = frozenset(("MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"))
 _POLL_S = 0.1  # idle wake-up: silence detection and resync of a stalled partial frame
 _MAX_BACKOFF_S = 0.5
-#: Receive buffer asked for a UDP link: about 1.5 s of 20,000 small frames/s. Without root
+#: Receive buffer asked for a UDP link: seconds of 20,000 small frames/s. Without root
 #: (SO_RCVBUFFORCE) the kernel caps it at net.core.rmem_max; ``stats["rcvbuf_bytes"]`` says what was granted.
 UDP_RCVBUF_BYTES = 32 << 20
 _SO_RCVBUFFORCE = getattr(socket, "SO_RCVBUFFORCE", 33)  # Linux
