@@ -89,6 +89,7 @@ TYPE_MASK_VELOCITY_YAW = 2503
 
 _DIALECT = "ardupilotmega"
 _MISSION_REPLIES = frozenset(("MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"))
+_REPLIES = _MISSION_REPLIES | {"COMMAND_ACK"}  # the messages a waiting command or upload is handed
 _POLL_S = 0.1  # idle wake-up: silence detection and resync of a stalled partial frame
 _MAX_BACKOFF_S = 0.5
 #: Receive buffer asked for a UDP link: seconds of 20,000 small frames/s. Without root
@@ -591,6 +592,7 @@ class MavlinkBridge(Service):
                 on_frame(frame, msg, recv_ns)
 
     def _on_frame(self, frame: bytes, msg: Any, recv_ns: int) -> None:
+        """Note what the bridge keeps of one frame (target, position, latest, replies) and publish it."""
         self._gaps.see(*frame_source_seq(frame))
         now = time.monotonic()
         if self._lost:
@@ -611,7 +613,7 @@ class MavlinkBridge(Service):
         if target is not None and source[0] == target[0]:
             if name != "HEARTBEAT" or source == target:  # another component's heartbeat is not the autopilot's
                 self._latest[name] = (msg, now)
-            if source == target and self._addressed_to_us(msg):
+            if name in _REPLIES and source == target and self._addressed_to_us(msg):
                 if name == "COMMAND_ACK":
                     with self._ack_cond:
                         self._ack_serial += 1
@@ -634,11 +636,12 @@ class MavlinkBridge(Service):
                 )  # not express: batching keeps bursts lossless, and costs no measurable latency
                 self._publishers[name] = pub
                 self._numbers[name] = 0
+            # numbered as keys.sequence_attachment does (inlined: this runs 20,000 times a second)
             number = self._numbers[name]
-            pub.put(message_json(msg, recv_ns), attachment=keys.sequence_attachment(number))
+            pub.put(message_json(msg, recv_ns), attachment=number.to_bytes(8, "little"))
             self._numbers[name] = number + 1
             self._counts["published"] += 1
-            raw_pub.put(frame, attachment=keys.sequence_attachment(self._raw_number))
+            raw_pub.put(frame, attachment=self._raw_number.to_bytes(8, "little"))
             self._raw_number += 1
             self._counts["published"] += 1
         except Exception as error:  # a closing session, an unencodable field: count, keep reading
