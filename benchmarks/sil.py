@@ -11,7 +11,7 @@
    each loss counter as the log's ``rapt.losses`` reports it (sequence gaps at the bridge, its
    socket's kernel drops, bus gaps, write errors; target: zero lost at 20,000/s for 60 s).
    ``--load-in-process`` runs the bridge and the logger in this process instead, on one
-   session pair, as ``rapt-plan run --log`` does (they then share one interpreter lock).
+   session, as ``rapt-plan run --log`` does (they then share one interpreter lock).
 
 Run:  python benchmarks/sil.py [--scenarios 5] [--trips 2000] [--rates 20000,5000] [--seconds 60] [--quick]
       python benchmarks/sil.py --only load --quick   (part 3 alone)
@@ -202,16 +202,13 @@ def sustained_processes(rate: int, seconds: float) -> dict:
 
 
 def sustained_one(rate: int, seconds: float) -> dict:
-    """One run with the bridge and the logger in this process (as ``rapt-plan run --log``); every counter of the way."""
+    """One run with the bridge and the logger in this process on one session (as ``rapt-plan run --log``)."""
     port = free_port()
-    endpoint = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
-    hub = open_session(listen=[endpoint])
-    client = open_session(connect=[endpoint])
+    session = open_session(listen=[f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"])
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "load.mcap"
-        with McapLogger(path, client, vehicle="uuv1") as logger:
-            time.sleep(0.5)  # the logger's subscription reaches the hub
-            with MavlinkBridge(f"udpin:127.0.0.1:{port}", hub, vehicle="uuv1") as bridge:
+        with McapLogger(path, session, vehicle="uuv1") as logger:
+            with MavlinkBridge(f"udpin:127.0.0.1:{port}", session, vehicle="uuv1") as bridge:
                 out = subprocess.run(
                     [sys.executable, "-c", _SENDER, str(port), str(rate), str(seconds)],
                     capture_output=True,
@@ -233,8 +230,7 @@ def sustained_one(rate: int, seconds: float) -> dict:
                 time.sleep(0.05)
         logged = sum(1 for topic, _, _ in read_log(path) if topic == RAW_TOPIC)
         losses = read_metadata(path).get(LOSSES_METADATA, {})
-    client.close()
-    hub.close()
+    session.close()
     return {
         "rate": rate,
         "sent": sent,
@@ -251,8 +247,12 @@ def sustained_one(rate: int, seconds: float) -> dict:
 
 def sustained(rates: list[int], seconds: float, in_process: bool = False) -> None:
     rows = [(sustained_one if in_process else sustained_processes)(rate, seconds) for rate in rates]
-    how = "bridge and logger in one process" if in_process else "rapt-plan bridge + rapt-plan log processes"
-    print(f"\n3. Sustained load for {seconds:g} s: pymavlink sender -> UDP -> {how} (Zenoh TCP between)")
+    how = (
+        "bridge and logger in one process, one session"
+        if in_process
+        else "rapt-plan bridge + rapt-plan log (Zenoh TCP)"
+    )
+    print(f"\n3. Sustained load for {seconds:g} s: pymavlink sender -> UDP -> {how}")
     head = "frames/s sent bridge_in logged logged_% seq_gaps kernel bus write_err reported".split()
     print(" ".join(f"{h.replace('_', ' '):>10}" for h in head))
     for r in rows:
