@@ -328,3 +328,4 @@ def test_an_edited_embedded_mission_is_refused_in_one_line_and_nothing_is_writte
         assert "mission.toml was edited after the plan was generated" in lines[0]
         assert "regenerate the plan" in lines[0]
     assert sorted(p for p in tmp_path.rglob("*") if p.is_file()) == inputs and digests(inputs) == before
+    assert not out.exists()
