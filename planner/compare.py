@@ -354,8 +354,8 @@ def _predict_plan(plan: Plan) -> tuple[list[str], np.ndarray, sim.uuv.Result]:
         got = MODE_NAMES[pred.modes[row_of[s["id"]]]] if pred.valid[row_of[s["id"]]] else "invalid"
         if planned and planned != got:
             raise StudyMismatchError(
-                f"PLAN: scenario {s['id']} is predicted {got} by {plan.mission_file} but the plan says "
-                f"{planned}; the mission file changed since the plan was made — regenerate the plan"
+                f"PLAN: scenario {s['id']} is predicted {got} by {plan.mission.source} but the plan says "
+                f"{planned}; the mission or the simulator changed since the plan was made — regenerate the plan"
             )
     return ids, U_plan, pred
 

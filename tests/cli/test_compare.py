@@ -10,6 +10,8 @@ logs.
 from __future__ import annotations
 
 import json
+import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -263,3 +265,67 @@ def test_a_calibrated_vehicle_is_flown_in_every_prediction_beside_the_plan(flown
     )
     assert bad.exit_code == 2 and "--calibrated:" in bad.output and "'elsewhere'" in bad.output
     assert len([line for line in bad.output.splitlines() if line.strip()]) == 1, bad.output
+
+
+def _hand_over(flown, to: Path) -> tuple[Path, list[Path]]:
+    """The plan directory and two logs copied to ``to``, the plan naming its mission by the relative path
+    ``rapt-plan generate examples/range2017.toml`` records (which exists only under the repository)."""
+    import shutil
+
+    plan_dir = to / "plan"
+    shutil.copytree(flown["plan_dir"], plan_dir)
+    data = json.loads((plan_dir / "plan.json").read_text())
+    data["mission"]["file"] = "examples/range2017.toml"
+    (plan_dir / "plan.json").write_text(json.dumps(data, indent=2))
+    (to / "logs").mkdir()
+    logs = [Path(shutil.copy2(p, to / "logs")) for p in flown["logs"][:2]]
+    return plan_dir, logs
+
+
+def test_a_plan_directory_compares_and_flies_from_any_directory(flown, tmp_path):
+    """Only the plan directory and logs at hand (an empty tree), run from another directory."""
+    import subprocess
+
+    from tests.cli.sil_day import rapt_plan
+
+    plan_dir, logs = _hand_over(flown, tmp_path / "handed")
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    assert not (elsewhere / "examples").exists()
+    env = {**os.environ, "COLUMNS": "200"}
+
+    def cli(*args: str) -> subprocess.CompletedProcess:
+        return subprocess.run(rapt_plan() + list(args), cwd=elsewhere, capture_output=True, text=True, env=env)
+
+    done = cli("compare", str(plan_dir), *map(str, logs), "--out", "cmp", "--dithers", "0", "--bootstrap", "0")
+    assert done.returncode == 0, done.stderr
+    c = json.loads((elsewhere / "cmp" / "comparison.json").read_text())
+    assert c["plan"]["id"] == load_plan(flown["plan_dir"]).id and len(c["scenarios"]) == 2
+    assert c["plan"]["mission_file"] == "examples/range2017.toml"  # recorded, not read
+    flew = cli("run", str(plan_dir / "plan.json"), "--scenario", flown["plan"]["scenarios"][0]["id"])
+    assert flew.returncode == 0, flew.stderr
+    assert re.search(r"same scores as the batch simulator\s+│\s+yes", flew.stdout), flew.stdout
+
+
+def test_an_edited_embedded_mission_is_refused_in_one_line_and_nothing_is_written(flown, tmp_path):
+    plan_dir, logs = _hand_over(flown, tmp_path)
+    data = json.loads((plan_dir / "plan.json").read_text())
+    data["mission"]["toml"] = data["mission"]["toml"].replace("hotel_w = 40.0", "hotel_w = 55.0", 1)
+    assert "hotel_w = 55.0" in data["mission"]["toml"]
+    (plan_dir / "plan.json").write_text(json.dumps(data, indent=2))
+    inputs = sorted(p for p in tmp_path.rglob("*") if p.is_file())
+    before = digests(inputs)
+    out = tmp_path / "cmp"
+    for args in (
+        ["compare", str(plan_dir), *map(str, logs), "--out", str(out)],
+        ["run", str(plan_dir), "--scenario", "pair1a", "--log", str(tmp_path / "pair1a.mcap")],
+        ["frontseat", str(plan_dir), "--scenario", "pair1a", "--mavlink", "udpin:127.0.0.1:9"],
+    ):
+        result = runner.invoke(app, args)
+        assert result.exit_code == 2, (args, result.output)
+        lines = [line for line in result.output.splitlines() if line.strip()]
+        assert len(lines) == 1 and "Traceback" not in result.output, result.output
+        assert "mission.toml was edited after the plan was generated" in lines[0]
+        assert "regenerate the plan" in lines[0]
+    assert sorted(p for p in tmp_path.rglob("*") if p.is_file()) == inputs and digests(inputs) == before
+    assert not out.exists()
