@@ -30,6 +30,7 @@ from bridge.session import open_session, receive, undeclare  # noqa: E402
 from planner.backseat import BackSeat  # noqa: E402
 from planner.jsonio import jsonable  # noqa: E402
 from planner.processes import wait_for  # noqa: E402
+from planner.scenario_map import publish_scenario_map  # noqa: E402
 from rapt.errors import LinkTimeoutError  # noqa: E402
 from sim.uuv.frontseat import FrontSeat  # noqa: E402
 from sim.uuv.mission import Mission  # noqa: E402
@@ -161,6 +162,8 @@ def run_sil(
                 }
             ),
         )
+        if logger is not None:
+            publish_scenario_map(session, vehicle, mission, u)
         backseat = flying = BackSeat(session, vehicle, mission, u).start()
         if surrogate is not None:
             learned = flying = BackSeat(
