@@ -138,6 +138,11 @@ def _pose(x: float, y: float, z: float, yaw: float) -> dict:
     }
 
 
+def _named(names: dict[int, str], value: Any) -> str:
+    """The name of code ``value`` in ``names``, or the value itself as text."""
+    return names.get(value, str(value)) if isinstance(value, int) else str(value)
+
+
 def _number(obj: dict, key: str) -> float | None:
     v = obj.get(key)
     return float(v) if isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) else None
@@ -240,9 +245,9 @@ class FoxgloveMessages:
             if before == state:
                 return None
             goal, reason, aborted = state
-            text = f"goal: {GOALS.get(goal, goal)}"  # type: ignore[call-overload]
+            text = f"goal: {_named(GOALS, goal)}"
             if reason:
-                text += f" (returning: {RETURN_REASONS.get(reason, reason)})"  # type: ignore[call-overload]
+                text += f" (returning: {_named(RETURN_REASONS, reason)})"
             if any(aborted):
                 text += f"; waypoints aborted: {[i for i, a in enumerate(aborted) if a]}"
             return (WARNING if any(aborted) and before is not None and aborted != before[2] else INFO), text
