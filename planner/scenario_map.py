@@ -1,4 +1,4 @@
-"""The scenario's map for the log: its mission elements and the plan's predicted track, put once on the bus.
+"""The scenario's map for the log: its mission elements and the plan's predicted track, on the bus.
 
 The logger (:mod:`bridge.logger`) writes the document of ``rapt/<v>/map/<name>`` as a
 ``foxglove.GeoJSON`` channel, so Foxglove's Map panel shows the mission areas, no-go areas,
@@ -6,20 +6,28 @@ start and recovery points and the predicted track under the vehicle's ``foxglove
 The bridge cannot build it (it must not import :mod:`sim`); the planner, which flies the
 scenario, can: the document is :func:`planner.exports.geojson`'s, the one the range already
 gets as a ``.geojson`` file, with the batch simulator's trajectory of the same row.
+
+:class:`ScenarioMap` puts it once when started, for a logger already listening, and answers
+queries for it while it runs, for a logger started later (the logger asks for
+``rapt/<v>/map/**`` when it starts), so a standalone ``rapt-plan log`` records it whichever
+process starts first.
 """
 
 from __future__ import annotations
 
 import json
+from typing import Any
 
 import numpy as np
 
 import sim.uuv
 from bridge import keys
+from bridge.service import Service
+from bridge.session import undeclare
 from planner.exports import geojson
 from sim.uuv.mission import Mission
 
-__all__ = ["SCENARIO_MAP", "scenario_map", "publish_scenario_map"]
+__all__ = ["SCENARIO_MAP", "scenario_map", "ScenarioMap"]
 
 #: The map document's name on the bus (``rapt/<v>/map/scenario``) and in the log (``/map/scenario``).
 SCENARIO_MAP = "scenario"
@@ -35,9 +43,27 @@ def scenario_map(mission: Mission, u) -> dict | None:
     return geojson(mission, row, predicted.trajectory(0))
 
 
-def publish_scenario_map(session, vehicle: str, mission: Mission, u) -> dict | None:
-    """Put scenario ``u``'s map on ``rapt/<vehicle>/map/scenario`` (once: a logger already listening records it)."""
-    document = scenario_map(mission, u)
-    if document is not None:
-        session.put(keys.map_document(vehicle, SCENARIO_MAP), json.dumps(document, allow_nan=False))
-    return document
+class ScenarioMap(Service):
+    """Scenario ``u``'s map on ``rapt/<vehicle>/map/scenario``: put at start, answered to queries until closed."""
+
+    _what = "scenario map"
+
+    def __init__(self, session, vehicle: str, mission: Mission, u):
+        super().__init__()
+        self.session = session
+        self.key = keys.map_document(vehicle, SCENARIO_MAP)
+        self.document = scenario_map(mission, u)
+        self._payload = b"" if self.document is None else json.dumps(self.document, allow_nan=False).encode()
+        self._queryable: Any = None
+
+    def _open(self) -> None:
+        if self.document is None:
+            return
+        self._queryable = self.session.declare_queryable(self.key, self._answer)
+        self.session.put(self.key, self._payload)
+
+    def _answer(self, query) -> None:
+        query.reply(self.key, self._payload)  # the one Zenoh call allowed in a callback
+
+    def _shutdown(self) -> None:
+        undeclare(self._queryable)

@@ -29,7 +29,7 @@ from planner.backseat import BackSeat
 from planner.bringup import BringUp, BringUpTimeouts, Step
 from planner.jsonio import jsonable
 from planner.referee import Referee
-from planner.scenario_map import publish_scenario_map
+from planner.scenario_map import ScenarioMap
 from planner.sil import free_port
 from planner.virtual_range import VirtualRange
 from planner.watchdog import REASONS, Watchdog, WatchdogRules
@@ -103,10 +103,9 @@ def run_vehicle(
         if log_path is not None:
             from bridge.logger import McapLogger
 
+            parts.append(ScenarioMap(session, vehicle, mission, u).start())  # first: the logger asks for it
             parts.append(McapLogger(log_path, session, vehicle=vehicle).start())
         session.put(keys.meta(vehicle, "scenario"), json.dumps(_scenario_meta(flight, connection)))
-        if log_path is not None:
-            publish_scenario_map(session, vehicle, mission, u)
         bridge = MavlinkBridge(
             connection, session, vehicle=vehicle, allow_commands=True, required_mode="GUIDED"
         ).start()
