@@ -13,9 +13,9 @@ Beside those channels, Foxglove's well-known messages derived from them (:mod:`b
 the vehicle's position fix, a log of STATUSTEXT and the autonomy's events, the local frame)
 are written so Foxglove's Map, Log and 3D panels show the run without configuration; a
 ``map/<name>`` GeoJSON document is written only as its ``foxglove.GeoJSON`` channel. They are
-counted in ``stats["derived"]``, apart from ``written``. Map documents put before the logger
-started are asked for once at its start (``rapt/<v>/map/*``; :class:`planner.scenario_map.
-ScenarioMap` answers), so a logger started after the planner still records them.
+counted in ``stats["derived"]``, apart from ``written``. A map's publisher puts it again
+whenever a logger's liveliness token appears (:class:`planner.scenario_map.ScenarioMap`), so a
+logger started after the planner still records it.
 
 Payloads that are not a JSON object are wrapped: ``{"value": <JSON or text>}``, or
 ``{"base64": ...}`` for bytes that are not UTF-8.
@@ -55,8 +55,6 @@ log = logging.getLogger(__name__)
 RAW_TOPIC = "/mavlink/raw"
 #: Message encoding of RAW_TOPIC: one MAVLink frame per message, no schema.
 RAW_ENCODING = "mavlink"
-#: How long the logger waits at its start for the answers to its query for map documents (s).
-MAP_QUERY_TIMEOUT_S = 2.0
 
 _OBJECT = {"type": "object"}
 _SCHEMAS: dict[str, dict] = {
@@ -156,7 +154,7 @@ class McapLogger(Service):
         self._channels: dict[str, tuple[int, list[int]]] = {}
         self._counts = dict.fromkeys(("written", "metadata", "errors", "flushes", "derived"), 0)
         self._foxglove = foxglove.FoxgloveMessages()
-        self._received = [0, 0, 0]  # per thread (data, liveliness, map query): no shared counter between threads
+        self._received = [0, 0]  # per drain thread (data, liveliness): no shared counter between threads
 
     # ----------------------------------------------------------------- life cycle
     def _open(self) -> None:
@@ -174,7 +172,6 @@ class McapLogger(Service):
         self._subs = [data, alive]
         for index, sub in enumerate(self._subs):
             self._spawn("mcap-drain", self._drain, sub.handler, index)
-        self._spawn("mcap-maps", self._ask_for_maps, s)
         self._token = s.liveliness().declare_token(keys.alive(self.vehicle, "logger"))
 
     def _shutdown(self) -> None:
@@ -214,18 +211,6 @@ class McapLogger(Service):
                 put((str(sample.key_expr), now, None, sample.kind == zenoh.SampleKind.PUT))
             else:
                 put((str(sample.key_expr), now, sample.payload.to_bytes(), sample.kind == zenoh.SampleKind.PUT))
-
-    def _ask_for_maps(self, session: zenoh.Session) -> None:
-        """Queue the map documents someone answers for (those put before we subscribed), once, at the start."""
-        try:
-            replies = session.get(keys.map_document(self.vehicle, "*"), timeout=MAP_QUERY_TIMEOUT_S)
-            for reply in replies:
-                sample = reply.ok
-                if sample is not None:
-                    self._received[2] += 1
-                    self._queue.put((str(sample.key_expr), time.time_ns(), sample.payload.to_bytes(), True))
-        except zenoh.ZError:  # the session closed under us: nothing to ask any more
-            return
 
     def _write_loop(self, writer: Writer) -> None:
         """The one thread that writes ``writer``: queued samples, and a flush every ``flush_interval_s``."""

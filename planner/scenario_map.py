@@ -7,10 +7,10 @@ The bridge cannot build it (it must not import :mod:`sim`); the planner, which f
 scenario, can: the document is :func:`planner.exports.geojson`'s, the one the range already
 gets as a ``.geojson`` file, with the batch simulator's trajectory of the same row.
 
-:class:`ScenarioMap` puts it once when started, for a logger already listening, and answers
-queries for it while it runs, for a logger started later (the logger asks for
-``rapt/<v>/map/**`` when it starts), so a standalone ``rapt-plan log`` records it whichever
-process starts first.
+:class:`ScenarioMap` puts it whenever a logger's liveliness token (``rapt/<v>/alive/logger``)
+appears, including one already there when it starts. The logger declares its token after
+its subscriber, so each logger records the document once, whichever process starts first
+(a standalone ``rapt-plan log`` too); a second logger's arrival sends it again to all.
 """
 
 from __future__ import annotations
@@ -19,11 +19,12 @@ import json
 from typing import Any
 
 import numpy as np
+import zenoh
 
 import sim.uuv
 from bridge import keys
 from bridge.service import Service
-from bridge.session import undeclare
+from bridge.session import receive, undeclare
 from planner.exports import geojson
 from sim.uuv.mission import Mission
 
@@ -44,26 +45,35 @@ def scenario_map(mission: Mission, u) -> dict | None:
 
 
 class ScenarioMap(Service):
-    """Scenario ``u``'s map on ``rapt/<vehicle>/map/scenario``: put at start, answered to queries until closed."""
+    """Scenario ``u``'s map on ``rapt/<vehicle>/map/scenario``, put for each logger that appears until closed."""
 
     _what = "scenario map"
 
     def __init__(self, session, vehicle: str, mission: Mission, u):
         super().__init__()
         self.session = session
+        self.vehicle = vehicle
         self.key = keys.map_document(vehicle, SCENARIO_MAP)
         self.document = scenario_map(mission, u)
         self._payload = b"" if self.document is None else json.dumps(self.document, allow_nan=False).encode()
-        self._queryable: Any = None
+        self._loggers: Any = None
+        self.puts = 0
 
     def _open(self) -> None:
         if self.document is None:
             return
-        self._queryable = self.session.declare_queryable(self.key, self._answer)
-        self.session.put(self.key, self._payload)
+        self._loggers = self.session.liveliness().declare_subscriber(
+            keys.alive(self.vehicle, "logger"), zenoh.handlers.FifoChannel(16), history=True
+        )
+        self._spawn("scenario-map", self._serve)
 
-    def _answer(self, query) -> None:
-        query.reply(self.key, self._payload)  # the one Zenoh call allowed in a callback
+    def _serve(self) -> None:
+        """Put the document for each logger token that appears (never from inside a Zenoh callback)."""
+        for sample in receive(self._loggers):
+            if sample.kind == zenoh.SampleKind.PUT:
+                self.session.put(self.key, self._payload)
+                self.puts += 1
 
     def _shutdown(self) -> None:
-        undeclare(self._queryable)
+        undeclare(self._loggers)  # ends _serve's receive()
+        self._join(self._threads, timeout=5)

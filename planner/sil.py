@@ -147,7 +147,7 @@ def run_sil(
         if log_path is not None:
             from bridge.logger import McapLogger
 
-            scenario_map = ScenarioMap(session, vehicle, mission, u).start()  # first: the logger asks for it
+            scenario_map = ScenarioMap(session, vehicle, mission, u).start()  # put when the logger appears
             logger = McapLogger(log_path, session, vehicle=vehicle).start()
         recorder = _Recorder(session, vehicle)
         session.put(

@@ -103,7 +103,7 @@ def run_vehicle(
         if log_path is not None:
             from bridge.logger import McapLogger
 
-            parts.append(ScenarioMap(session, vehicle, mission, u).start())  # first: the logger asks for it
+            parts.append(ScenarioMap(session, vehicle, mission, u).start())  # put when the logger appears
             parts.append(McapLogger(log_path, session, vehicle=vehicle).start())
         session.put(keys.meta(vehicle, "scenario"), json.dumps(_scenario_meta(flight, connection)))
         bridge = MavlinkBridge(
