@@ -60,6 +60,8 @@ NO_SUPPORT = "the logs do not support a correction; plan unchanged"
 #: on paths alone (a smaller change is within what refitting on other logs moves anyway).
 PATH_GAIN = 0.1
 RESULT_NAME = "comparison.json"
+#: How the Foxglove overlays' file names begin (:func:`planner.overlay.overlay_name`).
+OVERLAY_PREFIX = "overlay_"
 
 
 @dataclass
@@ -311,6 +313,9 @@ def _check_out_dir(plan_path: str | Path, log_paths: Sequence[str | Path], out_d
     inputs = {Path(p).resolve() for p in log_paths} | {plan_file.resolve()}
     if (Path(out_dir) / RESULT_NAME).resolve() in inputs:
         raise InputError(f"--out: {out_dir} would overwrite an input; choose another directory")
+    out = Path(out_dir).resolve()
+    if any(p.parent == out and p.name.startswith(OVERLAY_PREFIX) for p in inputs):  # planner.overlay's names
+        raise InputError(f"--out: {out_dir} would overwrite an input (an overlay_*.mcap); choose another directory")
 
 
 @dataclass

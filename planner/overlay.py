@@ -44,7 +44,7 @@ _UNSAFE = re.compile(r"[^A-Za-z0-9_.\-]")
 
 def overlay_name(sid: str) -> str:
     """``overlay_<scenario id>.mcap`` (characters unsafe in a file name replaced by ``_``)."""
-    return f"overlay_{_UNSAFE.sub('_', sid)}.mcap"
+    return f"overlay_{_UNSAFE.sub('_', sid)}.mcap"  # planner.compare.OVERLAY_PREFIX: refused as an input there
 
 
 class _Channels:

@@ -224,6 +224,12 @@ def test_an_out_that_would_overwrite_an_input_fails_first_in_one_line(tmp_path, 
     assert "Traceback" not in result.output
     assert len([line for line in result.output.splitlines() if line.strip()]) == 1, result.output
     assert log.read_text() == "not really a log\n" and sorted(out.iterdir()) == [log]
+    log.unlink()
+    kept = out / overlay_name("pair1a")  # a log kept under the name of a Foxglove overlay
+    kept.write_text("not really a log\n")
+    result = runner.invoke(app, ["compare", str(tmp_path / "plan"), str(kept), "--out", str(out)])
+    assert result.exit_code == 2 and "would overwrite an input (an overlay_*.mcap)" in result.output, result.output
+    assert kept.read_text() == "not really a log\n" and sorted(out.iterdir()) == [kept]
 
 
 def test_inject_bias_on_the_command_line(flown):
