@@ -6,6 +6,7 @@ pieces ``rapt-plan run`` wires together in one process, each until SIGINT or SIG
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 from typing import Annotated
 
@@ -138,8 +139,14 @@ def autonomy(
         ),
     ] = "lockstep",
 ) -> None:
-    """Run the back-seat autonomy of one scenario on the bus (or a trained surrogate of it)."""
+    """Run the back-seat autonomy of one scenario on the bus (or a trained surrogate of it).
+
+    As source ``autonomy`` it also serves the scenario's map (``rapt/<v>/map/scenario``) that
+    ``rapt-plan log`` records for Foxglove, whichever of the two starts first.
+    """
+    from bridge.keys import DEFAULT_ACTIVE
     from planner.backseat import PACINGS, BackSeat
+    from planner.scenario_map import ScenarioMap
 
     if pacing not in PACINGS:
         fail(f"--pacing: expected one of {', '.join(PACINGS)}, got {pacing!r}")
@@ -147,9 +154,16 @@ def autonomy(
     learned = load_surrogate(surrogate, mission)
     err.print(f"autonomy: mission {mission.name!r} scenario {sid}", highlight=False, soft_wrap=True)
     session = bus_session(zenoh_connect, zenoh_config)
-    run_until_signal(
-        session, lambda: BackSeat(session, vehicle, mission, u, source=source, surrogate=learned, pacing=pacing)
-    )
+
+    def start() -> contextlib.ExitStack:
+        """The back-seat, and (as the flying source) the scenario's map for a logger on the bus."""
+        with contextlib.ExitStack() as parts:
+            if source == DEFAULT_ACTIVE:
+                parts.enter_context(ScenarioMap(session, vehicle, mission, u))
+            parts.enter_context(BackSeat(session, vehicle, mission, u, source=source, surrogate=learned, pacing=pacing))
+            return parts.pop_all()
+
+    run_until_signal(session, start)
 
 
 def log(

@@ -142,6 +142,8 @@ def test_each_piece_runs_as_its_own_process_and_stops_cleanly(tmp_path):
     assert codes == [0, 0, 0, 0]
     commands, north = flown()
     assert len(commands) > 50 and max(north) - min(north) > 50  # the autonomy flew the vehicle
+    maps = [m for t, _, m in read_log(log) if t == "/map/scenario"]  # from the autonomy, whichever started first
+    assert len(maps) == 1 and "predicted_track" in maps[0]["geojson"]
 
 
 def test_selfright_is_a_rapt_plan_command_with_one_line_errors(tmp_path):
