@@ -23,6 +23,9 @@ Everything about a vehicle lives under ``rapt/<vehicle>/``:
 ``rapt/<v>/meta/<name>``                    scenario metadata JSON (mission file, scenario id,
                                             parameters, plan id); MCAP metadata in the log
 ``rapt/<v>/alive/<role>``                   liveliness tokens (``bridge``, ``logger``, ...)
+``rapt/<v>/map/<name>``                     a GeoJSON document for the map (the scenario's mission
+                                            elements and predicted track), put once at the start;
+                                            logged as a ``foxglove.GeoJSON`` channel ``/map/<name>``
 ==========================================  ===============================================
 
 ``<vehicle>``, ``<source>``, ``<name>`` and ``<role>`` are single key chunks: non-empty, without
@@ -54,6 +57,7 @@ __all__ = [
     "status",
     "meta",
     "alive",
+    "map_document",
     "everything",
     "split",
 ]
@@ -134,6 +138,11 @@ def meta(vehicle: str, name: str) -> str:
 def alive(vehicle: str, role: str) -> str:
     """``rapt/<vehicle>/alive/<role>``: a liveliness token."""
     return f"{PREFIX}/{_chunk(vehicle, 'vehicle')}/alive/{_chunk(role, 'role', wildcard=True)}"
+
+
+def map_document(vehicle: str, name: str) -> str:
+    """``rapt/<vehicle>/map/<name>``: a GeoJSON document for the map (mission elements, predicted track)."""
+    return f"{PREFIX}/{_chunk(vehicle, 'vehicle')}/map/{_chunk(name, 'name', wildcard=True)}"
 
 
 def everything(vehicle: str) -> str:

@@ -15,6 +15,14 @@ bridge's senders lost, from the bridge's ``status/bridge`` (``link_lost``); writ
 logger publishes its counters on ``status/logger`` once a second, and writes them at finish
 as the metadata record ``rapt.losses`` (:data:`LOSSES_METADATA`, see :meth:`McapLogger.losses`).
 
+Beside those channels, Foxglove's well-known messages derived from them (:mod:`bridge.foxglove`:
+the vehicle's position fix, a log of STATUSTEXT and the autonomy's events, the local frame)
+are written so Foxglove's Map, Log and 3D panels show the run without configuration; a
+``map/<name>`` GeoJSON document is written only as its ``foxglove.GeoJSON`` channel. They are
+counted in ``stats["derived"]``, apart from ``written``. A map's publisher puts it again
+whenever a logger's liveliness token appears (:class:`planner.scenario_map.ScenarioMap`), so a
+logger started after the planner still records it.
+
 Payloads that are not a JSON object are wrapped: ``{"value": <JSON or text>}``, or
 ``{"base64": ...}`` for bytes that are not UTF-8.
 """
@@ -40,7 +48,7 @@ from mcap.writer import CompressionType, Writer
 
 from rapt.errors import InputError
 
-from . import keys
+from . import foxglove, keys
 from .frames import strip_signature
 from .loss import PublicationGaps
 from .service import Service
@@ -163,7 +171,8 @@ class McapLogger(Service):
         self._writer: Writer | None = None
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, tuple[int, list[int]]] = {}
-        self._counts = dict.fromkeys(("written", "metadata", "errors", "flushes"), 0)
+        self._counts = dict.fromkeys(("written", "metadata", "errors", "flushes", "derived"), 0)
+        self._foxglove = foxglove.FoxgloveMessages()
         self._received = [0, 0]  # per drain thread (data, liveliness): no shared counter between threads
 
     # ----------------------------------------------------------------- life cycle
@@ -207,7 +216,8 @@ class McapLogger(Service):
 
     @property
     def stats(self) -> dict[str, int]:
-        """received (samples off Zenoh), written (MCAP messages), metadata, errors, flushes, queued."""
+        """received (samples off Zenoh), written (MCAP messages of them), metadata, errors, flushes, queued,
+        derived (Foxglove messages written beside them)."""
         out = {"received": sum(self._received), **self._counts}
         out["queued"] = len(self._liveliness)
         out["bus_lost"] = self._bus_gaps.lost
@@ -383,6 +393,7 @@ class McapLogger(Service):
             _, kind, name = keys.split(key)
         except ValueError:
             kind, name = "", key
+        source: dict | None = None  # the JSON object Foxglove messages are derived from
         if payload is None:  # liveliness change
             channel_id, seq = self._channel(w, key, "json", _schema_for("alive", name))
             data = json.dumps({"alive": put}).encode()
@@ -392,20 +403,36 @@ class McapLogger(Service):
             data = strip_signature(payload)
             publish_ns = recv_ns
         else:
-            channel_id, seq = self._channel(w, key, "json", _schema_for(kind, name))
             if put:
                 data, obj = _as_object(payload)
+                source = obj
             else:
                 obj = {"deleted": True}
                 data = json.dumps(obj).encode()
             stamp = obj.get("_recv_ns")
             publish_ns = stamp if isinstance(stamp, int) and not isinstance(stamp, bool) else recv_ns
+            if kind == "map":  # the document is logged as its foxglove.GeoJSON channel only
+                document = obj if put else {"type": "FeatureCollection", "features": []}  # deleted: an empty map
+                self._write_foxglove(w, self._foxglove.derive(kind, name, document, publish_ns), recv_ns, "written")
+                return
+            channel_id, seq = self._channel(w, key, "json", _schema_for(kind, name))
             if kind == "meta" and put:
                 w.add_metadata(name, {str(k): v if isinstance(v, str) else json.dumps(v) for k, v in obj.items()})
                 self._counts["metadata"] += 1
         w.add_message(channel_id, log_time=recv_ns, data=data, publish_time=publish_ns, sequence=seq[0])
         seq[0] += 1
         self._counts["written"] += 1
+        if source is not None:
+            self._write_foxglove(w, self._foxglove.derive(kind, name, source, publish_ns), recv_ns, "derived")
+
+    def _write_foxglove(self, w: Writer, derived: list[foxglove.Derived], recv_ns: int, counter: str) -> None:
+        """The Foxglove messages derived from one sample (:mod:`bridge.foxglove`), written beside it."""
+        for topic, schema_name, message in derived:
+            channel_id, seq = self._channel(w, topic, "json", (schema_name, foxglove.schema(schema_name)))
+            data = json.dumps(message, allow_nan=False).encode()
+            w.add_message(channel_id, log_time=recv_ns, data=data, publish_time=recv_ns, sequence=seq[0])
+            seq[0] += 1
+            self._counts[counter] += 1
 
 
 # --------------------------------------------------------------------------- reading

@@ -22,7 +22,9 @@ to identify and apply this bias to our predictions").  :func:`compare`
 5. re-predicts every run and every plan scenario under the bias used — the corrected
    predictions — and flags the pairs that no longer straddle their boundary, with an
    adjusted "M" scenario for each side that moved (:mod:`planner.replan`);
-6. writes ``comparison.json`` and ``comparison.html`` (:mod:`planner.compare_report`).
+6. writes ``comparison.json`` and ``comparison.html`` (:mod:`planner.compare_report`), and per
+   flown scenario an MCAP for Foxglove overlaying observed, predicted and corrected tracks
+   (:mod:`planner.overlay`).
 """
 
 from __future__ import annotations
@@ -58,6 +60,8 @@ NO_SUPPORT = "the logs do not support a correction; plan unchanged"
 #: on paths alone (a smaller change is within what refitting on other logs moves anyway).
 PATH_GAIN = 0.1
 RESULT_NAME = "comparison.json"
+#: How the Foxglove overlays' file names begin (:func:`planner.overlay.overlay_name`).
+OVERLAY_PREFIX = "overlay_"
 
 
 @dataclass
@@ -311,6 +315,9 @@ def _check_out_dir(plan_path: str | Path, log_paths: Sequence[str | Path], out_d
     inputs = {Path(p).resolve() for p in log_paths} | {plan_file.resolve()}
     if (Path(out_dir) / RESULT_NAME).resolve() in inputs:
         raise InputError(f"--out: {out_dir} would overwrite an input; choose another directory")
+    out = Path(out_dir).resolve()
+    if any(p.parent == out and p.name.startswith(OVERLAY_PREFIX) for p in inputs):  # planner.overlay's names
+        raise InputError(f"--out: {out_dir} would overwrite an input (an overlay_*.mcap); choose another directory")
 
 
 @dataclass
@@ -356,8 +363,8 @@ def _predict_plan(plan: Plan) -> tuple[list[str], np.ndarray, sim.uuv.Result]:
         got = MODE_NAMES[pred.modes[row_of[s["id"]]]] if pred.valid[row_of[s["id"]]] else "invalid"
         if planned and planned != got:
             raise StudyMismatchError(
-                f"PLAN: scenario {s['id']} is predicted {got} by {plan.mission_file} but the plan says "
-                f"{planned}; the mission file changed since the plan was made — regenerate the plan"
+                f"PLAN: scenario {s['id']} is predicted {got} by {plan.mission.source} but the plan says "
+                f"{planned}; the mission or the simulator changed since the plan was made — regenerate the plan"
             )
     return ids, U_plan, pred
 
@@ -592,13 +599,32 @@ def _bias_fit(fit, cfg: CompareConfig) -> dict:
 
 
 def _write(result: dict, plan: Plan, obs: list[Observation], runs: _PlanRuns, out_dir: Path) -> None:
-    """``comparison.json`` and the report (``comparison.html`` and its figures) into ``out_dir``."""
+    """``comparison.json``, the report (``comparison.html`` and its figures) and the Foxglove overlays
+    (``overlay_<scenario>.mcap``, listed in ``result["overlays"]``) into ``out_dir``."""
     out_dir.mkdir(parents=True, exist_ok=True)
+    result["overlays"] = _write_overlays(result, plan, obs, runs, out_dir)
     (out_dir / RESULT_NAME).write_text(json.dumps(result, indent=2))
     from planner.compare_report import write_comparison_report
 
     traj = {o.sid: (*runs.trajectories(o.sid), runs.calibrated_trajectory(o.sid)) for o in obs}
     write_comparison_report(result, plan, [(o.sid, o.run.track) for o in obs], traj, out_dir)
+
+
+def _write_overlays(result: dict, plan: Plan, obs: list[Observation], runs: _PlanRuns, out_dir: Path) -> dict:
+    """One Foxglove overlay per flown scenario (:func:`planner.overlay.write_overlay`): ``{scenario: file name}``."""
+    from planner.overlay import overlay_name, write_overlay
+
+    names = {}
+    correction = {"correction_used": result["correction"]["used"], "note": result["correction"]["note"]}
+    for sid in dict.fromkeys(o.sid for o in obs):
+        flown = [o for o in obs if o.sid == sid]
+        predicted, corrected = runs.trajectories(sid)
+        tracks = {"predicted": predicted, "corrected": corrected, "calibrated": runs.calibrated_trajectory(sid)}
+        observed = [(o.run.path.stem, o.run.track) for o in flown]
+        names[sid] = write_overlay(
+            out_dir / overlay_name(sid), plan.mission, flown[0].u, observed, tracks, correction
+        ).name
+    return names
 
 
 def _level_cols(m, level: int) -> list[int]:

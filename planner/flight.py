@@ -45,13 +45,15 @@ def is_plan(path: Path) -> bool:
     return path.suffix == ".json" or path.is_dir()
 
 
-def flight_from_plan(path: Path, scenario_id: str) -> Flight:
-    """Scenario ``scenario_id`` (e.g. pair1a) of the plan at ``path``; ValueError names what is wrong."""
+def flight_from_plan(path: Path, scenario_id: str | None) -> Flight:
+    """Scenario ``scenario_id`` (e.g. pair1a) of the plan at ``path``; ValueError names what is wrong
+    (a plan has no default scenario: ``None`` is answered with its ids)."""
     from planner.plans import load_plan
 
     plan = load_plan(path)
-    mission, u = plan.mission, plan.u(scenario_id)
-    return Flight(mission, u, scenario_id, str(plan.mission_file), plan.id)
+    scenario = plan.scenario(scenario_id)
+    mission, u = plan.mission, plan.u(scenario["id"])
+    return Flight(mission, u, scenario["id"], str(plan.mission_file), plan.id)
 
 
 def fly(

@@ -42,7 +42,7 @@ import sim.uuv
 from planner.dithering import DEFAULT_NOISE, DitherNoise, Outcome, dither_many, outcome_columns, robust_variants
 from planner.exports import write_scenario_files
 from planner.jsonio import jsonable
-from planner.plans import coordinate_sensitivity
+from planner.plans import coordinate_sensitivity, embedded_mission
 from planner.refinement import MIN_REFINE_RUNS, refine_pairs
 from planner.report import write_report
 from planner.search_status import SearchStatus
@@ -357,6 +357,7 @@ def generate(
     wall seconds of each stage (kept out of the plan, which depends on the seed only).
     """
     cfg.check()
+    embedded = _mission_text(mission, Path(mission_path))
     noise = cfg.noise()
     sigma = noise.sigmas(mission)  # a noise too wide for a parameter fails before the search
     out_dir = Path(out_dir)
@@ -409,12 +410,40 @@ def generate(
     }
     dithering = {"expected": noise.as_dict(), "sigma_u": [float(v) for v in sigma], "target": cfg.fragile_below}
     plan = _plan_document(
-        mission, mission_path, cfg, a, pairs, verdicts, confirmation, refinement, runs, dithering, scenarios, variants
+        mission,
+        mission_path,
+        embedded,
+        cfg,
+        a,
+        pairs,
+        verdicts,
+        confirmation,
+        refinement,
+        runs,
+        dithering,
+        scenarios,
+        variants,
     )
     (out_dir / "plan.json").write_text(json.dumps(plan, indent=2))
     write_report(plan, out_dir, dither_runs)
     clock.lap("files")
     return plan
+
+
+def _mission_text(mission: Mission, mission_path: Path) -> dict[str, str]:
+    """The mission file's text and digest for ``plan.json``, so the plan carries the mission it was made for."""
+    from sim.uuv.missionfile import load_mission_text
+
+    try:
+        text = mission_path.read_bytes().decode("utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"MISSION_FILE: cannot read {mission_path} to embed it in the plan ({exc})") from None
+    if load_mission_text(text, str(mission_path)) != mission:
+        raise StudyMismatchError(
+            f"MISSION_FILE: {mission_path} no longer holds the mission being planned (edited meanwhile?); "
+            "run rapt-plan generate again"
+        )
+    return embedded_mission(text)
 
 
 def _choose_pairs(
@@ -598,6 +627,7 @@ def _variant_entries(
 def _plan_document(
     mission: Mission,
     mission_path: Path,
+    embedded: dict[str, str],
     cfg: GenerateConfig,
     a: Analysis,
     pairs: list[dict],
@@ -639,6 +669,7 @@ def _plan_document(
             "file": str(mission_path),
             "dim": mission.dim,
             "parameters": mission.space.names,
+            **embedded,
         },
         "study": {
             "budget": cfg.budget,

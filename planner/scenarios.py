@@ -1,7 +1,9 @@
 """Naming a scenario on the command line: a number or a file.
 
 A number picks that row of the mission's scenario design (a scrambled Sobol sequence,
-seed 0, so the same number is the same scenario on every machine).  A file is JSON with
+seed 0, so the same number is the same scenario on every machine); without one, the
+commands take the design's first valid row (row 0 of a mission may well be invalid, e.g.
+a no-go area on a mission area).  A file is JSON with
 either ``"u"`` (a unit-cube row, as a study stores it) or ``"parameters"`` (physical
 values by parameter name, as a field plan lists them).
 """
@@ -17,7 +19,9 @@ from scipy.stats import qmc
 from rapt.errors import FileFormatError, InputError
 from sim.uuv.mission import Mission
 
-__all__ = ["resolve_scenario", "design_row"]
+__all__ = ["resolve_scenario", "design_row", "valid_design_rows"]
+
+SEARCHED_ROWS = 1024  # design rows looked through for valid ones
 
 
 def design_row(mission: Mission, index: int) -> np.ndarray:
@@ -28,6 +32,15 @@ def design_row(mission: Mission, index: int) -> np.ndarray:
     if index:
         sobol.fast_forward(index)
     return sobol.random(1)[0]
+
+
+def valid_design_rows(mission: Mission, count: int = 3) -> list[int]:
+    """The first ``count`` row numbers of the mission's design that are valid scenarios (fewer if the
+    first :data:`SEARCHED_ROWS` rows hold fewer)."""
+    from sim.uuv.scenario import make_scenarios
+
+    U = qmc.Sobol(mission.dim, scramble=True, seed=0).random(SEARCHED_ROWS)
+    return [int(i) for i in np.flatnonzero(make_scenarios(mission, U).valid)[:count]]
 
 
 def resolve_scenario(mission: Mission, spec: str) -> tuple[np.ndarray, str]:

@@ -30,6 +30,7 @@ from bridge.session import open_session, receive, undeclare  # noqa: E402
 from planner.backseat import BackSeat  # noqa: E402
 from planner.jsonio import jsonable  # noqa: E402
 from planner.processes import wait_for  # noqa: E402
+from planner.scenario_map import ScenarioMap  # noqa: E402
 from rapt.errors import LinkTimeoutError  # noqa: E402
 from sim.uuv.frontseat import FrontSeat  # noqa: E402
 from sim.uuv.mission import Mission  # noqa: E402
@@ -139,13 +140,14 @@ def run_sil(
     )
     fs_thread = threading.Thread(target=fs.serve, name="frontseat", daemon=True)
     session = open_session(listen=[f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"])
-    logger = bridge = backseat = recorder = learned = None
+    logger = bridge = backseat = recorder = learned = scenario_map = None
     started = time.perf_counter()
     try:
         fs_thread.start()
         if log_path is not None:
             from bridge.logger import McapLogger
 
+            scenario_map = ScenarioMap(session, vehicle, mission, u).start()  # put when the logger appears
             logger = McapLogger(log_path, session, vehicle=vehicle).start()
         recorder = _Recorder(session, vehicle)
         session.put(
@@ -185,7 +187,7 @@ def run_sil(
         track = recorder.builder.track()
         stats = dict(bridge.stats)
     finally:
-        for part in (learned, backseat, bridge, recorder, logger):
+        for part in (learned, backseat, bridge, recorder, scenario_map, logger):
             if part is not None:
                 part.close()
         fs.stop()

@@ -29,6 +29,7 @@ from planner.backseat import BackSeat
 from planner.bringup import BringUp, BringUpTimeouts, Step
 from planner.jsonio import jsonable
 from planner.referee import Referee
+from planner.scenario_map import ScenarioMap
 from planner.sil import free_port
 from planner.virtual_range import VirtualRange
 from planner.watchdog import REASONS, Watchdog, WatchdogRules
@@ -102,6 +103,7 @@ def run_vehicle(
         if log_path is not None:
             from bridge.logger import McapLogger
 
+            parts.append(ScenarioMap(session, vehicle, mission, u).start())  # put when the logger appears
             parts.append(McapLogger(log_path, session, vehicle=vehicle).start())
         session.put(keys.meta(vehicle, "scenario"), json.dumps(_scenario_meta(flight, connection)))
         bridge = MavlinkBridge(

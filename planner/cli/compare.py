@@ -162,7 +162,12 @@ def compare(
             )
         else:
             out.print(f"  {q['variant_of']}: {q['note']}", highlight=False, soft_wrap=True)
-    out.print(f"comparison.json and comparison.html written to {out_dir}", highlight=False, soft_wrap=True)
+    overlays = len(result.get("overlays", {}))
+    out.print(
+        f"comparison.json, comparison.html and {overlays} Foxglove overlay(s) (overlay_*.mcap) written to {out_dir}",
+        highlight=False,
+        soft_wrap=True,
+    )
 
 
 def _calibrated_vehicle(plan_dir: Path, calibrated: Path):

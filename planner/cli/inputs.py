@@ -39,9 +39,11 @@ SurrogateOpt = Annotated[
 
 
 ScenarioOpt = Annotated[
-    str,
+    str | None,
     typer.Option(
-        "--scenario", help="Row number of the mission's Sobol design, or a JSON file with 'u' or 'parameters'."
+        "--scenario",
+        help="Row number of the mission's Sobol design (default: its first valid row), or a JSON file with 'u' "
+        "or 'parameters'; with a plan, a scenario id such as pair1a.",
     ),
 ]
 
@@ -70,18 +72,32 @@ def load_mission(mission_file: Path):
         fail(str(exc))
 
 
-def mission_and_scenario(mission_file: Path, scenario: str):
+def mission_and_scenario(mission_file: Path, scenario: str | None):
+    """(mission, unit-cube row, scenario id) of ``--scenario`` (default: the design's first valid row),
+    or a one-line error naming why the scenario is invalid and the first valid rows."""
     import sim.uuv
-    from planner.scenarios import resolve_scenario
+    from planner.scenarios import SEARCHED_ROWS, resolve_scenario, valid_design_rows
 
     mission = load_mission(mission_file)
+    if scenario is None:
+        valid = valid_design_rows(mission, 1)
+        if not valid:
+            fail(
+                f"--scenario: none of the first {SEARCHED_ROWS} rows of mission {mission.name!r}'s design is "
+                "valid; give a scenario as a JSON file, or widen the mission's parameter ranges"
+            )
+        scenario = str(valid[0])
     try:
         u, sid = resolve_scenario(mission, scenario)
         scen = sim.uuv.scenario.make_scenarios(mission, u[None, :])
     except ValueError as exc:
         fail(str(exc))
     if not scen.valid[0]:
-        fail(f"--scenario: {scenario} is invalid for {mission.name} ({scen.invalid_reason[0]}); pick another")
+        valid = valid_design_rows(mission)
+        fail(
+            f"--scenario: scenario {scenario} is invalid for mission {mission.name!r} ({scen.invalid_reason[0]}); "
+            + (f"valid ones include {', '.join(map(str, valid))}" if valid else "give a valid one as a JSON file")
+        )
     return mission, u, sid
 
 

@@ -6,12 +6,13 @@ pieces ``rapt-plan run`` wires together in one process, each until SIGINT or SIG
 
 from __future__ import annotations
 
+import contextlib
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from planner.cli.console import fail
+from planner.cli.console import err, fail
 from planner.cli.inputs import (
     ScenarioOpt,
     SurrogateOpt,
@@ -36,7 +37,7 @@ def frontseat(
         ),
     ],
     mavlink: Annotated[str, typer.Option(help="pymavlink connection to serve on, e.g. udpin:127.0.0.1:14550.")],
-    scenario: ScenarioOpt = "0",
+    scenario: ScenarioOpt = None,
     speedup: Annotated[float | None, typer.Option(help="Real time times this factor (default: lock-step).")] = None,
     bare: Annotated[
         bool,
@@ -55,9 +56,9 @@ def frontseat(
             flight = flight_from_plan(mission_file, scenario)
         except ValueError as exc:
             fail(str(exc))
-        mission, u = flight.mission, flight.u
+        mission, u, sid = flight.mission, flight.u, flight.scenario_id
     else:
-        mission, u, _ = mission_and_scenario(mission_file, scenario)
+        mission, u, sid = mission_and_scenario(mission_file, scenario)
     try:
         fs = FrontSeat(
             mission,
@@ -70,6 +71,7 @@ def frontseat(
         )
     except (ValueError, OSError) as exc:
         fail(f"--mavlink: {exc}")
+    err.print(f"front-seat: mission {mission.name!r} scenario {sid} on {mavlink}", highlight=False, soft_wrap=True)
     serve_until_signal(fs)
 
 
@@ -123,7 +125,7 @@ def bridge(
 
 def autonomy(
     mission_file: Annotated[Path, typer.Argument(help="Mission file (TOML).")],
-    scenario: ScenarioOpt = "0",
+    scenario: ScenarioOpt = None,
     vehicle: Vehicle = "uuv1",
     source: Annotated[str, typer.Option(help="Name this autonomy publishes its set-points under.")] = "autonomy",
     zenoh_connect: ZenohConnect = ["tcp/127.0.0.1:7447"],
@@ -137,17 +139,31 @@ def autonomy(
         ),
     ] = "lockstep",
 ) -> None:
-    """Run the back-seat autonomy of one scenario on the bus (or a trained surrogate of it)."""
+    """Run the back-seat autonomy of one scenario on the bus (or a trained surrogate of it).
+
+    As source ``autonomy`` it also serves the scenario's map (``rapt/<v>/map/scenario``) that
+    ``rapt-plan log`` records for Foxglove, whichever of the two starts first.
+    """
+    from bridge.keys import DEFAULT_ACTIVE
     from planner.backseat import PACINGS, BackSeat
+    from planner.scenario_map import ScenarioMap
 
     if pacing not in PACINGS:
         fail(f"--pacing: expected one of {', '.join(PACINGS)}, got {pacing!r}")
-    mission, u, _ = mission_and_scenario(mission_file, scenario)
+    mission, u, sid = mission_and_scenario(mission_file, scenario)
     learned = load_surrogate(surrogate, mission)
+    err.print(f"autonomy: mission {mission.name!r} scenario {sid}", highlight=False, soft_wrap=True)
     session = bus_session(zenoh_connect, zenoh_config)
-    run_until_signal(
-        session, lambda: BackSeat(session, vehicle, mission, u, source=source, surrogate=learned, pacing=pacing)
-    )
+
+    def start() -> contextlib.ExitStack:
+        """The back-seat, and (as the flying source) the scenario's map for a logger on the bus."""
+        with contextlib.ExitStack() as parts:
+            if source == DEFAULT_ACTIVE:
+                parts.enter_context(ScenarioMap(session, vehicle, mission, u))
+            parts.enter_context(BackSeat(session, vehicle, mission, u, source=source, surrogate=learned, pacing=pacing))
+            return parts.pop_all()
+
+    run_until_signal(session, start)
 
 
 def log(

@@ -9,7 +9,7 @@ import typer
 from rich.table import Table
 
 from planner.cli.console import fail, out
-from planner.cli.inputs import SurrogateOpt, load_surrogate, mission_and_scenario
+from planner.cli.inputs import ScenarioOpt, SurrogateOpt, load_surrogate, mission_and_scenario
 from rapt.errors import RaptError
 
 __all__ = ["run"]
@@ -20,15 +20,7 @@ def run(
         Path,
         typer.Argument(metavar="MISSION_OR_PLAN", help="Mission file (TOML), or a plan.json from rapt-plan generate."),
     ],
-    scenario: Annotated[
-        str,
-        typer.Option(
-            "--scenario",
-            help="Row number of the mission's Sobol design, or a JSON "
-            "file with 'u' or 'parameters'; with a plan, a scenario "
-            "id such as pair1a.",
-        ),
-    ] = "0",
+    scenario: ScenarioOpt = None,
     speedup: Annotated[float | None, typer.Option(help="Real time times this factor (default: lock-step).")] = None,
     log: Annotated[Path | None, typer.Option(help="Record the bus to this MCAP file.")] = None,
     timeout: Annotated[

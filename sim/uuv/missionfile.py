@@ -105,7 +105,7 @@ from rapt.space import Categorical, Continuous, Integer, Parameter, Permutation,
 from sim.uuv.metrics import ELEMENT_KINDS, element_names, metric_names
 from sim.uuv.mission import TARGET_FIELDS, Binding, Current, Mission, MissionArea, Rect, Transmission, Triangle, Vehicle
 
-__all__ = ["load_mission", "MissionFileError"]
+__all__ = ["load_mission", "load_mission_text", "MissionFileError"]
 
 
 class MissionFileError(FileFormatError):
@@ -157,7 +157,15 @@ _NAMED_TARGETS = {
 
 def load_mission(path: str | Path) -> Mission:
     """Read, check and build the mission in the TOML file ``path``."""
-    return _Loader(Path(path)).load()
+    return _Loader(str(path)).load(Path(path))
+
+
+def load_mission_text(text: str, label: str) -> Mission:
+    """Check and build the mission in TOML ``text`` (e.g. the copy a field plan embeds).
+
+    ``label`` names where the text came from, in errors and as the mission's ``source``.
+    """
+    return _Loader(label).load_text(text)
 
 
 def _fmt(v: float) -> str:
@@ -170,9 +178,8 @@ def _names(items) -> str:
 
 
 class _Loader:
-    def __init__(self, path: Path):
-        self.path = path
-        self.label = str(path)
+    def __init__(self, label: str):
+        self.label = label
 
     # ------------------------------------------------------------------ errors and primitives
     def fail(self, where: str, message: str) -> NoReturn:
@@ -291,15 +298,20 @@ class _Loader:
         return x, y
 
     # ------------------------------------------------------------------ the file
-    def load(self) -> Mission:
+    def load(self, path: Path) -> Mission:
         try:
-            raw = self.path.read_bytes()
+            raw = path.read_bytes()
         except OSError as exc:
             self.fail("file", f"cannot read it ({exc.strerror or exc}); check the path")
         try:
-            data = tomllib.loads(raw.decode("utf-8"))
+            text = raw.decode("utf-8")
         except UnicodeDecodeError as exc:
             self.fail("file", f"not UTF-8 text ({exc.reason} at byte {exc.start}); save the file as UTF-8")
+        return self.load_text(text)
+
+    def load_text(self, text: str) -> Mission:
+        try:
+            data = tomllib.loads(text)
         except tomllib.TOMLDecodeError as exc:
             self.fail("TOML syntax", f"{exc}; fix the TOML at that line")
         return self.build(data)

@@ -142,6 +142,8 @@ def test_each_piece_runs_as_its_own_process_and_stops_cleanly(tmp_path):
     assert codes == [0, 0, 0, 0]
     commands, north = flown()
     assert len(commands) > 50 and max(north) - min(north) > 50  # the autonomy flew the vehicle
+    maps = [m for t, _, m in read_log(log) if t == "/map/scenario"]  # from the autonomy, whichever started first
+    assert len(maps) == 1 and "predicted_track" in maps[0]["geojson"]
 
 
 def test_selfright_is_a_rapt_plan_command_with_one_line_errors(tmp_path):
@@ -170,3 +172,56 @@ def test_a_rapt_error_no_command_caught_is_still_one_line_and_exit_2(monkeypatch
     assert exit_info.value.code == 2
     err = capsys.readouterr().err
     assert err.strip() == "error: front-seat: the simulator stopped answering; run it again"
+
+
+def test_an_invalid_scenario_names_its_reason_and_valid_ones():
+    """Row 0 of range2017 puts a no-go area on mission area B; the error says so and offers valid rows."""
+    for command in (["frontseat", RANGE2017, "--mavlink", "udpin:127.0.0.1:9"], ["run", RANGE2017]):
+        result = runner.invoke(app, command + ["--scenario", "0"])
+        assert result.exit_code == 2, result.output
+        lines = [line for line in result.output.splitlines() if line.strip()]
+        assert lines == [
+            "error: --scenario: scenario 0 is invalid for mission 'range2017' "
+            "(a no-go area on the centre of mission area B); valid ones include 1, 2, 3"
+        ]
+    plan = Path(__file__).resolve().parents[2] / "field_plans" / "range2017"
+    result = runner.invoke(app, ["frontseat", str(plan), "--mavlink", "udpin:127.0.0.1:9"])
+    assert result.exit_code == 2 and "--scenario: name the scenario of" in result.output
+    assert "choose one of pair1a, pair1b" in result.output
+
+
+@pytest.mark.integration
+def test_frontseat_without_scenario_serves_the_first_valid_one(tmp_path):
+    """`rapt-plan frontseat MISSION --mavlink ...` with no --scenario: a heartbeat on loopback, row 1 named."""
+    import os
+    import signal
+    import socket
+    import subprocess
+    import sys
+    import time
+
+    os.environ["MAVLINK20"] = "1"  # before pymavlink is imported (CONVENTIONS 2g)
+    from pymavlink import mavutil
+
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
+        s.bind(("127.0.0.1", 0))
+        udp = s.getsockname()[1]
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "planner.cli", "frontseat", RANGE2017, "--mavlink", f"udpin:127.0.0.1:{udp}"],
+        stderr=subprocess.PIPE,
+        text=True,
+        env={**os.environ, "COLUMNS": "200"},
+    )
+    gcs = mavutil.mavlink_connection(f"udpout:127.0.0.1:{udp}", source_system=255)
+    try:
+        heard, deadline = None, time.monotonic() + 30
+        while heard is None and time.monotonic() < deadline and proc.poll() is None:
+            gcs.mav.heartbeat_send(mavutil.mavlink.MAV_TYPE_GCS, mavutil.mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+            heard = gcs.recv_match(type="HEARTBEAT", blocking=True, timeout=0.5)
+    finally:
+        gcs.close()
+        proc.send_signal(signal.SIGINT)
+        _, stderr = proc.communicate(timeout=20)
+    assert heard is not None and heard.type == mavutil.mavlink.MAV_TYPE_SUBMARINE, stderr
+    assert proc.returncode == 0, stderr
+    assert f"front-seat: mission 'range2017' scenario sobol-1 on udpin:127.0.0.1:{udp}" in stderr

@@ -10,6 +10,8 @@ logs.
 from __future__ import annotations
 
 import json
+import os
+import re
 from pathlib import Path
 
 import numpy as np
@@ -18,12 +20,16 @@ from mcap.reader import make_reader
 from typer.testing import CliRunner
 
 import sim.uuv
-from bridge.logger import LOSSES_METADATA
+from bridge import foxglove, keys
+from bridge.logger import LOSSES_METADATA, read_log
 from planner.cli import app
 from planner.logs import read_run
+from planner.overlay import overlay_name
 from planner.plans import load_plan
 from sim.uuv.bias import Bias, parse_bias
+from sim.uuv.geo import LocalFrame
 from tests.cli.sil_day import MISSION, digests, fly_plan
+from tests.foxglove_check import check_channel, foxglove_channels, read_with_typescript
 
 pytestmark = [pytest.mark.slow, pytest.mark.integration]
 
@@ -237,6 +243,12 @@ def test_an_out_that_would_overwrite_an_input_fails_first_in_one_line(tmp_path, 
     assert "Traceback" not in result.output
     assert len([line for line in result.output.splitlines() if line.strip()]) == 1, result.output
     assert log.read_text() == "not really a log\n" and sorted(out.iterdir()) == [log]
+    log.unlink()
+    kept = out / overlay_name("pair1a")  # a log kept under the name of a Foxglove overlay
+    kept.write_text("not really a log\n")
+    result = runner.invoke(app, ["compare", str(tmp_path / "plan"), str(kept), "--out", str(out)])
+    assert result.exit_code == 2 and "would overwrite an input (an overlay_*.mcap)" in result.output, result.output
+    assert kept.read_text() == "not really a log\n" and sorted(out.iterdir()) == [kept]
 
 
 def test_inject_bias_on_the_command_line(flown):
@@ -281,3 +293,147 @@ def test_a_calibrated_vehicle_is_flown_in_every_prediction_beside_the_plan(flown
     )
     assert bad.exit_code == 2 and "--calibrated:" in bad.output and "'elsewhere'" in bad.output
     assert len([line for line in bad.output.splitlines() if line.strip()]) == 1, bad.output
+
+
+def _hand_over(flown, to: Path) -> tuple[Path, list[Path]]:
+    """The plan directory and two logs copied to ``to``, the plan naming its mission by the relative path
+    ``rapt-plan generate examples/range2017.toml`` records (which exists only under the repository)."""
+    import shutil
+
+    plan_dir = to / "plan"
+    shutil.copytree(flown["plan_dir"], plan_dir)
+    data = json.loads((plan_dir / "plan.json").read_text())
+    data["mission"]["file"] = "examples/range2017.toml"
+    (plan_dir / "plan.json").write_text(json.dumps(data, indent=2))
+    (to / "logs").mkdir()
+    logs = [Path(shutil.copy2(p, to / "logs")) for p in flown["logs"][:2]]
+    return plan_dir, logs
+
+
+def test_a_plan_directory_compares_and_flies_from_any_directory(flown, tmp_path):
+    """Only the plan directory and logs at hand (an empty tree), run from another directory."""
+    import subprocess
+
+    from tests.cli.sil_day import rapt_plan
+
+    plan_dir, logs = _hand_over(flown, tmp_path / "handed")
+    elsewhere = tmp_path / "elsewhere"
+    elsewhere.mkdir()
+    assert not (elsewhere / "examples").exists()
+    env = {**os.environ, "COLUMNS": "200"}
+
+    def cli(*args: str) -> subprocess.CompletedProcess:
+        return subprocess.run(rapt_plan() + list(args), cwd=elsewhere, capture_output=True, text=True, env=env)
+
+    done = cli("compare", str(plan_dir), *map(str, logs), "--out", "cmp", "--dithers", "0", "--bootstrap", "0")
+    assert done.returncode == 0, done.stderr
+    c = json.loads((elsewhere / "cmp" / "comparison.json").read_text())
+    assert c["plan"]["id"] == load_plan(flown["plan_dir"]).id and len(c["scenarios"]) == 2
+    assert c["plan"]["mission_file"] == "examples/range2017.toml"  # recorded, not read
+    flew = cli("run", str(plan_dir / "plan.json"), "--scenario", flown["plan"]["scenarios"][0]["id"])
+    assert flew.returncode == 0, flew.stderr
+    assert re.search(r"same scores as the batch simulator\s+│\s+yes", flew.stdout), flew.stdout
+
+
+def test_an_edited_embedded_mission_is_refused_in_one_line_and_nothing_is_written(flown, tmp_path):
+    plan_dir, logs = _hand_over(flown, tmp_path)
+    data = json.loads((plan_dir / "plan.json").read_text())
+    data["mission"]["toml"] = data["mission"]["toml"].replace("hotel_w = 40.0", "hotel_w = 55.0", 1)
+    assert "hotel_w = 55.0" in data["mission"]["toml"]
+    (plan_dir / "plan.json").write_text(json.dumps(data, indent=2))
+    inputs = sorted(p for p in tmp_path.rglob("*") if p.is_file())
+    before = digests(inputs)
+    out = tmp_path / "cmp"
+    for args in (
+        ["compare", str(plan_dir), *map(str, logs), "--out", str(out)],
+        ["run", str(plan_dir), "--scenario", "pair1a", "--log", str(tmp_path / "pair1a.mcap")],
+        ["frontseat", str(plan_dir), "--scenario", "pair1a", "--mavlink", "udpin:127.0.0.1:9"],
+    ):
+        result = runner.invoke(app, args)
+        assert result.exit_code == 2, (args, result.output)
+        lines = [line for line in result.output.splitlines() if line.strip()]
+        assert len(lines) == 1 and "Traceback" not in result.output, result.output
+        assert "mission.toml was edited after the plan was generated" in lines[0]
+        assert "regenerate the plan" in lines[0]
+    assert sorted(p for p in tmp_path.rglob("*") if p.is_file()) == inputs and digests(inputs) == before
+    assert not out.exists()
+
+
+def test_run_logs_have_foxglove_channels_the_typescript_reader_decodes(flown):
+    """A log of `rapt-plan run`: Foxglove's well-known channels beside the MAVLink ones, valid under Foxglove's
+    schemas (Python reader), and read back by Foxglove's TypeScript reader from npm with the same content."""
+    log = flown["logs"][0]
+    channels = foxglove_channels(log)
+    expected = {
+        foxglove.FIX_TOPIC: "foxglove.LocationFix",
+        foxglove.LOG_TOPIC: "foxglove.Log",
+        foxglove.TF_TOPIC: "foxglove.FrameTransform",
+        foxglove.TRAIL_TOPIC: "foxglove.PosesInFrame",
+        "/map/scenario": "foxglove.GeoJSON",
+    }
+    assert {t: c.schema_name for t, c in channels.items()} == expected
+    for channel in channels.values():
+        check_channel(channel)
+    # one fix per GLOBAL_POSITION_INT, its position in degrees
+    gpi = [m for t, _, m in read_log(log) if t == keys.telemetry("uuv1", "GLOBAL_POSITION_INT")]
+    fixes = channels[foxglove.FIX_TOPIC].messages
+    assert len(fixes) == len(gpi) > 100
+    assert [(f["latitude"], f["longitude"]) for f in fixes] == [(g["lat"] / 1e7, g["lon"] / 1e7) for g in gpi]
+    # the map: the scenario's elements and the plan's predicted track, once
+    run = read_run(log)
+    [doc] = [json.loads(m["geojson"]) for m in channels["/map/scenario"].messages]
+    kinds = [f["properties"]["kind"] for f in doc["features"]]
+    assert {"launch", "recovery", "operational_area", "mission_area", "nogo", "predicted_track"} <= set(kinds)
+    plan = load_plan(flown["plan_dir"])
+    predicted = sim.uuv.simulate(plan.mission, np.array([run.meta["u"]], dtype=float), trajectories=True)
+    [line] = [f for f in doc["features"] if f["properties"]["kind"] == "predicted_track"]
+    assert len(line["geometry"]["coordinates"]) == predicted.trajectory(0).shape[0]
+    events = [m["message"] for m in channels[foxglove.LOG_TOPIC].messages]
+    assert events[0] == "goal: waypoint" and f"run ended: {run.ended}" in events
+
+    ts = read_with_typescript(log, foxglove.FIX_TOPIC, "/map/scenario")
+    for topic, name in expected.items():
+        got = ts["channels"][topic]
+        assert (got["schema"], got["schemaEncoding"], got["messageEncoding"]) == (name, "jsonschema", "json")
+        assert got["messages"] == len(channels[topic].messages)
+    assert ts["first"][foxglove.FIX_TOPIC] == fixes[0]
+    assert json.loads(ts["first"]["/map/scenario"]["geojson"]) == doc
+    assert ts["statisticsMessageCount"] == sum(c["messages"] for c in ts["channels"].values())
+    print({t: (c["schema"], c["messages"]) for t, c in ts["channels"].items() if t in expected}, fixes[0])
+
+
+def test_compare_writes_a_foxglove_overlay_per_flown_scenario(flown):
+    """Next to comparison.json: per flown scenario the observed runs, the prediction and the corrected
+    prediction as GeoJSON lines and LocationFix series on their own topics."""
+    c = flown["comparison"]
+    rows = {r["log"]: r for r in c["scenarios"]}
+    assert c["overlays"] == {sid: overlay_name(sid) for sid in dict.fromkeys(r["id"] for r in c["scenarios"])}
+    log = flown["logs"][0]
+    sid = rows[log.name]["id"]
+    path = flown["out"] / c["overlays"][sid]
+    channels = foxglove_channels(path)
+    for channel in channels.values():
+        check_channel(channel)
+    observed = [run.stem for run in (log, flown["truncated"]) if rows[run.name]["id"] == sid]
+    assert observed == [log.stem, "killed"]  # the killed logger's copy of the same run
+    assert set(channels) == {"/map/scenario", "/map/observed", "/map/predicted", "/map/corrected"} | {
+        f"/fix/{k}" for k in ("predicted", "corrected", *(f"observed/{n}" for n in observed))
+    }
+    lines = {
+        t: json.loads(ch.messages[0]["geojson"])["features"] for t, ch in channels.items() if t.startswith("/map/")
+    }
+    assert [f["properties"]["name"] for f in lines["/map/observed"]] == observed
+    [corrected], [predicted] = lines["/map/corrected"], lines["/map/predicted"]
+    assert corrected["properties"]["correction_used"] is c["correction"]["used"] is True
+    assert corrected["geometry"]["coordinates"] != predicted["geometry"]["coordinates"]  # the fitted bias moved it
+    track = read_run(log).track
+    fixes = channels[f"/fix/observed/{log.stem}"].messages
+    assert len(fixes) == track.shape[0]
+    plan = load_plan(flown["plan_dir"])
+    lat, lon = LocalFrame(plan.mission.origin_lat, plan.mission.origin_lon).to_latlon(track[-1, 1], track[-1, 2])
+    assert (fixes[-1]["latitude"], fixes[-1]["longitude"]) == pytest.approx((lat, lon), abs=1e-9)
+    assert fixes[-1]["timestamp"]["sec"] == int(track[-1, 0])  # log time is scenario time
+    ts = read_with_typescript(path)
+    assert {t: (v["schema"], v["messages"]) for t, v in ts["channels"].items()} == {
+        t: (ch.schema_name, len(ch.messages)) for t, ch in channels.items()
+    }

@@ -196,3 +196,18 @@ def test_a_plan_scenario_flown_on_ardusub_like_on_the_range(tmp_path):
     run = read_run(log)
     assert run.scenario_id == "pair2b" and run.has_end and len(run.steps) == len(track)
     assert [e["name"] for e in run.events if e["source"] == "bringup"][: len(names)] == names
+    # Foxglove: the firmware's own position and STATUSTEXT under Foxglove's schemas, the map beneath them
+    from bridge.logger import read_log
+    from tests.foxglove_check import check_channel, foxglove_channels
+
+    channels = foxglove_channels(log)
+    for channel in channels.values():
+        check_channel(channel)
+    gpi = [m for t, _, m in read_log(log) if t == "rapt/uuv1/mavlink/GLOBAL_POSITION_INT"]
+    fixes = channels["/vehicle/fix"].messages
+    assert len(fixes) == len(gpi) > 10
+    assert (fixes[-1]["latitude"], fixes[-1]["longitude"]) == (gpi[-1]["lat"] / 1e7, gpi[-1]["lon"] / 1e7)
+    texts = [m for t, _, m in read_log(log) if t == "rapt/uuv1/mavlink/STATUSTEXT"]
+    vehicle_lines = [m for m in channels["/vehicle/log"].messages if m["name"] == "vehicle"]
+    assert texts and len(vehicle_lines) == len(texts)
+    assert len(channels["/map/scenario"].messages) == 1

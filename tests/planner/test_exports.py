@@ -14,6 +14,7 @@ import sim.uuv  # noqa: E402
 from planner.exports import geojson, qgc_plan, wpl, write_scenario_files  # noqa: E402
 from sim.uuv.geo import LocalFrame  # noqa: E402
 from sim.uuv.scenario import make_scenarios  # noqa: E402
+from tests.planner.qgc_loader import plan_errors, wpl_errors  # noqa: E402
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 
@@ -243,3 +244,62 @@ def test_invalid_scenario_names_u_and_writes_nothing(tmp_path):
         with pytest.raises(ValueError, match=r"^u: ") as err:
             qgc_plan(m, bad)
         assert "\n" not in str(err.value)
+
+
+FIELD_PLAN = Path(__file__).resolve().parents[2] / "field_plans" / "range2017"
+
+
+@pytest.mark.parametrize("stem", sorted(p.stem for p in FIELD_PLAN.glob("*.plan")))
+def test_shipped_plan_files_pass_qgroundcontrols_loader_and_mavproxys_wp_load(stem):
+    """What a range crew opens: every scenario file of the bundled plan, checked by QGroundControl's
+    load rules (tests/planner/qgc_loader.py) and loaded as MAVProxy's ``wp load`` does (mavwp)."""
+    plan_path, wpl_path = FIELD_PLAN / f"{stem}.plan", FIELD_PLAN / f"{stem}.waypoints"
+    assert plan_errors(plan_path) == [] and wpl_errors(wpl_path) == []
+    doc = json.loads(plan_path.read_text())
+    mis = doc["mission"]
+    assert (mis["version"], mis["firmwareType"], mis["vehicleType"]) == (2, 3, 12)  # ArduPilot, submarine
+    assert (doc["geoFence"]["version"], doc["rallyPoints"]["version"]) == (2, 2)
+    loader = mavwp.MAVWPLoader()
+    assert loader.load(str(wpl_path)) == len(mis["items"]) + 1
+    home = loader.wp(0)
+    assert (home.seq, home.frame, home.command) == (0, 0, 16)
+    np.testing.assert_allclose((home.x, home.y), mis["plannedHomePosition"][:2], atol=1e-7)
+    for seq, it in enumerate(mis["items"], start=1):
+        w = loader.wp(seq)
+        assert (w.seq, w.frame, w.command) == (seq, it["frame"], it["command"])
+        np.testing.assert_allclose((w.x, w.y, w.z), it["params"][4:7], atol=1e-7)
+
+
+def test_the_qgc_checker_refuses_what_qgroundcontrol_refuses_or_drops(tmp_path):
+    m = _mission("range2017")
+    good = qgc_plan(m, _row(m))
+    path = tmp_path / "s.plan"
+
+    def errors(edit) -> list[str]:
+        doc = json.loads(json.dumps(good))
+        edit(doc)
+        path.write_text(json.dumps(doc))
+        return plan_errors(path)
+
+    assert errors(lambda d: None) == []
+    assert errors(lambda d: d.pop("rallyPoints")) == ["The following required keys are missing: rallyPoints"]
+    assert errors(lambda d: d.update(version=2)) == ["File version 2 is not the supported version 1"]
+    assert errors(lambda d: d.update(fileType="Mission")) == ["Incorrect file type key expected:Plan actual:Mission"]
+    assert errors(lambda d: d["mission"].pop("firmwareType")) == [
+        "Mission: The following required keys are missing: firmwareType"
+    ]
+    assert errors(lambda d: d["mission"]["items"][0]["params"].pop()) == ["Mission: params key must contains 7 values"]
+    assert errors(lambda d: d["mission"]["items"][1].pop("Altitude")) == [
+        "Mission: The following required keys are missing: Altitude"
+    ]
+    assert errors(lambda d: d["mission"]["items"][0].update(autoContinue=1)) == [
+        "Mission: Incorrect value type - key:type:expected autoContinue:int:Bool"
+    ]
+    assert errors(lambda d: d["geoFence"].update(version=1))[0].startswith("GeoFence: version 1 or none")
+    assert errors(lambda d: d["geoFence"]["polygons"][0]["polygon"][0].append(0.0)) == [
+        "GeoFence: Coordinate array must contain 2 values"
+    ]
+    assert errors(lambda d: d["rallyPoints"]["points"][0].pop()) == ["Rally: Coordinate array must contain 3 values"]
+    wpl_path = tmp_path / "s.waypoints"
+    wpl_path.write_text(wpl(m, _row(m)).replace("QGC WPL 110", "QGC WPL 200"))
+    assert wpl_errors(wpl_path) != []

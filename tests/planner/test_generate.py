@@ -1,6 +1,9 @@
 """rapt-plan generate on small budgets: each stage, the plan file, determinism, resume, errors."""
 
+import hashlib
 import json
+import shutil
+from collections import deque
 from pathlib import Path
 
 import jsonschema
@@ -74,6 +77,9 @@ def test_generate_writes_a_plan_whose_predictions_hold(range2017, plan_dir):
     assert on_disk == json.loads(json.dumps(plan)) and plan["schema"] == PLAN_SCHEMA
     PLAN_VALIDATOR.validate(on_disk)  # the published schema describes what we write
     assert {"mission", "study", "sensitivity", "pairs", "scenarios", "run_order"} <= set(plan)
+    text = (EXAMPLES / "range2017.toml").read_text()
+    assert plan["mission"]["toml"] == text  # the plan carries its mission
+    assert plan["mission"]["sha256"] == hashlib.sha256(text.encode()).hexdigest()
     assert len(plan["scenarios"]) == 2 * len(plan["pairs"])
     assert plan["run_order"] == [s["id"] for s in plan["scenarios"]] + [v["id"] for v in plan["variants"]]
     assert (tmp_path / "out" / "report.html").is_file()
@@ -199,3 +205,35 @@ def test_search_status_counts_modes_and_cross_mode_links():
     status(np.array([[0.12, 0.1], [0.88, 0.9]]), np.array([[0.0, 1.0], [0.0, 0.0]]))
     assert status.links == 1 and status.modes_found == 3
     assert status.summary() == "3 modes, 1 boundary links"
+
+
+def test_a_plan_loads_from_its_embedded_mission_anywhere_and_refuses_an_edited_one(plan_dir, tmp_path, monkeypatch):
+    from planner.plans import load_plan
+    from rapt.errors import FileFormatError
+
+    src, plan = plan_dir
+    copy = tmp_path / "handed"
+    shutil.copytree(src / "out", copy)
+    data = json.loads((copy / "plan.json").read_text())
+    data["mission"]["file"] = "examples/range2017.toml"  # relative to a directory that is not here
+    (copy / "plan.json").write_text(json.dumps(data))
+    monkeypatch.chdir(tmp_path)
+    loaded = load_plan(copy)
+    assert loaded.mission == sim.uuv.load_mission(EXAMPLES / "range2017.toml")
+    assert loaded.mission_file == Path("examples/range2017.toml") and loaded.id == load_plan(src / "out").id
+    edited = json.loads(json.dumps(data))
+    edited["mission"]["toml"] = edited["mission"]["toml"].replace("hotel_w = 40.0", "hotel_w = 55.0", 1)
+    (copy / "plan.json").write_text(json.dumps(edited))
+    with pytest.raises(FileFormatError, match=r"mission\.toml was edited after the plan was generated") as err:
+        load_plan(copy)
+    assert "\n" not in str(err.value) and "regenerate the plan" in str(err.value)
+    # a plan from before the mission was embedded: its mission file, next to plan.json, or a line saying so
+    old = {**data, "mission": {k: v for k, v in data["mission"].items() if k not in ("toml", "sha256")}}
+    PLAN_VALIDATOR.validate(old)  # still a rapt.plan/1 plan
+    (copy / "plan.json").write_text(json.dumps(old))
+    with pytest.raises(FileFormatError, match=r"not there and not embedded .* regenerate the plan$"):
+        load_plan(copy)
+    shutil.copy(EXAMPLES / "range2017.toml", copy / "range2017.toml")
+    assert load_plan(copy).mission == loaded.mission
+    half = {**data, "mission": {k: v for k, v in data["mission"].items() if k != "sha256"}}
+    assert any(e.absolute_path == deque(["mission"]) for e in PLAN_VALIDATOR.iter_errors(half))

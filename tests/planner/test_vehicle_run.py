@@ -29,6 +29,7 @@ from sim.uuv.frontseat import FrontSeat
 from sim.uuv.geometry import polygon_signed_distance
 from sim.uuv.missionfile import load_mission
 from sim.uuv.scenario import make_scenarios
+from tests.foxglove_check import check_channel, foxglove_channels
 from tests.loopback import free_port, no_new_threads
 
 pytestmark = pytest.mark.integration
@@ -128,6 +129,14 @@ def test_an_operators_range_day_on_a_bare_autopilot_is_accepted_by_compare(tmp_p
     sources = {e["source"]: e for e in logged.events}
     assert {"bringup", "referee", "watchdog"} <= set(sources)
     assert sources["watchdog"]["event"] == "intervention" and sources["watchdog"]["reason"] == "nogo"
+    # what Foxglove shows unconfigured: the vehicle on the map over the scenario, the watchdog in the log
+    channels = foxglove_channels(log)
+    assert {"/vehicle/fix", "/map/scenario", "/vehicle/log", "/vehicle/tf", "/vehicle/track_local"} <= set(channels)
+    for channel in channels.values():
+        check_channel(channel)
+    kinds = {f["properties"]["kind"] for f in json.loads(channels["/map/scenario"].messages[0]["geojson"])["features"]}
+    assert {"nogo", "mission_area", "predicted_track"} <= kinds
+    assert any(m["name"] == "watchdog" and m["level"] == 4 for m in channels["/vehicle/log"].messages)  # ERROR
     out = tmp_path / "comparison"
     compare = subprocess.run(
         _rapt_plan() + ["compare", str(PLAN), str(log), "--out", str(out), "--dithers", "0", "--bootstrap", "0"],
