@@ -17,7 +17,9 @@ Everything about a vehicle lives under ``rapt/<vehicle>/``:
                                             (negative rises), "yaw": rad}``
 ``rapt/<v>/control/active``                 the source name allowed to command (text payload;
                                             ``"autonomy"`` until someone says otherwise)
-``rapt/<v>/status/<source>``                free JSON from a back-seat process (only logged)
+``rapt/<v>/status/<source>``                free JSON from a back-seat process (only logged); the
+                                            bridge's and the logger's counters, losses included,
+                                            once a second on ``status/bridge`` and ``status/logger``
 ``rapt/<v>/meta/<name>``                    scenario metadata JSON (mission file, scenario id,
                                             parameters, plan id); MCAP metadata in the log
 ``rapt/<v>/alive/<role>``                   liveliness tokens (``bridge``, ``logger``, ...)
@@ -48,6 +50,8 @@ __all__ = [
     "raw",
     "virtual",
     "VIRTUAL_ATTACHMENT",
+    "sequence_attachment",
+    "attachment_sequence",
     "command",
     "active",
     "status",
@@ -63,6 +67,22 @@ DEFAULT_VEHICLE = "uuv1"
 DEFAULT_ACTIVE = "autonomy"
 #: The Zenoh attachment of a frame on ``mavlink/raw`` that no vehicle sent (see :func:`virtual`).
 VIRTUAL_ATTACHMENT = b"virtual"
+
+
+def sequence_attachment(number: int) -> bytes:
+    """The Zenoh attachment numbering a bridge publication: 8 bytes, little-endian, one counter per key.
+
+    The logger counts the numbers it never received as lost on the bus.
+    """
+    return number.to_bytes(8, "little")
+
+
+def attachment_sequence(attachment: bytes | None) -> int | None:
+    """The number in a :func:`sequence_attachment`, None for any other attachment (``VIRTUAL_ATTACHMENT``)."""
+    if attachment is None or len(attachment) != 8:
+        return None
+    return int.from_bytes(attachment, "little")
+
 
 _CHUNK = re.compile(r"[A-Za-z0-9_.\-]+\Z")
 

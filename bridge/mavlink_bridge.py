@@ -23,10 +23,19 @@ back-seat echoes it as the set-point's ``tick_ms``, and the vehicle receives it 
 ``SET_POSITION_TARGET_LOCAL_NED.time_boot_ms``; wall time between the two, measured at the
 vehicle, is the MAVLink -> Zenoh -> back-seat -> Zenoh -> MAVLink latency. ``stats`` holds
 every counter a benchmark needs to check that nothing was refused or dropped on the way.
+
+Nothing is lost silently (:mod:`bridge.loss`): gaps in each sender's MAVLink sequence numbers
+are counted (``link_lost``), a UDP link's socket gets a receive buffer for bursts and its
+kernel drops are read back (``kernel_dropped``), every publication carries its number on its
+key (:func:`bridge.keys.sequence_attachment`) so the logger counts what the bus lost, and
+frames go out with Zenoh's BLOCK congestion control (a slow subscriber slows the bridge, whose
+socket buffer then absorbs the burst, rather than Zenoh dropping samples). The counters are
+published on ``status/bridge`` once a second and when the bridge closes.
 """
 
 from __future__ import annotations
 
+import json
 import logging
 import math
 import os
@@ -50,6 +59,7 @@ from rapt.errors import FileFormatError, InputError, LinkError, LinkTimeoutError
 from . import keys  # noqa: E402
 from .command_gate import CommandGate  # noqa: E402
 from .frames import FrameSplitter, mavlink2, message_json  # noqa: E402
+from .loss import SequenceGaps, frame_source_seq, udp_drops  # noqa: E402
 from .mission_upload import COUNT, MissionItem, MissionUpload, describe, mission_items  # noqa: E402
 from .service import Service  # noqa: E402
 from .session import undeclare, use_session  # noqa: E402
@@ -79,8 +89,15 @@ TYPE_MASK_VELOCITY_YAW = 2503
 
 _DIALECT = "ardupilotmega"
 _MISSION_REPLIES = frozenset(("MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"))
+_REPLIES = _MISSION_REPLIES | {"COMMAND_ACK"}  # the messages a waiting command or upload is handed
 _POLL_S = 0.1  # idle wake-up: silence detection and resync of a stalled partial frame
 _MAX_BACKOFF_S = 0.5
+#: Receive buffer asked for a UDP link: seconds of 20,000 small frames/s. Without root
+#: (SO_RCVBUFFORCE) the kernel caps it at net.core.rmem_max; ``stats["rcvbuf_bytes"]`` says what was granted.
+UDP_RCVBUF_BYTES = 32 << 20
+_SO_RCVBUFFORCE = getattr(socket, "SO_RCVBUFFORCE", 33)  # Linux
+_DRAIN_DATAGRAMS = 256  # datagrams read per wake-up under load (one select per burst, not per frame)
+_BLOCK = zenoh.CongestionControl.BLOCK
 
 
 def load_signing_key(signing_key: bytes | str | os.PathLike) -> bytes:
@@ -174,6 +191,7 @@ class MavlinkBridge(Service):
         source_system: int = 1,
         source_component: int = mavlink2.MAV_COMP_ID_ONBOARD_COMPUTER,
         baud: int = 115200,
+        status_interval_s: float = 1.0,
     ):
         if not isinstance(device, str) or not device:
             raise InputError(f"device: expected a pymavlink connection string, got {device!r}")
@@ -190,6 +208,9 @@ class MavlinkBridge(Service):
         )
         if not (isinstance(heartbeat_hz, (int, float)) and heartbeat_hz > 0):
             raise InputError(f"heartbeat_hz: expected a number > 0, got {heartbeat_hz!r}")
+        if not (_is_number(status_interval_s) and status_interval_s > 0):
+            raise InputError(f"status_interval_s: expected a number of seconds > 0, got {status_interval_s!r}")
+        self.status_interval_s = float(status_interval_s)
         for name, value in (("source_system", source_system), ("source_component", source_component)):
             if not (isinstance(value, int) and 1 <= value <= 255):
                 raise InputError(f"{name}: expected an int in 1..255, got {value!r}")
@@ -211,7 +232,15 @@ class MavlinkBridge(Service):
         self._wake_w: socket.socket | None = None
         self._splitter = FrameSplitter(self._decode)
         self._publishers: dict[str, zenoh.Publisher] = {}
+        self._numbers: dict[str, int] = {}  # per telemetry publisher: the next publication's number
         self._raw_pub: zenoh.Publisher | None = None
+        self._raw_number = 0
+        self._status_pub: zenoh.Publisher | None = None
+        self._started_ns = time.time_ns()  # tells this bridge's status apart from a restarted one's
+        self._gaps = SequenceGaps()
+        self._rcvbuf = 0
+        self._kernel_dropped_before = 0  # kernel drops of the UDP sockets closed so far
+        self._lost_said = (0, 0)  # the losses last warned about
         self._cmd_sub: Any = None
         self._active_sub: Any = None
         self._cmd_handler: Any = None
@@ -264,7 +293,7 @@ class MavlinkBridge(Service):
         )
 
     def _open(self) -> None:
-        """Open the session entities and the link, then start the reader, command and heartbeat threads."""
+        """Open the session entities and the link, then start the reader, command, heartbeat and status threads."""
         self._wake_r, self._wake_w = socket.socketpair()
         self._session, self._owns_session = use_session(self._session_arg)
         s, v = self._session, self.vehicle
@@ -272,7 +301,9 @@ class MavlinkBridge(Service):
             keys.raw(v),
             encoding=zenoh.Encoding.APPLICATION_OCTET_STREAM,
             reliability=zenoh.Reliability.RELIABLE,
+            congestion_control=_BLOCK,
         )
+        self._status_pub = s.declare_publisher(keys.status(v, "bridge"), encoding=zenoh.Encoding.APPLICATION_JSON)
         self._cmd_sub = s.declare_subscriber(keys.command(v, "*"), zenoh.handlers.FifoChannel(4096))
         self._active_sub = s.declare_subscriber(keys.active(v), zenoh.handlers.FifoChannel(256))
         # Handlers are read by our threads; the subscriber objects are only touched here and in close().
@@ -287,9 +318,10 @@ class MavlinkBridge(Service):
         self._spawn(f"bridge-{v}-reader", self._read_loop)
         self._spawn(f"bridge-{v}-commands", self._command_loop)
         self._spawn(f"bridge-{v}-heartbeat", self._heartbeat_loop)
+        self._spawn(f"bridge-{v}-status", self._status_loop)
 
     def _shutdown(self) -> None:
-        """Stop the threads, close the link, undeclare everything, close an owned session."""
+        """Stop the threads, close the link, publish the last status, undeclare everything, close an owned session."""
         if self._wake_w is not None:
             try:
                 self._wake_w.send(b"x")
@@ -299,7 +331,8 @@ class MavlinkBridge(Service):
         self._join(self._threads, timeout=5)
         with self._send_lock:
             self._close_conn()
-        undeclare(self._token, self._raw_pub, *self._publishers.values())
+        self._publish_status()
+        undeclare(self._token, self._raw_pub, self._status_pub, *self._publishers.values())
         self._publishers.clear()
         if self._owns_session and self._session is not None:
             self._session.close()
@@ -334,16 +367,72 @@ class MavlinkBridge(Service):
     # ----------------------------------------------------------------- state
     @property
     def stats(self) -> dict[str, int]:
-        """Counters: frames in/out, bad frames, refused unsigned frames, commands by fate, reconnects."""
+        """Counters: frames in/out, bad frames, refused unsigned frames, commands by fate, reconnects,
+        and losses: ``link_lost`` (MAVLink sequence numbers that never came, all senders; late frames
+        taken back off), ``link_late``, ``link_duplicates``, ``kernel_dropped`` (datagrams a UDP
+        socket had no room for; -1 where unknown) and ``rcvbuf_bytes`` (the UDP receive buffer granted)."""
         out = dict(self._counts)
-        sp = self._splitter
+        sp, gaps = self._splitter, self._gaps
+        kernel = self._kernel_dropped()
         out.update(
             bad_frames=sp.bad_frames,
             bad_bytes=sp.bad_bytes,
             unsigned_refused=sp.unsigned,
             bad_signature=sp.bad_signature,
+            link_lost=gaps.lost,
+            link_late=gaps.late,
+            link_duplicates=gaps.duplicates,
+            kernel_dropped=-1 if kernel is None else kernel,
+            rcvbuf_bytes=self._rcvbuf,
         )
         return out
+
+    @property
+    def link_lost_by_source(self) -> dict[str, int]:
+        """MAVLink frames lost per sender, ``{"system/component": lost}``."""
+        return self._gaps.as_dict()["by_source"]
+
+    def _kernel_dropped(self) -> int | None:
+        conn = self._conn
+        if not self._datagram:
+            return None
+        if conn is None or getattr(conn, "port", None) is None:
+            return self._kernel_dropped_before
+        try:
+            now = udp_drops(conn.port.fileno())
+        except (OSError, ValueError):
+            now = 0
+        return None if now is None else self._kernel_dropped_before + now
+
+    def status(self) -> dict[str, Any]:
+        """What ``status/bridge`` carries: :attr:`stats`, the losses per sender, and this bridge's start time
+        (``started_ns``; counters restart with a new bridge)."""
+        return {"started_ns": self._started_ns, **self.stats, "link_lost_by_source": self.link_lost_by_source}
+
+    def _publish_status(self) -> None:
+        pub = self._status_pub
+        if pub is None:
+            return
+        status = self.status()
+        lost = (status["link_lost"], max(0, status["kernel_dropped"]))
+        if lost != self._lost_said:  # said out loud, not only on the bus: an operator may watch only the console
+            log.warning(
+                "bridge %s: MAVLink frames lost so far: %d by sequence gaps, %d dropped by the UDP socket "
+                "(%s frames received)",
+                self.vehicle,
+                *lost,
+                status["frames_in"],
+            )
+            self._lost_said = lost
+        try:
+            pub.put(json.dumps(status))
+        except Exception as error:  # a closing session
+            log.debug("bridge %s: status not published: %s", self.vehicle, error)
+
+    def _status_loop(self) -> None:
+        self._publish_status()  # counters start at zero: a logger already up sees where they start
+        while not self._stop.wait(self.status_interval_s):
+            self._publish_status()
 
     @property
     def linked(self) -> bool:
@@ -393,10 +482,7 @@ class MavlinkBridge(Service):
         except ImportError as error:  # pymavlink imports pyserial only for serial ports
             raise RunError(f"device: {self.device!r} is a serial port and needs pyserial ({error})") from None
         if isinstance(conn, mavutil.mavudp):
-            try:  # bursts of small datagrams overflow the default buffer; the kernel caps this
-                conn.port.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 1 << 21)
-            except OSError:
-                pass
+            self._rcvbuf = _grow_rcvbuf(conn.port, UDP_RCVBUF_BYTES)
         if self._key is not None:
             conn.setup_signing(self._key, sign_outgoing=True, allow_unsigned_callback=_refuse_unsigned)
         with self._send_lock:
@@ -406,6 +492,8 @@ class MavlinkBridge(Service):
         self._opened_at = time.monotonic()
 
     def _close_conn(self) -> None:
+        if self._datagram and self._conn is not None:
+            self._kernel_dropped_before = self._kernel_dropped() or 0
         conn, self._conn = self._conn, None
         if conn is not None:
             try:
@@ -475,6 +563,8 @@ class MavlinkBridge(Service):
                 recv_ns = time.time_ns()
                 for frame, msg in self._splitter.feed(data, datagram=self._datagram):
                     self._on_frame(frame, msg, recv_ns)
+                if self._datagram:
+                    self._drain_datagrams(conn)
             elif self._splitter.pending:  # idle with a partial frame held back: junk, not a frame
                 recv_ns = time.time_ns()
                 for frame, msg in self._splitter.resync():
@@ -484,7 +574,26 @@ class MavlinkBridge(Service):
             if time.monotonic() - quiet_since > self.silence_s:
                 self._link_lost("silent")
 
+    def _drain_datagrams(self, conn: Any) -> None:
+        """Read the datagrams already queued on a UDP socket (up to a bound) without a select for each."""
+        feed, on_frame = self._splitter.feed, self._on_frame
+        for _ in range(_DRAIN_DATAGRAMS):
+            try:
+                data = conn.recv(65536)  # non-blocking: "" when nothing is left
+            except BlockingIOError:
+                return
+            except Exception as error:  # OSError
+                self._link_lost(str(error) or type(error).__name__)
+                return
+            if not data:
+                return
+            recv_ns = time.time_ns()
+            for frame, msg in feed(data, datagram=True):
+                on_frame(frame, msg, recv_ns)
+
     def _on_frame(self, frame: bytes, msg: Any, recv_ns: int) -> None:
+        """Note what the bridge keeps of one frame (target, position, latest, replies) and publish it."""
+        self._gaps.see(*frame_source_seq(frame))
         now = time.monotonic()
         if self._lost:
             self._lost = False
@@ -504,7 +613,7 @@ class MavlinkBridge(Service):
         if target is not None and source[0] == target[0]:
             if name != "HEARTBEAT" or source == target:  # another component's heartbeat is not the autopilot's
                 self._latest[name] = (msg, now)
-            if source == target and self._addressed_to_us(msg):
+            if name in _REPLIES and source == target and self._addressed_to_us(msg):
                 if name == "COMMAND_ACK":
                     with self._ack_cond:
                         self._ack_serial += 1
@@ -523,11 +632,18 @@ class MavlinkBridge(Service):
                     keys.telemetry(self.vehicle, name),
                     encoding=zenoh.Encoding.APPLICATION_JSON,
                     reliability=zenoh.Reliability.RELIABLE,
+                    congestion_control=_BLOCK,
                 )  # not express: batching keeps bursts lossless, and costs no measurable latency
                 self._publishers[name] = pub
-            pub.put(message_json(msg, recv_ns))
-            raw_pub.put(frame)
-            self._counts["published"] += 2
+                self._numbers[name] = 0
+            # numbered as keys.sequence_attachment does (inlined: this runs 20,000 times a second)
+            number = self._numbers[name]
+            pub.put(message_json(msg, recv_ns), attachment=number.to_bytes(8, "little"))
+            self._numbers[name] = number + 1
+            self._counts["published"] += 1
+            raw_pub.put(frame, attachment=self._raw_number.to_bytes(8, "little"))
+            self._raw_number += 1
+            self._counts["published"] += 1
         except Exception as error:  # a closing session, an unencodable field: count, keep reading
             self._counts["publish_errors"] += 1
             log.warning("bridge %s: cannot publish %s: %s", self.vehicle, name, error)
@@ -838,6 +954,20 @@ class MavlinkBridge(Service):
             else:
                 msg = items[seq].to_message(target[0], target[1], kind)
             self._send(msg)  # a closed link is a timeout for the upload, as a lost frame is
+
+
+def _grow_rcvbuf(sock: socket.socket, size: int) -> int:
+    """Ask for a ``size``-byte receive buffer (forced past net.core.rmem_max where allowed); the size granted."""
+    for option in (_SO_RCVBUFFORCE, socket.SO_RCVBUF):
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, option, size)
+            break
+        except OSError:
+            continue
+    granted = sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+    if granted < size:
+        log.info("bridge: UDP receive buffer %d bytes of %d asked (raise net.core.rmem_max for bursts)", granted, size)
+    return granted
 
 
 def _refuse_unsigned(mav: Any, msg_id: int) -> bool:

@@ -199,6 +199,8 @@ def compare(
                 "messages": o.run.messages,
                 "complete": bool(o.run.complete_file and o.run.has_end),
                 "lost": o.run.problems,
+                "frames_lost": o.run.frames_lost,
+                "losses": o.run.losses if o.run.losses is not None else "unknown",
             }
             for o in obs
         ],
@@ -404,6 +406,7 @@ def _scenario_rows(m, obs: list[Observation], runs: _PlanRuns) -> list[dict]:
                 "steps": int(o.run.steps.shape[0]),
                 "log_complete": bool(o.run.complete_file and o.run.has_end),
                 "lost": list(o.run.problems),
+                "frames_lost": o.run.frames_lost,
                 "sub_scores": sub,
             }
         )

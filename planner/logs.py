@@ -5,7 +5,9 @@ What a run's log holds (:mod:`bridge.logger`): the vehicle's MAVLink frames in o
 (aborted waypoints, why it turned home), and the scenario metadata (``meta/scenario``:
 mission, plan id, scenario id, unit-cube row).  :func:`read_run` turns that into a
 :class:`LoggedRun`: one row per reported step (:data:`STEP_FIELDS`), the set-point the
-vehicle was given at each step, and an account of anything lost.
+vehicle was given at each step, and an account of anything lost: damaged or missing parts of
+the file (:attr:`LoggedRun.problems`) and the frames lost on the way to it, as the logger
+counted them (:attr:`LoggedRun.losses`, from the ``rapt.losses`` metadata record).
 
 A log is read record by record and never modified.  A logger killed mid-run leaves a
 file with no summary or footer and a half-written last chunk: everything before it is
@@ -31,7 +33,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from bridge import keys  # noqa: E402
 from bridge.frames import message_id  # noqa: E402
-from bridge.logger import RAW_TOPIC  # noqa: E402
+from bridge.logger import LOSSES_METADATA, RAW_TOPIC  # noqa: E402
 from planner.bringup import BRINGUP_SOURCE  # noqa: E402
 from planner.referee import TrackSampler  # noqa: E402
 from planner.telemetry import VIRTUAL_BATTERY_ID, VehicleTelemetry  # noqa: E402
@@ -70,6 +72,15 @@ class LoggedRun:
     # (n,) vehicle seconds from each step to the set-point flown after it reaching the bus: 0 on a
     # lock-step front-seat (it waits for it), inf where no set-point answered this very step, NaN: none
     setpoint_delay_s: np.ndarray | None = None
+    # what the logger counted as lost on the way (:meth:`bridge.logger.McapLogger.losses`: total,
+    # link_lost, bus_lost, write_errors, ...); None for a log without the record (older, or killed)
+    losses: dict | None = None
+
+    @property
+    def frames_lost(self) -> int | str:
+        """Frames lost on the way to this log (``losses["total"]``), "unknown" without the record."""
+        total = (self.losses or {}).get("total")
+        return total if isinstance(total, int) else "unknown"
 
     @property
     def track(self) -> np.ndarray:
@@ -83,6 +94,17 @@ class LoggedRun:
     @property
     def has_end(self) -> bool:
         return bool(self.ended)
+
+
+def _losses(record: dict[str, str]) -> dict:
+    """A ``rapt.losses`` record's values as numbers and dicts ("unknown" stays as it is)."""
+    out: dict = {}
+    for key, text in record.items():
+        try:
+            out[key] = json.loads(text)
+        except ValueError:
+            out[key] = text
+    return out
 
 
 class _Steps(TrackBuilder):
@@ -181,6 +203,7 @@ class RunLogReader:
         self.lost_chunks: list[tuple[int, int]] = []
         self.footer = False
         self.n_messages = 0
+        self.losses: dict | None = None
 
     def read(self) -> LoggedRun:
         """The run in the log; LogError when the file is missing, not MCAP, or has no scenario metadata."""
@@ -223,6 +246,7 @@ class RunLogReader:
             self.n_messages,
             self.events,
             delay,
+            self.losses,
         )
 
     # -- the file ----------------------------------------------------------------------
@@ -269,6 +293,8 @@ class RunLogReader:
             self.on_message(rec)
         elif isinstance(rec, Metadata) and rec.name == "scenario":
             self.on_metadata(rec)
+        elif isinstance(rec, Metadata) and rec.name == LOSSES_METADATA:
+            self.losses = _losses(rec.metadata)
 
     def on_metadata(self, rec: Metadata) -> None:
         """The scenario metadata record (a fallback for the meta/scenario message)."""

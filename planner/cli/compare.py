@@ -84,10 +84,18 @@ def compare(
     for lg in result["logs"]:
         for problem in lg["lost"]:
             err.print(f"[yellow]warning:[/] {Path(lg['path']).name}: {problem}", highlight=False, soft_wrap=True)
+        losses = lg.get("losses")
+        if isinstance(losses, dict) and losses.get("total"):
+            err.print(
+                f"[yellow]warning:[/] {Path(lg['path']).name}: {losses['total']:,} frame(s) lost on the way to the log "
+                f"(link {losses.get('link_lost')}, bus {losses.get('bus_lost')}, write errors {losses.get('write_errors')})",
+                highlight=False,
+                soft_wrap=True,
+            )
     table = Table(
         title=f"{result['plan']['mission']}: {len(result['scenarios'])} run(s) against plan {result['plan']['id']}"
     )
-    for col in ("scenario", "predicted", "observed", "corrected", "path error (m)", "corrected (m)"):
+    for col in ("scenario", "predicted", "observed", "corrected", "path error (m)", "corrected (m)", "frames lost"):
         table.add_column(col, justify="left" if col == "scenario" else "right")
     for r in result["scenarios"]:
         pe, pc = r["path_error_m"], r["path_error_corrected_m"]
@@ -98,6 +106,7 @@ def compare(
             r["corrected_mode"],
             "-" if pe is None else f"{pe:.1f}",
             "-" if pc is None else f"{pc:.1f}",
+            str(r.get("frames_lost", "unknown")),
         )
     out.print(table)
     bias = Table(title="execution bias (MAP fit to all logs; unidentified parameters stay neutral)")

@@ -21,7 +21,7 @@ from typer.testing import CliRunner
 
 import sim.uuv
 from bridge import foxglove, keys
-from bridge.logger import read_log
+from bridge.logger import LOSSES_METADATA, read_log
 from planner.cli import app
 from planner.logs import read_run
 from planner.overlay import overlay_name
@@ -158,8 +158,9 @@ def test_logs_name_plan_and_scenario_but_not_the_injected_bias(flown):
     assert not any(name in text for name in ("speed", "current_offset", "bias"))
 
 
-def _rewrite_meta(src: Path, dst: Path, **changes) -> None:
-    """A copy of a log whose scenario metadata says something else (another mission or plan)."""
+def _rewrite_meta(src: Path, dst: Path, losses: dict | None = None, **changes) -> None:
+    """A copy of a log whose scenario metadata says something else (another mission or plan), without
+    the logger's ``rapt.losses`` record unless ``losses`` gives one."""
     from mcap.reader import make_reader
     from mcap.writer import Writer
 
@@ -181,7 +182,23 @@ def _rewrite_meta(src: Path, dst: Path, **changes) -> None:
                 data = json.dumps(obj).encode()
                 w.add_metadata("scenario", {k: v if isinstance(v, str) else json.dumps(v) for k, v in obj.items()})
             w.add_message(channels[channel.id], log_time=message.log_time, data=data, publish_time=message.publish_time)
+        if losses is not None:
+            w.add_metadata(LOSSES_METADATA, {k: json.dumps(v) for k, v in losses.items()})
         w.finish()
+
+
+def test_each_log_says_how_many_frames_were_lost_on_the_way(flown, tmp_path):
+    entries = {Path(lg["path"]).name: lg for lg in flown["comparison"]["logs"]}
+    for log in flown["logs"]:  # flown in SIL through the bridge and the logger: nothing lost, and it says so
+        losses = entries[log.name]["losses"]
+        assert entries[log.name]["frames_lost"] == 0 and losses["link_lost"] == 0 and losses["bus_lost"] == 0
+    assert entries[flown["truncated"].name]["frames_lost"] == "unknown"  # killed before the record was written
+    assert "frames" in flown["output"]  # the table's "frames lost" column (rich may wrap its header)
+    old, lossy = tmp_path / "old.mcap", tmp_path / "lossy.mcap"
+    _rewrite_meta(flown["logs"][0], old)  # a logger from before the record
+    _rewrite_meta(flown["logs"][0], lossy, losses={"total": 7, "link_lost": 5, "bus_lost": 2, "write_errors": 0})
+    assert read_run(old).frames_lost == "unknown" and read_run(old).losses is None
+    assert read_run(lossy).frames_lost == 7 and read_run(lossy).losses["bus_lost"] == 2
 
 
 def test_a_log_of_another_mission_or_plan_is_one_line_and_exit_2(flown, tmp_path):
