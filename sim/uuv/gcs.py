@@ -12,7 +12,8 @@ connect and in use gets the answer ArduSub SITL 4.7.0-dev gives (recorded in
   the position is known, then "Arming motors" / "Disarming motors"); DO_SET_MODE (an
   unknown mode: FAILED + "No such mode N"; a position mode before the EKF has a position:
   FAILED + "Mode change failed: GUIDED requires position"; no CUSTOM_MODE flag: DENIED);
-  REQUEST_MESSAGE and REQUEST_AUTOPILOT_CAPABILITIES (ACK, then the message);
+  REQUEST_MESSAGE and REQUEST_AUTOPILOT_CAPABILITIES (ACK, then the message; HOME_POSITION
+  before the EKF has a position: ACCEPTED and nothing sent);
   SET/GET_MESSAGE_INTERVAL (GET: MESSAGE_INTERVAL, then the ACK); anything else UNSUPPORTED.
 - SET_MODE: as DO_SET_MODE but never acknowledged (this firmware sends no COMMAND_ACK).
 - PARAM_REQUEST_LIST (a three-line banner, then every PARAM_VALUE with index and count),
@@ -217,8 +218,6 @@ class GroundStationLink:
             name = _message_name(msg_id)
             if name is None or name not in _ON_REQUEST and self.streams.interval_us(msg_id) is None:
                 result = mav.MAV_RESULT_FAILED
-            elif name in ("HOME_POSITION", "GPS_GLOBAL_ORIGIN") and self.vehicle.mode_refusal(4) is not None:
-                result = mav.MAV_RESULT_FAILED  # no position yet, no home
             else:
                 after += [lambda: self._send_requested(name)]
         else:
