@@ -21,9 +21,8 @@ connect and in use gets the answer ArduSub SITL 4.7.0-dev gives (recorded in
   PARAM_SET (PARAM_VALUE with the stored value; unknown, NaN: no answer), see
   :mod:`sim.uuv.params`.
 - REQUEST_DATA_STREAM: no answer; the group's MAV1_* rate changes.
-- MAVLink FTP: not served.  ArduSub serves ``@PARAM/param.pck``; here sessions are reset
-  and acknowledged and every open or list gets NAK FileNotFound, on which MAVProxy and
-  QGroundControl fall back to PARAM_REQUEST_LIST at once.
+- MAVLink FTP: ``@PARAM/param.pck``, the parameter file MAVProxy and QGroundControl fetch
+  first (:mod:`sim.uuv.ftp`), then the banner; any other file gets NAK FileNotFound.
 
 The vehicle behind it (lock-step :class:`sim.uuv.frontseat.FrontSeat` or the bare
 :class:`sim.uuv.bare.BareAutopilot`) supplies the few things that differ: its clock, whether
@@ -38,6 +37,7 @@ from typing import Protocol
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
+from sim.uuv.ftp import OPEN_RO, ParamFileServer  # noqa: E402
 from sim.uuv.params import FIRMWARE, ParameterTable  # noqa: E402
 from sim.uuv.streams import StreamSchedule  # noqa: E402
 
@@ -66,8 +66,6 @@ CONTROLLED_MODES = frozenset({2, 3, 4, 7, 9, 16})
 CAPABILITIES, SW_VERSION, GIT_HASH = 0xF9E7, 0x04070000, b"2598e9d4"
 #: The three STATUSTEXT lines ArduPilot sends before the parameter list.
 BANNER = (FIRMWARE, "RAPT simulated front-seat", "Frame: VECTORED")
-#: MAVLink FTP opcodes and the NAK error this front-seat answers with (ArduPilot's AP_MAVLinkFTP).
-FTP_TERMINATE, FTP_RESET, FTP_ACK, FTP_NAK, FTP_FILE_NOT_FOUND = 1, 2, 128, 129, 10
 
 
 class Vehicle(Protocol):
@@ -124,6 +122,7 @@ class GroundStationLink:
         self.fs, self.vehicle, self.params, self.streams = fs, vehicle, params, streams
         #: Vehicle time the ground station's (MAV_GCS_SYSID) heartbeat was last heard; None before.
         self.gcs_heard: float | None = None
+        self.ftp = ParamFileServer(params)
         self._texts: list[tuple[int, str]] = []  # STATUSTEXT sent after the COMMAND_ACK, as ArduSub orders them
 
     @property
@@ -268,16 +267,11 @@ class GroundStationLink:
     # -- MAVLink FTP -------------------------------------------------------------------
     def _ftp(self, msg) -> None:
         payload = bytes(msg.payload)
-        seq = int.from_bytes(payload[0:2], "little")
-        session, opcode = payload[2], payload[3]
-        reply = bytearray(251)
-        reply[0:2] = ((seq + 1) & 0xFFFF).to_bytes(2, "little")
-        reply[2], reply[5] = session, opcode
-        if opcode in (FTP_TERMINATE, FTP_RESET):
-            reply[3] = FTP_ACK
-        else:
-            reply[3], reply[4], reply[12] = FTP_NAK, 1, FTP_FILE_NOT_FOUND
-        self.conn.mav.file_transfer_protocol_send(0, msg.get_srcSystem(), msg.get_srcComponent(), list(reply))
+        for reply in self.ftp.answer(payload):
+            self.conn.mav.file_transfer_protocol_send(0, msg.get_srcSystem(), msg.get_srcComponent(), list(reply))
+        if payload[3] == OPEN_RO and self.ftp.file is not None:
+            for text in BANNER:  # ArduPilot greets a parameter download, FTP or not, with its banner
+                self.fs._status(mav.MAV_SEVERITY_INFO, text)
 
 
 def _message_name(msg_id: int) -> str | None:

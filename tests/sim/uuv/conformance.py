@@ -51,9 +51,9 @@ FLAVOURS = ("lockstep", "bare")
 ALLOWED: dict[str, str] = {
     "PARAM_REQUEST_LIST": "a subset of ArduSub's 1,386: those a ground station reads on connect and our model maps to",
     "PARAM_REQUEST_LIST banner": "line 2 is the board's unique id; ours names the simulator",
+    "FTP open @PARAM/param.pck": "the banner after it: line 2 is the board's unique id; ours names the simulator",
     "boot WPNAV_SPEED": "set from the mission's cruise speed: our vehicle is not a BlueROV2",
     "boot BATT_CAPACITY": "set from the mission's battery (Wh at 14.8 V)",
-    "FTP open @PARAM/param.pck": "FTP not served: NAK FileNotFound, on which clients fall back to PARAM_REQUEST_LIST",
 }
 #: Rows only the lock-step flavour may differ in, and why.
 ALLOWED_LOCKSTEP: dict[str, str] = {
@@ -94,8 +94,9 @@ def canonical(msg) -> str:
     if kind == "PARAM_VALUE":
         index = "-1" if msg.param_index == 65535 else str(msg.param_index)
         return f"PARAM_VALUE {msg.param_id}={msg.param_value:g} type={msg.param_type} index={index}"
-    if kind == "STATUSTEXT":
-        return f"STATUSTEXT {msg.severity} {msg.text!r}"
+    if kind == "STATUSTEXT":  # the board's id (banner line 2) differs from one SITL instance to the next
+        text = "<board id>" if re.fullmatch(r"[0-9a-f]{32}", msg.text) else msg.text
+        return f"STATUSTEXT {msg.severity} {text!r}"
     if kind == "AUTOPILOT_VERSION":
         custom = bytes(msg.flight_custom_version).rstrip(b"\0").decode(errors="replace")
         return f"AUTOPILOT_VERSION caps=0x{msg.capabilities:X} sw=0x{msg.flight_sw_version:08X} git={custom}"
@@ -298,9 +299,8 @@ def _param_rows(client: Client, window: float) -> dict[str, list[str]]:
         if msg is None:
             continue
         if msg.get_type() == "STATUSTEXT":
-            if not SPONTANEOUS.match(msg.text):  # the board's id differs from one SITL instance to the next
-                text = "<board id>" if re.fullmatch(r"[0-9a-f]{32}", msg.text) else msg.text
-                banner.append(f"STATUSTEXT {msg.severity} {text!r}")
+            if not SPONTANEOUS.match(msg.text):
+                banner.append(canonical(msg))
         elif msg.param_index != 65535:
             count = msg.param_count
             indices.add(msg.param_index)
