@@ -8,7 +8,9 @@ surface), OBSTACLE_DISTANCE (a 360-beam sonar scan, five messages) and OBSTACLE_
 (one closest point per contact), SYSTEM_TIME; GUIDED velocity+yaw set-points
 (SET_POSITION_TARGET_LOCAL_NED / _GLOBAL_INT, type mask 2503); and the mission upload and
 download protocol.  Both flavours answer every ground-station request (commands, modes,
-parameters, stream rates, FTP) the same, ArduSub way (:mod:`sim.uuv.gcs`, :mod:`sim.uuv.params`).
+parameters, stream rates, FTP) the same, ArduSub way (:mod:`sim.uuv.gcs`, :mod:`sim.uuv.params`);
+in lock-step a requested stream rate is acknowledged and read back, but telemetry still goes
+out once per step (the lock-step's contract with the back-seat), plus EKF_STATUS_REPORT.
 
 Clock: with ``lockstep`` the simulated time advances one step when the set-point for the
 current step arrives (its ``time_boot_ms`` names the step), so a one-hour mission flies as
