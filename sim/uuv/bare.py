@@ -10,8 +10,8 @@ Streamed with no request, each at its own rate (vehicle time, ArduSub's defaults
 measured on ArduSub SITL 4.7.0-dev, see :mod:`sim.uuv.streams`): HEARTBEAT 1 Hz;
 ATTITUDE, VFR_HUD 10 Hz; GLOBAL_POSITION_INT, LOCAL_POSITION_NED (only once the position
 estimate is ready, relative to the EKF origin = where the vehicle booted), SYSTEM_TIME,
-BATTERY_STATUS, EKF_STATUS_REPORT 3 Hz; SYS_STATUS, GPS_RAW_INT (3-D fix only when
-surfaced) 2 Hz; HOME_POSITION and GPS_GLOBAL_ORIGIN once when the estimate is ready.  No
+BATTERY_STATUS, EKF_STATUS_REPORT 3 Hz; SYS_STATUS, MISSION_CURRENT, GPS_RAW_INT (3-D fix
+only when surfaced) 2 Hz; HOME_POSITION and GPS_GLOBAL_ORIGIN once when the estimate is ready.  No
 sonar.  SET_MESSAGE_INTERVAL, GET_MESSAGE_INTERVAL, REQUEST_MESSAGE and
 REQUEST_DATA_STREAM are answered as ArduSub answers them.  The position estimate is ready
 ``ekf_ready_s`` after boot (:mod:`sim.uuv.ekf`); GUIDED and POSHOLD are refused before.
@@ -127,6 +127,7 @@ class BareAutopilot:
                 for name in self.streams.due(self.t):
                     self._send(name)
             self._housekeeping()
+            self.fs.missions.update()
             wait = (min(self.t + SUBSTEP_S, self.streams.next_time()) - self.now()) / self.fs.speedup
             msg = self.conn.recv_match(blocking=True, timeout=min(max(wait, 0.0005), IDLE_S))
             while msg is not None:  # answer everything that is waiting
@@ -259,6 +260,8 @@ class BareAutopilot:
         elif name == "EKF_STATUS_REPORT":
             var = 0.01 if ready else 0.0
             m.ekf_status_report_send(self.ekf.flags(self.t), var, var, var, 0.0, 0.0)
+        elif name == "MISSION_CURRENT":
+            self.fs.missions.send_current()
         elif name == "SYSTEM_TIME":
             m.system_time_send(int(time.time() * 1e6), ms)
         elif name in ("GPS_GLOBAL_ORIGIN", "HOME_POSITION"):
@@ -274,7 +277,7 @@ class BareAutopilot:
     # -- MAVLink in --------------------------------------------------------------------
     def handle(self, msg) -> None:
         kind = msg.get_type()
-        if kind == "BAD_DATA":
+        if kind == "BAD_DATA" or self.fs.missions.handle(msg):
             return
         if kind == "HEARTBEAT":
             if msg.get_srcSystem() == GCS_SYSID:
@@ -293,8 +296,6 @@ class BareAutopilot:
             self._accept(from_global_int(msg, self._north_east, self.t))
         elif kind == "REQUEST_DATA_STREAM":
             self.streams.request_data_stream(int(msg.req_stream_id), int(msg.req_message_rate), msg.start_stop, self.t)
-        else:
-            self.fs._handle(msg)  # the mission protocol, as in the other modes
 
     def _round_trip(self, stamp: int) -> None:
         """Time from the position report stamped ``stamp`` leaving to the first set-point that answers it."""

@@ -7,7 +7,7 @@ LOCAL_POSITION_NED, GLOBAL_POSITION_INT, ATTITUDE, GPS_RAW_INT (a fix only on th
 surface), OBSTACLE_DISTANCE (a 360-beam sonar scan, five messages) and OBSTACLE_DISTANCE_3D
 (one closest point per contact), SYSTEM_TIME; arming and mode changes (COMMAND_LONG, SET_MODE); GUIDED
 velocity+yaw set-points (SET_POSITION_TARGET_LOCAL_NED / _GLOBAL_INT, type mask 2503);
-and the mission upload and download protocol.
+and the mission protocol with MISSION_CURRENT (:mod:`sim.uuv.mission_server`).
 
 Clock: with ``lockstep`` the simulated time advances one step when the set-point for the
 current step arrives (its ``time_boot_ms`` names the step), so a one-hour mission flies as
@@ -40,6 +40,7 @@ from sim.uuv.bare import BareAutopilot  # noqa: E402
 from sim.uuv.geo import LocalFrame  # noqa: E402
 from sim.uuv.interface import DEPTH_M, decode_command  # noqa: E402
 from sim.uuv.mission import Mission  # noqa: E402
+from sim.uuv.mission_server import MissionServer  # noqa: E402
 from sim.uuv.scenario import make_scenarios  # noqa: E402
 from sim.uuv.scoring import Scorer  # noqa: E402
 from sim.uuv.sonar import BEAMS_PER_MESSAGE, SCAN_BEAMS  # noqa: E402
@@ -72,7 +73,6 @@ class FrontSeatStats:
     setpoints: int = 0
     ignored: int = 0
     failsafes: int = 0
-    mission_items: int = 0
     ended: str = ""
     ticks_at_end: int = 0
     log: list = field(default_factory=list)
@@ -129,8 +129,6 @@ class FrontSeat:
         self.k = 0
         self.setpoint = _Setpoint()
         self.stats = FrontSeatStats()
-        self.mission_items: list = []
-        self._upload_count = 0
         self._stop = threading.Event()
         self._boot = time.time()
         self.tel: Telemetry = self.world.telemetry(0.0)
@@ -139,11 +137,19 @@ class FrontSeat:
             self.bare = BareAutopilot(self, ekf_ready_s, gcs_failsafe_s)
         else:
             self._referee()  # the first report counts, as in a batch
+        home = self.frame.to_latlon(float(self.world.state.x[0]), float(self.world.state.y[0]))
+        clock = self.bare.now if self.bare is not None else time.monotonic
+        self.missions = MissionServer(self.conn, (*home, 0.0), self._status, clock)
 
     # -- public ----------------------------------------------------------------------
     @property
     def t(self) -> float:
         return self.k * self.mission.dt
+
+    @property
+    def mission_items(self) -> list:
+        """The mission's items as they were uploaded (MISSION_ITEM_INT or MISSION_ITEM messages)."""
+        return [it.message for it in self.missions.lists[0] if it.message is not None]
 
     @property
     def ended(self) -> bool:
@@ -169,10 +175,12 @@ class FrontSeat:
             now = time.monotonic()
             if now - last_hb >= 1.0:
                 self._heartbeat()
+                self.missions.send_current()
                 last_hb = now
             msg = self.conn.recv_match(blocking=True, timeout=0.02)
             if msg is not None:
                 self._handle(msg)
+            self.missions.update()
             flying = self.armed and self.mode == GUIDED and not self.ended
             if self.lockstep:
                 if flying and self.setpoint.tick_ms == self._tick_ms():
@@ -324,7 +332,7 @@ class FrontSeat:
     # -- MAVLink in ------------------------------------------------------------------
     def _handle(self, msg) -> None:
         kind = msg.get_type()
-        if kind == "BAD_DATA":
+        if kind == "BAD_DATA" or self.missions.handle(msg):
             return
         if kind == "COMMAND_LONG":
             self._command(msg)
@@ -332,16 +340,6 @@ class FrontSeat:
             self.mode = int(msg.custom_mode)
         elif kind in ("SET_POSITION_TARGET_LOCAL_NED", "SET_POSITION_TARGET_GLOBAL_INT"):
             self._setpoint(msg, kind)
-        elif kind == "MISSION_COUNT":
-            self._upload_count = int(msg.count)
-            self.mission_items = []
-            self._request_item(0, msg)
-        elif kind in ("MISSION_ITEM_INT", "MISSION_ITEM"):
-            self._mission_item(msg)
-        elif kind == "MISSION_REQUEST_LIST":
-            self.conn.mav.mission_count_send(msg.get_srcSystem(), msg.get_srcComponent(), len(self.mission_items))
-        elif kind in ("MISSION_REQUEST_INT", "MISSION_REQUEST"):
-            self._send_item(msg)
 
     def _command(self, msg) -> None:
         cmd, result = int(msg.command), mav.MAV_RESULT_ACCEPTED
@@ -372,38 +370,3 @@ class FrontSeat:
         heading, speed, surface = decode_command(msg.vx, msg.vy, msg.vz, msg.yaw)
         self.setpoint = _Setpoint(float(heading), float(speed), bool(surface), int(msg.time_boot_ms), self.t)
         self.stats.setpoints += 1
-
-    def _request_item(self, seq: int, msg) -> None:
-        self.conn.mav.mission_request_int_send(msg.get_srcSystem(), msg.get_srcComponent(), seq)
-
-    def _mission_item(self, msg) -> None:
-        if int(msg.seq) != len(self.mission_items):
-            return  # out of order: the ground station resends on its timeout
-        self.mission_items.append(msg)
-        self.stats.mission_items += 1
-        if len(self.mission_items) < self._upload_count:
-            self._request_item(len(self.mission_items), msg)
-        else:
-            self.conn.mav.mission_ack_send(msg.get_srcSystem(), msg.get_srcComponent(), mav.MAV_MISSION_ACCEPTED)
-
-    def _send_item(self, msg) -> None:
-        seq = int(msg.seq)
-        if 0 <= seq < len(self.mission_items):
-            it = self.mission_items[seq]
-            x, y = (it.x, it.y) if it.get_type() == "MISSION_ITEM_INT" else (int(it.x * 1e7), int(it.y * 1e7))
-            self.conn.mav.mission_item_int_send(
-                msg.get_srcSystem(),
-                msg.get_srcComponent(),
-                seq,
-                it.frame,
-                it.command,
-                0,
-                1,
-                it.param1,
-                it.param2,
-                it.param3,
-                it.param4,
-                x,
-                y,
-                it.z,
-            )
