@@ -12,17 +12,19 @@ ATTITUDE, VFR_HUD 10 Hz; GLOBAL_POSITION_INT, LOCAL_POSITION_NED (only once the 
 estimate is ready, relative to the EKF origin = where the vehicle booted), SYSTEM_TIME,
 BATTERY_STATUS, EKF_STATUS_REPORT 3 Hz; SYS_STATUS, MISSION_CURRENT, GPS_RAW_INT (3-D fix
 only when surfaced) 2 Hz; HOME_POSITION and GPS_GLOBAL_ORIGIN once when the estimate is ready.  No
-sonar.  SET_MESSAGE_INTERVAL, GET_MESSAGE_INTERVAL, REQUEST_MESSAGE and
-REQUEST_DATA_STREAM are answered as ArduSub answers them.  The position estimate is ready
+sonar.  Ground-station requests (commands, modes, parameters, stream rates) are answered
+by :mod:`sim.uuv.gcs`, as in the lock-step front-seat.  The position estimate is ready
 ``ekf_ready_s`` after boot (:mod:`sim.uuv.ekf`); GUIDED and POSHOLD are refused before.
 
 Modes: GUIDED flies set-points (:mod:`sim.uuv.guided`); SURFACE rises to the surface;
 STABILIZE, ALT_HOLD, POSHOLD, AUTO and CIRCLE keep depth with no horizontal drive (no
 pilot, no mission here); MANUAL and ACRO and a disarmed vehicle apply no thrust — the
 vehicle keeps its depth (neutral buoyancy) and drifts with the current.  The vehicle never
-disarms itself except by ArduSub's GCS failsafe (FS_GCS_ENABLE 2, FS_GCS_TIMEOUT 5 s):
-once a heartbeat from system 255 has been heard, ``gcs_failsafe_s`` vehicle seconds
-without one disarm it.
+disarms itself except by ArduSub's GCS failsafe (FS_GCS_ENABLE 2, FS_GCS_TIMEOUT 5 s, the
+parameters read each time, :mod:`sim.uuv.params`): once a heartbeat from MAV_GCS_SYSID (255)
+has been heard, FS_GCS_TIMEOUT vehicle seconds without one disarm it.  Position targets are
+approached at WPNAV_SPEED at most; the battery's remaining percent counts against
+BATT_CAPACITY.
 """
 
 from __future__ import annotations
@@ -40,9 +42,9 @@ from pymavlink import mavutil  # noqa: E402
 
 from sim.uuv.depth import SURFACE_VZ, Depth  # noqa: E402
 from sim.uuv.ekf import EkfReadiness  # noqa: E402
+from sim.uuv.gcs import SENSORS, heartbeat_send  # noqa: E402
 from sim.uuv.guided import Target, from_global_int, from_local_ned  # noqa: E402
-from sim.uuv.interface import battery_fraction, energy_consumed_hj  # noqa: E402
-from sim.uuv.streams import StreamSchedule, message_name  # noqa: E402
+from sim.uuv.interface import energy_consumed_hj  # noqa: E402
 
 if TYPE_CHECKING:
     from sim.uuv.frontseat import FrontSeat
@@ -56,14 +58,8 @@ SUBSTEP_S = 0.1
 #: Longest wait for input (wall seconds) when nothing is due: commands are answered within it anyway.
 IDLE_S = 0.05
 GUIDED, SURFACE, MANUAL, ACRO = 4, 9, 19, 1
-#: The modes ArduSub has (ArduSub/mode.h); any other gets MAV_RESULT_FAILED.
-MODES = frozenset(mavutil.mode_mapping_sub)
-#: ArduSub's MAV_GCS_SYSID: the ground station whose heartbeat the GCS failsafe watches.
-GCS_SYSID = 255
-#: SYS_STATUS sensor bits as ArduSub SITL reports them (present, enabled, healthy).
-SENSORS = (322043151, 302095631, 319921423)
-#: AUTOPILOT_VERSION capabilities and version of the firmware measured (4.7.0-dev).
-CAPABILITIES, SW_VERSION = 0xF9E7, 0x04070000
+#: Volts the battery's mAh are counted at (a 4-cell pack).
+PACK_V = 14.8
 
 
 @dataclass(frozen=True)
@@ -85,21 +81,18 @@ class Truth:
 class BareAutopilot:
     """A FrontSeat's vehicle run as ArduSub runs it (see module docstring)."""
 
-    def __init__(self, fs: FrontSeat, ekf_ready_s: float, gcs_failsafe_s: float | None):
+    def __init__(self, fs: FrontSeat, ekf_ready_s: float):
         self.fs, self.conn, self.world = fs, fs.conn, fs.world
         self.spec = fs.mission.vehicle
         self.ekf = EkfReadiness(float(ekf_ready_s))
-        self.gcs_failsafe_s = gcs_failsafe_s
         s = self.world.state
         self.x0, self.y0 = float(s.x[0]), float(s.y[0])  # the EKF origin and home
         self.t = 0.0
         self.depth = Depth()
         self.target = Target.hold(0.0, 0.0)
-        self.streams = StreamSchedule()
+        self.streams = fs.streams
         self.vn = self.ve = 0.0  # ground velocity over the last sub-step
         self._origin_sent = False
-        self._gcs_heard: float | None = None
-        self._texts: list[tuple[int, str]] = []  # STATUSTEXT to send after the COMMAND_ACK, as ArduSub orders them
         self._sent_at: dict[int, float] = {}  # GLOBAL_POSITION_INT time_boot_ms -> wall time sent
         self._boot = time.monotonic()
 
@@ -131,7 +124,7 @@ class BareAutopilot:
             wait = (min(self.t + SUBSTEP_S, self.streams.next_time()) - self.now()) / self.fs.speedup
             msg = self.conn.recv_match(blocking=True, timeout=min(max(wait, 0.0005), IDLE_S))
             while msg is not None:  # answer everything that is waiting
-                self.handle(msg)
+                self.fs._handle(msg)
                 msg = self.conn.recv_match(blocking=False)
 
     def _housekeeping(self) -> None:
@@ -140,12 +133,12 @@ class BareAutopilot:
             self._status(mav.MAV_SEVERITY_INFO, "EKF3 IMU0 is using GPS")
             self._send("GPS_GLOBAL_ORIGIN")
             self._send("HOME_POSITION")
-        heard = self._gcs_heard
-        if self.gcs_failsafe_s is not None and heard is not None and self.fs.armed:
-            if self.t - heard > self.gcs_failsafe_s:
-                self._status(mav.MAV_SEVERITY_CRITICAL, f"MYGCS: {GCS_SYSID}, heartbeat lost")
-                self._arm(False)
-                self.fs.stats.failsafes += 1
+        heard, timeout = self.fs.link.gcs_heard, self.fs.params.gcs_failsafe_s()
+        if timeout is not None and heard is not None and self.fs.armed and self.t - heard > timeout:
+            self._status(mav.MAV_SEVERITY_CRITICAL, f"MYGCS: {int(self.fs.params['MAV_GCS_SYSID'])}, heartbeat lost")
+            self._status(mav.MAV_SEVERITY_INFO, "Disarming motors")
+            self.set_armed(False)
+            self.fs.stats.failsafes += 1
 
     def _here(self) -> tuple[float, float]:
         s = self.world.state
@@ -159,7 +152,7 @@ class BareAutopilot:
                 self.target = self.target.timed_out(self.depth.depth)
             self.target = self.target.advanced(dt)
             north, east = self._here()
-            heading, speed, want = self.target.command(north, east, heading, self.spec.cruise_speed)
+            heading, speed, want = self.target.command(north, east, heading, self.fs.params.wpnav_speed_ms())
             if want is None:
                 assert self.target.depth is not None
                 want = self.depth.toward(self.target.depth, dt)
@@ -190,13 +183,18 @@ class BareAutopilot:
         """(energy used in hJ, percent left, volts in mV) of the vehicle's own pack, full at boot.
 
         The scenario's starting charge is virtual (the range's fuel gauge counts it); the
-        pack in a real vehicle is whatever the range charged, here a full one.
+        pack in a real vehicle is whatever the range charged, here a full one of
+        BATT_CAPACITY mAh.
         """
         w = self.world
-        hj = energy_consumed_hj(w.start_wh, w.state.energy_wh)
-        cap = np.array([self.spec.battery_wh])
-        frac = float(battery_fraction(cap, hj, self.spec.battery_wh)[0])
-        return int(hj[0]), int(np.clip(round(frac * 100), 0, 100)), int(14800 * (0.85 + 0.15 * min(max(frac, 0), 1)))
+        hj = float(energy_consumed_hj(w.start_wh, w.state.energy_wh)[0])
+        capacity = self.fs.params["BATT_CAPACITY"]
+        frac = 1.0 - self.consumed_mah(hj) / capacity if capacity > 0 else 0.0
+        return int(hj), int(np.clip(round(frac * 100), 0, 100)), int(14800 * (0.85 + 0.15 * min(max(frac, 0), 1)))
+
+    @staticmethod
+    def consumed_mah(hj: float) -> float:
+        return hj * 100 / 3600 / PACK_V * 1000
 
     def _send(self, name: str) -> None:
         m, ms = self.conn.mav, int(self.t * 1000)
@@ -207,15 +205,7 @@ class BareAutopilot:
         depth, vz = self.depth.depth, self.depth.vz
         ready, gps = self.ekf.ready(self.t), self.ekf.gps_found(self.t)
         if name == "HEARTBEAT":
-            fs = self.fs
-            base = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | mav.MAV_MODE_FLAG_MANUAL_INPUT_ENABLED
-            base |= mav.MAV_MODE_FLAG_STABILIZE_ENABLED
-            if fs.mode in (3, 4, 7, 16):
-                base |= mav.MAV_MODE_FLAG_GUIDED_ENABLED
-            if fs.armed:
-                base |= mav.MAV_MODE_FLAG_SAFETY_ARMED
-            state = mav.MAV_STATE_ACTIVE if fs.armed else mav.MAV_STATE_STANDBY
-            m.heartbeat_send(mav.MAV_TYPE_SUBMARINE, mav.MAV_AUTOPILOT_ARDUPILOTMEGA, base, fs.mode, state)
+            heartbeat_send(self.conn, self.fs.mode, self.fs.armed)
         elif name == "ATTITUDE":
             m.attitude_send(ms, 0.0, 0.0, yaw, 0.0, 0.0, float(s.yaw_rate[0]))
         elif name == "VFR_HUD":
@@ -249,10 +239,11 @@ class BareAutopilot:
             )  # fmt: skip
         elif name == "SYS_STATUS":
             _, percent, mv = self._battery()
-            m.sys_status_send(*SENSORS, 0, mv, -1, percent, 0, 0, 0, 0, 0, 0)
+            gps_bit = 0 if gps else mav.MAV_SYS_STATUS_SENSOR_GPS  # ArduSub reports the GPS once it finds one
+            m.sys_status_send(*(bits & ~gps_bit for bits in SENSORS), 0, mv, -1, percent, 0, 0, 0, 0, 0, 0)
         elif name == "BATTERY_STATUS":
             hj, percent, mv = self._battery()
-            mah = int(hj * 100 / 3600 / 14.8 * 1000)
+            mah = int(self.consumed_mah(hj))
             m.battery_status_send(
                 0, mav.MAV_BATTERY_FUNCTION_ALL, mav.MAV_BATTERY_TYPE_LION, 32767, [mv] + [65535] * 9, -1, mah, hj,
                 percent,
@@ -271,31 +262,17 @@ class BareAutopilot:
                 m.gps_global_origin_send(lat, lon, 0, ms * 1000)
             else:
                 m.home_position_send(lat, lon, 0, 0.0, 0.0, 0.0, [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, ms * 1000)
-        elif name == "AUTOPILOT_VERSION":
-            m.autopilot_version_send(CAPABILITIES, SW_VERSION, 0, 0, 0, [0] * 8, [0] * 8, [0] * 8, 0, 0, 0)
 
-    # -- MAVLink in --------------------------------------------------------------------
-    def handle(self, msg) -> None:
-        kind = msg.get_type()
-        if kind == "BAD_DATA" or self.fs.missions.handle(msg):
-            return
-        if kind == "HEARTBEAT":
-            if msg.get_srcSystem() == GCS_SYSID:
-                self._gcs_heard = self.t
-        elif kind == "COMMAND_LONG":
-            self._command(msg)
-        elif kind == "SET_MODE":
-            self.conn.mav.command_ack_send(mav.MAVLINK_MSG_ID_SET_MODE, self._set_mode(int(msg.custom_mode)))
-            self._flush_texts()
-        elif kind == "SET_POSITION_TARGET_LOCAL_NED":
+    # -- MAVLink in (ground-station requests are sim.uuv.gcs's) ------------------------
+    def setpoint(self, msg) -> None:
+        """SET_POSITION_TARGET_LOCAL_NED / _GLOBAL_INT, read as ArduSub reads them (sim.uuv.guided)."""
+        if msg.get_type() == "SET_POSITION_TARGET_LOCAL_NED":
             self._round_trip(int(msg.time_boot_ms))
             north, east = self._here()
             heading = float(self.world.state.heading[0])
             self._accept(from_local_ned(msg, north, east, self.depth.depth, heading, self.t))
-        elif kind == "SET_POSITION_TARGET_GLOBAL_INT":
+        else:
             self._accept(from_global_int(msg, self._north_east, self.t))
-        elif kind == "REQUEST_DATA_STREAM":
-            self.streams.request_data_stream(int(msg.req_stream_id), int(msg.req_message_rate), msg.start_stop, self.t)
 
     def _round_trip(self, stamp: int) -> None:
         """Time from the position report stamped ``stamp`` leaving to the first set-point that answers it."""
@@ -305,11 +282,6 @@ class BareAutopilot:
         if len(self._sent_at) > 4096:  # keep the last minutes' reports only
             for old in list(self._sent_at)[:2048]:
                 del self._sent_at[old]
-
-    def _flush_texts(self) -> None:
-        for severity, text in self._texts:
-            self._status(severity, text)
-        self._texts.clear()
 
     def _north_east(self, lat: float, lon: float) -> tuple[float, float]:
         x, y = self.fs.frame.to_local(lat, lon)
@@ -322,61 +294,29 @@ class BareAutopilot:
         self.target = target
         self.fs.stats.setpoints += 1
 
-    def _arm(self, on: bool) -> None:
-        if on != self.fs.armed:
-            self._status(mav.MAV_SEVERITY_INFO, "Arming motors" if on else "Disarming motors")
-        self.fs.armed = on
-        self.target = Target.hold(self.depth.depth, self.t)
+    # -- what sim.uuv.gcs asks of the vehicle ----------------------------------------------
+    def vehicle_time(self) -> float:
+        return self.t
 
-    def _set_mode(self, mode: int) -> int:
-        if mode not in MODES:
-            self._texts.append((mav.MAV_SEVERITY_WARNING, f"No such mode {mode}"))
-            return mav.MAV_RESULT_FAILED
-        if not self.ekf.mode_allowed(mode, self.t):
-            name = mavutil.mode_mapping_sub[mode]
-            self._texts.append((mav.MAV_SEVERITY_WARNING, f"Mode change failed: {name} requires position"))
-            return mav.MAV_RESULT_FAILED
+    def mode_refusal(self, mode: int) -> str | None:
+        if self.ekf.mode_allowed(mode, self.t):
+            return None
+        return f"Mode change failed: {mavutil.mode_mapping_sub[mode]} requires position"
+
+    def enter_mode(self, mode: int) -> None:
         if mode != self.fs.mode:
             self.target = Target.hold(self.depth.depth, self.t)  # GUIDED starts by holding where it is
         self.fs.mode = mode
-        return mav.MAV_RESULT_ACCEPTED
 
-    def _command(self, msg) -> None:
-        cmd, result = int(msg.command), mav.MAV_RESULT_ACCEPTED
-        after = None
-        if cmd == mav.MAV_CMD_COMPONENT_ARM_DISARM:
-            self._arm(msg.param1 > 0.5)  # ARMING_CHECK 448: ArduSub arms in any mode, before the EKF is ready
-        elif cmd == mav.MAV_CMD_DO_SET_MODE:
-            result = self._set_mode(int(msg.param2))
-        elif cmd == mav.MAV_CMD_SET_MESSAGE_INTERVAL:
-            msg_id = int(msg.param1)
-            result = self.streams.set_interval(msg_id, msg.param2, self.t)
-            if result != mav.MAV_RESULT_ACCEPTED:
-                self._texts.append((mav.MAV_SEVERITY_INFO, f"No ap_message for mavlink id ({msg_id})"))
-        elif cmd == mav.MAV_CMD_GET_MESSAGE_INTERVAL:
-            msg_id = int(msg.param1)
-            us = self.streams.interval_us(msg_id)
-            if us is None:
-                result = mav.MAV_RESULT_FAILED
-            else:
-                after = lambda: self.conn.mav.message_interval_send(msg_id, us)  # noqa: E731
-        elif cmd == mav.MAV_CMD_REQUEST_MESSAGE:
-            name = message_name(int(msg.param1)) or _ON_REQUEST.get(int(msg.param1))
-            if name is None or (name in ("HOME_POSITION", "GPS_GLOBAL_ORIGIN") and not self.ekf.ready(self.t)):
-                result = mav.MAV_RESULT_FAILED
-            else:
-                after = lambda: self._send(name)  # noqa: E731
-        else:
-            result = mav.MAV_RESULT_UNSUPPORTED
-        self.conn.mav.command_ack_send(cmd, result)
-        self._flush_texts()
-        if after is not None:
-            after()
+    def arm_refusal(self, on: bool) -> str | None:
+        return None  # ARMING_CHECK 448: ArduSub arms in any mode, before the EKF is ready
 
+    def set_armed(self, on: bool) -> None:
+        self.fs.armed = on
+        self.target = Target.hold(self.depth.depth, self.t)
 
-#: Messages sent only on request (MAV_CMD_REQUEST_MESSAGE), beside the streamed ones.
-_ON_REQUEST = {
-    int(mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION): "AUTOPILOT_VERSION",
-    int(mav.MAVLINK_MSG_ID_HOME_POSITION): "HOME_POSITION",
-    int(mav.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN): "GPS_GLOBAL_ORIGIN",
-}
+    def send_on_request(self, name: str) -> bool:
+        if name in ("HOME_POSITION", "GPS_GLOBAL_ORIGIN") and not self.ekf.ready(self.t):
+            return False
+        self._send(name)
+        return True

@@ -5,9 +5,10 @@ endpoint, so the back-seat autonomy, a ground station or the bridge talk to it e
 as to a vehicle: HEARTBEAT (MAV_TYPE_SUBMARINE), SYS_STATUS, BATTERY_STATUS,
 LOCAL_POSITION_NED, GLOBAL_POSITION_INT, ATTITUDE, GPS_RAW_INT (a fix only on the
 surface), OBSTACLE_DISTANCE (a 360-beam sonar scan, five messages) and OBSTACLE_DISTANCE_3D
-(one closest point per contact), SYSTEM_TIME; arming and mode changes (COMMAND_LONG, SET_MODE); GUIDED
-velocity+yaw set-points (SET_POSITION_TARGET_LOCAL_NED / _GLOBAL_INT, type mask 2503);
-and the mission protocol with MISSION_CURRENT (:mod:`sim.uuv.mission_server`).
+(one closest point per contact), SYSTEM_TIME; GUIDED velocity+yaw set-points
+(SET_POSITION_TARGET_LOCAL_NED / _GLOBAL_INT, type mask 2503); and the mission protocol with
+MISSION_CURRENT (:mod:`sim.uuv.mission_server`).  Both flavours answer every ground-station request (commands, modes,
+parameters, stream rates, FTP) the same, ArduSub way (:mod:`sim.uuv.gcs`, :mod:`sim.uuv.params`).
 
 Clock: with ``lockstep`` the simulated time advances one step when the set-point for the
 current step arrives (its ``time_boot_ms`` names the step), so a one-hour mission flies as
@@ -36,22 +37,23 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
 from rapt.errors import InputError  # noqa: E402
-from sim.uuv.bare import BareAutopilot  # noqa: E402
+from sim.uuv.bare import PACK_V, BareAutopilot  # noqa: E402
+from sim.uuv.gcs import SENSORS, GroundStationLink, heartbeat_send  # noqa: E402
 from sim.uuv.geo import LocalFrame  # noqa: E402
 from sim.uuv.interface import DEPTH_M, decode_command  # noqa: E402
 from sim.uuv.mission import Mission  # noqa: E402
 from sim.uuv.mission_server import MissionServer  # noqa: E402
+from sim.uuv.params import ParameterTable  # noqa: E402
 from sim.uuv.scenario import make_scenarios  # noqa: E402
 from sim.uuv.scoring import Scorer  # noqa: E402
 from sim.uuv.sonar import BEAMS_PER_MESSAGE, SCAN_BEAMS  # noqa: E402
+from sim.uuv.streams import StreamSchedule  # noqa: E402
 from sim.uuv.world import Telemetry, World, scenario_generators  # noqa: E402
 
 __all__ = ["FrontSeat", "GUIDED", "MANUAL", "SURFACE", "VELOCITY_YAW_MASK"]
 
 mav = mavutil.mavlink
 GUIDED, MANUAL, SURFACE = 4, 19, 9
-#: The modes this front-seat accepts: the ArduSub modes pymavlink names (ArduSub/mode.h).
-MODES = frozenset(mavutil.mode_mapping_sub)
 #: Velocity and yaw used; position, acceleration and yaw rate ignored.
 VELOCITY_YAW_MASK = 2503
 #: ArduSub zeroes a velocity target not refreshed within this many seconds.
@@ -132,14 +134,28 @@ class FrontSeat:
         self._stop = threading.Event()
         self._boot = time.time()
         self.tel: Telemetry = self.world.telemetry(0.0)
+        self.params = ParameterTable(self._mission_parameters(sysid, gcs_failsafe_s))
+        self.streams = StreamSchedule(params=self.params)
         self.bare: BareAutopilot | None = None
         if bare:  # a real vehicle knows no referee
-            self.bare = BareAutopilot(self, ekf_ready_s, gcs_failsafe_s)
+            self.bare = BareAutopilot(self, ekf_ready_s)
         else:
             self._referee()  # the first report counts, as in a batch
+        self.link = GroundStationLink(self, self.bare if self.bare is not None else self, self.params, self.streams)
         home = self.frame.to_latlon(float(self.world.state.x[0]), float(self.world.state.y[0]))
         clock = self.bare.now if self.bare is not None else time.monotonic
         self.missions = MissionServer(self.conn, (*home, 0.0), self._status, clock)
+
+    def _mission_parameters(self, sysid: int, gcs_failsafe_s: float | None) -> dict[str, float]:
+        """ArduSub's parameters this vehicle sets from its mission (sim.uuv.params)."""
+        spec = self.mission.vehicle
+        return {
+            "MAV_SYSID": sysid,
+            "FS_GCS_ENABLE": 0 if gcs_failsafe_s is None else 2,
+            "FS_GCS_TIMEOUT": 5.0 if gcs_failsafe_s is None else gcs_failsafe_s,
+            "WPNAV_SPEED": spec.cruise_speed * 100,
+            "BATT_CAPACITY": round(spec.battery_wh / PACK_V * 1000),
+        }
 
     # -- public ----------------------------------------------------------------------
     @property
@@ -243,9 +259,7 @@ class FrontSeat:
 
     # -- MAVLink out -----------------------------------------------------------------
     def _heartbeat(self) -> None:
-        base = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (mav.MAV_MODE_FLAG_SAFETY_ARMED if self.armed else 0)
-        state = mav.MAV_STATE_ACTIVE if self.armed else mav.MAV_STATE_STANDBY
-        self.conn.mav.heartbeat_send(mav.MAV_TYPE_SUBMARINE, mav.MAV_AUTOPILOT_ARDUPILOTMEGA, base, self.mode, state)
+        heartbeat_send(self.conn, self.mode, self.armed)
 
     def _status(self, severity: int, text: str) -> None:
         self.stats.log.append(text)
@@ -286,7 +300,7 @@ class FrontSeat:
             int(tel.energy_hj[0]),
             percent,
         )
-        m.sys_status_send(0, 0, 0, 0, volts[0], -1, percent, 0, 0, 0, 0, 0, 0)
+        m.sys_status_send(*SENSORS, 0, volts[0], -1, percent, 0, 0, 0, 0, 0, 0)
         fix = 3 if tel.surfaced[0] else 0
         m.gps_raw_int_send(
             ms * 1000,
@@ -332,31 +346,41 @@ class FrontSeat:
     # -- MAVLink in ------------------------------------------------------------------
     def _handle(self, msg) -> None:
         kind = msg.get_type()
-        if kind == "BAD_DATA" or self.missions.handle(msg):
-            return
-        if kind == "COMMAND_LONG":
-            self._command(msg)
-        elif kind == "SET_MODE":
-            self.mode = int(msg.custom_mode)
-        elif kind in ("SET_POSITION_TARGET_LOCAL_NED", "SET_POSITION_TARGET_GLOBAL_INT"):
-            self._setpoint(msg, kind)
+        if kind == "BAD_DATA" or self.missions.handle(msg) or self.link.handle(msg):
+            return  # the mission protocol (sim.uuv.mission_server), then the rest of a ground station's requests
+        if kind in ("SET_POSITION_TARGET_LOCAL_NED", "SET_POSITION_TARGET_GLOBAL_INT"):
+            if self.bare is not None:
+                self.bare.setpoint(msg)
+            else:
+                self._setpoint(msg, kind)
 
-    def _command(self, msg) -> None:
-        cmd, result = int(msg.command), mav.MAV_RESULT_ACCEPTED
-        if cmd == mav.MAV_CMD_COMPONENT_ARM_DISARM:
-            if msg.param1 > 0.5 and self.ended:
-                result = mav.MAV_RESULT_DENIED  # the run is over
+    # -- what sim.uuv.gcs asks of the lock-step vehicle ---------------------------------
+    def vehicle_time(self) -> float:
+        return self.t
+
+    def mode_refusal(self, mode: int) -> str | None:
+        return None  # its position is known from the start
+
+    def enter_mode(self, mode: int) -> None:
+        self.mode = mode
+
+    def arm_refusal(self, on: bool) -> str | None:
+        return "Arm: the run has ended" if on and self.ended else None
+
+    def set_armed(self, on: bool) -> None:
+        self.armed = on
+
+    def send_on_request(self, name: str) -> bool:
+        if name in ("HOME_POSITION", "GPS_GLOBAL_ORIGIN"):
+            lat, lon = self.frame.to_latlon(float(self.world.state.x[0]), float(self.world.state.y[0]))
+            lat7, lon7, usec = int(round(lat * 1e7)), int(round(lon * 1e7)), self._tick_ms() * 1000
+            if name == "GPS_GLOBAL_ORIGIN":
+                self.conn.mav.gps_global_origin_send(lat7, lon7, 0, usec)
             else:
-                self.armed = msg.param1 > 0.5
-        elif cmd == mav.MAV_CMD_DO_SET_MODE:
-            mode = int(msg.param2)
-            if mode in MODES:
-                self.mode = mode
-            else:
-                result = mav.MAV_RESULT_DENIED
+                self.conn.mav.home_position_send(lat7, lon7, 0, 0.0, 0.0, 0.0, [1.0, 0, 0, 0], 0.0, 0.0, 0.0, usec)
         else:
-            result = mav.MAV_RESULT_UNSUPPORTED
-        self.conn.mav.command_ack_send(cmd, result)
+            self._send_telemetry()  # the step's telemetry carries every streamed message
+        return True
 
     def _setpoint(self, msg, kind: str) -> None:
         frames = (

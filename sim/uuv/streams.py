@@ -13,6 +13,10 @@ GPS_RAW_INT, MISSION_CURRENT 2 Hz (EXTENDED_STATUS); HEARTBEAT 1 Hz in no group.
 gets MAV_RESULT_DENIED.  REQUEST_DATA_STREAM is never acknowledged; ``start_stop`` 0 stops
 the group (stream 0 = all groups, HEARTBEAT keeps going) and a new group rate replaces
 the per-message intervals set in that group before.
+
+Group rates live in the link's MAV1_* parameters (:mod:`sim.uuv.params`) when a table is
+given: REQUEST_DATA_STREAM writes them and a PARAM_SET of one changes the rate, as in
+ArduPilot.
 """
 
 from __future__ import annotations
@@ -21,6 +25,8 @@ import os
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
+
+from sim.uuv.params import STREAM_PARAMETERS, ParameterTable  # noqa: E402
 
 __all__ = ["StreamSchedule", "GROUPS", "DEFAULT_HZ", "message_id", "message_name"]
 
@@ -66,7 +72,8 @@ _NAMES = {message_id(name): name for name in (*_GROUP_OF, *UNGROUPED_HZ)}
 class StreamSchedule:
     """When each streamed message is next due, in vehicle seconds."""
 
-    def __init__(self, now: float = 0.0):
+    def __init__(self, now: float = 0.0, params: ParameterTable | None = None):
+        self.params = params
         self.group_hz = dict(DEFAULT_HZ)
         self.override: dict[str, float] = {}  # message -> Hz (0 = stopped), from SET_MESSAGE_INTERVAL
         self.next_due: dict[str, float] = {name: now for name in _NAMES.values()}
@@ -76,7 +83,17 @@ class StreamSchedule:
             return self.override[name]
         if name in UNGROUPED_HZ:
             return UNGROUPED_HZ[name]
-        return self.group_hz[_GROUP_OF[name]]
+        return self.group_rate(_GROUP_OF[name])
+
+    def group_rate(self, group: int) -> float:
+        if self.params is not None and group in STREAM_PARAMETERS:
+            return max(self.params.stream_hz(group), 0.0)
+        return self.group_hz[group]
+
+    def retime_all(self, now: float) -> None:
+        """After a group rate changed: every message is next due within its new interval."""
+        for name in self.next_due:
+            self._retime(name, now)
 
     def interval_us(self, msg_id: int) -> int | None:
         """MESSAGE_INTERVAL's answer: microseconds, -1 when stopped, None for an id not streamed."""
@@ -137,6 +154,8 @@ class StreamSchedule:
             if group not in DEFAULT_HZ:
                 continue
             self.group_hz[group] = hz
+            if self.params is not None and group in STREAM_PARAMETERS:
+                self.params.set(STREAM_PARAMETERS[group], hz)
             for name in GROUPS.get(group, ()):
                 self.override.pop(name, None)
                 self._retime(name, now)
