@@ -368,5 +368,34 @@ def _decode(msg, mission_type: int) -> tuple[Item | None, int]:
             return None, mav.MAV_MISSION_INVALID_PARAM6_Y
         if frame not in LOCATION_FRAMES:
             return None, mav.MAV_MISSION_UNSUPPORTED_FRAME
-    item = Item(frame, command, msg.param1, msg.param2, msg.param3, msg.param4, x, y, float(msg.z), msg)
+    params = _as_stored(command, (msg.param1, msg.param2, msg.param3, msg.param4))
+    item = Item(frame, command, *params, x, y, float(msg.z), msg)
     return item, mav.MAV_MISSION_ACCEPTED
+
+
+def _as_stored(command: int, p: tuple[float, float, float, float]) -> tuple[float, float, float, float]:
+    """The parameters a download gives back: AP_Mission keeps only what it uses, in its own types.
+
+    ArduSub SITL returns a NAV_WAYPOINT uploaded with an acceptance radius (param2) with
+    param2 0, and a LOITER_TIME with param3 1 (clockwise); other commands keep their values here.
+    """
+
+    def u16(v: float) -> float:
+        return float(min(max(int(v), 0), 65535))
+
+    def sign(v: float) -> float:
+        return -1.0 if v < 0 else 1.0
+
+    if command in (16, 82):  # WAYPOINT, SPLINE_WAYPOINT: the delay at the point
+        return u16(p[0]), 0.0, 0.0, 0.0
+    if command == 17:  # LOITER_UNLIM: radius, its sign the direction
+        return 0.0, 0.0, sign(p[2]) * u16(abs(p[2])), 0.0
+    if command == 18:  # LOITER_TURNS: turns and radius in one byte each
+        return float(int(p[0]) & 0xFF), 0.0, sign(p[2]) * float(int(abs(p[2])) & 0xFF), float(p[3] > 0)
+    if command == 19:  # LOITER_TIME: seconds, direction, cross-track flag
+        return u16(p[0]), 0.0, sign(p[2]), float(p[3] > 0)
+    if command == 20:  # RETURN_TO_LAUNCH
+        return 0.0, 0.0, 0.0, 0.0
+    if command in (21, 22):  # LAND (abort altitude, yaw direction), TAKEOFF (pitch)
+        return u16(p[0]), 0.0, 0.0, (sign(p[3]) if command == 21 else 0.0)
+    return p

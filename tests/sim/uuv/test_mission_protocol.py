@@ -110,13 +110,21 @@ def test_upload_download_and_home_as_seq_0():
 
         # MISSION_ITEM uploads work too, with a one-time warning
         b.drain()
-        b.gcs.mav.mission_count_send(1, 1, 2, MISSION)
+        b.gcs.mav.mission_count_send(1, 1, 3, MISSION)
         home = b.fs.frame.to_latlon(*LAUNCH)
-        for seq in range(2):
+        for seq, command in enumerate((WAYPOINT, WAYPOINT, mav.MAV_CMD_NAV_LOITER_TIME)):
             expect(b, "MISSION_REQUEST", seq=seq)
-            b.gcs.mav.mission_item_send(1, 1, seq, 3, WAYPOINT, 0, 1, 0, 0, 0, 0, home[0] + 1e-4 * seq, home[1], -1.0)
+            b.gcs.mav.mission_item_send(
+                1, 1, seq, 3, command, 0, 1, 60.0, 15.0, 0, 0, home[0] + 1e-4 * seq, home[1], -1.0
+            )
         expect(b, "MISSION_ACK", type=mav.MAV_MISSION_ACCEPTED)
         assert b.fs.missions.mission[1].x == pytest.approx(lat + 1000, abs=50)  # float32 degrees
+
+        # a download gives back what AP_Mission keeps: no acceptance radius, LOITER_TIME clockwise
+        for seq, params in ((1, (60.0, 0.0, 0.0, 0.0)), (2, (60.0, 0.0, 1.0, 0.0))):
+            b.gcs.mav.mission_request_int_send(1, 1, seq, MISSION)
+            got = expect(b, "MISSION_ITEM_INT", seq=seq)
+            assert (got.param1, got.param2, got.param3, got.param4) == params
 
 
 def test_bad_uploads_are_answered_as_ardusub_answers_them():
