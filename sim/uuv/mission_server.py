@@ -13,6 +13,9 @@ runs them (probed on loopback, vehicle time):
   is cut to the new count at MISSION_COUNT, so an upload aborted half-way keeps the old
   items behind the new ones.  MISSION_ITEM (float lat/lon) is accepted with a one-time
   warning; a count of 0 empties the list (ACCEPTED); a count above 655 gets NO_SPACE.
+  What a download gives back is what AP_Mission stores: a location's frame as GLOBAL,
+  GLOBAL_RELATIVE_ALT or GLOBAL_TERRAIN_ALT (never the _INT forms), and only the parameters
+  a command uses (a NAV_WAYPOINT's acceptance radius comes back 0).
 - Bad items: a wrong ``seq`` gets INVALID_SEQUENCE and the upload goes on; an unknown
   command gets UNSUPPORTED, an unknown frame UNSUPPORTED_FRAME, a latitude or longitude out
   of range INVALID_PARAM5_X / INVALID_PARAM6_Y, and each of those ends the upload.  An item
@@ -68,6 +71,8 @@ RALLY_COMMANDS = frozenset({5100})
 LOCATION_COMMANDS = frozenset({16, 17, 18, 19, 20, 21, 22, 30, 31, 82, 83, 94, 179, 192, 195, 201})
 #: Frames AP_Mission takes for a location: GLOBAL, MISSION, RELATIVE_ALT, their _INT forms, terrain.
 LOCATION_FRAMES = frozenset({0, 2, 3, 5, 6, 10, 11})
+#: The frame a download gives back for each (absolute, relative or terrain altitude, never _INT).
+_STORED_FRAME = {0: 0, 2: 0, 5: 0, 3: 3, 6: 3, 10: 10, 11: 10}
 
 
 @dataclass(frozen=True)
@@ -369,6 +374,8 @@ def _decode(msg, mission_type: int) -> tuple[Item | None, int]:
         if frame not in LOCATION_FRAMES:
             return None, mav.MAV_MISSION_UNSUPPORTED_FRAME
     params = _as_stored(command, (msg.param1, msg.param2, msg.param3, msg.param4))
+    if mission_type == MISSION and command in LOCATION_COMMANDS:
+        frame = _STORED_FRAME[frame]  # AP_Mission keeps "relative" and "terrain" flags, not the frame
     item = Item(frame, command, *params, x, y, float(msg.z), msg)
     return item, mav.MAV_MISSION_ACCEPTED
 

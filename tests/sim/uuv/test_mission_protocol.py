@@ -91,9 +91,10 @@ def test_upload_download_and_home_as_seq_0():
             got.append(expect(b, "MISSION_ITEM_INT", seq=seq, autocontinue=1, current=0))
         b.gcs.mav.mission_ack_send(1, 1, mav.MAV_MISSION_ACCEPTED, MISSION)
         assert (got[0].x, got[0].y, got[0].frame) == (lat, lon, mav.MAV_FRAME_GLOBAL)  # home, not what was sent
+        relative = mav.MAV_FRAME_GLOBAL_RELATIVE_ALT  # uploaded as ..._INT, read back as ArduSub stores it
         assert [(m.x, m.y, m.z, m.frame, m.command) for m in got[1:]] == [
-            (lat + 500, lon, -2.0, REL_ALT_INT, WAYPOINT),
-            (lat + 1000, lon, -2.0, REL_ALT_INT, WAYPOINT),
+            (lat + 500, lon, -2.0, relative, WAYPOINT),
+            (lat + 1000, lon, -2.0, relative, WAYPOINT),
         ]
         assert len(b.fs.mission_items) == 3
 
