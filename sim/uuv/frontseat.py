@@ -137,14 +137,13 @@ class FrontSeat:
         self.params = ParameterTable(self._mission_parameters(sysid, gcs_failsafe_s))
         self.streams = StreamSchedule(params=self.params)
         self.bare: BareAutopilot | None = None
+        home = self.frame.to_latlon(float(self.world.state.x[0]), float(self.world.state.y[0]))
+        self.missions = MissionServer(self.conn, (*home, 0.0), self._status, self._mission_clock)
         if bare:  # a real vehicle knows no referee
             self.bare = BareAutopilot(self, ekf_ready_s)
         else:
             self._referee()  # the first report counts, as in a batch
         self.link = GroundStationLink(self, self.bare if self.bare is not None else self, self.params, self.streams)
-        home = self.frame.to_latlon(float(self.world.state.x[0]), float(self.world.state.y[0]))
-        clock = self.bare.now if self.bare is not None else time.monotonic
-        self.missions = MissionServer(self.conn, (*home, 0.0), self._status, clock)
 
     def _mission_parameters(self, sysid: int, gcs_failsafe_s: float | None) -> dict[str, float]:
         """ArduSub's parameters this vehicle sets from its mission (sim.uuv.params)."""
@@ -161,6 +160,10 @@ class FrontSeat:
     @property
     def t(self) -> float:
         return self.k * self.mission.dt
+
+    def _mission_clock(self) -> float:
+        """Vehicle seconds for the mission protocol's timeouts (wall seconds in lock-step)."""
+        return self.bare.now() if self.bare is not None else time.monotonic()
 
     @property
     def mission_items(self) -> list:

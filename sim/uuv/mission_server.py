@@ -32,8 +32,10 @@ runs them (probed on loopback, vehicle time):
   always 0 (ArduSub fills in no mode).  MISSION_SET_CURRENT to an item that exists changes
   ``seq`` with no acknowledgement (none at all otherwise); MAV_CMD_DO_SET_MISSION_CURRENT
   is ACCEPTED or DENIED.
-- A vehicle flying AUTO reports each waypoint it reaches with "Mission: N WP",
-  MISSION_ITEM_REACHED and "Reached command #N" (:meth:`MissionServer.reached`).
+- A vehicle flying AUTO (:mod:`sim.uuv.auto`) announces each item as it starts it ("Mission:
+  1 WP", "Mission: 2 LoitTime") and reports it done with MISSION_ITEM_REACHED and "Reached
+  command #N" (nothing after a loiter); MISSION_CURRENT goes ACTIVE (3), then COMPLETE (5)
+  after the last item, its ``seq`` staying there.
 """
 
 from __future__ import annotations
@@ -148,17 +150,25 @@ class MissionServer:
             state = mav.MISSION_STATE_NOT_STARTED
         self.conn.mav.mission_current_send(self.current, total, state, 0)
 
-    def reached(self, seq: int) -> None:
-        """The vehicle reached item ``seq`` in AUTO: report it and make the next one current."""
-        self.status(mav.MAV_SEVERITY_INFO, f"Mission: {seq} WP")
-        self.conn.mav.mission_item_reached_send(seq)
-        self.status(mav.MAV_SEVERITY_INFO, f"Reached command #{seq}")
-        last = len(self.lists[MISSION]) - 1
-        if seq >= last:
-            self.state = mav.MISSION_STATE_COMPLETE
-        else:
-            self.current, self.state = seq + 1, mav.MISSION_STATE_ACTIVE
+    def start_item(self, seq: int) -> None:
+        """AUTO starts flying item ``seq``: "Mission: N <type>" and a MISSION_CURRENT at once."""
+        command = self.mission[seq].command
+        self.status(mav.MAV_SEVERITY_INFO, f"Mission: {seq} {_COMMAND_NAMES.get(command, str(command))}")
+        self.current, self.state = seq, mav.MISSION_STATE_ACTIVE
         self.send_current()
+
+    def reached(self, seq: int, next_seq: int | None = None) -> None:
+        """AUTO finished item ``seq``: MISSION_ITEM_REACHED ("Reached command #N" after a waypoint),
+        then item ``next_seq`` (default ``seq + 1``) starts, or the mission is COMPLETE."""
+        self.conn.mav.mission_item_reached_send(seq)
+        if self.mission[seq].command != mav.MAV_CMD_NAV_LOITER_TIME:  # ArduSub says nothing after a loiter
+            self.status(mav.MAV_SEVERITY_INFO, f"Reached command #{seq}")
+        next_seq = seq + 1 if next_seq is None else next_seq
+        if next_seq < len(self.mission):
+            self.start_item(next_seq)
+        else:
+            self.state = mav.MISSION_STATE_COMPLETE
+            self.send_current()
 
     # -- MAVLink in -------------------------------------------------------------------------
     def handle(self, msg) -> bool:
@@ -331,6 +341,9 @@ class MissionServer:
             self._warned.add(text)
             self.status(mav.MAV_SEVERITY_WARNING, text)
 
+
+#: How ArduSub names an item it starts (AP_Mission::Mission_Command::type()).
+_COMMAND_NAMES = {16: "WP", 17: "LoitUnlim", 18: "LoitTurns", 19: "LoitTime", 20: "RTL", 21: "Land", 82: "SplineWP"}
 
 _HANDLERS = {
     "MISSION_COUNT": "_count",

@@ -7,6 +7,7 @@ vehicle asks with the deprecated MISSION_REQUEST, re-asks every second, cancels 
 
 from __future__ import annotations
 
+import math
 import os
 
 import pytest
@@ -242,3 +243,49 @@ def test_mission_current_streams_with_sys_status_and_follows_set_current():
 
         b.gcs.mav.mission_clear_all_send(1, 1, MISSION)
         expect(b, "MISSION_CURRENT", seq=0, total=0, mission_state=mav.MISSION_STATE_NO_MISSION)
+
+
+def test_auto_flies_the_mission_and_reports_each_item_reached():
+    with Bare(speedup=40, ekf_ready_s=0.0) as b:
+        # home, a waypoint 20 m north at 2 m, a DO_CHANGE_SPEED (passed over), a 5 s loiter 20 m east of it
+        lat, lon = home_degE7(b)
+        north20 = int(round(20 / 111_200 * 1e7))
+        items = [(WAYPOINT, lat, lon, 0.0, 0.0), (WAYPOINT, lat + north20, lon, -2.0, 0.0)]
+        items += [(mav.MAV_CMD_DO_CHANGE_SPEED, 0, 0, 0.0, 1.0)]
+        items += [(mav.MAV_CMD_NAV_LOITER_TIME, lat + north20, lon + int(round(20 / 74_900 * 1e7)), -2.0, 5.0)]
+        b.drain()
+        b.gcs.mav.mission_count_send(1, 1, len(items), MISSION)
+        for _ in items:
+            seq = expect(b, "MISSION_REQUEST").seq
+            command, x, y, z, p1 = items[seq]
+            b.gcs.mav.mission_item_int_send(1, 1, seq, 3 if seq else 0, command, 0, 1, p1, 0, 0, 0, x, y, z)
+        expect(b, "MISSION_ACK", type=mav.MAV_MISSION_ACCEPTED)
+
+        assert b.command(mav.MAV_CMD_COMPONENT_ARM_DISARM, 1) == mav.MAV_RESULT_ACCEPTED
+        assert b.command(mav.MAV_CMD_DO_SET_MODE, 1, 3) == mav.MAV_RESULT_ACCEPTED  # AUTO
+        events = []
+        t0 = b.vehicle.t
+        while b.vehicle.t - t0 < 120 and (not events or events[-1] != ("state", mav.MISSION_STATE_COMPLETE)):
+            m = b.gcs.recv_match(
+                type=["MISSION_ITEM_REACHED", "STATUSTEXT", "MISSION_CURRENT"], blocking=True, timeout=1
+            )
+            if m is None:
+                continue
+            if m.get_type() == "MISSION_ITEM_REACHED":
+                events.append(("reached", m.seq, round(b.vehicle.t - t0)))
+            elif m.get_type() == "STATUSTEXT" and m.text.startswith(("Mission:", "Reached")):
+                events.append(("text", m.text))
+            elif m.get_type() == "MISSION_CURRENT" and (not events or events[-1] != ("state", m.mission_state)):
+                events.append(("state", m.mission_state))
+        kinds = [e[:2] for e in events if e[0] != "state"]
+        assert kinds == [
+            ("text", "Mission: 1 WP"), ("reached", 1), ("text", "Reached command #1"),
+            ("text", "Mission: 3 LoitTime"), ("reached", 3),
+        ], events  # fmt: skip
+        assert events[-1] == ("state", mav.MISSION_STATE_COMPLETE)
+        reached = {e[1]: e[2] for e in events if e[0] == "reached"}
+        assert reached[3] - reached[1] >= 5  # 20 m and the 5 s loiter
+        truth = b.vehicle.truth()
+        # reached within 2 m; a vehicle that steers by heading and speed wanders a little over a 5 s loiter
+        assert math.hypot(truth.north - 20, truth.east - 20) < 5 and abs(truth.depth - 2) < 1
+        expect(b, "MISSION_CURRENT", seq=3, total=3, mission_state=mav.MISSION_STATE_COMPLETE)
