@@ -43,7 +43,7 @@ from pymavlink import mavutil  # noqa: E402
 from sim.uuv.auto import AutoMission  # noqa: E402
 from sim.uuv.depth import SURFACE_VZ, Depth  # noqa: E402
 from sim.uuv.ekf import EkfReadiness  # noqa: E402
-from sim.uuv.gcs import SENSORS, heartbeat_send  # noqa: E402
+from sim.uuv.gcs import heartbeat_send, sensor_bits  # noqa: E402
 from sim.uuv.guided import Target, from_global_int, from_local_ned  # noqa: E402
 from sim.uuv.interface import energy_consumed_hj  # noqa: E402
 
@@ -246,8 +246,7 @@ class BareAutopilot:
             )  # fmt: skip
         elif name == "SYS_STATUS":
             _, percent, mv = self._battery()
-            gps_bit = 0 if gps else mav.MAV_SYS_STATUS_SENSOR_GPS  # ArduSub reports the GPS once it finds one
-            m.sys_status_send(*(bits & ~gps_bit for bits in SENSORS), 0, mv, -1, percent, 0, 0, 0, 0, 0, 0)
+            m.sys_status_send(*sensor_bits(self.fs.mode, gps), 0, mv, -1, percent, 0, 0, 0, 0, 0, 0)
         elif name == "BATTERY_STATUS":
             hj, percent, mv = self._battery()
             mah = int(self.consumed_mah(hj))

@@ -38,7 +38,8 @@ from pymavlink import mavutil  # noqa: E402
 
 from rapt.errors import InputError  # noqa: E402
 from sim.uuv.bare import PACK_V, BareAutopilot  # noqa: E402
-from sim.uuv.gcs import SENSORS, GroundStationLink, heartbeat_send  # noqa: E402
+from sim.uuv.ekf import FLAGS_READY  # noqa: E402
+from sim.uuv.gcs import GroundStationLink, heartbeat_send, sensor_bits  # noqa: E402
 from sim.uuv.geo import LocalFrame  # noqa: E402
 from sim.uuv.interface import DEPTH_M, decode_command  # noqa: E402
 from sim.uuv.mission import Mission  # noqa: E402
@@ -202,6 +203,8 @@ class FrontSeat:
             self.missions.update()
             flying = self.armed and self.mode == GUIDED and not self.ended
             if self.lockstep:
+                if not flying:
+                    waiting_since = time.monotonic()  # the failsafe counts from when flying begins
                 if flying and self.setpoint.tick_ms == self._tick_ms():
                     self._step(self.setpoint)
                     waiting_since = time.monotonic()
@@ -303,7 +306,8 @@ class FrontSeat:
             int(tel.energy_hj[0]),
             percent,
         )
-        m.sys_status_send(*SENSORS, 0, volts[0], -1, percent, 0, 0, 0, 0, 0, 0)
+        m.sys_status_send(*sensor_bits(self.mode, True), 0, volts[0], -1, percent, 0, 0, 0, 0, 0, 0)
+        m.ekf_status_report_send(FLAGS_READY, 0.01, 0.01, 0.01, 0.0, 0.0)  # its position is known from the start
         fix = 3 if tel.surfaced[0] else 0
         m.gps_raw_int_send(
             ms * 1000,

@@ -6,8 +6,8 @@ connect and in use gets the answer ArduSub SITL 4.7.0-dev gives (recorded in
 
 - HEARTBEAT: type SUBMARINE, autopilot ARDUPILOTMEGA, base_mode STABILIZE | MANUAL_INPUT |
   CUSTOM_MODE (+ GUIDED in AUTO, GUIDED, CIRCLE, POSHOLD, + SAFETY_ARMED), system_status
-  STANDBY or ACTIVE when armed.  SYS_STATUS carries SITL's sensor bits (the fence is present
-  and healthy but not enabled, so no ground station reports a breach).
+  STANDBY or ACTIVE when armed.  SYS_STATUS carries SITL's sensor bits (:func:`sensor_bits`:
+  the fence is present and healthy but not enabled, so no ground station reports a breach).
 - COMMAND_LONG: ARM_DISARM (ACK, then on arming GPS_GLOBAL_ORIGIN and HOME_POSITION once
   the position is known, then "Arming motors" / "Disarming motors"); DO_SET_MODE (an
   unknown mode: FAILED + "No such mode N"; a position mode before the EKF has a position:
@@ -44,7 +44,7 @@ __all__ = [
     "CAPABILITIES",
     "GroundStationLink",
     "MODES",
-    "SENSORS",
+    "sensor_bits",
     "SW_VERSION",
     "Vehicle",
     "heartbeat_send",
@@ -56,8 +56,10 @@ mav = mavutil.mavlink
 MODES = frozenset(mavutil.mode_mapping_sub)
 #: Modes that fly under position control (GUIDED_ENABLED in the heartbeat): AUTO, GUIDED, CIRCLE, POSHOLD.
 GUIDED_MODES = frozenset({3, 4, 7, 16})
-#: SYS_STATUS sensor bits (present, enabled, healthy) as ArduSub SITL reports them once it has GPS.
-SENSORS = (0x1331FD2F, 0x1221FD2F, 0x1331FD2F)
+#: SYS_STATUS sensor bits (present, enabled, healthy) as ArduSub SITL reports them in MANUAL with a GPS.
+SENSORS = (0x1331FD2F, 0x12219D2F, 0x13319D2F)
+#: Modes whose depth and position controllers ArduSub reports enabled and healthy (GCS_Sub.cpp).
+CONTROLLED_MODES = frozenset({2, 3, 4, 7, 9, 16})
 #: AUTOPILOT_VERSION: capabilities (MISSION_FLOAT/INT, PARAM_FLOAT, COMMAND_INT, SET_POSITION_TARGET_*,
 #: MAVLINK2, MISSION_FENCE/RALLY, FTP, ...), version 4.7.0 dev and git hash of the firmware measured.
 CAPABILITIES, SW_VERSION, GIT_HASH = 0xF9E7, 0x04070000, b"2598e9d4"
@@ -89,6 +91,17 @@ class Vehicle(Protocol):
     def send_on_request(self, name: str) -> bool:
         """Send one message (REQUEST_MESSAGE); False when the vehicle cannot send it now."""
         ...
+
+
+def sensor_bits(mode: int, gps: bool) -> tuple[int, int, int]:
+    """SYS_STATUS (present, enabled, healthy) as ArduSub sets them (GCS_Sub::update_vehicle_sensor_status_flags)."""
+    present, enabled, health = SENSORS
+    if mode in CONTROLLED_MODES:
+        control = mav.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL | mav.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL
+        enabled, health = enabled | control, health | control
+    if not gps:
+        present, enabled, health = (bits & ~mav.MAV_SYS_STATUS_SENSOR_GPS for bits in (present, enabled, health))
+    return present, enabled, health
 
 
 def heartbeat_send(conn, mode: int, armed: bool) -> None:
@@ -228,7 +241,7 @@ class GroundStationLink:
     # -- parameters --------------------------------------------------------------------
     def _param_value(self, name: str, index: int) -> None:
         p = self.params
-        self.conn.mav.param_value_send(name.encode(), p[name], p.types[name], len(p), index)
+        self.conn.mav.param_value_send(name.encode(), p[name], p.types[name], len(p), index & 0xFFFF)  # -1: 65535
 
     def _param_list(self) -> None:
         for text in BANNER:
