@@ -400,8 +400,8 @@ def test_bad_arguments_are_named_before_anything_is_checked_or_sent():
 
 # --------------------------------------------------------------------------- the simulated front-seat
 def test_bring_up_against_the_simulated_front_seat():
-    """The front-seat takes a mission, refuses SET_MESSAGE_INTERVAL (UNSUPPORTED: the planner falls back
-    to REQUEST_DATA_STREAM), and reports GUIDED and armed in its HEARTBEAT."""
+    """The front-seat takes a mission, accepts SET_MESSAGE_INTERVAL and REQUEST_DATA_STREAM as ArduSub
+    does, and reports GUIDED and armed in its HEARTBEAT."""
     mission = sim.uuv.load_mission(EXAMPLES / "range2017.toml")
     port = free_port(socket.SOCK_DGRAM)
     fs = FrontSeat(mission, np.full(mission.dim, 0.5), f"udpin:127.0.0.1:{port}")
@@ -416,7 +416,7 @@ def test_bring_up_against_the_simulated_front_seat():
             assert position.z >= 0
 
             result = bridge.set_message_interval(M.MAVLINK_MSG_ID_GLOBAL_POSITION_INT, 5)
-            assert result == M.MAV_RESULT_UNSUPPORTED
+            assert result == M.MAV_RESULT_ACCEPTED
             bridge.request_data_stream(M.MAV_DATA_STREAM_POSITION, 5)  # no reply exists; nothing breaks
 
             items = three_items()

@@ -257,3 +257,41 @@ def test_the_gcs_failsafe_disarms_once_the_ground_station_heartbeat_stops():
         assert b.fs.armed
         wait_until(lambda: not b.fs.armed, timeout=2, what="the GCS failsafe")
         assert b.vehicle.t - armed_at > 5.0 and b.fs.stats.failsafes == 1
+
+
+def test_parameters_a_ground_station_sets_act_on_the_vehicle():
+    with Bare(speedup=20, ekf_ready_s=1.0, sysid=255) as b:
+
+        def param_set(name: str, value: float) -> float:
+            b.drain()
+            b.gcs.mav.param_set_send(1, 1, name.encode(), value, mav.MAV_PARAM_TYPE_REAL32)
+            answer = b.gcs.recv_match(type="PARAM_VALUE", blocking=True, timeout=2)
+            assert answer is not None and answer.param_id == name
+            return answer.param_value
+
+        # MAV1_EXTRA1: ATTITUDE's stream group, 10 Hz -> 2 Hz
+        assert param_set("MAV1_EXTRA1", 2) == 2
+        assert near(b.collect(5.0)["ATTITUDE"], 2, 5.0)
+
+        # WPNAV_SPEED caps the approach to a position target (the mission's cruise speed is 2 m/s)
+        assert param_set("WPNAV_SPEED", 50) == 50
+        b.gcs.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)  # lest the GCS failsafe disarm
+        b.guided_and_armed()
+        here = b.vehicle.truth()
+        b.setpoint(POSITION, x=here.north + 200.0, y=here.east)
+        for _ in range(8):  # a ground station beating once a vehicle second
+            b.gcs.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+            b.wait_vehicle(b.vehicle.t + 1.0)
+        assert 0.4 < b.vehicle.truth().speed <= 0.5 + 1e-6  # uncapped it would be near 1.8 m/s by now
+
+        # BATT_CAPACITY: what was used, on twice that capacity, leaves half
+        used = b.latest("BATTERY_STATUS").current_consumed
+        assert used > 0
+        param_set("BATT_CAPACITY", 2 * used)
+        assert abs(b.latest("BATTERY_STATUS").battery_remaining - 50) <= 2
+
+        # FS_GCS_TIMEOUT: the ground station falls silent; at 2 s (not the default 5 s) the vehicle disarms
+        heard = b.fs.link.gcs_heard
+        assert heard is not None and b.fs.armed and param_set("FS_GCS_TIMEOUT", 2.0) == 2.0
+        wait_until(lambda: not b.fs.armed, timeout=2, what="the GCS failsafe at FS_GCS_TIMEOUT")
+        assert 2.0 < b.vehicle.t - heard < 4.0 and b.fs.stats.failsafes == 1
