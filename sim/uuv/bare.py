@@ -10,15 +10,15 @@ Streamed with no request, each at its own rate (vehicle time, ArduSub's defaults
 measured on ArduSub SITL 4.7.0-dev, see :mod:`sim.uuv.streams`): HEARTBEAT 1 Hz;
 ATTITUDE, VFR_HUD 10 Hz; GLOBAL_POSITION_INT, LOCAL_POSITION_NED (only once the position
 estimate is ready, relative to the EKF origin = where the vehicle booted), SYSTEM_TIME,
-BATTERY_STATUS, EKF_STATUS_REPORT 3 Hz; SYS_STATUS, GPS_RAW_INT (3-D fix only when
-surfaced) 2 Hz; HOME_POSITION and GPS_GLOBAL_ORIGIN once when the estimate is ready.  No
+BATTERY_STATUS, EKF_STATUS_REPORT 3 Hz; SYS_STATUS, MISSION_CURRENT, GPS_RAW_INT (3-D fix
+only when surfaced) 2 Hz; HOME_POSITION and GPS_GLOBAL_ORIGIN once when the estimate is ready.  No
 sonar.  Ground-station requests (commands, modes, parameters, stream rates) are answered
 by :mod:`sim.uuv.gcs`, as in the lock-step front-seat.  The position estimate is ready
 ``ekf_ready_s`` after boot (:mod:`sim.uuv.ekf`); GUIDED and POSHOLD are refused before.
 
-Modes: GUIDED flies set-points (:mod:`sim.uuv.guided`); SURFACE rises to the surface;
-STABILIZE, ALT_HOLD, POSHOLD, AUTO and CIRCLE keep depth with no horizontal drive (no
-pilot, no mission here); MANUAL and ACRO and a disarmed vehicle apply no thrust — the
+Modes: GUIDED flies set-points (:mod:`sim.uuv.guided`); AUTO flies the uploaded mission
+(:mod:`sim.uuv.auto`); SURFACE rises to the surface; STABILIZE, ALT_HOLD, POSHOLD and
+CIRCLE keep depth with no horizontal drive (no pilot here); MANUAL and ACRO and a disarmed vehicle apply no thrust — the
 vehicle keeps its depth (neutral buoyancy) and drifts with the current.  The vehicle never
 disarms itself except by ArduSub's GCS failsafe (FS_GCS_ENABLE 2, FS_GCS_TIMEOUT 5 s, the
 parameters read each time, :mod:`sim.uuv.params`): once a heartbeat from MAV_GCS_SYSID (255)
@@ -40,6 +40,7 @@ import numpy as np
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
+from sim.uuv.auto import AutoMission  # noqa: E402
 from sim.uuv.depth import SURFACE_VZ, Depth  # noqa: E402
 from sim.uuv.ekf import EkfReadiness  # noqa: E402
 from sim.uuv.gcs import heartbeat_send, sensor_bits  # noqa: E402
@@ -57,7 +58,7 @@ mav = mavutil.mavlink
 SUBSTEP_S = 0.1
 #: Longest wait for input (wall seconds) when nothing is due: commands are answered within it anyway.
 IDLE_S = 0.05
-GUIDED, SURFACE, MANUAL, ACRO = 4, 9, 19, 1
+AUTO, GUIDED, SURFACE, MANUAL, ACRO = 3, 4, 9, 19, 1
 #: Volts the battery's mAh are counted at (a 4-cell pack).
 PACK_V = 14.8
 
@@ -91,6 +92,7 @@ class BareAutopilot:
         self.depth = Depth()
         self.target = Target.hold(0.0, 0.0)
         self.streams = fs.streams
+        self.auto = AutoMission(fs.missions, self._north_east)
         self.vn = self.ve = 0.0  # ground velocity over the last sub-step
         self._origin_sent = False
         self._sent_at: dict[int, float] = {}  # GLOBAL_POSITION_INT time_boot_ms -> wall time sent
@@ -120,6 +122,7 @@ class BareAutopilot:
                 for name in self.streams.due(self.t):
                     self._send(name)
             self._housekeeping()
+            self.fs.missions.update()
             wait = (min(self.t + SUBSTEP_S, self.streams.next_time()) - self.now()) / self.fs.speedup
             msg = self.conn.recv_match(blocking=True, timeout=min(max(wait, 0.0005), IDLE_S))
             while msg is not None:  # answer everything that is waiting
@@ -146,7 +149,12 @@ class BareAutopilot:
     def _substep(self, dt: float) -> None:
         fs, s = self.fs, self.world.state
         heading, speed, vz = float(s.heading[0]), 0.0, 0.0
-        if fs.armed and fs.mode == GUIDED:
+        if fs.mode == AUTO:
+            self.auto.begin()
+        if fs.armed and fs.mode in (GUIDED, AUTO):
+            if fs.mode == AUTO:
+                north, east = self._here()
+                self.target = self.auto.target(self.t, north, east, self.depth.depth)
             if self.target.expired(self.t):
                 self.target = self.target.timed_out(self.depth.depth)
             self.target = self.target.advanced(dt)
@@ -249,6 +257,8 @@ class BareAutopilot:
         elif name == "EKF_STATUS_REPORT":
             var = 0.01 if ready else 0.0
             m.ekf_status_report_send(self.ekf.flags(self.t), var, var, var, 0.0, 0.0)
+        elif name == "MISSION_CURRENT":
+            self.fs.missions.send_current()
         elif name == "SYSTEM_TIME":
             m.system_time_send(int(time.time() * 1e6), ms)
         elif name in ("GPS_GLOBAL_ORIGIN", "HOME_POSITION"):
@@ -300,9 +310,12 @@ class BareAutopilot:
         return f"Mode change failed: {mavutil.mode_mapping_sub[mode]} requires position"
 
     def enter_mode(self, mode: int) -> None:
-        if mode != self.fs.mode:
+        changed = mode != self.fs.mode
+        if changed:
             self.target = Target.hold(self.depth.depth, self.t)  # GUIDED starts by holding where it is
         self.fs.mode = mode
+        if changed and mode == AUTO:
+            self.auto.start()  # ArduSub: entering the mode it is in already changes nothing
 
     def arm_refusal(self, on: bool) -> str | None:
         return None  # ARMING_CHECK 448: ArduSub arms in any mode, before the EKF is ready

@@ -6,11 +6,12 @@ as to a vehicle: HEARTBEAT (MAV_TYPE_SUBMARINE), SYS_STATUS, BATTERY_STATUS,
 LOCAL_POSITION_NED, GLOBAL_POSITION_INT, ATTITUDE, GPS_RAW_INT (a fix only on the
 surface), OBSTACLE_DISTANCE (a 360-beam sonar scan, five messages) and OBSTACLE_DISTANCE_3D
 (one closest point per contact), SYSTEM_TIME; GUIDED velocity+yaw set-points
-(SET_POSITION_TARGET_LOCAL_NED / _GLOBAL_INT, type mask 2503); and the mission upload and
-download protocol.  Both flavours answer every ground-station request (commands, modes,
-parameters, stream rates, FTP) the same, ArduSub way (:mod:`sim.uuv.gcs`, :mod:`sim.uuv.params`);
-in lock-step a requested stream rate is acknowledged and read back, but telemetry still goes
-out once per step (the lock-step's contract with the back-seat), plus EKF_STATUS_REPORT.
+(SET_POSITION_TARGET_LOCAL_NED / _GLOBAL_INT, type mask 2503); and the mission protocol with
+MISSION_CURRENT (:mod:`sim.uuv.mission_server`).  Both flavours answer every ground-station request
+(commands, modes, parameters, stream rates, FTP) the same, ArduSub way (:mod:`sim.uuv.gcs`,
+:mod:`sim.uuv.params`); in lock-step a requested stream rate is acknowledged and read back, but
+telemetry still goes out once per step (the lock-step's contract with the back-seat), plus
+EKF_STATUS_REPORT.
 
 Clock: with ``lockstep`` the simulated time advances one step when the set-point for the
 current step arrives (its ``time_boot_ms`` names the step), so a one-hour mission flies as
@@ -45,6 +46,7 @@ from sim.uuv.gcs import GroundStationLink, heartbeat_send, sensor_bits  # noqa: 
 from sim.uuv.geo import LocalFrame  # noqa: E402
 from sim.uuv.interface import DEPTH_M, decode_command  # noqa: E402
 from sim.uuv.mission import Mission  # noqa: E402
+from sim.uuv.mission_server import MissionServer  # noqa: E402
 from sim.uuv.params import ParameterTable  # noqa: E402
 from sim.uuv.scenario import make_scenarios  # noqa: E402
 from sim.uuv.scoring import Scorer  # noqa: E402
@@ -77,7 +79,6 @@ class FrontSeatStats:
     setpoints: int = 0
     ignored: int = 0
     failsafes: int = 0
-    mission_items: int = 0
     ended: str = ""
     ticks_at_end: int = 0
     log: list = field(default_factory=list)
@@ -134,14 +135,14 @@ class FrontSeat:
         self.k = 0
         self.setpoint = _Setpoint()
         self.stats = FrontSeatStats()
-        self.mission_items: list = []
-        self._upload_count = 0
         self._stop = threading.Event()
         self._boot = time.time()
         self.tel: Telemetry = self.world.telemetry(0.0)
         self.params = ParameterTable(self._mission_parameters(sysid, gcs_failsafe_s))
         self.streams = StreamSchedule(params=self.params)
         self.bare: BareAutopilot | None = None
+        home = self.frame.to_latlon(float(self.world.state.x[0]), float(self.world.state.y[0]))
+        self.missions = MissionServer(self.conn, (*home, 0.0), self._status, self._mission_clock)
         if bare:  # a real vehicle knows no referee
             self.bare = BareAutopilot(self, ekf_ready_s)
         else:
@@ -163,6 +164,15 @@ class FrontSeat:
     @property
     def t(self) -> float:
         return self.k * self.mission.dt
+
+    def _mission_clock(self) -> float:
+        """Vehicle seconds for the mission protocol's timeouts (wall seconds in lock-step)."""
+        return self.bare.now() if self.bare is not None else time.monotonic()
+
+    @property
+    def mission_items(self) -> list:
+        """The mission's items as they were uploaded (MISSION_ITEM_INT or MISSION_ITEM messages)."""
+        return [it.message for it in self.missions.lists[0] if it.message is not None]
 
     @property
     def ended(self) -> bool:
@@ -188,10 +198,12 @@ class FrontSeat:
             now = time.monotonic()
             if now - last_hb >= 1.0:
                 self._heartbeat()
+                self.missions.send_current()
                 last_hb = now
             msg = self.conn.recv_match(blocking=True, timeout=0.02)
             if msg is not None:
                 self._handle(msg)
+            self.missions.update()
             flying = self.armed and self.mode == GUIDED and not self.ended
             if self.lockstep:
                 if not flying:
@@ -344,23 +356,13 @@ class FrontSeat:
     # -- MAVLink in ------------------------------------------------------------------
     def _handle(self, msg) -> None:
         kind = msg.get_type()
-        if kind == "BAD_DATA" or self.link.handle(msg):
-            return  # ground-station requests: answered as ArduSub answers them (sim.uuv.gcs)
+        if kind == "BAD_DATA" or self.missions.handle(msg) or self.link.handle(msg):
+            return  # the mission protocol (sim.uuv.mission_server), then the rest of a ground station's requests
         if kind in ("SET_POSITION_TARGET_LOCAL_NED", "SET_POSITION_TARGET_GLOBAL_INT"):
             if self.bare is not None:
                 self.bare.setpoint(msg)
             else:
                 self._setpoint(msg, kind)
-        elif kind == "MISSION_COUNT":
-            self._upload_count = int(msg.count)
-            self.mission_items = []
-            self._request_item(0, msg)
-        elif kind in ("MISSION_ITEM_INT", "MISSION_ITEM"):
-            self._mission_item(msg)
-        elif kind == "MISSION_REQUEST_LIST":
-            self.conn.mav.mission_count_send(msg.get_srcSystem(), msg.get_srcComponent(), len(self.mission_items))
-        elif kind in ("MISSION_REQUEST_INT", "MISSION_REQUEST"):
-            self._send_item(msg)
 
     # -- what sim.uuv.gcs asks of the lock-step vehicle ---------------------------------
     def vehicle_time(self) -> float:
@@ -402,38 +404,3 @@ class FrontSeat:
         heading, speed, surface = decode_command(msg.vx, msg.vy, msg.vz, msg.yaw)
         self.setpoint = _Setpoint(float(heading), float(speed), bool(surface), int(msg.time_boot_ms), self.t)
         self.stats.setpoints += 1
-
-    def _request_item(self, seq: int, msg) -> None:
-        self.conn.mav.mission_request_int_send(msg.get_srcSystem(), msg.get_srcComponent(), seq)
-
-    def _mission_item(self, msg) -> None:
-        if int(msg.seq) != len(self.mission_items):
-            return  # out of order: the ground station resends on its timeout
-        self.mission_items.append(msg)
-        self.stats.mission_items += 1
-        if len(self.mission_items) < self._upload_count:
-            self._request_item(len(self.mission_items), msg)
-        else:
-            self.conn.mav.mission_ack_send(msg.get_srcSystem(), msg.get_srcComponent(), mav.MAV_MISSION_ACCEPTED)
-
-    def _send_item(self, msg) -> None:
-        seq = int(msg.seq)
-        if 0 <= seq < len(self.mission_items):
-            it = self.mission_items[seq]
-            x, y = (it.x, it.y) if it.get_type() == "MISSION_ITEM_INT" else (int(it.x * 1e7), int(it.y * 1e7))
-            self.conn.mav.mission_item_int_send(
-                msg.get_srcSystem(),
-                msg.get_srcComponent(),
-                seq,
-                it.frame,
-                it.command,
-                0,
-                1,
-                it.param1,
-                it.param2,
-                it.param3,
-                it.param4,
-                x,
-                y,
-                it.z,
-            )

@@ -8,7 +8,7 @@ answer both as ArduSub does, so this schedule is its own piece, in vehicle time.
 Measured on ArduSub SITL 4.7.0-dev (speed-up 10, rates in vehicle time, nothing requested):
 ATTITUDE, VFR_HUD 10 Hz (EXTRA1, EXTRA2); GLOBAL_POSITION_INT, LOCAL_POSITION_NED 3 Hz
 (POSITION); SYSTEM_TIME, BATTERY_STATUS, EKF_STATUS_REPORT 3 Hz (EXTRA3); SYS_STATUS,
-GPS_RAW_INT 2 Hz (EXTENDED_STATUS); HEARTBEAT 1 Hz in no group.  SET_MESSAGE_INTERVAL:
+GPS_RAW_INT, MISSION_CURRENT 2 Hz (EXTENDED_STATUS); HEARTBEAT 1 Hz in no group.  SET_MESSAGE_INTERVAL:
 -1 stops a message, 0 restores its group's *current* rate, an id ArduSub cannot stream
 gets MAV_RESULT_DENIED.  REQUEST_DATA_STREAM is never acknowledged; ``start_stop`` 0 stops
 the group (stream 0 = all groups, HEARTBEAT keeps going) and a new group rate replaces
@@ -34,7 +34,7 @@ mav = mavutil.mavlink
 
 #: ArduSub's stream groups (GCS_Mavlink.cpp), restricted to the messages the bare front-seat sends.
 GROUPS: dict[int, tuple[str, ...]] = {
-    mav.MAV_DATA_STREAM_EXTENDED_STATUS: ("SYS_STATUS", "GPS_RAW_INT"),
+    mav.MAV_DATA_STREAM_EXTENDED_STATUS: ("SYS_STATUS", "GPS_RAW_INT", "MISSION_CURRENT"),
     mav.MAV_DATA_STREAM_POSITION: ("GLOBAL_POSITION_INT", "LOCAL_POSITION_NED"),
     mav.MAV_DATA_STREAM_EXTRA1: ("ATTITUDE",),
     mav.MAV_DATA_STREAM_EXTRA2: ("VFR_HUD",),
