@@ -427,7 +427,7 @@ def main(argv: list[str] | None = None) -> int:
     fixture = load_fixture()
     if args.sitl and not args.record:
         with ardusub_sitl() as client:
-            live = run(client, window=0.8)
+            live = run(client, window=0.8, expected=fixture["rows"])
         print(table(compare(fixture["rows"], live), f"live ArduSub SITL vs the recording ({fixture['firmware']})"))
     ok = True
     for flavour in args.flavour or FLAVOURS:

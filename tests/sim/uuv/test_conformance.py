@@ -52,7 +52,7 @@ def test_a_changed_answer_is_caught():
 @pytest.mark.skipif(sitl_binary() is None, reason=f"{ENV} is not set: no ArduSub SITL binary")
 def test_the_recording_is_what_the_firmware_answers_today(recorded):
     with conformance.ardusub_sitl() as client:
-        live = conformance.run(client, window=0.8)
+        live = conformance.run(client, window=0.8, expected=recorded)
     rows = conformance.compare(recorded, live)
     print(conformance.table(rows, "live ArduSub SITL vs the recording"))
     assert [f"{r.name}: {r.ardusub} / live {r.ours}" for r in rows if not r.matches] == []
