@@ -187,18 +187,7 @@ def sustained_processes(rate: int, seconds: float) -> dict:
         logged = sum(1 for topic, _, _ in messages if topic == RAW_TOPIC)
         b = [p for topic, _, p in messages if topic.endswith("/status/bridge")][-1]
         losses = read_metadata(path).get(LOSSES_METADATA, {})
-    return {
-        "rate": rate,
-        "sent": sent,
-        "bridge_in": b["frames_in"],
-        "logged": logged,
-        "link_lost": b["link_lost"],
-        "kernel_dropped": b["kernel_dropped"],
-        "bus_lost": int(losses.get("bus_lost", -1)),
-        "write_errors": int(losses.get("write_errors", -1)),
-        "reported": int(losses.get("total", -1)),
-        "rcvbuf": b["rcvbuf_bytes"],
-    }
+    return _load_row(rate, sent, b, logged, losses)
 
 
 def sustained_one(rate: int, seconds: float) -> dict:
@@ -231,17 +220,22 @@ def sustained_one(rate: int, seconds: float) -> dict:
         logged = sum(1 for topic, _, _ in read_log(path) if topic == RAW_TOPIC)
         losses = read_metadata(path).get(LOSSES_METADATA, {})
     session.close()
+    return _load_row(rate, sent, b, logged, losses)
+
+
+def _load_row(rate: int, sent: int, bridge: dict, logged: int, losses: dict) -> dict:
+    """One rate's row: what was sent, read by the bridge, logged, and lost by each counter."""
     return {
         "rate": rate,
         "sent": sent,
-        "bridge_in": b["frames_in"],
+        "bridge_in": bridge["frames_in"],
         "logged": logged,
-        "link_lost": b["link_lost"],
-        "kernel_dropped": b["kernel_dropped"],
+        "link_lost": bridge["link_lost"],
+        "kernel_dropped": bridge["kernel_dropped"],
         "bus_lost": int(losses.get("bus_lost", -1)),
         "write_errors": int(losses.get("write_errors", -1)),
         "reported": int(losses.get("total", -1)),
-        "rcvbuf": b["rcvbuf_bytes"],
+        "rcvbuf": bridge["rcvbuf_bytes"],
     }
 
 
