@@ -2,10 +2,16 @@
 
 Every ``rapt-plan`` command reports bad input the same way — one line naming the field and
 the fix, exit code 2, no traceback — so the commands share this module's :func:`fail`.
+With ``RAPT_TRACEBACK=1`` in the environment, :func:`fail` called while an exception is being
+handled also prints its traceback: an unexpected error (a library's RuntimeError, say) then
+shows where it came from instead of only its message.
 """
 
 from __future__ import annotations
 
+import os
+import sys
+import traceback
 from typing import NoReturn
 
 import typer
@@ -25,7 +31,9 @@ def print_error(message: str) -> None:
 
 
 def fail(message: str) -> NoReturn:
-    """One-line error, exit code 2, no traceback."""
+    """One-line error, exit code 2, no traceback (unless ``RAPT_TRACEBACK=1``: see the module docstring)."""
+    if os.environ.get("RAPT_TRACEBACK") == "1" and sys.exc_info()[0] is not None:
+        traceback.print_exc(file=sys.stderr)
     print_error(message)
     raise typer.Exit(code=2)
 

@@ -39,6 +39,15 @@ def test_bad_input_is_one_line_and_exit_2():
         assert len([line for line in result.output.splitlines() if line.strip()]) == 1
 
 
+def test_rapt_traceback_shows_where_an_error_came_from(monkeypatch):
+    """RAPT_TRACEBACK=1: the same one-line error and exit code, after the traceback of the exception behind it."""
+    monkeypatch.setenv("RAPT_TRACEBACK", "1")
+    result = runner.invoke(app, ["search", "plates2d", "--budget", "50"])
+    assert result.exit_code == 2, result.output
+    assert "Traceback (most recent call last)" in result.output
+    assert result.output.strip().splitlines()[-1].startswith("error: ") and "budget: 50" in result.output
+
+
 def test_study_of_a_mission_reports_modes_and_boundary_types(tmp_path):
     db = tmp_path / "study.db"
     args = ["study", RANGE2017, "--budget", "1000", "--batch-size", "250", "--store", str(db)]
