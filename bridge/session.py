@@ -15,6 +15,8 @@ with a back-seat on another computer) is taken as-is.
 from __future__ import annotations
 
 import json
+import logging
+import time
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 from typing import Any
@@ -27,6 +29,10 @@ __all__ = ["DEFAULT_HUB", "CONNECT_TIMEOUT_S", "zenoh_config", "open_session", "
 
 #: The conventional hub endpoint when nothing else is given to a command line.
 DEFAULT_HUB = "tcp/127.0.0.1:7447"
+#: How long :func:`undeclare` waits for another thread's call on an entity to end.
+UNDECLARE_PATIENCE_S = 5.0
+
+log = logging.getLogger(__name__)
 
 #: How long a client waits for its hub by default. Processes of one vehicle start in any
 #: order (a systemd unit, a launch script, a test); Zenoh's client default (0) fails at once.
@@ -149,11 +155,31 @@ def receive(subscriber: Any) -> Iterator[Any]:
             return
 
 
-def undeclare(*entities: Any) -> None:
-    """Undeclare each publisher, subscriber or token given, skipping None and those already gone."""
+def undeclare(*entities: Any, patience_s: float = UNDECLARE_PATIENCE_S) -> None:
+    """Undeclare each publisher, subscriber or token given, skipping None and those already gone.
+
+    zenoh-python refuses to undeclare an entity while another thread is inside one of its
+    calls (a ``put`` still running in a worker that outlived its join, a ``try_recv``): the
+    binding raises ``RuntimeError("Already borrowed")``. That call ends soon, so undeclaring
+    is retried for up to ``patience_s``; an entity still busy then is left to its session's
+    close, with a warning, rather than turning a finished run into an error.
+    """
     for entity in entities:
-        if entity is not None:
+        if entity is None:
+            continue
+        deadline = time.monotonic() + patience_s
+        while True:
             try:
                 entity.undeclare()
             except zenoh.ZError:
-                pass
+                pass  # already undeclared, or its session closed
+            except RuntimeError as error:
+                if "borrow" not in str(error).lower():
+                    raise
+                if time.monotonic() < deadline:
+                    time.sleep(0.002)
+                    continue
+                log.warning(
+                    "zenoh: %r still in use by another thread after %.1f s; left to its session", entity, patience_s
+                )
+            break
