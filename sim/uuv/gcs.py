@@ -241,9 +241,13 @@ class GroundStationLink:
         p = self.params
         self.conn.mav.param_value_send(name.encode(), p[name], p.types[name], len(p), index & 0xFFFF)  # -1: 65535
 
-    def _param_list(self) -> None:
+    def _banner(self) -> None:
+        """ArduPilot greets a parameter download (list or FTP) with these lines."""
         for text in BANNER:
             self.fs._status(mav.MAV_SEVERITY_INFO, text)
+
+    def _param_list(self) -> None:
+        self._banner()
         for i, name in enumerate(self.params.names):
             self._param_value(name, i)
 
@@ -270,8 +274,7 @@ class GroundStationLink:
         for reply in self.ftp.answer(payload):
             self.conn.mav.file_transfer_protocol_send(0, msg.get_srcSystem(), msg.get_srcComponent(), list(reply))
         if payload[3] == OPEN_RO and self.ftp.file is not None:
-            for text in BANNER:  # ArduPilot greets a parameter download, FTP or not, with its banner
-                self.fs._status(mav.MAV_SEVERITY_INFO, text)
+            self._banner()
 
 
 def _message_name(msg_id: int) -> str | None:
