@@ -323,10 +323,10 @@ class McapLogger(Service):
         self._received[0] += 1
         now = time.time_ns()
         attachment = sample.attachment
-        if attachment is not None:  # a bridge publication's number: keys.sequence_attachment
-            number = attachment.to_bytes()
-            if len(number) == 8:
-                self._bus_gaps.see(key, int.from_bytes(number, "little"))
+        if attachment is not None:  # a bridge publication's number (keys.sequence_attachment), or not one
+            number = keys.attachment_sequence(attachment.to_bytes())
+            if number is not None:
+                self._bus_gaps.see(key, number)
         payload = sample.payload.to_bytes()
         put = sample.kind == zenoh.SampleKind.PUT
         if key == self._bridge_status_key and put:
