@@ -51,6 +51,7 @@ from rapt.errors import InputError
 from . import foxglove, keys
 from .frames import strip_signature
 from .loss import PublicationGaps
+from .mcap_channels import McapChannels
 from .service import Service
 from .session import open_session, undeclare, use_session
 
@@ -169,8 +170,7 @@ class McapLogger(Service):
         self._writer_thread: threading.Thread | None = None
         self._file: Any = None
         self._writer: Writer | None = None
-        self._schemas: dict[str, int] = {}
-        self._channels: dict[str, tuple[int, list[int]]] = {}
+        self._mcap: McapChannels | None = None  # the file's channels, from _open
         self._counts = dict.fromkeys(("written", "metadata", "errors", "flushes", "derived"), 0)
         self._foxglove = foxglove.FoxgloveMessages()
         self._received = [0, 0]  # per drain thread (data, liveliness): no shared counter between threads
@@ -181,6 +181,7 @@ class McapLogger(Service):
         self._file = open(self.path, "wb")
         self._writer = writer = Writer(self._file, chunk_size=self.chunk_size, compression=self._compression)
         writer.start(profile="", library="rapt-bridge")
+        self._mcap = McapChannels(writer)
         self._session, self._owns_session = use_session(self._session_arg)
         s = self._session
         self._status_pub = s.declare_publisher(
@@ -372,34 +373,20 @@ class McapLogger(Service):
             self._lost_said = losses["total"]
         return losses
 
-    def _channel(
-        self, writer: Writer, topic: str, encoding: str, schema: tuple[str, dict] | None
-    ) -> tuple[int, list[int]]:
-        entry = self._channels.get(topic)
-        if entry is None:
-            schema_id = 0
-            if schema is not None:
-                name, body = schema
-                schema_id = self._schemas.get(name, 0)
-                if not schema_id:
-                    schema_id = writer.register_schema(name, "jsonschema", json.dumps(body).encode())
-                    self._schemas[name] = schema_id
-            channel_id = writer.register_channel(topic, encoding, schema_id)
-            entry = self._channels[topic] = (channel_id, [0])
-        return entry
-
     def _write(self, w: Writer, key: str, recv_ns: int, payload: bytes | None, put: bool) -> None:
         try:
             _, kind, name = keys.split(key)
         except ValueError:
             kind, name = "", key
+        mcap = self._mcap
+        assert mcap is not None, "written only after _open"
         source: dict | None = None  # the JSON object Foxglove messages are derived from
         if payload is None:  # liveliness change
-            channel_id, seq = self._channel(w, key, "json", _schema_for("alive", name))
+            channel_id, seq = mcap.channel(key, "json", _schema_for("alive", name))
             data = json.dumps({"alive": put}).encode()
             publish_ns = recv_ns
         elif kind == "mavlink" and name == "raw":
-            channel_id, seq = self._channel(w, RAW_TOPIC, RAW_ENCODING, None)
+            channel_id, seq = mcap.channel(RAW_TOPIC, RAW_ENCODING, None)
             data = strip_signature(payload)
             publish_ns = recv_ns
         else:
@@ -413,9 +400,9 @@ class McapLogger(Service):
             publish_ns = stamp if isinstance(stamp, int) and not isinstance(stamp, bool) else recv_ns
             if kind == "map":  # the document is logged as its foxglove.GeoJSON channel only
                 document = obj if put else {"type": "FeatureCollection", "features": []}  # deleted: an empty map
-                self._write_foxglove(w, self._foxglove.derive(kind, name, document, publish_ns), recv_ns, "written")
+                self._write_foxglove(self._foxglove.derive(kind, name, document, publish_ns), recv_ns, "written")
                 return
-            channel_id, seq = self._channel(w, key, "json", _schema_for(kind, name))
+            channel_id, seq = mcap.channel(key, "json", _schema_for(kind, name))
             if kind == "meta" and put:
                 w.add_metadata(name, {str(k): v if isinstance(v, str) else json.dumps(v) for k, v in obj.items()})
                 self._counts["metadata"] += 1
@@ -423,15 +410,14 @@ class McapLogger(Service):
         seq[0] += 1
         self._counts["written"] += 1
         if source is not None:
-            self._write_foxglove(w, self._foxglove.derive(kind, name, source, publish_ns), recv_ns, "derived")
+            self._write_foxglove(self._foxglove.derive(kind, name, source, publish_ns), recv_ns, "derived")
 
-    def _write_foxglove(self, w: Writer, derived: list[foxglove.Derived], recv_ns: int, counter: str) -> None:
+    def _write_foxglove(self, derived: list[foxglove.Derived], recv_ns: int, counter: str) -> None:
         """The Foxglove messages derived from one sample (:mod:`bridge.foxglove`), written beside it."""
+        mcap = self._mcap
+        assert mcap is not None, "written only after _open"
         for topic, schema_name, message in derived:
-            channel_id, seq = self._channel(w, topic, "json", (schema_name, foxglove.schema(schema_name)))
-            data = json.dumps(message, allow_nan=False).encode()
-            w.add_message(channel_id, log_time=recv_ns, data=data, publish_time=recv_ns, sequence=seq[0])
-            seq[0] += 1
+            mcap.add_json(topic, (schema_name, foxglove.schema(schema_name)), message, recv_ns, recv_ns)
             self._counts[counter] += 1
 
 

@@ -25,7 +25,6 @@ scenario, flown on different days, line up. The GeoJSON documents are at time 0.
 
 from __future__ import annotations
 
-import json
 import re
 from pathlib import Path
 
@@ -33,6 +32,7 @@ import numpy as np
 from mcap.writer import CompressionType, Writer
 
 from bridge import foxglove
+from bridge.mcap_channels import McapChannels
 from planner.exports import geojson
 from sim.uuv.geo import LocalFrame
 from sim.uuv.mission import Mission
@@ -45,28 +45,6 @@ _UNSAFE = re.compile(r"[^A-Za-z0-9_.\-]")
 def overlay_name(sid: str) -> str:
     """``overlay_<scenario id>.mcap`` (characters unsafe in a file name replaced by ``_``)."""
     return f"overlay_{_UNSAFE.sub('_', sid)}.mcap"  # planner.compare.OVERLAY_PREFIX: refused as an input there
-
-
-class _Channels:
-    """Foxglove JSON channels of one MCAP writer, registered on first use."""
-
-    def __init__(self, writer: Writer):
-        self.writer = writer
-        self.schemas: dict[str, int] = {}
-        self.channels: dict[str, tuple[int, list[int]]] = {}
-
-    def add(self, topic: str, schema_name: str, message: dict, ns: int) -> None:
-        entry = self.channels.get(topic)
-        if entry is None:
-            sid = self.schemas.get(schema_name)
-            if sid is None:
-                body = json.dumps(foxglove.schema(schema_name)).encode()
-                sid = self.schemas[schema_name] = self.writer.register_schema(schema_name, "jsonschema", body)
-            entry = self.channels[topic] = (self.writer.register_channel(topic, "json", sid), [0])
-        channel_id, seq = entry
-        data = json.dumps(message, allow_nan=False).encode()
-        self.writer.add_message(channel_id, log_time=ns, data=data, publish_time=ns, sequence=seq[0])
-        seq[0] += 1
 
 
 def write_overlay(
@@ -89,18 +67,22 @@ def write_overlay(
     with open(path, "wb") as f:
         writer = Writer(f, compression=CompressionType.ZSTD)
         writer.start(profile="", library="rapt-compare")
-        ch = _Channels(writer)
-        ch.add("/map/scenario", "foxglove.GeoJSON", foxglove.geojson_message(geojson(mission, u)), 0)
+        mcap = McapChannels(writer)
+
+        def add(topic: str, schema_name: str, message: dict, ns: int) -> None:
+            mcap.add_json(topic, (schema_name, foxglove.schema(schema_name)), message, ns, ns)
+
+        add("/map/scenario", "foxglove.GeoJSON", foxglove.geojson_message(geojson(mission, u)), 0)
         observed = [(name, t) for name, t in observed if t.shape[0] >= 2]  # a line needs two points
         drawn = {kind: t for kind, t in tracks.items() if t is not None and t.shape[0] >= 2}
         lines = [_line(frame, track, {"kind": "observed", "name": name}) for name, track in observed]
-        ch.add("/map/observed", "foxglove.GeoJSON", foxglove.geojson_message(_collection(lines)), 0)
+        add("/map/observed", "foxglove.GeoJSON", foxglove.geojson_message(_collection(lines)), 0)
         for kind, track in drawn.items():
             props = {"kind": kind, "name": kind}
             if kind == "corrected":
                 props.update(properties or {})
             doc = _collection([_line(frame, track, props)])
-            ch.add(f"/map/{kind}", "foxglove.GeoJSON", foxglove.geojson_message(doc), 0)
+            add(f"/map/{kind}", "foxglove.GeoJSON", foxglove.geojson_message(doc), 0)
         series = [(f"/fix/observed/{_UNSAFE.sub('_', name)}", t) for name, t in observed]
         series += [(f"/fix/{kind}", t) for kind, t in drawn.items()]
         fixes = []
@@ -111,7 +93,7 @@ def write_overlay(
                 (int(n), topic, float(a), float(b)) for n, a, b in zip(ns, np.atleast_1d(lat), np.atleast_1d(lon))
             ]
         for n, topic, a, b in sorted(fixes):  # in time order across the tracks, as a recording is
-            ch.add(topic, "foxglove.LocationFix", foxglove.location_fix(a, b, 0.0, n, frame_id=topic), n)
+            add(topic, "foxglove.LocationFix", foxglove.location_fix(a, b, 0.0, n, frame_id=topic), n)
         writer.finish()
     return path
 

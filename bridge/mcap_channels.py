@@ -1,0 +1,51 @@
+"""The channels of one MCAP file being written, each registered (with its schema) on first use.
+
+The logger and ``rapt-plan compare``'s Foxglove overlays both write messages on topics they
+learn as they go; this keeps one channel per topic and one schema per name, and numbers each
+channel's messages in order (the MCAP ``sequence``).
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+from mcap.writer import Writer
+
+__all__ = ["McapChannels"]
+
+
+class McapChannels:
+    """Channels and ``jsonschema`` schemas of ``writer``, registered on first use."""
+
+    def __init__(self, writer: Writer):
+        self.writer = writer
+        self._schemas: dict[str, int] = {}
+        self._channels: dict[str, tuple[int, list[int]]] = {}
+
+    def channel(self, topic: str, encoding: str, schema: tuple[str, dict] | None) -> tuple[int, list[int]]:
+        """``(channel id, [next sequence number])`` of ``topic``; ``schema`` is ``(name, JSON Schema)`` or None."""
+        entry = self._channels.get(topic)
+        if entry is None:
+            schema_id = 0
+            if schema is not None:
+                name, body = schema
+                schema_id = self._schemas.get(name, 0)
+                if not schema_id:
+                    schema_id = self.writer.register_schema(name, "jsonschema", json.dumps(body).encode())
+                    self._schemas[name] = schema_id
+            channel_id = self.writer.register_channel(topic, encoding, schema_id)
+            entry = self._channels[topic] = (channel_id, [0])
+        return entry
+
+    def add(
+        self, topic: str, encoding: str, schema: tuple[str, dict] | None, data: bytes, log_ns: int, publish_ns: int
+    ) -> None:
+        """One message on ``topic`` (its channel registered if new), numbered after the channel's last."""
+        channel_id, seq = self.channel(topic, encoding, schema)
+        self.writer.add_message(channel_id, log_time=log_ns, data=data, publish_time=publish_ns, sequence=seq[0])
+        seq[0] += 1
+
+    def add_json(self, topic: str, schema: tuple[str, dict], message: Any, log_ns: int, publish_ns: int) -> None:
+        """One JSON message (NaN refused, as JSON has none) on a ``json`` channel of ``schema``."""
+        self.add(topic, "json", schema, json.dumps(message, allow_nan=False).encode(), log_ns, publish_ns)
