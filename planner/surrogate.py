@@ -66,6 +66,7 @@ def train_surrogate(
     select_runs: int = 25,
     seed: int = 0,
     on_iteration: Callable[[IterationRecord, Policy], None] | None = None,
+    goal_classifier: bool = True,
 ) -> Surrogate:
     """Imitate the mission's expert with ``runs`` annotated runs (``runs_per_iteration`` at a time).
 
@@ -74,7 +75,9 @@ def train_surrogate(
     ``select_runs`` held-out expert runs choose the update whose policy is kept (the best
     mode accuracy on them; 0 keeps the last), then its goal threshold
     (:func:`calibrate_goal_threshold`).  The surrogate's ``training["runs"]`` counts every
-    expert run spent: annotated and held out.
+    expert run spent: annotated and held out.  ``goal_classifier`` trains the goal decision
+    as a classifier weighted toward the expert's switches (:func:`rapt.imitation.imitate`'s
+    ``decisions``); False regresses it on +-1 like the velocity, for comparison.
     """
     if not 0.0 <= mixing < 1.0:
         raise InputError(f"--mixing: expected a share in [0, 1), got {mixing!r}")
@@ -104,6 +107,7 @@ def train_surrogate(
         select=select,
         on_iteration=on_iteration,
         heads=policy_heads(spec),
+        decisions=[GOAL] if goal_classifier else [],
     )
     h = result.history[result.chosen]
     threshold, calibration = 0.0, None
@@ -121,6 +125,7 @@ def train_surrogate(
         "seed": seed,
         "epochs": epochs,
         "mixing": mixing,
+        "goal": "classifier" if goal_classifier else "regression",
         "fit_s": round(sum(r.fit_s for r in result.history), 2),
         "iterations": len(result.history),
         "threshold_reproduced": calibration,
@@ -146,7 +151,7 @@ def calibrate_goal_threshold(
     hits = np.zeros(thresholds.size)
     runs = 0
     for t in trajectories:
-        pending = np.flatnonzero(np.any(t.features[:, spec.waypoint] != 0, axis=1))
+        pending = np.flatnonzero(spec.waypoint_pending(t.features))
         if pending.size == 0:
             continue
         runs += 1

@@ -22,6 +22,17 @@ PolicyUpdate continues from the previous weights (warm start).
 features (:class:`HeadsPolicy`): a decision the expert takes on a few features, learned
 by the network that also steers on hundreds, picks up dependence on the rest that the
 expert does not have.
+
+``decisions`` names action columns that are discrete switches (+1 / -1: abort, return,
+transmit).  Regressed on +-1 with squared error, a switch the expert throws once per run
+(after which the run no longer shows the state) is a rare label, and the learned output
+is a ramp whose zero crossing lies late or early by more than the boundary it should
+place.  A decision column instead gets a network of its own trained as a classifier
+(logistic output, cross-entropy, which keeps sharpening a separable switch where squared
+error settles), its two classes weighed equally, and the states within ``switch_window``
+steps of one of the expert's switches in their run weighed ``switch_weight`` times more:
+those states fix where the switch lies.  Its output is ``2 p - 1`` (p the probability of
++1), on the scale of the labels.
 """
 
 from __future__ import annotations
@@ -79,6 +90,8 @@ class MLPPolicy:
     weights: list[np.ndarray]
     biases: list[np.ndarray]
     activation: str = "logistic"
+    #: "identity" (a regressor) or "decision" (a binary classifier's ``2 sigmoid(z) - 1``).
+    output: str = "identity"
 
     @classmethod
     def from_sklearn(cls, model) -> MLPPolicy:
@@ -88,6 +101,7 @@ class MLPPolicy:
             [np.array(w, np.float32) for w in model.coefs_],
             [np.array(b, np.float32) for b in model.intercepts_],
             model.activation,
+            "decision" if getattr(model, "out_activation_", "identity") == "logistic" else "identity",
         )
 
     @property
@@ -122,6 +136,9 @@ class MLPPolicy:
             self._activate(h)
             h = h @ W
             h += b
+        if self.output == "decision":  # 2 sigmoid(z) - 1, elementwise: still independent of the batch
+            h *= 0.5
+            np.tanh(h, out=h)
         return h.astype(np.float32)
 
     def _activate(self, h: np.ndarray) -> None:
@@ -143,6 +160,8 @@ class MLPPolicy:
         if cached is None:
             if self.activation not in ("logistic", "tanh"):
                 raise InputError(f"activation: expected 'logistic' or 'tanh' (bounded), got {self.activation!r}")
+            if self.output not in ("identity", "decision"):
+                raise InputError(f"output: expected 'identity' or 'decision', got {self.output!r}")
             cached = []
             last = len(self.weights) - 1
             for k, (W, b) in enumerate(zip(self.weights, self.biases)):
@@ -187,6 +206,7 @@ class MLPPolicy:
         out = {f"W{k}": w for k, w in enumerate(self.weights)}
         out.update({f"b{k}": b for k, b in enumerate(self.biases)})
         out["activation"] = np.array(self.activation)
+        out["output"] = np.array(self.output)
         return out
 
     @classmethod
@@ -196,6 +216,7 @@ class MLPPolicy:
             [np.asarray(arrays[f"W{k}"], np.float32) for k in range(n)],
             [np.asarray(arrays[f"b{k}"], np.float32) for k in range(n)],
             str(arrays["activation"]),
+            str(arrays["output"]) if "output" in arrays else "identity",
         )
 
 
@@ -318,14 +339,53 @@ class ImitationResult:
 Rollout = Callable[[Policy | None, int, int], Sequence[Trajectory]]
 
 
-def _stack(trajs: Sequence[Trajectory]) -> tuple[np.ndarray, np.ndarray]:
+def _stack(
+    trajs: Sequence[Trajectory], decisions: Sequence[int] = (), window: int = 0
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Runs' states and actions stacked, and whether each state lies within ``window`` steps of a
+    switch of a ``decisions`` column in its run."""
     trajs = [t for t in trajs if t.features.shape[0]]
     if not trajs:
         raise InputError("rollout: returned no annotated states")
+    n_actions = trajs[0].expert.shape[1]
+    if any(d < 0 or d >= n_actions for d in decisions) or len(set(decisions)) != len(decisions):
+        raise InputError(f"decisions: expected distinct action columns 0..{n_actions - 1}, got {list(decisions)}")
+    near = []
+    for t in trajs:
+        close = np.zeros(t.features.shape[0], dtype=bool)
+        for d in decisions:
+            label = t.expert[:, d] > 0
+            for k in np.flatnonzero(label[1:] != label[:-1]) + 1:
+                close[max(k - window, 0) : k + window] = True
+        near.append(close)
     return (
         np.concatenate([t.features for t in trajs]).astype(np.float32),
         np.concatenate([t.expert for t in trajs]).astype(np.float32),
+        np.concatenate(near),
     )
+
+
+class _DecisionLearner:
+    """One decision column's classifier across updates (see the module docstring)."""
+
+    def __init__(self, options: dict, epochs: int, weight: float, seed: int):
+        from sklearn.neural_network import MLPClassifier
+
+        self.model = MLPClassifier(**options, random_state=seed)
+        self.epochs, self.weight = epochs, weight
+
+    def fit(self, x: np.ndarray, positive: np.ndarray, near: np.ndarray) -> MLPPolicy:
+        """``epochs`` more passes over states ``x`` labelled ``positive``; the classifier as a policy."""
+        w = np.where(near, self.weight, 1.0)
+        if positive.any() and not positive.all():  # each class carries half the weight
+            total = w.sum()
+            for cls in (positive, ~positive):
+                w[cls] *= total / (2.0 * w[cls].sum())
+        self.model.set_params(batch_size=min(int(self.model.batch_size), x.shape[0]))
+        for _ in range(self.epochs):  # one pass each; the classes are fixed up front, as the first
+            # runs may show no switch at all
+            self.model.partial_fit(x, positive.astype(np.int64), classes=[0, 1], sample_weight=w)
+        return MLPPolicy.from_sklearn(self.model)
 
 
 def imitate(
@@ -344,6 +404,9 @@ def imitate(
     select: Callable[[Policy], float] | None = None,
     on_iteration: Callable[[IterationRecord, Policy], None] | None = None,
     heads: Sequence[tuple[Sequence[int] | None, Sequence[int]]] | None = None,
+    decisions: Sequence[int] = (),
+    switch_window: int = 5,
+    switch_weight: float = 10.0,
 ) -> ImitationResult:
     """Train a policy imitating the expert behind ``rollout`` (see the module docstring).
 
@@ -364,6 +427,9 @@ def imitate(
     ``heads`` — (input columns or None for all, output columns) pairs covering every
     action column once — trains one network per head on its own columns
     (:class:`HeadsPolicy`); by default one network maps all features to all actions.
+    ``decisions`` — action columns labelled +1 / -1 that are switches, each trained as a
+    classifier in a head of its own (see the module docstring; without ``heads`` every
+    decision gets a head reading all features).
     """
     from sklearn.exceptions import ConvergenceWarning
     from sklearn.neural_network import MLPRegressor
@@ -372,64 +438,78 @@ def imitate(
         raise InputError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
     if method == "qdagger" and not 0.0 <= quantile < 1.0:
         raise InputError(f"quantile: expected a fraction in [0, 1), got {quantile!r}")
-    for name, value in (("iterations", iterations), ("runs_per_iteration", runs_per_iteration), ("epochs", epochs)):
-        if int(value) != value or value < (0 if name == "iterations" else 1):
+    for name, value in (
+        ("iterations", iterations),
+        ("runs_per_iteration", runs_per_iteration),
+        ("epochs", epochs),
+        ("switch_window", switch_window),
+    ):
+        if int(value) != value or value < (0 if name in ("iterations", "switch_window") else 1):
             raise InputError(f"{name}: expected a positive whole number, got {value!r}")
+    if not switch_weight >= 1.0:
+        raise InputError(f"switch_weight: expected a weight >= 1, got {switch_weight!r}")
+    decisions = [int(d) for d in decisions]
+    options = dict(
+        hidden_layer_sizes=tuple(hidden),
+        activation="logistic",
+        solver="adam",
+        learning_rate_init=learning_rate,
+        batch_size=batch_size,
+        shuffle=True,
+        tol=0.0,
+        n_iter_no_change=10**9,
+    )
 
-    def network(j: int) -> MLPRegressor:
-        return MLPRegressor(
-            hidden_layer_sizes=tuple(hidden),
-            activation="logistic",
-            solver="adam",
-            learning_rate_init=learning_rate,
-            batch_size=batch_size,
-            max_iter=epochs,
-            warm_start=True,
-            shuffle=True,
-            random_state=seed + j,
-            tol=0.0,
-            n_iter_no_change=10**9,
-        )
-
-    models = [network(j) for j in range(len(heads) if heads else 1)]
     started = time.perf_counter()
     history: list[IterationRecord] = []
     policy: Policy | None = None  # None until the first update, which iteration 0 makes
-    F = A = None
+    models: list = []
+    split: list[tuple[np.ndarray, np.ndarray]] | None = None
+    F = A = Nt = None
     runs = 0
     best: tuple[float, int, Policy] | None = None
     for it in range(iterations + 1):
         t0 = time.perf_counter()
         k = (initial_runs or runs_per_iteration) if it == 0 else runs_per_iteration
         flier = None if (it == 0 or method == "supervised") else policy
-        Fi, Ai = _stack(rollout(flier, k, it))
+        Fi, Ai, Ni = _stack(rollout(flier, k, it), decisions, switch_window)
         runs += k
         t1 = time.perf_counter()
         if F is None:
-            F, A = Fi, Ai
+            F, A, Nt = Fi, Ai, Ni
+            split = _heads(heads, decisions, F.shape[1], A.shape[1])
+            models = [
+                _DecisionLearner(options, epochs, switch_weight, seed + j)
+                if _is_decision(outs, decisions)
+                else MLPRegressor(**options, max_iter=epochs, warm_start=True, random_state=seed + j)
+                for j, (_, outs) in enumerate(split)
+            ]
         elif method == "qdagger":
-            assert policy is not None  # F holds data, so an update has made a policy
+            assert policy is not None and Nt is not None  # F holds data, so an update has made a policy
             loss = np.sum((policy(Fi) - Ai) ** 2, axis=1)
             keep = loss >= np.quantile(loss, quantile)
-            F, A = np.concatenate([F, Fi[keep]]), np.concatenate([A, Ai[keep]])
+            F, A, Nt = np.concatenate([F, Fi[keep]]), np.concatenate([A, Ai[keep]]), np.concatenate([Nt, Ni[keep]])
         else:
-            F, A = np.concatenate([F, Fi]), np.concatenate([A, Ai])
+            assert Nt is not None
+            F, A, Nt = np.concatenate([F, Fi]), np.concatenate([A, Ai]), np.concatenate([Nt, Ni])
+        assert split is not None and A is not None and Nt is not None
         c1 = time.process_time()
-        split = _heads(heads, F.shape[1], A.shape[1]) if heads else None
+        nets = []
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", ConvergenceWarning)
-            for j, model in enumerate(models):
-                cols, outs = (None, None) if split is None else split[j]
-                x = F if cols is None or _all_columns(cols, F.shape[1]) else F[:, cols]
-                y = A if outs is None else A[:, outs]
-                model.set_params(batch_size=min(batch_size, F.shape[0]))
-                model.fit(x, y if y.shape[1] > 1 else y[:, 0])
-        if split is None:
-            policy = MLPPolicy.from_sklearn(models[0])
+            for (cols, outs), model in zip(split, models):
+                x = F if _all_columns(cols, F.shape[1]) else F[:, cols]
+                if isinstance(model, _DecisionLearner):
+                    nets.append(model.fit(x, A[:, outs[0]] > 0, Nt))
+                else:
+                    model.set_params(batch_size=min(batch_size, F.shape[0]))
+                    y = A[:, outs]
+                    model.fit(x, y if y.shape[1] > 1 else y[:, 0])
+                    nets.append(MLPPolicy.from_sklearn(model))
+        if len(split) == 1 and _all_columns(split[0][0], F.shape[1]) and _all_columns(split[0][1], A.shape[1]):
+            policy = nets[0]
         else:
-            policy = HeadsPolicy(
-                F.shape[1], [(cols, outs, MLPPolicy.from_sklearn(m)) for (cols, outs), m in zip(split, models)]
-            )
+            policy = HeadsPolicy(F.shape[1], [(cols, outs, net) for (cols, outs), net in zip(split, nets)])
         t2, c2 = time.perf_counter(), time.process_time()
         mse = float(np.mean((policy(F) - A) ** 2))
         record = IterationRecord(it, runs, int(F.shape[0]), t1 - t0, t2 - t1, t2 - started, mse, c2 - c1)
@@ -446,14 +526,27 @@ def imitate(
     return ImitationResult(policy, method, quantile if method == "qdagger" else None, history, chosen)
 
 
-def _heads(heads, n_features: int, n_actions: int) -> list[tuple[np.ndarray, np.ndarray]]:
-    """``heads`` as column arrays, checked: inputs within the features, outputs covering each action once."""
+def _is_decision(outs: np.ndarray, decisions: Sequence[int]) -> bool:
+    return outs.size == 1 and int(outs[0]) in decisions
+
+
+def _heads(heads, decisions: Sequence[int], n_features: int, n_actions: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """``heads`` as column arrays, checked: inputs within the features, outputs covering each action
+    once, each decision alone in its head.  Without ``heads``: one network for the continuous
+    actions and one per decision, all reading every feature."""
+    if any(d < 0 or d >= n_actions for d in decisions) or len(set(decisions)) != len(decisions):
+        raise InputError(f"decisions: expected distinct action columns 0..{n_actions - 1}, got {list(decisions)}")
+    if heads is None:
+        rest = [c for c in range(n_actions) if c not in decisions]
+        heads = ([(None, rest)] if rest else []) + [(None, [d]) for d in decisions]
     out, seen = [], []
     for j, (inputs, outputs) in enumerate(heads):
         cols = np.arange(n_features) if inputs is None else np.asarray(inputs, np.int64)
         outs = np.asarray(outputs, np.int64)
         if cols.size == 0 or cols.min() < 0 or cols.max() >= n_features or np.unique(cols).size != cols.size:
             raise InputError(f"heads[{j}]: input columns must be distinct features 0..{n_features - 1}")
+        if any(int(o) in decisions for o in outs) and not _is_decision(outs, decisions):
+            raise InputError(f"heads[{j}]: a decision column needs a head of its own, got outputs {outs.tolist()}")
         out.append((cols, outs))
         seen.extend(outs.tolist())
     if sorted(seen) != list(range(n_actions)):

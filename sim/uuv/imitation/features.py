@@ -15,11 +15,14 @@ Features, all in the vehicle frame (x along the bow, y to starboard) and in [-1,
 * ``clock`` — mission time used, 2 t / limit - 1.  Not in the dissertation's list: our
   expert turns home when it runs out of time as well as fuel, and only the clock says so.
 
-Actions: the desired through-water velocity in the vehicle frame over the maximum speed,
-``a = (speed / max_speed) (cos r, sin r)`` with ``r`` the commanded heading relative to
-the bow; and a third output, the goal decision: +1 when the expert has given the mission
-waypoint up and heads home (waypoints done, not enough fuel, not enough time), -1 while
-it still pursues it.  The expert latches that decision, and a memoryless regressor cannot
+Actions: the commanded heading as a direction relative to the bow, ``(cos r, sin r)``; the
+goal decision: +1 when the expert has given the mission waypoint up and heads home
+(waypoints done, not enough fuel, not enough time), -1 while it still pursues it; and the
+commanded through-water speed over the maximum speed.  Section 6.5.3 puts speed and
+heading in one vector ``(speed / max_speed) (cos r, sin r)``, but a regression averages
+the vectors of neighbouring turns, and the shorter mean is a slower vehicle, which spends
+less energy a metre (drag is cubic in speed) and reaches waypoints the expert aborts.  With its own output the speed is learned as the expert
+holds it, and the heading is the direction's angle whatever its length.  The expert latches that decision, and a memoryless regressor cannot
 imitate a latch from the state alone: moments after turning on fuel the vehicle has the
 same charge and distance from home as one that carries on, and averaging "go on" with
 "go home" stalls it.  So the learned back-seat latches its own decision too (as the
@@ -52,13 +55,16 @@ __all__ = [
     "policy_heads",
     "ACTIONS",
     "GOAL",
+    "SPEED",
 ]
 
-FEATURE_VERSION = 2
-#: Network outputs: through-water velocity (forward, starboard) and the goal decision.
-ACTIONS = 3
+FEATURE_VERSION = 3
+#: Network outputs: heading direction (forward, starboard), the goal decision and the speed.
+ACTIONS = 4
 #: The action column of the goal decision (+1: give the waypoint up and head home).
 GOAL = 2
+#: The action column of the through-water speed over the maximum speed.
+SPEED = 3
 #: Within this distance a map vector shrinks linearly to zero (metres).
 NEAR_M = 10.0
 
@@ -84,6 +90,10 @@ class FeatureSpec:
     def waypoint(self) -> slice:
         """The pending waypoint's columns (direction and distance; all 0 when none is pending)."""
         return slice(1, 4)
+
+    def waypoint_pending(self, F: np.ndarray) -> np.ndarray:
+        """Rows of features ``F`` with a waypoint pending: where the goal decision is taken."""
+        return np.any(np.asarray(F)[:, self.waypoint] != 0, axis=1)
 
     @property
     def sonar(self) -> slice:
@@ -116,13 +126,13 @@ class FeatureSpec:
 def policy_heads(spec: FeatureSpec) -> tuple[tuple[list[int] | None, list[int]], ...]:
     """Which features each network of a learned back-seat reads (``rapt.imitation.imitate(heads=)``).
 
-    Velocity from every feature; the goal decision from the charge, the map vectors and the
-    clock only — what the expert's goal selection reads.  Learned by the steering network,
+    Heading and speed from every feature; the goal decision from the charge, the map vectors
+    and the clock only — what the expert's goal selection reads.  Learned by the steering network,
     the decision leaned on the range scan (in the chapter 6 mission most early aborts of a
     single network fired on a sonar spike, its output with the scan cleared far below 0).
     """
     mission_level = list(range(spec.sonar.start)) + list(range(spec.sonar.stop, spec.size))
-    return ((None, [0, 1]), (mission_level, [GOAL]))
+    return ((None, [0, 1, SPEED]), (mission_level, [GOAL]))
 
 
 def feature_spec(mission: Mission, beams: int = SCAN_BEAMS) -> FeatureSpec:
@@ -202,15 +212,15 @@ def expert_action(
     cmd_speed: np.ndarray,
     home: np.ndarray | bool = False,
 ) -> np.ndarray:
-    """(N, 3) float32 action for a commanded through-water heading and speed and the goal decision."""
+    """(N, 4) float32 action for a commanded through-water heading and speed and the goal decision."""
     rel = wrap_angle(np.asarray(cmd_heading, float) - np.asarray(heading, float))
     mag = np.clip(np.asarray(cmd_speed, float) / spec.max_speed, 0.0, 1.0)
     goal = np.broadcast_to(np.where(np.asarray(home, bool), 1.0, -1.0), mag.shape)
-    return np.column_stack([mag * np.cos(rel), mag * np.sin(rel), goal]).astype(np.float32)
+    return np.column_stack([np.cos(rel), np.sin(rel), goal, mag]).astype(np.float32)
 
 
 def action_command(spec: FeatureSpec, heading: np.ndarray, action: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(heading, speed) a front-seat is asked for by actions (N, 3); the goal column is not a command."""
+    """(heading, speed) a front-seat is asked for by actions (N, 4); the goal column is not a command."""
     a = np.asarray(action, dtype=float)
-    speed = np.clip(np.hypot(a[:, 0], a[:, 1]), 0.0, 1.0) * spec.max_speed
+    speed = np.clip(a[:, SPEED], 0.0, 1.0) * spec.max_speed
     return wrap_angle(np.asarray(heading, float) + np.arctan2(a[:, 1], a[:, 0])), speed

@@ -24,9 +24,10 @@ from sim.uuv.mission import Mission
 
 __all__ = ["Surrogate", "mission_digest", "FORMAT"]
 
-FORMAT = "rapt.surrogate/2"
-#: Formats this version reads: /1 held one network, /2 may hold several heads.
-READS = ("rapt.surrogate/1", FORMAT)
+FORMAT = "rapt.surrogate/3"
+#: Formats this version reads: /3 has a speed output and a classifier for the goal decision
+#: (/1 and /2 flew a velocity vector and must be retrained).
+READS = (FORMAT,)
 
 
 def mission_digest(mission: Mission) -> str:
@@ -62,7 +63,7 @@ class Surrogate:
         if policy.n_outputs != spec.actions:
             raise InputError(
                 f"policy: gives {policy.n_outputs} outputs, a back-seat needs {spec.actions} "
-                "(velocity forward and starboard, and the goal decision)"
+                "(heading forward and starboard, the goal decision and the speed)"
             )
         return cls(policy, spec, mission.name, mission_digest(mission), dict(training or {}), float(goal_threshold))
 

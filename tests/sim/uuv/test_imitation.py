@@ -3,13 +3,14 @@
 from __future__ import annotations
 
 import dataclasses
+import json
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 import sim.uuv
-from rapt.errors import FileFormatError, MissingFileError, StudyMismatchError
+from rapt.errors import FileFormatError, InputError, MissingFileError, StudyMismatchError
 from rapt.imitation import HeadsPolicy, MLPPolicy, Trajectory, imitate, policy_from_arrays
 from sim.uuv.imitation.features import action_command, expert_action, feature_spec, features
 from sim.uuv.imitation.rollouts import annotated_runs
@@ -66,13 +67,13 @@ def test_actions_round_trip_through_the_vehicle_frame():
     cmd = rng.uniform(-np.pi, np.pi, 50)
     speed = rng.uniform(0, SPEC.max_speed, 50)
     a = expert_action(SPEC, heading, cmd, speed)
-    assert np.all(np.hypot(a[:, 0], a[:, 1]) <= 1 + 1e-6)
+    np.testing.assert_allclose(np.hypot(a[:, 0], a[:, 1]), 1.0, rtol=1e-6)  # a direction: its length is 1
     h2, s2 = action_command(SPEC, heading, a)
     np.testing.assert_allclose(np.angle(np.exp(1j * (h2 - cmd))), 0, atol=1e-5)
     np.testing.assert_allclose(s2, speed, rtol=1e-5)
-    # straight ahead at cruise is (cruise / max, 0); hard to starboard is positive y
-    # straight ahead at cruise, still pursuing the waypoint, is (cruise / max, 0, -1)
-    np.testing.assert_allclose(expert_action(SPEC, [0.0], [0.0], [2.0]), [[2 / 3, 0.0, -1.0]], atol=1e-7)
+    # straight ahead at cruise, still pursuing the waypoint: direction (1, 0), goal -1, speed cruise / max;
+    # hard to starboard is positive y
+    np.testing.assert_allclose(expert_action(SPEC, [0.0], [0.0], [2.0]), [[1.0, 0.0, -1.0, 2 / 3]], atol=1e-7)
     assert expert_action(SPEC, [0.0], [np.pi / 2], [3.0])[0, 1] == pytest.approx(1.0)
     assert expert_action(SPEC, [0.0, 0.0], [0.0, 0.0], [1.0, 1.0], home=[True, False])[:, 2].tolist() == [1, -1]
 
@@ -151,6 +152,65 @@ def test_the_best_policy_on_validation_is_returned():
     assert last.chosen == 2
 
 
+def _latched_switch_rollout(threshold: float):
+    """Runs whose charge-like feature x falls 0.02 a step from a random start; the expert switches
+    (+1) at the first x <= ``threshold`` and latches: the run then shows "no waypoint pending"
+    (feature 1 is 0), so among pending states the +1 label appears once per run."""
+
+    def rollout(policy, k, iteration):
+        rng = np.random.default_rng([7, iteration])
+        out = []
+        for _ in range(k):
+            F, A, home = [], [], False
+            for x in np.arange(rng.uniform(-0.2, 1.0), -1.0, -0.02):
+                turn = home or x <= threshold
+                F.append([x, 0.0 if home else 1.0])
+                A.append([0.5 * x, 1.0 if turn else -1.0])
+                home = turn
+            out.append(Trajectory(np.array(F, np.float32), np.array(A, np.float32)))
+        return out
+
+    return rollout
+
+
+@pytest.mark.parametrize("seed", [0, 1])
+def test_a_decision_head_places_a_switch_sharply_where_regression_ramps(seed):
+    """The same runs, the same network shape and epochs: regressed on +-1 the latched switch is a
+    ramp half the input range wide, crossing zero well short of the expert's threshold; learned as
+    a decision (classifier, switch-weighted) it is a step a quarter as wide, nearer the threshold."""
+    threshold = 0.3
+    grid = np.column_stack([np.linspace(-1, 1, 2001), np.ones(2001)]).astype(np.float32)  # pending states
+    found = {}
+    for decisions in ((), (1,)):
+        result = imitate(
+            _latched_switch_rollout(threshold),
+            method="supervised",
+            iterations=5,
+            runs_per_iteration=4,
+            hidden=(16, 8),
+            epochs=60,
+            seed=seed,
+            decisions=decisions,
+        )
+        goal = result.policy(grid)[:, 1]
+        undecided = grid[(goal > -0.8) & (goal < 0.8), 0]
+        found[decisions] = (grid[goal > 0, 0].max(), undecided.max() - undecided.min())
+    (cross_r, ramp_r), (cross_d, ramp_d) = found[()], found[(1,)]
+    assert ramp_r > 0.45 and ramp_d < 0.3 and ramp_d < ramp_r / 2
+    assert abs(cross_d - threshold) < abs(cross_r - threshold) and abs(cross_d - threshold) < 0.1
+    assert result.policy.heads[1][2].output == "decision"  # saved and flown as 2 p - 1
+
+
+def test_decisions_are_checked():
+    rollout = _latched_switch_rollout(0.3)
+    with pytest.raises(InputError, match=r"decisions: expected distinct action columns 0\.\.1"):
+        imitate(rollout, iterations=0, decisions=[2])
+    with pytest.raises(InputError, match="a decision column needs a head of its own"):
+        imitate(rollout, iterations=0, decisions=[1], heads=[(None, [0, 1])])
+    with pytest.raises(InputError, match="switch_weight: expected a weight >= 1"):
+        imitate(rollout, iterations=0, decisions=[1], switch_weight=0.5)
+
+
 def _net(rng, n_in, n_out, hidden=(12, 6)):
     sizes = [n_in, *hidden, n_out]
     return MLPPolicy(
@@ -225,14 +285,14 @@ def test_bad_learner_settings_are_named():
 def _steering_policy(home_below: float = 0.15):
     """A hand-made linear policy: ahead at 80% of max speed, turning away from sonar returns ahead,
     homing on the waypoint, and giving it up when the charge is below ``home_below``."""
-    W = np.zeros((SPEC.size, 3), np.float32)
+    W = np.zeros((SPEC.size, 4), np.float32)
     sonar = np.arange(SPEC.size)[SPEC.sonar]
     ahead_stbd, ahead_port = sonar[1:30], sonar[331:360]
     W[ahead_stbd, 1] = 0.05  # a return to starboard (feature < 1) lowers the starboard command: turn to port
     W[ahead_port, 1] = -0.05
     W[2, 1] = W[5, 1] = 0.5  # steer towards the waypoint (or, with none pending, the recovery point)
     W[0, 2] = -10.0  # the goal output is positive below the charge home_below (fuel feature 2 b - 1)
-    b = np.array([0.8, -0.05 * 29 + 0.05 * 29, 10.0 * (2 * home_below - 1)], np.float32)
+    b = np.array([0.8, -0.05 * 29 + 0.05 * 29, 10.0 * (2 * home_below - 1), 0.8], np.float32)
     return MLPPolicy([W], [b], "logistic")
 
 
@@ -254,6 +314,13 @@ def test_surrogate_files_round_trip_and_refuse_another_mission(tmp_path):
     (tmp_path / "junk.npz").write_bytes(b"not a zip")
     with pytest.raises(FileFormatError, match="not a surrogate file"):
         Surrogate.load(tmp_path / "junk.npz")
+    with np.load(path) as z:  # a surrogate of the last format (a velocity vector, no speed output)
+        arrays = {k: z[k] for k in z.files}
+    header = json.loads(str(arrays["header"]))
+    arrays["header"] = np.array(json.dumps({**header, "format": "rapt.surrogate/2"}))
+    np.savez(tmp_path / "old.npz", **arrays)
+    with pytest.raises(FileFormatError, match=r"format 'rapt.surrogate/2', expected one of rapt.surrogate/3; retrain"):
+        Surrogate.load(tmp_path / "old.npz", IMITATION7)
 
 
 def test_a_surrogate_flies_the_batch_simulator_and_the_expert_annotates_it():
