@@ -23,6 +23,7 @@ import numpy as np
 
 import rapt
 import sim.uuv
+from rapt.errors import InputError
 from sim.uuv.metrics import metric_names, metric_types
 from sim.uuv.mission import Mission
 from sim.uuv.scoring import MODE_NAMES, modes_from_scores
@@ -101,7 +102,7 @@ class _Bracketing:
             self._bisect(next(iter(results.values())))
         else:
             self._after_steps(results)
-        if self.bracket is not None and not self.done and self.bracket[1] - self.bracket[0] <= self.target:
+        if self.bracket is not None and not self.done and self.bracket[1] - self.bracket[0] <= self.target * (1 + 1e-9):
             self.done = self.confirmed = True
 
     def _after_ends(self) -> None:
@@ -170,7 +171,7 @@ def confirm_pairs(
     distance from the candidate's midpoint to the bracket's) and its ``expert_runs``.
     """
     if radius <= 0 or min_length <= 0:
-        raise ValueError(f"confirm_pairs: radius and min_length must be positive, got {radius} and {min_length}")
+        raise InputError(f"confirm_pairs: radius and min_length must be positive, got {radius} and {min_length}")
     levels = [list(cols) for cols in rapt.ScoreTree.from_mapping(mission.score_tree).levels()]
     names, types = metric_names(mission), metric_types(mission)
     discrete = [[c for c in cols if types[c] != "continuous"] for cols in levels]
@@ -221,7 +222,7 @@ def _start(index: int, pair: dict, cols: list[int], radius: float, min_length: f
     a, b = (np.asarray(u, dtype=float) for u in pair["u"])
     length = float(np.linalg.norm(b - a))
     if length <= 0:
-        raise ValueError(f"confirm_pairs: candidate {index + 1} has two equal scenarios")
+        raise InputError(f"confirm_pairs: candidate {index + 1} has two equal scenarios")
     direction = (b - a) / length
     scores = np.asarray(pair["scores"], dtype=float)
     # how far the line stays in the unit cube before a and past b
