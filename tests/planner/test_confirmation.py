@@ -108,3 +108,21 @@ def test_confirmation_stops_at_its_budget(boundary, claimed, expert_calls):
     assert out.runs == sum(len(X) for X in expert_calls) <= 7
     assert out.pairs == [] and out.examined == 2  # the budget ran out before either found a boundary
     assert confirm_pairs(IMITATION7, candidates, k=2, budget=1).examined == 0
+
+
+def test_the_expert_as_its_own_surrogate_confirms_every_candidate_as_is():
+    """generate's wiring: candidates from a study's analysis reach the expert with the scores found there."""
+    from planner.generate import GenerateConfig, analyse, confirm_with_expert, search_mission, select_pairs
+
+    a = analyse(IMITATION7, search_mission(IMITATION7, GenerateConfig(budget=500, batch_size=250, seed=1)))
+    candidates = select_pairs(a, 10)
+    out = confirm_with_expert(IMITATION7, a, candidates, k=10, budget=100)
+    assert len(candidates) >= 2 and out.examined == len(out.pairs) == len(candidates)
+    assert out.runs == 2 * len(candidates) and out.share_confirmed == 1.0
+    for pair, cand in zip(out.pairs, candidates):
+        assert pair["moved_by"] == 0 and pair["expert_runs"] == 2 and pair["surrogate_modes"] == cand["modes"]
+        assert np.array_equal(pair["u_override"], a.X[cand["rows"]]) and pair["distance"] == pytest.approx(
+            cand["distance"]
+        )
+        # the same boundary type: the expert's own shows at the candidate's level
+        assert (pair["modes"], pair["level"], pair["elements"]) == (cand["modes"], cand["level"], cand["elements"])
