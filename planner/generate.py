@@ -322,12 +322,15 @@ def confirm_with_expert(mission: Mission, a: Analysis, candidates: list[dict], k
     (simulated again: the surrogate is deterministic) are handed on; at most ``k`` pairs,
     at most ``budget`` expert runs.
     """
-    U = np.array([np.asarray(p.get("u_override", [a.X[r] for r in p["rows"]])) for p in candidates]).reshape(
-        len(candidates), 2, mission.dim
-    )
+    U = np.array([_pair_points(a, p) for p in candidates]).reshape(len(candidates), 2, mission.dim)
     claimed = sim.uuv.simulate(mission, U.reshape(-1, mission.dim), surrogate=a.surrogate).scores
     offered = [{**p, "u": U[c], "scores": claimed[2 * c : 2 * c + 2]} for c, p in enumerate(candidates)]
     return confirm_pairs(mission, offered, k, budget)
+
+
+def _pair_points(a: Analysis, pair: dict) -> np.ndarray:
+    """A pair's two unit-cube scenarios: moved ones (refined or confirmed) or the study's rows."""
+    return np.asarray(pair["u_override"] if "u_override" in pair else a.X[pair["rows"]], dtype=float)
 
 
 # -- everything ------------------------------------------------------------------------------
@@ -355,11 +358,7 @@ def generate(
     clock = _StageClock(timings)
     a, pairs, confirmation, refinement = _choose_pairs(mission, cfg, progress, clock)
     sens = coordinate_sensitivity(mission.space, a.sensitivity)
-    U = (
-        np.vstack([np.asarray(p.get("u_override", [a.X[r] for r in p["rows"]])) for p in pairs])
-        if pairs
-        else np.zeros((0, mission.dim))
-    )
+    U = np.vstack([_pair_points(a, p) for p in pairs]) if pairs else np.zeros((0, mission.dim))
     ids = [f"pair{p}{side}" for p in range(1, len(pairs) + 1) for side in "ab"]
     partners = U[np.arange(len(U)) ^ 1]  # a's partner is b and b's is a
     chosen = sim.uuv.simulate(mission, U, trajectories=True)
