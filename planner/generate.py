@@ -39,6 +39,7 @@ from scipy.spatial import cKDTree
 
 import rapt
 import sim.uuv
+from planner.confirmation import Confirmation, confirm_pairs
 from planner.dithering import DEFAULT_NOISE, DitherNoise, Outcome, dither_many, outcome_columns, robust_variants
 from planner.exports import write_scenario_files
 from planner.jsonio import jsonable
@@ -92,7 +93,7 @@ class GenerateConfig:
     fragile_below: float = 0.8  # P(predicted outcome) under which a scenario gets a robust variant
     surrogate: Any = None  # a sim.uuv.imitation Surrogate: search and dither with it, confirm pairs with the expert
     surrogate_file: str = ""
-    confirm_runs: int = 100  # expert runs that check candidate pairs (two per pair)
+    confirm_runs: int = 100  # expert runs that look for the expert's boundary near the candidate pairs
 
     def __post_init__(self) -> None:
         if self.batch_size is None and isinstance(self.budget, int):
@@ -229,6 +230,7 @@ class Analysis:
     sensitivity: dict[str, dict[str, float]]
     X_invalid: np.ndarray
     boundary_types: list[dict] = field(default_factory=list)
+    surrogate: Any = None  # the learned autonomy the runs were simulated with (None: the expert)
 
 
 def analyse(mission: Mission, study: rapt.Study, surrogate=None) -> Analysis:
@@ -247,7 +249,7 @@ def analyse(mission: Mission, study: rapt.Study, surrogate=None) -> Analysis:
     sensitivity = {}
     for row, name in zip(imp, ("mission_success", "safety_success")):
         sensitivity[name] = {p.name: float(row[mission.space.slice_of(p.name)].sum()) for p in mission.space.parameters}
-    a = Analysis(X, result, tree, sensitivity, study.X_failed)
+    a = Analysis(X, result, tree, sensitivity, study.X_failed, surrogate=surrogate)
     a.boundary_types = _boundary_types(a)
     return a
 
@@ -312,32 +314,23 @@ def select_pairs(a: Analysis, k: int, min_cluster: int = 3) -> list[dict]:
 
 
 # -- 7. expert confirmation (surrogate workflow) ------------------------------------------------
-def confirm_with_expert(mission: Mission, a: Analysis, candidates: list[dict], k: int) -> tuple[list[dict], int]:
-    """Run the expert on both scenarios of each candidate pair; keep the first ``k`` it confirms.
+def confirm_with_expert(mission: Mission, a: Analysis, candidates: list[dict], k: int, budget: int) -> Confirmation:
+    """The surrogate's candidate pairs checked by the expert (:func:`planner.confirmation.confirm_pairs`).
 
-    Section 6.2.3, step 3: a pair found on the surrogate is a boundary of the real autonomy
-    when the expert's modes differ across it too.  The pair's ``modes`` become the expert's
-    (the surrogate's are kept as ``surrogate_modes``).  Returns (pairs, expert runs).
+    Section 6.2.3, step 3: a pair found on the surrogate is planned only as the expert's own
+    boundary pair near it.  The candidates' scenarios and the surrogate's scores there
+    (simulated again: the surrogate is deterministic) are handed on; at most ``k`` pairs,
+    at most ``budget`` expert runs.
     """
-    if not candidates:
-        return [], 0
-    U = np.vstack([np.asarray(p.get("u_override", [a.X[r] for r in p["rows"]])) for p in candidates])
-    r = sim.uuv.simulate(mission, U)
-    out = []
-    for c, pair in enumerate(candidates):
-        ma, mb = int(r.modes[2 * c]), int(r.modes[2 * c + 1])
-        if r.valid[2 * c] and r.valid[2 * c + 1] and ma != mb:
-            out.append(
-                {
-                    **pair,
-                    "confirmed_by_expert": True,
-                    "surrogate_modes": pair["modes"],
-                    "modes": [MODE_NAMES[ma], MODE_NAMES[mb]],
-                }
-            )
-            if len(out) == k:
-                break
-    return out, int(len(U))
+    U = np.array([_pair_points(a, p) for p in candidates]).reshape(len(candidates), 2, mission.dim)
+    claimed = sim.uuv.simulate(mission, U.reshape(-1, mission.dim), surrogate=a.surrogate).scores
+    offered = [{**p, "u": U[c], "scores": claimed[2 * c : 2 * c + 2]} for c, p in enumerate(candidates)]
+    return confirm_pairs(mission, offered, k, budget)
+
+
+def _pair_points(a: Analysis, pair: dict) -> np.ndarray:
+    """A pair's two unit-cube scenarios: moved ones (refined or confirmed) or the study's rows."""
+    return np.asarray(pair["u_override"] if "u_override" in pair else a.X[pair["rows"]], dtype=float)
 
 
 # -- everything ------------------------------------------------------------------------------
@@ -365,11 +358,7 @@ def generate(
     clock = _StageClock(timings)
     a, pairs, confirmation, refinement = _choose_pairs(mission, cfg, progress, clock)
     sens = coordinate_sensitivity(mission.space, a.sensitivity)
-    U = (
-        np.vstack([np.asarray(p.get("u_override", [a.X[r] for r in p["rows"]])) for p in pairs])
-        if pairs
-        else np.zeros((0, mission.dim))
-    )
+    U = np.vstack([_pair_points(a, p) for p in pairs]) if pairs else np.zeros((0, mission.dim))
     ids = [f"pair{p}{side}" for p in range(1, len(pairs) + 1) for side in "ab"]
     partners = U[np.arange(len(U)) ^ 1]  # a's partner is b and b's is a
     chosen = sim.uuv.simulate(mission, U, trajectories=True)
@@ -448,12 +437,12 @@ def _mission_text(mission: Mission, mission_path: Path) -> dict[str, str]:
 
 def _choose_pairs(
     mission: Mission, cfg: GenerateConfig, progress: Callable[[str, int, int, str], None] | None, clock: _StageClock
-) -> tuple[Analysis, list[dict], tuple[int, int] | None, dict | None]:
+) -> tuple[Analysis, list[dict], Confirmation | None, dict | None]:
     """Stages 1-3 (with refinement, and the expert's confirmation on the surrogate workflow).
 
-    Returns the analysis, the chosen pairs, on the surrogate workflow the number of
-    candidate pairs and the expert runs that checked them (None otherwise), and the
-    refinement's account (None without ``--refine``).
+    Returns the analysis, the chosen pairs, on the surrogate workflow the expert's
+    :class:`~planner.confirmation.Confirmation` (None otherwise), and the refinement's
+    account (None without ``--refine``).
     """
     status: SearchStatus | None = None
     searched: Callable[[int, int], None] | None = None
@@ -486,12 +475,17 @@ def _choose_pairs(
         clock.lap("refinement")
     confirmation = None
     if sur is not None:
-        candidates = len(pairs)
-        pairs, confirm_spent = confirm_with_expert(mission, a, pairs, cfg.pairs)
+        confirmation = confirm_with_expert(mission, a, pairs, cfg.pairs, cfg.confirm_runs)
+        pairs = confirmation.pairs
         if progress is not None:
-            progress("confirm", len(pairs), candidates, f"{len(pairs)} of {candidates} candidate pairs confirmed")
+            progress(
+                "confirm",
+                len(pairs),
+                confirmation.examined,
+                f"{len(pairs)} of {confirmation.examined} candidate pairs examined confirmed, "
+                f"{confirmation.runs} expert runs",
+            )
         clock.lap("confirmation")
-        confirmation = (candidates, confirm_spent)
     return a, pairs, confirmation, refinement
 
 
@@ -632,7 +626,7 @@ def _plan_document(
     a: Analysis,
     pairs: list[dict],
     verdicts: list[dict],
-    confirmation: tuple[int, int] | None,
+    confirmation: Confirmation | None,
     refinement: dict | None,
     runs: dict[str, int],
     dithering: dict,
@@ -653,7 +647,7 @@ def _plan_document(
             "distance": pair["distance"],
             "scenarios": sides,
             "refined": bool(pair.get("refined", False)),
-            **({"confirmed_by_expert": True, "surrogate_modes": pair["surrogate_modes"]} if sur is not None else {}),
+            **({key: pair[key] for key in _CONFIRMED_FIELDS} if sur is not None else {}),
         }
         if pair.get("refined"):
             entry["refinement"] = {"start_distance": pair["start_distance"], "runs": pair["refine_runs"]}
@@ -682,7 +676,7 @@ def _plan_document(
             "runs": runs,
             "dithering": {**dithering, "runs_per_scenario": cfg.dithers // 2},
             **({"refinement": refinement} if refinement is not None else {}),
-            **({"surrogate": _surrogate_summary(cfg, confirmation, len(pairs))} if confirmation is not None else {}),
+            **({"surrogate": _surrogate_summary(cfg, confirmation)} if confirmation is not None else {}),
         },
         "sensitivity": a.sensitivity,
         "pairs": plan_pairs,
@@ -692,16 +686,21 @@ def _plan_document(
     }
 
 
-def _surrogate_summary(cfg: GenerateConfig, confirmation: tuple[int, int], confirmed: int) -> dict:
-    """The plan's account of a surrogate search: its file and method, expert runs, pairs confirmed."""
+_CONFIRMED_FIELDS = ("confirmed_by_expert", "surrogate_modes", "surrogate_elements", "moved_by", "expert_runs")
+
+
+def _surrogate_summary(cfg: GenerateConfig, confirmation: Confirmation) -> dict:
+    """The plan's account of a surrogate search: its file and method, expert runs, candidates examined and confirmed."""
     sur = cfg.surrogate
-    candidates, confirm_spent = confirmation
     return {
         "file": cfg.surrogate_file,
         "method": str(sur.training.get("method", "")),
-        "expert_runs": {"training": int(sur.training.get("runs", 0)), "confirmation": confirm_spent},
-        "candidates": candidates,
-        "confirmed": confirmed,
+        "expert_runs": {"training": int(sur.training.get("runs", 0)), "confirmation": confirmation.runs},
+        "confirm_budget": cfg.confirm_runs,
+        "candidates": confirmation.candidates,
+        "examined": confirmation.examined,
+        "confirmed": len(confirmation.pairs),
+        "share_confirmed": confirmation.share_confirmed,
     }
 
 

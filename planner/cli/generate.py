@@ -93,7 +93,11 @@ def generate(
     ] = None,
     confirm_runs: Annotated[
         int,
-        typer.Option("--confirm-runs", help="Expert runs that check the surrogate's candidate pairs (two per pair)."),
+        typer.Option(
+            "--confirm-runs",
+            help="Budget of expert runs that look for the expert's own boundary near the surrogate's "
+            "candidate pairs (at least two per pair).",
+        ),
     ] = 100,
 ) -> None:
     """Search a mission, choose boundary pairs, dither them and write a field plan."""
@@ -166,9 +170,9 @@ def generate(
     if surrogate is not None:
         s = plan["study"]["surrogate"]
         out.print(
-            f"surrogate search: {s['confirmed']} of {s['candidates']} candidate pairs confirmed by the expert; "
-            f"expert runs: {s['expert_runs']['training']} training + {s['expert_runs']['confirmation']} "
-            "confirmation",
+            f"surrogate search: the expert confirmed {s['confirmed']} of {s['examined']} candidate pairs examined "
+            f"({s['share_confirmed']:.0%}; {s['candidates']} offered); expert runs: {s['expert_runs']['training']} "
+            f"training + {s['expert_runs']['confirmation']} confirmation (budget {s['confirm_budget']})",
             soft_wrap=True,
             highlight=False,
         )

@@ -77,13 +77,19 @@ def test_cli_trains_a_surrogate_and_generate_searches_with_it_and_confirms_with_
     assert result.exit_code == 0, result.output
     plan = json.loads((out / "plan.json").read_text())
     s = plan["study"]["surrogate"]
-    assert s["expert_runs"] == {"training": 8, "confirmation": 2 * s["candidates"]} and s["candidates"] <= 10
-    assert s["confirmed"] == len(plan["pairs"]) <= 2
-    for pair in plan["pairs"]:  # the expert changes mode across every planned pair
-        assert pair["confirmed_by_expert"] and pair["modes"][0] != pair["modes"][1]
+    # the confirmation is a budget of expert runs: two at least for every candidate examined
+    assert s["expert_runs"]["training"] == 8 and s["confirm_budget"] == 20
+    assert 2 * s["examined"] <= s["expert_runs"]["confirmation"] <= 20 and s["examined"] <= s["candidates"] <= 10
+    assert s["confirmed"] == len(plan["pairs"]) <= 2 and s["share_confirmed"] == s["confirmed"] / max(s["examined"], 1)
+    assert sum(p["expert_runs"] for p in plan["pairs"]) <= s["expert_runs"]["confirmation"]
+    assert f"confirmed {s['confirmed']} of {s['examined']} candidate pairs examined" in result.output
+    for pair in plan["pairs"]:  # the expert's own outcome changes across every planned pair, in its elements
+        assert pair["confirmed_by_expert"] and pair["moved_by"] >= 0 and pair["elements"]
         a, b = (next(sc for sc in plan["scenarios"] if sc["id"] == sid) for sid in pair["scenarios"])
         expert = sim.uuv.simulate(IMITATION7, np.array([a["u"], b["u"]]))
         assert [("TF", "SS", "MS", "TS")[m] for m in expert.modes] == pair["modes"]
+        cols = [expert.names.index(e) for e in pair["elements"]]
+        assert np.all(expert.scores[0, cols] != expert.scores[1, cols])
     import jsonschema
 
     jsonschema.validate(
