@@ -32,7 +32,14 @@ place.  A decision column instead gets a network of its own trained as a classif
 error settles), its two classes weighed equally, and the states within ``switch_window``
 steps of one of the expert's switches in their run weighed ``switch_weight`` times more:
 those states fix where the switch lies.  Its output is ``2 p - 1`` (p the probability of
-+1), on the scale of the labels.
++1), on the scale of the labels.  Adam over a few epochs an update still leaves a ramp a
+few percent of the input range wide (the expert's switch on charge is a fraction of a
+watt-hour), so once the updates are done each decision is refitted by L-BFGS to
+convergence, with a small network (:data:`SHARP_HIDDEN`) on standardised inputs, on the
+states where it is taken, all those near a switch and a seeded ``far_share`` of the rest.
+The updates themselves keep the smoother Adam classifier: trained to convergence on the
+first updates' handful of switches, a network generalises them badly and the learner,
+turning home early, never shows the late states that would correct it.
 """
 
 from __future__ import annotations
@@ -388,6 +395,38 @@ class _DecisionLearner:
         return MLPPolicy.from_sklearn(self.model)
 
 
+#: Hidden layer of the classifier that sharpens a decision at the end: a switch depends on a few
+#: features, and a small network trained to convergence by L-BFGS is sharp where Adam ramps.
+SHARP_HIDDEN = (64,)
+
+
+def _sharp_classifier(
+    x: np.ndarray, positive: np.ndarray, near: np.ndarray, iterations: int, far_share: float, seed: int
+) -> MLPPolicy | None:
+    """A classifier of ``positive`` on ``x`` trained by L-BFGS on standardised inputs, from the states
+    ``near`` a switch and a seeded ``far_share`` of the rest; None without both classes."""
+    from sklearn.exceptions import ConvergenceWarning
+    from sklearn.neural_network import MLPClassifier
+
+    rng = np.random.default_rng([seed, 0x736861])
+    keep = near | (rng.random(near.size) < far_share)
+    x, positive = x[keep], positive[keep]
+    if positive.all() or not positive.any():
+        return None
+    mu, sd = x.mean(axis=0), np.maximum(x.std(axis=0), 1e-3)
+    model = MLPClassifier(
+        SHARP_HIDDEN, activation="logistic", solver="lbfgs", max_iter=iterations, tol=0.0, random_state=seed
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ConvergenceWarning)
+        model.fit((x - mu) / sd, positive.astype(np.int64))
+    net = MLPPolicy.from_sklearn(model)
+    W0 = net.weights[0].astype(np.float64) / sd[:, None]  # the standardisation folded into layer 1
+    net.biases[0] = (net.biases[0] - mu @ W0).astype(np.float32)
+    net.weights[0] = W0.astype(np.float32)
+    return net
+
+
 def imitate(
     rollout: Rollout,
     *,
@@ -401,12 +440,15 @@ def imitate(
     learning_rate: float = 3e-3,
     batch_size: int = 256,
     seed: int = 0,
-    select: Callable[[Policy], float] | None = None,
+    select: Callable[[Policy], float | tuple[float, ...]] | None = None,
     on_iteration: Callable[[IterationRecord, Policy], None] | None = None,
     heads: Sequence[tuple[Sequence[int] | None, Sequence[int]]] | None = None,
     decisions: Sequence[int] = (),
     switch_window: int = 5,
     switch_weight: float = 10.0,
+    decided_where: Callable[[np.ndarray], np.ndarray] | None = None,
+    sharpen_iterations: int = 500,
+    far_share: float = 0.1,
 ) -> ImitationResult:
     """Train a policy imitating the expert behind ``rollout`` (see the module docstring).
 
@@ -421,15 +463,18 @@ def imitate(
     better) and the best is returned, as DAgger itself prescribes (Ross et al. 2011,
     Algorithm 3.1: "return best pi_i on validation"): a closed-loop figure such as mode
     accuracy swings from update to update although the loss falls, and the last policy
-    is not the best one; ties go to the later, better-fed policy.  Without it the last
-    policy is returned.
+    is not the best one; ties go to the later, better-fed policy.  A tuple is compared
+    element by element (a tie-breaker after the figure that counts; the first is recorded).
+    Without it the last policy is returned.
 
     ``heads`` — (input columns or None for all, output columns) pairs covering every
     action column once — trains one network per head on its own columns
     (:class:`HeadsPolicy`); by default one network maps all features to all actions.
     ``decisions`` — action columns labelled +1 / -1 that are switches, each trained as a
     classifier in a head of its own (see the module docstring; without ``heads`` every
-    decision gets a head reading all features).
+    decision gets a head reading all features).  After the last update each decision of
+    the policy returned is sharpened (``sharpen_iterations`` L-BFGS iterations, 0: not),
+    on the states where ``decided_where(F)`` says it is taken (default all).
     """
     from sklearn.exceptions import ConvergenceWarning
     from sklearn.neural_network import MLPRegressor
@@ -443,11 +488,14 @@ def imitate(
         ("runs_per_iteration", runs_per_iteration),
         ("epochs", epochs),
         ("switch_window", switch_window),
+        ("sharpen_iterations", sharpen_iterations),
     ):
-        if int(value) != value or value < (0 if name in ("iterations", "switch_window") else 1):
+        if int(value) != value or value < (0 if name in ("iterations", "switch_window", "sharpen_iterations") else 1):
             raise InputError(f"{name}: expected a positive whole number, got {value!r}")
     if not switch_weight >= 1.0:
         raise InputError(f"switch_weight: expected a weight >= 1, got {switch_weight!r}")
+    if not 0.0 < far_share <= 1.0:
+        raise InputError(f"far_share: expected a share in (0, 1], got {far_share!r}")
     decisions = [int(d) for d in decisions]
     options = dict(
         hidden_layer_sizes=tuple(hidden),
@@ -467,7 +515,7 @@ def imitate(
     split: list[tuple[np.ndarray, np.ndarray]] | None = None
     F = A = Nt = None
     runs = 0
-    best: tuple[float, int, Policy] | None = None
+    best: tuple[tuple[float, ...], int, Policy] | None = None
     for it in range(iterations + 1):
         t0 = time.perf_counter()
         k = (initial_runs or runs_per_iteration) if it == 0 else runs_per_iteration
@@ -514,8 +562,9 @@ def imitate(
         mse = float(np.mean((policy(F) - A) ** 2))
         record = IterationRecord(it, runs, int(F.shape[0]), t1 - t0, t2 - t1, t2 - started, mse, c2 - c1)
         if select is not None:
-            score = float(select(policy))
-            record.extra["selection"] = score
+            got = select(policy)
+            score = tuple(float(v) for v in got) if isinstance(got, tuple) else (float(got),)
+            record.extra["selection"] = score[0]
             if best is None or score >= best[0]:
                 best = (score, it, policy)
         if on_iteration is not None:
@@ -523,6 +572,15 @@ def imitate(
         history.append(record)
     chosen, policy = (best[1], best[2]) if best is not None else (len(history) - 1, policy)
     assert policy is not None  # iterations >= 0 was checked, so the loop updated at least once
+    if sharpen_iterations and isinstance(policy, HeadsPolicy) and F is not None and A is not None and Nt is not None:
+        taken = np.ones(F.shape[0], dtype=bool) if decided_where is None else np.asarray(decided_where(F), bool)
+        sharpened = list(policy.heads)
+        for j, (cols, outs, net) in enumerate(policy.heads):
+            if _is_decision(outs, decisions):
+                x = F[taken][:, cols]
+                sharp = _sharp_classifier(x, A[taken, outs[0]] > 0, Nt[taken], sharpen_iterations, far_share, seed + j)
+                sharpened[j] = (cols, outs, sharp if sharp is not None else net)
+        policy = HeadsPolicy(policy.n_features, sharpened)
     return ImitationResult(policy, method, quantile if method == "qdagger" else None, history, chosen)
 
 
