@@ -51,8 +51,9 @@ def test_cli_trains_a_surrogate_and_generate_searches_with_it_and_confirms_with_
         and "8 expert runs: 4 annotated + 4 held out" in result.output
     )
     policy = Surrogate.load(model, IMITATION7).policy  # the goal decision is its own network, blind to the scan
-    (steer_in, steer_out, _), (goal_in, goal_out, _) = policy.heads
-    assert steer_in.size == SPEC.size and steer_out.tolist() == [0, 1] and goal_out.tolist() == [2]
+    (steer_in, steer_out, _), (goal_in, goal_out, goal) = policy.heads
+    assert steer_in.size == SPEC.size and steer_out.tolist() == [0, 1, 3] and goal_out.tolist() == [2]
+    assert goal.output == "decision"  # a classifier: 2 p - 1
     assert goal_in.tolist() == [0, 1, 2, 3, 4, 5, 6, SPEC.size - 1]
     out = tmp_path / "plan"
     args = [
