@@ -35,8 +35,9 @@ those states fix where the switch lies.  Its output is ``2 p - 1`` (p the probab
 +1), on the scale of the labels.  Adam over a few epochs an update still leaves a ramp a
 few percent of the input range wide (the expert's switch on charge is a fraction of a
 watt-hour), so once the updates are done each decision is refitted by L-BFGS to
-convergence, with a small network (:data:`SHARP_HIDDEN`) on standardised inputs, on the
-states where it is taken, all those near a switch and a seeded ``far_share`` of the rest.
+convergence on standardised inputs by a few small networks whose logits are averaged
+(:data:`SHARP_HIDDEN`, :data:`SHARP_MEMBERS`), on the states where it is taken, all those
+near a switch and a seeded ``far_share`` of the rest.
 The updates themselves keep the smoother Adam classifier: trained to convergence on the
 first updates' handful of switches, a network generalises them badly and the learner,
 turning home early, never shows the late states that would correct it.
@@ -395,16 +396,20 @@ class _DecisionLearner:
         return MLPPolicy.from_sklearn(self.model)
 
 
-#: Hidden layer of the classifier that sharpens a decision at the end: a switch depends on a few
-#: features, and a small network trained to convergence by L-BFGS is sharp where Adam ramps.
-SHARP_HIDDEN = (64,)
+#: The classifier that sharpens a decision at the end: SHARP_MEMBERS networks of one small hidden
+#: layer, each trained to convergence by L-BFGS from its own start, their logits averaged.  A
+#: switch depends on a few features; a small network has little room to lean on the others, and
+#: the average steadies where members trained on the same states place it.
+SHARP_HIDDEN = 4
+SHARP_MEMBERS = 5
 
 
 def _sharp_classifier(
     x: np.ndarray, positive: np.ndarray, near: np.ndarray, iterations: int, far_share: float, seed: int
 ) -> MLPPolicy | None:
     """A classifier of ``positive`` on ``x`` trained by L-BFGS on standardised inputs, from the states
-    ``near`` a switch and a seeded ``far_share`` of the rest; None without both classes."""
+    ``near`` a switch and a seeded ``far_share`` of the rest; None without both classes.  The
+    members' average logit is itself one network (their hidden units side by side)."""
     from sklearn.exceptions import ConvergenceWarning
     from sklearn.neural_network import MLPClassifier
 
@@ -414,17 +419,30 @@ def _sharp_classifier(
     if positive.all() or not positive.any():
         return None
     mu, sd = x.mean(axis=0), np.maximum(x.std(axis=0), 1e-3)
-    model = MLPClassifier(
-        SHARP_HIDDEN, activation="logistic", solver="lbfgs", max_iter=iterations, tol=0.0, random_state=seed
+    members = []
+    for k in range(SHARP_MEMBERS):
+        model = MLPClassifier(
+            (SHARP_HIDDEN,),
+            activation="logistic",
+            solver="lbfgs",
+            max_iter=iterations,
+            tol=0.0,
+            random_state=seed * SHARP_MEMBERS + k,
+        )
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", ConvergenceWarning)
+            model.fit((x - mu) / sd, positive.astype(np.int64))
+        members.append(model)
+    W0 = np.concatenate([m.coefs_[0] for m in members], axis=1) / sd[:, None]  # standardisation folded in
+    b0 = np.concatenate([m.intercepts_[0] for m in members]) - mu @ W0
+    W1 = np.concatenate([m.coefs_[1] for m in members], axis=0) / SHARP_MEMBERS
+    b1 = np.mean([m.intercepts_[1] for m in members], axis=0)
+    return MLPPolicy(
+        [W0.astype(np.float32), W1.astype(np.float32)],
+        [b0.astype(np.float32), b1.astype(np.float32)],
+        "logistic",
+        "decision",
     )
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", ConvergenceWarning)
-        model.fit((x - mu) / sd, positive.astype(np.int64))
-    net = MLPPolicy.from_sklearn(model)
-    W0 = net.weights[0].astype(np.float64) / sd[:, None]  # the standardisation folded into layer 1
-    net.biases[0] = (net.biases[0] - mu @ W0).astype(np.float32)
-    net.weights[0] = W0.astype(np.float32)
-    return net
 
 
 def imitate(
@@ -552,7 +570,8 @@ def imitate(
                 else:
                     model.set_params(batch_size=min(batch_size, F.shape[0]))
                     y = A[:, outs]
-                    model.fit(x, y if y.shape[1] > 1 else y[:, 0])
+                    w = np.where(Nt, switch_weight, 1.0) if decisions else None
+                    model.fit(x, y if y.shape[1] > 1 else y[:, 0], sample_weight=w)
                     nets.append(MLPPolicy.from_sklearn(model))
         if len(split) == 1 and _all_columns(split[0][0], F.shape[1]) and _all_columns(split[0][1], A.shape[1]):
             policy = nets[0]
