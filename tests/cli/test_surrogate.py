@@ -116,3 +116,23 @@ def test_cli_trains_a_surrogate_and_generate_searches_with_it_and_confirms_with_
     assert len([line for line in result.output.splitlines() if line.strip()]) == 1
     result = runner.invoke(app, ["surrogate", mission, "--out", str(tmp_path / "x.npz"), "--method", "bogus"])
     assert result.exit_code == 2 and "--method: expected one of" in result.output
+
+
+def test_a_corrupt_or_outdated_surrogate_file_is_refused_in_one_line(tmp_path):
+    import json
+
+    from typer.testing import CliRunner
+
+    from planner.cli import app
+
+    junk = tmp_path / "junk.npz"
+    junk.write_bytes(b"PK\x03\x04 half a zip archive")
+    old = tmp_path / "old.npz"  # a surrogate of the velocity-vector layout (format /2)
+    np.savez(old, header=np.array(json.dumps({"format": "rapt.surrogate/2", "mission": "imitation7"})))
+    for path, message in ((junk, "is not a surrogate file"), (old, "expected one of rapt.surrogate/3; retrain it")):
+        out = tmp_path / path.stem
+        args = ["generate", str(EXAMPLES / "imitation7.toml"), "--out", str(out), "--surrogate", str(path)]
+        result = CliRunner().invoke(app, args)
+        lines = [line for line in result.output.splitlines() if line.strip()]
+        assert result.exit_code == 2 and len(lines) == 1 and message in lines[0], result.output
+        assert "--surrogate" in lines[0]  # names the option to fix

@@ -12,6 +12,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import zipfile
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -117,17 +118,19 @@ class Surrogate:
         try:
             with np.load(path, allow_pickle=False) as z:
                 header = json.loads(str(z["header"]))
+                if not isinstance(header, dict) or header.get("format") not in READS:  # before reading the rest
+                    got = header.get("format") if isinstance(header, dict) else None
+                    raise FileFormatError(
+                        f"surrogate: {str(path)!r} has format {got!r}, expected one of "
+                        f"{', '.join(READS)}; retrain it with `rapt-plan surrogate`"
+                    )
                 policy = policy_from_arrays({k: z[k] for k in z.files if k != "header"})
-        except (OSError, ValueError, KeyError) as exc:
+                spec = FeatureSpec.from_dict(header["features"])
+        except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile) as exc:  # truncated too
             raise FileFormatError(f"surrogate: {str(path)!r} is not a surrogate file ({exc})") from exc
-        if header.get("format") not in READS:
-            raise FileFormatError(
-                f"surrogate: {str(path)!r} has format {header.get('format')!r}, expected one of "
-                f"{', '.join(READS)}; retrain it with `rapt-plan surrogate`"
-            )
         out = cls(
             policy,
-            FeatureSpec.from_dict(header["features"]),
+            spec,
             header["mission"],
             header["mission_sha"],
             header.get("training", {}),
