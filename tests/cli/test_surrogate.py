@@ -136,3 +136,4 @@ def test_a_corrupt_or_outdated_surrogate_file_is_refused_in_one_line(tmp_path):
         lines = [line for line in result.output.splitlines() if line.strip()]
         assert result.exit_code == 2 and len(lines) == 1 and message in lines[0], result.output
         assert "--surrogate" in lines[0]  # names the option to fix
+    assert "not a surrogate file" not in lines[0]  # the outdated file is told to retrain, not called junk

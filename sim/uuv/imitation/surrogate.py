@@ -115,18 +115,23 @@ class Surrogate:
         path = Path(path)
         if not path.is_file():
             raise MissingFileError(f"surrogate: {str(path)!r} does not exist; train one with `rapt-plan surrogate`")
+        not_ours = (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile)  # truncated too
         try:
             with np.load(path, allow_pickle=False) as z:
                 header = json.loads(str(z["header"]))
-                if not isinstance(header, dict) or header.get("format") not in READS:  # before reading the rest
-                    got = header.get("format") if isinstance(header, dict) else None
-                    raise FileFormatError(
-                        f"surrogate: {str(path)!r} has format {got!r}, expected one of "
-                        f"{', '.join(READS)}; retrain it with `rapt-plan surrogate`"
-                    )
-                policy = policy_from_arrays({k: z[k] for k in z.files if k != "header"})
-                spec = FeatureSpec.from_dict(header["features"])
-        except (OSError, ValueError, KeyError, TypeError, EOFError, zipfile.BadZipFile) as exc:  # truncated too
+                arrays = {k: z[k] for k in z.files if k != "header"}
+        except not_ours as exc:
+            raise FileFormatError(f"surrogate: {str(path)!r} is not a surrogate file ({exc})") from exc
+        got = header.get("format") if isinstance(header, dict) else None
+        if got not in READS:
+            raise FileFormatError(
+                f"surrogate: {str(path)!r} has format {got!r}, expected one of "
+                f"{', '.join(READS)}; retrain it with `rapt-plan surrogate`"
+            )
+        try:
+            policy = policy_from_arrays(arrays)
+            spec = FeatureSpec.from_dict(header["features"])
+        except not_ours as exc:
             raise FileFormatError(f"surrogate: {str(path)!r} is not a surrogate file ({exc})") from exc
         out = cls(
             policy,
