@@ -90,7 +90,7 @@ def train_surrogate(
     if int(select_runs) != select_runs or select_runs < 0:
         raise InputError(f"--select-runs: expected a number of held-out expert runs >= 0, got {select_runs!r}")
     spec = feature_spec(mission)
-    select: Callable[[Policy], float] | None = None
+    select: Callable[[Policy], tuple[float, float]] | None = None
     if select_runs:
         Xs = draw_valid(mission, int(select_runs), np.random.default_rng([int(seed), 0x73656C]))
         expert, held_out = annotated_runs(mission, Xs, spec)
@@ -204,7 +204,12 @@ def held_out_agreement(mission: Mission, policy: Policy, X: np.ndarray, expert) 
     ok = np.flatnonzero(expert.valid & mine.valid)
     if not ok.size:
         return float("nan"), float("nan")
-    tracks = [[r.trajectory(int(i))[:, 1:3] for i in ok] for r in (expert, mine)]
+    tracks: list[list[np.ndarray]] = [[], []]
+    for i in ok.tolist():  # valid rows of a batch simulated with trajectories have one
+        for side, result in zip(tracks, (expert, mine)):
+            path = result.trajectory(i)
+            assert path is not None
+            side.append(path[:, 1:3])
     return float(np.mean(mine.modes[ok] == expert.modes[ok])), -path_error(*tracks)
 
 
