@@ -273,7 +273,17 @@ class BringUp:
         self._ok("guided", "GUIDED")
 
     def arm(self) -> None:
-        self._command_until("arm", lambda: self.bridge.arm(True), self.timeouts.arm)
+        """Arm, re-checking GUIDED before every try: a pilot, a failsafe or the firmware itself may have
+        changed the mode since, and armed in a pilot mode with no pilot the vehicle is adrift."""
+
+        def in_guided() -> int:
+            if self._mode() != GUIDED:
+                hb = self.bridge.autopilot
+                now = (hb.mode or f"mode {hb.custom_mode}") if hb is not None else "not heard"
+                self._fail("arm", RunError(f"bring-up arm: the vehicle left GUIDED before it was armed (now {now})"))
+            return self.bridge.arm(True)
+
+        self._command_until("arm", in_guided, self.timeouts.arm)
         if self._wait(lambda: self._armed() or None, 5.0) is None:
             self._fail("arm", RunError("bring-up arm: arming was accepted but the heartbeat does not show it"))
         self._ok("arm", "armed")

@@ -14,7 +14,10 @@ import time
 from collections.abc import Callable
 from contextlib import AbstractContextManager
 
+from bridge.mavlink_bridge import ARDUSUB_MODES
 from rapt.errors import RefusedError
+
+GUIDED_MODE = ARDUSUB_MODES["GUIDED"]
 
 __all__ = ["wait_for", "wait_for_signal", "serve_until_signal", "run_until_signal", "arm_when_heard"]
 
@@ -61,18 +64,27 @@ def arm_when_heard(link, timeout_s: float = 30.0, *, guided_s: float = 120.0) ->
     """Once the bridge ``link`` hears the vehicle: GUIDED, then arm.  False if it is not heard in ``timeout_s``.
 
     ArduSub refuses GUIDED until its position estimate is ready (about 40 s after a cold
-    boot), so GUIDED is asked again every half second for up to ``guided_s``, and the
-    vehicle is armed only once GUIDED was accepted; RefusedError if it never is.
+    boot), so GUIDED is asked again every half second for up to ``guided_s``.  The vehicle
+    is armed only while its heartbeat shows GUIDED (checked before every try: armed in a
+    pilot mode with no pilot it would drift), and arming is asked again until accepted;
+    RefusedError if either never happens.
     """
     if not wait_for(lambda: link.target is not None, timeout_s, poll_s=0.05):
         return False
-    deadline, result = time.monotonic() + guided_s, None
+    deadline, result, step = time.monotonic() + guided_s, None, "GUIDED"
     while time.monotonic() < deadline:
-        result = link.set_mode("GUIDED")
-        if result == 0:  # MAV_RESULT_ACCEPTED
-            link.arm(True)
-            return True
+        mode = link.autopilot.custom_mode if link.autopilot is not None else None
+        if mode != GUIDED_MODE:
+            step, result = "GUIDED", link.set_mode("GUIDED")
+            if result == 0:  # MAV_RESULT_ACCEPTED: arm once the heartbeat shows it
+                wait_for(lambda: link.autopilot is not None and link.autopilot.custom_mode == GUIDED_MODE, 5.0)
+                continue
+        else:
+            step, result = "arming", link.arm(True)
+            if result == 0:
+                return True
         time.sleep(0.5)
     raise RefusedError(
-        f"--arm: the vehicle refused GUIDED for {guided_s:g} s (last result {result}); is its position estimate ready?"
+        f"--arm: the vehicle refused {step} for {guided_s:g} s (last result {result}); "
+        "is its position estimate ready and are its pre-arm checks passing?"
     )

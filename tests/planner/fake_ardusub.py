@@ -33,6 +33,8 @@ class Behaviour:
     arm: int = M.MAV_RESULT_ACCEPTED
     mission: int | None = M.MAV_MISSION_ACCEPTED  # None: never answer the upload
     dives: bool = True
+    arm_denials: int = 0  # refuse the first arm requests (DENIED), as pre-arm checks do
+    denial_switches_to: int | None = None  # ... and change to this mode on each (a pilot, a failsafe)
 
 
 class FakeArduSub:
@@ -42,6 +44,7 @@ class FakeArduSub:
         self.lat, self.lon = LocalFrame(mission.origin_lat, mission.origin_lon).to_latlon(*mission.launch)
         self.mode, self.armed, self.depth, self.vz = 19, False, 0.0, 0.0
         self.received: list = []
+        self.arm_modes: list[int] = []  # the mode the vehicle was in at each arm request
         self._upload = 0
         self._boot = time.monotonic()
         self._stop = threading.Event()
@@ -102,6 +105,11 @@ class FakeArduSub:
             elif cmd == M.MAV_CMD_COMPONENT_ARM_DISARM:
                 on = msg.param1 > 0.5
                 result = self.b.arm if on else M.MAV_RESULT_ACCEPTED
+                if on:
+                    self.arm_modes.append(self.mode)
+                    if len(self.arm_modes) <= self.b.arm_denials:
+                        result = M.MAV_RESULT_DENIED
+                        self.mode = self.mode if self.b.denial_switches_to is None else self.b.denial_switches_to
                 if result == M.MAV_RESULT_ACCEPTED:
                     self.armed = on
                 m.command_ack_send(cmd, result, 0, 0, 1, 191)

@@ -15,7 +15,7 @@ from pymavlink import mavutil  # noqa: E402
 from planner.bringup import BringUpTimeouts  # noqa: E402
 from planner.flight import Flight, flight_from_plan  # noqa: E402
 from planner.vehicle_run import run_vehicle  # noqa: E402
-from rapt.errors import InputError, LinkTimeoutError, RefusedError  # noqa: E402
+from rapt.errors import InputError, LinkTimeoutError, RefusedError, RunError  # noqa: E402
 from sim.uuv.missionfile import load_mission  # noqa: E402
 from tests.loopback import free_port, no_new_threads  # noqa: E402
 from tests.planner.fake_ardusub import Behaviour, FakeArduSub  # noqa: E402
@@ -123,3 +123,36 @@ def test_a_vehicle_outside_the_scenarios_area_is_refused_before_anything_is_comm
         with pytest.raises(InputError, match=r"--scenario: the vehicle is at \(-480, -520\) m, outside mission"):
             _fly(other, conn, steps)
     assert steps[-1].name == "area" and _commanded(vehicle) == []
+
+
+def test_arming_is_re_checked_in_guided_and_never_sent_in_another_mode(flight):
+    """The first arm is refused and the vehicle drops to MANUAL meanwhile (a pilot, a failsafe): the
+    bring-up must not ask again in MANUAL.  It stops in one line, the vehicle never armed."""
+    steps: list = []
+    with fake(flight.mission, arm_denials=1, denial_switches_to=19) as (conn, vehicle):
+        with pytest.raises(RunError) as info:
+            _fly(flight, conn, steps)
+    assert str(info.value) == "bring-up arm: the vehicle left GUIDED before it was armed (now MANUAL)"
+    assert vehicle.arm_modes == [4] and not vehicle.armed  # one request, in GUIDED; none in MANUAL
+    assert [s.name for s in steps if s.status == "failed"] == ["arm"]
+    assert "SET_POSITION_TARGET_LOCAL_NED" not in _commanded(vehicle)
+
+
+def test_the_bridge_arm_option_takes_guided_back_before_arming_again(flight):
+    """``rapt-plan bridge --arm`` (arm_when_heard): after a refused arm that left the vehicle in MANUAL
+    it asks for GUIDED again and arms only once the heartbeat shows it."""
+    from bridge.mavlink_bridge import MavlinkBridge
+    from bridge.session import open_session
+    from planner.processes import arm_when_heard
+
+    with fake(flight.mission, arm_denials=2, denial_switches_to=19) as (conn, vehicle):
+        session = open_session(listen=[f"tcp/127.0.0.1:{free_port()}"])
+        try:
+            with MavlinkBridge(conn, session, vehicle="uuv1", allow_commands=True) as link:
+                assert arm_when_heard(link, timeout_s=10.0, guided_s=10.0)
+                wait_for_armed = [vehicle.armed, vehicle.mode]
+                assert link.arm(False) == M.MAV_RESULT_ACCEPTED
+        finally:
+            session.close()
+    assert vehicle.arm_modes == [4, 4, 4]  # every request in GUIDED: two refused, the third accepted
+    assert wait_for_armed == [True, 4]
