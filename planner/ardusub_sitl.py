@@ -79,6 +79,8 @@ class ArduSubSitl:
             raise InputError(f"binary: set {ENV} to the ArduSub SITL binary (see docs/sil-and-vehicle-link.md)")
         if not binary.is_file():
             raise MissingFileError(f"{ENV}: {str(binary)!r} does not exist; point it at the ArduSub SITL binary")
+        if not os.access(binary, os.X_OK):
+            raise InputError(f"{ENV}: {str(binary)!r} is not executable; chmod +x it, or point {ENV} at the built one")
         defaults = Path(defaults) if defaults is not None else binary.with_name("sub.parm")
         if not defaults.is_file():
             raise MissingFileError(f"defaults: {str(defaults)!r} does not exist; put ArduSub's sub.parm beside it")
@@ -122,26 +124,49 @@ class ArduSubSitl:
         log = open(self.directory / "sitl.log", "wb")  # noqa: SIM115 - the process writes it until stop()
         try:
             self.process = subprocess.Popen(command, cwd=self.directory, stdout=log, stderr=subprocess.STDOUT)
-        except OSError:
-            self.stop()  # not executable, wrong architecture: leave no directory behind
-            raise
+        except OSError as exc:  # wrong architecture, not a program: leave no directory behind
+            self.stop()
+            raise InputError(
+                f"{ENV}: {str(self.binary)!r} cannot be run ({exc.strerror}); build it for this machine "
+                "(docs/sil-and-vehicle-link.md)"
+            ) from exc
         finally:
             log.close()
+        try:
+            self._wait_until_listening()
+        except BaseException:  # a refusal, a timeout, Ctrl-C: never leave the firmware running
+            self.stop()
+            raise
+        return self
+
+    def _wait_until_listening(self) -> None:
+        assert self.process is not None
         deadline = time.monotonic() + self.start_timeout_s
         while time.monotonic() < deadline:
             if self.process.poll() is not None:
-                self.stop()
-                raise LinkTimeoutError(f"{ENV}: the firmware exited with code {self.process.returncode} at start")
+                said = self._last_log_line()
+                raise LinkTimeoutError(
+                    f"{ENV}: the firmware exited with code {self.process.returncode} at start"
+                    + (f" ({said})" if said else "")
+                )
             try:
                 with socket.create_connection(("127.0.0.1", self.port), timeout=0.2):
                     pass
                 # that probe was SERIAL0's one client; let the firmware see it gone before the real one connects
                 time.sleep(0.2)
-                return self
+                return
             except OSError:
                 time.sleep(0.1)
-        self.stop()
         raise LinkTimeoutError(f"{ENV}: SERIAL0 (port {self.port}) did not listen within {self.start_timeout_s} s")
+
+    def _last_log_line(self) -> str:
+        """The firmware's last non-empty line of output (why it stopped, as it said it)."""
+        try:
+            text = (self.directory / "sitl.log").read_text(errors="replace") if self.directory else ""
+        except OSError:
+            return ""
+        lines = [line.strip() for line in text.splitlines() if line.strip()]
+        return lines[-1][:200] if lines else ""
 
     def stop(self) -> None:
         """Stop the process by its id (SIGTERM, then SIGKILL) and remove its directory."""

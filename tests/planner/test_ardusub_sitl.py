@@ -10,7 +10,9 @@ from __future__ import annotations
 
 import json
 import os
+import tempfile
 import time
+from pathlib import Path
 
 import pytest
 
@@ -21,7 +23,7 @@ from bridge import keys
 from bridge.mavlink_bridge import MavlinkBridge, MissionItem
 from bridge.session import open_session
 from planner.ardusub_sitl import ENV, ArduSubSitl, sitl_binary
-from rapt.errors import InputError, MissingFileError
+from rapt.errors import InputError, LinkTimeoutError, MissingFileError
 from tests.loopback import free_port, wait_until
 
 #: range2017's launch point (lat, lon, alt, heading), where a range team would put the vehicle.
@@ -42,6 +44,20 @@ def test_the_launcher_names_what_is_missing_in_one_line(tmp_path, monkeypatch):
     with pytest.raises(MissingFileError, match="does not exist") as info:
         ArduSubSitl(LAUNCH, binary=tmp_path / "ardusub")
     assert "\n" not in str(info.value)
+    (tmp_path / "sub.parm").write_text("FS_GCS_ENABLE 1\n")
+    binary = tmp_path / "ardusub"
+    binary.write_bytes(b"\x7fELF not for this machine")
+    with pytest.raises(InputError, match="is not executable; chmod \\+x it"):
+        ArduSubSitl(LAUNCH, binary=binary)
+    binary.chmod(0o755)  # executable, but no program this machine runs
+    before = set(Path(tempfile.gettempdir()).glob("ardusub-sitl-*"))
+    with pytest.raises(InputError, match=r"cannot be run \(Exec format error\); build it for this machine") as info:
+        ArduSubSitl(LAUNCH, binary=binary).start()
+    binary.write_text("#!/bin/sh\necho 'starting'\necho 'Unknown option --bogus' >&2\nexit 3\n")
+    with pytest.raises(LinkTimeoutError, match=r"exited with code 3 at start \(Unknown option --bogus\)") as info:
+        ArduSubSitl(LAUNCH, binary=binary).start()
+    assert "\n" not in str(info.value)
+    assert set(Path(tempfile.gettempdir()).glob("ardusub-sitl-*")) == before  # nothing left behind
 
 
 @needs_firmware
