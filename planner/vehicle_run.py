@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from bridge import keys
-from bridge.mavlink_bridge import MavlinkBridge
+from bridge.mavlink_bridge import ARDUSUB_MODES, MavlinkBridge
 from bridge.session import open_session
 from planner.backseat import BackSeat
 from planner.bringup import BringUp, BringUpTimeouts, Step
@@ -124,17 +124,24 @@ def run_vehicle(
             backseat.begin(start_ms)
             watchdog.begin()
             session.put(keys.active(vehicle), keys.DEFAULT_ACTIVE)
-            ended = _fly(referee, watchdog, timeout_s)
+            ended = _fly(referee, watchdog, bridge, timeout_s)
         except BaseException as exc:  # Ctrl-C, or a bring-up step that failed after GUIDED and arming
             referee.end("stopped by the operator" if isinstance(exc, KeyboardInterrupt) else f"stopped: {exc}")
             backseat.close()
             watchdog.close()
-            if bringup.took_control:  # never touch a vehicle the checks refused: someone else may fly it
+            taken = _taken_by_vehicle(bridge)
+            if bringup.took_control and taken.startswith("left GUIDED"):  # a failsafe or a pilot has it now
+                bringup.note("recover", "ok", f"nothing commanded: {VEHICLE_ENDED}{taken}")
+            elif bringup.took_control:  # never touch a vehicle the checks refused: someone else may fly it
                 _recover(bridge, referee, bringup, "surface", say)
             raise
         backseat.close()  # the run is over: no more set-points of the scenario's
         watchdog.close()
-        _recover(bridge, referee, bringup, "hold" if watchdog.intervention and action == "hold" else "surface", say)
+        if ended.startswith(VEHICLE_ENDED):  # the vehicle, a failsafe or a pilot took it: command nothing
+            bringup.note("recover", "ok", f"nothing commanded: {ended}")
+        else:
+            recovery = "hold" if watchdog.intervention and action == "hold" else "surface"
+            _recover(bridge, referee, bringup, recovery, say)
         wall = time.perf_counter() - started
         autonomy = backseat.autonomy
         track = referee.track()
@@ -182,8 +189,8 @@ def _scenario_meta(flight, connection: str) -> dict:
     }
 
 
-def _fly(referee: Referee, watchdog: Watchdog, timeout_s: float | None) -> str:
-    """Wait for the run's end: the referee's, the watchdog's, or the wall-time limit's."""
+def _fly(referee: Referee, watchdog: Watchdog, bridge: MavlinkBridge, timeout_s: float | None) -> str:
+    """Wait for the run's end: the referee's, the watchdog's, the vehicle's own, or the wall-time limit's."""
     deadline = None if timeout_s is None else time.monotonic() + timeout_s
     while True:
         if referee.ended:
@@ -192,11 +199,37 @@ def _fly(referee: Referee, watchdog: Watchdog, timeout_s: float | None) -> str:
             reason = f"watchdog: {watchdog.intervention}"
             referee.end(reason)
             return reason
+        taken = _taken_by_vehicle(bridge)
+        if taken:
+            reason = f"{VEHICLE_ENDED}{taken}"
+            referee.end(reason)
+            return reason
         if deadline is not None and time.monotonic() > deadline:
             reason = f"wall-time limit of {timeout_s:g} s"
             referee.end(reason)
             return reason
         time.sleep(0.02)
+
+
+#: How a run ends that the vehicle ended: a failsafe disarmed it or changed its mode, or a pilot took it.
+VEHICLE_ENDED = "vehicle: "
+
+
+def _taken_by_vehicle(bridge: MavlinkBridge) -> str:
+    """Why the vehicle is no longer ours to fly, from its heartbeat ("" while it is armed in GUIDED).
+
+    ArduSub's failsafes (ground station lost, leak, battery, EKF) disarm it or switch its mode,
+    and a safety pilot takes it in a mode of their own; in each case the run is over and
+    nothing more is commanded: the vehicle, or the person, now in charge is not fought."""
+    hb = bridge.autopilot
+    if hb is None:
+        return ""
+    if not hb.armed:
+        return "disarmed itself (a failsafe, or disarmed by someone else)"
+    if int(hb.custom_mode) != ARDUSUB_MODES["GUIDED"]:
+        now = hb.mode or f"mode {hb.custom_mode}"
+        return f"left GUIDED (now {now}: a failsafe, or a pilot took it)"
+    return ""
 
 
 def _recover(bridge: MavlinkBridge, referee: Referee, bringup: BringUp, action: str, say) -> None:

@@ -35,6 +35,8 @@ class Behaviour:
     dives: bool = True
     arm_denials: int = 0  # refuse the first arm requests (DENIED), as pre-arm checks do
     denial_switches_to: int | None = None  # ... and change to this mode on each (a pilot, a failsafe)
+    failsafe_after_s: float | None = None  # this long after arming a failsafe acts on its own ...
+    failsafe_mode: int | None = None  # ... switching to this mode (None: it disarms the vehicle)
 
 
 class FakeArduSub:
@@ -45,6 +47,8 @@ class FakeArduSub:
         self.mode, self.armed, self.depth, self.vz = 19, False, 0.0, 0.0
         self.received: list = []
         self.arm_modes: list[int] = []  # the mode the vehicle was in at each arm request
+        self.armed_at: float | None = None
+        self.failsafe_at: int | None = None  # len(received) when the failsafe acted
         self._upload = 0
         self._boot = time.monotonic()
         self._stop = threading.Event()
@@ -68,6 +72,17 @@ class FakeArduSub:
                 base = M.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED | (M.MAV_MODE_FLAG_SAFETY_ARMED if self.armed else 0)
                 self.conn.mav.heartbeat_send(M.MAV_TYPE_SUBMARINE, M.MAV_AUTOPILOT_ARDUPILOTMEGA, base, self.mode, 4)
                 next_beat = now + 0.2
+            if (
+                self.b.failsafe_after_s is not None
+                and self.failsafe_at is None
+                and self.armed_at is not None
+                and now - self.armed_at >= self.b.failsafe_after_s
+            ):
+                self.failsafe_at = len(self.received)
+                if self.b.failsafe_mode is None:
+                    self.armed = False
+                else:
+                    self.mode = self.b.failsafe_mode
             if now >= next_report and self.b.stream:
                 self._report(now)
                 next_report = now + 0.05
@@ -112,6 +127,7 @@ class FakeArduSub:
                         self.mode = self.mode if self.b.denial_switches_to is None else self.b.denial_switches_to
                 if result == M.MAV_RESULT_ACCEPTED:
                     self.armed = on
+                    self.armed_at = time.monotonic() if on else None
                 m.command_ack_send(cmd, result, 0, 0, 1, 191)
         elif kind == "MISSION_COUNT" and self.b.mission is not None:
             self._upload = int(msg.count)

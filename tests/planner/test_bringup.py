@@ -156,3 +156,37 @@ def test_the_bridge_arm_option_takes_guided_back_before_arming_again(flight):
             session.close()
     assert vehicle.arm_modes == [4, 4, 4]  # every request in GUIDED: two refused, the third accepted
     assert wait_for_armed == [True, 4]
+
+
+@pytest.mark.parametrize(
+    ("failsafe_mode", "ended"),
+    [
+        (None, "vehicle: disarmed itself (a failsafe, or disarmed by someone else)"),
+        (19, "vehicle: left GUIDED (now MANUAL: a failsafe, or a pilot took it)"),
+    ],
+)
+def test_a_vehicle_that_ends_the_run_itself_is_left_alone(flight, failsafe_mode, ended):
+    """Mid-run, the vehicle's failsafe disarms it or a pilot takes it to MANUAL: the run ends with that
+    reason in one line and in the timeline, and nothing more is commanded (no SURFACE, no disarm)."""
+    steps: list = []
+    with fake(flight.mission, failsafe_after_s=4.0, failsafe_mode=failsafe_mode) as (conn, vehicle):
+        result = run_vehicle(flight, conn, timeouts=FAST, timeout_s=15.0, say=steps.append)
+        after = vehicle.received[vehicle.failsafe_at :] if vehicle.failsafe_at is not None else None
+    assert after is not None and result.ended == ended and result.watchdog == ""
+    assert [s.name for s in steps][: len(STEPS)] == STEPS  # it was flying: every step went through
+    assert steps[-1].name == "recover" and steps[-1].detail == f"nothing commanded: {ended}"
+    commands = [m for m in after if m.get_type() == "COMMAND_LONG" and m.command != M.MAV_CMD_SET_MESSAGE_INTERVAL]
+    assert commands == []  # neither SURFACE nor a disarm for a vehicle someone else now has
+    assert vehicle.armed == (failsafe_mode is not None)  # as the failsafe or the pilot left it
+
+
+def test_a_pilot_who_takes_the_vehicle_during_the_dive_is_not_fought(flight):
+    """The bring-up fails in one line, and the vehicle, now in MANUAL, is neither surfaced nor disarmed."""
+    steps: list = []
+    with fake(flight.mission, failsafe_after_s=0.2, failsafe_mode=19, dives=False) as (conn, vehicle):
+        with pytest.raises(RunError, match=r"^bring-up depth: the vehicle left GUIDED \(now MANUAL\)$"):
+            _fly(flight, conn, steps)
+        after = vehicle.received[vehicle.failsafe_at or 0 :]
+    assert vehicle.failsafe_at is not None and vehicle.armed and vehicle.mode == 19
+    assert not [m for m in after if m.get_type() == "COMMAND_LONG" and m.command != M.MAV_CMD_SET_MESSAGE_INTERVAL]
+    assert steps[-1].name == "recover" and steps[-1].detail.startswith("nothing commanded: vehicle: left GUIDED")
