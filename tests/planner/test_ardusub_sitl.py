@@ -227,3 +227,52 @@ def test_a_plan_scenario_flown_on_ardusub_like_on_the_range(tmp_path):
     vehicle_lines = [m for m in channels["/vehicle/log"].messages if m["name"] == "vehicle"]
     assert texts and len(vehicle_lines) == len(texts)
     assert len(channels["/map/scenario"].messages) == 1
+
+
+@needs_firmware
+@pytest.mark.sitl
+@pytest.mark.integration
+def test_ardusubs_ground_station_failsafe_ends_the_run_and_the_vehicle_is_left_alone(tmp_path):
+    """A ground station (system 255) beats through the bring-up and falls silent mid-run: ArduSub's own
+    failsafe (FS_GCS_ENABLE 2) disarms it, the run ends at once with that reason, nothing more is
+    commanded, and the log is closed and readable."""
+    import threading
+
+    from planner.flight import flight_from_plan
+    from planner.logs import read_run
+    from planner.vehicle_run import run_vehicle
+
+    flight = flight_from_plan(Path("field_plans/range2017/plan.json"), "pair2b")
+    log = tmp_path / "failsafe.mcap"
+    texts: list[str] = []
+    with ArduSubSitl(LAUNCH, speedup=10) as sitl:
+        gcs = mavutil.mavlink_connection(f"tcp:127.0.0.1:{sitl.port + 2}", source_system=255, source_component=190)
+        beating, stop = threading.Event(), threading.Event()
+        beating.set()
+
+        def ground_station() -> None:  # 20 Hz of wall time: 2 Hz of vehicle time at speed-up 10
+            while not stop.is_set():
+                if beating.is_set():
+                    gcs.mav.heartbeat_send(mavutil.mavlink.MAV_TYPE_GCS, mavutil.mavlink.MAV_AUTOPILOT_INVALID, 0, 0, 0)
+                while (msg := gcs.recv_msg()) is not None:  # keep the firmware's stream to it drained
+                    if msg.get_type() == "STATUSTEXT":
+                        texts.append(msg.text)
+                time.sleep(0.05)
+
+        def say(step) -> None:
+            if step.name == "clock":  # flying: the ground station goes quiet 2 s (20 vehicle s) later
+                threading.Timer(2.0, beating.clear).start()
+
+        station = threading.Thread(target=ground_station, name="gcs", daemon=True)
+        station.start()
+        try:
+            result = run_vehicle(flight, sitl.connection, log_path=log, timeout_s=30.0, say=say)
+        finally:
+            stop.set()
+            station.join(timeout=5)
+            gcs.close()
+    assert result.ended == "vehicle: disarmed itself (a failsafe, or disarmed by someone else)", result.ended
+    assert not result.watchdog and result.timeline[-1].detail == f"nothing commanded: {result.ended}"
+    assert any("heartbeat lost" in t for t in texts), texts  # ArduSub's own words: it was its failsafe
+    run = read_run(log)
+    assert run.has_end and run.scenario_id == "pair2b"
