@@ -227,6 +227,15 @@ def test_a_plan_scenario_flown_on_ardusub_like_on_the_range(tmp_path):
     vehicle_lines = [m for m in channels["/vehicle/log"].messages if m["name"] == "vehicle"]
     assert texts and len(vehicle_lines) == len(texts)
     assert len(channels["/map/scenario"].messages) == 1
+    # the range day's next step: `rapt-plan compare` reads the firmware's log like any other run's
+    from planner.compare import CompareConfig, compare
+
+    out = tmp_path / "comparison"
+    comparison = compare("field_plans/range2017/plan.json", [log], out, CompareConfig(dithers=0, bootstrap=0))
+    [row] = comparison["scenarios"]
+    assert row["id"] == "pair2b" and row["log"] == log.name and (out / "comparison.json").is_file()
+    assert row["log_complete"] and row["ended"] == result.ended and row["steps"] == len(track)
+    assert row["path_error_m"] is not None and row["predicted_mode"] in ("TF", "SS", "MS", "TS")
 
 
 @needs_firmware
