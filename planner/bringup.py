@@ -154,6 +154,7 @@ class BringUp:
                 LinkTimeoutError(
                     f"--mavlink {self.connection}: {why} within {self.timeouts.heartbeat:g} s; "
                     "check the address and that the vehicle is on"
+                    + (" and that no other program holds the port" if self.connection.startswith("tcp:") else "")
                 ),
             )
         if hb.type != mavlink.MAV_TYPE_SUBMARINE:

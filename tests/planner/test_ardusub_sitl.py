@@ -285,3 +285,33 @@ def test_ardusubs_ground_station_failsafe_ends_the_run_and_the_vehicle_is_left_a
     assert any("heartbeat lost" in t for t in texts), texts  # ArduSub's own words: it was its failsafe
     run = read_run(log)
     assert run.has_end and run.scenario_id == "pair2b"
+
+
+@needs_firmware
+@pytest.mark.sitl
+@pytest.mark.integration
+def test_a_vehicle_port_another_client_holds_is_one_line_and_nothing_is_commanded(tmp_path):
+    """SERIAL0 serves one client: with a ground station already on it, the run gets no HEARTBEAT and
+    stops at the first bring-up step in one line, its log closed and readable."""
+    import socket
+
+    from planner.bringup import BringUpTimeouts
+    from planner.flight import flight_from_plan
+    from planner.logs import read_run
+    from planner.vehicle_run import run_vehicle
+    from rapt.errors import LinkTimeoutError
+
+    flight = flight_from_plan(Path("field_plans/range2017/plan.json"), "pair2b")
+    log = tmp_path / "busy.mcap"
+    with ArduSubSitl(LAUNCH, speedup=10) as sitl:
+        with socket.create_connection(("127.0.0.1", sitl.port), timeout=5) as other:
+            other.recv(1)  # the firmware serves it: the port is taken
+            with pytest.raises(LinkTimeoutError) as info:
+                run_vehicle(flight, sitl.connection, log_path=log, timeouts=BringUpTimeouts(heartbeat=3.0))
+    line = str(info.value)
+    assert line == (
+        f"--mavlink {sitl.connection}: no HEARTBEAT from an autopilot within 3 s; check the address and that "
+        "the vehicle is on and that no other program holds the port"
+    )
+    run = read_run(log)
+    assert [e["name"] for e in run.events if e["source"] == "bringup"] == ["heartbeat"]
