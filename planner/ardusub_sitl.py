@@ -14,6 +14,7 @@ sends it goes to 127.0.0.1.
 
 from __future__ import annotations
 
+import math
 import os
 import shutil
 import signal
@@ -31,6 +32,11 @@ __all__ = ["ENV", "ArduSubSitl", "sitl_binary"]
 ENV = "ARDUSUB_SITL"
 #: SERIAL0's TCP port of instance 0; instance N uses 5760 + 10 N (and 5762/5763 + 10 N).
 BASE_PORT = 5760
+
+
+def _is_number(value: object) -> bool:
+    """Whether ``value`` is a finite real number (a parameter's value)."""
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
 
 
 def sitl_binary() -> Path | None:
@@ -63,6 +69,8 @@ class ArduSubSitl:
 
     ``sitl.connection`` is the pymavlink connection string of SERIAL0 (``tcp:127.0.0.1:PORT``).
     ``binary`` defaults to ``ARDUSUB_SITL``; the defaults file is ``sub.parm`` beside it.
+    ``parameters`` are defaults of this run's own, after ``sub.parm`` (a test's firmware that
+    never gets a position, say); the parameter store is wiped at every start either way.
     """
 
     def __init__(
@@ -73,6 +81,7 @@ class ArduSubSitl:
         binary: str | Path | None = None,
         defaults: str | Path | None = None,
         start_timeout_s: float = 30.0,
+        parameters: dict[str, float] | None = None,
     ):
         binary = Path(binary) if binary is not None else sitl_binary()
         if binary is None:
@@ -88,6 +97,10 @@ class ArduSubSitl:
             raise InputError(f"speedup: expected a factor > 0, got {speedup!r}")
         self.binary, self.defaults, self.home = binary, defaults, home
         self.speedup = float(speedup)
+        self.parameters = dict(parameters or {})
+        for name, value in self.parameters.items():
+            if not name.replace("_", "").isalnum() or not name.isupper() or not _is_number(value):
+                raise InputError(f"parameters: {name}={value!r} is not an ArduPilot parameter and a number")
         self.start_timeout_s = start_timeout_s
         self.instance = -1
         self.port = -1
@@ -110,12 +123,17 @@ class ArduSubSitl:
         self.port = BASE_PORT + 10 * self.instance
         self.directory = Path(tempfile.mkdtemp(prefix="ardusub-sitl-"))
         shutil.copy(self.defaults, self.directory / "sub.parm")
+        defaults = "sub.parm"
+        if self.parameters:
+            lines = "".join(f"{name} {value:g}\n" for name, value in self.parameters.items())
+            (self.directory / "run.parm").write_text(lines)
+            defaults += ",run.parm"
         lat, lon, alt, heading = self.home
         command = [
             str(self.binary),
             "--model", "vectored",
             "--speedup", f"{self.speedup:g}",
-            "--defaults", "sub.parm",
+            "--defaults", defaults,
             "-I", str(self.instance),
             "-w",  # wipe the parameter store: every run starts from the defaults
             "--home", f"{lat},{lon},{alt},{heading}",

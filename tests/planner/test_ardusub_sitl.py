@@ -315,3 +315,29 @@ def test_a_vehicle_port_another_client_holds_is_one_line_and_nothing_is_commande
     )
     run = read_run(log)
     assert [e["name"] for e in run.events if e["source"] == "bringup"] == ["heartbeat"]
+
+
+@needs_firmware
+@pytest.mark.sitl
+@pytest.mark.integration
+def test_a_firmware_that_never_gets_a_position_estimate_is_never_armed(tmp_path):
+    """With no horizontal position source for its EKF (EK3_SRC1_POSXY 0: a sensor setting, no failsafe
+    touched), ArduSub never reports an absolute position: the bring-up stops at its estimate step in
+    one line after 80 s of vehicle time, GUIDED never asked, nothing armed, the log readable."""
+    from planner.bringup import BringUpTimeouts
+    from planner.flight import flight_from_plan
+    from planner.logs import read_run
+    from planner.vehicle_run import run_vehicle
+    from rapt.errors import LinkTimeoutError
+
+    flight = flight_from_plan(Path("field_plans/range2017/plan.json"), "pair2b")
+    log = tmp_path / "no-estimate.mcap"
+    with ArduSubSitl(LAUNCH, speedup=10, parameters={"EK3_SRC1_POSXY": 0}) as sitl:
+        with pytest.raises(LinkTimeoutError) as info:
+            run_vehicle(flight, sitl.connection, log_path=log, timeouts=BringUpTimeouts(estimate=8.0))
+    assert str(info.value).startswith("bring-up estimate: no position estimate within 8 s"), str(info.value)
+    assert "\n" not in str(info.value)
+    steps = [(e["name"], e["status"]) for e in read_run(log).events if e["source"] == "bringup"]
+    assert steps == [("heartbeat", "ok"), ("streams", "ok"), ("estimate", "failed")], steps
+    with pytest.raises(InputError, match="parameters: EK3 SRC=1 is not an ArduPilot parameter"):
+        ArduSubSitl(LAUNCH, parameters={"EK3 SRC": 1})
