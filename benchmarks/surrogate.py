@@ -368,7 +368,7 @@ def workflow(mission, surrogate: Surrogate, budget: int, confirm: int, pairs: in
         ("confirmed boundary types", f"{len(confirmed_types)}"),
         (
             "expert-only runs to the same types",
-            f"{reached:,}" if reached is not None else f"> {budget:,}",
+            f"{reached:,}" if reached is not None else (f"> {budget:,}" if confirmed_types else "-"),
         ),
         (
             "workflow / expert-only expert runs",
@@ -382,9 +382,9 @@ def workflow(mission, surrogate: Surrogate, budget: int, confirm: int, pairs: in
             f"{'+'.join(p['elements'])} {'/'.join(p['modes'])}: moved {p['moved_by']:.3f}, "
             f"{p['expert_runs']} runs, length {p['distance']:.3f}"
         )
+    prefixes = f"prefixes analysed at {', '.join(f'{n:,}' for n in checked)} runs" if checked else "no prefix needed"
     print(
-        f"   wall: surrogate search + confirmation {ts:.0f} s, expert-only search {te:.0f} s; expert-only "
-        f"prefixes analysed at {', '.join(f'{n:,}' for n in checked)} runs\n"
+        f"   wall: surrogate search + confirmation {ts:.0f} s, expert-only search {te:.0f} s; expert-only {prefixes}\n"
     )
 
 
@@ -396,7 +396,9 @@ def _runs_to_types(mission, study, asked: np.ndarray, types: set[tuple]) -> tupl
     order = asked[valid]
     assert np.array_equal(order, study.U), "the study's valid rows are its asked rows in order"
     grid = sorted({int(round(16 * 2 ** (k / 2))) for k in range(64) if 16 * 2 ** (k / 2) < len(asked)} | {len(asked)})
-    checked = []
+    checked: list[int] = []
+    if not types:  # nothing confirmed: there is nothing for the expert-only search to reach
+        return None, checked
     for n in grid:
         m = int(valid[:n].sum())
         prefix = replace(study, X=study.X[:m], Y=study.Y[:m], U=study.U[:m], batch=study.batch[:m], neighbours=None)
@@ -435,7 +437,7 @@ def main() -> None:
     args = ap.parse_args()
     if args.quick:
         args.runs, args.track, args.validation, args.paths, args.budget, args.confirm = 20, 64, 500, 50, 1000, 20
-        args.epochs, args.methods = 10, ["dagger", "qdagger50"]
+        args.epochs, args.methods, args.seeds = 10, ["dagger", "qdagger50"], []
     mission = sim.uuv.load_mission(MISSION)
     if args.load is not None:
         main_surrogate = Surrogate.load(args.load, mission)
