@@ -347,30 +347,30 @@ class ImitationResult:
 Rollout = Callable[[Policy | None, int, int], Sequence[Trajectory]]
 
 
-def _stack(
-    trajs: Sequence[Trajectory], decisions: Sequence[int] = (), window: int = 0
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Runs' states and actions stacked, and whether each state lies within ``window`` steps of a
-    switch of a ``decisions`` column in its run."""
+def _stack(trajs: Sequence[Trajectory]) -> tuple[np.ndarray, np.ndarray, list[int]]:
+    """Runs' states and actions stacked, and each run's number of states."""
     trajs = [t for t in trajs if t.features.shape[0]]
     if not trajs:
         raise InputError("rollout: returned no annotated states")
-    n_actions = trajs[0].expert.shape[1]
-    if any(d < 0 or d >= n_actions for d in decisions) or len(set(decisions)) != len(decisions):
-        raise InputError(f"decisions: expected distinct action columns 0..{n_actions - 1}, got {list(decisions)}")
-    near = []
-    for t in trajs:
-        close = np.zeros(t.features.shape[0], dtype=bool)
-        for d in decisions:
-            label = t.expert[:, d] > 0
-            for k in np.flatnonzero(label[1:] != label[:-1]) + 1:
-                close[max(k - window, 0) : k + window] = True
-        near.append(close)
     return (
         np.concatenate([t.features for t in trajs]).astype(np.float32),
         np.concatenate([t.expert for t in trajs]).astype(np.float32),
-        np.concatenate(near),
+        [int(t.features.shape[0]) for t in trajs],
     )
+
+
+def _near_switches(A: np.ndarray, lengths: list[int], decisions: Sequence[int], window: int) -> np.ndarray:
+    """Whether each stacked state lies within ``window`` steps of a switch of a ``decisions`` column
+    in its own run (``lengths``: the runs' numbers of states, in order)."""
+    near = np.zeros(A.shape[0], dtype=bool)
+    start = 0
+    for n in lengths:
+        for d in decisions:
+            label = A[start : start + n, d] > 0
+            for k in (np.flatnonzero(label[1:] != label[:-1]) + 1).tolist():
+                near[start + max(k - window, 0) : start + min(k + window, n)] = True
+        start += n
+    return near
 
 
 class _DecisionLearner:
@@ -538,12 +538,14 @@ def imitate(
         t0 = time.perf_counter()
         k = (initial_runs or runs_per_iteration) if it == 0 else runs_per_iteration
         flier = None if (it == 0 or method == "supervised") else policy
-        Fi, Ai, Ni = _stack(rollout(flier, k, it), decisions, switch_window)
+        Fi, Ai, lengths = _stack(rollout(flier, k, it))
+        if split is None:  # the first runs give the shapes; heads and decisions are checked against them
+            split = _heads(heads, decisions, Fi.shape[1], Ai.shape[1])
+        Ni = _near_switches(Ai, lengths, decisions, switch_window)
         runs += k
         t1 = time.perf_counter()
         if F is None:
             F, A, Nt = Fi, Ai, Ni
-            split = _heads(heads, decisions, F.shape[1], A.shape[1])
             models = [
                 _DecisionLearner(options, epochs, switch_weight, seed + j)
                 if _is_decision(outs, decisions)
