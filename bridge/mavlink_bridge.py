@@ -147,6 +147,11 @@ class Autopilot:
                 return name
         return None
 
+    @property
+    def mode_label(self) -> str:
+        """The mode as a message names it: its name, or "mode N" for a number ArduSub does not define."""
+        return self.mode or f"mode {self.custom_mode}"
+
 
 def _mode_number(name: str) -> int:
     number = ARDUSUB_MODES.get(str(name).strip().upper())

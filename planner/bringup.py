@@ -166,7 +166,7 @@ class BringUp:
                     "connect to an ArduSub vehicle"
                 ),
             )
-        mode = hb.mode or f"mode {hb.custom_mode}"
+        mode = hb.mode_label
         if hb.armed and hb.custom_mode != GUIDED:
             self._fail(
                 "heartbeat",
@@ -279,8 +279,7 @@ class BringUp:
 
         def in_guided() -> int:
             if self._mode() != GUIDED:
-                hb = self.bridge.autopilot
-                now = (hb.mode or f"mode {hb.custom_mode}") if hb is not None else "not heard"
+                now = self._mode_label()
                 self._fail("arm", RunError(f"bring-up arm: the vehicle left GUIDED before it was armed (now {now})"))
             return self.bridge.arm(True)
 
@@ -305,9 +304,7 @@ class BringUp:
                     ),
                 )
             if self._mode() != GUIDED:
-                hb = self.bridge.autopilot
-                now = (hb.mode or f"mode {hb.custom_mode}") if hb is not None else "not heard"
-                self._fail("depth", RunError(f"bring-up depth: the vehicle left GUIDED (now {now})"))
+                self._fail("depth", RunError(f"bring-up depth: the vehicle left GUIDED (now {self._mode_label()})"))
             self._feed()
             pose = self.telemetry.pose
             if pose is None or pose.time_ms == last_ms:
@@ -347,6 +344,10 @@ class BringUp:
     def _mode(self) -> int:
         hb = self.bridge.autopilot
         return -1 if hb is None else int(hb.custom_mode)
+
+    def _mode_label(self) -> str:
+        hb = self.bridge.autopilot
+        return "not heard" if hb is None else hb.mode_label
 
     def _armed(self) -> bool:
         hb = self.bridge.autopilot

@@ -23,10 +23,10 @@ from pathlib import Path
 import numpy as np
 
 from bridge import keys
-from bridge.mavlink_bridge import ARDUSUB_MODES, MavlinkBridge
+from bridge.mavlink_bridge import Autopilot, MavlinkBridge
 from bridge.session import open_session
 from planner.backseat import BackSeat
-from planner.bringup import BringUp, BringUpTimeouts, Step
+from planner.bringup import GUIDED, BringUp, BringUpTimeouts, Step
 from planner.jsonio import jsonable
 from planner.referee import Referee
 from planner.scenario_map import ScenarioMap
@@ -129,9 +129,10 @@ def run_vehicle(
             referee.end("stopped by the operator" if isinstance(exc, KeyboardInterrupt) else f"stopped: {exc}")
             backseat.close()
             watchdog.close()
-            taken = _taken_by_vehicle(bridge)
-            if bringup.took_control and taken.startswith("left GUIDED"):  # a failsafe or a pilot has it now
-                bringup.note("recover", "ok", f"nothing commanded: {VEHICLE_ENDED}{taken}")
+            hb = bridge.autopilot
+            left = _left_guided(hb) if hb is not None and hb.armed else ""
+            if bringup.took_control and left:  # a failsafe or a pilot has it now
+                bringup.note("recover", "ok", f"nothing commanded: {VEHICLE_ENDED}{left}")
             elif bringup.took_control:  # never touch a vehicle the checks refused: someone else may fly it
                 _recover(bridge, referee, bringup, "surface", say)
             raise
@@ -222,14 +223,16 @@ def _taken_by_vehicle(bridge: MavlinkBridge) -> str:
     and a safety pilot takes it in a mode of their own; in each case the run is over and
     nothing more is commanded: the vehicle, or the person, now in charge is not fought."""
     hb = bridge.autopilot
-    if hb is None:
-        return ""
-    if not hb.armed:
+    if hb is not None and not hb.armed:
         return "disarmed itself (a failsafe, or disarmed by someone else)"
-    if int(hb.custom_mode) != ARDUSUB_MODES["GUIDED"]:
-        now = hb.mode or f"mode {hb.custom_mode}"
-        return f"left GUIDED (now {now}: a failsafe, or a pilot took it)"
-    return ""
+    return _left_guided(hb)
+
+
+def _left_guided(hb: Autopilot | None) -> str:
+    """Why the vehicle is out of GUIDED by the heartbeat ``hb`` ("" while in GUIDED or not heard)."""
+    if hb is None or hb.custom_mode == GUIDED:
+        return ""
+    return f"left GUIDED (now {hb.mode_label}: a failsafe, or a pilot took it)"
 
 
 def _recover(bridge: MavlinkBridge, referee: Referee, bringup: BringUp, action: str, say) -> None:
