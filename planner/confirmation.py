@@ -64,6 +64,7 @@ class _Bracketing:
     step: float
     target: float
     seen: dict[float, tuple | None] = field(default_factory=dict)
+    scores: dict[float, np.ndarray] = field(default_factory=dict)  # the expert's score rows at ``t``
     sides: list[int] = field(default_factory=list)  # -1: before a, +1: past b
     last: dict[int, float] = field(default_factory=dict)  # the outermost position run on each side
     bracket: tuple[float, float] | None = None
@@ -204,14 +205,14 @@ def confirm_pairs(
             got = {}
             for t in ts:
                 got[t] = _outcome(r.scores[row], cols) if r.valid[row] else INVALID
-                b.pair.setdefault("_scores", {})[t] = r.scores[row]
+                b.scores[t] = r.scores[row]
                 row += 1
             b.record(got)
         finished.extend(b for b in active if b.done)
         active = [b for b in active if not b.done]
     confirmed = sorted((b for b in finished if b.confirmed), key=lambda b: b.index)[:k]
     return Confirmation(
-        [_confirmed_pair(b, levels, discrete, names) for b in confirmed],
+        [_confirmed_pair(b, discrete, names) for b in confirmed],
         len(candidates),
         len([b for b in finished if b.seen]),
         spent,
@@ -247,10 +248,9 @@ def _outcome(scores: np.ndarray, cols: list[int]) -> tuple:
     return tuple(float(v) for v in np.nan_to_num(scores[cols], nan=-1.0))
 
 
-def _confirmed_pair(b: _Bracketing, levels: list[list[int]], discrete: list[list[int]], names: list[str]) -> dict:
+def _confirmed_pair(b: _Bracketing, discrete: list[list[int]], names: list[str]) -> dict:
     lo, hi = b.bracket  # type: ignore[misc]
-    s = b.pair.pop("_scores")
-    ends = np.vstack([s[lo], s[hi]])
+    ends = np.vstack([b.scores[lo], b.scores[hi]])
     modes = modes_from_scores(ends)
     level = next(lv for lv, cols in enumerate(discrete) if _outcome(ends[0], cols) != _outcome(ends[1], cols))
     elements = [names[c] for c in discrete[level] if _outcome(ends[0], [c]) != _outcome(ends[1], [c])]
