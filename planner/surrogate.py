@@ -93,7 +93,7 @@ def train_surrogate(
     select: Callable[[Policy], tuple[float, float]] | None = None
     if select_runs:
         Xs = draw_valid(mission, int(select_runs), np.random.default_rng([int(seed), 0x73656C]))
-        expert, held_out = annotated_runs(mission, Xs, spec)
+        _, held_out = annotated_runs(mission, Xs, spec)  # the expert's features, for the goal threshold
         expert_paths = sim.uuv.simulate(mission, Xs, trajectories=True)
 
         def select(policy: Policy) -> tuple[float, float]:

@@ -18,17 +18,21 @@ Features, all in the vehicle frame (x along the bow, y to starboard) and in [-1,
 Actions: the commanded heading as a direction relative to the bow, ``(cos r, sin r)``; the
 goal decision: +1 when the expert has given the mission waypoint up and heads home
 (waypoints done, not enough fuel, not enough time), -1 while it still pursues it; and the
-commanded through-water speed over the maximum speed.  Section 6.5.3 puts speed and
-heading in one vector ``(speed / max_speed) (cos r, sin r)``, but a regression averages
-the vectors of neighbouring turns, and the shorter mean is a slower vehicle, which spends
-less energy a metre (drag is cubic in speed) and reaches waypoints the expert aborts.  With its own output the speed is learned as the expert
-holds it, and the heading is the direction's angle whatever its length.  The expert latches that decision, and a memoryless regressor cannot
-imitate a latch from the state alone: moments after turning on fuel the vehicle has the
-same charge and distance from home as one that carries on, and averaging "go on" with
-"go home" stalls it.  So the learned back-seat latches its own decision too (as the
-expert's goal state does) and, once home-bound, sees no waypoint pending, exactly the
-features of a vehicle that has reached every waypoint.  The decision is learned from the
-features the expert takes it on, not the scan (:func:`policy_heads`).
+commanded through-water speed over the maximum speed.
+
+Section 6.5.3 puts speed and heading in one vector ``(speed / max_speed) (cos r, sin r)``,
+but a regression averages the vectors of neighbouring turns, and the shorter mean is a
+slower vehicle, which spends less energy a metre (drag is cubic in speed) and reaches
+waypoints the expert aborts.  With its own output the speed is learned as the expert holds
+it, and the heading is the direction's angle whatever its length.
+
+The expert latches its goal decision, and a memoryless regressor cannot imitate a latch
+from the state alone: moments after turning on fuel the vehicle has the same charge and
+distance from home as one that carries on, and averaging "go on" with "go home" stalls it.
+So the learned back-seat latches its own decision too (as the expert's goal state does)
+and, once home-bound, sees no waypoint pending, exactly the features of a vehicle that has
+reached every waypoint.  The decision is learned from the features the expert takes it on,
+not the scan (:func:`policy_heads`).
 
 Every input is what the front-seat reports over MAVLink at MAVLink precision, so
 features computed in the batch simulator and on the bus are the same numbers.
@@ -127,8 +131,8 @@ def policy_heads(spec: FeatureSpec) -> tuple[tuple[list[int] | None, list[int]],
     """Which features each network of a learned back-seat reads (``rapt.imitation.imitate(heads=)``).
 
     Heading and speed from every feature; the goal decision from the charge, the map vectors
-    and the clock only — what the expert's goal selection reads.  Learned by the steering network,
-    the decision leaned on the range scan (in the chapter 6 mission most early aborts of a
+    and the clock only — what the expert's goal selection reads.  Learned by the steering
+    network, the decision leaned on the range scan (in the chapter 6 mission most early aborts of a
     single network fired on a sonar spike, its output with the scan cleared far below 0).
     """
     mission_level = list(range(spec.sonar.start)) + list(range(spec.sonar.stop, spec.size))
