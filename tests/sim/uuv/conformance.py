@@ -2,10 +2,12 @@
 
 The sequences a ground station sends on connect and in use (heartbeat watch, AUTOPILOT_VERSION,
 the parameter list, reads and sets including bad ones, mode changes valid and invalid,
-arm/disarm, an unsupported command, stream rates, MAVLink FTP) go over real MAVLink on
+arm/disarm, an unsupported command, stream rates set and by default, MAVLink FTP, GUIDED
+velocity targets and their timeout, mission upload and download) go over real MAVLink on
 loopback, first to ArduSub SITL (the firmware is the reference), then to
 :class:`sim.uuv.frontseat.FrontSeat` in both flavours; each answer is reduced to the
-fields that matter (:func:`canonical`) and the two are compared row by row.  A row matches
+fields that matter (:func:`canonical`) and the two are compared row by row (a rate row
+matches when it names the same messages at rates within a factor of 2, per vehicle second).  A row matches
 or carries a reason from :data:`ALLOWED`; anything else fails ``test_conformance.py``.
 
 ArduSub's answers are recorded once into ``ardusub_answers.json`` next to this module (with the
@@ -54,10 +56,20 @@ ALLOWED: dict[str, str] = {
     "FTP open @PARAM/param.pck": "the banner after it: line 2 is the board's unique id; ours names the simulator",
     "boot WPNAV_SPEED": "set from the mission's cruise speed: our vehicle is not a BlueROV2",
     "boot BATT_CAPACITY": "set from the mission's battery (Wh at 14.8 V)",
+    "default streams: message types": "ArduSub streams 32 types; ours the 11 a back-seat or ground station reads "
+    "(no IMU, RC, servo, pressure or rangefinder hardware is simulated); their rates agree (next row)",
+    "GUIDED velocity target: braking": "our vehicle is the mission's torpedo model, which coasts down over seconds; "
+    "ArduSub's BlueROV2 falls to 0.2 m/s within 0.3 s, then drifts at 0.2-0.14 m/s",
 }
 #: Rows only the lock-step flavour may differ in, and why.
 ALLOWED_LOCKSTEP: dict[str, str] = {
     "DO_SET_MODE GUIDED before a position": "the lock-step vehicle knows its position from its first step",
+    "default streams: rates": "the lock-step vehicle sends its telemetry once per step, when the back-seat's "
+    "set-point for the step arrives, not at ArduSub's rates",
+    "GUIDED velocity target: speed": "the lock-step vehicle steps only on a velocity-and-yaw set-point (mask 2503) "
+    "naming its current step: its clock is the back-seat's",
+    "GUIDED velocity target: timeout": "the lock-step vehicle's clock stands still without the back-seat's "
+    "set-points; its failsafe (no set-point for 5 wall s) surfaces it",
 }
 
 
@@ -122,6 +134,17 @@ def canonical(msg) -> str:
     return kind  # HOME_POSITION, GPS_GLOBAL_ORIGIN: that it came is what counts
 
 
+def is_answer(msg) -> bool:
+    """Whether ``msg`` answers a request (not streamed telemetry, not what the firmware says on its own)."""
+    kind = msg.get_type()
+    if kind not in ANSWERS:
+        return False
+    if kind == "STATUSTEXT" and SPONTANEOUS.match(msg.text):
+        return False
+    # the firmware's own statistics, and what it saves on disarming
+    return not (kind == "PARAM_VALUE" and (msg.param_id not in _KEPT or msg.param_id.startswith("STAT_")))
+
+
 class Client:
     """A ground station on one MAVLink link (system 250, component 190)."""
 
@@ -158,12 +181,8 @@ class Client:
         deadline = time.monotonic() + window
         while time.monotonic() < deadline:
             msg = self.conn.recv_match(blocking=True, timeout=0.02)
-            if msg is None or msg.get_type() not in ANSWERS:
+            if msg is None or not is_answer(msg):
                 continue
-            if msg.get_type() == "STATUSTEXT" and SPONTANEOUS.match(msg.text):
-                continue
-            if msg.get_type() == "PARAM_VALUE" and (msg.param_id not in _KEPT or msg.param_id.startswith("STAT_")):
-                continue  # the firmware's own statistics, and what it saves on disarming
             got.append(msg)
             if expect is not None and len(got) >= expect:
                 deadline = min(deadline, time.monotonic() + self.grace_s)
@@ -184,6 +203,8 @@ class Step:
     watch: str = "answers"
     #: sent in the first vehicle seconds after boot, before the EKF has a position
     early: bool = False
+    #: a multi-message exchange that fills rows of its own (``row`` is their common prefix)
+    exchange: Callable[[Client, float], dict[str, list[str]]] | None = None
 
 
 def _param_set(name: str, value: float, kind: int = mav.MAV_PARAM_TYPE_REAL32) -> Callable[[Client], None]:
@@ -210,6 +231,208 @@ def _nothing(c: Client) -> None:
     pass
 
 
+# -- exchanges of many messages: default streams, the mission protocol, GUIDED velocity ------
+#: Vehicle seconds over which the default streams are counted.
+STREAM_WINDOW_S = 10.0
+#: Streamed messages a back-seat reads; their default rates must agree within a factor of 2.
+RELIED_ON = (
+    "HEARTBEAT",
+    "SYS_STATUS",
+    "GPS_RAW_INT",
+    "GLOBAL_POSITION_INT",
+    "LOCAL_POSITION_NED",
+    "ATTITUDE",
+    "VFR_HUD",
+    "SYSTEM_TIME",
+    "BATTERY_STATUS",
+    "EKF_STATUS_REPORT",
+    "MISSION_CURRENT",
+)
+#: Rows of "NAME RATE Hz" entries: they match when they name the same messages at rates within this factor.
+RATE_ROWS = frozenset({"default streams: rates"})
+RATE_FACTOR = 2.0
+
+
+def _default_streams(client: Client, window: float) -> dict[str, list[str]]:
+    """What the vehicle streams unasked: every message type, and the rates (per vehicle second) of those relied on.
+
+    Rates are counted against the vehicle's clock (ATTITUDE's ``time_boot_ms``), so a speed-up
+    does not change them; a clock that stands still for a wall second (lock-step) ends the count.
+    """
+    counts: dict[str, int] = {}
+    first = last = None
+    ticked = time.monotonic()
+    while time.monotonic() - ticked < 1.0 and (first is None or last - first < STREAM_WINDOW_S * 1000):
+        msg = client.conn.recv_match(blocking=True, timeout=0.05)
+        if msg is None or msg.get_type() == "BAD_DATA":
+            continue
+        if msg.get_type() == "ATTITUDE":  # the vehicle's clock, 10 Hz
+            if last is None or msg.time_boot_ms > last:
+                ticked = time.monotonic()
+            first = msg.time_boot_ms if first is None else first
+            last = msg.time_boot_ms
+        if first is not None and not is_answer(msg):
+            counts[msg.get_type()] = counts.get(msg.get_type(), 0) + 1
+    span = 0.0 if first is None or last is None else (last - first) / 1000
+    rates = [f"{name} {counts[name] / span:.2g} Hz" for name in RELIED_ON if name in counts and span > 0]
+    return {"default streams: message types": sorted(counts), "default streams: rates": rates}
+
+
+def rates_agree(ardusub: list[str], ours: list[str], factor: float = RATE_FACTOR) -> bool:
+    """Whether two rate rows name the same messages, each at a rate within ``factor`` of the other."""
+
+    def parse(row: list[str]) -> dict[str, float]:
+        return {name: float(hz) for name, hz, _ in (entry.split() for entry in row)}
+
+    try:
+        a, b = parse(ardusub), parse(ours)
+    except ValueError:  # not a rate row ("(row missing)")
+        return False
+    return a.keys() == b.keys() and all(1 / factor <= b[k] / a[k] <= factor for k in a if a[k] > 0)
+
+
+#: The mission uploaded: a placeholder for home (item 0, 0.001 deg north of home) and two
+#: waypoints 5 m deep north-east of home (frame, degrees of latitude and longitude from home, z).
+MISSION_ITEMS = (
+    (mav.MAV_FRAME_GLOBAL, 0.001, 0.0, 0.0),
+    (mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, 0.0002, 0.0001, -5.0),
+    (mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, 0.0004, 0.0003, -5.0),
+)
+
+
+def _mission(client: Client, window: float) -> dict[str, list[str]]:
+    """Upload a three-item mission (MISSION_COUNT, the vehicle asks for each item), then read it back."""
+    client.drain()
+    client.command(mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_HOME_POSITION)
+    home = client.wait_for("HOME_POSITION")
+    lat0, lon0 = home.latitude / 1e7, home.longitude / 1e7
+    sent = [(frame, int(round((lat0 + dlat) * 1e7)), int(round((lon0 + dlon) * 1e7)), z)
+            for frame, dlat, dlon, z in MISSION_ITEMS]  # fmt: skip
+    client.drain()
+    client.conn.mav.mission_count_send(1, 1, len(sent), mav.MAV_MISSION_TYPE_MISSION)
+    upload: list[str] = []
+    deadline, done = time.monotonic() + max(window, 1.0) * 10, None
+    while time.monotonic() < (deadline if done is None else min(deadline, done + client.grace_s)):
+        msg = client.conn.recv_match(
+            type=["MISSION_REQUEST", "MISSION_REQUEST_INT", "MISSION_ACK", "STATUSTEXT"], blocking=True, timeout=0.02
+        )
+        if msg is None:
+            continue
+        kind = msg.get_type()
+        if kind == "STATUSTEXT":
+            if not SPONTANEOUS.match(msg.text):
+                upload.append(canonical(msg))
+            continue
+        if kind == "MISSION_ACK":
+            upload.append(f"MISSION_ACK type={msg.type} mission_type={msg.mission_type}")
+            done = time.monotonic()
+            continue
+        entry = f"{kind} seq={msg.seq} mission_type={msg.mission_type}"
+        if not upload or upload[-1] != entry:  # a re-ask of the same item is not an answer of its own
+            upload.append(entry)
+        if 0 <= msg.seq < len(sent):
+            frame, lat, lon, z = sent[msg.seq]
+            client.conn.mav.mission_item_int_send(
+                1, 1, msg.seq, frame, mav.MAV_CMD_NAV_WAYPOINT, int(msg.seq == 0), 1, 0, 2.0, 0, 0, lat, lon, z,
+                mav.MAV_MISSION_TYPE_MISSION,
+            )  # fmt: skip
+    client.drain()
+    client.conn.mav.mission_request_list_send(1, 1, mav.MAV_MISSION_TYPE_MISSION)
+    count = client.wait_for("MISSION_COUNT")
+    download = [f"MISSION_COUNT count={count.count} mission_type={count.mission_type}"]
+    for seq in range(count.count):
+        client.conn.mav.mission_request_int_send(1, 1, seq, mav.MAV_MISSION_TYPE_MISSION)
+        item = client.wait_for("MISSION_ITEM_INT", ok=lambda m, seq=seq: m.seq == seq)
+        download.append(_mission_item(item, sent, (home.latitude, home.longitude)))
+    client.conn.mav.mission_ack_send(1, 1, mav.MAV_MISSION_ACCEPTED, mav.MAV_MISSION_TYPE_MISSION)
+    return {"mission upload": upload, "mission download": download}
+
+
+def _mission_item(item, sent: list, home: tuple[int, int]) -> str:
+    """A MISSION_ITEM_INT read back: its fields, and where it is (as uploaded, home, elsewhere)."""
+    at = "elsewhere"
+    if item.seq < len(sent) and (item.x, item.y) == tuple(sent[item.seq][1:3]):
+        at = "as uploaded"
+    elif abs(item.x - home[0]) <= 1 and abs(item.y - home[1]) <= 1:
+        at = "at HOME_POSITION"
+    z = "" if item.seq == 0 else f" z={item.z:g}"  # home's altitude is where the vehicle booted
+    return (
+        f"MISSION_ITEM_INT seq={item.seq} frame={item.frame} command={item.command} current={item.current} "
+        f"autocontinue={item.autocontinue} params={item.param1:g},{item.param2:g},{item.param3:g},{item.param4:g}"
+        f"{z} {at}"
+    )
+
+
+#: The GUIDED velocity target: 1 m/s north, velocity only (position, acceleration, yaw and yaw rate ignored).
+VELOCITY_ONLY_MASK = 0b110111000111
+TARGET_MS = 1.0
+#: Vehicle seconds the target is sent for (every REFRESH_S), then watched after the last one.
+FLY_S, REFRESH_S, WATCH_S = 8.0, 0.5, 8.0
+#: ArduSub zeroes a velocity target this many vehicle seconds after the last one (GUIDED_POSVEL_TIMEOUT_MS).
+TIMEOUT_S = 3.0
+
+
+def _guided_velocity(client: Client, window: float) -> dict[str, list[str]]:
+    """Fly a velocity target in GUIDED (armed), stop sending it and watch the vehicle after the timeout."""
+    answers: list[str] = []
+    targets: set[str] = set()
+    speeds: list[tuple[float, float, float]] = []  # (vehicle s since the first target, north m/s, east m/s)
+    now = start = last_sent = None
+    ticked = time.monotonic()
+    while time.monotonic() - ticked < 1.0:  # a vehicle whose clock stands still (lock-step) is left after 1 s
+        if now is not None and start is not None and now - start > FLY_S + WATCH_S:
+            break
+        if (
+            now is not None
+            and (start is None or now - start < FLY_S)
+            and (last_sent is None or now - last_sent >= REFRESH_S)
+        ):
+            client.conn.mav.set_position_target_local_ned_send(
+                int(now * 1000), 1, 1, mav.MAV_FRAME_LOCAL_NED, VELOCITY_ONLY_MASK, 0, 0, 0, TARGET_MS, 0, 0, 0, 0, 0, 0, 0
+            )  # fmt: skip
+            start = now if start is None else start
+            last_sent = now
+        msg = client.conn.recv_match(blocking=True, timeout=0.02)
+        if msg is None:
+            continue
+        kind = msg.get_type()
+        if kind == "GLOBAL_POSITION_INT":
+            if now is None or msg.time_boot_ms / 1000 > now:
+                ticked = time.monotonic()
+            now = msg.time_boot_ms / 1000
+            if start is not None:
+                speeds.append((now - start, msg.vx / 100, msg.vy / 100))
+        elif kind in ("POSITION_TARGET_LOCAL_NED", "POSITION_TARGET_GLOBAL_INT"):
+            targets.add(f"{kind} frame={msg.coordinate_frame} type_mask={msg.type_mask}")
+        elif is_answer(msg):
+            answers.append(canonical(msg))
+    rows = {
+        "GUIDED velocity target: answers": answers,
+        "GUIDED velocity target: POSITION_TARGET streamed": sorted(targets),
+    }
+    return rows | _timeout_rows(speeds, 0.0 if start is None or last_sent is None else last_sent - start)
+
+
+def _timeout_rows(speeds: list[tuple[float, float, float]], stop: float) -> dict[str, list[str]]:
+    """What the vehicle did with the target (``speeds`` as sampled, the last target sent ``stop`` s in)."""
+    reached = max((vn for t, vn, _ in speeds if t <= stop), default=0.0)
+    after = [(t - stop, math.hypot(vn, ve)) for t, vn, ve in speeds if t > stop]
+    held = max((v for t, v in after if t <= 0.5), default=0.0)  # the speed when the last target went out
+    slowing = next((t for t, v in after if v < 0.9 * held), None) if held > 0 else None
+    braked = slowing is not None and any(v < 0.5 * held for t, v in after if t <= slowing + 1.0)
+    early, late = TIMEOUT_S - 0.5, TIMEOUT_S + 1.5  # the last target's delivery and a 3 Hz report's spacing
+    return {
+        "GUIDED velocity target: speed": [f"north speed reached >= {TARGET_MS / 2:g} m/s: {reached >= TARGET_MS / 2}"],
+        "GUIDED velocity target: timeout": [
+            f"starts slowing {early:g}-{late:g} s after the last target: {slowing is not None and early <= slowing <= late}"
+        ],
+        "GUIDED velocity target: braking": [
+            f"below half the speed within 1 s of slowing: {braked}",
+            f"below 0.1 m/s {WATCH_S:g} s after the last target: {bool(after) and after[-1][1] < 0.1}",
+        ],
+    }
+
+
 C = mav
 STEPS: tuple[Step, ...] = (
     # the firmware's first seconds: only what does not depend on where in its boot timeline they fall
@@ -218,6 +441,7 @@ STEPS: tuple[Step, ...] = (
     Step("HEARTBEAT on connect", _nothing, "HEARTBEAT"),
     Step("SYS_STATUS sensor bits", _nothing, "SYS_STATUS"),
     Step("EKF_STATUS_REPORT with a position", _nothing, "EKF_STATUS_REPORT"),
+    Step("default streams", _nothing, exchange=_default_streams),
     Step("PARAM_REQUEST_LIST", lambda c: c.conn.mav.param_request_list_send(1, 1), "params"),
     Step("AUTOPILOT_VERSION (REQUEST_MESSAGE)", lambda c: c.command(C.MAV_CMD_REQUEST_MESSAGE, 148)),
     Step("AUTOPILOT_VERSION (REQUEST_AUTOPILOT_CAPABILITIES)", lambda c: c.command(520, 1)),
@@ -257,6 +481,7 @@ STEPS: tuple[Step, ...] = (
     Step("SYS_STATUS in GUIDED", _nothing, "SYS_STATUS"),
     Step("arm", lambda c: c.command(C.MAV_CMD_COMPONENT_ARM_DISARM, 1)),
     Step("HEARTBEAT armed", _nothing, "HEARTBEAT"),
+    Step("GUIDED velocity target", _nothing, exchange=_guided_velocity),
     Step("arm when armed", lambda c: c.command(C.MAV_CMD_COMPONENT_ARM_DISARM, 1)),
     Step("disarm", lambda c: c.command(C.MAV_CMD_COMPONENT_ARM_DISARM, 0)),
     Step("disarm when disarmed", lambda c: c.command(C.MAV_CMD_COMPONENT_ARM_DISARM, 0)),
@@ -264,6 +489,7 @@ STEPS: tuple[Step, ...] = (
     Step("unsupported command", lambda c: c.command(31000)),
     Step("FTP reset sessions", _ftp(10, 2)),
     Step("FTP open @PARAM/param.pck", _ftp(11, 4, b"@PARAM/param.pck")),
+    Step("mission", _nothing, exchange=_mission),
 )
 
 
@@ -277,7 +503,9 @@ def run(client: Client, window: float, expected: dict[str, list[str]] | None = N
             positioned = True
         client.drain()
         step.send(client)
-        if step.watch == "params":
+        if step.exchange is not None:
+            rows.update(step.exchange(client, window))
+        elif step.watch == "params":
             rows.update(_param_rows(client, window))
         elif step.watch != "answers":
             rows[step.row] = [canonical(client.wait_for(step.watch))]
@@ -322,6 +550,8 @@ class Row:
 
     @property
     def matches(self) -> bool:
+        if self.name in RATE_ROWS:
+            return rates_agree(self.ardusub, self.ours)
         return self.ardusub == self.ours
 
     #: why this row may differ, if it may
