@@ -14,6 +14,7 @@ import tempfile
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 os.environ.setdefault("MAVLINK20", "1")
@@ -22,12 +23,14 @@ from pymavlink import mavutil  # noqa: E402
 from bridge import keys
 from bridge.mavlink_bridge import MavlinkBridge, MissionItem
 from bridge.session import open_session
-from planner.ardusub_sitl import ENV, ArduSubSitl, sitl_binary
+from planner.ardusub_sitl import ENV, ArduSubSitl, launch_point, sitl_binary
 from rapt.errors import InputError, LinkTimeoutError, MissingFileError
+from sim.uuv.missionfile import load_mission
 from tests.loopback import free_port, wait_until
 
+ROOT = Path(__file__).resolve().parents[2]
 #: range2017's launch point (lat, lon, alt, heading), where a range team would put the vehicle.
-LAUNCH = (47.6953287, -122.6264071, 0.0, 0.0)
+LAUNCH = launch_point(load_mission(ROOT / "examples" / "range2017.toml"))
 MAV_RESULT_ACCEPTED, MAV_RESULT_FAILED = 0, 4
 MAV_MISSION_ACCEPTED = 0
 ATTITUDE = 30  # message id
@@ -341,3 +344,23 @@ def test_a_firmware_that_never_gets_a_position_estimate_is_never_armed(tmp_path)
     assert steps == [("heartbeat", "ok"), ("streams", "ok"), ("estimate", "failed")], steps
     with pytest.raises(InputError, match="parameters: EK3 SRC=1 is not an ArduPilot parameter"):
         ArduSubSitl(LAUNCH, parameters={"EK3 SRC": 1})
+
+
+def test_the_launch_point_is_where_the_modelled_vehicle_starts():
+    """SITL's home is the mission's launch in its local frame, heading for the first waypoint, as the model starts."""
+    import math
+
+    from sim.uuv.geo import LocalFrame
+    from sim.uuv.scenario import make_scenarios
+    from sim.uuv.world import World
+
+    for name in ("range2017", "imitation7"):
+        mission = load_mission(ROOT / "examples" / f"{name}.toml")
+        lat, lon, alt, heading = launch_point(mission)
+        state = World(make_scenarios(mission, np.full((1, mission.dim), 0.5))).state
+        east, north = LocalFrame(mission.origin_lat, mission.origin_lon).to_local(lat, lon)
+        assert math.hypot(east - state.x[0], north - state.y[0]) < 0.01, name
+        assert alt == 0.0 and abs(heading - math.degrees(state.heading[0]) % 360) < 1e-6, name
+    # the home range2017's field plan wrote into its WPL files, to the file's 8 decimals
+    home = (ROOT / "field_plans" / "range2017" / "pair1a.waypoints").read_text().splitlines()[1].split("\t")
+    assert (round(LAUNCH[0], 8), round(LAUNCH[1], 8)) == (float(home[8]), float(home[9]))
