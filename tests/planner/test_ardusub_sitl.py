@@ -34,7 +34,7 @@ LAUNCH = launch_point(load_mission(ROOT / "examples" / "range2017.toml"))
 MAV_RESULT_ACCEPTED, MAV_RESULT_FAILED = 0, 4
 MAV_MISSION_ACCEPTED = 0
 ATTITUDE = 30  # message id
-GUIDED = 4
+GUIDED, SURFACE, ALT_HOLD = 4, 9, 2  # ArduSub custom modes
 SAFETY_ARMED = 128  # MAV_MODE_FLAG_SAFETY_ARMED
 
 needs_firmware = pytest.mark.skipif(sitl_binary() is None, reason=f"{ENV} is not set: no ArduSub SITL binary to fly")
@@ -419,3 +419,48 @@ def test_a_virtual_obstacle_in_the_way_is_seen_and_gone_round_on_ardusub():
     assert y[-1] > obstacles[0, o2, :, 1].max()  # and on past it, north of its northmost corner
     # the firmware has no sonar: what the back-seat went round came from the virtual one
     assert result.virtual["contacts_sent"] > 0 and result.virtual["gauge_sent"] > 0
+
+
+@needs_firmware
+@pytest.mark.sitl
+@pytest.mark.integration
+def test_the_watchdog_surfaces_ardusub_when_the_vehicle_touches_a_virtual_obstacle(tmp_path):
+    """The same scenario with a sonar that reaches 1 m (a mission-file setting): the back-seat sees O2 too
+    late and touches it; the watchdog takes over at once with SURFACE, ArduSub rises to the surface (and
+    there, as its SURFACE mode does, switches itself to ALT_HOLD), the run ends with the collision and
+    the vehicle is disarmed; after the take-over only SURFACE and the disarm are commanded, the log is
+    closed and reads back with the watchdog's event."""
+    from bridge.logger import read_log
+    from planner.logs import read_run
+    from planner.vehicle_run import run_vehicle
+
+    flight = _imitation7_flight(sonar_range_m=1.0)
+    log = tmp_path / "collision.mcap"
+    with ArduSubSitl(launch_point(flight.mission), speedup=FLIGHT_SPEEDUP) as sitl:
+        result = run_vehicle(flight, sitl.connection, log_path=log, timeout_s=200 / FLIGHT_SPEEDUP)
+    assert result.watchdog == "collision", result.ended
+    assert result.ended in ("collision", "watchdog: collision")  # the referee's word or the watchdog's
+    assert result.decisions["missed"] == 0
+    assert result.timeline[-1].name == "recover" and result.timeline[-1].detail == "surfaced and disarmed"
+
+    run = read_run(log)
+    assert run.has_end and run.ended == result.ended and not run.problems
+    [event] = [e for e in run.events if e["source"] == "watchdog"]
+    assert (event["event"], event["reason"], event["action"]) == ("intervention", "collision", "surface")
+    assert event["mode_result"] == MAV_RESULT_ACCEPTED and event["detail"].startswith("touched obstacle O2")
+    records = list(read_log(log))
+    taken = next(ns for t, ns, m in records if t.endswith("/control/active") and m["value"] == "watchdog")
+    after = [(t, m) for t, ns, m in records if ns >= taken]
+    acks = [m["command"] for t, m in after if t.endswith("/mavlink/COMMAND_ACK")]
+    assert acks and set(acks) <= {176, 400}, acks  # DO_SET_MODE (SURFACE) and the disarm, nothing else
+    assert all(m["result"] == MAV_RESULT_ACCEPTED for t, m in after if t.endswith("/mavlink/COMMAND_ACK"))
+    modes = [
+        (m["custom_mode"], bool(m["base_mode"] & SAFETY_ARMED)) for t, m in after if t.endswith("/mavlink/HEARTBEAT")
+    ]
+    first = next(i for i, (mode, _) in enumerate(modes) if mode == SURFACE)
+    assert set(modes[:first]) <= {(GUIDED, True)}, modes  # a beat sent before the take-over reached it
+    assert {mode for mode, _ in modes[first:]} <= {SURFACE, ALT_HOLD}, modes  # never GUIDED again
+    assert modes[-1] in ((SURFACE, False), (ALT_HOLD, False)), modes  # disarmed, at the surface
+    assert not any(t.endswith("/control/active") and m["value"] != "watchdog" for t, m in after)
+    depth = [-m["relative_alt"] / 1000 for t, m in after if t.endswith("/mavlink/GLOBAL_POSITION_INT")]
+    assert depth[-1] < 0.5 < max(depth), depth[-1]  # it was under and came up
