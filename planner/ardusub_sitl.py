@@ -25,8 +25,10 @@ import time
 from pathlib import Path
 
 from rapt.errors import InputError, LinkTimeoutError, MissingFileError
+from sim.uuv.geo import LocalFrame
+from sim.uuv.mission import Mission
 
-__all__ = ["ENV", "ArduSubSitl", "sitl_binary"]
+__all__ = ["ENV", "ArduSubSitl", "launch_point", "sitl_binary"]
 
 #: The environment variable naming the ArduSub SITL binary.
 ENV = "ARDUSUB_SITL"
@@ -43,6 +45,23 @@ def sitl_binary() -> Path | None:
     """The binary ``ARDUSUB_SITL`` names, or None when the variable is unset."""
     value = os.environ.get(ENV)
     return Path(value) if value else None
+
+
+def launch_point(mission: Mission) -> tuple[float, float, float, float]:
+    """SITL's ``--home`` for ``mission``: (lat, lon, alt, heading).
+
+    Where a range team puts the vehicle in the water: the mission's launch point converted
+    from its local frame (:class:`sim.uuv.geo.LocalFrame` at the mission's origin, as the
+    MAVLink front-seat converts), on the surface, heading (compass degrees) for the first
+    waypoint as the modelled vehicle starts.
+    """
+    lx, ly = mission.launch
+    lat, lon = LocalFrame(mission.origin_lat, mission.origin_lon).to_latlon(float(lx), float(ly))
+    heading = 0.0
+    if mission.waypoints:
+        wx, wy = mission.waypoints[0]
+        heading = math.degrees(math.atan2(wx - lx, wy - ly)) % 360.0
+    return float(lat), float(lon), 0.0, heading
 
 
 def _port_free(port: int) -> bool:

@@ -32,8 +32,9 @@ import pytest
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil, mavwp  # noqa: E402
 
-from planner.ardusub_sitl import ENV, ArduSubSitl, sitl_binary  # noqa: E402
+from planner.ardusub_sitl import ENV, ArduSubSitl, launch_point, sitl_binary  # noqa: E402
 from sim.uuv.frontseat import FrontSeat  # noqa: E402
+from sim.uuv.missionfile import load_mission  # noqa: E402
 from tests.loopback import free_port, wait_until  # noqa: E402
 from tests.sim.uuv.uuvworld import mission  # noqa: E402
 
@@ -45,7 +46,7 @@ ROOT = Path(__file__).resolve().parents[3]
 WPL = ROOT / "field_plans" / "range2017" / "pair1a.waypoints"
 GUIDED = 4
 #: range2017's launch point, SITL's home.
-SITL_HOME = (47.6953287, -122.6264071, 0.0, 0.0)
+SITL_HOME = launch_point(load_mission(ROOT / "examples" / "range2017.toml"))
 SITL = pytest.param(
     "sitl",
     marks=[
