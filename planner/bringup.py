@@ -379,6 +379,7 @@ class BringUp:
             time.sleep(0.02)
 
     def _record(self, name: str, status: str, detail: str) -> Step:
+        self._feed()  # stamped with the vehicle's time now, also for steps noted long after bring-up
         step = Step(
             name,
             status,
