@@ -17,7 +17,8 @@ by :mod:`sim.uuv.gcs`, as in the lock-step front-seat.  The position estimate is
 ``ekf_ready_s`` after boot (:mod:`sim.uuv.ekf`); GUIDED and POSHOLD are refused before.
 
 Modes: GUIDED flies set-points (:mod:`sim.uuv.guided`); AUTO flies the uploaded mission
-(:mod:`sim.uuv.auto`); SURFACE rises to the surface; STABILIZE, ALT_HOLD, POSHOLD and
+(:mod:`sim.uuv.auto`); SURFACE rises to the surface, where it switches itself to ALT_HOLD as
+ArduSub does; STABILIZE, ALT_HOLD, POSHOLD and
 CIRCLE keep depth with no horizontal drive (no pilot here); MANUAL and ACRO and a disarmed vehicle apply no thrust — the
 vehicle keeps its depth (neutral buoyancy) and drifts with the current.  The vehicle never
 disarms itself except by ArduSub's GCS failsafe (FS_GCS_ENABLE 2, FS_GCS_TIMEOUT 5 s, the
@@ -58,7 +59,7 @@ mav = mavutil.mavlink
 SUBSTEP_S = 0.1
 #: Longest wait for input (wall seconds) when nothing is due: commands are answered within it anyway.
 IDLE_S = 0.05
-AUTO, GUIDED, SURFACE, MANUAL, ACRO = 3, 4, 9, 19, 1
+AUTO, GUIDED, SURFACE, MANUAL, ACRO, ALT_HOLD = 3, 4, 9, 19, 1, 2
 #: Volts the battery's mAh are counted at (a 4-cell pack).
 PACK_V = 14.8
 
@@ -165,7 +166,10 @@ class BareAutopilot:
                 want = self.depth.toward(self.target.depth, dt)
             vz = want
         elif fs.armed and fs.mode == SURFACE:
-            vz = -SURFACE_VZ
+            if self.depth.surfaced:  # ArduSub's SURFACE hands over to ALT_HOLD at the surface (mode_surface.cpp)
+                self.enter_mode(ALT_HOLD)
+            else:
+                vz = -SURFACE_VZ
         x, y = float(s.x[0]), float(s.y[0])
         self.depth.step(vz, dt)
         one = np.ones(1, dtype=bool)

@@ -18,6 +18,7 @@ import pytest
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
+from sim.uuv.depth import SURFACED_M  # noqa: E402
 from sim.uuv.ekf import FLAGS_BOOT, FLAGS_READY  # noqa: E402
 from sim.uuv.frontseat import FrontSeat  # noqa: E402
 from sim.uuv.geo import LocalFrame  # noqa: E402
@@ -220,8 +221,10 @@ def test_vz_dives_the_fix_is_lost_underwater_and_surface_mode_brings_it_up():
 
         assert b.command(mav.MAV_CMD_DO_SET_MODE, 1, SURFACE) == ACCEPTED
         b.wait_vehicle(b.vehicle.t + 2.0)
-        assert b.vehicle.truth().depth == 0.0
+        assert b.vehicle.truth().depth <= SURFACED_M  # at the surface: where ArduSub's at_surface begins
         assert b.latest("GPS_RAW_INT").fix_type == mav.GPS_FIX_TYPE_3D_FIX
+        # at the surface SURFACE hands over to ALT_HOLD by itself, as ArduSub's does (mode_surface.cpp)
+        assert b.latest("HEARTBEAT").custom_mode == 2 and b.fs.armed
 
 
 def test_setpoints_arduSub_drops_change_nothing():
