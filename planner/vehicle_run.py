@@ -32,7 +32,7 @@ from planner.referee import Referee
 from planner.scenario_map import ScenarioMap
 from planner.sil import free_port
 from planner.virtual_range import VirtualRange
-from planner.watchdog import REASONS, Watchdog, WatchdogRules
+from planner.watchdog import BATTERY, COLLISION, OPERATIONAL_AREA, REASONS, Watchdog, WatchdogRules
 from rapt.errors import InputError
 from sim.uuv.scenario import make_scenarios
 
@@ -190,16 +190,32 @@ def _scenario_meta(flight, connection: str) -> dict:
     }
 
 
+#: Watchdog reasons the referee also calls from its track rows (the scenario's virtual battery empty,
+#: an obstacle touched, out of the area).  The watchdog acts on the first report that breaks one;
+#: the referee's next row, at most one period later, then ends the run as the scenario's own outcome,
+#: the end the plan predicts.  When that row does not (the vehicle's real pack, a touch between
+#: rows), the run ends as the watchdog's.
+REFEREED = (BATTERY, COLLISION, OPERATIONAL_AREA)
+
+
 def _fly(referee: Referee, watchdog: Watchdog, bridge: MavlinkBridge, timeout_s: float | None) -> str:
     """Wait for the run's end: the referee's, the watchdog's, the vehicle's own, or the wall-time limit's."""
     deadline = None if timeout_s is None else time.monotonic() + timeout_s
+    period_ms = int(round(referee.mission.dt * 1000))
+    grace: tuple[int, float] | None = None  # (vehicle ms, wall deadline) the referee has to call it
     while True:
         if referee.ended:
             return referee.ended
         if watchdog.intervention:
-            reason = f"watchdog: {watchdog.intervention}"
-            referee.end(reason)
-            return reason
+            now_ms = referee.telemetry.now_ms
+            if grace is None and watchdog.intervention in REFEREED and now_ms >= 0:
+                grace = (now_ms + period_ms + 100, time.monotonic() + period_ms / 1000.0 + 1.0)
+            if grace is None or referee.telemetry.now_ms > grace[0] or time.monotonic() > grace[1]:
+                reason = f"watchdog: {watchdog.intervention}"
+                referee.end(reason)
+                return reason
+            time.sleep(0.02)
+            continue  # the vehicle leaving GUIDED now is the watchdog's doing, not a pilot's
         taken = _taken_by_vehicle(bridge)
         if taken:
             reason = f"{VEHICLE_ENDED}{taken}"

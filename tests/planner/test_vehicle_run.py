@@ -174,6 +174,26 @@ def test_a_virtual_obstacle_is_seen_and_avoided_on_a_vehicle_without_sonar():
     assert result.virtual["contacts_sent"] > 0 and result.virtual["gauge_sent"] > 0
 
 
+def test_the_scenarios_battery_running_empty_ends_the_run_as_its_own_outcome():
+    """The virtual gauge reaching empty breaks the watchdog's battery rule at once; the referee's next row
+    calls it the scenario's own end, "battery empty", the outcome the plan's batch model predicts (not a
+    watchdog take-over, which ``rapt-plan compare`` could not score)."""
+    from sim.uuv.missionfile import load_mission_text
+    from sim.uuv.scoring import mode_name
+
+    path = ROOT / "examples" / "range2017.toml"
+    mission = load_mission_text(path.read_text().replace("battery_wh = 1400.0", "battery_wh = 100.0"), str(path))
+    u = flight_from_plan(PLAN, "pair1a").u.copy()
+    u[-1] = 0.0  # the lowest starting charge: 5 Wh, empty about 96 s in
+    batch = sim.uuv.simulate(mission, u[None, :], trajectories=True)
+    with bare_vehicle(mission, u) as (connection, _):
+        result = run_vehicle(Flight(mission, u, "empty", str(path)), connection, timeout_s=60)
+    assert result.ended == "battery empty", result.ended  # whether or not the watchdog saw it first
+    assert abs(result.sim_s - batch.trajectory(0)[-1, 0]) <= 2 * mission.dt
+    assert mode_name(result.scores) == batch.mode_names[batch.modes[0]] == "TF"
+    assert result.timeline[-1].name == "recover" and result.timeline[-1].detail == "surfaced and disarmed"
+
+
 def test_ctrl_c_surfaces_and_disarms_the_vehicle():
     flight = flight_from_plan(PLAN, "pair2b")
 
