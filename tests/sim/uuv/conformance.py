@@ -45,8 +45,6 @@ from sim.uuv.params import ARDUSUB_PARAMETERS, FIRMWARE  # noqa: E402
 mav = mavutil.mavlink
 
 FIXTURE = Path(__file__).with_name("ardusub_answers.json")
-#: range2017's launch point: SITL's home (the front-seat's comes from its mission; positions are not compared).
-HOME = (47.6953287, -122.6264071, 0.0, 0.0)
 FLAVOURS = ("lockstep", "bare")
 
 #: Rows allowed to differ, and why (the conformance table prints the reason).
@@ -598,9 +596,11 @@ def load_fixture() -> dict:
 @contextmanager
 def ardusub_sitl(speedup: float = 10.0) -> Iterator[Client]:
     """A client of a fresh ArduSub SITL ($ARDUSUB_SITL) at range2017's launch point."""
-    from planner.ardusub_sitl import ArduSubSitl
+    from planner.ardusub_sitl import ArduSubSitl, launch_point
+    from sim.uuv import load_mission
 
-    with ArduSubSitl(HOME, speedup=speedup) as sitl:
+    home = launch_point(load_mission(Path(__file__).parents[3] / "examples" / "range2017.toml"))
+    with ArduSubSitl(home, speedup=speedup) as sitl:  # positions are not compared
         client = Client(sitl.connection, grace_s=0.3)
         try:
             client.hello()
