@@ -238,6 +238,11 @@ def _took_over(row: dict) -> str:
     return row["watchdog"] if row["ended"].startswith("watchdog:") else "no"
 
 
+def _head(*columns: str) -> list[str]:
+    """A markdown table's header and rule."""
+    return ["| " + " | ".join(columns) + " |", "|" + "---|" * len(columns)]
+
+
 def _f(v, fmt: str = ".0f") -> str:
     return "-" if v is None or (isinstance(v, float) and not np.isfinite(v)) else format(v, fmt)
 
@@ -246,9 +251,8 @@ def report(
     sweep_rows: list[dict], speedup: float | None, rows: list[dict], cal: dict | None, packs: list[dict] = ()
 ) -> str:
     out = ["## Speed-up sweep (first scenario, cut short)", ""]
-    out.append("| speed-up | vehicle s | decisions | missed | stale | p50 ms | p99 ms | p99 x speed-up (vehicle ms) "
-               "| longest set-point gap (vehicle ms) | lapsed | watchdog | kept up |")  # fmt: skip
-    out.append("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    out += _head("speed-up", "vehicle s", "decisions", "missed", "stale", "p50 ms", "p99 ms",
+                 "p99 x speed-up (vehicle ms)", "longest set-point gap (vehicle ms)", "lapsed", "watchdog", "kept up")  # fmt: skip
     for r in sweep_rows:
         if "error" in r:
             out.append(f"| {r['speedup']:g} | {r['error']} |" + " |" * 10)
@@ -262,9 +266,8 @@ def report(
     out += ["", f"Highest speed-up kept up: {_f(speedup, 'g')}.", ""]
     pack = rows[0]["pack_ah"] if rows else REHEARSAL_PACK_AH
     out += [f"## Scenarios at speed-up {_f(speedup, 'g')} ({pack:g} Ah pack: the scenario's own ends apply)", ""]
-    out.append("| scenario | boot to armed in GUIDED (vehicle s / wall s) | ended | vehicle s | watchdog | predicted | "
-               "observed | path RMS (m) | p50 / p99 ms | longest gap (vehicle ms) | lapsed |")  # fmt: skip
-    out.append("|---|---|---|---|---|---|---|---|---|---|---|")
+    out += _head("scenario", "boot to armed in GUIDED (vehicle s / wall s)", "ended", "vehicle s", "watchdog",
+                 "predicted", "observed", "path RMS (m)", "p50 / p99 ms", "longest gap (vehicle ms)", "lapsed")  # fmt: skip
     for r in rows:
         if "error" in r:
             out.append(f"| {r['scenario']} | {r['error']} |" + " |" * 9)
@@ -277,7 +280,7 @@ def report(
         )
     flown = [r for r in rows if "error" not in r]
     ended = sum(not r["ended"].startswith(NOT_AN_END) for r in flown)
-    held = sum(r.get("observed") == r.get("predicted") for r in flown)
+    held = sum(r.get("observed") is not None and r["observed"] == r.get("predicted") for r in flown)
     out += [
         "",
         f"Flown to the scenario's own end condition: {ended}/{len(rows)}; set-points lapsed: "
@@ -286,7 +289,7 @@ def report(
     ]
     if packs:
         out += ["## The vehicle's own pack (first scenario)", ""]
-        out += ["| pack | ended | vehicle s | watchdog | observed |", "|---|---|---|---|---|"]
+        out += _head("pack", "ended", "vehicle s", "watchdog", "observed")
         for r in packs:
             pack = "firmware default (3.3 Ah)" if not r["pack_ah"] else f"{r['pack_ah']:g} Ah"
             if "error" in r:
@@ -299,9 +302,8 @@ def report(
         out.append("")
     if cal is not None:
         out += ["## Held-out predictions before and after calibration", ""]
-        out.append("| fitted on | scenario | observed | predicted (plan's vehicle) | calibrated | calibrated + bias "
-                   "| path RMS before (m) | after (m) |")  # fmt: skip
-        out.append("|---|---|---|---|---|---|---|---|")
+        out += _head("fitted on", "scenario", "observed", "predicted (plan's vehicle)", "calibrated",
+                     "calibrated + bias", "path RMS before (m)", "after (m)")  # fmt: skip
         n = before = after = biased = 0
         for f in cal["folds"]:
             for r in f["rows"]:
