@@ -18,7 +18,7 @@ import zenoh  # noqa: E402
 
 import sim.uuv  # noqa: E402
 from bridge import keys  # noqa: E402
-from bridge.access import access_rules, role_permissions  # noqa: E402
+from bridge.access import access_rules, permissions_table, role_permissions  # noqa: E402
 from bridge.mavlink_bridge import MavlinkBridge  # noqa: E402
 from bridge.range_keys import make_range_keys, role_config  # noqa: E402
 from bridge.session import zenoh_config  # noqa: E402
@@ -65,10 +65,10 @@ def sessions(range_dir, *roles: str):
 class Heard:
     """(key, payload) of every sample a session's subscriber receives on ``rapt/<v>/**``."""
 
-    def __init__(self, session: zenoh.Session, key: str = keys.everything(V)):
+    def __init__(self, session: zenoh.Session, key: str | None = keys.everything(V)):
         self.samples: list[tuple[str, str]] = []
         self._lock = threading.Lock()
-        self.sub = session.declare_subscriber(key, self._on_sample)
+        self.sub = None if key is None else session.declare_subscriber(key, self._on_sample)
 
     def _on_sample(self, sample) -> None:
         with self._lock:
@@ -97,7 +97,11 @@ def test_the_rules_deny_by_default_and_grant_each_role_only_its_own_keys():
         r: [r] for r in ("autonomy", "rogue", "watchdog", "logger", "operator")
     }
     assert all(r["permission"] == "allow" for r in rules["rules"])
-    assert role_permissions(V, "rogue", autonomy=True)["put"] == ["rapt/uuv1/command/rogue", "rapt/uuv1/status/rogue"]
+    assert role_permissions(V, "rogue", autonomy=True)["put"] == [
+        "rapt/uuv1/command/rogue",
+        "rapt/uuv1/status/rogue",
+        "rapt/uuv1/map/scenario",
+    ]
     assert role_permissions(V, "logger")["put"] == ["rapt/uuv1/status/logger"]
     for role in ("watchdog", "operator"):
         assert keys.active(V) in role_permissions(V, role)["put"]
@@ -129,7 +133,10 @@ def test_each_role_puts_only_its_own_keys_and_the_logger_hears_them_all(range_di
     command, active, status = (lambda s: keys.command(V, s)), keys.active(V), (lambda s: keys.status(V, s))
     # per role: (denied, allowed) puts; denied ones first, so once the allowed ones arrived the others had their chance
     attempts = {
-        "autonomy": ([active, command("rogue")], [command("autonomy"), status("autonomy")]),
+        "autonomy": (
+            [active, command("rogue")],
+            [command("autonomy"), status("autonomy"), keys.map_document(V, "scenario")],
+        ),
         "rogue": ([command("autonomy"), active, status("autonomy")], [command("rogue")]),
         "logger": (
             [command("logger"), command("autonomy"), active, keys.telemetry(V, "HEARTBEAT")],
@@ -142,6 +149,17 @@ def test_each_role_puts_only_its_own_keys_and_the_logger_hears_them_all(range_di
         at_hub, by = Heard(hub), dict(zip(attempts, clients))
         logger = Heard(by["logger"])
         _wait_for_routes(hub, logger)
+        # liveliness: each declares its own token; the rogue cannot pass for the bridge
+        tokens = [by[r].liveliness().declare_token(keys.alive(V, r)) for r in ("autonomy", "logger")]
+        tokens.append(by["rogue"].liveliness().declare_token(keys.alive(V, "bridge")))
+        alive = Heard(hub, key=None)
+        alive.sub = hub.liveliness().declare_subscriber(keys.alive(V, "*"), alive._on_sample, history=True)
+        seen_by_autonomy = Heard(by["autonomy"], key=None)
+        seen_by_autonomy.sub = (
+            by["autonomy"]
+            .liveliness()
+            .declare_subscriber(keys.alive(V, "logger"), seen_by_autonomy._on_sample, history=True)
+        )
         for role, (denied, allowed) in attempts.items():
             for key in denied + allowed:
                 by[role].put(key, role)
@@ -153,6 +171,10 @@ def test_each_role_puts_only_its_own_keys_and_the_logger_hears_them_all(range_di
         # the logger hears everything that reached the hub, from every client (its own puts it hears locally)
         assert expected <= logger.keys()
         assert logger.keys() - expected - {ready} == {(k, "logger") for k in attempts["logger"][0]}
+        wait_until(lambda: seen_by_autonomy.keys(), what="the logger's token at the autonomy")
+        assert {k for k, _ in alive.keys()} == {keys.alive(V, "autonomy"), keys.alive(V, "logger")}
+        for token in tokens:
+            token.undeclare()
 
 
 def test_the_vehicle_gets_the_authorised_autonomys_setpoints_and_none_of_the_rogues(range_dir):
@@ -195,3 +217,8 @@ def test_the_vehicle_gets_the_authorised_autonomys_setpoints_and_none_of_the_rog
         fs.stop()
         fs_thread.join(timeout=5)
         fs.close()
+
+
+def test_the_administrators_page_shows_the_rules_as_they_are():
+    page = (Path(__file__).resolve().parents[2] / "docs" / "range-network.md").read_text()
+    assert permissions_table(V) in page
