@@ -90,7 +90,7 @@ def test_an_existing_directory_is_replaced_only_with_force(keydir, spoilable):
     [
         ({"hub": "tcp/127.0.0.1:7447"}, r"^--hub: 'tcp/127.0.0.1:7447' is not a TLS endpoint"),
         ({"autonomies": ("logger",)}, r"^--autonomy: 'logger' is named twice or is another role's name"),
-        ({"autonomies": ("a/b",)}, r"^--autonomy: source: 'a/b' is not a single key chunk"),
+        ({"autonomies": ("a/b",)}, r"^--autonomy: 'a/b' is not a single key chunk"),
         ({"valid_days": 0}, r"^--days: expected a whole number of days >= 1"),
     ],
 )
