@@ -17,7 +17,7 @@ from collections.abc import Iterable
 
 from bridge import keys
 
-__all__ = ["HUB_ROLE", "OTHER_ROLES", "role_permissions", "access_rules"]
+__all__ = ["HUB_ROLE", "OTHER_ROLES", "role_permissions", "access_rules", "permissions_table"]
 
 #: The role whose session is the hub (it listens; its own puts are not checked).
 HUB_ROLE = "bridge"
@@ -51,8 +51,9 @@ def role_permissions(vehicle: str, role: str, *, autonomy: bool = False) -> dict
     if role == HUB_ROLE:
         return {"put": [], "subscribe": [], "alive": []}
     if autonomy:
+        # and the scenario's map for the log (planner.scenario_map; drawn, never acted on)
         return {
-            "put": [keys.command(vehicle, role), *own],
+            "put": [keys.command(vehicle, role), *own, keys.map_document(vehicle, "scenario")],
             "subscribe": [k["telemetry"], k["virtual"], k["meta"], k["active"]],
             "alive": [keys.alive(vehicle, role)],
         }
@@ -105,3 +106,13 @@ def access_rules(vehicle: str, autonomies: Iterable[str] = (keys.DEFAULT_ACTIVE,
         "subjects": subjects,
         "policies": policies,
     }
+
+
+def permissions_table(vehicle: str, autonomies: Iterable[str] = (keys.DEFAULT_ACTIVE,)) -> str:
+    """What each client role may do, as the Markdown table of the range administrator's docs page."""
+    rows = ["| role | may put | may subscribe to | liveliness token |", "|---|---|---|---|"]
+    for role, is_autonomy in [(a, True) for a in autonomies] + [(r, False) for r in OTHER_ROLES]:
+        allowed = role_permissions(vehicle, role, autonomy=is_autonomy)
+        cells = [", ".join(f"`{k}`" for k in allowed[what]) for what in ("put", "subscribe", "alive")]
+        rows.append(f"| {role} | " + " | ".join(cells) + " |")
+    return "\n".join(rows) + "\n"

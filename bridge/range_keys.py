@@ -57,8 +57,8 @@ def _hub_host(hub: str) -> str:
 def _name(value: str, argument: str) -> str:
     try:
         keys.status("v", value)
-    except (ValueError, TypeError) as exc:
-        raise InputError(f"{argument}: {exc}") from None
+    except (ValueError, TypeError):
+        raise InputError(f"{argument}: {value!r} is not a single key chunk (letters, digits, '_', '.', '-')") from None
     return value
 
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import typer
 
-from planner.cli import calibrate, compare, generate, processes, run, search, selfright, surrogate
+from planner.cli import bus_keys, calibrate, compare, generate, processes, run, search, selfright, surrogate
 from planner.cli.console import print_error
 from rapt.errors import RaptError
 
@@ -39,6 +39,7 @@ app.command("frontseat")(processes.frontseat)
 app.command("bridge")(processes.bridge)
 app.command("autonomy")(processes.autonomy)
 app.command("log")(processes.log)
+app.command("bus-keys")(bus_keys.bus_keys)
 # Chapter 5's second system under test: self-righting ground robots (planner/selfright/).
 app.command("selfright")(selfright.selfright)
 
