@@ -131,12 +131,14 @@ def round_trip(mission, trips: int) -> None:
 
 
 # The sender runs in a process of its own: the bridge and the logger get the GIL to themselves.
+# An optional fourth argument is the first sequence number (a later burst goes on where the last ended).
 _SENDER = """
 import os, sys, time
 os.environ["MAVLINK20"] = "1"
 from pymavlink import mavutil
 port, rate, seconds = int(sys.argv[1]), int(sys.argv[2]), float(sys.argv[3])
 c = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=1, source_component=1, dialect="ardupilotmega")
+c.mav.seq = int(sys.argv[4]) if len(sys.argv) > 4 else 0
 sent, start = 0, time.perf_counter()
 while (now := time.perf_counter() - start) < seconds:
     while sent < int(now * rate):
@@ -215,7 +217,7 @@ def _wait_listening(port: int, proc: subprocess.Popen, timeout_s: float = 60.0) 
     raise RuntimeError(f"nothing listens on 127.0.0.1:{port} after {timeout_s:g} s")
 
 
-def _cpu_s(pid: int) -> float:
+def process_cpu_s(pid: int) -> float:
     """A process's CPU time so far (user + system), in seconds."""
     fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
     return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
@@ -241,18 +243,27 @@ class LoadRig:
         self._procs: list[subprocess.Popen] = []
         self._status: _BridgeStatus | None = None
 
+    def start(self) -> None:
+        """Start the bridge and the logger, without waiting for them (:meth:`ready` waits)."""
+        bridge = _cli("bridge", "--mavlink", f"udpin:127.0.0.1:{self.port}", *self.bus.bridge)
+        self._procs = [_cli("log", "--out", str(self.path), *self.bus.logger), bridge]
+
+    def ready(self, settle_s: float = 2.0) -> None:
+        """Wait until the hub listens, the bridge's status is heard and the logger's file exists, then ``settle_s``
+        (the logger's subscription reaches the bridge)."""
+        _wait_listening(self.bus.hub_port, self._procs[1])
+        self._status = _BridgeStatus(self.bus.listener())
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and not (self._status.latest and self.path.exists()):
+            time.sleep(0.2)
+        time.sleep(settle_s)
+
     def __enter__(self) -> LoadRig:
         try:
-            bridge = _cli("bridge", "--mavlink", f"udpin:127.0.0.1:{self.port}", *self.bus.bridge)
-            self._procs = [_cli("log", "--out", str(self.path), *self.bus.logger), bridge]
-            _wait_listening(self.bus.hub_port, bridge)
-            self._status = _BridgeStatus(self.bus.listener())
-            deadline = time.monotonic() + 60
-            while time.monotonic() < deadline and not (self._status.latest and self.path.exists()):
-                time.sleep(0.2)
-            time.sleep(2.0)  # the logger's subscription reaches the bridge
+            self.start()
+            self.ready()
         except BaseException:
-            self._stop()
+            self.finish(settle_s=0.0, read=False)
             raise
         return self
 
@@ -265,28 +276,30 @@ class LoadRig:
         """Send ATTITUDE frames at ``rate`` per second for ``seconds``; return once the bridge has read them
         (or its counters stopped); the number sent."""
         assert self._status is not None, "burst inside the with block"
-        sender = [sys.executable, "-c", _SENDER, str(self.port), str(rate), str(seconds)]
+        sender = [sys.executable, "-c", _SENDER, str(self.port), str(rate), str(seconds), str(self.sent % 256)]
         sent = int(subprocess.run(sender, capture_output=True, text=True, check=True).stdout.split()[0])
         self.sent += sent
         self._status.drained(self.sent)
         return sent
 
-    def _stop(self) -> None:
+    def finish(self, settle_s: float = 2.5, read: bool = True) -> None:
+        """After ``settle_s`` (two more statuses: the last counts reach the logger), stop the logger, then the
+        bridge (as an operator ends a run), and (unless not ``read``, after a failure) read the log."""
+        time.sleep(settle_s)
         if self._status is not None:
             self._status.close()
             self._status = None
-        for proc in self._procs:  # the logger first, as an operator ends a run
+        for proc in self._procs:  # the logger first
             if proc.poll() is None:
                 proc.send_signal(2)
             proc.communicate(timeout=120)
-
-    def __exit__(self, *exc) -> None:
-        if exc[0] is None:
-            time.sleep(2.5)  # two more statuses: the last counts reach the logger
-        self._stop()
-        if exc[0] is None:
+        if read:
             self.messages = read_log(self.path)
             self.losses = read_metadata(self.path).get(LOSSES_METADATA, {})
+
+    def __exit__(self, *exc) -> None:
+        ok = exc[0] is None
+        self.finish(settle_s=2.5 if ok else 0.0, read=ok)
 
 
 def sustained_processes(rate: int, seconds: float) -> dict:
