@@ -19,7 +19,7 @@ Two configurations of the bus, measured in turn within every repeat (which goes 
 Target: the secure bus costs at most 20 % of throughput and adds at most 0.5 ms to p99
 (medians over the repeats).
 
-Run:  python benchmarks/bridge.py [--repeats 5] [--trips 2000] [--rate 40000] [--seconds 10] [--quick]
+Run:  python benchmarks/secure_bus.py [--repeats 5] [--trips 2000] [--rate 40000] [--seconds 10] [--quick]
 
 ``--quick`` (under a minute): 3 repeats of 300 round trips and 2 s bursts, judged the same way.
 """
@@ -29,27 +29,28 @@ from __future__ import annotations
 import argparse
 import os
 import socket
-import sys
 import tempfile
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 
-_HERE = Path(__file__).resolve().parent
-# Run as a script, this file's directory comes first on sys.path and its name would hide the
-# bridge package: the repository root takes its place.
-sys.path[:] = [str(_HERE.parent)] + [p for p in sys.path if Path(p or ".").resolve() != _HERE]
+import numpy as np
+import zenoh
+from sil import (  # benchmarks/sil.py, beside this script
+    MISSION,
+    BusOptions,
+    LoadRig,
+    first_valid_scenario,
+    process_cpu_s,
+    round_trip_ms,
+)
 
-import numpy as np  # noqa: E402
-import zenoh  # noqa: E402
-
-import sim.uuv  # noqa: E402
-from benchmarks.sil import MISSION, BusOptions, LoadRig, first_valid_scenario, process_cpu_s, round_trip_ms  # noqa: E402
-from bridge.logger import RAW_TOPIC  # noqa: E402
-from bridge.range_keys import make_range_keys, role_config  # noqa: E402
-from bridge.session import zenoh_config  # noqa: E402
-from planner.sil import free_port  # noqa: E402
+import sim.uuv
+from bridge.logger import RAW_TOPIC
+from bridge.range_keys import make_range_keys, role_config
+from bridge.session import zenoh_config
+from planner.sil import free_port
 
 #: The targets: the secure bus keeps at least 80 % of plain TCP's throughput and adds at most 0.5 ms to p99.
 MAX_THROUGHPUT_COST = 0.20
