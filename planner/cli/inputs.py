@@ -143,6 +143,8 @@ def _role_config(keys_dir: Path | None, role: str | None, config_file: Path | No
         fail("--zenoh-config: give either --bus-keys DIR or --zenoh-config FILE, not both")
     if endpoints_given:
         fail("--zenoh-listen/--zenoh-connect: with --bus-keys the role's config in DIR names the hub; drop them")
+    if role is None:
+        fail("--bus-role: name the role to join as (one of the roles in DIR)")
     from bridge.range_keys import role_config
 
     try:
