@@ -7,8 +7,11 @@ of the certificate it showed in the mutual-TLS handshake, so a role cannot claim
 role's name: an autonomy whose certificate says ``rogue`` may put ``command/rogue`` but not
 ``command/autonomy``. The hub's own puts are local and not checked.
 
-A client that may put a key is also told of the hub's subscribers on it (egress
-``declare_subscriber``): a Zenoh client sends nothing to a key no one has declared interest in.
+A client that may put is also told of the hub's subscribers (egress ``declare_subscriber``): a
+Zenoh publisher sends nothing to a key no one has declared interest in. A rule applies to a
+declaration only if it includes the subscriber's whole key expression (the bridge's
+``command/*``, the logger's ``rapt/<v>/**``), so this rule covers the vehicle's keys; being told
+of a subscriber moves no data, and what the client may put is still only its ``put`` keys.
 """
 
 from __future__ import annotations
@@ -88,7 +91,14 @@ def access_rules(vehicle: str, autonomies: Iterable[str] = (keys.DEFAULT_ACTIVE,
         allowed = role_permissions(vehicle, role, autonomy=is_autonomy)
         grants = [
             ("puts", "ingress", ["put"], allowed["put"]),
-            ("hears who takes its puts", "egress", ["declare_subscriber"], allowed["put"]),
+            # a rule must include a subscriber's whole key expression (the bridge's command/*, the logger's
+            # rapt/<v>/**), so every subscriber of the vehicle is told of; being told moves no data
+            (
+                "hears who takes its puts",
+                "egress",
+                ["declare_subscriber"],
+                [keys.everything(vehicle)] if allowed["put"] else [],
+            ),
             ("subscribes", "ingress", ["declare_subscriber"], allowed["subscribe"]),
             ("receives", "egress", ["put"], allowed["subscribe"]),
             ("is alive", "ingress", ["liveliness_token"], allowed["alive"]),
