@@ -23,6 +23,12 @@ counted in ``stats["derived"]``, apart from ``written``. A map's publisher puts 
 whenever a logger's liveliness token appears (:class:`planner.scenario_map.ScenarioMap`), so a
 logger started after the planner still records it.
 
+On the range's secure bus (:mod:`bridge.range_keys`) a logger given the hub's rules (``roles``,
+:func:`bridge.channel_roles.put_roles`) records which role each channel came from: the channel
+metadata ``rapt.role`` (``"autonomy"``, ``"operator,watchdog"``: the roles allowed to put it;
+``"bridge"``: the hub's own), and the metadata record ``rapt.roles`` (:data:`ROLES_METADATA`)
+mapping the rules' key expressions to roles.
+
 Payloads that are not a JSON object are wrapped: ``{"value": <JSON or text>}``, or
 ``{"base64": ...}`` for bytes that are not UTF-8.
 """
@@ -49,13 +55,14 @@ from mcap.writer import CompressionType, Writer
 from rapt.errors import InputError
 
 from . import foxglove, keys
+from .channel_roles import HUB, ChannelRoles
 from .frames import strip_signature
 from .loss import PublicationGaps
 from .mcap_channels import McapChannels
 from .service import Service
 from .session import open_session, undeclare, use_session
 
-__all__ = ["McapLogger", "read_log", "read_metadata", "RAW_TOPIC", "LOSSES_METADATA", "main"]
+__all__ = ["McapLogger", "read_log", "read_metadata", "RAW_TOPIC", "LOSSES_METADATA", "ROLES_METADATA", "main"]
 
 log = logging.getLogger(__name__)
 
@@ -65,6 +72,10 @@ RAW_TOPIC = "/mavlink/raw"
 RAW_ENCODING = "mavlink"
 #: The metadata record with the log's loss counts, written at finish (see :meth:`McapLogger.losses`).
 LOSSES_METADATA = "rapt.losses"
+#: The metadata record mapping the hub's key expressions to the roles allowed to put them (a secure bus only).
+ROLES_METADATA = "rapt.roles"
+#: The channel metadata naming the role(s) a channel's samples came from (a secure bus only).
+ROLE_KEY = "rapt.role"
 
 _DATA_CHANNEL = 1 << 22  # samples held for the writer: a minute of 20,000 frames/s (allocated as used)
 _BATCH = 4096  # samples written between checks of the flush and status clocks
@@ -124,7 +135,8 @@ class McapLogger(Service):
     """Record ``rapt/<vehicle>/**`` and its liveliness tokens to the MCAP file ``path``.
 
     ``session``: an open ``zenoh.Session`` (left open), a ``zenoh.Config``, or None for an
-    in-process session of its own. Use as a context manager or call :meth:`start`/:meth:`close`
+    in-process session of its own. ``roles``: on a secure bus, ``{key expression: [roles]}``
+    allowed to put (:func:`bridge.channel_roles.put_roles` of the hub's rules). Use as a context manager or call :meth:`start`/:meth:`close`
     (:class:`~bridge.service.Service`).
     """
 
@@ -139,6 +151,7 @@ class McapLogger(Service):
         chunk_size: int = 64 * 1024,
         flush_interval_s: float = 1.0,
         compression: str = "zstd",
+        roles: dict[str, list[str]] | None = None,
     ):
         super().__init__()
         keys.everything(vehicle)  # validates the name
@@ -154,6 +167,7 @@ class McapLogger(Service):
         self.chunk_size = chunk_size
         self.flush_interval_s = float(flush_interval_s)
         self._compression = codecs[compression]
+        self._roles = None if roles is None else ChannelRoles(roles)
         self._session_arg = session
         self._session: zenoh.Session | None = None
         self._owns_session = False
@@ -182,6 +196,9 @@ class McapLogger(Service):
         self._writer = writer = Writer(self._file, chunk_size=self.chunk_size, compression=self._compression)
         writer.start(profile="", library="rapt-bridge")
         self._mcap = McapChannels(writer)
+        if self._roles is not None:
+            by_expr = {k: ",".join(v) for k, v in self._roles.by_key_expr.items()}
+            writer.add_metadata(ROLES_METADATA, {**by_expr, "(any other key)": HUB})
         self._session, self._owns_session = use_session(self._session_arg)
         s = self._session
         self._status_pub = s.declare_publisher(
@@ -382,11 +399,11 @@ class McapLogger(Service):
         assert mcap is not None, "written only after _open"
         source: dict | None = None  # the JSON object Foxglove messages are derived from
         if payload is None:  # liveliness change
-            channel_id, seq = mcap.channel(key, "json", _schema_for("alive", name))
+            channel_id, seq = mcap.channel(key, "json", _schema_for("alive", name), self._role_of(key))
             data = json.dumps({"alive": put}).encode()
             publish_ns = recv_ns
         elif kind == "mavlink" and name == "raw":
-            channel_id, seq = mcap.channel(RAW_TOPIC, RAW_ENCODING, None)
+            channel_id, seq = mcap.channel(RAW_TOPIC, RAW_ENCODING, None, self._role_of(key))
             data = strip_signature(payload)
             publish_ns = recv_ns
         else:
@@ -402,7 +419,7 @@ class McapLogger(Service):
                 document = obj if put else {"type": "FeatureCollection", "features": []}  # deleted: an empty map
                 self._write_foxglove(self._foxglove.derive(kind, name, document, publish_ns), recv_ns, "written")
                 return
-            channel_id, seq = mcap.channel(key, "json", _schema_for(kind, name))
+            channel_id, seq = mcap.channel(key, "json", _schema_for(kind, name), self._role_of(key))
             if kind == "meta" and put:
                 w.add_metadata(name, {str(k): v if isinstance(v, str) else json.dumps(v) for k, v in obj.items()})
                 self._counts["metadata"] += 1
@@ -411,6 +428,10 @@ class McapLogger(Service):
         self._counts["written"] += 1
         if source is not None:
             self._write_foxglove(self._foxglove.derive(kind, name, source, publish_ns), recv_ns, "derived")
+
+    def _role_of(self, key: str) -> dict[str, str] | None:
+        """The channel metadata naming who may have put ``key`` (None off a secure bus)."""
+        return None if self._roles is None else {ROLE_KEY: self._roles(key)}
 
     def _write_foxglove(self, derived: list[foxglove.Derived], recv_ns: int, counter: str) -> None:
         """The Foxglove messages derived from one sample (:mod:`bridge.foxglove`), written beside it."""

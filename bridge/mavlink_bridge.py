@@ -23,6 +23,13 @@ back-seat echoes it as the set-point's ``tick_ms``, and the vehicle receives it 
 ``SET_POSITION_TARGET_LOCAL_NED.time_boot_ms``; wall time between the two, measured at the
 vehicle, is the MAVLink -> Zenoh -> back-seat -> Zenoh -> MAVLink latency. ``stats`` holds
 every counter a benchmark needs to check that nothing was refused or dropped on the way.
+A set-point from a source that is not the active one is counted (``commands_inactive``) and
+logged once per source. On the range's secure bus the hub's access rules drop what a role may
+not put before the bridge sees it; eclipse-zenoh 1.10.2 reports those refusals only in its own
+log, at trace level beside every allowed message ("... CertCommonName(logger) ... is
+unauthorized to Put (ingress) on rapt/uuv1/control/active" with
+``RUST_LOG=zenoh::net::routing::interceptor::access_control=trace``), with no counter or
+callback a bridge could read, so the bridge counts only what reaches it.
 
 Nothing is lost silently (:mod:`bridge.loss`): gaps in each sender's MAVLink sequence numbers
 are counted (``link_lost``), a UDP link's socket gets a receive buffer for bursts and its
@@ -246,6 +253,7 @@ class MavlinkBridge(Service):
         self._rcvbuf = 0
         self._kernel_dropped_before = 0  # kernel drops of the UDP sockets closed so far
         self._lost_said = (0, 0)  # the losses last warned about
+        self._refused_sources: set[str] = set()  # sources whose set-points were refused (logged once each)
         self._cmd_sub: Any = None
         self._active_sub: Any = None
         self._cmd_handler: Any = None
@@ -711,6 +719,8 @@ class MavlinkBridge(Service):
                 except ValueError:
                     log.warning("bridge %s: ignoring an invalid active source", self.vehicle)
                     continue
+                if name != self.gate.active:
+                    log.info("bridge %s: the active source is now %r", self.vehicle, name)
                 self.gate.active = name
 
     def _command_loop(self) -> None:
@@ -735,6 +745,15 @@ class MavlinkBridge(Service):
         reason = self.gate.check_source(source)
         if reason is not None:
             c["commands_" + reason] += 1
+            if source not in self._refused_sources:  # said once per source: a standby autonomy puts all run long
+                self._refused_sources.add(source)
+                log.warning(
+                    "bridge %s: refusing set-points from %r: the active source is %r (counted in commands_%s)",
+                    self.vehicle,
+                    source,
+                    self.gate.active,
+                    reason,
+                )
             return
         try:
             sp = Setpoint.from_json(sample.payload.to_bytes())

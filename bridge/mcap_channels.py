@@ -23,8 +23,11 @@ class McapChannels:
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, tuple[int, list[int]]] = {}
 
-    def channel(self, topic: str, encoding: str, schema: tuple[str, dict] | None) -> tuple[int, list[int]]:
-        """``(channel id, [next sequence number])`` of ``topic``; ``schema`` is ``(name, JSON Schema)`` or None."""
+    def channel(
+        self, topic: str, encoding: str, schema: tuple[str, dict] | None, metadata: dict[str, str] | None = None
+    ) -> tuple[int, list[int]]:
+        """``(channel id, [next sequence number])`` of ``topic``; ``schema`` is ``(name, JSON Schema)`` or None;
+        ``metadata`` goes into the channel record when it is registered."""
         entry = self._channels.get(topic)
         if entry is None:
             schema_id = 0
@@ -34,7 +37,7 @@ class McapChannels:
                 if not schema_id:
                     schema_id = self.writer.register_schema(name, "jsonschema", json.dumps(body).encode())
                     self._schemas[name] = schema_id
-            channel_id = self.writer.register_channel(topic, encoding, schema_id)
+            channel_id = self.writer.register_channel(topic, encoding, schema_id, metadata or {})
             entry = self._channels[topic] = (channel_id, [0])
         return entry
 

@@ -66,8 +66,11 @@ def fly(
     stochastic: bool = False,
     seed: int = 0,
     surrogate=None,
+    bus_keys=None,
 ):
-    """Fly ``flight`` software-in-the-loop (:func:`planner.sil.run_sil`); returns its :class:`~planner.sil.SilResult`."""
+    """Fly ``flight`` software-in-the-loop (:func:`planner.sil.run_sil`); returns its :class:`~planner.sil.SilResult`.
+
+    ``bus_keys``: the range's keys directory; the run's parts then join the secure bus each as its role."""
     from planner.sil import run_sil
 
     return run_sil(
@@ -83,6 +86,7 @@ def fly(
         stochastic=stochastic,
         seed=seed,
         surrogate=surrogate,
+        bus_keys=bus_keys,
     )
 
 

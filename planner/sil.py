@@ -26,10 +26,11 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 from bridge import keys  # noqa: E402
 from bridge.mavlink_bridge import MavlinkBridge  # noqa: E402
 from bridge.service import Service  # noqa: E402
-from bridge.session import open_session, receive, undeclare  # noqa: E402
+from bridge.session import receive, undeclare  # noqa: E402
 from planner.backseat import BackSeat  # noqa: E402
 from planner.jsonio import jsonable  # noqa: E402
 from planner.processes import wait_for  # noqa: E402
+from planner.run_bus import PART_ROLES, RunBus, put_when_heard  # noqa: E402
 from planner.scenario_map import ScenarioMap  # noqa: E402
 from rapt.errors import LinkTimeoutError  # noqa: E402
 from sim.uuv.frontseat import FrontSeat  # noqa: E402
@@ -108,6 +109,7 @@ def run_sil(
     stochastic: bool = False,
     seed: int = 0,
     surrogate=None,
+    bus_keys: str | Path | None = None,
 ) -> SilResult:
     """Fly scenario ``u`` through front-seat, bridge, back-seat (and logger); return its scores.
 
@@ -123,11 +125,18 @@ def run_sil(
     source ``"surrogate"``, made active on the bus, while the expert still runs as source
     ``"autonomy"`` and its commands are published (and logged) but not obeyed — the testbed
     of Figure 6.3.  The scores are then the surrogate's.
+
+    ``bus_keys``: the range's keys directory (``rapt-plan bus-keys``); each part then joins the
+    secure bus as its role (:data:`planner.run_bus.PART_ROLES`; a surrogate as the autonomy role
+    ``surrogate``, and the operator makes it active), the bridge's session being the hub.
     """
     u = np.asarray(u, dtype=float)
     if surrogate is not None:
         surrogate.check(mission)
     port = free_port()
+    roles = ["autonomy"] + (["logger"] if log_path is not None else [])
+    roles += [SURROGATE_SOURCE, "operator"] if surrogate is not None else []
+    bus = RunBus(bus_keys, vehicle=vehicle, roles=tuple(roles))  # keys checked before the front-seat starts
     fs = FrontSeat(
         mission,
         u,
@@ -139,40 +148,51 @@ def run_sil(
         seed=seed,
     )
     fs_thread = threading.Thread(target=fs.serve, name="frontseat", daemon=True)
-    session = open_session(listen=[f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"])
     logger = bridge = backseat = recorder = learned = scenario_map = None
     started = time.perf_counter()
     try:
         fs_thread.start()
+        autonomy = bus.session(PART_ROLES["backseat"])
+        heard = [keys.DEFAULT_ACTIVE]
         if log_path is not None:
             from bridge.logger import McapLogger
 
-            scenario_map = ScenarioMap(session, vehicle, mission, u).start()  # put when the logger appears
-            logger = McapLogger(log_path, session, vehicle=vehicle).start()
-        recorder = _Recorder(session, vehicle)
-        session.put(
-            keys.meta(vehicle, "scenario"),
-            json.dumps(
-                {
-                    "mission": mission.name,
-                    "mission_file": mission_file or mission.source,
-                    "scenario_id": scenario_id,
-                    "plan_id": plan_id,
-                    "u": u.tolist(),
-                    "parameters": jsonable(mission.space.decode(u[None, :])[0]),
-                }
-            ),
-        )
-        backseat = flying = BackSeat(session, vehicle, mission, u).start()
+            scenario_map = ScenarioMap(
+                bus.session(PART_ROLES["scenario_map"]), vehicle, mission, u
+            ).start()  # put when the logger appears
+            logger = McapLogger(
+                log_path, bus.session(PART_ROLES["logger"]), vehicle=vehicle, roles=bus.put_roles()
+            ).start()
+            heard.append("logger")
+        recorder = _Recorder(bus.session(PART_ROLES["recorder"]), vehicle)  # declared before the back-seat's token
+        backseat = flying = BackSeat(autonomy, vehicle, mission, u).start()
         if surrogate is not None:
             learned = flying = BackSeat(
-                session, vehicle, mission, u, source=SURROGATE_SOURCE, surrogate=surrogate
+                bus.session(SURROGATE_SOURCE), vehicle, mission, u, source=SURROGATE_SOURCE, surrogate=surrogate
             ).start()
-        bridge = MavlinkBridge(f"udpout:127.0.0.1:{port}", session, vehicle=vehicle, allow_commands=True).start()
+            heard.append(SURROGATE_SOURCE)
+        bus.wait_for_parts(*heard)  # every part's subscriptions are at the hub before the first frame
+        meta = json.dumps(
+            {
+                "mission": mission.name,
+                "mission_file": mission_file or mission.source,
+                "scenario_id": scenario_id,
+                "plan_id": plan_id,
+                "u": u.tolist(),
+                "parameters": jsonable(mission.space.decode(u[None, :])[0]),
+            }
+        )
+        if logger is not None:  # the logger may be a client of the hub: put once it is heard
+            put_when_heard(bus.session(PART_ROLES["scenario_meta"]), keys.meta(vehicle, "scenario"), meta)
+        else:
+            bus.session(PART_ROLES["scenario_meta"]).put(keys.meta(vehicle, "scenario"), meta)
+        bridge = MavlinkBridge(
+            f"udpout:127.0.0.1:{port}", bus.session("bridge"), vehicle=vehicle, allow_commands=True
+        ).start()
         if not wait_for(lambda: bridge.target is not None, 10):
             raise LinkTimeoutError("front-seat: no HEARTBEAT on the MAVLink link within 10 s")
         if surrogate is not None:
-            session.put(keys.active(vehicle), SURROGATE_SOURCE)
+            put_when_heard(bus.session(PART_ROLES["control"]), keys.active(vehicle), SURROGATE_SOURCE)
             if not wait_for(lambda: bridge.active == SURROGATE_SOURCE, 10):
                 raise LinkTimeoutError("bridge: did not take the surrogate as the active source within 10 s")
         bridge.set_mode("GUIDED")
@@ -193,7 +213,7 @@ def run_sil(
         fs.stop()
         fs_thread.join(timeout=5)
         fs.close()
-        session.close()
+        bus.close()
     scores = score_track(mission, u, track, wp_aborted, reason)
     return SilResult(
         scores,

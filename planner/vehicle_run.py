@@ -14,7 +14,6 @@ the water, ArduSub SITL or our bare-autopilot front-seat.
 from __future__ import annotations
 
 import json
-import socket
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
@@ -24,15 +23,15 @@ import numpy as np
 
 from bridge import keys
 from bridge.mavlink_bridge import Autopilot, MavlinkBridge
-from bridge.session import open_session
 from planner.backseat import BackSeat
 from planner.bringup import GUIDED, BringUp, BringUpTimeouts, Step
 from planner.jsonio import jsonable
 from planner.referee import Referee
+from planner.run_bus import PART_ROLES, RunBus, put_when_heard
 from planner.scenario_map import ScenarioMap
-from planner.sil import free_port
 from planner.virtual_range import VirtualRange
 from planner.watchdog import BATTERY, COLLISION, OPERATIONAL_AREA, REASONS, Watchdog, WatchdogRules
+from planner.watchdog import SOURCE as WATCHDOG_SOURCE
 from rapt.errors import InputError
 from sim.uuv.scenario import make_scenarios
 
@@ -73,6 +72,7 @@ def run_vehicle(
     timeouts: BringUpTimeouts | None = None,
     timeout_s: float | None = None,
     say: Callable[[Step], None] | None = None,
+    bus_keys: str | Path | None = None,
 ) -> VehicleRunResult:
     """Fly ``flight`` (:class:`planner.flight.Flight`) on the vehicle at ``connection`` (a pymavlink string).
 
@@ -81,6 +81,8 @@ def run_vehicle(
     run's wall time (None: the mission's time limit on the vehicle's clock ends it).
     ``record_only`` names watchdog reasons (:data:`planner.watchdog.REASONS`) that are logged
     as violations without taking control, e.g. ``nogo`` where the no-go areas are virtual.
+    ``bus_keys``: the range's keys directory; each part then joins the secure bus as its role
+    (:data:`planner.run_bus.PART_ROLES`), the bridge's session being the hub.
     """
     if action not in WATCHDOG_ACTIONS:
         raise InputError(f"--watchdog-action: expected one of {', '.join(WATCHDOG_ACTIONS)}, got {action!r}")
@@ -95,35 +97,48 @@ def run_vehicle(
         raise InputError(
             f"--scenario {flight.scenario_id}: invalid for mission '{mission.name}' ({scen.invalid_reason[0]})"
         )
-    session = open_session(listen=[f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"])
+    roles = ("autonomy", "watchdog", "operator") + (("logger",) if log_path is not None else ())
+    bus = RunBus(bus_keys, vehicle=vehicle, roles=roles)  # every key checked before anything joins
+    hub = bus.session("bridge")
     parts: list = []
     bringup = None
     started = time.perf_counter()
     try:
+        heard = [keys.DEFAULT_ACTIVE, WATCHDOG_SOURCE]
         if log_path is not None:
             from bridge.logger import McapLogger
 
-            parts.append(ScenarioMap(session, vehicle, mission, u).start())  # put when the logger appears
-            parts.append(McapLogger(log_path, session, vehicle=vehicle).start())
-        session.put(keys.meta(vehicle, "scenario"), json.dumps(_scenario_meta(flight, connection)))
-        bridge = MavlinkBridge(
-            connection, session, vehicle=vehicle, allow_commands=True, required_mode="GUIDED"
-        ).start()
+            # the map is put when the logger appears
+            parts.append(ScenarioMap(bus.session(PART_ROLES["scenario_map"]), vehicle, mission, u).start())
+            logger = McapLogger(log_path, bus.session(PART_ROLES["logger"]), vehicle=vehicle, roles=bus.put_roles())
+            parts.append(logger.start())
+            heard.append("logger")
+        bridge = MavlinkBridge(connection, hub, vehicle=vehicle, allow_commands=True, required_mode="GUIDED").start()
         parts.append(bridge)
-        virtual = VirtualRange(session, vehicle, mission, u).start()
-        referee = Referee(session, vehicle, mission, u).start()
-        backseat = BackSeat(session, vehicle, mission, u, pacing="vehicle").start()
+        virtual = VirtualRange(bus.session(PART_ROLES["virtual_range"]), vehicle, mission, u).start()
+        referee = Referee(bus.session(PART_ROLES["referee"]), vehicle, mission, u).start()
+        backseat = BackSeat(bus.session(PART_ROLES["backseat"]), vehicle, mission, u, pacing="vehicle").start()
         rules = WatchdogRules(record_only=frozenset(record_only))
-        watchdog = Watchdog(session, vehicle, mission, u, bridge, action=action, rules=rules).start()
+        watchdog = Watchdog(
+            bus.session(PART_ROLES["watchdog"]), vehicle, mission, u, bridge, action=action, rules=rules
+        ).start()
         parts += [virtual, referee, backseat, watchdog]
-        bringup = BringUp(bridge, session, vehicle, mission, connection, timeouts or BringUpTimeouts(), say)
+        bus.wait_for_parts(*heard)  # their subscriptions are at the hub before the bring-up's first put
+        meta = json.dumps(_scenario_meta(flight, connection))
+        if log_path is not None:
+            put_when_heard(bus.session(PART_ROLES["scenario_meta"]), keys.meta(vehicle, "scenario"), meta)
+        else:
+            bus.session(PART_ROLES["scenario_meta"]).put(keys.meta(vehicle, "scenario"), meta)
+        bringup = BringUp(
+            bridge, bus.session(PART_ROLES["bringup"]), vehicle, mission, connection, timeouts or BringUpTimeouts(), say
+        )
         try:
             start_ms = bringup.run()
             virtual.begin()
             referee.begin(start_ms)
             backseat.begin(start_ms)
             watchdog.begin()
-            session.put(keys.active(vehicle), keys.DEFAULT_ACTIVE)
+            put_when_heard(bus.session(PART_ROLES["control"]), keys.active(vehicle), keys.DEFAULT_ACTIVE)
             ended = _fly(referee, watchdog, bridge, timeout_s)
         except BaseException as exc:  # Ctrl-C, or a bring-up step that failed after GUIDED and arming
             referee.end("stopped by the operator" if isinstance(exc, KeyboardInterrupt) else f"stopped: {exc}")
@@ -171,7 +186,7 @@ def run_vehicle(
             bringup.close()
         for part in reversed(parts):
             part.close()
-        session.close()
+        bus.close()
 
 
 def _scenario_meta(flight, connection: str) -> dict:

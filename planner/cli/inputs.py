@@ -21,10 +21,13 @@ __all__ = [
     "ZenohConnect",
     "ZenohConfig",
     "Vehicle",
+    "BusKeys",
+    "BusRole",
     "load_mission",
     "mission_and_scenario",
     "load_surrogate",
     "bus_session",
+    "bus_config",
 ]
 
 
@@ -58,6 +61,23 @@ ZenohConfig = Annotated[Path | None, typer.Option("--zenoh-config", help="Zenoh 
 
 
 Vehicle = Annotated[str, typer.Option("--vehicle", help="Vehicle name on the bus.")]
+
+
+BusKeys = Annotated[
+    Path | None,
+    typer.Option(
+        "--bus-keys",
+        metavar="DIR",
+        help="The range's keys (rapt-plan bus-keys): join the secure bus (mutual TLS, access by role) "
+        "with the role's config instead of the loopback endpoints.",
+    ),
+]
+
+
+BusRole = Annotated[
+    str | None,
+    typer.Option("--bus-role", metavar="ROLE", help="With --bus-keys: the role to join as (default: see above)."),
+]
 
 
 def load_mission(mission_file: Path):
@@ -113,11 +133,73 @@ def load_surrogate(path: Path | None, mission):
         fail(f"--surrogate: {exc}")
 
 
-def bus_session(connect: list[str], config_file: Path | None):
-    """A Zenoh session joining the bus: the config file as given, else the endpoints (loopback by default)."""
-    from bridge.session import open_session
+def _role_config(keys_dir: Path | None, role: str | None, config_file: Path | None, endpoints_given: bool):
+    """The role's checked Zenoh config with --bus-keys (None without), or a one-line error."""
+    if keys_dir is None:
+        if role is not None:
+            fail("--bus-role: only with --bus-keys DIR (the role's certificate and config are in DIR)")
+        return None
+    if config_file is not None:
+        fail("--zenoh-config: give either --bus-keys DIR or --zenoh-config FILE, not both")
+    if endpoints_given:
+        fail("--zenoh-listen/--zenoh-connect: with --bus-keys the role's config in DIR names the hub; drop them")
+    if role is None:
+        fail("--bus-role: name the role to join as (one of the roles in DIR)")
+    from bridge.range_keys import role_config
 
     try:
+        return role_config(keys_dir, role)
+    except (ValueError, OSError) as exc:
+        fail(str(exc))
+
+
+def bus_config(
+    listen: list[str],
+    connect: list[str],
+    config_file: Path | None,
+    keys_dir: Path | None,
+    role: str | None,
+    *,
+    endpoints_given: bool = False,
+):
+    """The hub's Zenoh config: the role's from --bus-keys, the config file as given, else the loopback endpoints."""
+    from bridge.session import zenoh_config
+
+    config = _role_config(keys_dir, role, config_file, endpoints_given)
+    if config is not None:
+        return config
+    try:
+        if config_file is not None:
+            return zenoh_config(config_file=config_file)
+        return zenoh_config(listen=listen, connect=connect)
+    except (ValueError, OSError) as exc:
+        fail(str(exc))
+
+
+def bus_session(
+    connect: list[str],
+    config_file: Path | None,
+    keys_dir: Path | None = None,
+    role: str | None = None,
+    *,
+    endpoints_given: bool = False,
+):
+    """A Zenoh session joining the bus: as ``role`` with --bus-keys, the config file as given, else the
+    endpoints (loopback by default)."""
+    import zenoh
+
+    from bridge.session import open_session
+
+    config = _role_config(keys_dir, role, config_file, endpoints_given)
+    try:
+        if config is not None:
+            try:
+                return zenoh.open(config)
+            except zenoh.ZError as exc:
+                fail(
+                    f"--bus-keys: role {role!r} could not join the hub named in {keys_dir}/{role}.json5 "
+                    f"({str(exc).split(' at ')[0]}); start rapt-plan bridge --bus-keys first, or check the network"
+                )
         return open_session(config_file=config_file) if config_file is not None else open_session(connect=connect)
     except (ValueError, OSError) as exc:
         fail(str(exc))

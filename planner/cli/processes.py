@@ -2,6 +2,11 @@
 
 On the water the front-seat is the vehicle; in rehearsal these commands run the same
 pieces ``rapt-plan run`` wires together in one process, each until SIGINT or SIGTERM.
+
+With ``--bus-keys DIR`` the bridge, the autonomy and the logger join the range's secure bus
+(mutual TLS, access by role; ``docs/range-network.md``), each as its role: ``bridge`` (the hub),
+the autonomy's source name, ``logger``. The front-seat is the vehicle: it speaks only MAVLink
+(signed with ``--signing-key`` on the bridge's side) and never joins the bus, so it takes no keys.
 """
 
 from __future__ import annotations
@@ -14,12 +19,15 @@ import typer
 
 from planner.cli.console import err, fail
 from planner.cli.inputs import (
+    BusKeys,
+    BusRole,
     ScenarioOpt,
     SurrogateOpt,
     Vehicle,
     ZenohConfig,
     ZenohConnect,
     ZenohListen,
+    bus_config,
     bus_session,
     load_surrogate,
     mission_and_scenario,
@@ -81,6 +89,8 @@ def bridge(
     zenoh_listen: ZenohListen = ["tcp/127.0.0.1:7447"],
     zenoh_connect: ZenohConnect = [],
     zenoh_config: ZenohConfig = None,
+    bus_keys: BusKeys = None,
+    bus_role: BusRole = None,
     allow_commands: Annotated[bool, typer.Option("--allow-commands", help="Forward back-seat set-points.")] = False,
     signing_key: Annotated[Path | None, typer.Option(help="MAVLink 2 signing key file (32 bytes).")] = None,
     geofence: Annotated[str | None, typer.Option(help="north_min,north_max,east_min,east_max in m.")] = None,
@@ -89,9 +99,18 @@ def bridge(
         bool, typer.Option("--arm", help="Once the vehicle is heard: GUIDED and arm (needs --allow-commands).")
     ] = False,
 ) -> None:
-    """Join a vehicle's MAVLink port (simulated or real) to the Zenoh bus."""
+    """Join a vehicle's MAVLink port (simulated or real) to the Zenoh bus.
+
+    With --bus-keys DIR it is the secure bus's hub: role bridge (the default --bus-role). Set-points
+    from a source that is not the active one are counted and logged; what the hub's access rules
+    refuse is printed by Zenoh itself with
+    RUST_LOG=zenoh::net::routing::interceptor::access_control=trace (every allowed message too).
+    """
+    import zenoh
+
     from bridge.mavlink_bridge import MavlinkBridge
-    from bridge.session import zenoh_config as make_config
+
+    zenoh.try_init_log_from_env()  # only with RUST_LOG set: Zenoh's own log, the access rules' refusals in it
 
     fence = None
     if geofence is not None:
@@ -99,12 +118,17 @@ def bridge(
             fence = [float(v) for v in geofence.split(",")]
         except ValueError:
             fail(f"--geofence: expected four numbers north_min,north_max,east_min,east_max, got {geofence!r}")
+    if bus_keys is not None and (bus_role or "bridge") != "bridge":
+        fail(f"--bus-role: the bridge is the hub of the secure bus, role 'bridge', not {bus_role!r}; drop --bus-role")
+    conf = bus_config(
+        zenoh_listen,
+        zenoh_connect,
+        zenoh_config,
+        bus_keys,
+        "bridge" if bus_keys is not None else bus_role,
+        endpoints_given=zenoh_listen != ["tcp/127.0.0.1:7447"] or bool(zenoh_connect),
+    )
     try:
-        conf = (
-            make_config(config_file=zenoh_config)
-            if zenoh_config is not None
-            else make_config(listen=zenoh_listen, connect=zenoh_connect)
-        )
         if arm and not allow_commands:
             fail("--arm: arming sends commands to the vehicle; add --allow-commands")
         with MavlinkBridge(
@@ -130,6 +154,8 @@ def autonomy(
     source: Annotated[str, typer.Option(help="Name this autonomy publishes its set-points under.")] = "autonomy",
     zenoh_connect: ZenohConnect = ["tcp/127.0.0.1:7447"],
     zenoh_config: ZenohConfig = None,
+    bus_keys: BusKeys = None,
+    bus_role: BusRole = None,
     surrogate: SurrogateOpt = None,
     pacing: Annotated[
         str,
@@ -142,7 +168,8 @@ def autonomy(
     """Run the back-seat autonomy of one scenario on the bus (or a trained surrogate of it).
 
     As source ``autonomy`` it also serves the scenario's map (``rapt/<v>/map/scenario``) that
-    ``rapt-plan log`` records for Foxglove, whichever of the two starts first.
+    ``rapt-plan log`` records for Foxglove, whichever of the two starts first. With --bus-keys DIR
+    its role is its source name (the default --bus-role): the hub lets it put ``command/<source>`` only.
     """
     from bridge.keys import DEFAULT_ACTIVE
     from planner.backseat import PACINGS, BackSeat
@@ -150,10 +177,21 @@ def autonomy(
 
     if pacing not in PACINGS:
         fail(f"--pacing: expected one of {', '.join(PACINGS)}, got {pacing!r}")
+    if bus_keys is not None and bus_role is not None and bus_role != source:
+        fail(
+            f"--bus-role: autonomy {source!r} puts command/{source}, which only role {source!r} may; "
+            f"drop --bus-role or give --source {bus_role}"
+        )
     mission, u, sid = mission_and_scenario(mission_file, scenario)
     learned = load_surrogate(surrogate, mission)
     err.print(f"autonomy: mission {mission.name!r} scenario {sid}", highlight=False, soft_wrap=True)
-    session = bus_session(zenoh_connect, zenoh_config)
+    session = bus_session(
+        zenoh_connect,
+        zenoh_config,
+        bus_keys,
+        source if bus_keys is not None else bus_role,
+        endpoints_given=zenoh_connect != ["tcp/127.0.0.1:7447"],
+    )
 
     def start() -> contextlib.ExitStack:
         """The back-seat, and (as the flying source) the scenario's map for a logger on the bus."""
@@ -171,9 +209,20 @@ def log(
     vehicle: Vehicle = "uuv1",
     zenoh_connect: ZenohConnect = ["tcp/127.0.0.1:7447"],
     zenoh_config: ZenohConfig = None,
+    bus_keys: BusKeys = None,
+    bus_role: BusRole = None,
 ) -> None:
-    """Record a vehicle's bus traffic to MCAP until stopped."""
-    from bridge.logger import McapLogger
+    """Record a vehicle's bus traffic to MCAP until stopped.
 
-    session = bus_session(zenoh_connect, zenoh_config)
-    run_until_signal(session, lambda: McapLogger(out_file, session, vehicle=vehicle))
+    With --bus-keys DIR it joins as role logger (the default --bus-role) and records which role
+    each channel came from, by the hub's rules (DIR's bridge.json5 if there, else the roles in DIR).
+    """
+    from bridge.logger import McapLogger
+    from planner.run_bus import put_roles_of
+
+    role = (bus_role or "logger") if bus_keys is not None else bus_role
+    session = bus_session(
+        zenoh_connect, zenoh_config, bus_keys, role, endpoints_given=zenoh_connect != ["tcp/127.0.0.1:7447"]
+    )
+    roles = None if bus_keys is None else put_roles_of(bus_keys, vehicle)
+    run_until_signal(session, lambda: McapLogger(out_file, session, vehicle=vehicle, roles=roles))

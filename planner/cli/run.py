@@ -9,7 +9,7 @@ import typer
 from rich.table import Table
 
 from planner.cli.console import fail, out
-from planner.cli.inputs import ScenarioOpt, SurrogateOpt, load_surrogate, mission_and_scenario
+from planner.cli.inputs import BusKeys, ScenarioOpt, SurrogateOpt, load_surrogate, mission_and_scenario
 from rapt.errors import RaptError
 
 __all__ = ["run"]
@@ -62,12 +62,15 @@ def run(
     heartbeat_timeout: Annotated[
         float, typer.Option("--heartbeat-timeout", help="With --mavlink: seconds to wait for the vehicle's HEARTBEAT.")
     ] = 15.0,
+    bus_keys: BusKeys = None,
 ) -> None:
     """Fly one scenario software-in-the-loop: front-seat, bridge, autonomy (and logger).
 
     With --surrogate the learned policy commands the vehicle while the expert autonomy
     keeps running beside it; the expert's commands are on the bus and in the log.
     With --mavlink the scenario is flown on the vehicle at that address instead.
+    With --bus-keys DIR the parts talk over the range's secure bus, each as its role
+    (the bridge is the hub; a --surrogate needs an autonomy role named surrogate in DIR).
     """
     from planner.flight import Flight, check_against_batch, flight_from_plan, fly, is_plan
     from sim.uuv.bias import parse_bias
@@ -85,6 +88,8 @@ def run(
     else:
         mission, u, sid = mission_and_scenario(mission_file, scenario)
         flight = Flight(mission, u, sid, str(mission_file))
+    if bus_keys is not None:
+        _check_bus_keys(bus_keys, surrogate is not None)
     if mavlink is not None:
         for name, given in (
             ("--speedup", speedup is not None),
@@ -105,6 +110,7 @@ def run(
             action=watchdog_action,
             record_only=watchdog_record or [],
             heartbeat_timeout=heartbeat_timeout,
+            bus_keys=bus_keys,
         )
         return
     if speedup is not None and speedup <= 0:
@@ -120,8 +126,9 @@ def run(
             stochastic=stochastic,
             seed=seed,
             surrogate=learned,
+            bus_keys=bus_keys,
         )
-    except (RaptError, ValueError, RuntimeError, TimeoutError) as exc:
+    except (RaptError, ValueError, RuntimeError, TimeoutError, ConnectionError) as exc:
         fail(str(exc))
     batch = check_against_batch(flight, result.scores, bias=bias, stochastic=stochastic, seed=seed, surrogate=learned)
     table = Table(title=f"{flight.mission.name} scenario {flight.scenario_id}: software in the loop")
@@ -147,3 +154,19 @@ def run(
     if log is not None:
         table.add_row("log", str(log))
     out.print(table)
+
+
+def _check_bus_keys(keys_dir: Path, surrogate: bool) -> None:
+    """A one-line error before anything starts when DIR cannot fly this run (each role's files are checked next)."""
+    from bridge.range_keys import role_names
+    from planner.sil import SURROGATE_SOURCE
+
+    if not keys_dir.is_dir():
+        fail(
+            f"--bus-keys: {str(keys_dir)!r} is not a directory; make the keys with rapt-plan bus-keys DIR --vehicle NAME"
+        )
+    if surrogate and SURROGATE_SOURCE not in role_names(keys_dir):
+        fail(
+            f"--surrogate: on the secure bus the surrogate flies as autonomy role {SURROGATE_SOURCE!r}, which "
+            f"{keys_dir} lacks; make the keys with --autonomy autonomy --autonomy {SURROGATE_SOURCE}"
+        )

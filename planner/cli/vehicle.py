@@ -21,6 +21,7 @@ def run_on_vehicle(
     action: str,
     record_only: list[str] | None = None,
     heartbeat_timeout: float = 15.0,
+    bus_keys: Path | None = None,
 ) -> None:
     """Fly ``flight`` at ``connection``; print the bring-up timeline, the end, the mode and the decisions' figures."""
     from planner.bringup import BringUpTimeouts
@@ -51,6 +52,7 @@ def run_on_vehicle(
             timeout_s=timeout,
             timeouts=timeouts,
             say=say,
+            bus_keys=bus_keys,
         )
     except KeyboardInterrupt:
         fail("stopped by the operator: the vehicle was told to surface and disarm")

@@ -90,7 +90,10 @@ def test_run_flies_a_scenario_in_the_loop_and_logs_it(tmp_path):
 
 
 @pytest.mark.integration
-def test_each_piece_runs_as_its_own_process_and_stops_cleanly(tmp_path):
+@pytest.mark.parametrize("bus", ["loopback", pytest.param("secure", marks=pytest.mark.slow)])
+def test_each_piece_runs_as_its_own_process_and_stops_cleanly(tmp_path, bus):
+    """Bridge, logger, autonomy and front-seat as processes, on the loopback bus or on the range's
+    secure bus (``--bus-keys``: mutual TLS, each as its role; the front-seat speaks only MAVLink)."""
     import signal
     import socket
     import subprocess
@@ -106,19 +109,13 @@ def test_each_piece_runs_as_its_own_process_and_stops_cleanly(tmp_path):
     log = tmp_path / "bus.mcap"
     cli = [sys.executable, "-m", "planner.cli"]
     zen = ["--zenoh-connect", f"tcp/127.0.0.1:{hub}"]
+    listen = ["--zenoh-listen", f"tcp/127.0.0.1:{hub}"]
+    if bus == "secure":
+        from bridge.range_keys import make_range_keys
+
+        zen = listen = ["--bus-keys", str(make_range_keys(tmp_path / "keys", "uuv1", hub=f"tls/127.0.0.1:{hub}"))]
     procs = [
-        subprocess.Popen(
-            cli
-            + [
-                "bridge",
-                "--mavlink",
-                f"udpout:127.0.0.1:{udp}",
-                "--zenoh-listen",
-                f"tcp/127.0.0.1:{hub}",
-                "--allow-commands",
-                "--arm",
-            ]
-        )
+        subprocess.Popen(cli + ["bridge", "--mavlink", f"udpout:127.0.0.1:{udp}", *listen, "--allow-commands", "--arm"])
     ]
     # No pause: the clients wait for the hub (bridge.session.CONNECT_TIMEOUT_S), in any start order.
     procs += [
@@ -153,6 +150,12 @@ def test_each_piece_runs_as_its_own_process_and_stops_cleanly(tmp_path):
     assert len(commands) > 50 and max(north) - min(north) > 50  # the autonomy flew the vehicle
     maps = [m for t, _, m in read_log(log) if t == "/map/scenario"]  # from the autonomy, whichever started first
     assert len(maps) == 1 and "predicted_track" in maps[0]["geojson"]
+    if bus == "secure":  # rapt-plan log names each channel's role, from the roles in DIR
+        from mcap.reader import make_reader
+
+        with open(log, "rb") as f:
+            roles = {c.topic: c.metadata.get("rapt.role") for c in make_reader(f).get_summary().channels.values()}
+        assert roles["rapt/uuv1/command/autonomy"] == "autonomy" and roles["/mavlink/raw"] == "bridge"
 
 
 def test_selfright_is_a_rapt_plan_command_with_one_line_errors(tmp_path):
