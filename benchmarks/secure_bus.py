@@ -5,8 +5,9 @@ Two configurations of the bus, measured in turn within every repeat (which goes 
 - ``plain``: the bridge's session listens on loopback TCP as the hub; the others connect to it;
 - ``secure``: the range's keys from :func:`bridge.range_keys.make_range_keys`, made in a
   temporary directory, and each process on its role's configuration
-  (:func:`bridge.range_keys.role_config`): the bridge the hub with the access-control rules,
-  the autonomy and the logger its clients over mutual TLS.
+  (:func:`bridge.range_keys.role_config`, ``--bus-keys DIR`` on the command line): the bridge
+  the hub with the access-control rules, the autonomy and the logger its clients over mutual
+  TLS (the logger then also records which role each channel came from).
 
 1. Round trip: a vehicle's telemetry step over MAVLink -> bridge -> bus -> back-seat autonomy
    -> bus -> bridge -> set-point over MAVLink, timed at the vehicle (``benchmarks/sil.py``'s
@@ -84,8 +85,8 @@ def secure(directory: Path) -> Configuration:
     port = free_port(socket.SOCK_STREAM)
     load_keys = make_range_keys(directory / "load", "uuv1", hub=f"tls/127.0.0.1:{port}")
     load = BusOptions(
-        ["--zenoh-config", str(load_keys / "bridge.json5")],
-        ["--zenoh-config", str(load_keys / "logger.json5")],
+        ["--bus-keys", str(load_keys)],  # the hub, role bridge
+        ["--bus-keys", str(load_keys), "--bus-role", "logger"],
         port,
         lambda: role_config(load_keys, "logger"),  # the harness hears status/bridge as a logger
     )
