@@ -30,9 +30,12 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+import zenoh
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
@@ -40,7 +43,7 @@ from pymavlink import mavutil  # noqa: E402
 import sim.uuv  # noqa: E402
 from bridge.logger import LOSSES_METADATA, RAW_TOPIC, McapLogger, read_log, read_metadata  # noqa: E402
 from bridge.mavlink_bridge import MavlinkBridge  # noqa: E402
-from bridge.session import open_session  # noqa: E402
+from bridge.session import open_session, zenoh_config  # noqa: E402
 from planner.backseat import BackSeat  # noqa: E402
 from planner.sil import free_port, run_sil  # noqa: E402
 
@@ -63,44 +66,63 @@ def lockstep(mission, n: int) -> None:
     print(f"   median {np.median(speeds):,.0f}x real time (target >= 100x)")
 
 
-def round_trip(mission, trips: int) -> None:
-    """Time from the last frame of a telemetry step leaving the vehicle to its set-point arriving."""
+def first_valid_scenario(mission) -> np.ndarray:
+    """A scenario of ``mission`` the simulator flies (the first valid one of a seeded draw)."""
     X = np.random.default_rng(0).random((40, mission.dim))
-    u = X[np.flatnonzero(sim.uuv.simulate(mission, X).valid)[0]]
+    return X[np.flatnonzero(sim.uuv.simulate(mission, X).valid)[0]]
+
+
+def round_trip_ms(mission, u, trips: int, bus: tuple[zenoh.Session, zenoh.Session] | None = None) -> np.ndarray:
+    """Milliseconds from the last frame of each telemetry step leaving the vehicle to its set-point arriving.
+
+    ``bus`` is the bridge's session and the back-seat's, left open (two processes' worth of bus
+    between them); by default both run on one session of their own. The first 50 steps warm up.
+    """
     port = free_port()
     vehicle = mavutil.mavlink_connection(
         f"udpin:127.0.0.1:{port}", source_system=1, source_component=1, dialect="ardupilotmega"
     )
-    session = open_session(listen=[f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"])
+    own = bus is None
+    if bus is None:
+        session = open_session(listen=[f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"])
+        bus = (session, session)
     lat = []
-    with (
-        BackSeat(session, "uuv1", mission, u),
-        MavlinkBridge(f"udpout:127.0.0.1:{port}", session, vehicle="uuv1", allow_commands=True) as bridge,
-    ):
-        m = vehicle.mav
-        vehicle.recv_match(type="HEARTBEAT", blocking=True, timeout=5)  # the bridge has spoken: we can send
-        deadline = time.monotonic() + 5
-        while bridge.target is None and time.monotonic() < deadline:
-            m.heartbeat_send(12, 3, 0, 4, 4)
-            time.sleep(0.05)
-        x, y = -480.0, -500.0
-        for k in range(trips + 50):
-            ms = k * 2000
-            m.attitude_send(ms, 0, 0, 0.5, 0, 0, 0)
-            m.local_position_ned_send(ms, y, x, 2.0, 0, 0, 0)
-            m.battery_status_send(0, 0, 0, 2000, [15000] + [65535] * 9, -1, 0, k, 90)
-            t0 = time.perf_counter()
-            m.system_time_send(int(time.time() * 1e6), ms)
-            reply = vehicle.recv_match(type="SET_POSITION_TARGET_LOCAL_NED", blocking=True, timeout=1)
-            t1 = time.perf_counter()
-            if reply is not None and reply.time_boot_ms == ms and k >= 50:  # 50 warm-up steps
-                lat.append((t1 - t0) * 1e3)
-            y += 1.0
-        if k % 500 == 0:
-            m.heartbeat_send(12, 3, 0, 4, 4)
-    session.close()
-    vehicle.close()
-    lat = np.array(lat)
+    try:
+        with (
+            BackSeat(bus[1], "uuv1", mission, u),
+            MavlinkBridge(f"udpout:127.0.0.1:{port}", bus[0], vehicle="uuv1", allow_commands=True) as bridge,
+        ):
+            m = vehicle.mav
+            vehicle.recv_match(type="HEARTBEAT", blocking=True, timeout=5)  # the bridge has spoken: we can send
+            deadline = time.monotonic() + 5
+            while bridge.target is None and time.monotonic() < deadline:
+                m.heartbeat_send(12, 3, 0, 4, 4)
+                time.sleep(0.05)
+            x, y = -480.0, -500.0
+            for k in range(trips + 50):
+                ms = k * 2000
+                m.attitude_send(ms, 0, 0, 0.5, 0, 0, 0)
+                m.local_position_ned_send(ms, y, x, 2.0, 0, 0, 0)
+                m.battery_status_send(0, 0, 0, 2000, [15000] + [65535] * 9, -1, 0, k, 90)
+                t0 = time.perf_counter()
+                m.system_time_send(int(time.time() * 1e6), ms)
+                reply = vehicle.recv_match(type="SET_POSITION_TARGET_LOCAL_NED", blocking=True, timeout=1)
+                t1 = time.perf_counter()
+                if reply is not None and reply.time_boot_ms == ms and k >= 50:  # 50 warm-up steps
+                    lat.append((t1 - t0) * 1e3)
+                y += 1.0
+                if k % 500 == 0:
+                    m.heartbeat_send(12, 3, 0, 4, 4)
+    finally:
+        if own:
+            bus[0].close()
+        vehicle.close()
+    return np.array(lat)
+
+
+def round_trip(mission, trips: int) -> None:
+    """Part 2: the round trip with the bridge and the back-seat on one session."""
+    lat = round_trip_ms(mission, first_valid_scenario(mission), trips)
     print(
         f"\n2. Bridge round trip (MAVLink -> Zenoh -> autonomy -> Zenoh -> MAVLink), {lat.size} steps: "
         f"p50 {np.percentile(lat, 50):.2f} ms, p99 {np.percentile(lat, 99):.2f} ms, max {lat.max():.2f} ms "
@@ -109,12 +131,14 @@ def round_trip(mission, trips: int) -> None:
 
 
 # The sender runs in a process of its own: the bridge and the logger get the GIL to themselves.
+# An optional fourth argument is the first sequence number (a later burst goes on where the last ended).
 _SENDER = """
 import os, sys, time
 os.environ["MAVLINK20"] = "1"
 from pymavlink import mavutil
 port, rate, seconds = int(sys.argv[1]), int(sys.argv[2]), float(sys.argv[3])
 c = mavutil.mavlink_connection(f"udpout:127.0.0.1:{port}", source_system=1, source_component=1, dialect="ardupilotmega")
+c.mav.seq = int(sys.argv[4]) if len(sys.argv) > 4 else 0
 sent, start = 0, time.perf_counter()
 while (now := time.perf_counter() - start) < seconds:
     while sent < int(now * rate):
@@ -131,11 +155,11 @@ def _cli(*args: str) -> subprocess.Popen:
 
 
 class _BridgeStatus:
-    """The latest ``status/bridge`` of a bridge, heard on the bus from a client session of our own."""
+    """The latest ``status/bridge`` of a bridge, heard on the bus from a session of our own (opened from ``config``)."""
 
-    def __init__(self, endpoint: str):
+    def __init__(self, config: zenoh.Config):
         self.latest: dict = {}
-        self.session = open_session(connect=[endpoint])
+        self.session = zenoh.open(config)
         self.sub = self.session.declare_subscriber("rapt/uuv1/status/bridge", self._on)
 
     def _on(self, sample) -> None:  # a Zenoh callback: only store
@@ -160,34 +184,132 @@ class _BridgeStatus:
         self.session.close()
 
 
+@dataclass
+class BusOptions:
+    """How the processes of a load run join the bus: the options of ``rapt-plan bridge`` (the hub) and of
+    ``rapt-plan log``, the hub's TCP port, and the config of the session this harness listens on."""
+
+    bridge: list[str]
+    logger: list[str]
+    hub_port: int
+    listener: Callable[[], zenoh.Config]
+
+    @classmethod
+    def tcp(cls) -> BusOptions:
+        """Plain Zenoh TCP on a free loopback port, as a new user runs it."""
+        port = free_port(socket.SOCK_STREAM)
+        endpoint = f"tcp/127.0.0.1:{port}"
+        return cls(
+            ["--zenoh-listen", endpoint], ["--zenoh-connect", endpoint], port, lambda: zenoh_config(connect=endpoint)
+        )
+
+
+def _wait_listening(port: int, proc: subprocess.Popen, timeout_s: float = 60.0) -> None:
+    """Wait until ``proc`` accepts TCP connections on loopback ``port``; its stderr if it ends first."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        if proc.poll() is not None:
+            raise RuntimeError(f"the hub ended before listening: {proc.communicate()[1].strip()[-500:]}")
+        with socket.socket() as s:
+            if s.connect_ex(("127.0.0.1", port)) == 0:
+                return
+        time.sleep(0.1)
+    raise RuntimeError(f"nothing listens on 127.0.0.1:{port} after {timeout_s:g} s")
+
+
+def process_cpu_s(pid: int) -> float:
+    """A process's CPU time so far (user + system), in seconds."""
+    fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+class LoadRig:
+    """``rapt-plan bridge`` and ``rapt-plan log`` as processes of their own, fed ATTITUDE frames in bursts by a
+    pymavlink sender in a third.
+
+    A context manager: entering starts both and waits until the logger hears the bridge;
+    :meth:`burst` sends one burst and waits until the bridge has read it; leaving stops the
+    logger, then the bridge (as an operator ends a run) and reads the log into :attr:`messages`
+    and its ``rapt.losses`` into :attr:`losses`.
+    """
+
+    def __init__(self, path: Path, bus: BusOptions | None = None):
+        self.path = path
+        self.bus = bus if bus is not None else BusOptions.tcp()
+        self.port = free_port()
+        self.sent = 0
+        self.messages: list = []
+        self.losses: dict = {}
+        self._procs: list[subprocess.Popen] = []
+        self._status: _BridgeStatus | None = None
+
+    def start(self) -> None:
+        """Start the bridge and the logger, without waiting for them (:meth:`ready` waits)."""
+        bridge = _cli("bridge", "--mavlink", f"udpin:127.0.0.1:{self.port}", *self.bus.bridge)
+        self._procs = [_cli("log", "--out", str(self.path), *self.bus.logger), bridge]
+
+    def ready(self, settle_s: float = 2.0) -> None:
+        """Wait until the hub listens, the bridge's status is heard and the logger's file exists, then ``settle_s``
+        (the logger's subscription reaches the bridge)."""
+        _wait_listening(self.bus.hub_port, self._procs[1])
+        self._status = _BridgeStatus(self.bus.listener())
+        deadline = time.monotonic() + 60
+        while time.monotonic() < deadline and not (self._status.latest and self.path.exists()):
+            time.sleep(0.2)
+        time.sleep(settle_s)
+
+    def __enter__(self) -> LoadRig:
+        try:
+            self.start()
+            self.ready()
+        except BaseException:
+            self.finish(settle_s=0.0, read=False)
+            raise
+        return self
+
+    @property
+    def pids(self) -> dict[str, int]:
+        """The process ids of the bridge and the logger."""
+        return {"bridge": self._procs[1].pid, "logger": self._procs[0].pid}
+
+    def burst(self, rate: int, seconds: float) -> int:
+        """Send ATTITUDE frames at ``rate`` per second for ``seconds``; return once the bridge has read them
+        (or its counters stopped); the number sent."""
+        assert self._status is not None, "burst inside the with block"
+        sender = [sys.executable, "-c", _SENDER, str(self.port), str(rate), str(seconds), str(self.sent % 256)]
+        sent = int(subprocess.run(sender, capture_output=True, text=True, check=True).stdout.split()[0])
+        self.sent += sent
+        self._status.drained(self.sent)
+        return sent
+
+    def finish(self, settle_s: float = 2.5, read: bool = True) -> None:
+        """After ``settle_s`` (two more statuses: the last counts reach the logger), stop the logger, then the
+        bridge (as an operator ends a run), and (unless not ``read``, after a failure) read the log."""
+        time.sleep(settle_s)
+        if self._status is not None:
+            self._status.close()
+            self._status = None
+        for proc in self._procs:  # the logger first
+            if proc.poll() is None:
+                proc.send_signal(2)
+            proc.communicate(timeout=120)
+        if read:
+            self.messages = read_log(self.path)
+            self.losses = read_metadata(self.path).get(LOSSES_METADATA, {})
+
+    def __exit__(self, *exc) -> None:
+        ok = exc[0] is None
+        self.finish(settle_s=2.5 if ok else 0.0, read=ok)
+
+
 def sustained_processes(rate: int, seconds: float) -> dict:
     """One run with ``rapt-plan bridge`` and ``rapt-plan log`` as processes; the counters from the log."""
-    port, zport = free_port(), free_port(socket.SOCK_STREAM)
     with tempfile.TemporaryDirectory() as tmp:
-        path = Path(tmp) / "load.mcap"
-        endpoint = f"tcp/127.0.0.1:{zport}"
-        bridge = _cli("bridge", "--mavlink", f"udpin:127.0.0.1:{port}", "--zenoh-listen", endpoint)
-        logger = _cli("log", "--out", str(path), "--zenoh-connect", endpoint)
-        status = _BridgeStatus(endpoint)
-        try:
-            deadline = time.monotonic() + 60
-            while time.monotonic() < deadline and not (status.latest and path.exists()):
-                time.sleep(0.2)
-            time.sleep(2.0)  # the logger's subscription reaches the bridge
-            sender = [sys.executable, "-c", _SENDER, str(port), str(rate), str(seconds)]
-            sent = int(subprocess.run(sender, capture_output=True, text=True, check=True).stdout.split()[0])
-            status.drained(sent)
-            time.sleep(2.5)  # two more statuses: the last counts reach the logger
-        finally:
-            status.close()
-            for proc in (logger, bridge):  # the logger first, as an operator ends a run
-                proc.send_signal(2)
-                proc.communicate(timeout=120)
-        messages = read_log(path)
-        logged = sum(1 for topic, _, _ in messages if topic == RAW_TOPIC)
-        b = [p for topic, _, p in messages if topic.endswith("/status/bridge")][-1]
-        losses = read_metadata(path).get(LOSSES_METADATA, {})
-    return _load_row(rate, sent, b, logged, losses)
+        with LoadRig(Path(tmp) / "load.mcap") as rig:
+            sent = rig.burst(rate, seconds)
+        logged = sum(1 for topic, _, _ in rig.messages if topic == RAW_TOPIC)
+        b = [p for topic, _, p in rig.messages if topic.endswith("/status/bridge")][-1]
+    return _load_row(rate, sent, b, logged, rig.losses)
 
 
 def sustained_one(rate: int, seconds: float) -> dict:
