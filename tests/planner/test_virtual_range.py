@@ -44,6 +44,11 @@ def _mission(**vehicle):
     )
 
 
+def _latest_pose_ms(mission, frames) -> int | None:
+    pose = telemetry_of(mission, frames).pose
+    return None if pose is None else pose.time_ms
+
+
 def test_barriers_ahead_in_range_are_reported_as_body_frd_contacts_that_round_trip():
     m = _mission()
     with bus() as s:
@@ -64,6 +69,8 @@ def test_barriers_ahead_in_range_are_reported_as_body_frd_contacts_that_round_tr
                 wait_until(lambda n=n: vr.stats["poses"] == n, what=f"pose {n}")
                 sent = vr.stats["contacts_sent"]
                 wait_until(lambda c=sent: len(_virtual(raw.items())) == c, what="the contacts on the raw stream")
+                # the listener is a subscriber of its own: the pose may reach it after the range saw it
+                wait_until(lambda t=t: _latest_pose_ms(m, raw.items()) == t, what=f"pose {n} on the raw stream")
                 # the consumer (a back-seat) reads the stream up to here and converts the contacts back
                 tel = telemetry_of(m, raw.items())
                 pose = tel.pose
