@@ -33,7 +33,7 @@ from bridge.session import open_session
 from planner.processes import wait_for
 from rapt.errors import LinkError, LinkTimeoutError
 
-__all__ = ["PART_ROLES", "RunBus", "put_when_heard", "put_roles_of"]
+__all__ = ["PART_ROLES", "RunBus", "free_port", "put_when_heard", "put_roles_of"]
 
 #: The role each in-process part of a run joins the secure bus as (an autonomy's role is its source name).
 PART_ROLES = {
@@ -54,8 +54,9 @@ PART_ROLES = {
 HEARD_TIMEOUT_S = 10.0
 
 
-def _free_tcp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+def free_port(kind: int = socket.SOCK_DGRAM) -> int:
+    """A free loopback port (UDP by default)."""
+    with socket.socket(socket.AF_INET, kind) as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
 
@@ -76,7 +77,7 @@ class RunBus:
         self._sessions: dict[str, Any] = {}
         self._shared: Any = None
         if self.keys_dir is None:
-            self._shared = open_session(listen=[f"tcp/127.0.0.1:{_free_tcp_port()}"])
+            self._shared = open_session(listen=[f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"])
             return
         from bridge.range_keys import role_config
 
@@ -93,11 +94,7 @@ class RunBus:
     def put_roles(self) -> dict[str, list[str]] | None:
         """``{key expression: [roles allowed to put it]}`` from the hub's own config, for the logger
         (:mod:`bridge.channel_roles`); None on the loopback bus."""
-        if self.keys_dir is None:
-            return None
-        from bridge.channel_roles import put_roles
-
-        return put_roles(json.loads(self._role_config(self.keys_dir, "bridge").get_json("access_control")))
+        return None if self.keys_dir is None else put_roles_of(self.keys_dir, self.vehicle)
 
     def session(self, role: str) -> Any:
         """The session of ``role`` (opened on first use)."""
@@ -117,6 +114,14 @@ class RunBus:
             ) from exc
         self._sessions[role] = session
         return session
+
+    def put(self, role: str, key: str, payload: str, *, when_heard: bool = False) -> None:
+        """Put ``payload`` on ``key`` from ``role``'s session; ``when_heard``: once a subscriber of it is known
+        (a client of the hub learns of the hub's subscribers over the network, :func:`put_when_heard`)."""
+        if when_heard:
+            put_when_heard(self.session(role), key, payload)
+        else:
+            self.session(role).put(key, payload)
 
     def wait_for_parts(self, *names: str, timeout_s: float = HEARD_TIMEOUT_S) -> None:
         """Wait until the hub holds the liveliness tokens ``alive/<name>`` of the parts named: their

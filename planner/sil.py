@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import json
 import os
-import socket
 import threading
 import time
 from dataclasses import dataclass, field
@@ -30,7 +29,7 @@ from bridge.session import receive, undeclare  # noqa: E402
 from planner.backseat import BackSeat  # noqa: E402
 from planner.jsonio import jsonable  # noqa: E402
 from planner.processes import wait_for  # noqa: E402
-from planner.run_bus import PART_ROLES, RunBus, put_when_heard  # noqa: E402
+from planner.run_bus import PART_ROLES, RunBus, free_port  # noqa: E402
 from planner.scenario_map import ScenarioMap  # noqa: E402
 from rapt.errors import LinkTimeoutError  # noqa: E402
 from sim.uuv.frontseat import FrontSeat  # noqa: E402
@@ -41,13 +40,6 @@ __all__ = ["SilResult", "run_sil", "free_port", "SURROGATE_SOURCE"]
 
 #: The back-seat source name a surrogate commands under.
 SURROGATE_SOURCE = "surrogate"
-
-
-def free_port(kind: int = socket.SOCK_DGRAM) -> int:
-    """A free loopback port (UDP by default)."""
-    with socket.socket(socket.AF_INET, kind) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 @dataclass
@@ -182,17 +174,15 @@ def run_sil(
                 "parameters": jsonable(mission.space.decode(u[None, :])[0]),
             }
         )
-        if logger is not None:  # the logger may be a client of the hub: put once it is heard
-            put_when_heard(bus.session(PART_ROLES["scenario_meta"]), keys.meta(vehicle, "scenario"), meta)
-        else:
-            bus.session(PART_ROLES["scenario_meta"]).put(keys.meta(vehicle, "scenario"), meta)
+        # the logger may be a client of the hub: put once it is heard
+        bus.put(PART_ROLES["scenario_meta"], keys.meta(vehicle, "scenario"), meta, when_heard=logger is not None)
         bridge = MavlinkBridge(
             f"udpout:127.0.0.1:{port}", bus.session("bridge"), vehicle=vehicle, allow_commands=True
         ).start()
         if not wait_for(lambda: bridge.target is not None, 10):
             raise LinkTimeoutError("front-seat: no HEARTBEAT on the MAVLink link within 10 s")
         if surrogate is not None:
-            put_when_heard(bus.session(PART_ROLES["control"]), keys.active(vehicle), SURROGATE_SOURCE)
+            bus.put(PART_ROLES["control"], keys.active(vehicle), SURROGATE_SOURCE, when_heard=True)
             if not wait_for(lambda: bridge.active == SURROGATE_SOURCE, 10):
                 raise LinkTimeoutError("bridge: did not take the surrogate as the active source within 10 s")
         bridge.set_mode("GUIDED")

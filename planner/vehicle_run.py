@@ -27,7 +27,7 @@ from planner.backseat import BackSeat
 from planner.bringup import GUIDED, BringUp, BringUpTimeouts, Step
 from planner.jsonio import jsonable
 from planner.referee import Referee
-from planner.run_bus import PART_ROLES, RunBus, put_when_heard
+from planner.run_bus import PART_ROLES, RunBus
 from planner.scenario_map import ScenarioMap
 from planner.virtual_range import VirtualRange
 from planner.watchdog import BATTERY, COLLISION, OPERATIONAL_AREA, REASONS, Watchdog, WatchdogRules
@@ -125,10 +125,7 @@ def run_vehicle(
         parts += [virtual, referee, backseat, watchdog]
         bus.wait_for_parts(*heard)  # their subscriptions are at the hub before the bring-up's first put
         meta = json.dumps(_scenario_meta(flight, connection))
-        if log_path is not None:
-            put_when_heard(bus.session(PART_ROLES["scenario_meta"]), keys.meta(vehicle, "scenario"), meta)
-        else:
-            bus.session(PART_ROLES["scenario_meta"]).put(keys.meta(vehicle, "scenario"), meta)
+        bus.put(PART_ROLES["scenario_meta"], keys.meta(vehicle, "scenario"), meta, when_heard=log_path is not None)
         bringup = BringUp(
             bridge, bus.session(PART_ROLES["bringup"]), vehicle, mission, connection, timeouts or BringUpTimeouts(), say
         )
@@ -138,7 +135,7 @@ def run_vehicle(
             referee.begin(start_ms)
             backseat.begin(start_ms)
             watchdog.begin()
-            put_when_heard(bus.session(PART_ROLES["control"]), keys.active(vehicle), keys.DEFAULT_ACTIVE)
+            bus.put(PART_ROLES["control"], keys.active(vehicle), keys.DEFAULT_ACTIVE, when_heard=True)
             ended = _fly(referee, watchdog, bridge, timeout_s)
         except BaseException as exc:  # Ctrl-C, or a bring-up step that failed after GUIDED and arming
             referee.end("stopped by the operator" if isinstance(exc, KeyboardInterrupt) else f"stopped: {exc}")
@@ -225,7 +222,7 @@ def _fly(referee: Referee, watchdog: Watchdog, bridge: MavlinkBridge, timeout_s:
             now_ms = referee.telemetry.now_ms
             if grace is None and watchdog.intervention in REFEREED and now_ms >= 0:
                 grace = (now_ms + period_ms + 100, time.monotonic() + period_ms / 1000.0 + 1.0)
-            if grace is None or referee.telemetry.now_ms > grace[0] or time.monotonic() > grace[1]:
+            if grace is None or now_ms > grace[0] or time.monotonic() > grace[1]:
                 reason = f"watchdog: {watchdog.intervention}"
                 referee.end(reason)
                 return reason
