@@ -1,8 +1,8 @@
 """The range day rehearsed on ArduSub's real firmware (issue 28): plan on the model, fly SITL, compare, correct.
 
-Every flight boots ArduSub SITL cold (``planner.ardusub_sitl.ArduSubSitl``: a wiped parameter
+Every flight boots ArduSub SITL cold (``planner.fly.ardusub_sitl.ArduSubSitl``: a wiped parameter
 store, its home at range2017's launch point) and flies one scenario of
-``field_plans/range2017/`` through :func:`planner.vehicle_run.run_vehicle` — what
+``field_plans/range2017/`` through :func:`planner.fly.vehicle.run.run_vehicle` — what
 ``rapt-plan run PLAN --scenario ID --mavlink tcp:...`` does on a range day: bring-up (the
 estimator awaited, GUIDED retried until accepted, armed only in GUIDED), the vehicle-paced
 back-seat, the virtual sonar and fuel gauge, the watchdog (no-go areas record-only: they are
@@ -103,9 +103,9 @@ def fly(
     sid: str, speedup: float, log: Path, vehicle_s: float | None = None, pack_ah: float = REHEARSAL_PACK_AH
 ) -> dict:
     """One scenario from a cold boot of the firmware; ``vehicle_s`` cuts the flight after that much vehicle time."""
-    from planner.ardusub_sitl import ArduSubSitl, launch_point
-    from planner.flight import flight_from_plan
-    from planner.vehicle_run import run_vehicle
+    from planner.fly.ardusub_sitl import ArduSubSitl, launch_point
+    from planner.fly.sil_flight import flight_from_plan
+    from planner.fly.vehicle.run import run_vehicle
     from rapt.errors import RaptError
 
     flight = flight_from_plan(PLAN, sid)
@@ -188,8 +188,8 @@ def observe(rows: list[dict]) -> None:
     """Add observed mode (the logged track scored) and path error against the plan's prediction to each row."""
     import sim.uuv
     from benchmarks.calibrate import _observed, _path_rms
-    from planner.logs import read_run
-    from planner.plans import load_plan
+    from planner.common.plans import load_plan
+    from planner.review.logs import read_run
 
     plan = load_plan(PLAN)
     flown = [r for r in rows if "error" not in r]
@@ -209,8 +209,8 @@ def calibration(rows: list[dict], work: Path, seed: int = 0) -> dict:
     """Calibrate (and fit the bias) on one half, predict the other; both ways round."""
     import sim.uuv
     from benchmarks.calibrate import evaluate
-    from planner.compare import CompareConfig, compare
-    from planner.plans import load_plan
+    from planner.common.plans import load_plan
+    from planner.review.compare import CompareConfig, compare
     from sim.uuv.bias import Bias
     from sim.uuv.scoring import MODE_NAMES
 
@@ -323,7 +323,7 @@ def report(
             f"{biased}/{n} after calibration and the fitted bias.",
             "",
         ]
-        from planner.calibrate import FITTED
+        from planner.review.calibrate import FITTED
 
         out.append("| fold | " + " | ".join(FITTED) + " | bias |")
         out.append("|---|" + "---|" * (len(FITTED) + 1))
@@ -337,8 +337,8 @@ def report(
 
 
 def main(argv: list[str] | None = None) -> int:
-    from planner.ardusub_sitl import ENV, sitl_binary
-    from planner.plans import load_plan
+    from planner.common.plans import load_plan
+    from planner.fly.ardusub_sitl import ENV, sitl_binary
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--speedups", default="10,20,30,40", help="Speed-ups to sweep (comma-separated).")

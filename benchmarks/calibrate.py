@@ -76,7 +76,7 @@ def other_vehicle_mission(path: Path) -> Path:
 def make_plan(work: Path, seed: int = 0, pairs: int = 4) -> Path:
     """A small plan of the mission (budget 1000, ``pairs`` pairs, no dithers) in ``work/plan``."""
     import sim.uuv
-    from planner.generate import GenerateConfig, generate
+    from planner.plan.generate import GenerateConfig, generate
 
     plan_dir = work / "plan"
     if not (plan_dir / "plan.json").is_file():
@@ -94,7 +94,7 @@ def fly(
 ) -> str:
     """One scenario on the bare front-seat running ``vehicle_toml`` (stopped after ``cut_s`` wall seconds
     when given); returns "" or what went wrong."""
-    from planner.sil import free_port
+    from planner.fly.sil_loop import free_port
 
     port = free_port()
     scen = log.with_suffix(".scenario.json")
@@ -151,7 +151,7 @@ def fly_checked(
     plan_json: Path, vehicle_toml: Path, sid: str, u: np.ndarray, log: Path, speedup: float, cut_s: float | None = None
 ) -> str:
     """:func:`fly`, once more when the watchdog ended the run (the rig fell behind the vehicle's clock)."""
-    from planner.logs import read_run
+    from planner.review.logs import read_run
 
     error = ""
     for _ in range(2):
@@ -173,9 +173,9 @@ def _path_rms(track: np.ndarray, pred: np.ndarray | None) -> float:
 def evaluate(plan_json: Path, logs: dict[str, Path], work: Path, seed: int = 0, modes: bool = True) -> dict:
     """Calibrate on each half, predict the other; returns the rows and the fitted values per fold."""
     import sim.uuv
-    from planner.calibrate import FITTED, calibrate
-    from planner.logs import read_run
-    from planner.plans import load_plan
+    from planner.common.plans import load_plan
+    from planner.review.calibrate import FITTED, calibrate
+    from planner.review.logs import read_run
     from sim.uuv.scoring import MODE_NAMES
 
     plan = load_plan(plan_json)
@@ -225,7 +225,7 @@ def evaluate(plan_json: Path, logs: dict[str, Path], work: Path, seed: int = 0, 
 def rows(speedup: float = 10.0, jobs: int = 2, work: Path | None = None, seed: int = 0, quick: bool = False) -> dict:
     """Fly (what is missing in ``work``), calibrate and predict: :func:`evaluate`'s result plus flight notes."""
     import sim.uuv  # noqa: F401  (imported before the pool, once)
-    from planner.plans import load_plan
+    from planner.common.plans import load_plan
 
     work = Path(work) if work is not None else Path(tempfile.mkdtemp(prefix="rapt_calibrate_"))
     work.mkdir(parents=True, exist_ok=True)
@@ -294,7 +294,7 @@ def report(result: dict) -> str:
 
 def fitted_table(result: dict) -> str:
     """Fitted versus true [vehicle] values per fold (true: the flown vehicle; file: the planner's)."""
-    from planner.calibrate import FITTED
+    from planner.review.calibrate import FITTED
 
     file = result["file"]
     head = "| field | file (planner) | true (flown) | " + " | ".join(

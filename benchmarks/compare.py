@@ -34,7 +34,7 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 import sim.uuv  # noqa: E402
-from planner.generate import GenerateConfig, generate  # noqa: E402
+from planner.plan.generate import GenerateConfig, generate  # noqa: E402
 from sim.uuv.bias import BIAS_NAMES, NEUTRAL, parse_bias  # noqa: E402
 
 CASES = {  # label: (--inject-bias, stochastic effects on, runs per scenario)
@@ -117,8 +117,8 @@ def coverage(plan_dir: Path, seeds: int) -> None:
     how far each identified estimate falls from the truth, in its own standard errors."""
     import numpy as np
 
-    from planner.biasfit import fit_bias
-    from planner.plans import load_plan
+    from planner.common.plans import load_plan
+    from planner.review.biasfit import fit_bias
     from sim.uuv.scenario import make_scenarios
     from sim.uuv.simulate import TRAJECTORY_FIELDS
 

@@ -27,7 +27,7 @@ import time
 from pathlib import Path
 
 import sim.uuv
-from planner.generate import GenerateConfig, auto_batch_size, generate, make_executor
+from planner.plan.generate import GenerateConfig, auto_batch_size, generate, make_executor
 
 MISSION = Path(__file__).resolve().parents[1] / "examples" / "range2017.toml"
 TARGET_S = 600.0
@@ -114,7 +114,7 @@ DRIVER = r"""
 import json, sys, time
 from pathlib import Path
 import sim.uuv
-from planner.generate import GenerateConfig, generate
+from planner.plan.generate import GenerateConfig, generate
 mission_file, out, budget, dithers, refine = sys.argv[1], Path(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4]), int(sys.argv[5])
 mission = sim.uuv.load_mission(mission_file)
 timings = {}

@@ -44,8 +44,8 @@ import sim.uuv  # noqa: E402
 from bridge.logger import LOSSES_METADATA, RAW_TOPIC, McapLogger, read_log, read_metadata  # noqa: E402
 from bridge.mavlink_bridge import MavlinkBridge  # noqa: E402
 from bridge.session import open_session, zenoh_config  # noqa: E402
-from planner.backseat import BackSeat  # noqa: E402
-from planner.sil import free_port, run_sil  # noqa: E402
+from planner.fly.backseat import BackSeat  # noqa: E402
+from planner.fly.sil_loop import free_port, run_sil  # noqa: E402
 
 MISSION = Path(__file__).resolve().parents[1] / "examples" / "range2017.toml"
 

@@ -34,8 +34,8 @@ import numpy as np
 from scipy.stats import qmc
 
 import sim.uuv
-from planner.generate import GenerateConfig, analyse, confirm_with_expert, search_mission, select_pairs
-from planner.surrogate import ModeValidation, train_surrogate
+from planner.plan.generate import GenerateConfig, analyse, confirm_with_expert, search_mission, select_pairs
+from planner.plan.surrogate import ModeValidation, train_surrogate
 from rapt.agreement import agreement, path_error
 from sim.uuv.autonomy import Autonomy
 from sim.uuv.imitation.surrogate import Surrogate
@@ -325,14 +325,14 @@ def workflow(mission, surrogate: Surrogate, budget: int, confirm: int, pairs: in
     """Table 4: the surrogate workflow's expert runs against the expert-only search's to the same boundary types.
 
     The surrogate workflow searches on the surrogate and lets the expert confirm every
-    candidate pair (:func:`planner.confirmation.confirm_pairs`, ``confirm`` expert runs at
+    candidate pair (:func:`planner.plan.confirmation.confirm_pairs`, ``confirm`` expert runs at
     most).  The expert-only S-NDV search of ``budget`` runs is analysed on prefixes of its
     own run order (whole batches, a geometric grid) to find after how many runs its
     boundary types first include every type the expert confirmed.
     """
     import tempfile
 
-    from planner.confirmation import DEFAULT_RADIUS
+    from planner.plan.confirmation import DEFAULT_RADIUS
     from rapt.store import StudyStore
 
     cfg_s = GenerateConfig(budget=budget, pairs=pairs, seed=seed, dithers=0, surrogate=surrogate, confirm_runs=confirm)

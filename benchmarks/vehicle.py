@@ -1,9 +1,9 @@
 """A field plan flown on a vehicle we do not simulate in lock-step (issue 22), measured.
 
 Every scenario of ``field_plans/range2017/`` is flown through ``--mavlink`` exactly as on a
-range day (:func:`planner.vehicle_run.run_vehicle`: bring-up, vehicle-paced back-seat,
+range day (:func:`planner.fly.vehicle.run.run_vehicle`: bring-up, vehicle-paced back-seat,
 virtual sonar and fuel gauge, watchdog, referee) against our front-seat as a bare
-autopilot (:class:`sim.uuv.frontseat.FrontSeat` with ``bare=True``: its own stream rates,
+autopilot (:class:`sim.uuv.ardusub.frontseat.FrontSeat` with ``bare=True``: its own stream rates,
 no sonar, an estimator that is not ready at boot, ArduSub's 3 s set-point timeout), in a
 process of its own, at each speed-up.  Per scenario and speed-up:
 
@@ -49,8 +49,8 @@ PLAN = ROOT / "field_plans" / "range2017" / "plan.json"
 
 def _vehicle(plan_path: str, sid: str, port: int, speedup: float, stop, results) -> None:
     """The bare-autopilot vehicle in its own process, as a real vehicle is another computer."""
-    from planner.plans import load_plan
-    from sim.uuv.frontseat import FrontSeat
+    from planner.common.plans import load_plan
+    from sim.uuv.ardusub.frontseat import FrontSeat
 
     plan = load_plan(plan_path)
     fs = FrontSeat(plan.mission, plan.u(sid), f"udpin:127.0.0.1:{port}", bare=True, speedup=speedup)
@@ -64,9 +64,9 @@ def _vehicle(plan_path: str, sid: str, port: int, speedup: float, stop, results)
 
 def _stack(plan_path: str, sid: str, port: int, speedup: float, record: tuple, results) -> None:
     """The whole range-day stack on the vehicle's port, as `rapt-plan run PLAN --scenario ID --mavlink`."""
-    from planner.bringup import BringUpTimeouts
-    from planner.flight import flight_from_plan
-    from planner.vehicle_run import run_vehicle
+    from planner.fly.sil_flight import flight_from_plan
+    from planner.fly.vehicle.bringup import BringUpTimeouts
+    from planner.fly.vehicle.run import run_vehicle
     from sim.uuv.scoring import mode_name
 
     flight = flight_from_plan(Path(plan_path), sid)
@@ -106,7 +106,7 @@ def _stack(plan_path: str, sid: str, port: int, speedup: float, record: tuple, r
 
 def fly(plan_path: str, sid: str, speedup: float, record: tuple = ("nogo",)) -> dict:
     """One scenario at one speed-up: the vehicle and the stack as two processes on loopback."""
-    from planner.sil import free_port
+    from planner.fly.sil_loop import free_port
 
     ctx = mp.get_context("spawn")
     results = ctx.Queue()
@@ -169,7 +169,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     from concurrent.futures import ThreadPoolExecutor
 
-    from planner.plans import load_plan
+    from planner.common.plans import load_plan
 
     plan = load_plan(PLAN)
     ids = [s["id"] for s in plan.scenarios] + [v["id"] for v in plan.variants]

@@ -54,7 +54,7 @@ def role_permissions(vehicle: str, role: str, *, autonomy: bool = False) -> dict
     if role == HUB_ROLE:
         return {"put": [], "subscribe": [], "alive": []}
     if autonomy:
-        # and the scenario's map for the log (planner.scenario_map; drawn, never acted on)
+        # and the scenario's map for the log (planner.fly.scenario_map; drawn, never acted on)
         return {
             "put": [keys.command(vehicle, role), *own, keys.map_document(vehicle, "scenario")],
             "subscribe": [k["telemetry"], k["virtual"], k["meta"], k["active"]],

@@ -20,7 +20,7 @@ the vehicle's position fix, a log of STATUSTEXT and the autonomy's events, the l
 are written so Foxglove's Map, Log and 3D panels show the run without configuration; a
 ``map/<name>`` GeoJSON document is written only as its ``foxglove.GeoJSON`` channel. They are
 counted in ``stats["derived"]``, apart from ``written``. A map's publisher puts it again
-whenever a logger's liveliness token appears (:class:`planner.scenario_map.ScenarioMap`), so a
+whenever a logger's liveliness token appears (:class:`planner.fly.scenario_map.ScenarioMap`), so a
 logger started after the planner still records it.
 
 On the range's secure bus (:mod:`bridge.range_keys`) a logger given the hub's rules (``roles``,

@@ -52,7 +52,7 @@ def test_the_import_layers_hold():
         ("bridge/setpoint.py", "sim.uuv", "planner wires sim and bridge"),
         ("sim/uuv/geo.py", "bridge", "planner wires sim and bridge"),
         ("sim/robots/model.py", "sim.uuv", "the simulated systems are independent"),
-        ("planner/compare.py", "planner.cli", "only the command line"),
+        ("planner/review/compare.py", "planner.cli", "only the command line"),
     ],
 )
 def test_the_import_check_fails_on_a_forbidden_import(tmp_path, module, forbidden, contract):

@@ -24,8 +24,8 @@ def calibrate(
     seed: Annotated[int, typer.Option(help="Seed of the bootstrap behind the standard errors.")] = 0,
 ) -> None:
     """Fit the vehicle's speed, turn and power terms to logs; write a mission file the planner can use."""
-    from planner.calibrate import UNITS, sidecar_path
-    from planner.calibrate import calibrate as run_calibrate
+    from planner.review.calibrate import UNITS, sidecar_path
+    from planner.review.calibrate import calibrate as run_calibrate
 
     if not mission.is_file():
         fail(f"MISSION: {mission} does not exist; give the mission file (.toml) the runs were flown on")

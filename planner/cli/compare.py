@@ -45,8 +45,8 @@ def compare(
     ] = None,
 ) -> None:
     """Compare run logs with the plan: predicted vs observed, execution bias, re-plan."""
-    from planner.compare import CompareConfig
-    from planner.compare import compare as run_compare
+    from planner.review.compare import CompareConfig
+    from planner.review.compare import compare as run_compare
     from sim.uuv.bias import BIAS_NAMES
 
     names = BIAS_NAMES
@@ -173,7 +173,7 @@ def compare(
 def _calibrated_vehicle(plan_dir: Path, calibrated: Path):
     """The vehicle of a calibrated mission file of the plan's mission; a one-line error otherwise."""
     import sim.uuv
-    from planner.plans import load_plan
+    from planner.common.plans import load_plan
 
     if not calibrated.is_file():
         fail(f"--calibrated: {calibrated} does not exist; give the file rapt-plan calibrate wrote")

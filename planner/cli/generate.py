@@ -101,8 +101,8 @@ def generate(
     ] = 100,
 ) -> None:
     """Search a mission, choose boundary pairs, dither them and write a field plan."""
-    from planner.generate import GenerateConfig, make_executor
-    from planner.generate import generate as run_generate
+    from planner.plan.generate import GenerateConfig, make_executor
+    from planner.plan.generate import generate as run_generate
 
     mission = load_mission(mission_file)
     store = out_dir / ("study.db" if surrogate is None else "study-surrogate.db")
@@ -127,7 +127,7 @@ def generate(
     except ValueError as exc:
         fail(str(exc))
     if surrogate is not None:
-        from planner.surrogate import load_or_train
+        from planner.plan.surrogate import load_or_train
 
         try:
             if not surrogate.exists():

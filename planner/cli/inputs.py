@@ -96,7 +96,7 @@ def mission_and_scenario(mission_file: Path, scenario: str | None):
     """(mission, unit-cube row, scenario id) of ``--scenario`` (default: the design's first valid row),
     or a one-line error naming why the scenario is invalid and the first valid rows."""
     import sim.uuv
-    from planner.scenarios import SEARCHED_ROWS, resolve_scenario, valid_design_rows
+    from planner.common.scenarios import SEARCHED_ROWS, resolve_scenario, valid_design_rows
 
     mission = load_mission(mission_file)
     if scenario is None:

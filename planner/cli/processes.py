@@ -32,7 +32,7 @@ from planner.cli.inputs import (
     load_surrogate,
     mission_and_scenario,
 )
-from planner.processes import arm_when_heard, run_until_signal, serve_until_signal, wait_for_signal
+from planner.fly.lifecycle import arm_when_heard, run_until_signal, serve_until_signal, wait_for_signal
 
 __all__ = ["frontseat", "bridge", "autonomy", "log"]
 
@@ -56,8 +56,8 @@ def frontseat(
     ] = 5.0,
 ) -> None:
     """Serve the simulated front-seat of one scenario on a MAVLink connection."""
-    from planner.flight import flight_from_plan, is_plan
-    from sim.uuv.frontseat import FrontSeat
+    from planner.fly.sil_flight import flight_from_plan, is_plan
+    from sim.uuv.ardusub.frontseat import FrontSeat
 
     if is_plan(mission_file):
         try:
@@ -172,8 +172,8 @@ def autonomy(
     its role is its source name (the default --bus-role): the hub lets it put ``command/<source>`` only.
     """
     from bridge.keys import DEFAULT_ACTIVE
-    from planner.backseat import PACINGS, BackSeat
-    from planner.scenario_map import ScenarioMap
+    from planner.fly.backseat import PACINGS, BackSeat
+    from planner.fly.scenario_map import ScenarioMap
 
     if pacing not in PACINGS:
         fail(f"--pacing: expected one of {', '.join(PACINGS)}, got {pacing!r}")
@@ -218,7 +218,7 @@ def log(
     each channel came from, by the hub's rules (DIR's bridge.json5 if there, else the roles in DIR).
     """
     from bridge.logger import McapLogger
-    from planner.run_bus import put_roles_of
+    from planner.fly.run_bus import put_roles_of
 
     role = (bus_role or "logger") if bus_keys is not None else bus_role
     session = bus_session(

@@ -72,7 +72,7 @@ def run(
     With --bus-keys DIR the parts talk over the range's secure bus, each as its role
     (the bridge is the hub; a --surrogate needs an autonomy role named surrogate in DIR).
     """
-    from planner.flight import Flight, check_against_batch, flight_from_plan, fly, is_plan
+    from planner.fly.sil_flight import Flight, check_against_batch, flight_from_plan, fly, is_plan
     from sim.uuv.bias import parse_bias
     from sim.uuv.scoring import mode_name
 
@@ -159,7 +159,7 @@ def run(
 def _check_bus_keys(keys_dir: Path, surrogate: bool) -> None:
     """A one-line error before anything starts when DIR cannot fly this run (each role's files are checked next)."""
     from bridge.range_keys import role_names
-    from planner.sil import SURROGATE_SOURCE
+    from planner.fly.sil_loop import SURROGATE_SOURCE
 
     if not keys_dir.is_dir():
         fail(

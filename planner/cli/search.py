@@ -121,7 +121,7 @@ def study(
     baseline: Annotated[str, typer.Option(help="Method to compare against (or 'none').")] = "sobol",
 ) -> None:
     """Search a mission's scenarios for performance boundaries; print modes and boundary types."""
-    from planner.mission_search import ROOT_OUTPUT_TYPES, ModeSearch, root_scores
+    from planner.plan.mission_search import ROOT_OUTPUT_TYPES, ModeSearch, root_scores
     from sim.uuv.scoring import MODE_NAMES
 
     if baseline != "none" and baseline not in rapt.METHODS:

@@ -49,7 +49,7 @@ def surrogate(
     seed: Annotated[int, typer.Option(help="Seed of every random choice.")] = 0,
 ) -> None:
     """Train a surrogate of a mission's back-seat autonomy by imitation learning (chapter 6)."""
-    from planner.surrogate import ModeValidation, train_surrogate
+    from planner.plan.surrogate import ModeValidation, train_surrogate
 
     mission = load_mission(mission_file)
     if out_file.suffix != ".npz":

@@ -24,9 +24,9 @@ def run_on_vehicle(
     bus_keys: Path | None = None,
 ) -> None:
     """Fly ``flight`` at ``connection``; print the bring-up timeline, the end, the mode and the decisions' figures."""
-    from planner.bringup import BringUpTimeouts
-    from planner.flight import is_plan
-    from planner.vehicle_run import run_vehicle
+    from planner.fly.sil_flight import is_plan
+    from planner.fly.vehicle.bringup import BringUpTimeouts
+    from planner.fly.vehicle.run import run_vehicle
     from rapt.errors import RaptError
     from sim.uuv.scoring import mode_name
 
@@ -82,7 +82,7 @@ def run_on_vehicle(
 
 
 def _predicted_mode(source: Path, scenario_id: str) -> str | None:
-    from planner.plans import load_plan
+    from planner.common.plans import load_plan
 
     try:
         return str(load_plan(source).scenario(scenario_id)["predicted"]["mode"])

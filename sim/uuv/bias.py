@@ -3,7 +3,7 @@
 On the 2017 range day the vehicle ran faster than commanded and the tidal files were
 wrong, so every run shifted the same way — an *execution bias*, unlike stochastic effects
 a translation of all the performance boundaries.  A :class:`Bias` given to the world
-(:class:`sim.uuv.world.World`, hence :func:`sim.uuv.simulate` and :class:`sim.uuv.frontseat.FrontSeat`)
+(:class:`sim.uuv.world.World`, hence :func:`sim.uuv.simulate` and :class:`sim.uuv.ardusub.frontseat.FrontSeat`)
 makes the vehicle behave like such a vehicle, while the back-seat autonomy still plans
 with the unbiased model — the mission file's vehicle and tide table.  That is what makes
 it a bias, and why ``rapt-plan compare`` can estimate it from logs.

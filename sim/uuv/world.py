@@ -2,7 +2,7 @@
 
 This is what sits on the far side of the front-seat/back-seat interface.  The batch
 simulator drives it with the autonomy in the same process; the MAVLink front-seat
-simulator (:mod:`sim.uuv.frontseat`) drives a world of one vehicle with set-points arriving
+simulator (:mod:`sim.uuv.ardusub.frontseat`) drives a world of one vehicle with set-points arriving
 over MAVLink.  Either way :meth:`World.telemetry` is what the vehicle reports, rounded as
 MAVLink carries it (:mod:`sim.uuv.interface`), and :meth:`World.advance` applies a decoded
 set-point for one step.

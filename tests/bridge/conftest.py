@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from tests.loopback import no_new_threads
+from tests.support.loopback import no_new_threads
 
 
 @pytest.fixture(autouse=True)

@@ -23,9 +23,9 @@ from bridge.mavlink_bridge import MavlinkBridge  # noqa: E402
 from bridge.range_keys import make_range_keys, role_config  # noqa: E402
 from bridge.session import zenoh_config  # noqa: E402
 from bridge.setpoint import Setpoint  # noqa: E402
-from sim.uuv.frontseat import FrontSeat  # noqa: E402
+from sim.uuv.ardusub.frontseat import FrontSeat  # noqa: E402
 from sim.uuv.scenario import make_scenarios  # noqa: E402
-from tests.loopback import free_port, wait_until  # noqa: E402
+from tests.support.loopback import free_port, wait_until  # noqa: E402
 
 V = "uuv1"
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"

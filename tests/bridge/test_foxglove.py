@@ -13,8 +13,8 @@ from bridge import foxglove, keys
 from bridge.frames import mavlink2, message_json
 from bridge.logger import McapLogger, read_log
 from bridge.session import open_session
-from tests.foxglove_check import check_channel, foxglove_channels
-from tests.loopback import free_port, wait_until
+from tests.support.foxglove_check import check_channel, foxglove_channels
+from tests.support.loopback import free_port, wait_until
 
 NS = 1_795_790_247_083_170_978
 M = mavlink2.MAVLink(None)

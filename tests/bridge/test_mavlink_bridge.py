@@ -33,7 +33,7 @@ BURST = 10**12  # time_unix_usec of test frames, far from the vehicle clock (~1.
 VEHICLE = "uuv1"
 
 
-from tests.loopback import free_port, wait_until  # noqa: E402
+from tests.support.loopback import free_port, wait_until  # noqa: E402
 
 pytestmark = [pytest.mark.integration]
 

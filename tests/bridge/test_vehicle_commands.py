@@ -1,7 +1,7 @@
 """What an operator's bring-up asks of the bridge: latest messages, COMMAND_LONG, stream rates, mission upload.
 
 Over real loopback MAVLink and a real Zenoh session: against the simulated front-seat
-(:class:`sim.uuv.frontseat.FrontSeat`) where it shows the behaviour, and against a small scripted
+(:class:`sim.uuv.ardusub.frontseat.FrontSeat`) where it shows the behaviour, and against a small scripted
 pymavlink vehicle where it cannot (a vehicle that NACKs, stalls, answers IN_PROGRESS or nothing).
 """
 
@@ -28,8 +28,8 @@ from bridge.frames import mavlink2  # noqa: E402
 from bridge.mavlink_bridge import MavlinkBridge, MissionItem  # noqa: E402
 from bridge.session import open_session  # noqa: E402
 from rapt.errors import InputError, LinkError, LinkTimeoutError, RefusedError, RunError  # noqa: E402
-from sim.uuv.frontseat import FrontSeat  # noqa: E402
-from tests.loopback import free_port, wait_until  # noqa: E402
+from sim.uuv.ardusub.frontseat import FrontSeat  # noqa: E402
+from tests.support.loopback import free_port, wait_until  # noqa: E402
 
 pytestmark = [pytest.mark.integration]
 

@@ -14,13 +14,13 @@ import pytest
 from typer.testing import CliRunner
 
 import sim.uuv
-from planner.calibrate import FITTED, MIN_LOGS
 from planner.cli import app
-from planner.logs import read_run
+from planner.review.calibrate import FITTED, MIN_LOGS
+from planner.review.logs import read_run
 from sim.uuv.replay import score_track
 from sim.uuv.scoring import MODE_NAMES, mode_name
-from tests.cli.sil_day import MISSION, digests, fly_plan
-from tests.planner.test_calibrate import wrong_mission_text
+from tests.planner.review.test_calibrate import wrong_mission_text
+from tests.support.sil_day import MISSION, digests, fly_plan
 
 runner = CliRunner()
 

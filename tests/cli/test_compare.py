@@ -23,13 +23,13 @@ import sim.uuv
 from bridge import foxglove, keys
 from bridge.logger import LOSSES_METADATA, read_log
 from planner.cli import app
-from planner.logs import read_run
-from planner.overlay import overlay_name
-from planner.plans import load_plan
+from planner.common.plans import load_plan
+from planner.review.logs import read_run
+from planner.review.overlay import overlay_name
 from sim.uuv.bias import Bias, parse_bias
 from sim.uuv.geo import LocalFrame
-from tests.cli.sil_day import MISSION, digests, fly_plan
-from tests.foxglove_check import check_channel, foxglove_channels, read_with_typescript
+from tests.support.foxglove_check import check_channel, foxglove_channels, read_with_typescript
+from tests.support.sil_day import MISSION, digests, fly_plan
 
 pytestmark = [pytest.mark.slow, pytest.mark.integration]
 
@@ -225,7 +225,7 @@ def test_a_log_of_another_mission_or_plan_is_one_line_and_exit_2(flown, tmp_path
 
 def test_an_out_that_would_overwrite_an_input_fails_first_in_one_line(tmp_path, monkeypatch):
     """Refused before the plan is loaded, a log read or a run simulated, and nothing is written."""
-    import planner.compare as compare_module
+    import planner.review.compare as compare_module
 
     def no_work(*args, **kwargs):
         raise AssertionError("compare did work before checking --out")
@@ -314,7 +314,7 @@ def test_a_plan_directory_compares_and_flies_from_any_directory(flown, tmp_path)
     """Only the plan directory and logs at hand (an empty tree), run from another directory."""
     import subprocess
 
-    from tests.cli.sil_day import rapt_plan
+    from tests.support.sil_day import rapt_plan
 
     plan_dir, logs = _hand_over(flown, tmp_path / "handed")
     elsewhere = tmp_path / "elsewhere"

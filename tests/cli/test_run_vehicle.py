@@ -15,7 +15,7 @@ from pymavlink import mavutil  # noqa: E402
 from typer.testing import CliRunner  # noqa: E402
 
 from planner.cli import app  # noqa: E402
-from tests.loopback import free_port  # noqa: E402
+from tests.support.loopback import free_port  # noqa: E402
 
 M = mavutil.mavlink
 runner = CliRunner()

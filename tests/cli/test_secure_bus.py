@@ -14,8 +14,8 @@ from typer.testing import CliRunner
 from bridge.logger import ROLES_METADATA, read_metadata
 from bridge.range_keys import make_range_keys
 from planner.cli import app
-from planner.logs import read_run
-from tests.loopback import free_port
+from planner.review.logs import read_run
+from tests.support.loopback import free_port
 
 ROOT = Path(__file__).resolve().parents[2]
 PLAN = ROOT / "field_plans" / "range2017" / "plan.json"

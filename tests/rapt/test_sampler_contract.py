@@ -27,7 +27,7 @@ import pytest
 import rapt
 from rapt.manifold import ManifoldSampler
 from rapt.samplers import METHODS, InformationSampler, Sampler, make_sampler
-from tests.rapt.systems import disk
+from tests.support.systems import disk
 
 BOUNDS = [[0.0, np.pi], [0.0, np.pi]]
 FACES = np.array([[0.25], [0.75]])

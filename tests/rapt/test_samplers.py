@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from rapt.samplers import make_sampler
-from tests.rapt.systems import disk, disk_distance, two_outputs
+from tests.support.systems import disk, disk_distance, two_outputs
 
 ADAPTIVE = ["gpr", "nndv", "s-ndv"]
 

@@ -15,7 +15,7 @@ import pytest
 import rapt
 from rapt.samplers import Sampler
 from rapt.store import StudyStore
-from tests.rapt.systems import disk, first_of_two_outputs, flaky, projecting, two_outputs
+from tests.support.systems import disk, first_of_two_outputs, flaky, projecting, two_outputs
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -193,7 +193,7 @@ KILLED_STUDY = textwrap.dedent("""
     import numpy as np
     sys.path.insert(0, {root!r})
     import rapt
-    from tests.rapt.systems import disk
+    from tests.support.systems import disk
 
     progress = {progress!r}
 

@@ -47,7 +47,7 @@ class Surrogate:
     mission_sha: str
     training: dict = field(default_factory=dict)
     #: The goal output above which the back-seat gives the waypoint up (calibrated on held-out
-    #: expert runs: a decision seen once per aborted run is learned late, see planner.surrogate).
+    #: expert runs: a decision seen once per aborted run is learned late, see planner.plan.surrogate).
     goal_threshold: float = 0.0
 
     @classmethod

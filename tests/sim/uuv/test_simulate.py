@@ -13,7 +13,7 @@ from sim.uuv.mission import Vehicle
 from sim.uuv.navigation import Navigation, filterpy_filter
 from sim.uuv.simulate import TRAJECTORY_FIELDS
 from sim.uuv.vehicle import VehicleState, propulsion_power, step_vehicle
-from tests.sim.uuv.uuvworld import Current, Rect, Transmission, Triangle, area, mission, vehicle
+from tests.support.uuvworld import Current, Rect, Transmission, Triangle, area, mission, vehicle
 
 EXAMPLES = Path(__file__).resolve().parents[3] / "examples"
 

@@ -1,0 +1,102 @@
+"""One scenario flown in the loop, then checked against the batch simulator.
+
+``rapt-plan run`` flies a scenario of a mission, or of a field plan, through the
+interfaces used on the water (:func:`planner.fly.sil_loop.run_sil`).  The loop adds no physics of
+its own, so a deterministic flight must score exactly what the batch simulator scores
+for the same row, bias and surrogate; a stochastic flight is scored from what the
+navigation believed, so the batch's mode is the ground truth beside it.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from sim.uuv.mission import Mission
+from sim.uuv.scoring import MODE_NAMES
+
+__all__ = ["Flight", "BatchCheck", "is_plan", "flight_from_plan", "fly", "check_against_batch"]
+
+
+@dataclass(frozen=True)
+class Flight:
+    """What to fly: one scenario of a mission, and where it came from (both go into the log)."""
+
+    mission: Mission
+    u: np.ndarray  # the scenario's unit-cube row
+    scenario_id: str
+    mission_file: str
+    plan_id: str = ""
+
+
+@dataclass(frozen=True)
+class BatchCheck:
+    """The batch simulator's verdict on the scenario a flight flew."""
+
+    names: list  # the scores' names
+    mode: str  # the batch's performance mode
+    same: bool  # the flight scored exactly the batch's scores
+
+
+def is_plan(path: Path) -> bool:
+    """A field plan (its plan.json or its directory) rather than a mission file."""
+    return path.suffix == ".json" or path.is_dir()
+
+
+def flight_from_plan(path: Path, scenario_id: str | None) -> Flight:
+    """Scenario ``scenario_id`` (e.g. pair1a) of the plan at ``path``; ValueError names what is wrong
+    (a plan has no default scenario: ``None`` is answered with its ids)."""
+    from planner.common.plans import load_plan
+
+    plan = load_plan(path)
+    scenario = plan.scenario(scenario_id)
+    mission, u = plan.mission, plan.u(scenario["id"])
+    return Flight(mission, u, scenario["id"], str(plan.mission_file), plan.id)
+
+
+def fly(
+    flight: Flight,
+    *,
+    log_path=None,
+    speedup=None,
+    timeout_s: float = 600.0,
+    bias=None,
+    stochastic: bool = False,
+    seed: int = 0,
+    surrogate=None,
+    bus_keys=None,
+):
+    """Fly ``flight`` software-in-the-loop (:func:`planner.fly.sil_loop.run_sil`); returns its :class:`~planner.fly.sil_loop.SilResult`.
+
+    ``bus_keys``: the range's keys directory; the run's parts then join the secure bus each as its role."""
+    from planner.fly.sil_loop import run_sil
+
+    return run_sil(
+        flight.mission,
+        flight.u,
+        log_path=log_path,
+        speedup=speedup,
+        timeout_s=timeout_s,
+        scenario_id=flight.scenario_id,
+        mission_file=flight.mission_file,
+        plan_id=flight.plan_id,
+        bias=bias,
+        stochastic=stochastic,
+        seed=seed,
+        surrogate=surrogate,
+        bus_keys=bus_keys,
+    )
+
+
+def check_against_batch(
+    flight: Flight, scores: np.ndarray, *, bias=None, stochastic: bool = False, seed: int = 0, surrogate=None
+) -> BatchCheck:
+    """The batch simulator on the flight's row with the same bias, seed and surrogate, against its ``scores``."""
+    import sim.uuv
+
+    batch = sim.uuv.simulate(
+        flight.mission, flight.u[None, :], bias=bias, seed=seed, stochastic=stochastic, surrogate=surrogate
+    )
+    return BatchCheck(batch.names, MODE_NAMES[int(batch.modes[0])], bool(np.array_equal(scores, batch.scores[0])))

@@ -1,0 +1,288 @@
+"""One scenario of a field plan flown on a vehicle we do not simulate, through its MAVLink port.
+
+This is where the whole stack meets a real vehicle (or the simulated one as a bare
+autopilot): the bridge on the vehicle's port, the vehicle-paced back-seat, the virtual
+range elements (sonar returns of the scenario's barriers and obstacles, the fuel gauge
+counted from the scenario's charge), the watchdog, the referee and the MCAP logger, all on
+one Zenoh bus.  The bring-up (:mod:`planner.fly.vehicle.bringup`) takes the vehicle to the scenario's
+start; the run ends when the referee says so (recovered, collision, out of the area,
+battery empty, time limit) or the watchdog takes over, and the vehicle is then surfaced
+and disarmed — as it is on Ctrl-C.  Nothing here knows whether the far end is ArduSub on
+the water, ArduSub SITL or our bare-autopilot front-seat.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from bridge import keys
+from bridge.mavlink_bridge import Autopilot, MavlinkBridge
+from planner.common.jsonio import jsonable
+from planner.fly.backseat import BackSeat
+from planner.fly.run_bus import PART_ROLES, RunBus
+from planner.fly.scenario_map import ScenarioMap
+from planner.fly.vehicle.bringup import GUIDED, BringUp, BringUpTimeouts, Step
+from planner.fly.vehicle.referee import Referee
+from planner.fly.vehicle.virtual_range import VirtualRange
+from planner.fly.vehicle.watchdog import BATTERY, COLLISION, OPERATIONAL_AREA, REASONS, Watchdog, WatchdogRules
+from planner.fly.vehicle.watchdog import SOURCE as WATCHDOG_SOURCE
+from rapt.errors import InputError
+from sim.uuv.scenario import make_scenarios
+
+__all__ = ["VehicleRunResult", "run_vehicle", "WATCHDOG_ACTIONS"]
+
+#: What the watchdog does when it takes over.
+WATCHDOG_ACTIONS = ("surface", "hold")
+
+
+@dataclass
+class VehicleRunResult:
+    scores: np.ndarray
+    track: np.ndarray  # (n, 8) rows of planner.fly.vehicle.referee.TrackSampler
+    ended: str  # the referee's reason, "watchdog: <reason>", or "stopped by the operator"
+    watchdog: str  # the watchdog's reason, "" if it never intervened
+    sim_s: float  # scenario seconds flown
+    wall_s: float
+    start_ms: int  # the vehicle's time_boot_ms at the scenario clock's start
+    decisions: dict = field(default_factory=dict)
+    telemetry: dict = field(default_factory=dict)
+    timeline: list[Step] = field(default_factory=list)
+    bridge_stats: dict = field(default_factory=dict)
+    log_path: Path | None = None
+    decision_ticks: list[int] = field(default_factory=list)  # time_boot_ms each decision was taken on
+    input_age_ms: list[int] = field(default_factory=list)  # the oldest input of each decision
+    violations: dict = field(default_factory=dict)  # record-only watchdog reasons broken: reason -> detail
+    virtual: dict = field(default_factory=dict)  # the virtual range's counters (contacts_sent, gauge_sent, ...)
+
+
+def run_vehicle(
+    flight,
+    connection: str,
+    *,
+    vehicle: str = keys.DEFAULT_VEHICLE,
+    log_path: str | Path | None = None,
+    action: str = "surface",
+    record_only: Iterable[str] = (),
+    timeouts: BringUpTimeouts | None = None,
+    timeout_s: float | None = None,
+    say: Callable[[Step], None] | None = None,
+    bus_keys: str | Path | None = None,
+) -> VehicleRunResult:
+    """Fly ``flight`` (:class:`planner.fly.sil_flight.Flight`) on the vehicle at ``connection`` (a pymavlink string).
+
+    Raises a :class:`rapt.errors.RaptError` with one line when bring-up fails; by then nothing
+    has been commanded that the failed check could have prevented.  ``timeout_s`` bounds the
+    run's wall time (None: the mission's time limit on the vehicle's clock ends it).
+    ``record_only`` names watchdog reasons (:data:`planner.fly.vehicle.watchdog.REASONS`) that are logged
+    as violations without taking control, e.g. ``nogo`` where the no-go areas are virtual.
+    ``bus_keys``: the range's keys directory; each part then joins the secure bus as its role
+    (:data:`planner.fly.run_bus.PART_ROLES`), the bridge's session being the hub.
+    """
+    if action not in WATCHDOG_ACTIONS:
+        raise InputError(f"--watchdog-action: expected one of {', '.join(WATCHDOG_ACTIONS)}, got {action!r}")
+    unknown = sorted(set(record_only) - set(REASONS))
+    if unknown:
+        raise InputError(f"--watchdog-record: unknown reason {unknown[0]!r}; known: {', '.join(REASONS)}")
+    if not isinstance(connection, str) or not connection.strip():
+        raise InputError("--mavlink: expected a pymavlink connection string such as tcp:127.0.0.1:5760")
+    mission, u = flight.mission, np.asarray(flight.u, dtype=float)
+    scen = make_scenarios(mission, u[None, :])
+    if not scen.valid[0]:
+        raise InputError(
+            f"--scenario {flight.scenario_id}: invalid for mission '{mission.name}' ({scen.invalid_reason[0]})"
+        )
+    roles = ("autonomy", "watchdog", "operator") + (("logger",) if log_path is not None else ())
+    bus = RunBus(bus_keys, vehicle=vehicle, roles=roles)  # every key checked before anything joins
+    hub = bus.session("bridge")
+    parts: list = []
+    bringup = None
+    started = time.perf_counter()
+    try:
+        heard = [keys.DEFAULT_ACTIVE, WATCHDOG_SOURCE]
+        if log_path is not None:
+            from bridge.logger import McapLogger
+
+            # the map is put when the logger appears
+            parts.append(ScenarioMap(bus.session(PART_ROLES["scenario_map"]), vehicle, mission, u).start())
+            logger = McapLogger(log_path, bus.session(PART_ROLES["logger"]), vehicle=vehicle, roles=bus.put_roles())
+            parts.append(logger.start())
+            heard.append("logger")
+        bridge = MavlinkBridge(connection, hub, vehicle=vehicle, allow_commands=True, required_mode="GUIDED").start()
+        parts.append(bridge)
+        virtual = VirtualRange(bus.session(PART_ROLES["virtual_range"]), vehicle, mission, u).start()
+        referee = Referee(bus.session(PART_ROLES["referee"]), vehicle, mission, u).start()
+        backseat = BackSeat(bus.session(PART_ROLES["backseat"]), vehicle, mission, u, pacing="vehicle").start()
+        rules = WatchdogRules(record_only=frozenset(record_only))
+        watchdog = Watchdog(
+            bus.session(PART_ROLES["watchdog"]), vehicle, mission, u, bridge, action=action, rules=rules
+        ).start()
+        parts += [virtual, referee, backseat, watchdog]
+        bus.wait_for_parts(*heard)  # their subscriptions are at the hub before the bring-up's first put
+        meta = json.dumps(_scenario_meta(flight, connection))
+        bus.put(PART_ROLES["scenario_meta"], keys.meta(vehicle, "scenario"), meta, when_heard=log_path is not None)
+        bringup = BringUp(
+            bridge, bus.session(PART_ROLES["bringup"]), vehicle, mission, connection, timeouts or BringUpTimeouts(), say
+        )
+        try:
+            start_ms = bringup.run()
+            virtual.begin()
+            referee.begin(start_ms)
+            backseat.begin(start_ms)
+            watchdog.begin()
+            bus.put(PART_ROLES["control"], keys.active(vehicle), keys.DEFAULT_ACTIVE, when_heard=True)
+            ended = _fly(referee, watchdog, bridge, timeout_s)
+        except BaseException as exc:  # Ctrl-C, or a bring-up step that failed after GUIDED and arming
+            referee.end("stopped by the operator" if isinstance(exc, KeyboardInterrupt) else f"stopped: {exc}")
+            backseat.close()
+            watchdog.close()
+            hb = bridge.autopilot
+            left = _left_guided(hb) if hb is not None and hb.armed else ""
+            if bringup.took_control and left:  # a failsafe or a pilot has it now
+                bringup.note("recover", "ok", f"nothing commanded: {VEHICLE_ENDED}{left}")
+            elif bringup.took_control:  # never touch a vehicle the checks refused: someone else may fly it
+                _recover(bridge, referee, bringup, "surface", say)
+            raise
+        backseat.close()  # the run is over: no more set-points of the scenario's
+        watchdog.close()
+        if ended.startswith(VEHICLE_ENDED):  # the vehicle, a failsafe or a pilot took it: command nothing
+            bringup.note("recover", "ok", f"nothing commanded: {ended}")
+        else:
+            recovery = "hold" if watchdog.intervention and action == "hold" else "surface"
+            _recover(bridge, referee, bringup, recovery, say)
+        wall = time.perf_counter() - started
+        autonomy = backseat.autonomy
+        track = referee.track()
+        scores = referee.scorer.scores([bool(v) for v in autonomy.wp_aborted[0]], int(autonomy.return_reason[0]))
+        time.sleep(0.3)  # the last reports reach the logger
+        return VehicleRunResult(
+            scores,
+            track,
+            ended,
+            watchdog.intervention or "",
+            float(track[-1, 0]) if len(track) else 0.0,
+            wall,
+            start_ms,
+            backseat.stats.as_dict(),
+            dict(vars(backseat.telemetry.counts)),
+            list(bringup.timeline),
+            dict(bridge.stats),
+            Path(log_path) if log_path else None,
+            list(backseat.stats.ticks),
+            list(backseat.stats.input_age_ms),
+            dict(watchdog.violations),
+            virtual.stats,
+        )
+    finally:
+        if bringup is not None:
+            bringup.close()
+        for part in reversed(parts):
+            part.close()
+        bus.close()
+
+
+def _scenario_meta(flight, connection: str) -> dict:
+    mission = flight.mission
+    return {
+        "mission": mission.name,
+        "mission_file": flight.mission_file or mission.source,
+        "scenario_id": flight.scenario_id,
+        "plan_id": flight.plan_id,
+        "u": np.asarray(flight.u, dtype=float).tolist(),
+        "parameters": jsonable(mission.space.decode(np.asarray(flight.u, dtype=float)[None, :])[0]),
+        "vehicle_link": connection,
+        "pacing": "vehicle",
+        "origin": [mission.origin_lat, mission.origin_lon],
+        "dt": mission.dt,
+    }
+
+
+#: Watchdog reasons the referee also calls from its track rows (the scenario's virtual battery empty,
+#: an obstacle touched, out of the area).  The watchdog acts on the first report that breaks one;
+#: the referee's next row, at most one period later, then ends the run as the scenario's own outcome,
+#: the end the plan predicts.  When that row does not (the vehicle's real pack, a touch between
+#: rows), the run ends as the watchdog's.
+REFEREED = (BATTERY, COLLISION, OPERATIONAL_AREA)
+
+
+def _fly(referee: Referee, watchdog: Watchdog, bridge: MavlinkBridge, timeout_s: float | None) -> str:
+    """Wait for the run's end: the referee's, the watchdog's, the vehicle's own, or the wall-time limit's."""
+    deadline = None if timeout_s is None else time.monotonic() + timeout_s
+    period_ms = int(round(referee.mission.dt * 1000))
+    grace: tuple[int, float] | None = None  # (vehicle ms, wall deadline) the referee has to call it
+    while True:
+        if referee.ended:
+            return referee.ended
+        if watchdog.intervention:
+            now_ms = referee.telemetry.now_ms
+            if grace is None and watchdog.intervention in REFEREED and now_ms >= 0:
+                grace = (now_ms + period_ms + 100, time.monotonic() + period_ms / 1000.0 + 1.0)
+            if grace is None or now_ms > grace[0] or time.monotonic() > grace[1]:
+                reason = f"watchdog: {watchdog.intervention}"
+                referee.end(reason)
+                return reason
+            time.sleep(0.02)
+            continue  # the vehicle leaving GUIDED now is the watchdog's doing, not a pilot's
+        taken = _taken_by_vehicle(bridge)
+        if taken:
+            reason = f"{VEHICLE_ENDED}{taken}"
+            referee.end(reason)
+            return reason
+        if deadline is not None and time.monotonic() > deadline:
+            reason = f"wall-time limit of {timeout_s:g} s"
+            referee.end(reason)
+            return reason
+        time.sleep(0.02)
+
+
+#: How a run ends that the vehicle ended: a failsafe disarmed it or changed its mode, or a pilot took it.
+VEHICLE_ENDED = "vehicle: "
+
+
+def _taken_by_vehicle(bridge: MavlinkBridge) -> str:
+    """Why the vehicle is no longer ours to fly, from its heartbeat ("" while it is armed in GUIDED).
+
+    ArduSub's failsafes (ground station lost, leak, battery, EKF) disarm it or switch its mode,
+    and a safety pilot takes it in a mode of their own; in each case the run is over and
+    nothing more is commanded: the vehicle, or the person, now in charge is not fought."""
+    hb = bridge.autopilot
+    if hb is not None and not hb.armed:
+        return "disarmed itself (a failsafe, or disarmed by someone else)"
+    return _left_guided(hb)
+
+
+def _left_guided(hb: Autopilot | None) -> str:
+    """Why the vehicle is out of GUIDED by the heartbeat ``hb`` ("" while in GUIDED or not heard)."""
+    if hb is None or hb.custom_mode == GUIDED:
+        return ""
+    return f"left GUIDED (now {hb.mode_label}: a failsafe, or a pilot took it)"
+
+
+def _recover(bridge: MavlinkBridge, referee: Referee, bringup: BringUp, action: str, say) -> None:
+    """After the run (or on Ctrl-C): SURFACE, wait for the surface, disarm; or leave it holding in GUIDED."""
+    hb = bridge.autopilot
+    if hb is None or not hb.armed:
+        return
+    if action == "hold":
+        bringup.note("recover", "ok", "left holding in GUIDED for the operator (watchdog action: hold)")
+        return
+    try:
+        bridge.set_mode("SURFACE")
+        deadline = time.monotonic() + bringup.timeouts.surface
+        while time.monotonic() < deadline:
+            pose = referee.telemetry.pose
+            if pose is not None and pose.surfaced:
+                break
+            time.sleep(0.05)
+    except Exception as exc:  # a lost link or a refusal must not keep us from disarming
+        bringup.note("recover", "failed", f"SURFACE: {exc}")
+    try:
+        bridge.arm(False)
+        bringup.note("recover", "ok", "surfaced and disarmed")
+    except Exception as exc:
+        bringup.note("recover", "failed", f"disarm: {exc}; the vehicle's own failsafe must act")

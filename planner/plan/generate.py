@@ -1,0 +1,718 @@
+"""From a mission file to a field plan: search, analyse, choose pairs, dither (section 4.4).
+
+The stages of ``rapt-plan generate``, each a function a test can run on a small budget:
+
+1. :func:`search_mission` — a space-filling start, then S-NDV on the root scores, every
+   batch written to the study store (a killed run resumes where it stopped).
+2. :func:`analyse` — every valid run re-scored in full (the simulator is deterministic),
+   the sub-boundary tree over the mission's score tree, sensitivity of each root score.
+3. :func:`select_pairs` — K boundary pairs on different sub-boundaries, shortest first,
+   kept clear of invalid scenarios and of isolated samples (noise rather than behaviour);
+   with ``--refine``, :func:`planner.plan.refinement.refine_pairs` focuses a search on each
+   candidate's own sub-scores and keeps the first K it makes sharp.
+4. :func:`planner.plan.dithering.dither_many` — Gaussian dithers of the expected execution
+   noise (:class:`~planner.plan.dithering.DitherNoise`) around every chosen scenario,
+   re-simulated with the stochastic effects on: how likely each shows its predicted
+   outcome, the nearest boundary in its neighbourhood, and sub-boundaries there that the
+   pair does not test (orthogonal: another kind of element; parallel: another element of
+   the same kind).
+5. :func:`planner.plan.dithering.robust_variants` — fragile scenarios moved away from their
+   boundary ("M") until they hold; each pair gets a verdict: sharp, robust or fragile.
+
+:func:`generate` runs them all and writes ``plan.json`` (schema ``rapt.plan/1``,
+documented in ``planner/plan.schema.json``) and, per scenario, a QGroundControl
+``.plan``, a ``QGC WPL 110`` file and its predicted track as GeoJSON
+(:mod:`planner.plan.exports`), and ``report.html`` (:mod:`planner.plan.report`).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+import rapt
+import sim.uuv
+from planner.common.jsonio import jsonable
+from planner.common.plans import coordinate_sensitivity, embedded_mission
+from planner.plan.confirmation import Confirmation, confirm_pairs
+from planner.plan.dithering import DEFAULT_NOISE, DitherNoise, Outcome, dither_many, outcome_columns, robust_variants
+from planner.plan.exports import write_scenario_files
+from planner.plan.refinement import MIN_REFINE_RUNS, refine_pairs
+from planner.plan.report import write_report
+from planner.plan.search_status import SearchStatus
+from rapt.errors import InputError, StudyMismatchError
+from rapt.importance import output_importance
+from sim.uuv.metrics import metric_names, metric_types
+from sim.uuv.mission import Mission
+from sim.uuv.scoring import MODE_NAMES, modes_from_scores
+
+__all__ = [
+    "GenerateConfig",
+    "search_mission",
+    "analyse",
+    "select_pairs",
+    "generate",
+    "auto_batch_size",
+    "PLAN_SCHEMA",
+]
+
+PLAN_SCHEMA = "rapt.plan/1"
+
+
+def auto_batch_size(budget: int) -> int:
+    """About 40 batches of 250 to 5,000 runs.
+
+    Small batches steer the search more often; large ones keep the vectorised simulator
+    at full speed (its runs per second grow with the batch: ``benchmarks/sim_throughput.py``
+    measures them by batch size on the machine at hand).
+    """
+    return int(np.clip(budget // 40, 250, 5000))
+
+
+@dataclass
+class GenerateConfig:
+    budget: int = 3000
+    pairs: int = 5
+    global_fraction: float = 0.2
+    seed: int = 0
+    batch_size: int | None = None  # None: auto_batch_size(budget)
+    dithers: int = 2000
+    dither_sigma: str | float = DEFAULT_NOISE  # expected execution noise (planner.plan.dithering.DitherNoise)
+    executor: Any = None
+    store: Path | None = None
+    refine: int = 0  # runs per candidate pair of the focused second search (0: off)
+    refine_min_distance: float = 0.02  # refined pairs stay at least this far apart (unit cube)
+    refine_max_distance: float = 0.05  # a refined pair further apart than this is not shipped
+    fragile_below: float = 0.8  # P(predicted outcome) under which a scenario gets a robust variant
+    surrogate: Any = None  # a sim.uuv.imitation Surrogate: search and dither with it, confirm pairs with the expert
+    surrogate_file: str = ""
+    confirm_runs: int = 100  # expert runs that look for the expert's boundary near the candidate pairs
+
+    def __post_init__(self) -> None:
+        if self.batch_size is None and isinstance(self.budget, int):
+            self.batch_size = auto_batch_size(self.budget)
+
+    @property
+    def pairs_wanted(self) -> int:
+        """Pairs the selection must deliver: the plan's, or on the surrogate workflow the candidates to confirm."""
+        return self.pairs if self.surrogate is None else self.confirm_runs // 2
+
+    @property
+    def refine_candidates(self) -> int:
+        """Candidate pairs the refinement may try: twice the pairs wanted, so each can be replaced once."""
+        return 2 * self.pairs_wanted if self.refine else 0
+
+    @property
+    def search_budget(self) -> int:
+        """The runs left for the search once the refinement's are set aside (all count in ``budget``)."""
+        return self.budget - self.refine * self.refine_candidates
+
+    def noise(self) -> DitherNoise:
+        return DitherNoise.parse(self.dither_sigma)
+
+    def check(self) -> None:
+        if not isinstance(self.batch_size, int) or self.batch_size < 1:
+            raise InputError(f"--batch-size: expected a positive number of runs, got {self.batch_size}")
+        if not isinstance(self.budget, int) or self.budget < 2 * self.batch_size:
+            raise InputError(f"--budget: expected at least {2 * self.batch_size} runs, got {self.budget}")
+        if not (0 < self.global_fraction < 1):
+            raise InputError(f"--global-fraction: expected a share in (0, 1), got {self.global_fraction}")
+        if not isinstance(self.pairs, int) or self.pairs < 1:
+            raise InputError(f"--pairs: expected a positive number of pairs, got {self.pairs}")
+        if not isinstance(self.refine, int) or self.refine < 0 or 0 < self.refine < MIN_REFINE_RUNS:
+            raise InputError(f"--refine-runs: expected at least {MIN_REFINE_RUNS} runs per pair, got {self.refine}")
+        if self.refine and self.search_budget < 2 * self.batch_size:
+            raise InputError(
+                f"--refine-runs: {self.refine} runs for each of {self.refine_candidates} candidate pairs leave "
+                f"{self.search_budget} of --budget {self.budget} for the search, under two batches "
+                f"({2 * self.batch_size}); lower --refine-runs or --pairs, or raise --budget"
+            )
+        if not (0 < self.refine_min_distance < self.refine_max_distance):
+            raise InputError(
+                f"refine_max_distance: expected more than refine_min_distance ({self.refine_min_distance}), "
+                f"got {self.refine_max_distance}"
+            )
+        self.noise()
+        if not isinstance(self.dithers, int) or self.dithers < 0:
+            raise InputError(f"--dithers: expected a number of runs >= 0, got {self.dithers}")
+        if not isinstance(self.confirm_runs, int) or self.confirm_runs < 2 * self.pairs:
+            raise InputError(
+                f"--confirm-runs: expected at least two runs per pair ({2 * self.pairs}), got {self.confirm_runs}"
+            )
+
+
+# -- 1. search --------------------------------------------------------------------------
+@dataclass(frozen=True)
+class MissionScores:
+    """Every score of unit-cube scenarios (NaN rows for invalid ones); picklable, so it runs on any executor."""
+
+    mission: Mission
+    surrogate: Any = None  # fly a learned copy of the autonomy instead of the expert
+
+    def __call__(self, U: np.ndarray) -> np.ndarray:
+        return sim.uuv.simulate(self.mission, U, surrogate=self.surrogate).scores
+
+
+ROOT_COLUMNS = (0, 1)  # mission and safety success: what the search steers on
+# S-NDV's neighbours come from at most this many samples (rapt NNDVSampler.max_reference):
+# a mission's parameters all matter, so its effective dimension is high and neighbour
+# queries cost O(n) each; past this the asks of a 10^5-run study would dominate it.
+SEARCH_REFERENCE = 10_000
+SPOT_CHECK_RUNS = 8  # stored runs simulated again before an analysis trusts the store
+
+
+def make_executor(spec: str):
+    """``local`` (in process), ``processes`` (one per core) or ``dask://host:port``; returns (executor, close)."""
+    if spec == "local":
+        return None, lambda: None
+    if spec == "processes":
+        import concurrent.futures as cf
+        import multiprocessing as mp
+        import os
+
+        pool = cf.ProcessPoolExecutor(max_workers=os.cpu_count() or 2, mp_context=mp.get_context("spawn"))
+        return pool, lambda: pool.shutdown(cancel_futures=True)
+    if spec.startswith("dask://"):
+        try:
+            from distributed import Client
+        except ImportError:
+            raise InputError("--executor: dask:// needs the cluster extra; pip install -e '.[cluster]'") from None
+        client = Client(f"tcp://{spec[len('dask://') :]}", timeout=10)
+        return client, client.close
+    raise InputError(f"--executor: expected local, processes or dask://host:port, got {spec!r}")
+
+
+def search_mission(
+    mission: Mission,
+    cfg: GenerateConfig,
+    progress: Callable[[int, int], None] | None = None,
+    on_batch: Callable[[np.ndarray, np.ndarray], None] | None = None,
+) -> rapt.Study:
+    """Global then adaptive search steered by mission and safety success; invalid scenarios fail.
+
+    Every score is stored with its run, so the sub-boundary analysis needs no second run,
+    and the neighbour graph the analysis pairs through grows with the batches (and is
+    stored with them), so it need not be built once the search ends.
+    """
+    batch_size = auto_batch_size(cfg.budget) if cfg.batch_size is None else cfg.batch_size  # as __post_init__
+    return rapt.search(
+        MissionScores(mission, cfg.surrogate),
+        mission.space,
+        cfg.search_budget,
+        method="s-ndv",
+        batch_size=batch_size,
+        seed=cfg.seed,
+        store=cfg.store,
+        executor=cfg.executor,
+        output_types=("binary", "binary"),
+        steer=ROOT_COLUMNS,
+        sampler_options={"max_reference": SEARCH_REFERENCE},
+        n_initial=int(round(cfg.search_budget * cfg.global_fraction)),
+        progress=progress,
+        on_batch=on_batch,
+        neighbour_graph=12,  # subboundary_tree's k
+    )
+
+
+# -- 2. analysis --------------------------------------------------------------------------
+@dataclass
+class Analysis:
+    X: np.ndarray
+    result: sim.uuv.Result
+    tree: rapt.SubBoundaryTree
+    sensitivity: dict[str, dict[str, float]]
+    X_invalid: np.ndarray
+    boundary_types: list[dict] = field(default_factory=list)
+    surrogate: Any = None  # the learned autonomy the runs were simulated with (None: the expert)
+
+
+def analyse(mission: Mission, study: rapt.Study, surrogate=None) -> Analysis:
+    X, Y = study.X, study.Y
+    names, types = metric_names(mission), metric_types(mission)
+    spot = sim.uuv.simulate(mission, X[:SPOT_CHECK_RUNS], surrogate=surrogate)
+    if Y.shape[1] != len(names) or not np.array_equal(spot.scores, Y[:SPOT_CHECK_RUNS], equal_nan=True):
+        raise StudyMismatchError(
+            "study: the stored runs do not match the mission file (was it edited?); plan into a new --out directory"
+        )
+    result = sim.uuv.Result(Y, modes_from_scores(Y), np.ones(len(Y), dtype=bool), [""] * len(Y), names, types)
+    tree = rapt.subboundary_tree(
+        X, result.scores, mission.score_tree, output_types=result.output_types, graph=study.neighbours
+    )
+    imp = output_importance(X, result.scores[:, :2], ("binary", "binary"), random_state=0)
+    sensitivity = {}
+    for row, name in zip(imp, ("mission_success", "safety_success")):
+        sensitivity[name] = {p.name: float(row[mission.space.slice_of(p.name)].sum()) for p in mission.space.parameters}
+    a = Analysis(X, result, tree, sensitivity, study.X_failed, surrogate=surrogate)
+    a.boundary_types = _boundary_types(a)
+    return a
+
+
+def _pair_elements(a: Analysis, i: int, j: int, level: int) -> list[str]:
+    """Names of the discrete score elements of ``level`` that differ across a pair."""
+    cols = a.tree.levels[level]
+    types = a.result.output_types
+    return [
+        a.result.names[c] for c in cols if types[c] != "continuous" and a.result.scores[i, c] != a.result.scores[j, c]
+    ]
+
+
+def _boundary_types(a: Analysis) -> list[dict]:
+    i, j, d, lv = a.tree.pairs()
+    counts: dict[tuple, list[float]] = {}
+    for ii, jj, dd, ll in zip(i.tolist(), j.tolist(), d.tolist(), lv.tolist()):
+        key = (ll, tuple(_pair_elements(a, ii, jj, ll)))
+        if key[1]:
+            counts.setdefault(key, []).append(dd)
+    rows = [{"level": k[0], "elements": list(k[1]), "pairs": len(v), "shortest": min(v)} for k, v in counts.items()]
+    return sorted(rows, key=lambda r: (r["level"], -r["pairs"], r["shortest"]))
+
+
+# -- 3. pair selection --------------------------------------------------------------------
+def select_pairs(a: Analysis, k: int, min_cluster: int = 3) -> list[dict]:
+    """K pairs on distinct sub-boundaries: root-mode changes first, then deeper elements.
+
+    A pair is skipped when an endpoint's sub-cluster at the pair's level has fewer than
+    ``min_cluster`` runs (a lone run is more likely noise than a behaviour), or when an
+    invalid scenario lies closer to an endpoint than the pair's own length.
+    """
+    i, j, d, lv = a.tree.pairs()
+    invalid = cKDTree(a.X_invalid) if len(a.X_invalid) else None
+    sizes = [np.bincount(a.tree.assignment[level]) for level in range(len(a.tree.levels))]
+    chosen, seen = [], set()
+    for ii, jj, dd, ll in sorted(zip(i.tolist(), j.tolist(), d.tolist(), lv.tolist()), key=lambda p: (p[3] > 0, p[2])):
+        elements = tuple(_pair_elements(a, ii, jj, ll))
+        if not elements or (ll, elements) in seen:
+            continue
+        asg = a.tree.assignment[ll]
+        if min(sizes[ll][asg[ii]], sizes[ll][asg[jj]]) < min_cluster:
+            continue
+        if invalid is not None:
+            near, _ = invalid.query(a.X[[ii, jj]], k=1)
+            if np.any(near < dd):
+                continue
+        seen.add((ll, elements))
+        modes = a.result.modes
+        chosen.append(
+            {
+                "level": ll,
+                "elements": list(elements),
+                "distance": dd,
+                "rows": [ii, jj],
+                "modes": [MODE_NAMES[modes[ii]], MODE_NAMES[modes[jj]]],
+            }
+        )
+        if len(chosen) == k:
+            break
+    return chosen
+
+
+# -- 7. expert confirmation (surrogate workflow) ------------------------------------------------
+def confirm_with_expert(mission: Mission, a: Analysis, candidates: list[dict], k: int, budget: int) -> Confirmation:
+    """The surrogate's candidate pairs checked by the expert (:func:`planner.plan.confirmation.confirm_pairs`).
+
+    Section 6.2.3, step 3: a pair found on the surrogate is planned only as the expert's own
+    boundary pair near it.  The candidates' scenarios and the surrogate's scores there
+    (simulated again: the surrogate is deterministic) are handed on; at most ``k`` pairs,
+    at most ``budget`` expert runs.
+    """
+    U = np.array([_pair_points(a, p) for p in candidates]).reshape(len(candidates), 2, mission.dim)
+    claimed = sim.uuv.simulate(mission, U.reshape(-1, mission.dim), surrogate=a.surrogate).scores
+    offered = [{**p, "u": U[c], "scores": claimed[2 * c : 2 * c + 2]} for c, p in enumerate(candidates)]
+    return confirm_pairs(mission, offered, k, budget)
+
+
+def _pair_points(a: Analysis, pair: dict) -> np.ndarray:
+    """A pair's two unit-cube scenarios: moved ones (refined or confirmed) or the study's rows."""
+    return np.asarray(pair["u_override"] if "u_override" in pair else a.X[pair["rows"]], dtype=float)
+
+
+# -- everything ------------------------------------------------------------------------------
+def generate(
+    mission: Mission,
+    mission_path: Path,
+    out_dir: Path,
+    cfg: GenerateConfig,
+    progress: Callable[[str, int, int, str], None] | None = None,
+    timings: dict[str, float] | None = None,
+) -> dict:
+    """Run every stage and write ``plan.json`` (plus per-scenario files and the report) into ``out_dir``.
+
+    ``progress(stage, done, total, detail)`` follows the stages; during the search
+    ``detail`` says how many modes and boundary links the runs so far show
+    (:class:`~planner.plan.search_status.SearchStatus`).  ``timings``, when given, receives the
+    wall seconds of each stage (kept out of the plan, which depends on the seed only).
+    """
+    cfg.check()
+    embedded = _mission_text(mission, Path(mission_path))
+    noise = cfg.noise()
+    sigma = noise.sigmas(mission)  # a noise too wide for a parameter fails before the search
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    clock = _StageClock(timings)
+    a, pairs, confirmation, refinement = _choose_pairs(mission, cfg, progress, clock)
+    sens = coordinate_sensitivity(mission.space, a.sensitivity)
+    U = np.vstack([_pair_points(a, p) for p in pairs]) if pairs else np.zeros((0, mission.dim))
+    ids = [f"pair{p}{side}" for p in range(1, len(pairs) + 1) for side in "ab"]
+    partners = U[np.arange(len(U)) ^ 1]  # a's partner is b and b's is a
+    chosen = sim.uuv.simulate(mission, U, trajectories=True)
+    root = list(a.tree.levels[0])
+    outcomes = []
+    for k in range(len(U)):
+        cols = outcome_columns(root, chosen.names, pairs[k // 2]["elements"])
+        outcomes.append(Outcome(int(chosen.modes[k]), tuple(cols), tuple(float(v) for v in chosen.scores[k, cols])))
+    stats, dither_runs, shown = _dither_chosen(mission, cfg, U, ids, outcomes, pairs, sigma, progress)
+    clock.lap("dithering")
+    fragile = [k for k, st in enumerate(stats) if st.get("p_predicted", 1.0) < cfg.fragile_below]
+    found: list[dict] = []
+    variant_runs = 0
+    if fragile and cfg.dithers:
+        found, variant_runs = robust_variants(
+            mission,
+            U[fragile],
+            partners[fragile],
+            [outcomes[k] for k in fragile],
+            [(dither_runs[ids[k]][0], shown[k]) for k in fragile],
+            sens,
+            sigma,
+            min(max(cfg.dithers // 20, 40), cfg.dithers // 2),  # screening never outweighs confirming
+            cfg.dithers // 2,
+            cfg.fragile_below,
+            cfg.seed + 1,
+            cfg.surrogate,
+        )
+    clock.lap("variants")
+    scenarios = _scenario_entries(mission, a, U, ids, chosen, stats, out_dir)
+    variants = _variant_entries(mission, ids, fragile, found, chosen, out_dir)
+    verdicts = _verdicts(cfg, pairs, stats, dict(zip(fragile, found)))
+    runs = {
+        "search": cfg.search_budget,
+        "refinement": refinement["runs"] if refinement else 0,
+        "dithering": len(U) * (cfg.dithers // 2) if cfg.dithers else 0,
+        "variants": variant_runs,
+    }
+    dithering = {"expected": noise.as_dict(), "sigma_u": [float(v) for v in sigma], "target": cfg.fragile_below}
+    plan = _plan_document(
+        mission,
+        mission_path,
+        embedded,
+        cfg,
+        a,
+        pairs,
+        verdicts,
+        confirmation,
+        refinement,
+        runs,
+        dithering,
+        scenarios,
+        variants,
+    )
+    (out_dir / "plan.json").write_text(json.dumps(plan, indent=2))
+    write_report(plan, out_dir, dither_runs)
+    clock.lap("files")
+    return plan
+
+
+def _mission_text(mission: Mission, mission_path: Path) -> dict[str, str]:
+    """The mission file's text and digest for ``plan.json``, so the plan carries the mission it was made for."""
+    from sim.uuv.missionfile import load_mission_text
+
+    try:
+        text = mission_path.read_bytes().decode("utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"MISSION_FILE: cannot read {mission_path} to embed it in the plan ({exc})") from None
+    if load_mission_text(text, str(mission_path)) != mission:
+        raise StudyMismatchError(
+            f"MISSION_FILE: {mission_path} no longer holds the mission being planned (edited meanwhile?); "
+            "run rapt-plan generate again"
+        )
+    return embedded_mission(text)
+
+
+def _choose_pairs(
+    mission: Mission, cfg: GenerateConfig, progress: Callable[[str, int, int, str], None] | None, clock: _StageClock
+) -> tuple[Analysis, list[dict], Confirmation | None, dict | None]:
+    """Stages 1-3 (with refinement, and the expert's confirmation on the surrogate workflow).
+
+    Returns the analysis, the chosen pairs, on the surrogate workflow the expert's
+    :class:`~planner.plan.confirmation.Confirmation` (None otherwise), and the refinement's
+    account (None without ``--refine``).
+    """
+    status: SearchStatus | None = None
+    searched: Callable[[int, int], None] | None = None
+    if progress is not None:
+        status = SearchStatus(mission.dim)
+        searched = _search_progress(progress, status)
+    study = search_mission(mission, cfg, searched, on_batch=status)
+    clock.lap("search")
+    sur = cfg.surrogate
+    a = analyse(mission, study, sur)
+    clock.lap("analysis")
+    wanted = cfg.pairs_wanted
+    pairs = select_pairs(a, cfg.refine_candidates if cfg.refine else wanted)
+    clock.lap("selection")
+    refinement = None
+    if cfg.refine:
+        pairs, refinement = refine_pairs(
+            mission,
+            a,
+            pairs,
+            wanted,
+            runs=cfg.refine,
+            min_distance=cfg.refine_min_distance,
+            max_distance=cfg.refine_max_distance,
+            seed=cfg.seed,
+            surrogate=sur,
+        )
+        if progress is not None:
+            progress("refine", refinement["sharp"], refinement["candidates"], f"{refinement['runs']:,} runs")
+        clock.lap("refinement")
+    confirmation = None
+    if sur is not None:
+        confirmation = confirm_with_expert(mission, a, pairs, cfg.pairs, cfg.confirm_runs)
+        pairs = confirmation.pairs
+        if progress is not None:
+            progress(
+                "confirm",
+                len(pairs),
+                confirmation.examined,
+                f"{len(pairs)} of {confirmation.examined} candidate pairs examined confirmed, "
+                f"{confirmation.runs} expert runs",
+            )
+        clock.lap("confirmation")
+    return a, pairs, confirmation, refinement
+
+
+def _search_progress(
+    progress: Callable[[str, int, int, str], None], status: SearchStatus
+) -> Callable[[int, int], None]:
+    """The search's ``progress``: runs done of the budget, and what the runs so far show (``status``)."""
+    return lambda done, total: progress("search", done, total, status.summary())
+
+
+def _dither_chosen(
+    mission: Mission,
+    cfg: GenerateConfig,
+    U: np.ndarray,
+    ids: list[str],
+    outcomes: list[Outcome],
+    pairs: list[dict],
+    sigma: np.ndarray,
+    progress: Callable[[str, int, int, str], None] | None,
+) -> tuple[list[dict], dict[str, tuple[np.ndarray, np.ndarray]], np.ndarray]:
+    """Stage 4 on the chosen scenarios: their dither statistics, the dithers by scenario, which held."""
+    elements = [pair["elements"] for pair in pairs for _ in "ab"]
+    stats: list[dict] = [{} for _ in ids]
+    dither_runs: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    shown = np.zeros((len(ids), 0), dtype=bool)
+    if cfg.dithers and len(U):
+        stats, dU, dmodes, shown = dither_many(
+            mission, U, outcomes, elements, cfg.dithers // 2, sigma, cfg.seed, cfg.surrogate
+        )
+        dither_runs = {sid: (dU[k], dmodes[k]) for k, sid in enumerate(ids)}
+        if progress is not None:
+            progress("dither", len(ids), len(ids), "")
+    return stats, dither_runs, shown
+
+
+def _verdicts(cfg: GenerateConfig, pairs: list[dict], stats: list[dict], found: dict[int, dict]) -> list[dict]:
+    """Per pair: P(predicted outcome) of each side and of its variant, and a one-word verdict.
+
+    *sharp*: refined to at most ``refine_max_distance`` and both sides hold as planned;
+    *robust*: every side holds, as planned or through its variant; *fragile*: a side that
+    does not hold has no variant (``reason`` says why). No verdict without dithering.
+    """
+    out: list[dict] = []
+    for p, pair in enumerate(pairs):
+        sides = [2 * p, 2 * p + 1]
+        if not cfg.dithers or any(stats[k].get("p_predicted") is None for k in sides):
+            out.append({})
+            continue
+        probs: list[float] = [stats[k]["p_predicted"] for k in sides]
+        variant_p = [found[k]["p_predicted"] if found.get(k, {}).get("found") else None for k in sides]
+        holds = [pr >= cfg.fragile_below or vp is not None for pr, vp in zip(probs, variant_p)]
+        if all(pr >= cfg.fragile_below for pr in probs) and pair["distance"] <= cfg.refine_max_distance:
+            verdict = "sharp"
+        else:
+            verdict = "robust" if all(holds) else "fragile"
+        entry: dict[str, Any] = {"p_predicted": probs, "variant_p_predicted": variant_p, "verdict": verdict}
+        if verdict == "fragile":
+            entry["reason"] = "; ".join(
+                f"side {'ab'[i]}: {found[k]['reason']}" for i, k in enumerate(sides) if not holds[i]
+            )
+        out.append(entry)
+    return out
+
+
+def _scenario_entries(
+    mission: Mission,
+    a: Analysis,
+    U: np.ndarray,
+    ids: list[str],
+    chosen: sim.uuv.Result,
+    stats: list[dict],
+    out_dir: Path,
+) -> list[dict]:
+    """The plan's scenarios (with their predicted root and level-1 scores), their files written."""
+    level_cols = set(a.tree.levels[0]) | set(a.tree.levels[min(1, len(a.tree.levels) - 1)])
+    scenarios = []
+    for k, sid in enumerate(ids):
+        mode = int(chosen.modes[k])
+        scenarios.append(
+            {
+                "id": sid,
+                "u": [float(v) for v in U[k]],
+                "parameters": jsonable(mission.space.decode(U[k][None, :])[0]),
+                "predicted": {
+                    "mode": MODE_NAMES[mode],
+                    "scores": {n: float(chosen.scores[k, c]) for c, n in enumerate(chosen.names) if c in level_cols},
+                },
+                "dithering": stats[k],
+                "files": {
+                    kind: path.name
+                    for kind, path in write_scenario_files(mission, U[k], out_dir, sid, chosen.trajectory(k)).items()
+                },
+            }
+        )
+    return scenarios
+
+
+def _variant_entries(
+    mission: Mission,
+    ids: list[str],
+    fragile: list[int],
+    found: list[dict],
+    chosen: sim.uuv.Result,
+    out_dir: Path,
+) -> list[dict]:
+    """The robust "M" variants found for fragile scenarios, their files written."""
+    variants = []
+    for k, v in zip(fragile, found):
+        if not v["found"]:
+            continue
+        vid = f"{ids[k]}M"
+        variants.append(
+            {
+                "id": vid,
+                "variant_of": ids[k],
+                "u": v["u"],
+                "parameters": jsonable(mission.space.decode(np.array(v["u"])[None, :])[0]),
+                "moved": v["moved"],
+                "direction": v["direction"],
+                "noise_sigmas": v["sigmas"],
+                "predicted": {"mode": MODE_NAMES[int(chosen.modes[k])]},
+                "p_predicted_mode": v["p_predicted_mode"],
+                "p_predicted": v["p_predicted"],
+                "files": {
+                    kind: path.name
+                    for kind, path in write_scenario_files(mission, np.array(v["u"]), out_dir, vid).items()
+                },
+            }
+        )
+    return variants
+
+
+def _plan_document(
+    mission: Mission,
+    mission_path: Path,
+    embedded: dict[str, str],
+    cfg: GenerateConfig,
+    a: Analysis,
+    pairs: list[dict],
+    verdicts: list[dict],
+    confirmation: Confirmation | None,
+    refinement: dict | None,
+    runs: dict[str, int],
+    dithering: dict,
+    scenarios: list[dict],
+    variants: list[dict],
+) -> dict:
+    """What ``plan.json`` holds (schema ``rapt.plan/1``)."""
+    sur = cfg.surrogate
+    variant_ids = {v["id"] for v in variants}
+    plan_pairs = []
+    for p, (pair, verdict) in enumerate(zip(pairs, verdicts), start=1):
+        sides = [f"pair{p}a", f"pair{p}b"]
+        entry = {
+            "id": p,
+            "level": pair["level"],
+            "elements": pair["elements"],
+            "modes": pair["modes"],
+            "distance": pair["distance"],
+            "scenarios": sides,
+            "refined": bool(pair.get("refined", False)),
+            **({key: pair[key] for key in _CONFIRMED_FIELDS} if sur is not None else {}),
+        }
+        if pair.get("refined"):
+            entry["refinement"] = {"start_distance": pair["start_distance"], "runs": pair["refine_runs"]}
+        if verdict:
+            entry.update(verdict)
+            entry["variants"] = [f"{sid}M" if f"{sid}M" in variant_ids else None for sid in sides]
+        plan_pairs.append(entry)
+    modes = a.result.modes
+    return {
+        "schema": PLAN_SCHEMA,
+        "mission": {
+            "name": mission.name,
+            "file": str(mission_path),
+            "dim": mission.dim,
+            "parameters": mission.space.names,
+            **embedded,
+        },
+        "study": {
+            "budget": cfg.budget,
+            "seed": cfg.seed,
+            "global_fraction": cfg.global_fraction,
+            "valid_runs": int(len(a.X)),
+            "invalid_runs": int(len(a.X_invalid)),
+            "modes": {MODE_NAMES[m]: int(c) for m, c in zip(*np.unique(modes, return_counts=True))},
+            "boundary_types": a.boundary_types[:30],
+            "runs": runs,
+            "dithering": {**dithering, "runs_per_scenario": cfg.dithers // 2},
+            **({"refinement": refinement} if refinement is not None else {}),
+            **({"surrogate": _surrogate_summary(cfg, confirmation)} if confirmation is not None else {}),
+        },
+        "sensitivity": a.sensitivity,
+        "pairs": plan_pairs,
+        "scenarios": scenarios,
+        "variants": variants,
+        "run_order": [s["id"] for s in scenarios] + [v["id"] for v in variants],
+    }
+
+
+_CONFIRMED_FIELDS = ("confirmed_by_expert", "surrogate_modes", "surrogate_elements", "moved_by", "expert_runs")
+
+
+def _surrogate_summary(cfg: GenerateConfig, confirmation: Confirmation) -> dict:
+    """The plan's account of a surrogate search: its file and method, expert runs, candidates examined and confirmed."""
+    sur = cfg.surrogate
+    return {
+        "file": cfg.surrogate_file,
+        "method": str(sur.training.get("method", "")),
+        "expert_runs": {"training": int(sur.training.get("runs", 0)), "confirmation": confirmation.runs},
+        "confirm_budget": cfg.confirm_runs,
+        "candidates": confirmation.candidates,
+        "examined": confirmation.examined,
+        "confirmed": len(confirmation.pairs),
+        "share_confirmed": confirmation.share_confirmed,
+    }
+
+
+class _StageClock:
+    """Wall seconds per stage into a caller's dict (or nowhere)."""
+
+    def __init__(self, into: dict[str, float] | None):
+        self.into = into
+        self.last = time.perf_counter()
+
+    def lap(self, stage: str) -> None:
+        now = time.perf_counter()
+        if self.into is not None:
+            self.into[stage] = self.into.get(stage, 0.0) + now - self.last
+        self.last = now

@@ -1,0 +1,192 @@
+"""Bring-up like a careful operator: each step's success, and each step's failure in one line, on loopback MAVLink."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import socket
+from pathlib import Path
+
+import pytest
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavutil  # noqa: E402
+
+from planner.fly.sil_flight import Flight, flight_from_plan  # noqa: E402
+from planner.fly.vehicle.bringup import BringUpTimeouts  # noqa: E402
+from planner.fly.vehicle.run import run_vehicle  # noqa: E402
+from rapt.errors import InputError, LinkTimeoutError, RefusedError, RunError  # noqa: E402
+from sim.uuv.missionfile import load_mission  # noqa: E402
+from tests.support.fake_ardusub import Behaviour, FakeArduSub  # noqa: E402
+from tests.support.loopback import free_port, no_new_threads  # noqa: E402
+
+M = mavutil.mavlink
+ROOT = Path(__file__).resolve().parents[4]
+FAST = BringUpTimeouts(heartbeat=5, streams=2, estimate=1.5, mission=3, guided=1.5, arm=1.5, depth=5, surface=5)
+STEPS = ["heartbeat", "streams", "estimate", "area", "mission", "guided", "arm", "depth", "clock"]
+
+
+@pytest.fixture(scope="module")
+def flight():
+    return flight_from_plan(ROOT / "field_plans" / "range2017" / "plan.json", "pair2b")
+
+
+@contextlib.contextmanager
+def fake(route, **behaviour):
+    port = free_port(socket.SOCK_DGRAM)
+    with no_new_threads():
+        vehicle = FakeArduSub(f"udpout:127.0.0.1:{port}", route, Behaviour(**behaviour))
+        try:
+            yield f"udpin:127.0.0.1:{port}", vehicle
+        finally:
+            vehicle.close()
+
+
+def _fly(flight, connection, steps: list, **kw):
+    return run_vehicle(flight, connection, timeouts=FAST, timeout_s=0.5, say=steps.append, **kw)
+
+
+def _commanded(vehicle) -> list[str]:
+    """What the vehicle was told beyond our heartbeat and the message rates."""
+    out = []
+    for m in vehicle.received:
+        kind = m.get_type()
+        if kind == "COMMAND_LONG" and m.command == M.MAV_CMD_SET_MESSAGE_INTERVAL or kind == "HEARTBEAT":
+            continue
+        out.append(kind if kind != "COMMAND_LONG" else f"COMMAND_LONG {m.command}")
+    return out
+
+
+def test_every_step_in_order_and_set_points_only_in_guided(flight):
+    steps: list = []
+    with fake(flight.mission) as (conn, vehicle):
+        result = _fly(flight, conn, steps)
+    assert [s.name for s in steps][: len(STEPS)] == STEPS and all(s.status == "ok" for s in steps)
+    assert result.timeline[-1].name == "recover" and "disarmed" in result.timeline[-1].detail
+    told = _commanded(vehicle)
+    guided = told.index(f"COMMAND_LONG {M.MAV_CMD_DO_SET_MODE}")
+    assert told.index("MISSION_COUNT") < guided  # the mission is uploaded before anything moves
+    assert "SET_POSITION_TARGET_LOCAL_NED" not in told[:guided]  # nothing is commanded outside GUIDED
+    assert vehicle.mode == 9 and vehicle.depth == 0.0 and not vehicle.armed  # surfaced, then disarmed
+
+
+@pytest.mark.parametrize(
+    ("behaviour", "error", "line", "last_step"),
+    [
+        (
+            {"intervals": False, "stream": False},
+            LinkTimeoutError,
+            "bring-up streams: no GLOBAL_POSITION_INT",
+            "streams",
+        ),
+        ({"ekf_flags": 0x00A7}, LinkTimeoutError, "bring-up estimate: no position estimate within 1.5 s", "estimate"),
+        ({"mission": M.MAV_MISSION_NO_SPACE}, RefusedError, "refused the upload (MAV_MISSION_NO_SPACE)", "mission"),
+        ({"mission": None}, LinkTimeoutError, "bring-up mission:", "mission"),
+        ({"guided": M.MAV_RESULT_FAILED}, RefusedError, "bring-up guided: refused", "guided"),
+        ({"arm": M.MAV_RESULT_DENIED}, RefusedError, "bring-up arm: refused", "arm"),
+        ({"dives": False}, LinkTimeoutError, "bring-up depth: not at 2 m within 5 s", "depth"),
+    ],
+)
+def test_a_step_that_fails_stops_the_run_with_one_line(flight, behaviour, error, line, last_step):
+    steps: list = []
+    with fake(flight.mission, **behaviour) as (conn, vehicle):
+        with pytest.raises(error) as info:
+            _fly(flight, conn, steps)
+    assert line in str(info.value) and "\n" not in str(info.value)
+    failed = [s for s in steps if s.status == "failed"]
+    assert [s.name for s in failed] == [last_step]
+    told = _commanded(vehicle)
+    if last_step in ("streams", "estimate", "mission", "guided"):
+        assert "COMMAND_LONG 400" not in told  # never armed
+        assert "SET_POSITION_TARGET_LOCAL_NED" not in told
+    if last_step == "streams":
+        assert "REQUEST_DATA_STREAM" in told  # the fallback was tried
+    if last_step == "depth":  # armed by then: it is brought up and disarmed before the error is raised
+        assert vehicle.mode == 9 and not vehicle.armed and steps[-1].name == "recover"
+
+
+def test_streams_fall_back_to_request_data_stream(flight):
+    steps: list = []
+    with fake(flight.mission, intervals=False) as (conn, vehicle):
+        _fly(flight, conn, steps)
+    fallback = [s for s in steps if s.status == "fallback"]
+    assert fallback and fallback[0].name == "streams" and "REQUEST_DATA_STREAM" in fallback[0].detail
+    assert "REQUEST_DATA_STREAM" in vehicle.kinds()
+
+
+def test_a_vehicle_outside_the_scenarios_area_is_refused_before_anything_is_commanded(flight):
+    """range2017's launch point is south of imitation7's operational area (y -500..500)."""
+    mission = load_mission(ROOT / "examples" / "imitation7.toml")
+    other = Flight(mission, flight.u[: mission.dim] * 0 + 0.5, "centre", "examples/imitation7.toml")
+    steps: list = []
+    with fake(flight.mission) as (conn, vehicle):
+        with pytest.raises(InputError, match=r"--scenario: the vehicle is at \(-480, -520\) m, outside mission"):
+            _fly(other, conn, steps)
+    assert steps[-1].name == "area" and _commanded(vehicle) == []
+
+
+def test_arming_is_re_checked_in_guided_and_never_sent_in_another_mode(flight):
+    """The first arm is refused and the vehicle drops to MANUAL meanwhile (a pilot, a failsafe): the
+    bring-up must not ask again in MANUAL.  It stops in one line, the vehicle never armed."""
+    steps: list = []
+    with fake(flight.mission, arm_denials=1, denial_switches_to=19) as (conn, vehicle):
+        with pytest.raises(RunError) as info:
+            _fly(flight, conn, steps)
+    assert str(info.value) == "bring-up arm: the vehicle left GUIDED before it was armed (now MANUAL)"
+    assert vehicle.arm_modes == [4] and not vehicle.armed  # one request, in GUIDED; none in MANUAL
+    assert [s.name for s in steps if s.status == "failed"] == ["arm"]
+    assert "SET_POSITION_TARGET_LOCAL_NED" not in _commanded(vehicle)
+
+
+def test_the_bridge_arm_option_takes_guided_back_before_arming_again(flight):
+    """``rapt-plan bridge --arm`` (arm_when_heard): after a refused arm that left the vehicle in MANUAL
+    it asks for GUIDED again and arms only once the heartbeat shows it."""
+    from bridge.mavlink_bridge import MavlinkBridge
+    from bridge.session import open_session
+    from planner.fly.lifecycle import arm_when_heard
+
+    with fake(flight.mission, arm_denials=2, denial_switches_to=19) as (conn, vehicle):
+        session = open_session(listen=[f"tcp/127.0.0.1:{free_port()}"])
+        try:
+            with MavlinkBridge(conn, session, vehicle="uuv1", allow_commands=True) as link:
+                assert arm_when_heard(link, timeout_s=10.0, guided_s=10.0)
+                wait_for_armed = [vehicle.armed, vehicle.mode]
+                assert link.arm(False) == M.MAV_RESULT_ACCEPTED
+        finally:
+            session.close()
+    assert vehicle.arm_modes == [4, 4, 4]  # every request in GUIDED: two refused, the third accepted
+    assert wait_for_armed == [True, 4]
+
+
+@pytest.mark.parametrize(
+    ("failsafe_mode", "ended"),
+    [
+        (None, "vehicle: disarmed itself (a failsafe, or disarmed by someone else)"),
+        (19, "vehicle: left GUIDED (now MANUAL: a failsafe, or a pilot took it)"),
+    ],
+)
+def test_a_vehicle_that_ends_the_run_itself_is_left_alone(flight, failsafe_mode, ended):
+    """Mid-run, the vehicle's failsafe disarms it or a pilot takes it to MANUAL: the run ends with that
+    reason in one line and in the timeline, and nothing more is commanded (no SURFACE, no disarm)."""
+    steps: list = []
+    with fake(flight.mission, failsafe_after_s=4.0, failsafe_mode=failsafe_mode) as (conn, vehicle):
+        result = run_vehicle(flight, conn, timeouts=FAST, timeout_s=15.0, say=steps.append)
+        after = vehicle.received[vehicle.failsafe_at :] if vehicle.failsafe_at is not None else None
+    assert after is not None and result.ended == ended and result.watchdog == ""
+    assert [s.name for s in steps][: len(STEPS)] == STEPS  # it was flying: every step went through
+    assert steps[-1].name == "recover" and steps[-1].detail == f"nothing commanded: {ended}"
+    commands = [m for m in after if m.get_type() == "COMMAND_LONG" and m.command != M.MAV_CMD_SET_MESSAGE_INTERVAL]
+    assert commands == []  # neither SURFACE nor a disarm for a vehicle someone else now has
+    assert vehicle.armed == (failsafe_mode is not None)  # as the failsafe or the pilot left it
+
+
+def test_a_pilot_who_takes_the_vehicle_during_the_dive_is_not_fought(flight):
+    """The bring-up fails in one line, and the vehicle, now in MANUAL, is neither surfaced nor disarmed."""
+    steps: list = []
+    with fake(flight.mission, failsafe_after_s=0.2, failsafe_mode=19, dives=False) as (conn, vehicle):
+        with pytest.raises(RunError, match=r"^bring-up depth: the vehicle left GUIDED \(now MANUAL\)$"):
+            _fly(flight, conn, steps)
+        after = vehicle.received[vehicle.failsafe_at or 0 :]
+    assert vehicle.failsafe_at is not None and vehicle.armed and vehicle.mode == 19
+    assert not [m for m in after if m.get_type() == "COMMAND_LONG" and m.command != M.MAV_CMD_SET_MESSAGE_INTERVAL]
+    assert steps[-1].name == "recover" and steps[-1].detail.startswith("nothing commanded: vehicle: left GUIDED")

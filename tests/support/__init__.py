@@ -1,0 +1,1 @@
+"""Fakes, fixtures and loopback helpers shared by the tests."""
