@@ -1,12 +1,16 @@
-"""The code checks configured in pyproject.toml, run by the test command so they hold on every change.
+"""The code checks, run by the test command so they hold on every change.
 
-ruff (lint and format), mypy, and import-linter's contracts for the dependency rules: planner wires
-sim and bridge, which stand on rapt and never meet; the UUV world and the robots never import each
-other; only the command line (and its tests) imports the command line.
+ruff (lint and format), mypy, and import-linter's contracts for the dependency rules (pyproject.toml):
+planner wires sim and bridge, which stand on rapt and never meet; the stages of the range day (plan,
+fly, review) share only planner.common; the UUV world and the robots never import each other; only
+the command line (and its tests) imports the command line. Beside them, two checks of our own: no
+import circle anywhere (imports inside functions and under TYPE_CHECKING count), and the size limits
+that keep a function readable on one screen and a module about one concept.
 """
 
 from __future__ import annotations
 
+import ast
 import os
 import shutil
 import subprocess
@@ -17,6 +21,16 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 PACKAGES = ("rapt", "sim", "bridge", "planner", "tests")
+CHECKED = (*PACKAGES, "benchmarks")
+
+#: The longest a function body may be (from its first statement after the docstring to its last line).
+MAX_FUNCTION_LINES = 80
+#: The longest a module may be.
+MAX_MODULE_LINES = 600
+#: Modules allowed to be longer, each with the reason: data written as code, not logic.
+LONG_MODULES = {
+    "tests/sim/uuv/ardusub/conformance.py": "the conformance table: one row per ArduSub answer, read as a spec",
+}
 
 
 def _tool(name: str, *args: str, cwd: Path = ROOT, env: dict | None = None) -> subprocess.CompletedProcess:
@@ -52,7 +66,9 @@ def test_the_import_layers_hold():
         ("bridge/setpoint.py", "sim.uuv", "planner wires sim and bridge"),
         ("sim/uuv/geo.py", "bridge", "planner wires sim and bridge"),
         ("sim/robots/model.py", "sim.uuv", "the simulated systems are independent"),
-        ("planner/review/compare.py", "planner.cli", "only the command line"),
+        ("tests/planner/review/test_biasfit.py", "planner.cli", "only the command line"),
+        ("planner/review/logs.py", "planner.fly", "the range day's stages"),
+        ("planner/common/plans.py", "planner.plan", "the range day's stages"),
     ],
 )
 def test_the_import_check_fails_on_a_forbidden_import(tmp_path, module, forbidden, contract):
@@ -71,3 +87,100 @@ def test_the_import_check_fails_on_a_forbidden_import(tmp_path, module, forbidde
     assert len(broken) == 1 and broken[0].startswith(contract), proc.stdout
     importer = module.removesuffix(".py").replace("/", ".")
     assert f"{importer} -> {forbidden}" in proc.stdout
+
+
+def _python_files() -> list[Path]:
+    return sorted(p for top in CHECKED for p in (ROOT / top).rglob("*.py") if "node_modules" not in p.parts)
+
+
+def _body_lines(node: ast.FunctionDef | ast.AsyncFunctionDef) -> int:
+    body = node.body
+    if len(body) > 1 and isinstance(body[0], ast.Expr) and isinstance(body[0].value, ast.Constant):
+        body = body[1:]  # the docstring says why; it does not count
+    return (node.end_lineno or node.lineno) - body[0].lineno + 1
+
+
+def test_functions_and_modules_stay_short():
+    """Every function body fits in MAX_FUNCTION_LINES and every module in MAX_MODULE_LINES (named exceptions aside)."""
+    over = []
+    for path in _python_files():
+        rel = path.relative_to(ROOT).as_posix()
+        text = path.read_text()
+        lines = len(text.splitlines())
+        if lines > MAX_MODULE_LINES and rel not in LONG_MODULES:
+            over.append(f"{rel}: {lines} lines (limit {MAX_MODULE_LINES}): split it at a seam")
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef) and _body_lines(node) > MAX_FUNCTION_LINES:
+                over.append(f"{rel}:{node.lineno} {node.name}: {_body_lines(node)} lines (limit {MAX_FUNCTION_LINES})")
+    assert not over, "\n".join(over)
+
+
+def test_the_size_exceptions_are_still_needed():
+    """A named exception that has come under the limit, or whose file is gone, is taken off the list."""
+    for rel in LONG_MODULES:
+        path = ROOT / rel
+        assert path.exists() and len(path.read_text().splitlines()) > MAX_MODULE_LINES, rel
+
+
+def _circles(edges: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one module (Tarjan), each sorted."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    found: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        for w in sorted(edges.get(v, ())):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for v in sorted(edges):
+        if v not in index:
+            visit(v)
+    return found
+
+
+def _package_imports() -> dict[str, set[str]]:
+    """Every import between our modules, those inside functions and under TYPE_CHECKING included (grimp)."""
+    import grimp
+
+    graph = grimp.build_graph("rapt", "sim", "bridge", "planner", cache_dir=None)
+    return {m: set(graph.find_modules_directly_imported_by(m)) for m in graph.modules}
+
+
+def _benchmark_imports() -> dict[str, set[str]]:
+    """The benchmark scripts import each other as top-level modules (each puts its folder on sys.path)."""
+    scripts = {p.stem: p for p in (ROOT / "benchmarks").glob("*.py")}
+    edges: dict[str, set[str]] = {}
+    for name, path in scripts.items():
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else []
+            if isinstance(node, ast.ImportFrom) and node.module and not node.level:
+                names = [node.module]
+            edges.setdefault(name, set()).update(n.split(".")[0] for n in names if n.split(".")[0] in scripts)
+    return edges
+
+
+def test_no_import_circles():
+    """No module imports, however indirectly, a module that imports it back."""
+    circles = _circles(_package_imports()) + _circles(_benchmark_imports())
+    assert not circles, "import circles: " + "; ".join(" <-> ".join(c) for c in circles)
+
+
+def test_the_circle_check_finds_a_circle():
+    assert _circles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert _circles({"a": {"b"}, "b": set()}) == []

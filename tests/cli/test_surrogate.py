@@ -15,6 +15,18 @@ IMITATION7 = sim.uuv.load_mission(EXAMPLES / "imitation7.toml")
 SPEC = feature_spec(IMITATION7)
 
 
+def _surrogate_args(mission: str, model: Path) -> list[str]:
+    """A small, quick training run: 4 expert runs, 3 epochs, 16 validation scenarios."""
+    options = "--runs 4 --runs-per-iteration 2 --epochs 3 --validate 16 --select-runs 4"
+    return ["surrogate", mission, "--out", str(model), *options.split()]
+
+
+def _generate_args(mission: str, out: Path, model: Path) -> list[str]:
+    """A 500-run search on the surrogate, confirmed by at most 20 expert runs."""
+    options = "--budget 500 --batch-size 250 --pairs 2 --dithers 40 --confirm-runs 20"
+    return ["generate", mission, "--out", str(out), "--surrogate", str(model), *options.split()]
+
+
 def test_cli_trains_a_surrogate_and_generate_searches_with_it_and_confirms_with_the_expert(tmp_path):
     import json
 
@@ -25,25 +37,7 @@ def test_cli_trains_a_surrogate_and_generate_searches_with_it_and_confirms_with_
     runner = CliRunner()
     model = tmp_path / "imitation7.npz"
     mission = str(EXAMPLES / "imitation7.toml")
-    result = runner.invoke(
-        app,
-        [
-            "surrogate",
-            mission,
-            "--out",
-            str(model),
-            "--runs",
-            "4",
-            "--runs-per-iteration",
-            "2",
-            "--epochs",
-            "3",
-            "--validate",
-            "16",
-            "--select-runs",
-            "4",
-        ],
-    )
+    result = runner.invoke(app, _surrogate_args(mission, model))
     assert result.exit_code == 0, result.output
     assert (
         model.is_file()
@@ -56,24 +50,7 @@ def test_cli_trains_a_surrogate_and_generate_searches_with_it_and_confirms_with_
     assert goal.output == "decision"  # a classifier: 2 p - 1
     assert goal_in.tolist() == [0, 1, 2, 3, 4, 5, 6, SPEC.size - 1]
     out = tmp_path / "plan"
-    args = [
-        "generate",
-        mission,
-        "--out",
-        str(out),
-        "--budget",
-        "500",
-        "--batch-size",
-        "250",
-        "--pairs",
-        "2",
-        "--dithers",
-        "40",
-        "--surrogate",
-        str(model),
-        "--confirm-runs",
-        "20",
-    ]
+    args = _generate_args(mission, out, model)
     result = runner.invoke(app, args)
     assert result.exit_code == 0, result.output
     plan = json.loads((out / "plan.json").read_text())
