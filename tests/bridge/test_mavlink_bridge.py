@@ -23,7 +23,9 @@ from pymavlink import mavutil  # noqa: E402
 from bridge import keys  # noqa: E402
 from bridge.command_gate import outward  # noqa: E402
 from bridge.frames import FrameSplitter, is_signed, mavlink2, strip_signature  # noqa: E402
-from bridge.mavlink_bridge import TYPE_MASK_VELOCITY_YAW, MavlinkBridge, load_signing_key  # noqa: E402
+from bridge.link import load_signing_key  # noqa: E402
+from bridge.mavlink_bridge import MavlinkBridge  # noqa: E402
+from bridge.relay import TYPE_MASK_VELOCITY_YAW  # noqa: E402
 from bridge.session import open_session, zenoh_config  # noqa: E402
 from bridge.setpoint import Setpoint  # noqa: E402
 from rapt.errors import LinkError, RefusedError  # noqa: E402
@@ -429,7 +431,7 @@ def test_arm_and_set_mode_wait_for_the_ack():
 def test_geofence_refuses_outward_commands_near_the_edge():
     fence = (0.0, 100.0, 0.0, 100.0)
     with rig(allow_commands=True, geofence=fence, position=(90.0, 50.0, 5.0)) as (bridge, vehicle, client, _):
-        wait_until(lambda: bridge.linked and bridge._position is not None, what="a position")
+        wait_until(lambda: bridge.linked and bridge._relay.position is not None, what="a position")
         pub = publisher(client, keys.command(VEHICLE, "autonomy"))
         pub.put(setpoint(vx=1.0, vy=0.0, tick_ms=1))  # out through the north edge: refused
         pub.put(setpoint(vx=0.2, vy=0.3, tick_ms=2))  # still outward (north component): refused

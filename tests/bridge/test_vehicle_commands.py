@@ -25,7 +25,8 @@ from pymavlink import mavutil  # noqa: E402
 
 import sim.uuv  # noqa: E402
 from bridge.frames import mavlink2  # noqa: E402
-from bridge.mavlink_bridge import MavlinkBridge, MissionItem  # noqa: E402
+from bridge.mavlink_bridge import MavlinkBridge  # noqa: E402
+from bridge.mission_upload import MissionItem  # noqa: E402
 from bridge.session import open_session  # noqa: E402
 from rapt.errors import InputError, LinkError, LinkTimeoutError, RefusedError, RunError  # noqa: E402
 from sim.uuv.ardusub.frontseat import FrontSeat  # noqa: E402
