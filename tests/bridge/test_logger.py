@@ -20,16 +20,8 @@ from bridge.frames import is_signed, mavlink2
 from bridge.logger import RAW_TOPIC, McapLogger, read_log, read_metadata
 from bridge.mavlink_bridge import MavlinkBridge
 from bridge.session import open_session
-from tests.bridge.test_mavlink_bridge import (
-    KEY,
-    VEHICLE,
-    FakeVehicle,
-    bus,
-    free_port,
-    publisher,
-    setpoint,
-    wait_until,
-)
+from tests.support.bridge_rig import KEY, VEHICLE, FakeVehicle, bus, publisher, setpoint
+from tests.support.loopback import free_port, wait_until
 
 pytestmark = [pytest.mark.integration]
 
