@@ -6,21 +6,29 @@ Modules: :mod:`bridge.keys` (the key scheme), :mod:`bridge.session` (loopback Ze
 sessions), :mod:`bridge.setpoint` (the back-seat set-point), :mod:`bridge.frames` (MAVLink
 frame handling), :mod:`bridge.mission_upload` (the mission upload protocol, no I/O),
 :mod:`bridge.command_gate` (:class:`CommandGate`, the bridge's safety
-gates), :mod:`bridge.service` (the start/close life cycle), :mod:`bridge.mavlink_bridge`
-(:class:`MavlinkBridge`) and :mod:`bridge.logger` (:class:`McapLogger`). The names below are
+gates), :mod:`bridge.service` (the start/close life cycle), the bridge's three layers
+:mod:`bridge.link` (:class:`MavlinkLink`, the MAVLink connection), :mod:`bridge.vehicle_commands`
+(:class:`VehicleCommands`, COMMAND_LONG, modes, mission upload) and :mod:`bridge.relay`
+(:class:`BusRelay`, to and from the bus through the gate), composed by :mod:`bridge.mavlink_bridge`
+(:class:`MavlinkBridge`), and :mod:`bridge.logger` (:class:`McapLogger`). The names below are
 imported on first use, so ``import bridge.keys`` stays cheap for a back-seat process.
 """
 
 from importlib import import_module
 
 _EXPORTS = {
+    "ARDUSUB_MODES": "bridge.vehicle_commands",
+    "Autopilot": "bridge.vehicle_commands",
+    "BusRelay": "bridge.relay",
     "CommandGate": "bridge.command_gate",
     "MavlinkBridge": "bridge.mavlink_bridge",
+    "MavlinkLink": "bridge.link",
     "McapLogger": "bridge.logger",
     "MissionItem": "bridge.mission_upload",
     "read_log": "bridge.logger",
     "read_metadata": "bridge.logger",
     "Setpoint": "bridge.setpoint",
+    "VehicleCommands": "bridge.vehicle_commands",
     "open_session": "bridge.session",
     "zenoh_config": "bridge.session",
 }

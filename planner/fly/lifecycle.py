@@ -14,7 +14,7 @@ import time
 from collections.abc import Callable
 from contextlib import AbstractContextManager
 
-from bridge.mavlink_bridge import ARDUSUB_MODES
+from bridge.vehicle_commands import ARDUSUB_MODES
 from rapt.errors import RefusedError
 
 GUIDED_MODE = ARDUSUB_MODES["GUIDED"]

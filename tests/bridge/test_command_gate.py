@@ -7,7 +7,7 @@ import math
 import pytest
 
 from bridge import keys
-from bridge.command_gate import GEOFENCE, INACTIVE, MODE, RATE_LIMITED, REFUSED, STALE, CommandGate
+from bridge.command_gate import GEOFENCE, INACTIVE, MODE, RATE_LIMITED, REFUSED, STALE, CommandGate, outward
 from bridge.setpoint import Setpoint
 
 HOLD = Setpoint(0.0, 0.0, 0.0, 0.0)  # no horizontal velocity: the geofence never refuses it
@@ -124,3 +124,12 @@ def test_every_reason_is_a_bridge_counter():
     assert all(f"commands_{reason}" in bridge.stats for reason in (INACTIVE, REFUSED, STALE, GEOFENCE, RATE_LIMITED))
     assert bridge.gate.geofence == FENCE and bridge.geofence == FENCE and bridge.max_rate_hz == 5.0
     assert bridge.allow_commands and bridge.silence_s == bridge.gate.silence_s == 2.0
+
+
+def test_outward_only_near_an_edge():
+    fence = (0.0, 100.0, 0.0, 100.0)
+    assert outward(fence, 20, 90, 50, 1.0, 0.0)
+    assert not outward(fence, 20, 90, 50, -1.0, 0.0)
+    assert not outward(fence, 20, 50, 50, 1.0, 1.0)
+    assert outward(fence, 20, 50, 5, 0.0, -0.1)
+    assert outward(fence, 20, 150, 50, 0.1, 0.0)  # outside, still heading out

@@ -20,24 +20,18 @@ from bridge.frames import is_signed, mavlink2
 from bridge.logger import RAW_TOPIC, McapLogger, read_log, read_metadata
 from bridge.mavlink_bridge import MavlinkBridge
 from bridge.session import open_session
-from tests.bridge.test_mavlink_bridge import (
-    KEY,
-    VEHICLE,
-    FakeVehicle,
-    bus,
-    free_port,
-    publisher,
-    setpoint,
-    wait_until,
-)
+from tests.support.bridge_rig import KEY, VEHICLE, FakeVehicle, bus, publisher, setpoint
+from tests.support.loopback import free_port, wait_until
 
 pytestmark = [pytest.mark.integration]
 
 ROOT = Path(__file__).resolve().parents[2]
 
 
-def test_logger_writes_channels_stripped_raw_frames_and_metadata(tmp_path):
-    path = tmp_path / "run.mcap"
+def _log_a_signed_run(path: Path) -> tuple[dict, int, list]:
+    """A signed vehicle, the bridge and the logger on one bus; meta, status and two sources' set-points put.
+
+    Returns the logger's stats, the frames the bridge received and the set-points the vehicle got."""
     port = free_port(socket.SOCK_DGRAM)
     with bus() as (hub, client, endpoint):
         logger_session = open_session(connect=[endpoint])
@@ -65,7 +59,6 @@ def test_logger_writes_channels_stripped_raw_frames_and_metadata(tmp_path):
                     operator.put(setpoint(vx=9.0, tick_ms=1))
                     autonomy.put(setpoint(vx=0.5, tick_ms=2))
                     got = wait_until(lambda: vehicle.messages("SET_POSITION_TARGET_LOCAL_NED"), what="the set-point")
-                    assert [m.time_boot_ms for m in got] == [2]
                     operator.undeclare()
                     autonomy.undeclare()
                 finally:
@@ -83,6 +76,13 @@ def test_logger_writes_channels_stripped_raw_frames_and_metadata(tmp_path):
             stats = logger.stats
         finally:
             logger_session.close()
+    return stats, frames_in, got
+
+
+def test_logger_writes_channels_stripped_raw_frames_and_metadata(tmp_path):
+    path = tmp_path / "run.mcap"
+    stats, frames_in, got = _log_a_signed_run(path)
+    assert [m.time_boot_ms for m in got] == [2]
 
     assert stats["errors"] == 0 and stats["written"] == stats["received"] and stats["metadata"] == 1
     with open(path, "rb") as f:

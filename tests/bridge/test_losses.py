@@ -18,7 +18,7 @@ from bridge.logger import LOSSES_METADATA, RAW_TOPIC, McapLogger, read_log, read
 from bridge.loss import PublicationGaps, SequenceGaps  # noqa: E402
 from bridge.mavlink_bridge import MavlinkBridge  # noqa: E402
 from bridge.session import open_session  # noqa: E402
-from tests.bridge.test_mavlink_bridge import VEHICLE, Collector, bus, wait_for_subscriber  # noqa: E402
+from tests.support.bridge_rig import VEHICLE, Collector, bus, wait_for_subscriber  # noqa: E402
 from tests.support.loopback import free_port, wait_until  # noqa: E402
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 import logging
 import threading
 import time
@@ -9,7 +10,9 @@ import time
 import pytest
 import zenoh
 
-from bridge.session import open_session, undeclare
+from bridge.session import open_session, undeclare, zenoh_config
+from rapt.errors import LinkError
+from tests.support.loopback import free_port, wait_until
 
 
 @pytest.fixture
@@ -61,3 +64,41 @@ def test_an_entity_busy_past_the_patience_is_left_with_a_warning_not_an_error(se
     undeclare(sub)  # free now: undeclared
     with pytest.raises(zenoh.ZError):
         sub.try_recv()
+
+
+def test_config_is_loopback_only_without_scouting():
+    config = zenoh_config(listen=["tcp/127.0.0.1:7447"])
+    assert json.loads(config.get_json("scouting/multicast/enabled")) is False
+    assert json.loads(config.get_json("scouting/gossip/enabled")) is False
+    assert json.loads(config.get_json("listen/endpoints")) == ["tcp/127.0.0.1:7447"]
+    assert json.loads(config.get_json("connect/endpoints")) == []
+    with pytest.raises(ValueError, match="listen"):
+        zenoh_config(listen=["tcp/0.0.0.0:7447"])
+    with pytest.raises(ValueError, match="connect"):
+        zenoh_config(connect=["tcp/192.168.1.2:7447"])
+
+
+def test_a_client_waits_for_a_hub_that_starts_later_and_names_a_missing_one():
+    import threading
+
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    holder = {}
+
+    def start_hub_late():
+        time.sleep(1.0)
+        holder["hub"] = open_session(listen=[endpoint])
+
+    starter = threading.Thread(target=start_hub_late)
+    starter.start()
+    client = open_session(connect=[endpoint], connect_timeout=8)  # blocks until the hub is up
+    starter.join()
+    try:
+        wait_until(lambda: list(client.info.peers_zid()), what="the late hub")
+    finally:
+        client.close()
+        holder["hub"].close()
+    nobody = f"tcp/127.0.0.1:{free_port()}"
+    started = time.monotonic()
+    with pytest.raises(LinkError, match=f"could not open the session \\({nobody}\\).*start the hub"):
+        open_session(connect=[nobody], connect_timeout=0.5)
+    assert time.monotonic() - started < 5

@@ -25,10 +25,12 @@ from pymavlink import mavutil  # noqa: E402
 
 import sim.uuv  # noqa: E402
 from bridge.frames import mavlink2  # noqa: E402
-from bridge.mavlink_bridge import MavlinkBridge, MissionItem  # noqa: E402
+from bridge.mavlink_bridge import MavlinkBridge  # noqa: E402
+from bridge.mission_upload import MissionItem  # noqa: E402
 from bridge.session import open_session  # noqa: E402
 from rapt.errors import InputError, LinkError, LinkTimeoutError, RefusedError, RunError  # noqa: E402
 from sim.uuv.ardusub.frontseat import FrontSeat  # noqa: E402
+from tests.support.bridge_rig import rig  # noqa: E402
 from tests.support.loopback import free_port, wait_until  # noqa: E402
 
 pytestmark = [pytest.mark.integration]
@@ -434,3 +436,15 @@ def test_bring_up_against_the_simulated_front_seat():
         thread.join(timeout=5)
         fs.close()
         session.close()
+
+
+def test_arm_and_set_mode_wait_for_the_ack():
+    with rig(allow_commands=True) as (bridge, vehicle, client, _):
+        wait_until(lambda: bridge.linked, what="the bridge to hear the vehicle")
+        assert bridge.set_mode("guided") == mavlink2.MAV_RESULT_ACCEPTED
+        assert vehicle.custom_mode == 4
+        assert bridge.arm(True) == mavlink2.MAV_RESULT_ACCEPTED and vehicle.armed
+        (cmd,) = [m for m in vehicle.messages("COMMAND_LONG") if m.command == mavlink2.MAV_CMD_DO_SET_MODE]
+        assert (cmd.param1, cmd.param2) == (mavlink2.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED, 4)
+        with pytest.raises(ValueError, match="mode"):
+            bridge.set_mode("WARP")

@@ -24,9 +24,10 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
 from bridge import keys  # noqa: E402
-from bridge.mavlink_bridge import ARDUSUB_MODES, MavlinkBridge  # noqa: E402
+from bridge.mavlink_bridge import MavlinkBridge  # noqa: E402
 from bridge.mission_upload import MissionItem  # noqa: E402
 from bridge.setpoint import Setpoint  # noqa: E402
+from bridge.vehicle_commands import ARDUSUB_MODES  # noqa: E402
 from planner.common.telemetry import VehicleTelemetry  # noqa: E402
 from rapt.errors import InputError, LinkTimeoutError, RefusedError, RunError  # noqa: E402
 from sim.uuv.geo import LocalFrame  # noqa: E402

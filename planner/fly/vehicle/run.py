@@ -22,7 +22,8 @@ from pathlib import Path
 import numpy as np
 
 from bridge import keys
-from bridge.mavlink_bridge import Autopilot, MavlinkBridge
+from bridge.mavlink_bridge import MavlinkBridge
+from bridge.vehicle_commands import Autopilot
 from planner.common.jsonio import jsonable
 from planner.fly.backseat import BackSeat
 from planner.fly.run_bus import PART_ROLES, RunBus

@@ -21,7 +21,8 @@ os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
 from bridge import keys
-from bridge.mavlink_bridge import MavlinkBridge, MissionItem
+from bridge.mavlink_bridge import MavlinkBridge
+from bridge.mission_upload import MissionItem
 from bridge.session import open_session
 from planner.fly.ardusub_sitl import ENV, ArduSubSitl, launch_point, sitl_binary
 from rapt.errors import InputError, LinkTimeoutError, MissingFileError
