@@ -17,18 +17,13 @@ imported on first use, so ``import bridge.keys`` stays cheap for a back-seat pro
 from importlib import import_module
 
 _EXPORTS = {
-    "ARDUSUB_MODES": "bridge.vehicle_commands",
-    "Autopilot": "bridge.vehicle_commands",
-    "BusRelay": "bridge.relay",
     "CommandGate": "bridge.command_gate",
     "MavlinkBridge": "bridge.mavlink_bridge",
-    "MavlinkLink": "bridge.link",
     "McapLogger": "bridge.logger",
     "MissionItem": "bridge.mission_upload",
     "read_log": "bridge.logger",
     "read_metadata": "bridge.logger",
     "Setpoint": "bridge.setpoint",
-    "VehicleCommands": "bridge.vehicle_commands",
     "open_session": "bridge.session",
     "zenoh_config": "bridge.session",
 }
