@@ -40,7 +40,7 @@ from scipy.spatial import cKDTree
 import rapt
 import sim.uuv
 from planner.common.jsonio import jsonable
-from planner.common.plans import coordinate_sensitivity, embedded_mission
+from planner.common.plans import PLAN_SCHEMA, coordinate_sensitivity, embedded_mission
 from planner.plan.confirmation import Confirmation, confirm_pairs
 from planner.plan.dithering import DEFAULT_NOISE, DitherNoise, Outcome, dither_many, outcome_columns, robust_variants
 from planner.plan.exports import write_scenario_files
@@ -60,10 +60,7 @@ __all__ = [
     "select_pairs",
     "generate",
     "auto_batch_size",
-    "PLAN_SCHEMA",
 ]
-
-PLAN_SCHEMA = "rapt.plan/1"
 
 
 def auto_batch_size(budget: int) -> int:

@@ -43,12 +43,12 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
 from matplotlib.patches import Polygon as MplPolygon  # noqa: E402
 
+from planner.common.plans import PLAN_SCHEMA  # noqa: E402
 from rapt.errors import InputError  # noqa: E402
 from sim.uuv.geo import LocalFrame  # noqa: E402
 
 __all__ = ["write_report", "REPORT_NAME", "FIGURES_DIR"]
 
-PLAN_SCHEMA = "rapt.plan/1"  # planner.plan.generate.PLAN_SCHEMA (not imported: generate imports this module)
 REPORT_NAME = "report.html"
 FIGURES_DIR = "figures"
 
