@@ -14,7 +14,8 @@ from typer.testing import CliRunner
 import planner
 import sim.uuv
 from planner.common.plans import PLAN_SCHEMA
-from planner.plan.generate import GenerateConfig, analyse, generate, search_mission, select_pairs
+from planner.plan.analysis import analyse, select_pairs
+from planner.plan.generate import GenerateConfig, generate, search_mission
 from rapt.errors import InputError
 
 EXAMPLES = Path(__file__).resolve().parents[3] / "examples"
