@@ -34,7 +34,8 @@ import numpy as np
 from scipy.stats import qmc
 
 import sim.uuv
-from planner.plan.generate import GenerateConfig, analyse, confirm_with_expert, search_mission, select_pairs
+from planner.plan.analysis import analyse, confirm_with_expert, select_pairs
+from planner.plan.generate import GenerateConfig, search_mission
 from planner.plan.surrogate import ModeValidation, train_surrogate
 from rapt.agreement import agreement, path_error
 from sim.uuv.autonomy import Autonomy

@@ -28,9 +28,10 @@ from rapt.errors import FileFormatError, InputError, StudyMismatchError
 from rapt.space import StateSpace
 from sim.uuv.mission import Mission
 
-__all__ = ["Plan", "load_plan", "plan_id", "coordinate_sensitivity", "embedded_mission"]
+__all__ = ["Plan", "PLAN_SCHEMA", "load_plan", "plan_id", "coordinate_sensitivity", "embedded_mission"]
 
-SCHEMA = "rapt.plan/1"
+#: The schema ``plan.json`` declares (``planner/plan.schema.json``); :func:`load_plan` accepts no other.
+PLAN_SCHEMA = "rapt.plan/1"
 
 
 def plan_id(plan: dict) -> str:
@@ -122,9 +123,9 @@ def load_plan(path: str | Path) -> Plan:
             f"PLAN: {path} is not valid JSON ({exc}); regenerate it with rapt-plan generate"
         ) from None
     schema = data.get("schema") if isinstance(data, dict) else None
-    if schema != SCHEMA:
+    if schema != PLAN_SCHEMA:
         raise FileFormatError(
-            f"PLAN: {path} is not a {SCHEMA} plan (schema {schema!r}); give the plan.json written by rapt-plan generate"
+            f"PLAN: {path} is not a {PLAN_SCHEMA} plan (schema {schema!r}); give the plan.json written by rapt-plan generate"
         )
     info = data.get("mission")
     if not isinstance(info, dict):

@@ -4,9 +4,9 @@ The stages of ``rapt-plan generate``, each a function a test can run on a small 
 
 1. :func:`search_mission` — a space-filling start, then S-NDV on the root scores, every
    batch written to the study store (a killed run resumes where it stopped).
-2. :func:`analyse` — every valid run re-scored in full (the simulator is deterministic),
+2. :func:`planner.plan.analysis.analyse` — every valid run re-scored in full (the simulator is deterministic),
    the sub-boundary tree over the mission's score tree, sensitivity of each root score.
-3. :func:`select_pairs` — K boundary pairs on different sub-boundaries, shortest first,
+3. :func:`planner.plan.analysis.select_pairs` — K boundary pairs on different sub-boundaries, shortest first,
    kept clear of invalid scenarios and of isolated samples (noise rather than behaviour);
    with ``--refine``, :func:`planner.plan.refinement.refine_pairs` focuses a search on each
    candidate's own sub-scores and keeps the first K it makes sharp.
@@ -22,7 +22,9 @@ The stages of ``rapt-plan generate``, each a function a test can run on a small 
 :func:`generate` runs them all and writes ``plan.json`` (schema ``rapt.plan/1``,
 documented in ``planner/plan.schema.json``) and, per scenario, a QGroundControl
 ``.plan``, a ``QGC WPL 110`` file and its predicted track as GeoJSON
-(:mod:`planner.plan.exports`), and ``report.html`` (:mod:`planner.plan.report`).
+(:mod:`planner.plan.plan_scenarios`), and ``report.html`` (:mod:`planner.plan.report`).
+On the surrogate workflow the expert confirms the pairs first
+(:func:`planner.plan.analysis.confirm_with_expert`).
 """
 
 from __future__ import annotations
@@ -30,40 +32,27 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 import rapt
 import sim.uuv
-from planner.common.jsonio import jsonable
-from planner.common.plans import coordinate_sensitivity, embedded_mission
-from planner.plan.confirmation import Confirmation, confirm_pairs
+from planner.common.plans import PLAN_SCHEMA, coordinate_sensitivity, embedded_mission
+from planner.plan.analysis import Analysis, analyse, confirm_with_expert, pair_points, select_pairs
+from planner.plan.confirmation import Confirmation
 from planner.plan.dithering import DEFAULT_NOISE, DitherNoise, Outcome, dither_many, outcome_columns, robust_variants
-from planner.plan.exports import write_scenario_files
+from planner.plan.plan_scenarios import scenario_entries, variant_entries
 from planner.plan.refinement import MIN_REFINE_RUNS, refine_pairs
 from planner.plan.report import write_report
 from planner.plan.search_status import SearchStatus
 from rapt.errors import InputError, StudyMismatchError
-from rapt.importance import output_importance
-from sim.uuv.metrics import metric_names, metric_types
 from sim.uuv.mission import Mission
-from sim.uuv.scoring import MODE_NAMES, modes_from_scores
+from sim.uuv.scoring import MODE_NAMES
 
-__all__ = [
-    "GenerateConfig",
-    "search_mission",
-    "analyse",
-    "select_pairs",
-    "generate",
-    "auto_batch_size",
-    "PLAN_SCHEMA",
-]
-
-PLAN_SCHEMA = "rapt.plan/1"
+__all__ = ["GenerateConfig", "search_mission", "generate", "auto_batch_size", "make_executor"]
 
 
 def auto_batch_size(budget: int) -> int:
@@ -165,7 +154,6 @@ ROOT_COLUMNS = (0, 1)  # mission and safety success: what the search steers on
 # a mission's parameters all matter, so its effective dimension is high and neighbour
 # queries cost O(n) each; past this the asks of a 10^5-run study would dominate it.
 SEARCH_REFERENCE = 10_000
-SPOT_CHECK_RUNS = 8  # stored runs simulated again before an analysis trusts the store
 
 
 def make_executor(spec: str):
@@ -221,118 +209,6 @@ def search_mission(
     )
 
 
-# -- 2. analysis --------------------------------------------------------------------------
-@dataclass
-class Analysis:
-    X: np.ndarray
-    result: sim.uuv.Result
-    tree: rapt.SubBoundaryTree
-    sensitivity: dict[str, dict[str, float]]
-    X_invalid: np.ndarray
-    boundary_types: list[dict] = field(default_factory=list)
-    surrogate: Any = None  # the learned autonomy the runs were simulated with (None: the expert)
-
-
-def analyse(mission: Mission, study: rapt.Study, surrogate=None) -> Analysis:
-    X, Y = study.X, study.Y
-    names, types = metric_names(mission), metric_types(mission)
-    spot = sim.uuv.simulate(mission, X[:SPOT_CHECK_RUNS], surrogate=surrogate)
-    if Y.shape[1] != len(names) or not np.array_equal(spot.scores, Y[:SPOT_CHECK_RUNS], equal_nan=True):
-        raise StudyMismatchError(
-            "study: the stored runs do not match the mission file (was it edited?); plan into a new --out directory"
-        )
-    result = sim.uuv.Result(Y, modes_from_scores(Y), np.ones(len(Y), dtype=bool), [""] * len(Y), names, types)
-    tree = rapt.subboundary_tree(
-        X, result.scores, mission.score_tree, output_types=result.output_types, graph=study.neighbours
-    )
-    imp = output_importance(X, result.scores[:, :2], ("binary", "binary"), random_state=0)
-    sensitivity = {}
-    for row, name in zip(imp, ("mission_success", "safety_success")):
-        sensitivity[name] = {p.name: float(row[mission.space.slice_of(p.name)].sum()) for p in mission.space.parameters}
-    a = Analysis(X, result, tree, sensitivity, study.X_failed, surrogate=surrogate)
-    a.boundary_types = _boundary_types(a)
-    return a
-
-
-def _pair_elements(a: Analysis, i: int, j: int, level: int) -> list[str]:
-    """Names of the discrete score elements of ``level`` that differ across a pair."""
-    cols = a.tree.levels[level]
-    types = a.result.output_types
-    return [
-        a.result.names[c] for c in cols if types[c] != "continuous" and a.result.scores[i, c] != a.result.scores[j, c]
-    ]
-
-
-def _boundary_types(a: Analysis) -> list[dict]:
-    i, j, d, lv = a.tree.pairs()
-    counts: dict[tuple, list[float]] = {}
-    for ii, jj, dd, ll in zip(i.tolist(), j.tolist(), d.tolist(), lv.tolist()):
-        key = (ll, tuple(_pair_elements(a, ii, jj, ll)))
-        if key[1]:
-            counts.setdefault(key, []).append(dd)
-    rows = [{"level": k[0], "elements": list(k[1]), "pairs": len(v), "shortest": min(v)} for k, v in counts.items()]
-    return sorted(rows, key=lambda r: (r["level"], -r["pairs"], r["shortest"]))
-
-
-# -- 3. pair selection --------------------------------------------------------------------
-def select_pairs(a: Analysis, k: int, min_cluster: int = 3) -> list[dict]:
-    """K pairs on distinct sub-boundaries: root-mode changes first, then deeper elements.
-
-    A pair is skipped when an endpoint's sub-cluster at the pair's level has fewer than
-    ``min_cluster`` runs (a lone run is more likely noise than a behaviour), or when an
-    invalid scenario lies closer to an endpoint than the pair's own length.
-    """
-    i, j, d, lv = a.tree.pairs()
-    invalid = cKDTree(a.X_invalid) if len(a.X_invalid) else None
-    sizes = [np.bincount(a.tree.assignment[level]) for level in range(len(a.tree.levels))]
-    chosen, seen = [], set()
-    for ii, jj, dd, ll in sorted(zip(i.tolist(), j.tolist(), d.tolist(), lv.tolist()), key=lambda p: (p[3] > 0, p[2])):
-        elements = tuple(_pair_elements(a, ii, jj, ll))
-        if not elements or (ll, elements) in seen:
-            continue
-        asg = a.tree.assignment[ll]
-        if min(sizes[ll][asg[ii]], sizes[ll][asg[jj]]) < min_cluster:
-            continue
-        if invalid is not None:
-            near, _ = invalid.query(a.X[[ii, jj]], k=1)
-            if np.any(near < dd):
-                continue
-        seen.add((ll, elements))
-        modes = a.result.modes
-        chosen.append(
-            {
-                "level": ll,
-                "elements": list(elements),
-                "distance": dd,
-                "rows": [ii, jj],
-                "modes": [MODE_NAMES[modes[ii]], MODE_NAMES[modes[jj]]],
-            }
-        )
-        if len(chosen) == k:
-            break
-    return chosen
-
-
-# -- 7. expert confirmation (surrogate workflow) ------------------------------------------------
-def confirm_with_expert(mission: Mission, a: Analysis, candidates: list[dict], k: int, budget: int) -> Confirmation:
-    """The surrogate's candidate pairs checked by the expert (:func:`planner.plan.confirmation.confirm_pairs`).
-
-    Section 6.2.3, step 3: a pair found on the surrogate is planned only as the expert's own
-    boundary pair near it.  The candidates' scenarios and the surrogate's scores there
-    (simulated again: the surrogate is deterministic) are handed on; at most ``k`` pairs,
-    at most ``budget`` expert runs.
-    """
-    U = np.array([_pair_points(a, p) for p in candidates]).reshape(len(candidates), 2, mission.dim)
-    claimed = sim.uuv.simulate(mission, U.reshape(-1, mission.dim), surrogate=a.surrogate).scores
-    offered = [{**p, "u": U[c], "scores": claimed[2 * c : 2 * c + 2]} for c, p in enumerate(candidates)]
-    return confirm_pairs(mission, offered, k, budget)
-
-
-def _pair_points(a: Analysis, pair: dict) -> np.ndarray:
-    """A pair's two unit-cube scenarios: moved ones (refined or confirmed) or the study's rows."""
-    return np.asarray(pair["u_override"] if "u_override" in pair else a.X[pair["rows"]], dtype=float)
-
-
 # -- everything ------------------------------------------------------------------------------
 def generate(
     mission: Mission,
@@ -358,7 +234,7 @@ def generate(
     clock = _StageClock(timings)
     a, pairs, confirmation, refinement = _choose_pairs(mission, cfg, progress, clock)
     sens = coordinate_sensitivity(mission.space, a.sensitivity)
-    U = np.vstack([_pair_points(a, p) for p in pairs]) if pairs else np.zeros((0, mission.dim))
+    U = np.vstack([pair_points(a, p) for p in pairs]) if pairs else np.zeros((0, mission.dim))
     ids = [f"pair{p}{side}" for p in range(1, len(pairs) + 1) for side in "ab"]
     partners = U[np.arange(len(U)) ^ 1]  # a's partner is b and b's is a
     chosen = sim.uuv.simulate(mission, U, trajectories=True)
@@ -388,8 +264,8 @@ def generate(
             cfg.surrogate,
         )
     clock.lap("variants")
-    scenarios = _scenario_entries(mission, a, U, ids, chosen, stats, out_dir)
-    variants = _variant_entries(mission, ids, fragile, found, chosen, out_dir)
+    scenarios = scenario_entries(mission, a, U, ids, chosen, stats, out_dir)
+    variants = variant_entries(mission, ids, fragile, found, chosen, out_dir)
     verdicts = _verdicts(cfg, pairs, stats, dict(zip(fragile, found)))
     runs = {
         "search": cfg.search_budget,
@@ -548,74 +424,6 @@ def _verdicts(cfg: GenerateConfig, pairs: list[dict], stats: list[dict], found: 
             )
         out.append(entry)
     return out
-
-
-def _scenario_entries(
-    mission: Mission,
-    a: Analysis,
-    U: np.ndarray,
-    ids: list[str],
-    chosen: sim.uuv.Result,
-    stats: list[dict],
-    out_dir: Path,
-) -> list[dict]:
-    """The plan's scenarios (with their predicted root and level-1 scores), their files written."""
-    level_cols = set(a.tree.levels[0]) | set(a.tree.levels[min(1, len(a.tree.levels) - 1)])
-    scenarios = []
-    for k, sid in enumerate(ids):
-        mode = int(chosen.modes[k])
-        scenarios.append(
-            {
-                "id": sid,
-                "u": [float(v) for v in U[k]],
-                "parameters": jsonable(mission.space.decode(U[k][None, :])[0]),
-                "predicted": {
-                    "mode": MODE_NAMES[mode],
-                    "scores": {n: float(chosen.scores[k, c]) for c, n in enumerate(chosen.names) if c in level_cols},
-                },
-                "dithering": stats[k],
-                "files": {
-                    kind: path.name
-                    for kind, path in write_scenario_files(mission, U[k], out_dir, sid, chosen.trajectory(k)).items()
-                },
-            }
-        )
-    return scenarios
-
-
-def _variant_entries(
-    mission: Mission,
-    ids: list[str],
-    fragile: list[int],
-    found: list[dict],
-    chosen: sim.uuv.Result,
-    out_dir: Path,
-) -> list[dict]:
-    """The robust "M" variants found for fragile scenarios, their files written."""
-    variants = []
-    for k, v in zip(fragile, found):
-        if not v["found"]:
-            continue
-        vid = f"{ids[k]}M"
-        variants.append(
-            {
-                "id": vid,
-                "variant_of": ids[k],
-                "u": v["u"],
-                "parameters": jsonable(mission.space.decode(np.array(v["u"])[None, :])[0]),
-                "moved": v["moved"],
-                "direction": v["direction"],
-                "noise_sigmas": v["sigmas"],
-                "predicted": {"mode": MODE_NAMES[int(chosen.modes[k])]},
-                "p_predicted_mode": v["p_predicted_mode"],
-                "p_predicted": v["p_predicted"],
-                "files": {
-                    kind: path.name
-                    for kind, path in write_scenario_files(mission, np.array(v["u"]), out_dir, vid).items()
-                },
-            }
-        )
-    return variants
 
 
 def _plan_document(

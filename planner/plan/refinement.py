@@ -44,7 +44,7 @@ def refine_pairs(
 ) -> tuple[list[dict], dict]:
     """The first ``k`` candidates, in their order, that a focused search makes sharp.
 
-    ``a`` is the study's :class:`~planner.plan.generate.Analysis`: its runs seed each focus.
+    ``a`` is the study's :class:`~planner.plan.analysis.Analysis`: its runs seed each focus.
     ``runs`` caps each candidate's new simulations. Returns the sharp pairs and the
     refinement's account for the plan: runs spent, candidates tried, and the ones
     dropped with their lengths.

@@ -15,19 +15,15 @@ Agg backend like the plan's own report:
 
 from __future__ import annotations
 
-import html
 from pathlib import Path
 from typing import Any
 
-import matplotlib
+import matplotlib.pyplot as plt
+import numpy as np
 
-matplotlib.use("Agg")  # files only: no display on CI machines or range laptops
-
-import matplotlib.pyplot as plt  # noqa: E402
-import numpy as np  # noqa: E402
-from matplotlib.patches import Rectangle  # noqa: E402
-
-from sim.uuv.scenario import make_scenarios  # noqa: E402
+from planner.common.html.figures import draw_area, label_map_axes, rectangle_corners, save_figure
+from planner.common.html.text import EN_DASH, escape, percent, significant
+from sim.uuv.scenario import make_scenarios
 
 __all__ = ["write_comparison_report", "REPORT_NAME"]
 
@@ -39,16 +35,17 @@ th{background:#eee}td.l,th.l{text-align:left}.bad{color:#b00020;font-weight:bold
 img{max-width:100%}.warn{background:#fff4e5;border-left:4px solid #f0a020;padding:.5em 1em}"""
 
 
+#: A missing value (the plan's report writes an em dash).
+MISSING = EN_DASH
+
+
 def _e(v: Any) -> str:
-    return html.escape("" if v is None else str(v))
+    """Text escaped; a missing one (None) written as nothing."""
+    return escape(v, none="")
 
 
 def _num(v: Any, digits: int = 3) -> str:
-    if v is None:
-        return "–"
-    if isinstance(v, float):
-        return f"{v:.{digits}g}"
-    return _e(v)
+    return significant(v, digits, missing=MISSING)
 
 
 def _differ(row: dict) -> str:
@@ -57,15 +54,13 @@ def _differ(row: dict) -> str:
     for name, v in row.get("sub_scores", {}).items():
         if v["observed"] is not None and v["observed"] != v["predicted"]:
             out.append(f"{name} {v['predicted']:g}→{v['observed']:g}")
-    return ", ".join(out) or "–"
+    return ", ".join(out) or MISSING
 
 
 def _rects(ax, rects: np.ndarray, face: str, edge: str, alpha: float, label: str | None = None) -> None:
     for i, (x0, x1, y0, y1) in enumerate(np.asarray(rects).reshape(-1, 4)):
-        ax.add_patch(
-            Rectangle(
-                (x0, y0), x1 - x0, y1 - y0, facecolor=face, edgecolor=edge, alpha=alpha, label=label if i == 0 else None
-            )
+        draw_area(
+            ax, rectangle_corners(x0, x1, y0, y1), face=face, edge=edge, alpha=alpha, label=label if i == 0 else None
         )
 
 
@@ -74,9 +69,8 @@ def _map(plan, sid: str, track: np.ndarray, predicted, corrected, row: dict, pat
     scen = make_scenarios(m, plan.u(sid)[None, :])
     fig, ax = plt.subplots(figsize=(5.2, 6.0))
     op = m.operational_area
-    ax.add_patch(
-        Rectangle((op.x - op.width / 2, op.y - op.height / 2), op.width, op.height, fill=False, edgecolor="#333")
-    )
+    x0, y0 = op.x - op.width / 2, op.y - op.height / 2
+    draw_area(ax, rectangle_corners(x0, x0 + op.width, y0, y0 + op.height), face=None, edge="#333")
     _rects(ax, scen.area_rect[0], "#4daf4a", "#2b7a28", 0.3, "mission area")
     if m.transmission is not None:
         _rects(ax, scen.tx_rect[0], "#80b1d3", "#377eb8", 0.3, "transmission")
@@ -121,14 +115,12 @@ def _map(plan, sid: str, track: np.ndarray, predicted, corrected, row: dict, pat
     ax.set_aspect("equal")
     ax.set_xlim(op.x - op.width / 2 - 20, op.x + op.width / 2 + 20)
     ax.set_ylim(op.y - op.height / 2 - 20, op.y + op.height / 2 + 20)
-    ax.set_xlabel("east (m)")
-    ax.set_ylabel("north (m)")
+    label_map_axes(ax)
     err = row.get("path_error_m")
     ax.set_title(f"{sid}: path error {err:.1f} m" if err is not None else sid, fontsize=10)
     ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.12), ncol=3, frameon=False)
     fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    save_figure(fig, path, dpi=90)
 
 
 def _bias_figure(result: dict, path: Path) -> None:
@@ -150,8 +142,7 @@ def _bias_figure(result: dict, path: Path) -> None:
         "execution bias: estimate ± 2 s.e. (line: neutral, band: prior ± 2 s.d., grey: not identified)", fontsize=9
     )
     fig.tight_layout()
-    fig.savefig(path, dpi=90)
-    plt.close(fig)
+    save_figure(fig, path, dpi=90)
 
 
 def _bias_section(result: dict, fig_dir: Path) -> list[str]:
@@ -179,13 +170,13 @@ def _bias_section(result: dict, fig_dir: Path) -> list[str]:
     ag = result["mode_agreement"]
 
     def pct(v: float | None) -> str:
-        return "–" if v is None else f"{v:.0%}"
+        return percent(v, missing=MISSING)
 
     cv = result["cross_validation"]
     held, path = cv["held_out_mode_agreement"], cv["held_out_path_error_m"]
 
     def metres(v: float | None) -> str:
-        return "–" if v is None else f"{v:.1f} m"
+        return MISSING if v is None else f"{v:.1f} m"
 
     parts.append(
         "<h2>Is the correction worth using?</h2><p>Leave one log out: fit on the others, predict the "
@@ -214,7 +205,7 @@ def _scenario_section(result: dict, plan, tracks: list[tuple[str, np.ndarray]], 
         cls = "ok" if r["observed_mode"] == r["predicted_mode"] else "bad"
         parts.append(
             f"<tr><td class='l'>{_e(r['id'])}</td><td class='l'>{_e(r['log'])}</td>"
-            f"<td>{_e(r['predicted_mode'])}</td><td class='{cls}'>{_e(r['observed_mode'] or '–')}</td>"
+            f"<td>{_e(r['predicted_mode'])}</td><td class='{cls}'>{_e(r['observed_mode'] or MISSING)}</td>"
             f"<td>{_e(r['corrected_mode'])}</td><td>{_num(r['path_error_m'])}</td>"
             f"<td>{_num(r['path_error_corrected_m'])}</td><td class='l'>{_e(r['ended'] or 'not in log')}</td>"
             f"<td class='l'>{_e(_differ(r))}</td></tr>"
@@ -230,7 +221,7 @@ def _scenario_section(result: dict, plan, tracks: list[tuple[str, np.ndarray]], 
         for r in result["scenarios"]:
             parts.append(
                 f"<tr><td class='l'>{_e(r['id'])}</td><td>{_e(r['predicted_mode'])}</td>"
-                f"<td>{_e(r['calibrated_mode'])}</td><td>{_e(r['observed_mode'] or '–')}</td>"
+                f"<td>{_e(r['calibrated_mode'])}</td><td>{_e(r['observed_mode'] or MISSING)}</td>"
                 f"<td>{_num(r['path_error_m'])}</td><td>{_num(r['path_error_calibrated_m'])}</td></tr>"
             )
         parts.append("</table>")
@@ -252,13 +243,13 @@ def _pair_section(result: dict) -> list[str]:
     )
 
     def yn(v: bool | None) -> str:
-        return "–" if v is None else ("yes" if v else "<span class='bad'>no</span>")
+        return MISSING if v is None else ("yes" if v else "<span class='bad'>no</span>")
 
     for p in result["pairs"]:
         parts.append(
             f"<tr><td>{_e(p['id'])}</td><td class='l'>{_e(' / '.join(p['scenarios']))}</td>"
             f"<td class='l'>{_e(', '.join(p['elements']))}</td><td>{_e(' / '.join(p['predicted_modes']))}</td>"
-            f"<td>{_e(' / '.join(m or '–' for m in p['observed_modes']))}</td>"
+            f"<td>{_e(' / '.join(m or MISSING for m in p['observed_modes']))}</td>"
             f"<td>{yn(p['observed_straddles'])}</td>"
             f"<td>{'<span class=bad>flagged: ' + _e(p.get('reason')) + '</span>' if p['flagged'] else 'holds'}"
             "</td></tr>"
@@ -288,7 +279,7 @@ def _replan_section(result: dict) -> list[str]:
                 )
             else:
                 parts.append(
-                    f"<tr><td class='l'>–</td><td class='l'>{_e(q['variant_of'])}</td>"
+                    f"<tr><td class='l'>{MISSING}</td><td class='l'>{_e(q['variant_of'])}</td>"
                     f"<td class='l' colspan=3>{_e(q['note'])}</td></tr>"
                 )
         parts.append("</table>")

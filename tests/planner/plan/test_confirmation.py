@@ -112,7 +112,8 @@ def test_confirmation_stops_at_its_budget(boundary, claimed, expert_calls):
 
 def test_the_expert_as_its_own_surrogate_confirms_every_candidate_as_is():
     """generate's wiring: candidates from a study's analysis reach the expert with the scores found there."""
-    from planner.plan.generate import GenerateConfig, analyse, confirm_with_expert, search_mission, select_pairs
+    from planner.plan.analysis import analyse, confirm_with_expert, select_pairs
+    from planner.plan.generate import GenerateConfig, search_mission
 
     a = analyse(IMITATION7, search_mission(IMITATION7, GenerateConfig(budget=500, batch_size=250, seed=1)))
     candidates = select_pairs(a, 10)

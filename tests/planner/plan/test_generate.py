@@ -13,7 +13,9 @@ from typer.testing import CliRunner
 
 import planner
 import sim.uuv
-from planner.plan.generate import PLAN_SCHEMA, GenerateConfig, analyse, generate, search_mission, select_pairs
+from planner.common.plans import PLAN_SCHEMA
+from planner.plan.analysis import analyse, select_pairs
+from planner.plan.generate import GenerateConfig, generate, search_mission
 from rapt.errors import InputError
 
 EXAMPLES = Path(__file__).resolve().parents[3] / "examples"
