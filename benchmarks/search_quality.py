@@ -15,7 +15,7 @@ a boundary band of width ``D_eps`` (section 3.6.2 of Mullins 2018, Table 3.1):
 
 For systems with several outputs (composite8d) each figure is the mean over outputs.
 
-Systems, budgets and D_eps (``rapt.testfunctions.REFERENCE_SETTINGS``): the budgets are the issue's
+Systems, budgets and D_eps (``rapt.testfunctions.registry.REFERENCE_SETTINGS``): the budgets are the issue's
 (2-D: 1000, 3-D: 3000, 7-D screened and 8-D composite: 10000).  The paper does not
 state its D_eps, but its Table 3.1 Sobol coverages (32 % in 2-D, 1.3 % in 3-D) show a
 band narrow enough that a space-filling design covers well under half of it.  D_eps is
@@ -77,7 +77,7 @@ import peers  # noqa: E402
 
 import rapt  # noqa: E402
 from rapt.metrics import quality_table  # noqa: E402
-from rapt.testfunctions import REFERENCE_SETTINGS, get_system, search_output_types  # noqa: E402
+from rapt.testfunctions.registry import REFERENCE_SETTINGS, get_system, search_output_types  # noqa: E402
 
 BATCH = 100
 #: A method other than sobol / s-ndv / uncertainty whose first run takes longer than
@@ -104,7 +104,7 @@ class SystemSpec:
 
 
 def _spec(name: str, quick_budget: int, p_target: float, c_target: float, why: str) -> SystemSpec:
-    """Budget and D_eps come from ``rapt.testfunctions.REFERENCE_SETTINGS`` (one source of truth)."""
+    """Budget and D_eps come from ``rapt.testfunctions.registry.REFERENCE_SETTINGS`` (one source of truth)."""
     budget, d_eps = REFERENCE_SETTINGS[name]
     return SystemSpec(budget, min(quick_budget, budget), d_eps, p_target, c_target, why)
 
