@@ -187,7 +187,7 @@ def highest_kept_up(rows: list[dict]) -> float | None:
 def observe(rows: list[dict]) -> None:
     """Add observed mode (the logged track scored) and path error against the plan's prediction to each row."""
     import sim.uuv
-    from benchmarks.calibrate import _observed, _path_rms
+    from benchmarks.calibrate import observed_mode, path_rms
     from planner.common.plans import load_plan
     from planner.review.logs import read_run
 
@@ -201,8 +201,8 @@ def observe(rows: list[dict]) -> None:
         run = read_run(Path(r["log"]))
         r["predicted"] = plan.scenario(r["scenario"])["predicted"]["mode"]
         cut = r["ended"].startswith(NOT_AN_END)  # a run the scenario did not end has no mode to observe
-        r["observed"] = None if cut else _observed(plan.mission, plan.u(r["scenario"]), run)
-        r["path_rms_m"] = _path_rms(run.track, pred.trajectory(i))
+        r["observed"] = None if cut else observed_mode(plan.mission, plan.u(r["scenario"]), run)
+        r["path_rms_m"] = path_rms(run.track, pred.trajectory(i))
 
 
 def calibration(rows: list[dict], work: Path, seed: int = 0) -> dict:
@@ -247,9 +247,8 @@ def _f(v, fmt: str = ".0f") -> str:
     return "-" if v is None or (isinstance(v, float) and not np.isfinite(v)) else format(v, fmt)
 
 
-def report(
-    sweep_rows: list[dict], speedup: float | None, rows: list[dict], cal: dict | None, packs: list[dict] = ()
-) -> str:
+def _sweep_section(sweep_rows: list[dict], speedup: float | None) -> list[str]:
+    """The speed-up sweep's table and the highest speed-up that kept up."""
     out = ["## Speed-up sweep (first scenario, cut short)", ""]
     out += _head("speed-up", "vehicle s", "decisions", "missed", "stale", "p50 ms", "p99 ms",
                  "p99 x speed-up (vehicle ms)", "longest set-point gap (vehicle ms)", "lapsed", "watchdog", "kept up")  # fmt: skip
@@ -264,8 +263,13 @@ def report(
             f"{_f(r['max_gap_ms'])} | {r['lapsed']} | {r['watchdog'] or 'no'} | {'yes' if r['kept_up'] else 'no'} |"
         )
     out += ["", f"Highest speed-up kept up: {_f(speedup, 'g')}.", ""]
+    return out
+
+
+def _scenario_section(rows: list[dict], speedup: float | None) -> list[str]:
+    """The scenarios flown at ``speedup``: one row each, then how many ended and held their mode."""
     pack = rows[0]["pack_ah"] if rows else REHEARSAL_PACK_AH
-    out += [f"## Scenarios at speed-up {_f(speedup, 'g')} ({pack:g} Ah pack: the scenario's own ends apply)", ""]
+    out = [f"## Scenarios at speed-up {_f(speedup, 'g')} ({pack:g} Ah pack: the scenario's own ends apply)", ""]
     out += _head("scenario", "boot to armed in GUIDED (vehicle s / wall s)", "ended", "vehicle s", "watchdog",
                  "predicted", "observed", "path RMS (m)", "p50 / p99 ms", "longest gap (vehicle ms)", "lapsed")  # fmt: skip
     for r in rows:
@@ -287,52 +291,70 @@ def report(
         f"{sum(r['lapsed'] for r in flown)}; the plan's predicted mode observed: {held}/{len(rows)}.",
         "",
     ]
-    if packs:
-        out += ["## The vehicle's own pack (first scenario)", ""]
-        out += _head("pack", "ended", "vehicle s", "watchdog", "observed")
-        for r in packs:
-            pack = "firmware default (3.3 Ah)" if not r["pack_ah"] else f"{r['pack_ah']:g} Ah"
-            if "error" in r:
-                out.append(f"| {pack} | {r['error']} | | | |")
-                continue
-            out.append(
-                f"| {pack} | {r['ended']} | {r['sim_s']:.0f} | {_took_over(r)} | "
-                f"{r.get('observed') or 'no observation'} |"
-            )
-        out.append("")
-    if cal is not None:
-        out += ["## Held-out predictions before and after calibration", ""]
-        out += _head("fitted on", "scenario", "observed", "predicted (plan's vehicle)", "calibrated",
-                     "calibrated + bias", "path RMS before (m)", "after (m)")  # fmt: skip
-        n = before = after = biased = 0
-        for f in cal["folds"]:
-            for r in f["rows"]:
-                out.append(
-                    f"| {', '.join(f['fit_on'])} | {r['scenario']} | {r['observed'] or 'no observation'} | "
-                    f"{r['before']} | {r['after']} | {r['after_bias']} | {_f(r['path_before_m'])} | "
-                    f"{_f(r['path_after_m'])} |"
-                )
-                if r["observed"] is not None:
-                    n += 1
-                    before += r["before"] == r["observed"]
-                    after += r["after"] == r["observed"]
-                    biased += r["after_bias"] == r["observed"]
-        out += [
-            "",
-            f"Predicted modes that hold on the held-out half: {before}/{n} before calibration, {after}/{n} after, "
-            f"{biased}/{n} after calibration and the fitted bias.",
-            "",
-        ]
-        from planner.review.calibrate import FITTED
+    return out
 
-        out.append("| fold | " + " | ".join(FITTED) + " | bias |")
-        out.append("|---|" + "---|" * (len(FITTED) + 1))
-        for k, f in enumerate(cal["folds"]):
-            cells = [f"{f['fitted'][n][0]:.3g}" + ("" if f["fitted"][n][2] else " (n.i.)") for n in FITTED]
-            bias = ", ".join(f"{n} {v:.3g}" for n, v in f["bias"].items()) or "neutral"
-            out.append(f"| {k + 1} | " + " | ".join(cells) + f" | {bias} |")
-        file = cal["file"]
-        out.append("| file | " + " | ".join(f"{file[n]:.3g}" for n in FITTED) + " | |")
+
+def _pack_section(packs: list[dict]) -> list[str]:
+    """The first scenario flown on the vehicle's own pack (firmware default or a given capacity)."""
+    out = ["## The vehicle's own pack (first scenario)", ""]
+    out += _head("pack", "ended", "vehicle s", "watchdog", "observed")
+    for r in packs:
+        pack = "firmware default (3.3 Ah)" if not r["pack_ah"] else f"{r['pack_ah']:g} Ah"
+        if "error" in r:
+            out.append(f"| {pack} | {r['error']} | | | |")
+            continue
+        out.append(
+            f"| {pack} | {r['ended']} | {r['sim_s']:.0f} | {_took_over(r)} | {r.get('observed') or 'no observation'} |"
+        )
+    out.append("")
+    return out
+
+
+def _calibration_section(cal: dict) -> list[str]:
+    """Held-out predictions before and after calibration, and the fitted parameters per fold."""
+    from planner.review.calibrate import FITTED
+
+    out = ["## Held-out predictions before and after calibration", ""]
+    out += _head("fitted on", "scenario", "observed", "predicted (plan's vehicle)", "calibrated",
+                 "calibrated + bias", "path RMS before (m)", "after (m)")  # fmt: skip
+    n = before = after = biased = 0
+    for f in cal["folds"]:
+        for r in f["rows"]:
+            out.append(
+                f"| {', '.join(f['fit_on'])} | {r['scenario']} | {r['observed'] or 'no observation'} | "
+                f"{r['before']} | {r['after']} | {r['after_bias']} | {_f(r['path_before_m'])} | "
+                f"{_f(r['path_after_m'])} |"
+            )
+            if r["observed"] is not None:
+                n += 1
+                before += r["before"] == r["observed"]
+                after += r["after"] == r["observed"]
+                biased += r["after_bias"] == r["observed"]
+    out += [
+        "",
+        f"Predicted modes that hold on the held-out half: {before}/{n} before calibration, {after}/{n} after, "
+        f"{biased}/{n} after calibration and the fitted bias.",
+        "",
+    ]
+    out.append("| fold | " + " | ".join(FITTED) + " | bias |")
+    out.append("|---|" + "---|" * (len(FITTED) + 1))
+    for k, f in enumerate(cal["folds"]):
+        cells = [f"{f['fitted'][n][0]:.3g}" + ("" if f["fitted"][n][2] else " (n.i.)") for n in FITTED]
+        bias = ", ".join(f"{n} {v:.3g}" for n, v in f["bias"].items()) or "neutral"
+        out.append(f"| {k + 1} | " + " | ".join(cells) + f" | {bias} |")
+    file = cal["file"]
+    out.append("| file | " + " | ".join(f"{file[n]:.3g}" for n in FITTED) + " | |")
+    return out
+
+
+def report(
+    sweep_rows: list[dict], speedup: float | None, rows: list[dict], cal: dict | None, packs: list[dict] = ()
+) -> str:
+    out = _sweep_section(sweep_rows, speedup) + _scenario_section(rows, speedup)
+    if packs:
+        out += _pack_section(packs)
+    if cal is not None:
+        out += _calibration_section(cal)
     return "\n".join(out)
 
 

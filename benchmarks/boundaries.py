@@ -46,7 +46,9 @@ import rapt
 from rapt.boundaries import EXACT_GRAPH_MAX_SAMPLES, boundary_pairs, mutual_pairs
 from rapt.metrics import subboundary_recovery
 from rapt.modes import performance_modes
-from rapt.testfunctions import FuzzyBoundary, GlobalNoise, Hierarchical2D, HierarchicalND, Plates2D
+from rapt.testfunctions.hierarchical import Hierarchical2D, HierarchicalND
+from rapt.testfunctions.noise import FuzzyBoundary, GlobalNoise
+from rapt.testfunctions.shapes import Plates2D
 
 
 def correctness(n: int = 4000) -> None:

@@ -136,7 +136,7 @@ def fly(
             vehicle.wait()
 
 
-def _observed(mission, u, run) -> str | None:
+def observed_mode(mission, u, run) -> str | None:
     """The logged run's mode (the track scored by the mission's scorer); None when its end is not
     in the log or the watchdog ended it (a rig that fell behind, not the vehicle: no observation)."""
     from sim.uuv.replay import score_track
@@ -162,7 +162,7 @@ def fly_checked(
     return error
 
 
-def _path_rms(track: np.ndarray, pred: np.ndarray | None) -> float:
+def path_rms(track: np.ndarray, pred: np.ndarray | None) -> float:
     """RMS distance (m) between the logged and the predicted track at the same times (over the span both cover)."""
     if pred is None or not track.shape[0]:
         return float("nan")
@@ -198,11 +198,11 @@ def evaluate(plan_json: Path, logs: dict[str, Path], work: Path, seed: int = 0, 
             rows.append(
                 {
                     "scenario": sid,
-                    "observed": _observed(m, plan.u(sid), run) if modes else None,
+                    "observed": observed_mode(m, plan.u(sid), run) if modes else None,
                     "before": MODE_NAMES[before.modes[i]],
                     "after": MODE_NAMES[after.modes[i]],
-                    "path_before_m": _path_rms(run.track, before.trajectory(i)),
-                    "path_after_m": _path_rms(run.track, after.trajectory(i)),
+                    "path_before_m": path_rms(run.track, before.trajectory(i)),
+                    "path_after_m": path_rms(run.track, after.trajectory(i)),
                 }
             )
         fitted = {

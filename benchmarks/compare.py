@@ -165,6 +165,51 @@ def coverage(plan_dir: Path, seeds: int) -> None:
         print(f"| {n} | {a.size} of {seeds} | {rms} | {big} |")
 
 
+def report_case(label: str, text: str, noisy: bool, c: dict, timing: str) -> tuple:
+    """Print one case's comparison ``c`` (``comparison.json``) against the bias ``text`` injected,
+    under its heading and ``timing`` line: the parameter table, held-out agreement and path error,
+    the correction and end conditions.  Returns the case's row of the summary."""
+    params_ok, rows = judge(parse_bias(text), c["bias"])
+    print(f"\n## {label}: --inject-bias {text}" + (" --stochastic" if noisy else ""))
+    print(timing)
+    print("| parameter | injected | estimate | std. error | identified | verdict |")
+    print("|---|---:|---:|---:|:---:|---|")
+    for n, inj, est, se, ident, verdict in rows:
+        print(f"| {n} | {inj:g} | {est:.5g} | {se:.2g} | {'yes' if ident else 'no'} | {verdict} |")
+    cv = c["cross_validation"]
+    held, path = cv["held_out_mode_agreement"], cv["held_out_path_error_m"]
+    cv_ok = held["corrected"] is not None and held["corrected"] >= HELD_OUT_AGREEMENT
+    cv_ok &= held["uncorrected"] is None or held["corrected"] >= held["uncorrected"]
+    print(
+        f"held-out (leave one log out) mode agreement: uncorrected {held['uncorrected']:.0%}, "
+        f"corrected {held['corrected']:.0%} over {held['runs']} runs; held-out path error "
+        f"{path['uncorrected']:.1f} m -> {path['corrected']:.1f} m"
+    )
+    print(f"{c['correction']['note']}")
+    ends = c["bias_fit"]["end_conditions"]
+    print(
+        f"end conditions: {ends.get('logs_with_end', 0)} logged ends, chosen bias: {ends.get('chosen')} "
+        f"(reproduces {ends.get('ends_reproduced_by_chosen', '-')} of them)"
+    )
+    return (label, params_ok, held, path, c["correction"]["used"], cv_ok)
+
+
+def print_summary(summary: list[tuple]) -> None:
+    """The closing table: one row per case from :func:`report_case`."""
+    print("\n## Summary")
+    print(
+        "| case | parameters within 20 % of shift, others neutral | held-out agreement uncorrected -> corrected "
+        "| held-out path error (m) | correction used | >= 90 % and never below |"
+    )
+    print("|---|:---:|---:|---:|:---:|:---:|")
+    for label, params_ok, held, path, used, cv_ok in summary:
+        print(
+            f"| {label} | {'yes' if params_ok else 'NO'} | {held['uncorrected']:.0%} -> {held['corrected']:.0%} "
+            f"| {path['uncorrected']:.1f} -> {path['corrected']:.1f} | {'yes' if used else 'no'} "
+            f"| {'yes' if cv_ok else 'NO'} |"
+        )
+
+
 def main(argv: list[str] | None = None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--budget", type=int, default=None, help="search budget of the plan (default 4000; --quick: 500)")
@@ -213,43 +258,11 @@ def main(argv: list[str] | None = None) -> None:
             )
             t_cmp = time.perf_counter() - t0
             c = json.loads((logs / "cmp" / "comparison.json").read_text())
-            params_ok, rows = judge(parse_bias(text), c["bias"])
-            print(f"\n## {label}: --inject-bias {text}" + (" --stochastic" if noisy else ""))
-            print(f"{len(paths)} SIL runs in {t_fly:.0f} s ({args.workers} at a time); compare in {t_cmp:.0f} s")
-            print("| parameter | injected | estimate | std. error | identified | verdict |")
-            print("|---|---:|---:|---:|:---:|---|")
-            for n, inj, est, se, ident, verdict in rows:
-                print(f"| {n} | {inj:g} | {est:.5g} | {se:.2g} | {'yes' if ident else 'no'} | {verdict} |")
-            cv = c["cross_validation"]
-            held, path = cv["held_out_mode_agreement"], cv["held_out_path_error_m"]
-            cv_ok = held["corrected"] is not None and held["corrected"] >= HELD_OUT_AGREEMENT
-            cv_ok &= held["uncorrected"] is None or held["corrected"] >= held["uncorrected"]
-            print(
-                f"held-out (leave one log out) mode agreement: uncorrected {held['uncorrected']:.0%}, "
-                f"corrected {held['corrected']:.0%} over {held['runs']} runs; held-out path error "
-                f"{path['uncorrected']:.1f} m -> {path['corrected']:.1f} m"
-            )
-            print(f"{c['correction']['note']}")
-            ends = c["bias_fit"]["end_conditions"]
-            print(
-                f"end conditions: {ends.get('logs_with_end', 0)} logged ends, chosen bias: {ends.get('chosen')} "
-                f"(reproduces {ends.get('ends_reproduced_by_chosen', '-')} of them)"
-            )
-            summary.append((label, params_ok, held, path, c["correction"]["used"], cv_ok))
+            timing = f"{len(paths)} SIL runs in {t_fly:.0f} s ({args.workers} at a time); compare in {t_cmp:.0f} s"
+            summary.append(report_case(label, text, noisy, c, timing))
         if args.coverage and not args.quick:
             coverage(tmp / "plan", args.coverage)
-    print("\n## Summary")
-    print(
-        "| case | parameters within 20 % of shift, others neutral | held-out agreement uncorrected -> corrected "
-        "| held-out path error (m) | correction used | >= 90 % and never below |"
-    )
-    print("|---|:---:|---:|---:|:---:|:---:|")
-    for label, params_ok, held, path, used, cv_ok in summary:
-        print(
-            f"| {label} | {'yes' if params_ok else 'NO'} | {held['uncorrected']:.0%} -> {held['corrected']:.0%} "
-            f"| {path['uncorrected']:.1f} -> {path['corrected']:.1f} | {'yes' if used else 'no'} "
-            f"| {'yes' if cv_ok else 'NO'} |"
-        )
+    print_summary(summary)
     if args.vehicle:
         from benchmarks import calibrate
 

@@ -16,14 +16,6 @@ peer, as it is for ``rapt.search``.
 * :func:`uncertainty_search` - pool-based active learning by classifier uncertainty:
   a random forest retrained on all samples after every batch scores random candidates
   by predictive entropy and the batch takes the most uncertain ones.
-
-Run on its own, this file prints ``benchmarks/search_quality.py``'s table for the peers
-beside Sobol and S-NDV (same systems, budgets, D_eps and seeds)::
-
-    python benchmarks/peers.py [--seeds 3] [--systems ...] [--quick]
-
-``--quick`` runs one seed on the 2-D and 3-D systems (Custom2D, Plates2D, Plates3D) at
-their full budgets (1000, 1000, 3000 samples).
 """
 
 from __future__ import annotations
@@ -31,8 +23,9 @@ from __future__ import annotations
 import numpy as np
 
 from rapt.samplers.space_filling import sobol_points
+from rapt.testfunctions.registry import get_system
 
-__all__ = ["adaptive_available", "python_adaptive_search", "uncertainty_search", "COMBINE", "main"]
+__all__ = ["adaptive_available", "python_adaptive_search", "uncertainty_search", "probe_learnernd", "COMBINE"]
 
 #: How the uncertainty learner combines its per-output scores (see :func:`uncertainty_search`).
 COMBINE = "normalised"
@@ -182,8 +175,6 @@ def _learnernd_child(system_name: str, batch: int, max_points: int, queue) -> No
 
     import adaptive
 
-    from rapt.testfunctions import get_system
-
     system = get_system(system_name)
     learner = adaptive.LearnerND(lambda x: 0.0, bounds=[(0.0, 1.0)] * system.dim)
     start = time.perf_counter()
@@ -232,38 +223,3 @@ def probe_learnernd(system_name: str, seconds: float, batch: int = 20, max_point
         proc.terminate()
     proc.join(5)
     return {"points": int(reached), "at": float(at), "finished": finished, "limit": float(seconds)}
-
-
-# ------------------------------------------------------------------------------- main
-#: The methods of the peers' table: the two peers and the two references they are read against.
-PEER_METHODS = ("sobol", "s-ndv", "uncertainty", "python-adaptive")
-#: Systems of ``--quick``: those on which every peer runs (python-adaptive stops at 3-D).
-QUICK_SYSTEMS = ("custom2d", "plates2d", "plates3d")
-
-
-def main(argv: list[str] | None = None) -> int:
-    """The peers beside Sobol and S-NDV, in ``benchmarks/search_quality.py``'s table."""
-    import argparse
-
-    import search_quality  # the benchmarks directory is on sys.path when this file is run
-
-    ap = argparse.ArgumentParser(description="Peer samplers beside Sobol and S-NDV (search_quality's table).")
-    ap.add_argument("--seeds", type=int, default=3, help="seeds 0..N-1 per method (default 3; --quick: 1)")
-    ap.add_argument(
-        "--systems",
-        nargs="+",
-        choices=list(search_quality.SYSTEMS),
-        default=None,
-        help="default: all five; --quick: " + " ".join(QUICK_SYSTEMS),
-    )
-    ap.add_argument("--quick", action="store_true", help="one seed on the 2-D and 3-D systems")
-    args = ap.parse_args(argv)
-    systems = args.systems or list(QUICK_SYSTEMS if args.quick else search_quality.SYSTEMS)
-    forwarded = ["--methods", *PEER_METHODS, "--systems", *systems, "--seeds", str(args.seeds)]
-    return search_quality.main(forwarded + (["--quick"] if args.quick else []))
-
-
-if __name__ == "__main__":
-    import sys
-
-    sys.exit(main())

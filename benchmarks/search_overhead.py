@@ -33,7 +33,9 @@ import numpy as np
 import rapt
 from rapt.metrics import quality_table
 from rapt.samplers import make_sampler
-from rapt.testfunctions import Plates3D, Screened, get_system, search_output_types
+from rapt.testfunctions.composites import Screened
+from rapt.testfunctions.registry import get_system, search_output_types
+from rapt.testfunctions.shapes import Plates3D
 
 
 def time_ask(method: str, X: np.ndarray, Y: np.ndarray, batch: int, repeat: int) -> float:

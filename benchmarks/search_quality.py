@@ -15,7 +15,7 @@ a boundary band of width ``D_eps`` (section 3.6.2 of Mullins 2018, Table 3.1):
 
 For systems with several outputs (composite8d) each figure is the mean over outputs.
 
-Systems, budgets and D_eps (``rapt.testfunctions.REFERENCE_SETTINGS``): the budgets are the issue's
+Systems, budgets and D_eps (``rapt.testfunctions.registry.REFERENCE_SETTINGS``): the budgets are the issue's
 (2-D: 1000, 3-D: 3000, 7-D screened and 8-D composite: 10000).  The paper does not
 state its D_eps, but its Table 3.1 Sobol coverages (32 % in 2-D, 1.3 % in 3-D) show a
 band narrow enough that a space-filling design covers well under half of it.  D_eps is
@@ -52,6 +52,10 @@ Usage::
     python benchmarks/search_quality.py                 # 3 seeds, full budgets (~15 min on 2 cores)
     python benchmarks/search_quality.py --quick         # 1 seed, 7-D/8-D at 3000 samples, no GPR
     python benchmarks/search_quality.py --systems plates2d plates3d --seeds 5
+    python benchmarks/search_quality.py --methods sobol s-ndv uncertainty python-adaptive   # the peers only
+
+With ``--quick --systems custom2d plates2d plates3d`` the peers-only run takes one seed on
+the systems every peer runs on (python-adaptive stops at 3-D), at their full budgets.
 
 The exit code is 0 whatever the verdicts (it is a report, not a test); only an
 exception ends it otherwise.
@@ -77,7 +81,7 @@ import peers  # noqa: E402
 
 import rapt  # noqa: E402
 from rapt.metrics import quality_table  # noqa: E402
-from rapt.testfunctions import REFERENCE_SETTINGS, get_system, search_output_types  # noqa: E402
+from rapt.testfunctions.registry import REFERENCE_SETTINGS, get_system, search_output_types  # noqa: E402
 
 BATCH = 100
 #: A method other than sobol / s-ndv / uncertainty whose first run takes longer than
@@ -104,7 +108,7 @@ class SystemSpec:
 
 
 def _spec(name: str, quick_budget: int, p_target: float, c_target: float, why: str) -> SystemSpec:
-    """Budget and D_eps come from ``rapt.testfunctions.REFERENCE_SETTINGS`` (one source of truth)."""
+    """Budget and D_eps come from ``rapt.testfunctions.registry.REFERENCE_SETTINGS`` (one source of truth)."""
     budget, d_eps = REFERENCE_SETTINGS[name]
     return SystemSpec(budget, min(quick_budget, budget), d_eps, p_target, c_target, why)
 
@@ -268,23 +272,39 @@ def verdict(spec: SystemSpec, p_ratio: float, c_ratio: float) -> str:
     return f"{word} (P>={spec.p_target:g}x, C>={spec.c_target:g}x)"
 
 
+#: Columns of the main table; an n/a row's message spans those from "precision" on.
+TABLE_HEADERS = [
+    "system",
+    "method",
+    "n",
+    "seeds",
+    "precision",
+    "coverage",
+    "mean dist",
+    "time/search s",
+    "P/Sobol",
+    "C/Sobol",
+    "target (s-ndv)",
+]
+
+
 def print_table(
     all_results: dict[str, dict[str, Result]], specs: dict[str, SystemSpec], budgets: dict[str, int], seeds: list[int]
 ) -> list[str]:
     """Print the table; return the failed targets as text lines."""
-    headers = [
-        "system",
-        "method",
-        "n",
-        "seeds",
-        "precision",
-        "coverage",
-        "mean dist",
-        "time/search s",
-        "P/Sobol",
-        "C/Sobol",
-        "target (s-ndv)",
-    ]
+    rows, notes, failures = table_rows(all_results, specs, budgets)
+    print_rows(TABLE_HEADERS, rows)
+    if notes:
+        print("Notes:")
+        for n in notes:
+            print(f"  - {n}")
+    return failures
+
+
+def table_rows(
+    all_results: dict[str, dict[str, Result]], specs: dict[str, SystemSpec], budgets: dict[str, int]
+) -> tuple[list[list[str]], list[str], list[str]]:
+    """The table's cells (an empty row between systems), its notes and the failed s-ndv targets."""
     rows: list[list[str]] = []
     notes: list[str] = []
     failures: list[str] = []
@@ -325,6 +345,12 @@ def print_table(
             if res.note:
                 notes.append(f"{name} / {method}: {res.note}")
         rows.append([])
+    return rows, notes, failures
+
+
+def print_rows(headers: list[str], rows: list[list[str]]) -> None:
+    """The rows in aligned columns under ``headers`` (text left, figures right); an n/a row's
+    message runs on from the fifth column unaligned."""
     widths = [len(h) for h in headers]
     for row in rows:
         for i, cell in enumerate(row):
@@ -352,11 +378,6 @@ def print_table(
                 cell.ljust(w) if i < 2 or i == 10 else cell.rjust(w) for i, (cell, w) in enumerate(zip(row, widths))
             ).rstrip()
         )
-    if notes:
-        print("Notes:")
-        for n in notes:
-            print(f"  - {n}")
-    return failures
 
 
 def print_d_eps(all_results, specs, budgets) -> list[str]:

@@ -120,57 +120,42 @@ def _robust_scale(r: np.ndarray) -> float:
     return max(s, 1e-3 * rms, 1e-12)
 
 
-def fit_map(
-    residuals: Callable[[np.ndarray], np.ndarray],
-    priors: Sequence[Prior],
-    *,
-    groups: np.ndarray | None = None,
-    kinds: np.ndarray | None = None,
-    bootstrap: int = 0,
-    jackknife: bool = False,
-    seed: int = 0,
-    identify_below: float = IDENTIFIED_BELOW,
-    max_nfev: int = 200,
-    diff_step: float = 1e-6,
-    residuals_many: Callable[[np.ndarray], np.ndarray] | None = None,
-) -> MapEstimate:
-    """MAP estimate of ``priors``' parameters from ``residuals(theta) -> (m,)`` (see the module docstring).
+class _Problem:
+    """The MAP fit as ``least_squares`` sees it: parameters in prior-scaled units ``z``, so the prior
+    term is ``z`` itself and a parameter fixed at its centre is ``z = 0``."""
 
-    ``residuals`` takes parameter values in ``priors`` order and returns residuals in units
-    of a nominal noise (their actual scale is estimated); its length must not depend on
-    ``theta``.  ``groups`` (m,) labels residuals that share an error (a segment, a log):
-    the robust and bootstrap standard errors treat each group as one draw.  ``kinds`` (m,)
-    labels residuals of one kind (position, energy): each kind's noise scale is estimated
-    on its own, so a precise kind is not drowned by a noisy one.  ``residuals_many(thetas)``
-    (p, k) -> (p, m), when given, evaluates several parameter vectors at once: the
-    Jacobian's finite differences then cost one batched call instead of k + 1.
-    """
-    priors = tuple(priors)
-    names = [p.name for p in priors]
-    centre = np.array([p.centre for p in priors])
-    sd = np.array([p.sd for p in priors])
-    lo = (np.array([p.low for p in priors]) - centre) / sd
-    hi = (np.array([p.high for p in priors]) - centre) / sd
+    def __init__(
+        self,
+        residuals: Callable[[np.ndarray], np.ndarray],
+        priors: tuple[Prior, ...],
+        residuals_many: Callable[[np.ndarray], np.ndarray] | None,
+        max_nfev: int,
+        diff_step: float,
+    ):
+        self.residuals, self.residuals_many = residuals, residuals_many
+        self.max_nfev, self.diff_step = max_nfev, diff_step
+        self.centre = np.array([p.centre for p in priors])
+        self.sd = np.array([p.sd for p in priors])
+        self.lo = (np.array([p.low for p in priors]) - self.centre) / self.sd
+        self.hi = (np.array([p.high for p in priors]) - self.centre) / self.sd
 
-    def theta_of(z: np.ndarray, free: np.ndarray) -> np.ndarray:
-        full = np.zeros(len(priors))
+    def theta(self, z: np.ndarray, free: np.ndarray) -> np.ndarray:
+        """Parameter values for ``z`` of the ``free`` ones, the others at their centre."""
+        full = np.zeros(self.centre.size)
         full[free] = z
-        return centre + sd * full
-
-    r0 = np.asarray(residuals(centre), dtype=float)
-    m = r0.size
-    if groups is not None:
-        groups = np.asarray(groups)
-        if groups.shape != (m,):
-            raise ValueError(f"groups: expected one label per residual ({m}), got shape {groups.shape}")
+        return self.centre + self.sd * full
 
     def solve(
+        self,
         free: np.ndarray,
         z0: np.ndarray,
         scale: np.ndarray | float,
         weight: np.ndarray | None = None,
-        nfev: int = max_nfev,
+        nfev: int | None = None,
     ):
+        """Fit the ``free`` parameters from ``z0`` with residuals divided by ``scale`` (and weighted)."""
+        lo, hi, diff_step = self.lo, self.hi, self.diff_step
+        residuals, residuals_many, theta_of = self.residuals, self.residuals_many, self.theta
         w = None if weight is None else np.sqrt(weight)
 
         def fun(z: np.ndarray) -> np.ndarray:
@@ -203,8 +188,46 @@ def fit_map(
             jac=jac,
             diff_step=diff_step,
             x_scale=1.0,
-            max_nfev=nfev,
+            max_nfev=self.max_nfev if nfev is None else nfev,
         )
+
+
+def fit_map(
+    residuals: Callable[[np.ndarray], np.ndarray],
+    priors: Sequence[Prior],
+    *,
+    groups: np.ndarray | None = None,
+    kinds: np.ndarray | None = None,
+    bootstrap: int = 0,
+    jackknife: bool = False,
+    seed: int = 0,
+    identify_below: float = IDENTIFIED_BELOW,
+    max_nfev: int = 200,
+    diff_step: float = 1e-6,
+    residuals_many: Callable[[np.ndarray], np.ndarray] | None = None,
+) -> MapEstimate:
+    """MAP estimate of ``priors``' parameters from ``residuals(theta) -> (m,)`` (see the module docstring).
+
+    ``residuals`` takes parameter values in ``priors`` order and returns residuals in units
+    of a nominal noise (their actual scale is estimated); its length must not depend on
+    ``theta``.  ``groups`` (m,) labels residuals that share an error (a segment, a log):
+    the robust and bootstrap standard errors treat each group as one draw.  ``kinds`` (m,)
+    labels residuals of one kind (position, energy): each kind's noise scale is estimated
+    on its own, so a precise kind is not drowned by a noisy one.  ``residuals_many(thetas)``
+    (p, k) -> (p, m), when given, evaluates several parameter vectors at once: the
+    Jacobian's finite differences then cost one batched call instead of k + 1.
+    """
+    priors = tuple(priors)
+    names = [p.name for p in priors]
+    problem = _Problem(residuals, priors, residuals_many, max_nfev, diff_step)
+    centre, sd, theta_of, solve = problem.centre, problem.sd, problem.theta, problem.solve
+
+    r0 = np.asarray(residuals(centre), dtype=float)
+    m = r0.size
+    if groups is not None:
+        groups = np.asarray(groups)
+        if groups.shape != (m,):
+            raise ValueError(f"groups: expected one label per residual ({m}), got shape {groups.shape}")
 
     every = np.ones(len(priors), dtype=bool)
     # the data's noise scale: from a fit with nominal units, then the MAP with the data's own scale
@@ -231,18 +254,9 @@ def fit_map(
             final = solve(free, sol.x[free], scale)
         sd_f, cov_f, source = _covariances(final, m, groups)
         if sd_f.max() < identify_below and (bootstrap > 0 or jackknife) and groups is not None:
-            if jackknife:
-                sd_b, n_boot, how = _jackknife(solve, free, final.x, scale, groups), np.unique(groups).size, "jackknife"
-            else:
-                boot = _bootstrap(solve, free, final.x, scale, groups, bootstrap, seed)
-                n_boot, how = boot.shape[0], "bootstrap"
-                sd_b = boot.std(axis=0, ddof=1) if n_boot > 1 else np.zeros(sd_f.size)
-            if n_boot > 1:
-                for i in range(sd_f.size):
-                    if sd_b[i] > sd_f[i]:
-                        sd_f[i], source[i] = sd_b[i], how
-                d = np.sqrt(np.clip(np.diag(cov_f), 1e-300, None))
-                cov_f = cov_f / np.outer(d, d) * np.outer(sd_f, sd_f)  # the correlations, at the chosen widths
+            sd_f, cov_f, source, n_boot = _resampled(
+                solve, free, final.x, scale, groups, sd_f, cov_f, source, bootstrap, jackknife, seed
+            )
         stderr_z[free] = sd_f
         for n, src in zip([n for n, f in zip(names, free) if f], source):
             sources[n] = src
@@ -260,14 +274,7 @@ def fit_map(
     for n, f in zip(names, free):
         if not f:
             sources[n] = "not identified"
-    corr: dict[str, dict[str, float]] = {}
-    cov_value = np.zeros((int(free.sum()), int(free.sum())))
-    if free.any():
-        cov_value = cov_f * np.outer(sd[free], sd[free])
-        d = np.sqrt(np.clip(np.diag(cov_f), 1e-300, None))
-        c = cov_f / np.outer(d, d)
-        kn = [n for n, f in zip(names, free) if f]
-        corr = {a: {b: float(c[i, j]) for j, b in enumerate(kn) if b != a} for i, a in enumerate(kn)}
+    corr, cov_value = _correlations(cov_f, sd, names, free)
     value = theta_of(final.x, free) if free.any() else centre.copy()
     res = np.asarray(residuals(value), dtype=float)
     return MapEstimate(
@@ -285,6 +292,52 @@ def fit_map(
         n_boot,
         sources,
     )
+
+
+def _resampled(
+    solve,
+    free: np.ndarray,
+    z: np.ndarray,
+    scale: np.ndarray | float,
+    groups: np.ndarray,
+    sd_f: np.ndarray,
+    cov_f: np.ndarray,
+    source: list[str],
+    bootstrap: int,
+    jackknife: bool,
+    seed: int,
+) -> tuple[np.ndarray, np.ndarray, list[str], int]:
+    """The s.d. ``sd_f`` (with covariance and sources) widened where the jackknife or block bootstrap
+    around the estimate ``z`` is wider, and the number of refits that took."""
+    if jackknife:
+        sd_b, n_boot, how = _jackknife(solve, free, z, scale, groups), np.unique(groups).size, "jackknife"
+    else:
+        boot = _bootstrap(solve, free, z, scale, groups, bootstrap, seed)
+        n_boot, how = boot.shape[0], "bootstrap"
+        sd_b = boot.std(axis=0, ddof=1) if n_boot > 1 else np.zeros(sd_f.size)
+    if n_boot > 1:
+        for i in range(sd_f.size):
+            if sd_b[i] > sd_f[i]:
+                sd_f[i], source[i] = sd_b[i], how
+        d = np.sqrt(np.clip(np.diag(cov_f), 1e-300, None))
+        cov_f = cov_f / np.outer(d, d) * np.outer(sd_f, sd_f)  # the correlations, at the chosen widths
+    return sd_f, cov_f, source, n_boot
+
+
+def _correlations(
+    cov_f: np.ndarray, sd: np.ndarray, names: list[str], free: np.ndarray
+) -> tuple[dict[str, dict[str, float]], np.ndarray]:
+    """The identified parameters' correlations by name, and their covariance in value units
+    (``cov_f`` is in prior-scaled units)."""
+    corr: dict[str, dict[str, float]] = {}
+    cov_value = np.zeros((int(free.sum()), int(free.sum())))
+    if free.any():
+        cov_value = cov_f * np.outer(sd[free], sd[free])
+        d = np.sqrt(np.clip(np.diag(cov_f), 1e-300, None))
+        c = cov_f / np.outer(d, d)
+        kn = [n for n, f in zip(names, free) if f]
+        corr = {a: {b: float(c[i, j]) for j, b in enumerate(kn) if b != a} for i, a in enumerate(kn)}
+    return corr, cov_value
 
 
 def _drop_one(solve, free: np.ndarray, z: np.ndarray, scale, candidates: np.ndarray) -> np.ndarray:

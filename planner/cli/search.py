@@ -17,7 +17,7 @@ import rapt
 from planner.cli.console import fail, out, progress_bar
 from planner.cli.inputs import load_mission
 from rapt.metrics import quality_table
-from rapt.testfunctions import REFERENCE_SETTINGS, SYSTEMS, get_system, search_output_types
+from rapt.testfunctions.registry import REFERENCE_SETTINGS, SYSTEMS, get_system, search_output_types
 
 __all__ = ["run_search", "search", "study"]
 

@@ -23,7 +23,8 @@ from scipy.stats import qmc
 import sim.uuv
 from rapt.agreement import path_error
 from rapt.errors import InputError
-from rapt.imitation import IterationRecord, Policy, imitate
+from rapt.imitation.dagger import IterationRecord, imitate
+from rapt.imitation.policies import Policy
 from sim.uuv.imitation.features import GOAL, feature_spec, policy_heads
 from sim.uuv.imitation.rollouts import annotated_runs, draw_valid, make_rollout
 from sim.uuv.imitation.surrogate import Surrogate
@@ -78,7 +79,7 @@ def train_surrogate(
     mode accuracy on them; 0 keeps the last), then its goal threshold
     (:func:`calibrate_goal_threshold`).  The surrogate's ``training["runs"]`` counts every
     expert run spent: annotated and held out.  ``goal_classifier`` trains the goal decision
-    as a classifier weighted toward the expert's switches (:func:`rapt.imitation.imitate`'s
+    as a classifier weighted toward the expert's switches (:func:`rapt.imitation.dagger.imitate`'s
     ``decisions``); False regresses it on +-1 like the velocity, for comparison.
     """
     if not 0.0 <= mixing < 1.0:

@@ -6,7 +6,8 @@ import pytest
 import rapt
 from rapt.boundaries import boundary_pairs, mutual_pairs
 from rapt.modes import performance_modes
-from rapt.testfunctions import GlobalNoise, Plates2D
+from rapt.testfunctions.noise import GlobalNoise
+from rapt.testfunctions.shapes import Plates2D
 
 
 def test_discrete_modes_are_label_combinations():

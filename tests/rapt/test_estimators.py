@@ -7,7 +7,7 @@ from sklearn.utils.estimator_checks import parametrize_with_checks
 
 import rapt
 from rapt.estimators import BoundaryPairFinder, PerformanceModes
-from rapt.testfunctions import Plates2D
+from rapt.testfunctions.shapes import Plates2D
 
 
 @parametrize_with_checks([PerformanceModes(), BoundaryPairFinder()])

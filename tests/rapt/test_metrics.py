@@ -15,7 +15,8 @@ from rapt.metrics import (
     mean_boundary_distance,
     quality_table,
 )
-from rapt.testfunctions import Composite8D, Plates2D, Plates3D, Rings2D, Screened
+from rapt.testfunctions.composites import Composite8D, Screened
+from rapt.testfunctions.shapes import Plates2D, Plates3D, Rings2D
 
 
 class HalfPlane:

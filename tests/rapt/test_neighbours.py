@@ -98,7 +98,7 @@ def test_hnsw_graph_pairs_match_the_exact_graph_pairs():
     # The approximate graph must give (nearly) the pairs of the exact k-graph at every level
     # of a sub-boundary tree: same clusters, >= 95 % of the pairs, no type with 2+ pairs lost.
     import rapt
-    from rapt.testfunctions import HierarchicalND
+    from rapt.testfunctions.hierarchical import HierarchicalND
 
     h = HierarchicalND(dim=10)
     X = np.random.default_rng(7).random((3000, 10))
@@ -121,7 +121,7 @@ def test_hnsw_graph_pairs_match_the_exact_graph_pairs():
 
 def test_hnsw_pairs_are_deterministic():
     import rapt
-    from rapt.testfunctions import HierarchicalND
+    from rapt.testfunctions.hierarchical import HierarchicalND
 
     h = HierarchicalND(dim=10)
     X = np.random.default_rng(8).random((3000, 10))

@@ -6,7 +6,7 @@ import pytest
 import rapt
 from rapt.metrics import subboundary_recovery
 from rapt.scoretree import ScoreTree
-from rapt.testfunctions import Hierarchical2D
+from rapt.testfunctions.hierarchical import Hierarchical2D
 
 
 def test_score_tree_from_nested_mappings():

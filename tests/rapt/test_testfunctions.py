@@ -9,21 +9,11 @@ import pytest
 from scipy.spatial import cKDTree
 from scipy.stats import norm
 
-from rapt.testfunctions import (
-    SYSTEMS,
-    Composite,
-    Composite8D,
-    Custom2D,
-    FuzzyBoundary,
-    GlobalNoise,
-    Mirrored,
-    Plates2D,
-    Plates3D,
-    Rings2D,
-    Screened,
-    convex_polygon_sdf,
-    get_system,
-)
+from rapt.testfunctions.composites import Composite, Composite8D, Mirrored, Screened
+from rapt.testfunctions.geometry import convex_polygon_sdf
+from rapt.testfunctions.noise import FuzzyBoundary, GlobalNoise
+from rapt.testfunctions.registry import SYSTEMS, get_system
+from rapt.testfunctions.shapes import Custom2D, Plates2D, Plates3D, Rings2D
 
 EXPECTED = {
     # name: (dim, output_types, active_dims)

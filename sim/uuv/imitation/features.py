@@ -128,7 +128,7 @@ class FeatureSpec:
 
 
 def policy_heads(spec: FeatureSpec) -> tuple[tuple[list[int] | None, list[int]], ...]:
-    """Which features each network of a learned back-seat reads (``rapt.imitation.imitate(heads=)``).
+    """Which features each network of a learned back-seat reads (``rapt.imitation.dagger.imitate(heads=)``).
 
     Heading and speed from every feature; the goal decision from the charge, the map vectors
     and the clock only — what the expert's goal selection reads.  Learned by the steering

@@ -11,7 +11,8 @@ from __future__ import annotations
 import numpy as np
 
 from rapt.errors import InputError
-from rapt.imitation import MLPPolicy, Trajectory
+from rapt.imitation.dagger import Trajectory
+from rapt.imitation.policies import MLPPolicy
 from sim.uuv.autonomy import Autonomy, Command
 from sim.uuv.imitation.driver import PolicyAutonomy
 from sim.uuv.imitation.features import FeatureSpec, advance_waypoints, expert_action, features, waypoint_target
@@ -174,7 +175,7 @@ def draw_valid(mission: Mission, k: int, rng: np.random.Generator) -> np.ndarray
 
 
 def make_rollout(mission: Mission, spec: FeatureSpec, seed: int = 0, stochastic: bool = False, mixing: float = 0.0):
-    """A ``rollout(policy, k, iteration)`` for :func:`rapt.imitation.imitate` on random valid scenarios.
+    """A ``rollout(policy, k, iteration)`` for :func:`rapt.imitation.dagger.imitate` on random valid scenarios.
 
     Iteration ``i`` draws its scenarios from a generator seeded by ``(seed, i)``, so every
     learner sees the same scenarios at the same iteration.  ``mixing`` p makes iteration i obey the

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from rapt.errors import FileFormatError, InputError, MissingFileError, StudyMismatchError
-from rapt.imitation import HeadsPolicy, MLPPolicy, policy_from_arrays
+from rapt.imitation.policies import HeadsPolicy, MLPPolicy, policy_from_arrays
 from sim.uuv.imitation.features import FeatureSpec, feature_spec
 from sim.uuv.mission import Mission
 

@@ -11,7 +11,8 @@ import pytest
 
 import sim.uuv
 from rapt.errors import FileFormatError, InputError, MissingFileError, StudyMismatchError
-from rapt.imitation import HeadsPolicy, MLPPolicy, Trajectory, imitate, policy_from_arrays
+from rapt.imitation.dagger import Trajectory, imitate
+from rapt.imitation.policies import HeadsPolicy, MLPPolicy, policy_from_arrays
 from sim.uuv.imitation.features import action_command, expert_action, feature_spec, features
 from sim.uuv.imitation.rollouts import annotated_runs
 from sim.uuv.imitation.surrogate import Surrogate
