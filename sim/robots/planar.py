@@ -11,21 +11,32 @@ so here they are array operations over a chunk of joint states:
   (so, as with Qhull, collinear middle points are not vertices); the edges are walked
   into a ring;
 * settling: the quasi-static tipping table :meth:`StabilityFunction.settle_all` uses
-  (:func:`sim.robots.stability.planar_tip_table`), followed for every face in step.
+  (:func:`sim.robots.tipping.planar_tip_table`), followed for every face in step.
 
 The results equal the per-state path's (checked in the tests) up to the order of faces.
 """
 
 from __future__ import annotations
 
+from typing import Protocol
+
 import numpy as np
 
-from sim.robots.stability import planar_face_ids, planar_tip_table
+from sim.robots.model import Robot
+from sim.robots.tipping import planar_face_ids, planar_tip_table
 
-__all__ = ["planar_all_faces"]
+__all__ = ["PlanarFaces", "planar_all_faces"]
 
 
-def _kinematics(F, theta: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+class PlanarFaces(Protocol):
+    """What :func:`planar_all_faces` reads of a :class:`~sim.robots.stability.StabilityFunction`."""
+
+    robot: Robot
+    gravity: np.ndarray  # ground-frame direction of gravity (3,)
+    vertex_id: np.ndarray  # per robot vertex, its canonical vertex (coinciding ones share one)
+
+
+def _kinematics(F: PlanarFaces, theta: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(n, V, 2) x-z positions of the kept robot vertices and (n, 2) centre of mass."""
     robot = F.robot
     n = len(theta)
@@ -40,11 +51,11 @@ def _kinematics(F, theta: np.ndarray, keep: np.ndarray) -> tuple[np.ndarray, np.
         ang[j.child] = pa + sign * a
     verts, com = [], np.zeros((n, 2))
     for name, link in robot.links.items():
-        v = robot._verts[name][:, [0, 2]]
+        v = robot.link_vertices[name][:, [0, 2]]
         c, s = np.cos(ang[name])[:, None], np.sin(ang[name])[:, None]
         t = pos[name]
         verts.append(np.stack([c * v[:, 0] + s * v[:, 1] + t[:, :1], -s * v[:, 0] + c * v[:, 1] + t[:, 1:]], axis=-1))
-        m = robot._com[name][[0, 2]]
+        m = robot.link_coms[name][[0, 2]]
         com += link.mass * np.column_stack(
             [
                 np.cos(ang[name]) * m[0] + np.sin(ang[name]) * m[1] + t[:, 0],
@@ -84,13 +95,13 @@ def _rings(P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return ring, length
 
 
-def planar_all_faces(F, theta: np.ndarray, chunk: int = 2000) -> dict:
+def planar_all_faces(F: PlanarFaces, theta: np.ndarray, chunk: int = 2000) -> dict:
     """Every face of every joint state in ``theta`` (n, m): flat arrays in joint-state order, faces in ring order.
 
     Keys: ``row`` (joint-state index), ``start``, ``rest`` (body angles, NaN when it rolls
     away), ``stable``, ``energy``, ``tips``, ``start_id``, ``rest_id``, ``count`` (faces per joint state).
     """
-    uniq = np.unique(F._vertex_id)
+    uniq = np.unique(F.vertex_id)
     out: dict[str, list[np.ndarray]] = {
         k: [] for k in ("row", "start", "rest", "stable", "energy", "tips", "start_id", "rest_id", "count")
     }

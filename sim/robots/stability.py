@@ -34,64 +34,11 @@ import numpy as np
 from scipy.spatial import ConvexHull, QhullError
 
 from rapt.errors import InputError
-from sim.robots.model import Robot, _rotation
+from sim.robots.model import Robot, rotation
+from sim.robots.planar import planar_all_faces
+from sim.robots.tipping import GRAVITY, HASH_BASE, HASH_MOD, TOL, planar_face_ids, planar_tip_table
 
-__all__ = ["GRAVITY", "Hull", "StabilityResult", "StabilityFunction", "body_angles", "down_normals"]
-
-GRAVITY = 9.81
-_TOL = 1e-9
-_HASH_BASE, _HASH_MOD = 1_000_003, 2**61 - 1  # face identities: a polynomial hash of the spanning vertices
-
-
-def planar_face_ids(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Identity of the planar face from canonical vertex ``a`` to ``b`` (an ordered pair: its direction matters).
-
-    The same hash as :meth:`StabilityFunction._face_ids` gives the vertex sequence ``(a, b)``.
-    """
-    return ((np.asarray(a, dtype=np.int64) + 1) * _HASH_BASE + np.asarray(b, dtype=np.int64) + 1) % _HASH_MOD
-
-
-def _rot_xz(v: np.ndarray, c: np.ndarray, s: np.ndarray) -> np.ndarray:
-    """Ground-frame (x, z) of base-frame (x, z) points ``v`` (..., 2) under Ry(p), ``c = cos p``, ``s = sin p``."""
-    return np.stack([c * v[..., 0] + s * v[..., 1], -s * v[..., 0] + c * v[..., 1]], axis=-1)
-
-
-def planar_tip_table(
-    A: np.ndarray, B: np.ndarray, p: np.ndarray, com: np.ndarray, k: np.ndarray, gravity: np.ndarray, mass: float
-) -> tuple[np.ndarray, np.ndarray]:
-    """Quasi-static tipping table of n planar hulls: the face each face tips onto and the energy lost, each (n, K).
-
-    Face ``f < k[i]`` of hull ``i`` runs counter-clockwise from ``A[i, f]`` to ``B[i, f]`` (x-z,
-    base frame, the next face's start) at body angle ``p[i, f]``; ``com`` (n, 2) is each hull's
-    centre of mass; entries ``f >= k[i]`` are padding.  ``next`` is -1 where the face is stable;
-    otherwise the robot pivots on the end the centre of mass has crossed onto the neighbouring
-    face.  A planar tip depends only on the face it starts from, so following the table from a
-    face is the whole quasi-static settling (:meth:`StabilityFunction.settle_all` for one hull,
-    :func:`sim.robots.planar.planar_all_faces` for many).
-    """
-    n, K = p.shape
-    f = np.arange(K)[None, :]
-    valid = f < k[:, None]
-    kk = np.maximum(k, 1)[:, None]
-    c, s = np.cos(p), np.sin(p)
-    qa, qb, qc = _rot_xz(A, c, s), _rot_xz(B, c, s), _rot_xz(com[:, None, :], c, s)
-    gx, gz = gravity[0], gravity[2]
-    xs = qc[..., 0] + (qa[..., 1] - qc[..., 1]) / gz * gx  # where the centre of mass meets the ground along gravity
-    lo, hi = np.minimum(qa[..., 0], qb[..., 0]), np.maximum(qa[..., 0], qb[..., 0])
-    hull_max = np.where(valid[..., None], np.abs(A), 0.0).max(axis=(1, 2))
-    tol = (_TOL * np.maximum(1.0, hull_max))[:, None]
-    over_hi, under_lo = xs > hi + tol, xs < lo - tol
-    b_is_hi = qb[..., 0] >= qa[..., 0]
-    pivot_b = np.where(over_hi, b_is_hi, ~b_is_hi)  # pivot on vertex b (the next face) or a (the previous)
-    nxt = np.where((over_hi | under_lo) & valid, np.where(pivot_b, (f + 1) % kk, (f - 1) % kk), -1)
-    pivot = np.where(pivot_b[..., None], B, A)
-    j = np.maximum(nxt, 0)
-    rows = np.arange(n)[:, None]
-    rel = com[:, None, :] - pivot
-    up = -gravity[[0, 2]]
-    h0 = _rot_xz(rel, c, s) @ up
-    h1 = _rot_xz(rel, c[rows, j], s[rows, j]) @ up
-    return nxt, np.where(nxt >= 0, mass * GRAVITY * (h0 - h1), 0.0)
+__all__ = ["Hull", "StabilityResult", "StabilityFunction", "body_angles", "down_normals"]
 
 
 def body_angles(normals: np.ndarray, planar: bool) -> np.ndarray:
@@ -119,10 +66,8 @@ def down_normals(angles: np.ndarray, planar: bool) -> np.ndarray:
 def _orientation(angles: np.ndarray, planar: bool) -> np.ndarray:
     """Base-to-ground rotation with yaw 0 for one body angle."""
     if planar:
-        return _rotation(np.array([0.0, 1.0, 0.0]), float(angles[0]))
-    return _rotation(np.array([0.0, 1.0, 0.0]), float(angles[1])) @ _rotation(
-        np.array([1.0, 0.0, 0.0]), float(angles[0])
-    )
+        return rotation(np.array([0.0, 1.0, 0.0]), float(angles[0]))
+    return rotation(np.array([0.0, 1.0, 0.0]), float(angles[1])) @ rotation(np.array([1.0, 0.0, 0.0]), float(angles[0]))
 
 
 @dataclass
@@ -191,7 +136,7 @@ class StabilityFunction:
         self.gravity = np.array([np.sin(self.slope), 0.0, -np.cos(self.slope)])  # ground frame
         self.n_queries = 0
         self.n_hulls = 0
-        self._vertex_id = self._canonical_vertices()
+        self.vertex_id = self._canonical_vertices()
 
     def _canonical_vertices(self) -> np.ndarray:
         """Per robot vertex, the index of the first vertex it always coincides with in the hull's plane.
@@ -220,7 +165,7 @@ class StabilityFunction:
         for i, vs in enumerate(vertex_sets):
             h = 0
             for v in sorted(set(vs)):
-                h = (h * _HASH_BASE + int(v) + 1) % _HASH_MOD
+                h = (h * HASH_BASE + int(v) + 1) % HASH_MOD
             out[i] = h
         return out
 
@@ -243,7 +188,7 @@ class StabilityFunction:
         offsets = -(normals * a).sum(axis=1)
         k = len(ring)
         faces = [np.array([i, (i + 1) % k]) for i in range(k)]
-        vid = self._vertex_id[ring]
+        vid = self.vertex_id[ring]
         ids = planar_face_ids(vid, np.concatenate([vid[1:], vid[:1]]))  # each face runs from vertex i to i + 1
         return Hull(
             np.asarray(theta, float),
@@ -278,7 +223,7 @@ class StabilityFunction:
         offsets = sums[:, 3] / np.bincount(group, minlength=n_groups)
         pairs = np.unique(np.column_stack([np.repeat(group, 3), remap[h.simplices].ravel()]), axis=0)
         faces = np.split(pairs[:, 1], np.flatnonzero(np.diff(pairs[:, 0])) + 1)
-        ids = self._face_ids([self._vertex_id[used[f]] for f in faces])
+        ids = self._face_ids([self.vertex_id[used[f]] for f in faces])
         return Hull(
             np.asarray(theta, float),
             pts,
@@ -341,7 +286,7 @@ class StabilityFunction:
             outward /= np.linalg.norm(outward, axis=1, keepdims=True)
             excess = ((cp - a) * outward).sum(axis=1)
             e = int(np.argmax(excess))
-            if excess[e] <= _TOL * max(1.0, np.abs(a).max()):
+            if excess[e] <= TOL * max(1.0, np.abs(a).max()):
                 return face, energy, tips
             if tips > 4 * hull.n_faces + 8:  # no stable face on this slope: it rolls away downhill
                 return -1, float("inf"), tips
@@ -352,7 +297,7 @@ class StabilityFunction:
             v1 = R @ hull.normals[nxt]
             target = np.array([0.0, 0.0, -1.0])
             angle = np.arctan2(w @ np.cross(v1, target), v1 @ target)
-            R2 = _rotation(w, angle) @ R
+            R2 = rotation(w, angle) @ R
             energy += self.robot.mass * GRAVITY * float(up @ ((R - R2) @ (c - hull.points[ia])))
             R, face, tips = R2, nxt, tips + 1
 
@@ -478,8 +423,6 @@ class StabilityFunction:
 
     def _all_faces_planar(self, theta: np.ndarray) -> StabilityResult:
         """:meth:`all_faces` for a planar robot, in bulk (:mod:`sim.robots.planar`); same results."""
-        from sim.robots.planar import planar_all_faces
-
         b = planar_all_faces(self, theta)
         self.n_hulls += len(theta)
         self.n_queries += len(b["row"])

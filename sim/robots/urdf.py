@@ -18,7 +18,7 @@ Read with :mod:`xml.etree`; what a self-righting study needs, nothing more:
   slope is 0.
 
 The tables built here go through the TOML reader's own validation
-(:func:`sim.robots.model.parse_parts`), so both formats accept and reject the same values.
+(:func:`sim.robots.parts.parse_parts`), so both formats accept and reject the same values.
 """
 
 from __future__ import annotations
@@ -29,7 +29,8 @@ from pathlib import Path
 
 import numpy as np
 
-from sim.robots.model import Robot, RobotFileError, _vec, parse_parts
+from sim.robots.model import Robot, RobotFileError
+from sim.robots.parts import parse_parts, vector
 
 __all__ = ["load_urdf"]
 
@@ -122,7 +123,7 @@ def _link_table(el: ET.Element, where: str) -> tuple[dict, Callable[[str], str],
                     f"{at}/geometry/mesh/@scale: expected one factor for all three axes, got {shape.get('scale')!r}"
                 )
             spec["mesh"], spec["mesh_scale"] = filename, scale[0]
-            offset = np.asarray(_vec(xyz, f"{at}/origin/@xyz"))
+            offset = np.asarray(vector(xyz, f"{at}/origin/@xyz"))
         else:
             raise RobotFileError(f"{at}/geometry/{shape.tag}: not supported; use <box> (or an STL <mesh>) instead")
     if boxes:

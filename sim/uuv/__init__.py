@@ -5,13 +5,7 @@ Depends on :mod:`rapt` for shared types only; never imports :mod:`bridge`.
 
 from sim.uuv.bias import Bias, parse_bias
 from sim.uuv.mission import Mission
+from sim.uuv.missionfile import load_mission
 from sim.uuv.simulate import Result, simulate
 
 __all__ = ["Bias", "Mission", "Result", "simulate", "load_mission", "parse_bias"]
-
-
-def load_mission(path) -> Mission:
-    """Load and validate a TOML mission file (see :mod:`sim.uuv.missionfile`)."""
-    from sim.uuv.missionfile import load_mission as _load
-
-    return _load(path)

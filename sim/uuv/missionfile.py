@@ -1,7 +1,7 @@
 """Mission files: a TOML description of a range day, loaded into a :class:`sim.uuv.mission.Mission`.
 
 :func:`load_mission` reads and checks the whole file; every problem is a
-:class:`MissionFileError` of ONE line naming the file, the field and the fix, e.g.::
+:class:`~sim.uuv.missionfields.MissionFileError` of ONE line naming the file, the field and the fix, e.g.::
 
     examples/x.toml: parameters[3].target: unknown element 'nogo.Z' (known no-go areas: N1); name an element defined in [[nogo]]
 
@@ -92,30 +92,19 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
-import math
 import re
 import tomllib
 from collections.abc import Mapping
 from pathlib import Path
-from typing import Any, NoReturn
+from typing import Any
 
-from rapt.errors import FileFormatError
-from rapt.scoretree import ScoreTree
-from rapt.space import Categorical, Continuous, Integer, Parameter, Permutation, StateSpace
-from sim.uuv.metrics import ELEMENT_KINDS, element_names, metric_names
-from sim.uuv.mission import TARGET_FIELDS, Binding, Current, Mission, MissionArea, Rect, Transmission, Triangle, Vehicle
+from sim.uuv.mission import Current, Mission, MissionArea, Rect, Transmission, Triangle, Vehicle
+from sim.uuv.missionfields import MISSING, FieldChecker, fmt, names
+from sim.uuv.missionparameters import ParameterReader
+from sim.uuv.missionscoretree import ScoreTreeReader
 
-__all__ = ["load_mission", "load_mission_text", "MissionFileError"]
+__all__ = ["load_mission", "load_mission_text"]
 
-
-class MissionFileError(FileFormatError):
-    """A mission file that cannot be loaded; the message is one line: file, field, problem, fix.
-
-    A :class:`rapt.errors.FileFormatError`, so also an ``InputError``, a ``RaptError`` and a ``ValueError``.
-    """
-
-
-_MISSING = object()
 _NAME_RE = re.compile(r"^[A-Za-z0-9_-]+$")
 
 _SECTIONS = (
@@ -137,22 +126,6 @@ _SECTIONS = (
 _REQUIRED_SECTIONS = ("mission", "operational_area", "launch", "recovery", "parameters", "score_tree")
 _ARRAY_SECTIONS = ("waypoints", "mission_areas", "nogo", "barriers", "obstacles", "parameters")
 _REQUIRES = ("waypoints", "mission_areas", "transmission", "mission_time")
-_PARAM_KINDS = ("continuous", "integer", "categorical", "permutation")
-_PARAM_KEYS = {
-    "continuous": (("name", "kind", "target", "low", "high"), ("log",)),
-    "integer": (("name", "kind", "target", "low", "high"), ()),
-    "categorical": (("name", "kind", "target", "choices"), ()),
-    "permutation": (("name", "kind", "target", "items"), ()),
-}
-#: Target kinds written without an element name.
-_UNNAMED_TARGETS = ("mission", "vehicle", "mission_areas", "transmission")
-#: Target kind -> (file section, words for its elements).
-_NAMED_TARGETS = {
-    "nogo": ("nogo", "no-go areas"),
-    "barrier": ("barriers", "barriers"),
-    "obstacle": ("obstacles", "obstacles"),
-    "mission_area": ("mission_areas", "mission areas"),
-}
 
 
 def load_mission(path: str | Path) -> Mission:
@@ -168,95 +141,10 @@ def load_mission_text(text: str, label: str) -> Mission:
     return _Loader(label).load_text(text)
 
 
-def _fmt(v: float) -> str:
-    return f"{v:g}"
+class _Loader(FieldChecker):
+    """Reads a whole mission file: its sections here, parameters and score tree by their readers."""
 
-
-def _names(items) -> str:
-    items = list(items)
-    return ", ".join(map(str, items)) if items else "none"
-
-
-class _Loader:
-    def __init__(self, label: str):
-        self.label = label
-
-    # ------------------------------------------------------------------ errors and primitives
-    def fail(self, where: str, message: str) -> NoReturn:
-        message = " ".join(str(message).split())  # one line, always
-        raise MissionFileError(f"{self.label}: {where}: {message}")
-
-    def table(self, value: Any, where: str, header: str) -> dict:
-        if not isinstance(value, dict):
-            self.fail(where, f"expected a table, got {type(value).__name__} {value!r}; write it as {header}")
-        return value
-
-    def keys(self, tbl: Mapping, where: str, required=(), optional=()) -> None:
-        allowed = tuple(required) + tuple(optional)
-        for key in tbl:
-            if key not in allowed:
-                hint = difflib.get_close_matches(key, allowed, n=1)
-                did = f" (did you mean '{hint[0]}'?)" if hint else ""
-                self.fail(f"{where}.{key}" if where else key, f"unknown key{did}; allowed keys: {_names(allowed)}")
-        for key in required:
-            if key not in tbl:
-                self.fail(
-                    f"{where}.{key}" if where else key,
-                    f"missing required key; add {key} = ... to {where or 'the file'}",
-                )
-
-    def number(
-        self,
-        tbl: Mapping,
-        key: str,
-        where: str,
-        default: Any = _MISSING,
-        *,
-        low: float | None = None,
-        high: float | None = None,
-        positive: bool = False,
-    ) -> float:
-        field = f"{where}.{key}"
-        if key not in tbl:
-            if default is _MISSING:
-                self.fail(field, f"missing required number; add {key} = <number> to {where}")
-            return default
-        return self.check_number(tbl[key], field, low=low, high=high, positive=positive)
-
-    def check_number(
-        self, v: Any, field: str, *, low: float | None = None, high: float | None = None, positive: bool = False
-    ) -> float:
-        if isinstance(v, bool) or not isinstance(v, (int, float)):
-            self.fail(field, f"expected a number, got {type(v).__name__} {v!r}; write a plain number such as 10.0")
-        v = float(v)
-        if not math.isfinite(v):
-            self.fail(field, f"{v} is not finite; give a finite number")
-        if positive and v <= 0:
-            self.fail(field, f"{_fmt(v)} must be > 0; give a positive number")
-        if low is not None and v < low:
-            self.fail(
-                field,
-                f"{_fmt(v)} is below the minimum {_fmt(low)}; use a value in [{_fmt(low)}, {_fmt(high) if high is not None else 'inf'}]",
-            )
-        if high is not None and v > high:
-            self.fail(
-                field,
-                f"{_fmt(v)} is above the maximum {_fmt(high)}; use a value in [{_fmt(low) if low is not None else '-inf'}, {_fmt(high)}]",
-            )
-        return v
-
-    def string(self, tbl: Mapping, key: str, where: str, default: Any = _MISSING) -> str:
-        field = f"{where}.{key}"
-        if key not in tbl:
-            if default is _MISSING:
-                self.fail(field, f'missing required string; add {key} = "..." to {where}')
-            return default
-        v = tbl[key]
-        if not isinstance(v, str) or not v:
-            self.fail(field, f'expected a non-empty string, got {v!r}; write {key} = "..."')
-        return v
-
-    def element_name(self, tbl: Mapping, where: str, default: Any = _MISSING) -> str:
+    def element_name(self, tbl: Mapping, where: str, default: Any = MISSING) -> str:
         name = self.string(tbl, "name", where, default)
         if not _NAME_RE.match(name):
             self.fail(f"{where}.name", f"{name!r} is not a valid element name; use letters, digits, '_' or '-' only")
@@ -269,28 +157,15 @@ class _Loader:
         self.element_owner[name] = where
         return name
 
-    def string_list(self, v: Any, field: str) -> list[str]:
-        if not isinstance(v, list) or not all(isinstance(s, str) for s in v):
-            self.fail(field, f'expected a list of strings, got {v!r}; write e.g. ["A", "B"]')
-        return v
-
     def inside(self, x: float, y: float, field: str, what: str = "centre") -> None:
         op = self.op
         x0, x1, y0, y1 = op.x - op.width / 2, op.x + op.width / 2, op.y - op.height / 2, op.y + op.height / 2
         if not (x0 <= x <= x1 and y0 <= y <= y1):
             self.fail(
                 field,
-                f"{what} (x={_fmt(x)}, y={_fmt(y)}) lies outside the operational area "
-                f"(x {_fmt(x0)}..{_fmt(x1)}, y {_fmt(y0)}..{_fmt(y1)}); move it inside",
+                f"{what} (x={fmt(x)}, y={fmt(y)}) lies outside the operational area "
+                f"(x {fmt(x0)}..{fmt(x1)}, y {fmt(y0)}..{fmt(y1)}); move it inside",
             )
-
-    def array(self, data: Mapping, key: str) -> list[dict]:
-        v = data.get(key, [])
-        if not isinstance(v, list):
-            self.fail(key, f"expected an array of tables, got {type(v).__name__}; write each entry as [[{key}]]")
-        for i, item in enumerate(v):
-            self.table(item, f"{key}[{i}]", f"[[{key}]]")
-        return v
 
     def xy(self, tbl: Mapping, where: str) -> tuple[float, float]:
         x, y = self.number(tbl, "x", where), self.number(tbl, "y", where)
@@ -346,8 +221,9 @@ class _Loader:
             "obstacle": [o.name for o in obstacles],
             "mission_area": area_names,
         }
-        self.transmission = transmission
-        space, bindings = self.parameters(self.array(data, "parameters"), area_names)
+        space, bindings = ParameterReader(self.label, self.op, self.elements, transmission).read(
+            self.array(data, "parameters"), area_names
+        )
 
         mission = Mission(
             name=name,
@@ -376,7 +252,7 @@ class _Loader:
             dt=dt,
             source=self.label,
         )
-        tree = self.score_tree(data["score_tree"], mission)
+        tree = ScoreTreeReader(self.label, mission).read(data["score_tree"])
         return dataclasses.replace(mission, score_tree=tree)
 
     # ------------------------------------------------------------------ sections
@@ -386,7 +262,7 @@ class _Loader:
             if key not in _SECTIONS:
                 hint = difflib.get_close_matches(key, _SECTIONS, n=1)
                 did = f" (did you mean '{hint[0]}'?)" if hint else ""
-                self.fail(key, f"unknown section{did}; allowed sections: {_names(_SECTIONS)}")
+                self.fail(key, f"unknown section{did}; allowed sections: {names(_SECTIONS)}")
         for key in _REQUIRED_SECTIONS:
             if key not in data:
                 header = f"[[{key}]]" if key in _ARRAY_SECTIONS else f"[{key}]"
@@ -423,9 +299,7 @@ class _Loader:
         wp_radius = self.number(m, "waypoint_radius_m", "mission", 25.0, positive=True)
         dt = self.number(m, "dt_s", "mission", 2.0, positive=True)
         if dt > time_limit:
-            self.fail(
-                "mission.dt_s", f"step {_fmt(dt)} s exceeds time_limit_s {_fmt(time_limit)} s; use a smaller step"
-            )
+            self.fail("mission.dt_s", f"step {fmt(dt)} s exceeds time_limit_s {fmt(time_limit)} s; use a smaller step")
         return name, lat, lon, start_time, time_limit, wp_radius, dt
 
     def launch_section(self, launch_t: Mapping) -> tuple[float, float]:
@@ -523,7 +397,7 @@ class _Loader:
         if sorted(priority) != sorted(area_names) or len(set(priority)) != len(priority):
             self.fail(
                 "mission.priority",
-                f"{priority!r} is not an ordering of the mission areas; list each of {_names(area_names)} exactly once",
+                f"{priority!r} is not an ordering of the mission areas; list each of {names(area_names)} exactly once",
             )
         return priority
 
@@ -540,7 +414,7 @@ class _Loader:
         requires = self.string_list(m["requires"], "mission.requires")
         for r in requires:
             if r not in _REQUIRES:
-                self.fail("mission.requires", f"unknown objective {r!r}; allowed: {_names(_REQUIRES)}")
+                self.fail("mission.requires", f"unknown objective {r!r}; allowed: {names(_REQUIRES)}")
         if len(set(requires)) != len(requires):
             self.fail("mission.requires", f"{requires!r} lists an objective twice; list each once")
         present = {
@@ -594,17 +468,17 @@ class _Loader:
             )
             for key in positive:
                 if getattr(obj, key) <= 0:
-                    self.fail(f"vehicle.{key}", f"{_fmt(getattr(obj, key))} must be > 0; give a positive number")
+                    self.fail(f"vehicle.{key}", f"{fmt(getattr(obj, key))} must be > 0; give a positive number")
             for key in ("start_battery", "critical_battery"):
                 if not 0.0 <= getattr(obj, key) <= 1.0:
                     self.fail(
                         f"vehicle.{key}",
-                        f"{_fmt(getattr(obj, key))} is a fraction of the battery; use a value in [0, 1]",
+                        f"{fmt(getattr(obj, key))} is a fraction of the battery; use a value in [0, 1]",
                     )
             if obj.max_speed < obj.cruise_speed:
                 self.fail(
                     "vehicle.max_speed",
-                    f"{_fmt(obj.max_speed)} is below cruise_speed {_fmt(obj.cruise_speed)}; "
+                    f"{fmt(obj.max_speed)} is below cruise_speed {fmt(obj.cruise_speed)}; "
                     "raise max_speed or lower cruise_speed",
                 )
         if cls is Current:
@@ -614,288 +488,5 @@ class _Loader:
                     "must be >= 0; give a non-negative speed",
                 )
             if obj.period_h <= 0:
-                self.fail("current.period_h", f"{_fmt(obj.period_h)} must be > 0; give the tidal period in hours")
+                self.fail("current.period_h", f"{fmt(obj.period_h)} must be > 0; give the tidal period in hours")
         return obj
-
-    # ------------------------------------------------------------------ parameters
-    def parameters(self, specs: list[dict], area_names: list[str]) -> tuple[StateSpace, tuple[Binding, ...]]:
-        if not specs:
-            self.fail("parameters", "no [[parameters]] entries; a study needs at least one parameter")
-        params: list[Parameter] = []
-        bindings: list[Binding] = []
-        seen_names: dict[str, str] = {}
-        seen_targets: dict[tuple, str] = {}
-        for i, p in enumerate(specs):
-            where = f"parameters[{i}]"
-            kind = self.string(p, "kind", where)
-            if kind not in _PARAM_KINDS:
-                self.fail(f"{where}.kind", f"unknown kind {kind!r}; allowed: {_names(_PARAM_KINDS)}")
-            if p.get("target") == "mission_areas.priority" and kind != "permutation":
-                self.fail(
-                    f"{where}.kind",
-                    f'kind {kind!r} cannot set mission_areas.priority; use kind = "permutation" '
-                    "with items = the mission-area names",
-                )
-            required, optional = _PARAM_KEYS[kind]
-            self.keys(p, where, required, optional)
-            pname = self.string(p, "name", where)
-            if pname in seen_names:
-                self.fail(
-                    f"{where}.name",
-                    f"duplicate parameter name {pname!r} (also {seen_names[pname]}); give every parameter its own name",
-                )
-            seen_names[pname] = where
-            binding = self.target(p, where, pname)
-            key = (binding.kind, binding.name, binding.field)
-            if key in seen_targets:
-                self.fail(
-                    f"{where}.target",
-                    f"{p['target']!r} is already set by {seen_targets[key]}; give each field one parameter",
-                )
-            seen_targets[key] = where
-            if binding.field == "priority":
-                params.append(self.priority_parameter(p, where, pname, area_names))
-            elif kind == "permutation":
-                self.fail(
-                    f"{where}.kind",
-                    f"a permutation can only target mission_areas.priority, not {p['target']!r}; "
-                    "use continuous, integer or categorical",
-                )
-            elif kind == "categorical":
-                params.append(self.categorical_parameter(p, where, pname, binding))
-            else:
-                params.append(self.numeric_parameter(p, where, kind, pname, binding))
-            bindings.append(binding)
-        try:
-            space = StateSpace(params)
-        except ValueError as exc:  # pragma: no cover - everything is checked above
-            self.fail("parameters", str(exc))
-        return space, tuple(bindings)
-
-    def priority_parameter(self, p: Mapping, where: str, pname: str, area_names: list[str]) -> Permutation:
-        """A permutation of the mission areas' priority order: every area named exactly once."""
-        tfield = f"{where}.target"
-        items = self.string_list(p["items"], f"{where}.items")
-        if sorted(items) != sorted(area_names) or len(set(items)) != len(items):
-            self.fail(
-                f"{where}.items",
-                f"{items!r} is not the mission-area names; list each of {_names(area_names)} exactly once",
-            )
-        if len(items) < 2:
-            self.fail(
-                f"{tfield}",
-                "a priority permutation needs at least 2 mission areas; drop this parameter or add [[mission_areas]]",
-            )
-        return Permutation(pname, tuple(items))
-
-    def categorical_parameter(self, p: Mapping, where: str, pname: str, binding: Binding) -> Categorical:
-        """A choice among at least two distinct numbers, each within the target field's range."""
-        choices = p["choices"]
-        if not isinstance(choices, list):
-            self.fail(
-                f"{where}.choices",
-                f"expected a list of numbers, got {choices!r}; write e.g. choices = [0.1, 0.2]",
-            )
-        values = [self.check_number(c, f"{where}.choices[{j}]") for j, c in enumerate(choices)]
-        if len(values) < 2 or len(set(values)) != len(values):
-            self.fail(f"{where}.choices", f"{choices!r} needs at least 2 distinct values; add or de-duplicate choices")
-        self.value_range(binding, min(values), max(values), f"{where}.choices")
-        return Categorical(pname, tuple(values))
-
-    def numeric_parameter(
-        self, p: Mapping, where: str, kind: str, pname: str, binding: Binding
-    ) -> Integer | Continuous:
-        """An integer or continuous range (optionally log-scaled) within the target field's range."""
-        if kind == "integer":
-            for k in ("low", "high"):
-                if isinstance(p[k], bool) or not isinstance(p[k], int):
-                    self.fail(
-                        f"{where}.{k}",
-                        f"an integer parameter needs whole-number bounds, got {p[k]!r}; "
-                        'write e.g. 3, or use kind = "continuous"',
-                    )
-        low = self.check_number(p["low"], f"{where}.low")
-        high = self.check_number(p["high"], f"{where}.high")
-        if low >= high:
-            self.fail(f"{where}.low", f"low={_fmt(low)} must be < high={_fmt(high)}; swap or widen the bounds")
-        log = False
-        if "log" in p:
-            log = p["log"]
-            if not isinstance(log, bool):
-                self.fail(f"{where}.log", f"expected true or false, got {log!r}")
-            if log and low <= 0:
-                self.fail(f"{where}.low", f"log scale needs low > 0, got {_fmt(low)}; raise low or set log = false")
-        self.value_range(binding, low, high, where)
-        return Integer(pname, int(low), int(high)) if kind == "integer" else Continuous(pname, low, high, log)
-
-    def target(self, p: Mapping, where: str, pname: str) -> Binding:
-        field = f"{where}.target"
-        target = self.string(p, "target", where)
-        parts = target.split(".")
-        kinds = tuple(TARGET_FIELDS)
-        kind = parts[0]
-        if kind not in TARGET_FIELDS or not 2 <= len(parts) <= 3 or not all(parts):
-            self.fail(
-                field,
-                f"{target!r} is not a target; write '<kind>.<field>' or '<kind>.<element name>.<field>' "
-                f"with kind one of {_names(kinds)}",
-            )
-        if kind in _UNNAMED_TARGETS:
-            if len(parts) == 3:
-                self.fail(field, f"{kind!r} takes no element name; write '{kind}.{parts[2]}'")
-            name, attr = None, parts[1]
-            if kind == "transmission" and self.transmission is None:
-                self.fail(
-                    field,
-                    f"{target!r} targets the transmission area but the file has no [transmission]; "
-                    "add [transmission] or drop this parameter",
-                )
-            if kind == "mission_areas" and not self.elements["mission_area"]:
-                self.fail(field, f"{target!r} but the file has no [[mission_areas]]; add them or drop this parameter")
-        else:
-            section, words = _NAMED_TARGETS[kind]
-            known = self.elements[kind]
-            if len(parts) == 2:
-                example = known[0] if known else "<name>"
-                self.fail(
-                    field,
-                    f"{kind!r} needs an element name; write '{kind}.{example}.{parts[1]}' "
-                    f"(known {words}: {_names(known)})",
-                )
-            name, attr = parts[1], parts[2]
-            if name not in known:
-                self.fail(
-                    field,
-                    f"unknown element '{kind}.{name}' (known {words}: {_names(known)}); "
-                    f"name an element defined in [[{section}]]",
-                )
-        if attr not in TARGET_FIELDS[kind]:
-            self.fail(field, f"{kind!r} has no settable field {attr!r}; settable: {_names(TARGET_FIELDS[kind])}")
-        return Binding(pname, kind, name, attr)
-
-    def value_range(self, b: Binding, low: float, high: float, where: str) -> None:
-        """Check a parameter's range against what its field can hold (``where`` is the entry or its choices)."""
-        field = b.field
-        bound = where if where.endswith(".choices") else None
-        if field in ("x", "y"):
-            op = self.op
-            c, size = (op.x, op.width) if field == "x" else (op.y, op.height)
-            lo, hi = c - size / 2, c + size / 2
-            if low < lo or high > hi:
-                self.fail(
-                    bound or f"{where}.{'low' if low < lo else 'high'}",
-                    f"{field} range {_fmt(low)}..{_fmt(high)} leaves the operational area "
-                    f"({field} {_fmt(lo)}..{_fmt(hi)}); keep positions inside it",
-                )
-            return
-        limits = {
-            "start_time_s": (0.0, 86400.0, "seconds after local midnight"),
-            "start_battery": (0.0, 1.0, "a fraction of the battery"),
-            "window_start_s": (0.0, math.inf, "seconds after the mission start"),
-            "window_length_s": (0.0, math.inf, "a duration in seconds"),
-            "dwell_s": (0.0, math.inf, "a duration in seconds"),
-        }
-        if field in limits:
-            lo, hi, what = limits[field]
-            if low < lo or high > hi:
-                self.fail(
-                    bound or f"{where}.{'low' if low < lo else 'high'}",
-                    f"{b.kind}.{field} is {what}; keep the range {_fmt(low)}..{_fmt(high)} "
-                    f"within {_fmt(lo)}..{_fmt(hi)}",
-                )
-
-    # ------------------------------------------------------------------ score tree
-    def score_tree(self, spec: Any, mission: Mission) -> dict:
-        self.metric_list = metric_names(mission)
-        self.metric_index = {n: i for i, n in enumerate(self.metric_list)}
-        self.mission = mission
-        self.check_node(spec, "score_tree", root=True)
-        self.used: dict[int, str] = {}
-        (tree,) = self.resolve(spec, "score_tree", None)
-        for i, metric in enumerate(self.metric_list):
-            if i not in self.used:
-                self.fail(
-                    "score_tree",
-                    f"metric {metric!r} (column {i}) is not in the tree; add it to the scores of "
-                    "one node (every score column must appear exactly once)",
-                )
-        try:
-            ScoreTree.from_mapping(tree).validate(len(self.metric_list))
-        except ValueError as exc:  # pragma: no cover - checked above
-            self.fail("score_tree", str(exc))
-        return tree
-
-    def check_node(self, spec: Any, where: str, root: bool = False) -> None:
-        """Syntax of a node and its descendants (before replication, so empty for_each nodes are checked too)."""
-        bare = re.sub(r"\[\d+\]", "", where)
-        self.table(spec, where, f"[{bare}]" if root else f"[[{bare}]]")
-        self.keys(spec, where, ("scores",), ("name", "children", "for_each"))
-        if "name" in spec and not isinstance(spec["name"], str):
-            self.fail(f"{where}.name", f'expected a string, got {spec["name"]!r}; write name = "..."')
-        scores = spec["scores"]
-        if not isinstance(scores, list) or not scores or not all(isinstance(s, str) for s in scores):
-            self.fail(
-                f"{where}.scores",
-                f'expected a non-empty list of metric names, got {scores!r}; write e.g. scores = ["mission_success"]',
-            )
-        if "for_each" in spec:
-            fe = spec["for_each"]
-            if root:
-                self.fail(f"{where}.for_each", "the root node cannot be replicated; move for_each to a child node")
-            if fe not in ELEMENT_KINDS:
-                self.fail(f"{where}.for_each", f"unknown element kind {fe!r}; allowed: {_names(ELEMENT_KINDS)}")
-        children = spec.get("children", [])
-        if not isinstance(children, list):
-            self.fail(
-                f"{where}.children",
-                f"expected an array of tables, got {type(children).__name__}; write each child as [[{bare}.children]]",
-            )
-        for j, child in enumerate(children):
-            self.check_node(child, f"{where}.children[{j}]")
-
-    def resolve(self, spec: Mapping, where: str, current: tuple[str, str] | None) -> list[dict]:
-        if "for_each" in spec:
-            kind = spec["for_each"]
-            return [self.resolve_body(spec, where, (kind, e)) for e in element_names(self.mission, kind)]
-        return [self.resolve_body(spec, where, current)]
-
-    def resolve_body(self, spec: Mapping, where: str, current: tuple[str, str] | None) -> dict:
-        elem = f" ({current[0]} {current[1]!r})" if current else ""
-
-        def sub(text: str, field: str) -> str:
-            if "{name}" in text:
-                if current is None:
-                    self.fail(
-                        field,
-                        f'{text!r} uses {{name}} outside a for_each node; add for_each = "..." to this '
-                        "node or an ancestor, or write the element name",
-                    )
-                text = text.replace("{name}", current[1])
-            return text
-
-        indices = []
-        for j, pattern in enumerate(spec["scores"]):
-            field = f"{where}.scores[{j}]"
-            metric = sub(pattern, field)
-            if metric not in self.metric_index:
-                hint = difflib.get_close_matches(metric, self.metric_list, n=1)
-                known = f"did you mean {hint[0]!r}?" if hint else f"known metrics: {_names(self.metric_list)}"
-                self.fail(
-                    field,
-                    f"unknown metric {metric!r}{elem} ({known}); use a name from "
-                    "sim.uuv.metrics.metric_names for this mission",
-                )
-            i = self.metric_index[metric]
-            if i in self.used:
-                self.fail(
-                    field,
-                    f"metric {metric!r}{elem} appears twice (also at {self.used[i]}); "
-                    "list each metric in exactly one node",
-                )
-            self.used[i] = field + elem
-            indices.append(i)
-        name = sub(spec["name"], f"{where}.name") if "name" in spec else self.metric_list[indices[0]]
-        children = []
-        for j, child in enumerate(spec.get("children", [])):
-            children.extend(self.resolve(child, f"{where}.children[{j}]", current))
-        return {"name": name, "indices": indices, "children": children}

@@ -106,22 +106,9 @@ def _set_rect_centre(arr: np.ndarray, k: int, field: str, values: np.ndarray, wi
 
 def make_scenarios(mission: Mission, U: np.ndarray) -> Scenarios:
     """Decode unit-cube rows ``U`` (N, mission.dim) into a batch of scenarios."""
-    U = np.asarray(U, dtype=float)
-    if U.ndim != 2 or U.shape[1] != mission.dim:
-        raise InputError(
-            f"X: expected unit-cube rows of shape (N, {mission.dim}) for mission '{mission.name}', got {U.shape}"
-        )
-    if U.size and (np.nanmin(U) < 0 or np.nanmax(U) > 1 or not np.all(np.isfinite(U))):
-        raise InputError(
-            "X: values must be finite and inside the unit cube [0, 1]; scale physical values with "
-            "mission.space.to_unit_array"
-        )
+    U = _unit_rows(mission, U)
     n = U.shape[0]
-    values = {
-        p.name: _decode(p, U[:, mission.space.slice_of(p.name)])
-        for p in mission.space.parameters
-        if p.kind != "permutation"
-    }
+    values = _physical_values(mission, U)
 
     start_time = np.full(n, float(mission.start_time_s))
     battery0 = np.full(n, float(mission.vehicle.start_battery))
@@ -153,9 +140,7 @@ def make_scenarios(mission: Mission, U: np.ndarray) -> Scenarios:
         elif b.kind == "vehicle":
             battery0 = np.asarray(v, dtype=float)
         elif b.kind == "mission_areas":  # random keys -> area indices in priority order, vectorised
-            param = next(p for p in mission.space.parameters if isinstance(p, Permutation) and p.name == b.parameter)
-            ranks = np.argsort(U[:, mission.space.slice_of(b.parameter)], axis=1, kind="stable")
-            order = np.array([names.index(item) for item in param.items], dtype=np.int64)[ranks]
+            order = _priority_orders(mission, b.parameter, names, U)
         elif b.kind == "transmission" and tx is not None:  # bound only when the mission has one
             if b.field in ("x", "y"):
                 _set_rect_centre(tx_rect[:, None, :], 0, b.field, np.asarray(v, float), tx.width, tx.height)
@@ -199,6 +184,37 @@ def make_scenarios(mission: Mission, U: np.ndarray) -> Scenarios:
     )
     _check_validity(s)
     return s
+
+
+def _unit_rows(mission: Mission, U: np.ndarray) -> np.ndarray:
+    """``U`` as float rows (N, mission.dim) inside the unit cube; :class:`InputError` otherwise."""
+    U = np.asarray(U, dtype=float)
+    if U.ndim != 2 or U.shape[1] != mission.dim:
+        raise InputError(
+            f"X: expected unit-cube rows of shape (N, {mission.dim}) for mission '{mission.name}', got {U.shape}"
+        )
+    if U.size and (np.nanmin(U) < 0 or np.nanmax(U) > 1 or not np.all(np.isfinite(U))):
+        raise InputError(
+            "X: values must be finite and inside the unit cube [0, 1]; scale physical values with "
+            "mission.space.to_unit_array"
+        )
+    return U
+
+
+def _physical_values(mission: Mission, U: np.ndarray) -> dict:
+    """Every row's physical value of each parameter but the permutations, by parameter name."""
+    return {
+        p.name: _decode(p, U[:, mission.space.slice_of(p.name)])
+        for p in mission.space.parameters
+        if p.kind != "permutation"
+    }
+
+
+def _priority_orders(mission: Mission, parameter: str, names: list[str], U: np.ndarray) -> np.ndarray:
+    """(N, A) mission-area indices in priority order from the permutation ``parameter``'s random keys."""
+    param = next(p for p in mission.space.parameters if isinstance(p, Permutation) and p.name == parameter)
+    ranks = np.argsort(U[:, mission.space.slice_of(parameter)], axis=1, kind="stable")
+    return np.array([names.index(item) for item in param.items], dtype=np.int64)[ranks]
 
 
 def _decode(param, block: np.ndarray):

@@ -7,7 +7,8 @@ import rapt
 import rapt.errors
 from rapt.errors import FileFormatError, InputError, RaptError, RunError, StudyMismatchError
 from rapt.store import StudyStore
-from sim.robots.model import RobotFileError, load_robot
+from sim.robots.model import RobotFileError
+from sim.robots.robotfile import load_robot
 
 # (the class, the built-in exception that code written before the hierarchy caught)
 BUILT_IN_BASES = [

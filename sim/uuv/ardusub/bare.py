@@ -34,7 +34,6 @@ import math
 import os
 import time
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -46,10 +45,8 @@ from sim.uuv.ardusub.depth import SURFACE_VZ, Depth  # noqa: E402
 from sim.uuv.ardusub.ekf import EkfReadiness  # noqa: E402
 from sim.uuv.ardusub.gcs import heartbeat_send, sensor_bits  # noqa: E402
 from sim.uuv.ardusub.guided import Target, from_global_int, from_local_ned  # noqa: E402
+from sim.uuv.ardusub.host import Host  # noqa: E402
 from sim.uuv.interface import energy_consumed_hj  # noqa: E402
-
-if TYPE_CHECKING:
-    from sim.uuv.ardusub.frontseat import FrontSeat
 
 __all__ = ["BareAutopilot", "Truth", "SUBSTEP_S"]
 
@@ -81,9 +78,9 @@ class Truth:
 
 
 class BareAutopilot:
-    """A FrontSeat's vehicle run as ArduSub runs it (see module docstring)."""
+    """A front-seat's (its :class:`~sim.uuv.ardusub.host.Host`'s) vehicle run as ArduSub runs it (see module docstring)."""
 
-    def __init__(self, fs: FrontSeat, ekf_ready_s: float):
+    def __init__(self, fs: Host, ekf_ready_s: float):
         self.fs, self.conn, self.world = fs, fs.conn, fs.world
         self.spec = fs.mission.vehicle
         self.ekf = EkfReadiness(float(ekf_ready_s))
@@ -111,8 +108,7 @@ class BareAutopilot:
 
     def serve(self, duration_s: float | None = None) -> None:
         deadline = None if duration_s is None else time.monotonic() + duration_s
-        stop = self.fs._stop
-        while not stop.is_set() and (deadline is None or time.monotonic() < deadline):
+        while not self.fs.stop_requested() and (deadline is None or time.monotonic() < deadline):
             now = self.now()
             while True:
                 event = min(self.t + SUBSTEP_S, self.streams.next_time())
@@ -127,7 +123,7 @@ class BareAutopilot:
             wait = (min(self.t + SUBSTEP_S, self.streams.next_time()) - self.now()) / self.fs.speedup
             msg = self.conn.recv_match(blocking=True, timeout=min(max(wait, 0.0005), IDLE_S))
             while msg is not None:  # answer everything that is waiting
-                self.fs._handle(msg)
+                self.fs.handle(msg)
                 msg = self.conn.recv_match(blocking=False)
 
     def _housekeeping(self) -> None:
@@ -180,7 +176,7 @@ class BareAutopilot:
 
     # -- MAVLink out -------------------------------------------------------------------
     def _status(self, severity: int, text: str) -> None:
-        self.fs._status(severity, text)
+        self.fs.send_status(severity, text)
 
     def _estimate(self) -> tuple[float, float]:
         """Where the vehicle believes it is (mission frame east, north)."""

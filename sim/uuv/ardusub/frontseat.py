@@ -32,7 +32,7 @@ from __future__ import annotations
 import os
 import threading
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -43,6 +43,7 @@ from rapt.errors import InputError  # noqa: E402
 from sim.uuv.ardusub.bare import PACK_V, BareAutopilot  # noqa: E402
 from sim.uuv.ardusub.ekf import FLAGS_READY  # noqa: E402
 from sim.uuv.ardusub.gcs import GroundStationLink, heartbeat_send, sensor_bits  # noqa: E402
+from sim.uuv.ardusub.host import FrontSeatStats  # noqa: E402
 from sim.uuv.ardusub.mission_server import MissionServer  # noqa: E402
 from sim.uuv.ardusub.params import ParameterTable  # noqa: E402
 from sim.uuv.ardusub.streams import StreamSchedule  # noqa: E402
@@ -71,20 +72,6 @@ class _Setpoint:
     surface: bool = False
     tick_ms: int = -1
     received: float = -1e9  # simulated time
-
-
-@dataclass
-class FrontSeatStats:
-    ticks: int = 0
-    setpoints: int = 0
-    ignored: int = 0
-    failsafes: int = 0
-    ended: str = ""
-    ticks_at_end: int = 0
-    log: list = field(default_factory=list)
-    #: Bare mode: a position report's time_boot_ms -> wall seconds from sending it to the first
-    #: set-point stamped with it (what a benchmark calls telemetry in -> set-point out).
-    latency_s: dict = field(default_factory=dict)
 
 
 class FrontSeat:
@@ -142,7 +129,7 @@ class FrontSeat:
         self.streams = StreamSchedule(params=self.params)
         self.bare: BareAutopilot | None = None
         home = self.frame.to_latlon(float(self.world.state.x[0]), float(self.world.state.y[0]))
-        self.missions = MissionServer(self.conn, (*home, 0.0), self._status, self._mission_clock)
+        self.missions = MissionServer(self.conn, (*home, 0.0), self.send_status, self._mission_clock)
         if bare:  # a real vehicle knows no referee
             self.bare = BareAutopilot(self, ekf_ready_s)
         else:
@@ -181,6 +168,9 @@ class FrontSeat:
     def stop(self) -> None:
         self._stop.set()
 
+    def stop_requested(self) -> bool:
+        return self._stop.is_set()
+
     def close(self) -> None:
         self._stop.set()
         self.conn.close()
@@ -202,7 +192,7 @@ class FrontSeat:
                 last_hb = now
             msg = self.conn.recv_match(blocking=True, timeout=0.02)
             if msg is not None:
-                self._handle(msg)
+                self.handle(msg)
             self.missions.update()
             flying = self.armed and self.mode == GUIDED and not self.ended
             if self.lockstep:
@@ -247,7 +237,7 @@ class FrontSeat:
 
     def _failsafe(self) -> None:
         self.stats.failsafes += 1
-        self._status(mav.MAV_SEVERITY_WARNING, "failsafe: no back-seat set-point, holding on the surface")
+        self.send_status(mav.MAV_SEVERITY_WARNING, "failsafe: no back-seat set-point, holding on the surface")
         self._step(
             _Setpoint(
                 heading=float(self.tel.heading[0]), speed=0.0, surface=True, tick_ms=self._tick_ms(), received=self.t
@@ -264,13 +254,14 @@ class FrontSeat:
         if reason:
             self.stats.ended, self.stats.ticks_at_end = reason, self.k
             self.armed = False
-            self._status(mav.MAV_SEVERITY_NOTICE, f"run ended: {reason}")
+            self.send_status(mav.MAV_SEVERITY_NOTICE, f"run ended: {reason}")
 
     # -- MAVLink out -----------------------------------------------------------------
     def _heartbeat(self) -> None:
         heartbeat_send(self.conn, self.mode, self.armed)
 
-    def _status(self, severity: int, text: str) -> None:
+    def send_status(self, severity: int, text: str) -> None:
+        """Send a STATUSTEXT (cut to 50 characters) and keep it in ``stats.log``."""
         self.stats.log.append(text)
         self.conn.mav.statustext_send(severity, text[:50].encode())
 
@@ -354,7 +345,8 @@ class FrontSeat:
             )
 
     # -- MAVLink in ------------------------------------------------------------------
-    def _handle(self, msg) -> None:
+    def handle(self, msg) -> None:
+        """Answer one incoming MAVLink message."""
         kind = msg.get_type()
         if kind == "BAD_DATA" or self.missions.handle(msg) or self.link.handle(msg):
             return  # the mission protocol (sim.uuv.ardusub.mission_server), then the rest of a ground station's requests

@@ -162,7 +162,7 @@ class GroundStationLink:
 
     def _flush_texts(self) -> None:
         for severity, text in self._texts:
-            self.fs._status(severity, text)
+            self.fs.send_status(severity, text)
         self._texts.clear()
 
     def _set_mode(self, base_mode: int, mode: int) -> int:
@@ -244,7 +244,7 @@ class GroundStationLink:
     def _banner(self) -> None:
         """ArduPilot greets a parameter download (list or FTP) with these lines."""
         for text in BANNER:
-            self.fs._status(mav.MAV_SEVERITY_INFO, text)
+            self.fs.send_status(mav.MAV_SEVERITY_INFO, text)
 
     def _param_list(self) -> None:
         self._banner()

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from sim.robots import Box, Link, Robot, RobotFileError, StabilityFunction, body_angles, down_normals, load_robot
-from sim.robots.model import read_stl
+from sim.robots.parts import read_stl
 
 L, W, H, M = 0.4, 0.3, 0.2, 2.0  # box length (x), width (y), height (z), mass
 NO_JOINTS = np.zeros((1, 0))

@@ -14,7 +14,8 @@ from rapt.space import Continuous, Permutation
 from sim.uuv.geo import LocalFrame, from_degE7, to_degE7
 from sim.uuv.metrics import metric_names
 from sim.uuv.mission import Binding, Mission
-from sim.uuv.missionfile import MissionFileError, load_mission
+from sim.uuv.missionfields import MissionFileError
+from sim.uuv.missionfile import load_mission
 
 EXAMPLES = Path(__file__).resolve().parents[3] / "examples"
 

@@ -27,7 +27,6 @@ import argparse
 import json
 import math
 import os
-import re
 import socket
 import sys
 import threading
@@ -40,7 +39,9 @@ from pathlib import Path
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
-from sim.uuv.ardusub.params import ARDUSUB_PARAMETERS, FIRMWARE  # noqa: E402
+from sim.uuv.ardusub.params import FIRMWARE  # noqa: E402
+from tests.sim.uuv.ardusub.exchanges import default_streams, guided_velocity, mission_protocol  # noqa: E402
+from tests.sim.uuv.ardusub.ground_station import KEPT, SPONTANEOUS, Client, canonical  # noqa: E402
 
 mav = mavutil.mavlink
 
@@ -78,117 +79,6 @@ def allowed(flavour: str) -> dict[str, str]:
 
 #: Parameters our front-seat sets from its mission, compared in rows of their own.
 MISSION_SET = ("WPNAV_SPEED", "BATT_CAPACITY")
-#: What counts as an answer; everything else (streamed telemetry) is ignored.
-ANSWERS = frozenset(
-    {
-        "COMMAND_ACK",
-        "PARAM_VALUE",
-        "STATUSTEXT",
-        "AUTOPILOT_VERSION",
-        "HOME_POSITION",
-        "GPS_GLOBAL_ORIGIN",
-        "MESSAGE_INTERVAL",
-        "FILE_TRANSFER_PROTOCOL",
-    }
-)
-#: STATUSTEXT the firmware sends on its own (EKF, GPS), not in answer to anything.
-SPONTANEOUS = re.compile(r"^(EKF\d|AHRS|GPS \d|Field Elevation|u-blox)")
-_KEPT = {name for name, _, _ in ARDUSUB_PARAMETERS}
-
-
-def canonical(msg) -> str:
-    """The fields of an answer that a client acts on, as one comparable string."""
-    kind = msg.get_type()
-    if kind == "COMMAND_ACK":
-        return f"COMMAND_ACK {msg.command} result={msg.result}"
-    if kind == "PARAM_VALUE":
-        index = "-1" if msg.param_index == 65535 else str(msg.param_index)
-        return f"PARAM_VALUE {msg.param_id}={msg.param_value:g} type={msg.param_type} index={index}"
-    if kind == "STATUSTEXT":  # the board's id (banner line 2) differs from one SITL instance to the next
-        text = "<board id>" if re.fullmatch(r"[0-9a-f]{32}", msg.text) else msg.text
-        return f"STATUSTEXT {msg.severity} {text!r}"
-    if kind == "AUTOPILOT_VERSION":
-        custom = bytes(msg.flight_custom_version).rstrip(b"\0").decode(errors="replace")
-        return f"AUTOPILOT_VERSION caps=0x{msg.capabilities:X} sw=0x{msg.flight_sw_version:08X} git={custom}"
-    if kind == "MESSAGE_INTERVAL":
-        return f"MESSAGE_INTERVAL {msg.message_id} {msg.interval_us}"
-    if kind == "FILE_TRANSFER_PROTOCOL":
-        p = bytes(msg.payload)
-        opcode = {128: "ACK", 129: "NAK"}.get(p[3], str(p[3]))
-        error = f" error={p[12]}" if p[3] == 129 else ""
-        return f"FTP {opcode} req={p[5]}{error}"
-    if kind == "HEARTBEAT":
-        return (
-            f"HEARTBEAT type={msg.type} autopilot={msg.autopilot} base_mode={msg.base_mode} "
-            f"custom_mode={msg.custom_mode} system_status={msg.system_status}"
-        )
-    if kind == "SYS_STATUS":
-        return (
-            f"SYS_STATUS present=0x{msg.onboard_control_sensors_present:X} "
-            f"enabled=0x{msg.onboard_control_sensors_enabled:X} health=0x{msg.onboard_control_sensors_health:X}"
-        )
-    if kind == "EKF_STATUS_REPORT":
-        return f"EKF_STATUS_REPORT flags=0x{msg.flags:X}"
-    return kind  # HOME_POSITION, GPS_GLOBAL_ORIGIN: that it came is what counts
-
-
-def is_answer(msg) -> bool:
-    """Whether ``msg`` answers a request (not streamed telemetry, not what the firmware says on its own)."""
-    kind = msg.get_type()
-    if kind not in ANSWERS:
-        return False
-    if kind == "STATUSTEXT" and SPONTANEOUS.match(msg.text):
-        return False
-    # the firmware's own statistics, and what it saves on disarming
-    return not (kind == "PARAM_VALUE" and (msg.param_id not in _KEPT or msg.param_id.startswith("STAT_")))
-
-
-class Client:
-    """A ground station on one MAVLink link (system 250, component 190)."""
-
-    def __init__(self, connection: str, grace_s: float):
-        self.conn = mavutil.mavlink_connection(connection, source_system=250, source_component=190)
-        self.grace_s = grace_s  # how long silence is awaited
-
-    def close(self) -> None:
-        self.conn.close()
-
-    def hello(self, timeout: float = 30.0) -> None:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            self.conn.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
-            if self.conn.wait_heartbeat(timeout=0.5) is not None:
-                return
-        raise TimeoutError("no HEARTBEAT from the vehicle")
-
-    def drain(self) -> None:
-        while self.conn.recv_match(blocking=False) is not None:
-            pass
-
-    def wait_for(self, kind: str, timeout: float = 10.0, ok: Callable = lambda m: True):
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            msg = self.conn.recv_match(type=kind, blocking=True, timeout=0.1)
-            if msg is not None and ok(msg):
-                return msg
-        raise TimeoutError(f"no {kind}")
-
-    def answers(self, expect: int | None, window: float) -> list:
-        """Answers until ``expect`` of them came (then a short grace) or ``window`` seconds passed."""
-        got: list = []
-        deadline = time.monotonic() + window
-        while time.monotonic() < deadline:
-            msg = self.conn.recv_match(blocking=True, timeout=0.02)
-            if msg is None or not is_answer(msg):
-                continue
-            got.append(msg)
-            if expect is not None and len(got) >= expect:
-                deadline = min(deadline, time.monotonic() + self.grace_s)
-        return got
-
-    def command(self, cmd: int, *params: float) -> None:
-        p = [*params, *[0.0] * (7 - len(params))]
-        self.conn.mav.command_long_send(1, 1, cmd, 0, *p)
 
 
 @dataclass(frozen=True)
@@ -229,51 +119,9 @@ def _nothing(c: Client) -> None:
     pass
 
 
-# -- exchanges of many messages: default streams, the mission protocol, GUIDED velocity ------
-#: Vehicle seconds over which the default streams are counted.
-STREAM_WINDOW_S = 10.0
-#: Streamed messages a back-seat reads; their default rates must agree within a factor of 2.
-RELIED_ON = (
-    "HEARTBEAT",
-    "SYS_STATUS",
-    "GPS_RAW_INT",
-    "GLOBAL_POSITION_INT",
-    "LOCAL_POSITION_NED",
-    "ATTITUDE",
-    "VFR_HUD",
-    "SYSTEM_TIME",
-    "BATTERY_STATUS",
-    "EKF_STATUS_REPORT",
-    "MISSION_CURRENT",
-)
 #: Rows of "NAME RATE Hz" entries: they match when they name the same messages at rates within this factor.
 RATE_ROWS = frozenset({"default streams: rates"})
 RATE_FACTOR = 2.0
-
-
-def _default_streams(client: Client, window: float) -> dict[str, list[str]]:
-    """What the vehicle streams unasked: every message type, and the rates (per vehicle second) of those relied on.
-
-    Rates are counted against the vehicle's clock (ATTITUDE's ``time_boot_ms``), so a speed-up
-    does not change them; a clock that stands still for a wall second (lock-step) ends the count.
-    """
-    counts: dict[str, int] = {}
-    first = last = None
-    ticked = time.monotonic()
-    while time.monotonic() - ticked < 1.0 and (first is None or last - first < STREAM_WINDOW_S * 1000):
-        msg = client.conn.recv_match(blocking=True, timeout=0.05)
-        if msg is None or msg.get_type() == "BAD_DATA":
-            continue
-        if msg.get_type() == "ATTITUDE":  # the vehicle's clock, 10 Hz
-            if last is None or msg.time_boot_ms > last:
-                ticked = time.monotonic()
-            first = msg.time_boot_ms if first is None else first
-            last = msg.time_boot_ms
-        if first is not None and not is_answer(msg):
-            counts[msg.get_type()] = counts.get(msg.get_type(), 0) + 1
-    span = 0.0 if first is None or last is None else (last - first) / 1000
-    rates = [f"{name} {counts[name] / span:.2g} Hz" for name in RELIED_ON if name in counts and span > 0]
-    return {"default streams: message types": sorted(counts), "default streams: rates": rates}
 
 
 def rates_agree(ardusub: list[str], ours: list[str], factor: float = RATE_FACTOR) -> bool:
@@ -289,148 +137,6 @@ def rates_agree(ardusub: list[str], ours: list[str], factor: float = RATE_FACTOR
     return a.keys() == b.keys() and all(1 / factor <= b[k] / a[k] <= factor for k in a if a[k] > 0)
 
 
-#: The mission uploaded: a placeholder for home (item 0, 0.001 deg north of home) and two
-#: waypoints 5 m deep north-east of home (frame, degrees of latitude and longitude from home, z).
-MISSION_ITEMS = (
-    (mav.MAV_FRAME_GLOBAL, 0.001, 0.0, 0.0),
-    (mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, 0.0002, 0.0001, -5.0),
-    (mav.MAV_FRAME_GLOBAL_RELATIVE_ALT_INT, 0.0004, 0.0003, -5.0),
-)
-
-
-def _mission(client: Client, window: float) -> dict[str, list[str]]:
-    """Upload a three-item mission (MISSION_COUNT, the vehicle asks for each item), then read it back."""
-    client.drain()
-    client.command(mav.MAV_CMD_REQUEST_MESSAGE, mav.MAVLINK_MSG_ID_HOME_POSITION)
-    home = client.wait_for("HOME_POSITION")
-    lat0, lon0 = home.latitude / 1e7, home.longitude / 1e7
-    sent = [(frame, int(round((lat0 + dlat) * 1e7)), int(round((lon0 + dlon) * 1e7)), z)
-            for frame, dlat, dlon, z in MISSION_ITEMS]  # fmt: skip
-    client.drain()
-    client.conn.mav.mission_count_send(1, 1, len(sent), mav.MAV_MISSION_TYPE_MISSION)
-    upload: list[str] = []
-    deadline, done = time.monotonic() + max(window, 1.0) * 10, None
-    while time.monotonic() < (deadline if done is None else min(deadline, done + client.grace_s)):
-        msg = client.conn.recv_match(
-            type=["MISSION_REQUEST", "MISSION_REQUEST_INT", "MISSION_ACK", "STATUSTEXT"], blocking=True, timeout=0.02
-        )
-        if msg is None:
-            continue
-        kind = msg.get_type()
-        if kind == "STATUSTEXT":
-            if not SPONTANEOUS.match(msg.text):
-                upload.append(canonical(msg))
-            continue
-        if kind == "MISSION_ACK":
-            upload.append(f"MISSION_ACK type={msg.type} mission_type={msg.mission_type}")
-            done = time.monotonic()
-            continue
-        entry = f"{kind} seq={msg.seq} mission_type={msg.mission_type}"
-        if not upload or upload[-1] != entry:  # a re-ask of the same item is not an answer of its own
-            upload.append(entry)
-        if 0 <= msg.seq < len(sent):
-            frame, lat, lon, z = sent[msg.seq]
-            client.conn.mav.mission_item_int_send(
-                1, 1, msg.seq, frame, mav.MAV_CMD_NAV_WAYPOINT, int(msg.seq == 0), 1, 0, 2.0, 0, 0, lat, lon, z,
-                mav.MAV_MISSION_TYPE_MISSION,
-            )  # fmt: skip
-    client.drain()
-    client.conn.mav.mission_request_list_send(1, 1, mav.MAV_MISSION_TYPE_MISSION)
-    count = client.wait_for("MISSION_COUNT")
-    download = [f"MISSION_COUNT count={count.count} mission_type={count.mission_type}"]
-    for seq in range(count.count):
-        client.conn.mav.mission_request_int_send(1, 1, seq, mav.MAV_MISSION_TYPE_MISSION)
-        item = client.wait_for("MISSION_ITEM_INT", ok=lambda m, seq=seq: m.seq == seq)
-        download.append(_mission_item(item, sent, (home.latitude, home.longitude)))
-    client.conn.mav.mission_ack_send(1, 1, mav.MAV_MISSION_ACCEPTED, mav.MAV_MISSION_TYPE_MISSION)
-    return {"mission upload": upload, "mission download": download}
-
-
-def _mission_item(item, sent: list, home: tuple[int, int]) -> str:
-    """A MISSION_ITEM_INT read back: its fields, and where it is (as uploaded, home, elsewhere)."""
-    at = "elsewhere"
-    if item.seq < len(sent) and (item.x, item.y) == tuple(sent[item.seq][1:3]):
-        at = "as uploaded"
-    elif abs(item.x - home[0]) <= 1 and abs(item.y - home[1]) <= 1:
-        at = "at HOME_POSITION"
-    z = "" if item.seq == 0 else f" z={item.z:g}"  # home's altitude is where the vehicle booted
-    return (
-        f"MISSION_ITEM_INT seq={item.seq} frame={item.frame} command={item.command} current={item.current} "
-        f"autocontinue={item.autocontinue} params={item.param1:g},{item.param2:g},{item.param3:g},{item.param4:g}"
-        f"{z} {at}"
-    )
-
-
-#: The GUIDED velocity target: 1 m/s north, velocity only (position, acceleration, yaw and yaw rate ignored).
-VELOCITY_ONLY_MASK = 0b110111000111
-TARGET_MS = 1.0
-#: Vehicle seconds the target is sent for (every REFRESH_S), then watched after the last one.
-FLY_S, REFRESH_S, WATCH_S = 8.0, 0.5, 8.0
-#: ArduSub zeroes a velocity target this many vehicle seconds after the last one (GUIDED_POSVEL_TIMEOUT_MS).
-TIMEOUT_S = 3.0
-
-
-def _guided_velocity(client: Client, window: float) -> dict[str, list[str]]:
-    """Fly a velocity target in GUIDED (armed), stop sending it and watch the vehicle after the timeout."""
-    answers: list[str] = []
-    targets: set[str] = set()
-    speeds: list[tuple[float, float, float]] = []  # (vehicle s since the first target, north m/s, east m/s)
-    now = start = last_sent = None
-    ticked = time.monotonic()
-    while time.monotonic() - ticked < 1.0:  # a vehicle whose clock stands still (lock-step) is left after 1 s
-        if now is not None and start is not None and now - start > FLY_S + WATCH_S:
-            break
-        if (
-            now is not None
-            and (start is None or now - start < FLY_S)
-            and (last_sent is None or now - last_sent >= REFRESH_S)
-        ):
-            client.conn.mav.set_position_target_local_ned_send(
-                int(now * 1000), 1, 1, mav.MAV_FRAME_LOCAL_NED, VELOCITY_ONLY_MASK, 0, 0, 0, TARGET_MS, 0, 0, 0, 0, 0, 0, 0
-            )  # fmt: skip
-            start = now if start is None else start
-            last_sent = now
-        msg = client.conn.recv_match(blocking=True, timeout=0.02)
-        if msg is None:
-            continue
-        kind = msg.get_type()
-        if kind == "GLOBAL_POSITION_INT":
-            if now is None or msg.time_boot_ms / 1000 > now:
-                ticked = time.monotonic()
-            now = msg.time_boot_ms / 1000
-            if start is not None:
-                speeds.append((now - start, msg.vx / 100, msg.vy / 100))
-        elif kind in ("POSITION_TARGET_LOCAL_NED", "POSITION_TARGET_GLOBAL_INT"):
-            targets.add(f"{kind} frame={msg.coordinate_frame} type_mask={msg.type_mask}")
-        elif is_answer(msg):
-            answers.append(canonical(msg))
-    rows = {
-        "GUIDED velocity target: answers": answers,
-        "GUIDED velocity target: POSITION_TARGET streamed": sorted(targets),
-    }
-    return rows | _timeout_rows(speeds, 0.0 if start is None or last_sent is None else last_sent - start)
-
-
-def _timeout_rows(speeds: list[tuple[float, float, float]], stop: float) -> dict[str, list[str]]:
-    """What the vehicle did with the target (``speeds`` as sampled, the last target sent ``stop`` s in)."""
-    reached = max((vn for t, vn, _ in speeds if t <= stop), default=0.0)
-    after = [(t - stop, math.hypot(vn, ve)) for t, vn, ve in speeds if t > stop]
-    held = max((v for t, v in after if t <= 0.5), default=0.0)  # the speed when the last target went out
-    slowing = next((t for t, v in after if v < 0.9 * held), None) if held > 0 else None
-    braked = slowing is not None and any(v < 0.5 * held for t, v in after if t <= slowing + 1.0)
-    early, late = TIMEOUT_S - 0.5, TIMEOUT_S + 1.5  # the last target's delivery and a 3 Hz report's spacing
-    return {
-        "GUIDED velocity target: speed": [f"north speed reached >= {TARGET_MS / 2:g} m/s: {reached >= TARGET_MS / 2}"],
-        "GUIDED velocity target: timeout": [
-            f"starts slowing {early:g}-{late:g} s after the last target: {slowing is not None and early <= slowing <= late}"
-        ],
-        "GUIDED velocity target: braking": [
-            f"below half the speed within 1 s of slowing: {braked}",
-            f"below 0.1 m/s {WATCH_S:g} s after the last target: {bool(after) and after[-1][1] < 0.1}",
-        ],
-    }
-
-
 C = mav
 STEPS: tuple[Step, ...] = (
     # the firmware's first seconds: only what does not depend on where in its boot timeline they fall
@@ -439,7 +145,7 @@ STEPS: tuple[Step, ...] = (
     Step("HEARTBEAT on connect", _nothing, "HEARTBEAT"),
     Step("SYS_STATUS sensor bits", _nothing, "SYS_STATUS"),
     Step("EKF_STATUS_REPORT with a position", _nothing, "EKF_STATUS_REPORT"),
-    Step("default streams", _nothing, exchange=_default_streams),
+    Step("default streams", _nothing, exchange=default_streams),
     Step("PARAM_REQUEST_LIST", lambda c: c.conn.mav.param_request_list_send(1, 1), "params"),
     Step("AUTOPILOT_VERSION (REQUEST_MESSAGE)", lambda c: c.command(C.MAV_CMD_REQUEST_MESSAGE, 148)),
     Step("AUTOPILOT_VERSION (REQUEST_AUTOPILOT_CAPABILITIES)", lambda c: c.command(520, 1)),
@@ -479,7 +185,7 @@ STEPS: tuple[Step, ...] = (
     Step("SYS_STATUS in GUIDED", _nothing, "SYS_STATUS"),
     Step("arm", lambda c: c.command(C.MAV_CMD_COMPONENT_ARM_DISARM, 1)),
     Step("HEARTBEAT armed", _nothing, "HEARTBEAT"),
-    Step("GUIDED velocity target", _nothing, exchange=_guided_velocity),
+    Step("GUIDED velocity target", _nothing, exchange=guided_velocity),
     Step("arm when armed", lambda c: c.command(C.MAV_CMD_COMPONENT_ARM_DISARM, 1)),
     Step("disarm", lambda c: c.command(C.MAV_CMD_COMPONENT_ARM_DISARM, 0)),
     Step("disarm when disarmed", lambda c: c.command(C.MAV_CMD_COMPONENT_ARM_DISARM, 0)),
@@ -487,7 +193,7 @@ STEPS: tuple[Step, ...] = (
     Step("unsupported command", lambda c: c.command(31000)),
     Step("FTP reset sessions", _ftp(10, 2)),
     Step("FTP open @PARAM/param.pck", _ftp(11, 4, b"@PARAM/param.pck")),
-    Step("mission", _nothing, exchange=_mission),
+    Step("mission", _nothing, exchange=mission_protocol),
 )
 
 
@@ -530,7 +236,7 @@ def _param_rows(client: Client, window: float) -> dict[str, list[str]]:
         elif msg.param_index != 65535:
             count = msg.param_count
             indices.add(msg.param_index)
-            if msg.param_id in _KEPT:
+            if msg.param_id in KEPT:
                 values[msg.param_id] = f"{msg.param_id}={msg.param_value:g} type={msg.param_type}"
     shape = f"{len(indices)} PARAM_VALUE, indices 0..{count - 1 if count else '?'}, param_count {count}"
     rows = {"PARAM_REQUEST_LIST banner": banner, "PARAM_REQUEST_LIST": [shape]}
