@@ -69,6 +69,9 @@ def test_the_import_layers_hold():
         ("tests/planner/review/test_biasfit.py", "planner.cli", "only the command line"),
         ("planner/review/logs.py", "planner.fly", "the range day's stages"),
         ("planner/common/plans.py", "planner.plan", "the range day's stages"),
+        ("bridge/link.py", "bridge.relay", "the bridge's layers"),
+        ("sim/uuv/simulate.py", "sim.uuv.ardusub.frontseat", "the batch simulator never imports the front-seat"),
+        ("sim/robots/planar.py", "sim.robots.stability", "robot files over the model"),
     ],
 )
 def test_the_import_check_fails_on_a_forbidden_import(tmp_path, module, forbidden, contract):
@@ -87,6 +90,18 @@ def test_the_import_check_fails_on_a_forbidden_import(tmp_path, module, forbidde
     assert len(broken) == 1 and broken[0].startswith(contract), proc.stdout
     importer = module.removesuffix(".py").replace("/", ".")
     assert f"{importer} -> {forbidden}" in proc.stdout
+
+
+def test_the_front_seat_contract_names_every_batch_module():
+    """A new module of the batch simulator is held apart from the front-seat too, not only the ones listed today."""
+    import tomllib
+
+    contracts = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["importlinter"]["contracts"]
+    (listed,) = [c["source_modules"] for c in contracts if c["name"].startswith("the batch simulator")]
+    uuv = ROOT / "sim" / "uuv"
+    batch = {f"sim.uuv.{p.stem}" for p in uuv.glob("*.py") if p.stem != "__init__"}
+    batch |= {f"sim.uuv.{p.parent.name}" for p in uuv.glob("*/__init__.py") if p.parent.name != "ardusub"}
+    assert sorted(listed) == sorted(batch)
 
 
 def _python_files() -> list[Path]:
