@@ -158,8 +158,8 @@ def run(
 
 def _check_bus_keys(keys_dir: Path, surrogate: bool) -> None:
     """A one-line error before anything starts when DIR cannot fly this run (each role's files are checked next)."""
+    from bridge.keys import SURROGATE_SOURCE
     from bridge.range_keys import role_names
-    from planner.fly.sil_loop import SURROGATE_SOURCE
 
     if not keys_dir.is_dir():
         fail(

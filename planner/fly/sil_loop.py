@@ -36,10 +36,7 @@ from sim.uuv.ardusub.frontseat import FrontSeat  # noqa: E402
 from sim.uuv.mission import Mission  # noqa: E402
 from sim.uuv.replay import TrackBuilder, score_track  # noqa: E402
 
-__all__ = ["SilResult", "run_sil", "free_port", "SURROGATE_SOURCE"]
-
-#: The back-seat source name a surrogate commands under.
-SURROGATE_SOURCE = "surrogate"
+__all__ = ["SilResult", "run_sil"]
 
 
 @dataclass
@@ -126,8 +123,8 @@ def run_sil(
     if surrogate is not None:
         surrogate.check(mission)
     port = free_port()
-    roles = ["autonomy"] + (["logger"] if log_path is not None else [])
-    roles += [SURROGATE_SOURCE, "operator"] if surrogate is not None else []
+    roles = [keys.DEFAULT_ACTIVE] + (["logger"] if log_path is not None else [])
+    roles += [keys.SURROGATE_SOURCE, "operator"] if surrogate is not None else []
     bus = RunBus(bus_keys, vehicle=vehicle, roles=tuple(roles))  # keys checked before the front-seat starts
     fs = FrontSeat(
         mission,
@@ -160,9 +157,14 @@ def run_sil(
         backseat = flying = BackSeat(autonomy, vehicle, mission, u).start()
         if surrogate is not None:
             learned = flying = BackSeat(
-                bus.session(SURROGATE_SOURCE), vehicle, mission, u, source=SURROGATE_SOURCE, surrogate=surrogate
+                bus.session(keys.SURROGATE_SOURCE),
+                vehicle,
+                mission,
+                u,
+                source=keys.SURROGATE_SOURCE,
+                surrogate=surrogate,
             ).start()
-            heard.append(SURROGATE_SOURCE)
+            heard.append(keys.SURROGATE_SOURCE)
         bus.wait_for_parts(*heard)  # every part's subscriptions are at the hub before the first frame
         meta = json.dumps(
             {
@@ -182,8 +184,8 @@ def run_sil(
         if not wait_for(lambda: bridge.target is not None, 10):
             raise LinkTimeoutError("front-seat: no HEARTBEAT on the MAVLink link within 10 s")
         if surrogate is not None:
-            bus.put(PART_ROLES["control"], keys.active(vehicle), SURROGATE_SOURCE, when_heard=True)
-            if not wait_for(lambda: bridge.active == SURROGATE_SOURCE, 10):
+            bus.put(PART_ROLES["control"], keys.active(vehicle), keys.SURROGATE_SOURCE, when_heard=True)
+            if not wait_for(lambda: bridge.active == keys.SURROGATE_SOURCE, 10):
                 raise LinkTimeoutError("bridge: did not take the surrogate as the active source within 10 s")
         bridge.set_mode("GUIDED")
         bridge.arm(True)

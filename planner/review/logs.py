@@ -34,10 +34,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 from bridge import keys  # noqa: E402
 from bridge.frames import message_id  # noqa: E402
 from bridge.logger import LOSSES_METADATA, RAW_TOPIC  # noqa: E402
-from planner.common.telemetry import VIRTUAL_BATTERY_ID, VehicleTelemetry  # noqa: E402
-from planner.fly.vehicle.bringup import BRINGUP_SOURCE  # noqa: E402
-from planner.fly.vehicle.referee import TrackSampler  # noqa: E402
-from planner.fly.vehicle.watchdog import SOURCE as WATCHDOG_SOURCE  # noqa: E402
+from planner.common.telemetry import VIRTUAL_BATTERY_ID, TrackSampler, VehicleTelemetry  # noqa: E402
 from rapt.errors import FileFormatError  # noqa: E402
 from sim.uuv.geo import LocalFrame  # noqa: E402
 from sim.uuv.interface import decode_command  # noqa: E402
@@ -129,7 +126,7 @@ class _Steps(TrackBuilder):
 
 
 class _PacedSteps:
-    """The track of a vehicle-paced run: the referee's sampling (:class:`planner.fly.vehicle.referee.TrackSampler`) of the log."""
+    """The track of a vehicle-paced run: the referee's sampling (:class:`planner.common.telemetry.TrackSampler`) of the log."""
 
     def __init__(self, frame: LocalFrame, dt: float):
         self.telemetry = VehicleTelemetry(frame, VIRTUAL_BATTERY_ID)
@@ -361,7 +358,7 @@ class RunLogReader:
     def on_status(self, name: str, obj) -> None:
         if not isinstance(obj, dict):
             return
-        if name in ("referee", "bringup", "watchdog"):
+        if name in ("referee", keys.BRINGUP_SOURCE, keys.WATCHDOG_SOURCE):
             self.events.append({"source": name, **obj})
             if name == "referee" and self.paced is not None and obj.get("ended"):
                 self.paced.ended = str(obj["ended"])
@@ -373,7 +370,7 @@ class RunLogReader:
         bring-up's or the watchdog's (they take over before and after it)."""
         if name == "active":
             value = str(obj.get("value", obj)) if isinstance(obj, dict) else str(obj)
-            if value not in (BRINGUP_SOURCE, WATCHDOG_SOURCE):
+            if value not in (keys.BRINGUP_SOURCE, keys.WATCHDOG_SOURCE):
                 self.active = value
 
     # -- set-points ---------------------------------------------------------------------

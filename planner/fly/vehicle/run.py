@@ -31,7 +31,6 @@ from planner.fly.vehicle.bringup import GUIDED, BringUp, BringUpTimeouts, Step
 from planner.fly.vehicle.referee import Referee
 from planner.fly.vehicle.virtual_range import VirtualRange
 from planner.fly.vehicle.watchdog import BATTERY, COLLISION, OPERATIONAL_AREA, REASONS, Watchdog, WatchdogRules
-from planner.fly.vehicle.watchdog import SOURCE as WATCHDOG_SOURCE
 from rapt.errors import InputError
 from sim.uuv.scenario import make_scenarios
 
@@ -44,7 +43,7 @@ WATCHDOG_ACTIONS = ("surface", "hold")
 @dataclass
 class VehicleRunResult:
     scores: np.ndarray
-    track: np.ndarray  # (n, 8) rows of planner.fly.vehicle.referee.TrackSampler
+    track: np.ndarray  # (n, 8) rows of planner.common.telemetry.TrackSampler
     ended: str  # the referee's reason, "watchdog: <reason>", or "stopped by the operator"
     watchdog: str  # the watchdog's reason, "" if it never intervened
     sim_s: float  # scenario seconds flown
@@ -97,14 +96,14 @@ def run_vehicle(
         raise InputError(
             f"--scenario {flight.scenario_id}: invalid for mission '{mission.name}' ({scen.invalid_reason[0]})"
         )
-    roles = ("autonomy", "watchdog", "operator") + (("logger",) if log_path is not None else ())
+    roles = (keys.DEFAULT_ACTIVE, keys.WATCHDOG_SOURCE, "operator") + (("logger",) if log_path is not None else ())
     bus = RunBus(bus_keys, vehicle=vehicle, roles=roles)  # every key checked before anything joins
     hub = bus.session("bridge")
     parts: list = []
     bringup = None
     started = time.perf_counter()
     try:
-        heard = [keys.DEFAULT_ACTIVE, WATCHDOG_SOURCE]
+        heard = [keys.DEFAULT_ACTIVE, keys.WATCHDOG_SOURCE]
         if log_path is not None:
             from bridge.logger import McapLogger
 
