@@ -10,7 +10,6 @@ logs are (:func:`sim.uuv.replay.score_track`).
 
 from __future__ import annotations
 
-import json
 import os
 import threading
 import time
@@ -26,7 +25,7 @@ from bridge import keys  # noqa: E402
 from bridge.mavlink_bridge import MavlinkBridge  # noqa: E402
 from bridge.service import Service  # noqa: E402
 from bridge.session import receive, undeclare  # noqa: E402
-from planner.common.jsonio import jsonable  # noqa: E402
+from planner.common.scenario_record import SCENARIO_META, scenario_json  # noqa: E402
 from planner.fly.backseat import BackSeat  # noqa: E402
 from planner.fly.lifecycle import wait_for  # noqa: E402
 from planner.fly.run_bus import PART_ROLES, RunBus, free_port  # noqa: E402
@@ -166,18 +165,9 @@ def run_sil(
             ).start()
             heard.append(keys.SURROGATE_SOURCE)
         bus.wait_for_parts(*heard)  # every part's subscriptions are at the hub before the first frame
-        meta = json.dumps(
-            {
-                "mission": mission.name,
-                "mission_file": mission_file or mission.source,
-                "scenario_id": scenario_id,
-                "plan_id": plan_id,
-                "u": u.tolist(),
-                "parameters": jsonable(mission.space.decode(u[None, :])[0]),
-            }
-        )
+        meta = scenario_json(mission, u, mission_file=mission_file, scenario_id=scenario_id, plan_id=plan_id)
         # the logger may be a client of the hub: put once it is heard
-        bus.put(PART_ROLES["scenario_meta"], keys.meta(vehicle, "scenario"), meta, when_heard=logger is not None)
+        bus.put(PART_ROLES["scenario_meta"], keys.meta(vehicle, SCENARIO_META), meta, when_heard=logger is not None)
         bridge = MavlinkBridge(
             f"udpout:127.0.0.1:{port}", bus.session("bridge"), vehicle=vehicle, allow_commands=True
         ).start()

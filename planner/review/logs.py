@@ -34,6 +34,7 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 from bridge import keys  # noqa: E402
 from bridge.frames import message_id  # noqa: E402
 from bridge.logger import LOSSES_METADATA, RAW_TOPIC  # noqa: E402
+from planner.common.scenario_record import SCENARIO_META, metadata_fields, paced_clock  # noqa: E402
 from planner.common.telemetry import VIRTUAL_BATTERY_ID, TrackSampler, VehicleTelemetry  # noqa: E402
 from rapt.errors import FileFormatError  # noqa: E402
 from sim.uuv.geo import LocalFrame  # noqa: E402
@@ -288,18 +289,15 @@ class RunLogReader:
             self.channels[rec.id] = rec
         elif isinstance(rec, Message):
             self.on_message(rec)
-        elif isinstance(rec, Metadata) and rec.name == "scenario":
+        elif isinstance(rec, Metadata) and rec.name == SCENARIO_META:
             self.on_metadata(rec)
         elif isinstance(rec, Metadata) and rec.name == LOSSES_METADATA:
             self.losses = _losses(rec.metadata)
 
     def on_metadata(self, rec: Metadata) -> None:
         """The scenario metadata record (a fallback for the meta/scenario message)."""
-        for k, v in rec.metadata.items():
-            try:
-                self.meta.setdefault(k, json.loads(v) if k in ("u", "parameters") else v)
-            except ValueError:
-                self.meta.setdefault(k, v)
+        for k, v in metadata_fields(rec.metadata).items():
+            self.meta.setdefault(k, v)
 
     # -- messages by kind -----------------------------------------------------------------
     def on_message(self, msg: Message) -> None:
@@ -335,11 +333,11 @@ class RunLogReader:
                 self.steps.add(m)
 
     def on_meta(self, name: str, obj) -> None:
-        if name == "scenario" and isinstance(obj, dict):
+        if name == SCENARIO_META and isinstance(obj, dict):
             self.meta.update(obj)
-            origin = obj.get("origin")
-            if obj.get("pacing") == "vehicle" and self.paced is None and isinstance(origin, list) and len(origin) == 2:
-                self.paced = _PacedSteps(LocalFrame(float(origin[0]), float(origin[1])), float(obj.get("dt", 2.0)))
+            clock = paced_clock(obj) if self.paced is None else None
+            if clock is not None:
+                self.paced = _PacedSteps(LocalFrame(clock.origin_lat, clock.origin_lon), clock.dt)
         elif name == "clock" and isinstance(obj, dict) and self.paced is not None:
             self.start_ms = int(obj.get("start_ms", 0))
             self.paced.begin(self.start_ms)

@@ -13,7 +13,6 @@ the water, ArduSub SITL or our bare-autopilot front-seat.
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
@@ -23,7 +22,7 @@ import numpy as np
 
 from bridge import keys
 from bridge.mavlink_bridge import Autopilot, MavlinkBridge
-from planner.common.jsonio import jsonable
+from planner.common.scenario_record import SCENARIO_META, scenario_json
 from planner.fly.backseat import BackSeat
 from planner.fly.run_bus import PART_ROLES, RunBus
 from planner.fly.scenario_map import ScenarioMap
@@ -123,8 +122,15 @@ def run_vehicle(
         ).start()
         parts += [virtual, referee, backseat, watchdog]
         bus.wait_for_parts(*heard)  # their subscriptions are at the hub before the bring-up's first put
-        meta = json.dumps(_scenario_meta(flight, connection))
-        bus.put(PART_ROLES["scenario_meta"], keys.meta(vehicle, "scenario"), meta, when_heard=log_path is not None)
+        meta = scenario_json(
+            mission,
+            u,
+            mission_file=flight.mission_file,
+            scenario_id=flight.scenario_id,
+            plan_id=flight.plan_id,
+            vehicle_link=connection,
+        )
+        bus.put(PART_ROLES["scenario_meta"], keys.meta(vehicle, SCENARIO_META), meta, when_heard=log_path is not None)
         bringup = BringUp(
             bridge, bus.session(PART_ROLES["bringup"]), vehicle, mission, connection, timeouts or BringUpTimeouts(), say
         )
@@ -183,22 +189,6 @@ def run_vehicle(
         for part in reversed(parts):
             part.close()
         bus.close()
-
-
-def _scenario_meta(flight, connection: str) -> dict:
-    mission = flight.mission
-    return {
-        "mission": mission.name,
-        "mission_file": flight.mission_file or mission.source,
-        "scenario_id": flight.scenario_id,
-        "plan_id": flight.plan_id,
-        "u": np.asarray(flight.u, dtype=float).tolist(),
-        "parameters": jsonable(mission.space.decode(np.asarray(flight.u, dtype=float)[None, :])[0]),
-        "vehicle_link": connection,
-        "pacing": "vehicle",
-        "origin": [mission.origin_lat, mission.origin_lon],
-        "dt": mission.dt,
-    }
 
 
 #: Watchdog reasons the referee also calls from its track rows (the scenario's virtual battery empty,
