@@ -82,6 +82,38 @@ class _Recorder(Service):
         self._join(self._threads, timeout=5)
 
 
+def _frontseat(mission: Mission, u: np.ndarray, port: int, speedup, bias, stochastic: bool, seed: int) -> FrontSeat:
+    """The simulated front-seat on UDP ``port``: lock-step when ``speedup`` is None, else real time times it."""
+    return FrontSeat(
+        mission,
+        u,
+        f"udpin:127.0.0.1:{port}",
+        lockstep=speedup is None,
+        speedup=speedup or 1.0,
+        bias=bias,
+        stochastic=stochastic,
+        seed=seed,
+    )
+
+
+def _fly_to_the_end(
+    bus: RunBus, bridge: MavlinkBridge, fs: FrontSeat, vehicle: str, surrogate: bool, timeout_s: float
+) -> None:
+    """Once the bridge hears the front-seat (and takes the surrogate as the active source): GUIDED, arm,
+    and wait for the front-seat to end the run; then for its last telemetry to reach the recorder and logger."""
+    if not wait_for(lambda: bridge.target is not None, 10):
+        raise LinkTimeoutError("front-seat: no HEARTBEAT on the MAVLink link within 10 s")
+    if surrogate:
+        bus.put(PART_ROLES["control"], keys.active(vehicle), keys.SURROGATE_SOURCE, when_heard=True)
+        if not wait_for(lambda: bridge.active == keys.SURROGATE_SOURCE, 10):
+            raise LinkTimeoutError("bridge: did not take the surrogate as the active source within 10 s")
+    bridge.set_mode("GUIDED")
+    bridge.arm(True)
+    if not wait_for(lambda: fs.ended, timeout_s, poll_s=0.005):
+        raise LinkTimeoutError(f"timeout_s: the run did not end within {timeout_s} s of wall time")
+    time.sleep(0.3)  # let the last step's telemetry reach the recorder and the logger
+
+
 def run_sil(
     mission: Mission,
     u,
@@ -125,16 +157,7 @@ def run_sil(
     roles = [keys.DEFAULT_ACTIVE] + (["logger"] if log_path is not None else [])
     roles += [keys.SURROGATE_SOURCE, "operator"] if surrogate is not None else []
     bus = RunBus(bus_keys, vehicle=vehicle, roles=tuple(roles))  # keys checked before the front-seat starts
-    fs = FrontSeat(
-        mission,
-        u,
-        f"udpin:127.0.0.1:{port}",
-        lockstep=speedup is None,
-        speedup=speedup or 1.0,
-        bias=bias,
-        stochastic=stochastic,
-        seed=seed,
-    )
+    fs = _frontseat(mission, u, port, speedup, bias, stochastic, seed)
     fs_thread = threading.Thread(target=fs.serve, name="frontseat", daemon=True)
     logger = bridge = backseat = recorder = learned = scenario_map = None
     started = time.perf_counter()
@@ -171,17 +194,7 @@ def run_sil(
         bridge = MavlinkBridge(
             f"udpout:127.0.0.1:{port}", bus.session("bridge"), vehicle=vehicle, allow_commands=True
         ).start()
-        if not wait_for(lambda: bridge.target is not None, 10):
-            raise LinkTimeoutError("front-seat: no HEARTBEAT on the MAVLink link within 10 s")
-        if surrogate is not None:
-            bus.put(PART_ROLES["control"], keys.active(vehicle), keys.SURROGATE_SOURCE, when_heard=True)
-            if not wait_for(lambda: bridge.active == keys.SURROGATE_SOURCE, 10):
-                raise LinkTimeoutError("bridge: did not take the surrogate as the active source within 10 s")
-        bridge.set_mode("GUIDED")
-        bridge.arm(True)
-        if not wait_for(lambda: fs.ended, timeout_s, poll_s=0.005):
-            raise LinkTimeoutError(f"timeout_s: the run did not end within {timeout_s} s of wall time")
-        time.sleep(0.3)  # let the last step's telemetry reach the recorder and the logger
+        _fly_to_the_end(bus, bridge, fs, vehicle, surrogate is not None, timeout_s)
         wall = time.perf_counter() - started
         status = flying.autonomy  # the scores are those of whoever flew
         wp_aborted = [bool(v) for v in status.wp_aborted[0]]
