@@ -210,7 +210,8 @@ def calibration(rows: list[dict], work: Path, seed: int = 0) -> dict:
     import sim.uuv
     from benchmarks.calibrate import evaluate
     from planner.common.plans import load_plan
-    from planner.review.compare import CompareConfig, compare
+    from planner.review.compare import compare
+    from planner.review.runs import CompareConfig
     from sim.uuv.bias import Bias
     from sim.uuv.scoring import MODE_NAMES
 

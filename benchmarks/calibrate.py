@@ -94,7 +94,7 @@ def fly(
 ) -> str:
     """One scenario on the bare front-seat running ``vehicle_toml`` (stopped after ``cut_s`` wall seconds
     when given); returns "" or what went wrong."""
-    from planner.fly.sil_loop import free_port
+    from planner.fly.run_bus import free_port
 
     port = free_port()
     scen = log.with_suffix(".scenario.json")

@@ -52,7 +52,7 @@ import sim.uuv
 from bridge.logger import RAW_TOPIC
 from bridge.range_keys import make_range_keys, role_config
 from bridge.session import zenoh_config
-from planner.fly.sil_loop import free_port
+from planner.fly.run_bus import free_port
 
 #: The targets: the secure bus keeps at least 80 % of plain TCP's throughput and adds at most 0.5 ms to p99.
 MAX_THROUGHPUT_COST = 0.20

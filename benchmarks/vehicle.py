@@ -106,7 +106,7 @@ def _stack(plan_path: str, sid: str, port: int, speedup: float, record: tuple, r
 
 def fly(plan_path: str, sid: str, speedup: float, record: tuple = ("nogo",)) -> dict:
     """One scenario at one speed-up: the vehicle and the stack as two processes on loopback."""
-    from planner.fly.sil_loop import free_port
+    from planner.fly.run_bus import free_port
 
     ctx = mp.get_context("spawn")
     results = ctx.Queue()

@@ -25,7 +25,7 @@ __all__ = ["HUB_ROLE", "OTHER_ROLES", "role_permissions", "access_rules", "permi
 #: The role whose session is the hub (it listens; its own puts are not checked).
 HUB_ROLE = "bridge"
 #: The roles besides the hub and the autonomies, each connecting as a client.
-OTHER_ROLES = ("watchdog", "logger", "operator")
+OTHER_ROLES = (keys.WATCHDOG_SOURCE, "logger", "operator")
 
 
 def _vehicle_keys(vehicle: str) -> dict[str, str]:
@@ -63,7 +63,7 @@ def role_permissions(vehicle: str, role: str, *, autonomy: bool = False) -> dict
     if role == "logger":
         # the logger's own counters (status/logger) are only logged; it puts no command and no control
         return {"put": own, "subscribe": [k["everything"]], "alive": [keys.alive(vehicle, role)]}
-    if role in ("watchdog", "operator"):
+    if role in (keys.WATCHDOG_SOURCE, "operator"):
         return {
             "put": [k["active"], keys.command(vehicle, role), *own],
             "subscribe": [k["telemetry"], k["virtual"], k["meta"], k["active"], k["commands"], k["status"]],

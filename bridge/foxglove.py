@@ -34,6 +34,8 @@ from functools import cache
 from pathlib import Path
 from typing import Any
 
+from bridge import keys
+
 __all__ = [
     "WELL_KNOWN",
     "FIX_TOPIC",
@@ -230,7 +232,7 @@ class FoxgloveMessages:
     # -- the autonomy's events -------------------------------------------------------------
     def _event(self, source: str, obj: dict) -> tuple[int, str] | None:
         """(level, text) of a back-seat process's status, or None when it reports no event."""
-        if source == "bringup" and "name" in obj and "status" in obj:
+        if source == keys.BRINGUP_SOURCE and "name" in obj and "status" in obj:
             detail = f": {obj['detail']}" if obj.get("detail") else ""
             return BRINGUP_LEVEL.get(str(obj["status"]), INFO), f"bring-up {obj['name']} {obj['status']}{detail}"
         if source == "referee" and obj.get("ended"):

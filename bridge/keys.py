@@ -28,6 +28,17 @@ Everything about a vehicle lives under ``rapt/<vehicle>/``:
                                             logged as a ``foxglove.GeoJSON`` channel ``/map/<name>``
 ==========================================  ===============================================
 
+The sources that command the vehicle (``command/<source>``, ``control/active``), named here so
+every process agrees on who flies it:
+
+=======================  ==========================================================================
+``DEFAULT_ACTIVE``       ``"autonomy"``: the scenario's back-seat autonomy, active from the start
+``BRINGUP_SOURCE``       ``"bringup"``: a real vehicle's bring-up, taking it down before the run
+``WATCHDOG_SOURCE``      ``"watchdog"``: the watchdog, when it takes over (also its role and its
+                         ``status/`` and ``alive/`` name)
+``SURROGATE_SOURCE``     ``"surrogate"``: a trained surrogate flying in the autonomy's place
+=======================  ==========================================================================
+
 ``<vehicle>``, ``<source>``, ``<name>`` and ``<role>`` are single key chunks: non-empty, without
 ``/``, ``*``, ``$``, ``?``, ``#`` or spaces. ``"*"`` is accepted where a pattern makes sense
 (``command(v, "*")``, ``alive(v, "*")``).
@@ -46,6 +57,9 @@ __all__ = [
     "PREFIX",
     "DEFAULT_VEHICLE",
     "DEFAULT_ACTIVE",
+    "BRINGUP_SOURCE",
+    "WATCHDOG_SOURCE",
+    "SURROGATE_SOURCE",
     "telemetry",
     "raw",
     "virtual",
@@ -64,7 +78,14 @@ __all__ = [
 
 PREFIX = "rapt"
 DEFAULT_VEHICLE = "uuv1"
+#: The source allowed to command until someone says otherwise: the scenario's autonomy.
 DEFAULT_ACTIVE = "autonomy"
+#: The source a real vehicle's bring-up commands under while it takes the vehicle down.
+BRINGUP_SOURCE = "bringup"
+#: The source the watchdog commands under when it takes over (and its status key, role and token).
+WATCHDOG_SOURCE = "watchdog"
+#: The source a trained surrogate of the autonomy commands under.
+SURROGATE_SOURCE = "surrogate"
 #: The Zenoh attachment of a frame on ``mavlink/raw`` that no vehicle sent (see :func:`virtual`).
 VIRTUAL_ATTACHMENT = b"virtual"
 

@@ -38,7 +38,7 @@ from rapt.errors import FileFormatError, InputError, MissingFileError
 __all__ = ["ROLES", "DEFAULT_TLS_HUB", "make_range_keys", "role_config", "role_names", "write_certificate"]
 
 #: The kinds of role on a range's bus. Each autonomy is a role of its own, named by its source name.
-ROLES = ("bridge", "autonomy", "watchdog", "logger", "operator")
+ROLES = (HUB_ROLE, "autonomy", keys.WATCHDOG_SOURCE, "logger", "operator")
 #: The hub endpoint when none is given: the bridge's TLS listener.
 DEFAULT_TLS_HUB = "tls/127.0.0.1:7448"
 _CA = "ca"

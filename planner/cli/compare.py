@@ -45,8 +45,30 @@ def compare(
     ] = None,
 ) -> None:
     """Compare run logs with the plan: predicted vs observed, execution bias, re-plan."""
-    from planner.review.compare import CompareConfig
-    from planner.review.compare import compare as run_compare
+    from planner.review.runs import CompareConfig
+
+    names = _bias_names(fit)
+    _check_options(dithers, bootstrap, logs)
+    plant = None
+    if calibrated is not None:
+        plant = _calibrated_vehicle(plan_dir, calibrated)
+    config = CompareConfig(dithers=dithers, seed=seed, fit=names, plant=plant, bootstrap=bootstrap)
+    result = _run_compare(plan_dir, logs, out_dir, config)
+    _warn_lost(result)
+    out.print(_scenario_table(result))
+    out.print(_bias_table(result))
+    _print_agreement(result)
+    _print_flagged(result)
+    overlays = len(result.get("overlays", {}))
+    out.print(
+        f"comparison.json, comparison.html and {overlays} Foxglove overlay(s) (overlay_*.mcap) written to {out_dir}",
+        highlight=False,
+        soft_wrap=True,
+    )
+
+
+def _bias_names(fit: str | None) -> tuple[str, ...]:
+    """The bias parameters --fit names (all of them without it); a one-line error for an unknown one."""
     from sim.uuv.bias import BIAS_NAMES
 
     names = BIAS_NAMES
@@ -55,6 +77,11 @@ def compare(
         bad = [n for n in names if n not in BIAS_NAMES]
         if bad or not names:
             fail(f"--fit: unknown bias parameter {bad[0] if bad else fit!r}; choose from {', '.join(BIAS_NAMES)}")
+    return names
+
+
+def _check_options(dithers: int, bootstrap: int, logs: list[Path]) -> None:
+    """A one-line error for a negative count or a log that is not there."""
     if dithers < 0:
         fail(f"--dithers: expected a number of runs >= 0, got {dithers}")
     if bootstrap < 0:
@@ -62,9 +89,12 @@ def compare(
     for p in logs:
         if not p.is_file():
             fail(f"LOGS: {p} does not exist; give the .mcap files of the plan's runs")
-    plant = None
-    if calibrated is not None:
-        plant = _calibrated_vehicle(plan_dir, calibrated)
+
+
+def _run_compare(plan_dir: Path, logs: list[Path], out_dir: Path, config) -> dict:
+    """:func:`planner.review.compare.compare` under a spinner naming its stage (on a terminal)."""
+    from planner.review.compare import compare as run_compare
+
     with err.status("comparing", spinner="dots") if err.is_terminal else nullcontext() as status:
 
         def progress(stage: str) -> None:
@@ -72,15 +102,13 @@ def compare(
                 status.update(stage)
 
         try:
-            result = run_compare(
-                plan_dir,
-                logs,
-                out_dir,
-                CompareConfig(dithers=dithers, seed=seed, fit=names, plant=plant, bootstrap=bootstrap),
-                progress,
-            )
+            return run_compare(plan_dir, logs, out_dir, config, progress)
         except ValueError as exc:
             fail(str(exc))
+
+
+def _warn_lost(result: dict) -> None:
+    """A warning per log for what it lost: damaged parts, frames lost on the way."""
     for lg in result["logs"]:
         for problem in lg["lost"]:
             err.print(f"[yellow]warning:[/] {Path(lg['path']).name}: {problem}", highlight=False, soft_wrap=True)
@@ -92,6 +120,10 @@ def compare(
                 highlight=False,
                 soft_wrap=True,
             )
+
+
+def _scenario_table(result: dict) -> Table:
+    """Per logged run: predicted, observed and corrected modes, path errors, frames lost."""
     table = Table(
         title=f"{result['plan']['mission']}: {len(result['scenarios'])} run(s) against plan {result['plan']['id']}"
     )
@@ -108,7 +140,11 @@ def compare(
             "-" if pc is None else f"{pc:.1f}",
             str(r.get("frames_lost", "unknown")),
         )
-    out.print(table)
+    return table
+
+
+def _bias_table(result: dict) -> Table:
+    """The fitted execution bias: estimate, standard error, prior and whether the logs identify it."""
     bias = Table(title="execution bias (MAP fit to all logs; unidentified parameters stay neutral)")
     for col in ("parameter", "estimate", "std. error", "prior", "identified", "unit"):
         bias.add_column(col, justify="left" if col in ("parameter", "unit", "identified") else "right")
@@ -123,27 +159,35 @@ def compare(
             "yes" if v["identified"] else "no (neutral)",
             units[n],
         )
-    out.print(bias)
+    return bias
+
+
+def _pct(v: float | None) -> str:
+    return "-" if v is None else f"{v:.0%}"
+
+
+def _print_agreement(result: dict) -> None:
+    """Held-out and overall mode agreement, and whether the correction is used."""
     ag = result["mode_agreement"]
     cv = result["cross_validation"]
-
-    def pct(v: float | None) -> str:
-        return "-" if v is None else f"{v:.0%}"
-
     held = cv["held_out_mode_agreement"]
     out.print(
-        f"held-out (leave one log out) mode agreement: {pct(held['uncorrected'])} uncorrected, "
-        f"{pct(held['corrected'])} corrected ({held['runs']} runs)",
+        f"held-out (leave one log out) mode agreement: {_pct(held['uncorrected'])} uncorrected, "
+        f"{_pct(held['corrected'])} corrected ({held['runs']} runs)",
         highlight=False,
         soft_wrap=True,
     )
     out.print(result["correction"]["note"], highlight=False, soft_wrap=True)
     out.print(
-        f"mode agreement: {pct(ag['uncorrected'])} as planned, {pct(ag['corrected'])} with the correction used "
+        f"mode agreement: {_pct(ag['uncorrected'])} as planned, {_pct(ag['corrected'])} with the correction used "
         f"({ag['scenarios']} scenarios with a logged end)",
         highlight=False,
         soft_wrap=True,
     )
+
+
+def _print_flagged(result: dict) -> None:
+    """The pairs the bias moved off their boundary, and the adjusted scenario proposed for each side."""
     flagged = [p for p in result["pairs"] if p["flagged"]]
     for p in flagged:
         out.print(
@@ -162,12 +206,6 @@ def compare(
             )
         else:
             out.print(f"  {q['variant_of']}: {q['note']}", highlight=False, soft_wrap=True)
-    overlays = len(result.get("overlays", {}))
-    out.print(
-        f"comparison.json, comparison.html and {overlays} Foxglove overlay(s) (overlay_*.mcap) written to {out_dir}",
-        highlight=False,
-        soft_wrap=True,
-    )
 
 
 def _calibrated_vehicle(plan_dir: Path, calibrated: Path):

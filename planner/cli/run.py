@@ -72,33 +72,18 @@ def run(
     With --bus-keys DIR the parts talk over the range's secure bus, each as its role
     (the bridge is the hub; a --surrogate needs an autonomy role named surrogate in DIR).
     """
-    from planner.fly.sil_flight import Flight, check_against_batch, flight_from_plan, fly, is_plan
+    from planner.fly.sil_flight import check_against_batch, fly
     from sim.uuv.bias import parse_bias
-    from sim.uuv.scoring import mode_name
 
     try:
         bias = parse_bias(inject_bias) if inject_bias is not None else None
     except ValueError as exc:
         fail(f"--inject-bias: {exc}")
-    if is_plan(mission_file):
-        try:
-            flight = flight_from_plan(mission_file, scenario)
-        except ValueError as exc:
-            fail(str(exc))
-    else:
-        mission, u, sid = mission_and_scenario(mission_file, scenario)
-        flight = Flight(mission, u, sid, str(mission_file))
+    flight = _flight(mission_file, scenario)
     if bus_keys is not None:
         _check_bus_keys(bus_keys, surrogate is not None)
     if mavlink is not None:
-        for name, given in (
-            ("--speedup", speedup is not None),
-            ("--inject-bias", bias is not None),
-            ("--stochastic", stochastic),
-            ("--surrogate", surrogate is not None),
-        ):
-            if given:
-                fail(f"{name}: not with --mavlink (the vehicle keeps its own pace and physics); drop one of them")
+        _check_not_with_mavlink(speedup is not None, bias is not None, stochastic, surrogate is not None)
         from planner.cli.vehicle import run_on_vehicle
 
         run_on_vehicle(
@@ -131,12 +116,45 @@ def run(
     except (RaptError, ValueError, RuntimeError, TimeoutError, ConnectionError) as exc:
         fail(str(exc))
     batch = check_against_batch(flight, result.scores, bias=bias, stochastic=stochastic, seed=seed, surrogate=learned)
+    flown_by = surrogate.name if learned is not None and surrogate is not None else None
+    out.print(_result_table(flight, result, batch, bias, flown_by, stochastic, log))
+
+
+def _flight(mission_file: Path, scenario: str | None):
+    """The flight of MISSION_OR_PLAN's scenario (:class:`planner.fly.sil_flight.Flight`); a one-line error."""
+    from planner.fly.sil_flight import Flight, flight_from_plan, is_plan
+
+    if is_plan(mission_file):
+        try:
+            return flight_from_plan(mission_file, scenario)
+        except ValueError as exc:
+            fail(str(exc))
+    mission, u, sid = mission_and_scenario(mission_file, scenario)
+    return Flight(mission, u, sid, str(mission_file))
+
+
+def _check_not_with_mavlink(speedup: bool, bias: bool, stochastic: bool, surrogate: bool) -> None:
+    """A one-line error for an option given with --mavlink that only the simulated vehicle has."""
+    for name, given in (
+        ("--speedup", speedup),
+        ("--inject-bias", bias),
+        ("--stochastic", stochastic),
+        ("--surrogate", surrogate),
+    ):
+        if given:
+            fail(f"{name}: not with --mavlink (the vehicle keeps its own pace and physics); drop one of them")
+
+
+def _result_table(flight, result, batch, bias, flown_by: str | None, stochastic: bool, log: Path | None) -> Table:
+    """How the software-in-the-loop run ended, set against the batch simulator's run of the scenario."""
+    from sim.uuv.scoring import mode_name
+
     table = Table(title=f"{flight.mission.name} scenario {flight.scenario_id}: software in the loop")
     table.add_column("", justify="left")
     table.add_column("value", justify="right")
     table.add_row("ended", result.ended)
-    if learned is not None and surrogate is not None:
-        table.add_row("flown by", f"surrogate {surrogate.name} (expert commands recorded)")
+    if flown_by is not None:
+        table.add_row("flown by", f"surrogate {flown_by} (expert commands recorded)")
     table.add_row("mode", mode_name(result.scores))
     if bias is not None:
         table.add_row("injected bias", str(bias))
@@ -153,13 +171,13 @@ def run(
         )
     if log is not None:
         table.add_row("log", str(log))
-    out.print(table)
+    return table
 
 
 def _check_bus_keys(keys_dir: Path, surrogate: bool) -> None:
     """A one-line error before anything starts when DIR cannot fly this run (each role's files are checked next)."""
+    from bridge.keys import SURROGATE_SOURCE
     from bridge.range_keys import role_names
-    from planner.fly.sil_loop import SURROGATE_SOURCE
 
     if not keys_dir.is_dir():
         fail(

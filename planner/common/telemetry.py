@@ -8,6 +8,8 @@ range elements, the watchdog, the run's referee — reads it through
 :class:`VehicleTelemetry`: it keeps the newest report of each kind with the vehicle's
 ``time_boot_ms``, drops (and counts) reports older than one already seen, and gives the
 pose in the mission's local frame (x east, y north) through :class:`sim.uuv.geo.LocalFrame`.
+:class:`TrackSampler` turns those poses into a track on the scenario clock, for the referee
+of a live run and for the review of its log alike.
 """
 
 from __future__ import annotations
@@ -17,13 +19,24 @@ import os
 from collections import deque
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from bridge.frames import message_id
 from sim.uuv.geo import LocalFrame
 
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 
-__all__ = ["Pose", "Contact", "VehicleTelemetry", "FrameDecoder", "KINDS", "VIRTUAL_BATTERY_ID", "SURFACED_DEPTH_M"]
+__all__ = [
+    "Pose",
+    "Contact",
+    "VehicleTelemetry",
+    "TrackSampler",
+    "FrameDecoder",
+    "KINDS",
+    "VIRTUAL_BATTERY_ID",
+    "SURFACED_DEPTH_M",
+]
 
 #: The messages :class:`VehicleTelemetry` reads; anything else on the stream is skipped undecoded.
 KINDS = (
@@ -229,6 +242,37 @@ class VehicleTelemetry:
     def recent_contacts(self, since_ms: int) -> dict[int, Contact]:
         """Contacts reported at or after ``since_ms`` (older ones are out of sight now)."""
         return {j: c for j, c in self.contacts.items() if c.time_ms >= since_ms}
+
+
+class TrackSampler:
+    """One row per period of the vehicle's clock from ``start_ms``: t, x, y, heading, energy, surfaced, speed, yaw rate."""
+
+    def __init__(self, telemetry: VehicleTelemetry, start_ms: int, period_ms: int):
+        self.telemetry, self.start_ms, self.period_ms = telemetry, int(start_ms), int(period_ms)
+        self.next_ms = self.start_ms
+        self.rows: list[tuple[float, ...]] = []
+
+    def add(self, pose: Pose) -> tuple[float, ...] | None:
+        """The row this report opens, or None (not yet the next period, or no battery reading yet)."""
+        energy = self.telemetry.energy_hj
+        if pose.time_ms < self.next_ms or energy is None:
+            return None
+        self.next_ms += ((pose.time_ms - self.next_ms) // self.period_ms + 1) * self.period_ms
+        row = (
+            (pose.time_ms - self.start_ms) / 1000.0,
+            pose.east,
+            pose.north,
+            pose.heading,
+            float(energy),
+            1.0 if pose.surfaced else 0.0,
+            pose.speed,
+            pose.yaw_rate,
+        )
+        self.rows.append(row)
+        return row
+
+    def track(self) -> np.ndarray:
+        return np.array(self.rows, dtype=float).reshape(-1, 8)
 
 
 def _wrap(a: float) -> float:

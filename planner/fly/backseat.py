@@ -136,7 +136,7 @@ class BackSeat(Service):
         vehicle: str,
         mission: Mission,
         u,
-        source: str = "autonomy",
+        source: str = keys.DEFAULT_ACTIVE,
         surrogate=None,
         *,
         pacing: str = "lockstep",

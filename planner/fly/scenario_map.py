@@ -4,7 +4,7 @@ The logger (:mod:`bridge.logger`) writes the document of ``rapt/<v>/map/<name>``
 ``foxglove.GeoJSON`` channel, so Foxglove's Map panel shows the mission areas, no-go areas,
 start and recovery points and the predicted track under the vehicle's ``foxglove.LocationFix``.
 The bridge cannot build it (it must not import :mod:`sim`); the planner, which flies the
-scenario, can: the document is :func:`planner.plan.exports.geojson`'s, the one the range already
+scenario, can: the document is :func:`planner.common.geojson.geojson`'s, the one the range already
 gets as a ``.geojson`` file, with the batch simulator's trajectory of the same row.
 
 :class:`ScenarioMap` puts it whenever a logger's liveliness token (``rapt/<v>/alive/logger``)
@@ -25,7 +25,7 @@ import sim.uuv
 from bridge import keys
 from bridge.service import Service
 from bridge.session import receive, undeclare
-from planner.plan.exports import geojson
+from planner.common.geojson import geojson
 from sim.uuv.mission import Mission
 
 __all__ = ["SCENARIO_MAP", "scenario_map", "ScenarioMap"]

@@ -10,7 +10,6 @@ logs are (:func:`sim.uuv.replay.score_track`).
 
 from __future__ import annotations
 
-import json
 import os
 import threading
 import time
@@ -26,7 +25,7 @@ from bridge import keys  # noqa: E402
 from bridge.mavlink_bridge import MavlinkBridge  # noqa: E402
 from bridge.service import Service  # noqa: E402
 from bridge.session import receive, undeclare  # noqa: E402
-from planner.common.jsonio import jsonable  # noqa: E402
+from planner.common.scenario_record import SCENARIO_META, scenario_json  # noqa: E402
 from planner.fly.backseat import BackSeat  # noqa: E402
 from planner.fly.lifecycle import wait_for  # noqa: E402
 from planner.fly.run_bus import PART_ROLES, RunBus, free_port  # noqa: E402
@@ -36,10 +35,7 @@ from sim.uuv.ardusub.frontseat import FrontSeat  # noqa: E402
 from sim.uuv.mission import Mission  # noqa: E402
 from sim.uuv.replay import TrackBuilder, score_track  # noqa: E402
 
-__all__ = ["SilResult", "run_sil", "free_port", "SURROGATE_SOURCE"]
-
-#: The back-seat source name a surrogate commands under.
-SURROGATE_SOURCE = "surrogate"
+__all__ = ["SilResult", "run_sil"]
 
 
 @dataclass
@@ -86,6 +82,38 @@ class _Recorder(Service):
         self._join(self._threads, timeout=5)
 
 
+def _frontseat(mission: Mission, u: np.ndarray, port: int, speedup, bias, stochastic: bool, seed: int) -> FrontSeat:
+    """The simulated front-seat on UDP ``port``: lock-step when ``speedup`` is None, else real time times it."""
+    return FrontSeat(
+        mission,
+        u,
+        f"udpin:127.0.0.1:{port}",
+        lockstep=speedup is None,
+        speedup=speedup or 1.0,
+        bias=bias,
+        stochastic=stochastic,
+        seed=seed,
+    )
+
+
+def _fly_to_the_end(
+    bus: RunBus, bridge: MavlinkBridge, fs: FrontSeat, vehicle: str, surrogate: bool, timeout_s: float
+) -> None:
+    """Once the bridge hears the front-seat (and takes the surrogate as the active source): GUIDED, arm,
+    and wait for the front-seat to end the run; then for its last telemetry to reach the recorder and logger."""
+    if not wait_for(lambda: bridge.target is not None, 10):
+        raise LinkTimeoutError("front-seat: no HEARTBEAT on the MAVLink link within 10 s")
+    if surrogate:
+        bus.put(PART_ROLES["control"], keys.active(vehicle), keys.SURROGATE_SOURCE, when_heard=True)
+        if not wait_for(lambda: bridge.active == keys.SURROGATE_SOURCE, 10):
+            raise LinkTimeoutError("bridge: did not take the surrogate as the active source within 10 s")
+    bridge.set_mode("GUIDED")
+    bridge.arm(True)
+    if not wait_for(lambda: fs.ended, timeout_s, poll_s=0.005):
+        raise LinkTimeoutError(f"timeout_s: the run did not end within {timeout_s} s of wall time")
+    time.sleep(0.3)  # let the last step's telemetry reach the recorder and the logger
+
+
 def run_sil(
     mission: Mission,
     u,
@@ -126,19 +154,10 @@ def run_sil(
     if surrogate is not None:
         surrogate.check(mission)
     port = free_port()
-    roles = ["autonomy"] + (["logger"] if log_path is not None else [])
-    roles += [SURROGATE_SOURCE, "operator"] if surrogate is not None else []
+    roles = [keys.DEFAULT_ACTIVE] + (["logger"] if log_path is not None else [])
+    roles += [keys.SURROGATE_SOURCE, "operator"] if surrogate is not None else []
     bus = RunBus(bus_keys, vehicle=vehicle, roles=tuple(roles))  # keys checked before the front-seat starts
-    fs = FrontSeat(
-        mission,
-        u,
-        f"udpin:127.0.0.1:{port}",
-        lockstep=speedup is None,
-        speedup=speedup or 1.0,
-        bias=bias,
-        stochastic=stochastic,
-        seed=seed,
-    )
+    fs = _frontseat(mission, u, port, speedup, bias, stochastic, seed)
     fs_thread = threading.Thread(target=fs.serve, name="frontseat", daemon=True)
     logger = bridge = backseat = recorder = learned = scenario_map = None
     started = time.perf_counter()
@@ -160,36 +179,22 @@ def run_sil(
         backseat = flying = BackSeat(autonomy, vehicle, mission, u).start()
         if surrogate is not None:
             learned = flying = BackSeat(
-                bus.session(SURROGATE_SOURCE), vehicle, mission, u, source=SURROGATE_SOURCE, surrogate=surrogate
+                bus.session(keys.SURROGATE_SOURCE),
+                vehicle,
+                mission,
+                u,
+                source=keys.SURROGATE_SOURCE,
+                surrogate=surrogate,
             ).start()
-            heard.append(SURROGATE_SOURCE)
+            heard.append(keys.SURROGATE_SOURCE)
         bus.wait_for_parts(*heard)  # every part's subscriptions are at the hub before the first frame
-        meta = json.dumps(
-            {
-                "mission": mission.name,
-                "mission_file": mission_file or mission.source,
-                "scenario_id": scenario_id,
-                "plan_id": plan_id,
-                "u": u.tolist(),
-                "parameters": jsonable(mission.space.decode(u[None, :])[0]),
-            }
-        )
+        meta = scenario_json(mission, u, mission_file=mission_file, scenario_id=scenario_id, plan_id=plan_id)
         # the logger may be a client of the hub: put once it is heard
-        bus.put(PART_ROLES["scenario_meta"], keys.meta(vehicle, "scenario"), meta, when_heard=logger is not None)
+        bus.put(PART_ROLES["scenario_meta"], keys.meta(vehicle, SCENARIO_META), meta, when_heard=logger is not None)
         bridge = MavlinkBridge(
             f"udpout:127.0.0.1:{port}", bus.session("bridge"), vehicle=vehicle, allow_commands=True
         ).start()
-        if not wait_for(lambda: bridge.target is not None, 10):
-            raise LinkTimeoutError("front-seat: no HEARTBEAT on the MAVLink link within 10 s")
-        if surrogate is not None:
-            bus.put(PART_ROLES["control"], keys.active(vehicle), SURROGATE_SOURCE, when_heard=True)
-            if not wait_for(lambda: bridge.active == SURROGATE_SOURCE, 10):
-                raise LinkTimeoutError("bridge: did not take the surrogate as the active source within 10 s")
-        bridge.set_mode("GUIDED")
-        bridge.arm(True)
-        if not wait_for(lambda: fs.ended, timeout_s, poll_s=0.005):
-            raise LinkTimeoutError(f"timeout_s: the run did not end within {timeout_s} s of wall time")
-        time.sleep(0.3)  # let the last step's telemetry reach the recorder and the logger
+        _fly_to_the_end(bus, bridge, fs, vehicle, surrogate is not None, timeout_s)
         wall = time.perf_counter() - started
         status = flying.autonomy  # the scores are those of whoever flew
         wp_aborted = [bool(v) for v in status.wp_aborted[0]]

@@ -10,7 +10,8 @@ items, so the files never disagree with each other or with what was simulated.
 Formats follow CONVENTIONS section 5: ``.plan`` version 1 with mission v2, geoFence v2
 (polygon items v1, clockwise ``[lat, lon]`` vertices) and rallyPoints v2; WPL lines of 12
 tab-separated fields with latitude before longitude and line 0 the home position; GeoJSON
-per RFC 7946 (``[lon, lat]``, closed counter-clockwise rings).  Items run in the order
+per RFC 7946 (``[lon, lat]``, closed counter-clockwise rings), built by
+:mod:`planner.common.geojson`, which the fly and review stages draw too.  Items run in the order
 the autonomy means to fly them: waypoints, mission areas in the scenario's priority
 order (loiter for the dwell time), the transmission area (loiter for the transmission
 duration), then the recovery point.  The real autonomy transmits whenever the window is
@@ -28,14 +29,14 @@ from typing import Any
 
 import numpy as np
 
+from planner.common.geojson import decode_scenario, exclusions, geojson, operational_rect, oriented, rect_vertices
 from rapt.errors import InputError
 from sim.uuv.geo import LocalFrame
 from sim.uuv.interface import DEPTH_M
 from sim.uuv.mission import Mission
-from sim.uuv.scenario import Scenarios, make_scenarios
-from sim.uuv.simulate import TRAJECTORY_FIELDS
+from sim.uuv.scenario import Scenarios
 
-__all__ = ["qgc_plan", "wpl", "geojson", "write_scenario_files"]
+__all__ = ["qgc_plan", "wpl", "write_scenario_files"]
 
 #: MAVLink values used in the files (MAV_CMD, MAV_FRAME, MAV_AUTOPILOT, MAV_TYPE).
 MAV_CMD_NAV_WAYPOINT = 16
@@ -47,8 +48,6 @@ MAV_TYPE_SUBMARINE = 12
 #: QGroundControl's AltMode enum: Relative.
 QGC_ALT_MODE_RELATIVE = 1
 
-_T, _X, _Y, _SURFACED = (TRAJECTORY_FIELDS.index(k) for k in ("t", "x", "y", "surfaced"))
-
 
 @dataclass(frozen=True)
 class _Item:
@@ -58,21 +57,6 @@ class _Item:
     params: tuple[float, float, float, float]
     x: float
     y: float
-
-
-def _scenario(mission: Mission, u) -> Scenarios:
-    """The decoded scenario of row ``u``; raises if the row is malformed or the scenario invalid."""
-    row = np.asarray(u, dtype=float)
-    if row.shape != (mission.dim,):
-        raise InputError(
-            f"u: expected a unit-cube row of shape ({mission.dim},) for mission '{mission.name}', got {row.shape}"
-        )
-    if not np.all(np.isfinite(row)) or np.any(row < 0.0) or np.any(row > 1.0):
-        raise InputError("u: values must be finite and inside the unit cube [0, 1]")
-    scen = make_scenarios(mission, row[None, :])
-    if not scen.valid[0]:
-        raise InputError(f"u: scenario is invalid ({scen.invalid_reason[0]})")
-    return scen
 
 
 def _centre(rect: np.ndarray) -> tuple[float, float]:
@@ -103,36 +87,9 @@ def _num(v: float) -> float | None:
     return v if math.isfinite(v) else None
 
 
-def _rect_vertices(rect: np.ndarray) -> np.ndarray:
-    """(4, 2) counter-clockwise corners of an (xmin, xmax, ymin, ymax) rectangle."""
-    x0, x1, y0, y1 = (float(v) for v in rect)
-    return np.array([[x0, y0], [x1, y0], [x1, y1], [x0, y1]])
-
-
-def _oriented(vertices: np.ndarray, clockwise: bool) -> np.ndarray:
-    """The polygon's vertices turning the requested way (x east, y north; a map seen from above)."""
-    v = np.asarray(vertices, dtype=float)
-    x, y = v[:, 0], v[:, 1]
-    area2 = float(np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
-    return v[::-1] if (area2 > 0) == clockwise else v
-
-
-def _op_rect(mission: Mission) -> np.ndarray:
-    r = mission.operational_area
-    return np.array([r.x - r.width / 2, r.x + r.width / 2, r.y - r.height / 2, r.y + r.height / 2])
-
-
-def _exclusions(mission: Mission, scen: Scenarios) -> list[tuple[str, str, np.ndarray]]:
-    """(kind, name, vertices) of every no-go area, barrier and obstacle at its scenario position."""
-    out = [("nogo", z.name, _rect_vertices(scen.nogo[0, k])) for k, z in enumerate(mission.nogo)]
-    out += [("barrier", b.name, _rect_vertices(scen.barriers[0, k])) for k, b in enumerate(mission.barriers)]
-    out += [("obstacle", o.name, scen.obstacles[0, k]) for k, o in enumerate(mission.obstacles)]
-    return out
-
-
 def qgc_plan(mission: Mission, u) -> dict[str, Any]:
     """The QGroundControl ``.plan`` (a JSON-ready dict) of scenario ``u`` (shape (mission.dim,))."""
-    scen = _scenario(mission, u)
+    scen = decode_scenario(mission, u)
     frame = LocalFrame(mission.origin_lat, mission.origin_lon)
     alt = -float(DEPTH_M)
 
@@ -157,11 +114,11 @@ def qgc_plan(mission: Mission, u) -> dict[str, Any]:
         )
 
     def polygon(vertices: np.ndarray, inclusion: bool) -> dict[str, Any]:
-        cw = _oriented(vertices, clockwise=True)
+        cw = oriented(vertices, clockwise=True)
         return {"inclusion": inclusion, "polygon": [latlon(x, y) for x, y in cw], "version": 1}
 
-    polygons = [polygon(_rect_vertices(_op_rect(mission)), True)]
-    polygons += [polygon(v, False) for _, _, v in _exclusions(mission, scen)]
+    polygons = [polygon(rect_vertices(operational_rect(mission)), True)]
+    polygons += [polygon(v, False) for _, _, v in exclusions(mission, scen)]
     return {
         "fileType": "Plan",
         "geoFence": {"circles": [], "polygons": polygons, "version": 2},
@@ -183,7 +140,7 @@ def qgc_plan(mission: Mission, u) -> dict[str, Any]:
 
 def wpl(mission: Mission, u) -> str:
     """The ``QGC WPL 110`` text of scenario ``u``: home (the launch point) then the ``.plan`` items."""
-    scen = _scenario(mission, u)
+    scen = decode_scenario(mission, u)
     frame = LocalFrame(mission.origin_lat, mission.origin_lon)
 
     def line(seq, current, mav_frame, command, params, x, y, alt) -> str:
@@ -197,85 +154,6 @@ def wpl(mission: Mission, u) -> str:
     for seq, it in enumerate(_items(mission, scen), start=1):
         lines.append(line(seq, 0, MAV_FRAME_GLOBAL_RELATIVE_ALT, it.command, it.params, it.x, it.y, -DEPTH_M))
     return "\n".join(lines) + "\n"
-
-
-def _check_track(track) -> np.ndarray:
-    tr = np.asarray(track, dtype=float)
-    if tr.ndim != 2 or tr.shape[1] != len(TRAJECTORY_FIELDS) or tr.shape[0] < 2:
-        raise InputError(
-            f"track: expected a trajectory of shape (steps >= 2, {len(TRAJECTORY_FIELDS)}) "
-            f"with columns {TRAJECTORY_FIELDS}, got {tr.shape}"
-        )
-    if not np.all(np.isfinite(tr[:, [_T, _X, _Y]])):
-        raise InputError("track: t, x and y must be finite")
-    return tr
-
-
-def geojson(mission: Mission, u, track=None) -> dict[str, Any]:
-    """An RFC 7946 FeatureCollection of scenario ``u``, with the predicted ``track`` when given.
-
-    ``track`` is one trajectory of :func:`sim.uuv.simulate` (``trajectories=True``).
-    """
-    scen = _scenario(mission, u)
-    tr = None if track is None else _check_track(track)
-    frame = LocalFrame(mission.origin_lat, mission.origin_lon)
-
-    def lonlat(xy: np.ndarray) -> list[list[float]]:
-        lat, lon = frame.to_latlon(np.asarray(xy[:, 0], float), np.asarray(xy[:, 1], float))
-        return [[float(a), float(b)] for a, b in zip(np.atleast_1d(lon), np.atleast_1d(lat))]
-
-    def feature(geometry: dict, kind: str, name: str, **extra) -> dict[str, Any]:
-        return {"type": "Feature", "geometry": geometry, "properties": {"kind": kind, "name": name, **extra}}
-
-    def point(x, y, kind, name, **extra):
-        return feature({"type": "Point", "coordinates": lonlat(np.array([[x, y]]))[0]}, kind, name, **extra)
-
-    def polygon(vertices, kind, name, **extra):
-        ring = lonlat(_oriented(vertices, clockwise=False))
-        return feature({"type": "Polygon", "coordinates": [ring + [ring[0]]]}, kind, name, **extra)
-
-    feats = [
-        point(*mission.launch, "launch", "launch"),
-        point(*mission.recovery, "recovery", "recovery", radius_m=float(mission.recovery_radius)),
-    ]
-    feats += [point(x, y, "waypoint", str(i)) for i, (x, y) in enumerate(scen.waypoints)]
-    feats.append(polygon(_rect_vertices(_op_rect(mission)), "operational_area", mission.operational_area.name))
-    rank = {int(a): r for r, a in enumerate(scen.order[0].tolist(), start=1)}
-    feats += [
-        polygon(
-            _rect_vertices(scen.area_rect[0, k]),
-            "mission_area",
-            a.name,
-            priority=rank[k],
-            dwell_s=float(scen.area_dwell[0, k]),
-        )
-        for k, a in enumerate(mission.mission_areas)
-    ]
-    if mission.transmission is not None:
-        feats.append(
-            polygon(
-                _rect_vertices(scen.tx_rect[0]),
-                "transmission",
-                mission.transmission.name,
-                window_open_s=float(scen.tx_open[0]),
-                window_close_s=float(scen.tx_close[0]),
-                duration_s=float(mission.transmission.duration_s),
-            )
-        )
-    feats += [polygon(v, kind, name) for kind, name, v in _exclusions(mission, scen)]
-    if tr is not None:
-        t = tr[:, _T]
-        surfaced_s = float(np.sum(np.diff(t) * (tr[:-1, _SURFACED] > 0.5)))
-        feats.append(
-            feature(
-                {"type": "LineString", "coordinates": lonlat(tr[:, [_X, _Y]])},
-                "predicted_track",
-                "predicted track",
-                duration_s=float(t[-1] - t[0]),
-                surfaced_s=surfaced_s,
-            )
-        )
-    return {"type": "FeatureCollection", "features": feats}
 
 
 def write_scenario_files(mission: Mission, u, directory, stem: str, track=None) -> dict[str, Path]:

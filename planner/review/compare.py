@@ -4,8 +4,8 @@
 to identify and apply this bias to our predictions").  :func:`compare`
 
 1. reads every log (:mod:`planner.review.logs`; never modified, damaged ones as far as they go)
-   and matches it to its plan scenario by the recorded metadata — a log of another
-   mission or plan is refused with a one-line error;
+   and matches it to its plan scenario by the recorded metadata (:mod:`planner.review.runs`)
+   — a log of another mission or plan is refused with a one-line error;
 2. rebuilds each run's track, scores it with the mission's own scorer and score tree
    (:func:`sim.uuv.replay.score_track`), and sets predicted against observed mode and
    sub-scores per scenario and per pair (did the pair straddle its boundary?), with the
@@ -14,8 +14,8 @@ to identify and apply this bias to our predictions").  :func:`compare`
    a MAP estimate under documented priors, each parameter with a standard error and whether
    the logs identify it (an unidentified one stays neutral), the runs' observed end
    conditions weighed in by a closed-loop re-simulation;
-4. checks the correction before using it (:func:`cross_validate`): leave one log out, fit
-   on the others, predict the left-out run's mode and path with and without the fitted
+4. checks the correction before using it (:mod:`planner.review.correction`): leave one log
+   out, fit on the others, predict the left-out run's mode and path with and without the fitted
    bias.  The correction is used only when it predicts held-out runs at least as well in
    mode and better in mode or path; otherwise the report says "the logs do not support a
    correction; plan unchanged" and the corrected predictions are the uncorrected ones;
@@ -32,8 +32,6 @@ from __future__ import annotations
 import dataclasses
 import json
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
-from functools import cached_property
 from pathlib import Path
 
 import numpy as np
@@ -41,79 +39,29 @@ import numpy as np
 import sim.uuv
 from planner.common.jsonio import json_value, jsonable
 from planner.common.plans import Plan, load_plan
-from planner.review.biasfit import BiasFit, check_end_conditions, fit_bias
-from planner.review.logs import LogError, LoggedRun, read_run
+from planner.review.correction import cross_validate, fit_observed, path_error, rms_path_error
+from planner.review.logs import read_run
 from planner.review.replan import adjust_for_bias
-from rapt.errors import InputError, StudyMismatchError
-from sim.uuv.bias import BIAS_NAMES, BIAS_UNITS, NEUTRAL, Bias
-from sim.uuv.mission import Vehicle
-from sim.uuv.replay import score_track
+from planner.review.runs import (
+    CompareConfig,
+    Observation,
+    PlanRuns,
+    match_logs,
+    predict_plan,
+    row_index,
+    score_observed,
+)
+from rapt.errors import InputError
+from sim.uuv.bias import BIAS_UNITS, NEUTRAL, Bias
 from sim.uuv.scenario import make_scenarios
-from sim.uuv.scoring import MODE_NAMES, mode_name
+from sim.uuv.scoring import MODE_NAMES
 
-__all__ = ["compare", "CompareConfig", "COMPARISON_SCHEMA", "match_logs", "cross_validate", "NO_SUPPORT"]
+__all__ = ["compare", "COMPARISON_SCHEMA"]
 
 COMPARISON_SCHEMA = "rapt.comparison/2"
-#: What the report says when cross-validation does not support the fitted correction.
-NO_SUPPORT = "the logs do not support a correction; plan unchanged"
-#: Share by which the held-out path error must shrink for the correction to count as helping
-#: on paths alone (a smaller change is within what refitting on other logs moves anyway).
-PATH_GAIN = 0.1
 RESULT_NAME = "comparison.json"
 #: How the Foxglove overlays' file names begin (:func:`planner.review.overlay.overlay_name`).
 OVERLAY_PREFIX = "overlay_"
-
-
-@dataclass
-class CompareConfig:
-    dithers: int = 20  # stochastic runs checking each adjusted scenario (0: none)
-    seed: int = 0
-    fit: tuple[str, ...] = BIAS_NAMES  # bias parameters to fit; the others stay neutral
-    p_target: float = 0.8
-    bootstrap: int = 20  # block-bootstrap refits for the standard errors (0: analytic only)
-    plant: Vehicle | None = None  # a calibrated vehicle (rapt-plan calibrate): flown in every prediction
-
-
-@dataclass
-class Observation:
-    run: LoggedRun
-    sid: str
-    u: np.ndarray
-    scores: np.ndarray | None = None
-    mode: str | None = None  # None: the run's end is not in the log
-    notes: list[str] = field(default_factory=list)
-
-
-def match_logs(plan: Plan, runs: list[LoggedRun]) -> list[Observation]:
-    """Each log's plan scenario, by its metadata; LogError naming the log that does not belong."""
-    out = []
-    for run in runs:
-        meta, name = run.meta, run.path.name
-        mission = meta.get("mission")
-        if mission != plan.mission.name:
-            raise LogError(
-                f"LOG: {name} was flown on mission {mission!r}, but the plan is for "
-                f"{plan.mission.name!r}; compare a plan only with the logs of its own runs"
-            )
-        pid = meta.get("plan_id") or ""
-        if pid and pid != plan.id:
-            raise LogError(
-                f"LOG: {name} flew plan {pid}, not this plan ({plan.id}); give the plan directory "
-                "its runs were flown from"
-            )
-        u = np.asarray(meta.get("u", []), dtype=float)
-        sid = str(meta.get("scenario_id", ""))
-        known = {s["id"]: np.asarray(s["u"], dtype=float) for s in plan.scenarios + plan.variants}
-        if sid not in known or u.shape != known[sid].shape or not np.allclose(u, known[sid], rtol=0, atol=1e-9):
-            same = [k for k, v in known.items() if u.shape == v.shape and np.allclose(u, v, rtol=0, atol=1e-9)]
-            if not same:
-                raise LogError(
-                    f"LOG: {name} flew scenario {sid!r}, which is not a scenario of this plan (no plan "
-                    "scenario has its parameters); fly it with rapt-plan run PLAN/plan.json --scenario ID"
-                )
-            sid = same[0]
-        out.append(Observation(run, sid, known[sid]))
-    return out
 
 
 def _elements(plan: Plan, pair: dict, names: list[str]) -> list[int]:
@@ -123,21 +71,6 @@ def _elements(plan: Plan, pair: dict, names: list[str]) -> list[int]:
     if not cols or pair.get("level", 0) == 0:
         cols = sorted(set(cols) | {0, 1})
     return cols
-
-
-def _path_error(track: np.ndarray, pred: np.ndarray | None) -> dict | None:
-    """Horizontal distance between a logged and a predicted track at the same times (m)."""
-    if pred is None or track.shape[0] == 0:
-        return None
-    n = min(track.shape[0], pred.shape[0])
-    d = np.hypot(track[:n, 1] - pred[:n, 1], track[:n, 2] - pred[:n, 2])
-    return {
-        "rms_m": float(np.sqrt(np.mean(d**2))),
-        "max_m": float(d.max()),
-        "compared_s": float(track[n - 1, 0]),
-        "duration_observed_s": float(track[-1, 0]),
-        "duration_predicted_s": float(pred[-1, 0]),
-    }
 
 
 def compare(
@@ -163,9 +96,9 @@ def compare(
     say("reading logs")
     runs = [read_run(p) for p in log_paths]
     obs = match_logs(plan, runs)
-    ids, U_plan, pred = _predict_plan(plan)
+    ids, U_plan, pred = predict_plan(plan)
     say("scoring logged runs")
-    _score_observed(m, obs)
+    score_observed(m, obs)
     plant = cfg.plant
     calib = None
     if plant is not None:
@@ -174,9 +107,9 @@ def compare(
     baseline = calib if calib is not None else pred
     say("fitting the execution bias")
     start_times = [float(make_scenarios(m, o.u[None, :]).start_time[0]) for o in obs]
-    fit = _fit(m, obs, start_times, cfg, cfg.bootstrap)
+    fit = fit_observed(m, obs, start_times, cfg, cfg.bootstrap)
     say("cross-validating the correction")
-    cv = cross_validate(m, obs, start_times, baseline, _rows(ids), cfg)
+    cv = cross_validate(m, obs, start_times, baseline, row_index(ids), cfg)
     bias_used = fit.bias if cv["correction_used"] else Bias()
     say("re-predicting under the fitted bias")
     corr = (
@@ -184,7 +117,7 @@ def compare(
         if cv["correction_used"]
         else baseline
     )
-    plan_runs = _PlanRuns(ids, U_plan, pred, corr, calib)
+    plan_runs = PlanRuns(ids, U_plan, pred, corr, calib)
     scen_rows = _scenario_rows(m, obs, plan_runs)
     agreement = _mode_agreement(scen_rows)
     say("re-planning")
@@ -205,7 +138,7 @@ def compare(
             for o in obs
         ],
         "bias": fit.to_dict(),
-        "bias_fit": _bias_fit(fit, cfg),
+        "bias_fit": _biasfit_observed(fit, cfg),
         "calibrated_vehicle": None if plant is None else jsonable(dataclasses.asdict(plant)),
         "cross_validation": cv,
         "correction": {
@@ -225,84 +158,6 @@ def compare(
     return result
 
 
-def _fit(m, obs: list[Observation], start_times: list[float], cfg: CompareConfig, bootstrap: int) -> BiasFit:
-    """The bias fit of ``obs``'s logs, its bias chosen against their observed end conditions."""
-    runs = [o.run for o in obs]
-    fit = fit_bias(m, runs, start_times, fit=tuple(cfg.fit), bootstrap=bootstrap, seed=cfg.seed, vehicle=cfg.plant)
-    ends = [o.scores if o.mode is not None else None for o in obs]
-    U = np.array([o.u for o in obs])
-    return check_end_conditions(m, fit, runs, start_times, U, ends, seed=cfg.seed, vehicle=cfg.plant)
-
-
-def cross_validate(
-    m,
-    obs: list[Observation],
-    start_times: list[float],
-    pred: sim.uuv.Result,
-    row_of: dict[str, int],
-    cfg: CompareConfig,
-) -> dict:
-    """Leave one log out: fit on the others, predict the left-out run's mode and path with and
-    without that bias; and whether the correction is to be used (module docstring, step 4).
-    ``pred`` are the predictions without a bias (with the calibrated vehicle when there is one)."""
-    folds = []
-    for i, o in enumerate(obs):
-        rest = [j for j in range(len(obs)) if j != i]
-        row: dict = {"log": o.run.path.name, "scenario": o.sid, "observed_mode": o.mode}
-        k = row_of[o.sid]
-        row["uncorrected_mode"] = MODE_NAMES[pred.modes[k]]
-        row["path_error_uncorrected_m"] = _round(_path_error(o.run.track, pred.trajectory(k)), "rms_m")
-        try:
-            if not rest:
-                raise InputError("no other log to fit on")
-            fit = _fit(m, [obs[j] for j in rest], [start_times[j] for j in rest], cfg, 0)
-        except InputError as exc:
-            row.update(corrected_mode=None, path_error_corrected_m=None, bias=None, note=str(exc))
-            folds.append(row)
-            continue
-        r = sim.uuv.simulate(m, o.u[None, :], trajectories=True, bias=fit.bias, plant=cfg.plant)
-        row["corrected_mode"] = MODE_NAMES[r.modes[0]] if r.valid[0] else "invalid"
-        row["path_error_corrected_m"] = _round(_path_error(o.run.track, r.trajectory(0)), "rms_m")
-        row["bias"] = {n: v for n, v in fit.bias.to_dict().items() if v != NEUTRAL[n]}
-        folds.append(row)
-    scored = [f for f in folds if f["observed_mode"] is not None and f["corrected_mode"] is not None]
-    pathed = [f for f in folds if f["path_error_uncorrected_m"] is not None and f["path_error_corrected_m"] is not None]
-    agree_u = float(np.mean([f["uncorrected_mode"] == f["observed_mode"] for f in scored])) if scored else None
-    agree_c = float(np.mean([f["corrected_mode"] == f["observed_mode"] for f in scored])) if scored else None
-    path_u = float(np.mean([f["path_error_uncorrected_m"] for f in pathed])) if pathed else None
-    path_c = float(np.mean([f["path_error_corrected_m"] for f in pathed])) if pathed else None
-    used, note = _support(agree_u, agree_c, path_u, path_c)
-    return {
-        "folds": folds,
-        "held_out_mode_agreement": {"uncorrected": agree_u, "corrected": agree_c, "runs": len(scored)},
-        "held_out_path_error_m": {"uncorrected": path_u, "corrected": path_c, "runs": len(pathed)},
-        "correction_used": used,
-        "note": note,
-    }
-
-
-def _support(agree_u, agree_c, path_u, path_c) -> tuple[bool, str]:
-    """Use the correction only when held-out runs show it helps: mode agreement no worse, and
-    better mode agreement or a path error at least :data:`PATH_GAIN` smaller."""
-    if agree_c is None and path_c is None:
-        return False, NO_SUPPORT + " (no held-out prediction: give at least two logs)"
-    if agree_c is not None and agree_u is not None and agree_c < agree_u:
-        return (
-            False,
-            NO_SUPPORT + f" (held-out mode agreement {agree_c:.0%} corrected against {agree_u:.0%} uncorrected)",
-        )
-    better_mode = agree_c is not None and agree_u is not None and agree_c > agree_u
-    better_path = path_c is not None and path_u is not None and path_c < (1.0 - PATH_GAIN) * path_u
-    if not (better_mode or better_path):
-        return False, NO_SUPPORT + " (the correction does not improve held-out predictions)"
-    parts = []
-    if agree_c is not None and agree_u is not None:
-        parts.append(f"held-out mode agreement {agree_u:.0%} -> {agree_c:.0%}")
-    if path_c is not None and path_u is not None:
-        parts.append(f"held-out path error {path_u:.1f} -> {path_c:.1f} m")
-    return True, "correction used: " + ", ".join(parts)
-
-
 def _check_out_dir(plan_path: str | Path, log_paths: Sequence[str | Path], out_dir: str | Path) -> None:
     """InputError (one line) when ``out_dir``'s ``comparison.json`` would overwrite a log or the plan.
 
@@ -320,65 +175,7 @@ def _check_out_dir(plan_path: str | Path, log_paths: Sequence[str | Path], out_d
         raise InputError(f"--out: {out_dir} would overwrite an input (an overlay_*.mcap); choose another directory")
 
 
-@dataclass
-class _PlanRuns:
-    """Every plan scenario (and variant): its unit-cube row, its run as planned and under the fitted bias
-    (both simulated with their trajectories)."""
-
-    ids: list[str]
-    U: np.ndarray
-    pred: sim.uuv.Result
-    corr: sim.uuv.Result
-    calib: sim.uuv.Result | None = None  # with the calibrated vehicle, no bias (when one is given)
-
-    @cached_property
-    def row_of(self) -> dict[str, int]:
-        """The row of each scenario id."""
-        return _rows(self.ids)
-
-    def trajectories(self, sid: str) -> tuple[np.ndarray | None, np.ndarray | None]:
-        """Scenario ``sid``'s predicted and corrected trajectories (None when it is invalid)."""
-        k = self.row_of[sid]
-        return self.pred.trajectory(k), self.corr.trajectory(k)
-
-    def calibrated_trajectory(self, sid: str) -> np.ndarray | None:
-        """Scenario ``sid``'s trajectory with the calibrated vehicle (None without one, or when invalid)."""
-        return None if self.calib is None else self.calib.trajectory(self.row_of[sid])
-
-
-def _rows(ids: list[str]) -> dict[str, int]:
-    return {sid: k for k, sid in enumerate(ids)}
-
-
-def _predict_plan(plan: Plan) -> tuple[list[str], np.ndarray, sim.uuv.Result]:
-    """Predictions of every plan scenario, unbiased, as planned: ids, unit-cube rows and the runs (with
-    trajectories); StudyMismatchError when they are not the plan's."""
-    m = plan.mission
-    ids = [s["id"] for s in plan.scenarios + plan.variants]
-    U_plan = np.array([plan.u(i) for i in ids]).reshape(-1, m.dim)
-    pred = sim.uuv.simulate(m, U_plan, trajectories=True)
-    row_of = _rows(ids)
-    for s in plan.scenarios + plan.variants:
-        planned = s.get("predicted", {}).get("mode")
-        got = MODE_NAMES[pred.modes[row_of[s["id"]]]] if pred.valid[row_of[s["id"]]] else "invalid"
-        if planned and planned != got:
-            raise StudyMismatchError(
-                f"PLAN: scenario {s['id']} is predicted {got} by {plan.mission.source} but the plan says "
-                f"{planned}; the mission or the simulator changed since the plan was made — regenerate the plan"
-            )
-    return ids, U_plan, pred
-
-
-def _score_observed(m, obs: list[Observation]) -> None:
-    """Each logged run's scores from its track, and its mode when the run's end is in the log."""
-    for o in obs:
-        if o.run.steps.shape[0]:
-            o.scores = score_track(m, o.u, o.run.track, o.run.wp_aborted, o.run.return_reason)
-            if o.run.has_end:
-                o.mode = mode_name(o.scores)
-
-
-def _scenario_rows(m, obs: list[Observation], runs: _PlanRuns) -> list[dict]:
+def _scenario_rows(m, obs: list[Observation], runs: PlanRuns) -> list[dict]:
     """One row per logged run: predicted, observed and corrected modes and sub-scores, path errors."""
     pred, corr, names = runs.pred, runs.corr, runs.pred.names
     scen_rows = []
@@ -399,9 +196,9 @@ def _scenario_rows(m, obs: list[Observation], runs: _PlanRuns) -> list[dict]:
                 "predicted_mode": MODE_NAMES[pred.modes[k]],
                 "observed_mode": o.mode,
                 "corrected_mode": MODE_NAMES[corr.modes[k]],
-                "path_error_m": _round(_path_error(o.run.track, p_traj), "rms_m"),
-                "path_error": _path_error(o.run.track, p_traj),
-                "path_error_corrected_m": _round(_path_error(o.run.track, c_traj), "rms_m"),
+                "path_error_m": rms_path_error(o.run.track, p_traj),
+                "path_error": path_error(o.run.track, p_traj),
+                "path_error_corrected_m": rms_path_error(o.run.track, c_traj),
                 "ended": o.run.ended or None,
                 "steps": int(o.run.steps.shape[0]),
                 "log_complete": bool(o.run.complete_file and o.run.has_end),
@@ -412,9 +209,7 @@ def _scenario_rows(m, obs: list[Observation], runs: _PlanRuns) -> list[dict]:
         )
         if runs.calib is not None:  # before (as planned) and after calibrating the vehicle model
             scen_rows[-1]["calibrated_mode"] = MODE_NAMES[runs.calib.modes[k]]
-            scen_rows[-1]["path_error_calibrated_m"] = _round(
-                _path_error(o.run.track, runs.calibrated_trajectory(o.sid)), "rms_m"
-            )
+            scen_rows[-1]["path_error_calibrated_m"] = rms_path_error(o.run.track, runs.calibrated_trajectory(o.sid))
     return scen_rows
 
 
@@ -438,7 +233,7 @@ def _mode_agreement(scen_rows: list[dict]) -> dict:
 
 
 def _pair_rows(
-    plan: Plan, obs: list[Observation], runs: _PlanRuns, bias, cfg: CompareConfig
+    plan: Plan, obs: list[Observation], runs: PlanRuns, bias, cfg: CompareConfig
 ) -> tuple[list[dict], list[dict]]:
     """Per plan pair: did it straddle its boundary as observed and under the fitted bias; and an
     adjusted "M" scenario proposed for each side the bias moved."""
@@ -496,7 +291,7 @@ def _pair_rows(
 
 def _proposal(
     m,
-    runs: _PlanRuns,
+    runs: PlanRuns,
     pair: dict,
     s: str,
     partner: str,
@@ -558,7 +353,7 @@ def _proposal(
     return prop
 
 
-def _remaining(plan: Plan, obs: list[Observation], runs: _PlanRuns) -> list[dict]:
+def _remaining(plan: Plan, obs: list[Observation], runs: PlanRuns) -> list[dict]:
     """The plan's scenarios not flown yet, in run order, with their modes as planned and under the bias."""
     pred, corr, row_of = runs.pred, runs.corr, runs.row_of
     flown = {o.sid for o in obs}
@@ -574,7 +369,7 @@ def _remaining(plan: Plan, obs: list[Observation], runs: _PlanRuns) -> list[dict
     ]
 
 
-def _bias_fit(fit, cfg: CompareConfig) -> dict:
+def _biasfit_observed(fit, cfg: CompareConfig) -> dict:
     """How the bias was fitted: units, neutral values, residuals, convergence."""
     return {
         "units": dict(BIAS_UNITS),
@@ -598,7 +393,7 @@ def _bias_fit(fit, cfg: CompareConfig) -> dict:
     }
 
 
-def _write(result: dict, plan: Plan, obs: list[Observation], runs: _PlanRuns, out_dir: Path) -> None:
+def _write(result: dict, plan: Plan, obs: list[Observation], runs: PlanRuns, out_dir: Path) -> None:
     """``comparison.json``, the report (``comparison.html`` and its figures) and the Foxglove overlays
     (``overlay_<scenario>.mcap``, listed in ``result["overlays"]``) into ``out_dir``."""
     out_dir.mkdir(parents=True, exist_ok=True)
@@ -610,7 +405,7 @@ def _write(result: dict, plan: Plan, obs: list[Observation], runs: _PlanRuns, ou
     write_comparison_report(result, plan, [(o.sid, o.run.track) for o in obs], traj, out_dir)
 
 
-def _write_overlays(result: dict, plan: Plan, obs: list[Observation], runs: _PlanRuns, out_dir: Path) -> dict:
+def _write_overlays(result: dict, plan: Plan, obs: list[Observation], runs: PlanRuns, out_dir: Path) -> dict:
     """One Foxglove overlay per flown scenario (:func:`planner.review.overlay.write_overlay`): ``{scenario: file name}``."""
     from planner.review.overlay import overlay_name, write_overlay
 
@@ -642,7 +437,3 @@ def _obs_mode(obs: list[Observation], sid: str) -> str | None:
 def _f(v) -> float | None:
     v = float(v)
     return v if np.isfinite(v) else None
-
-
-def _round(d: dict | None, key: str) -> float | None:
-    return None if d is None else round(d[key], 3)

@@ -34,10 +34,8 @@ from pymavlink.dialects.v20 import ardupilotmega as mavlink  # noqa: E402
 from bridge import keys  # noqa: E402
 from bridge.frames import message_id  # noqa: E402
 from bridge.logger import LOSSES_METADATA, RAW_TOPIC  # noqa: E402
-from planner.common.telemetry import VIRTUAL_BATTERY_ID, VehicleTelemetry  # noqa: E402
-from planner.fly.vehicle.bringup import BRINGUP_SOURCE  # noqa: E402
-from planner.fly.vehicle.referee import TrackSampler  # noqa: E402
-from planner.fly.vehicle.watchdog import SOURCE as WATCHDOG_SOURCE  # noqa: E402
+from planner.common.scenario_record import SCENARIO_META, metadata_fields, paced_clock  # noqa: E402
+from planner.common.telemetry import VIRTUAL_BATTERY_ID, TrackSampler, VehicleTelemetry  # noqa: E402
 from rapt.errors import FileFormatError  # noqa: E402
 from sim.uuv.geo import LocalFrame  # noqa: E402
 from sim.uuv.interface import decode_command  # noqa: E402
@@ -129,7 +127,7 @@ class _Steps(TrackBuilder):
 
 
 class _PacedSteps:
-    """The track of a vehicle-paced run: the referee's sampling (:class:`planner.fly.vehicle.referee.TrackSampler`) of the log."""
+    """The track of a vehicle-paced run: the referee's sampling (:class:`planner.common.telemetry.TrackSampler`) of the log."""
 
     def __init__(self, frame: LocalFrame, dt: float):
         self.telemetry = VehicleTelemetry(frame, VIRTUAL_BATTERY_ID)
@@ -291,18 +289,15 @@ class RunLogReader:
             self.channels[rec.id] = rec
         elif isinstance(rec, Message):
             self.on_message(rec)
-        elif isinstance(rec, Metadata) and rec.name == "scenario":
+        elif isinstance(rec, Metadata) and rec.name == SCENARIO_META:
             self.on_metadata(rec)
         elif isinstance(rec, Metadata) and rec.name == LOSSES_METADATA:
             self.losses = _losses(rec.metadata)
 
     def on_metadata(self, rec: Metadata) -> None:
         """The scenario metadata record (a fallback for the meta/scenario message)."""
-        for k, v in rec.metadata.items():
-            try:
-                self.meta.setdefault(k, json.loads(v) if k in ("u", "parameters") else v)
-            except ValueError:
-                self.meta.setdefault(k, v)
+        for k, v in metadata_fields(rec.metadata).items():
+            self.meta.setdefault(k, v)
 
     # -- messages by kind -----------------------------------------------------------------
     def on_message(self, msg: Message) -> None:
@@ -338,11 +333,11 @@ class RunLogReader:
                 self.steps.add(m)
 
     def on_meta(self, name: str, obj) -> None:
-        if name == "scenario" and isinstance(obj, dict):
+        if name == SCENARIO_META and isinstance(obj, dict):
             self.meta.update(obj)
-            origin = obj.get("origin")
-            if obj.get("pacing") == "vehicle" and self.paced is None and isinstance(origin, list) and len(origin) == 2:
-                self.paced = _PacedSteps(LocalFrame(float(origin[0]), float(origin[1])), float(obj.get("dt", 2.0)))
+            clock = paced_clock(obj) if self.paced is None else None
+            if clock is not None:
+                self.paced = _PacedSteps(LocalFrame(clock.origin_lat, clock.origin_lon), clock.dt)
         elif name == "clock" and isinstance(obj, dict) and self.paced is not None:
             self.start_ms = int(obj.get("start_ms", 0))
             self.paced.begin(self.start_ms)
@@ -361,7 +356,7 @@ class RunLogReader:
     def on_status(self, name: str, obj) -> None:
         if not isinstance(obj, dict):
             return
-        if name in ("referee", "bringup", "watchdog"):
+        if name in ("referee", keys.BRINGUP_SOURCE, keys.WATCHDOG_SOURCE):
             self.events.append({"source": name, **obj})
             if name == "referee" and self.paced is not None and obj.get("ended"):
                 self.paced.ended = str(obj["ended"])
@@ -373,7 +368,7 @@ class RunLogReader:
         bring-up's or the watchdog's (they take over before and after it)."""
         if name == "active":
             value = str(obj.get("value", obj)) if isinstance(obj, dict) else str(obj)
-            if value not in (BRINGUP_SOURCE, WATCHDOG_SOURCE):
+            if value not in (keys.BRINGUP_SOURCE, keys.WATCHDOG_SOURCE):
                 self.active = value
 
     # -- set-points ---------------------------------------------------------------------

@@ -33,7 +33,7 @@ from mcap.writer import CompressionType, Writer
 
 from bridge import foxglove
 from bridge.mcap_channels import McapChannels
-from planner.plan.exports import geojson
+from planner.common.geojson import geojson
 from sim.uuv.geo import LocalFrame
 from sim.uuv.mission import Mission
 

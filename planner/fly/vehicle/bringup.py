@@ -34,10 +34,8 @@ from sim.uuv.geo import LocalFrame  # noqa: E402
 from sim.uuv.interface import DEPTH_M, depth_rate  # noqa: E402
 from sim.uuv.mission import Mission  # noqa: E402
 
-__all__ = ["BringUp", "BringUpTimeouts", "Step", "STREAMS", "BRINGUP_SOURCE", "mission_items"]
+__all__ = ["BringUp", "BringUpTimeouts", "Step", "STREAMS", "mission_items"]
 
-#: The source name the bring-up commands under while it takes the vehicle down.
-BRINGUP_SOURCE = "bringup"
 #: Messages the back-seat, the referee and the watchdog read, and the rate (Hz, vehicle time) asked for.
 STREAMS = {
     "GLOBAL_POSITION_INT": 10.0,
@@ -122,8 +120,8 @@ class BringUp:
         self.took_control = False
         self._t0 = time.monotonic()
         self.telemetry = VehicleTelemetry(LocalFrame(self.mission.origin_lat, self.mission.origin_lon))
-        self._status = self.session.declare_publisher(keys.status(self.vehicle, "bringup"))
-        self._commands = self.session.declare_publisher(keys.command(self.vehicle, BRINGUP_SOURCE))
+        self._status = self.session.declare_publisher(keys.status(self.vehicle, keys.BRINGUP_SOURCE))
+        self._commands = self.session.declare_publisher(keys.command(self.vehicle, keys.BRINGUP_SOURCE))
 
     def close(self) -> None:
         for entity in (self._status, self._commands):
@@ -291,7 +289,7 @@ class BringUp:
 
     def dive(self) -> None:
         """Down to the mission depth on set-points of our own, holding position, in GUIDED."""
-        self.session.put(keys.active(self.vehicle), BRINGUP_SOURCE)
+        self.session.put(keys.active(self.vehicle), keys.BRINGUP_SOURCE)
         deadline = time.monotonic() + self.timeouts.depth
         at_depth, last_ms = 0, -1
         while at_depth < DEPTH_REPORTS:

@@ -4,8 +4,8 @@ Our simulated front-seat referees its own runs; a real vehicle knows nothing of 
 scenario's rules.  So the run is refereed from the vehicle's reports: each period
 (``mission.dt`` of the vehicle's clock from the scenario clock's start) the first
 position report becomes one track row (:data:`sim.uuv.replay.TRACK_FIELDS` plus speed
-and yaw rate), scored as it comes by the batch scorer (:class:`sim.uuv.replay.TrackScorer`)
-— recovered, collision, out of the area, battery empty — or the time limit.  The same
+and yaw rate; :class:`planner.common.telemetry.TrackSampler`), scored as it comes by the
+batch scorer (:class:`sim.uuv.replay.TrackScorer`) — recovered, collision, out of the area, battery empty — or the time limit.  The same
 sampling turns a logged run back into its track for ``rapt-plan compare``.
 """
 
@@ -21,46 +21,15 @@ os.environ.setdefault("MAVLINK20", "1")
 from bridge import keys  # noqa: E402
 from bridge.service import Service  # noqa: E402
 from bridge.session import receive, undeclare  # noqa: E402
-from planner.common.telemetry import VIRTUAL_BATTERY_ID, FrameDecoder, Pose, VehicleTelemetry  # noqa: E402
+from planner.common.telemetry import VIRTUAL_BATTERY_ID, FrameDecoder, TrackSampler, VehicleTelemetry  # noqa: E402
 from sim.uuv.geo import LocalFrame  # noqa: E402
 from sim.uuv.mission import Mission  # noqa: E402
 from sim.uuv.replay import TrackScorer  # noqa: E402
 
-__all__ = ["TrackSampler", "Referee", "TIME_LIMIT"]
+__all__ = ["Referee", "TIME_LIMIT"]
 
 #: The end reason when the mission's time limit passes.
 TIME_LIMIT = "time limit"
-
-
-class TrackSampler:
-    """One row per period of the vehicle's clock from ``start_ms``: t, x, y, heading, energy, surfaced, speed, yaw rate."""
-
-    def __init__(self, telemetry: VehicleTelemetry, start_ms: int, period_ms: int):
-        self.telemetry, self.start_ms, self.period_ms = telemetry, int(start_ms), int(period_ms)
-        self.next_ms = self.start_ms
-        self.rows: list[tuple[float, ...]] = []
-
-    def add(self, pose: Pose) -> tuple[float, ...] | None:
-        """The row this report opens, or None (not yet the next period, or no battery reading yet)."""
-        energy = self.telemetry.energy_hj
-        if pose.time_ms < self.next_ms or energy is None:
-            return None
-        self.next_ms += ((pose.time_ms - self.next_ms) // self.period_ms + 1) * self.period_ms
-        row = (
-            (pose.time_ms - self.start_ms) / 1000.0,
-            pose.east,
-            pose.north,
-            pose.heading,
-            float(energy),
-            1.0 if pose.surfaced else 0.0,
-            pose.speed,
-            pose.yaw_rate,
-        )
-        self.rows.append(row)
-        return row
-
-    def track(self) -> np.ndarray:
-        return np.array(self.rows, dtype=float).reshape(-1, 8)
 
 
 class Referee(Service):

@@ -13,7 +13,6 @@ the water, ArduSub SITL or our bare-autopilot front-seat.
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
@@ -24,7 +23,7 @@ import numpy as np
 from bridge import keys
 from bridge.mavlink_bridge import MavlinkBridge
 from bridge.vehicle_commands import Autopilot
-from planner.common.jsonio import jsonable
+from planner.common.scenario_record import SCENARIO_META, scenario_json
 from planner.fly.backseat import BackSeat
 from planner.fly.run_bus import PART_ROLES, RunBus
 from planner.fly.scenario_map import ScenarioMap
@@ -32,7 +31,6 @@ from planner.fly.vehicle.bringup import GUIDED, BringUp, BringUpTimeouts, Step
 from planner.fly.vehicle.referee import Referee
 from planner.fly.vehicle.virtual_range import VirtualRange
 from planner.fly.vehicle.watchdog import BATTERY, COLLISION, OPERATIONAL_AREA, REASONS, Watchdog, WatchdogRules
-from planner.fly.vehicle.watchdog import SOURCE as WATCHDOG_SOURCE
 from rapt.errors import InputError
 from sim.uuv.scenario import make_scenarios
 
@@ -45,7 +43,7 @@ WATCHDOG_ACTIONS = ("surface", "hold")
 @dataclass
 class VehicleRunResult:
     scores: np.ndarray
-    track: np.ndarray  # (n, 8) rows of planner.fly.vehicle.referee.TrackSampler
+    track: np.ndarray  # (n, 8) rows of planner.common.telemetry.TrackSampler
     ended: str  # the referee's reason, "watchdog: <reason>", or "stopped by the operator"
     watchdog: str  # the watchdog's reason, "" if it never intervened
     sim_s: float  # scenario seconds flown
@@ -85,100 +83,49 @@ def run_vehicle(
     ``bus_keys``: the range's keys directory; each part then joins the secure bus as its role
     (:data:`planner.fly.run_bus.PART_ROLES`), the bridge's session being the hub.
     """
-    if action not in WATCHDOG_ACTIONS:
-        raise InputError(f"--watchdog-action: expected one of {', '.join(WATCHDOG_ACTIONS)}, got {action!r}")
-    unknown = sorted(set(record_only) - set(REASONS))
-    if unknown:
-        raise InputError(f"--watchdog-record: unknown reason {unknown[0]!r}; known: {', '.join(REASONS)}")
-    if not isinstance(connection, str) or not connection.strip():
-        raise InputError("--mavlink: expected a pymavlink connection string such as tcp:127.0.0.1:5760")
+    _check_options(action, record_only, connection)
     mission, u = flight.mission, np.asarray(flight.u, dtype=float)
     scen = make_scenarios(mission, u[None, :])
     if not scen.valid[0]:
         raise InputError(
             f"--scenario {flight.scenario_id}: invalid for mission '{mission.name}' ({scen.invalid_reason[0]})"
         )
-    roles = ("autonomy", "watchdog", "operator") + (("logger",) if log_path is not None else ())
+    roles = (keys.DEFAULT_ACTIVE, keys.WATCHDOG_SOURCE, "operator") + (("logger",) if log_path is not None else ())
     bus = RunBus(bus_keys, vehicle=vehicle, roles=roles)  # every key checked before anything joins
-    hub = bus.session("bridge")
     parts: list = []
     bringup = None
     started = time.perf_counter()
     try:
-        heard = [keys.DEFAULT_ACTIVE, WATCHDOG_SOURCE]
-        if log_path is not None:
-            from bridge.logger import McapLogger
-
-            # the map is put when the logger appears
-            parts.append(ScenarioMap(bus.session(PART_ROLES["scenario_map"]), vehicle, mission, u).start())
-            logger = McapLogger(log_path, bus.session(PART_ROLES["logger"]), vehicle=vehicle, roles=bus.put_roles())
-            parts.append(logger.start())
-            heard.append("logger")
-        bridge = MavlinkBridge(connection, hub, vehicle=vehicle, allow_commands=True, required_mode="GUIDED").start()
-        parts.append(bridge)
-        virtual = VirtualRange(bus.session(PART_ROLES["virtual_range"]), vehicle, mission, u).start()
-        referee = Referee(bus.session(PART_ROLES["referee"]), vehicle, mission, u).start()
-        backseat = BackSeat(bus.session(PART_ROLES["backseat"]), vehicle, mission, u, pacing="vehicle").start()
-        rules = WatchdogRules(record_only=frozenset(record_only))
-        watchdog = Watchdog(
-            bus.session(PART_ROLES["watchdog"]), vehicle, mission, u, bridge, action=action, rules=rules
-        ).start()
-        parts += [virtual, referee, backseat, watchdog]
-        bus.wait_for_parts(*heard)  # their subscriptions are at the hub before the bring-up's first put
-        meta = json.dumps(_scenario_meta(flight, connection))
-        bus.put(PART_ROLES["scenario_meta"], keys.meta(vehicle, "scenario"), meta, when_heard=log_path is not None)
+        run = _start_parts(bus, vehicle, flight, connection, log_path, action, record_only, parts)
+        meta = scenario_json(
+            mission,
+            u,
+            mission_file=flight.mission_file,
+            scenario_id=flight.scenario_id,
+            plan_id=flight.plan_id,
+            vehicle_link=connection,
+        )
+        bus.put(PART_ROLES["scenario_meta"], keys.meta(vehicle, SCENARIO_META), meta, when_heard=log_path is not None)
         bringup = BringUp(
-            bridge, bus.session(PART_ROLES["bringup"]), vehicle, mission, connection, timeouts or BringUpTimeouts(), say
+            run.bridge,
+            bus.session(PART_ROLES["bringup"]),
+            vehicle,
+            mission,
+            connection,
+            timeouts or BringUpTimeouts(),
+            say,
         )
         try:
             start_ms = bringup.run()
-            virtual.begin()
-            referee.begin(start_ms)
-            backseat.begin(start_ms)
-            watchdog.begin()
+            run.begin(start_ms)
             bus.put(PART_ROLES["control"], keys.active(vehicle), keys.DEFAULT_ACTIVE, when_heard=True)
-            ended = _fly(referee, watchdog, bridge, timeout_s)
+            ended = _fly(run.referee, run.watchdog, run.bridge, timeout_s)
         except BaseException as exc:  # Ctrl-C, or a bring-up step that failed after GUIDED and arming
-            referee.end("stopped by the operator" if isinstance(exc, KeyboardInterrupt) else f"stopped: {exc}")
-            backseat.close()
-            watchdog.close()
-            hb = bridge.autopilot
-            left = _left_guided(hb) if hb is not None and hb.armed else ""
-            if bringup.took_control and left:  # a failsafe or a pilot has it now
-                bringup.note("recover", "ok", f"nothing commanded: {VEHICLE_ENDED}{left}")
-            elif bringup.took_control:  # never touch a vehicle the checks refused: someone else may fly it
-                _recover(bridge, referee, bringup, "surface", say)
+            _stop(exc, run, bringup, say)
             raise
-        backseat.close()  # the run is over: no more set-points of the scenario's
-        watchdog.close()
-        if ended.startswith(VEHICLE_ENDED):  # the vehicle, a failsafe or a pilot took it: command nothing
-            bringup.note("recover", "ok", f"nothing commanded: {ended}")
-        else:
-            recovery = "hold" if watchdog.intervention and action == "hold" else "surface"
-            _recover(bridge, referee, bringup, recovery, say)
+        _land(ended, run, bringup, action, say)
         wall = time.perf_counter() - started
-        autonomy = backseat.autonomy
-        track = referee.track()
-        scores = referee.scorer.scores([bool(v) for v in autonomy.wp_aborted[0]], int(autonomy.return_reason[0]))
-        time.sleep(0.3)  # the last reports reach the logger
-        return VehicleRunResult(
-            scores,
-            track,
-            ended,
-            watchdog.intervention or "",
-            float(track[-1, 0]) if len(track) else 0.0,
-            wall,
-            start_ms,
-            backseat.stats.as_dict(),
-            dict(vars(backseat.telemetry.counts)),
-            list(bringup.timeline),
-            dict(bridge.stats),
-            Path(log_path) if log_path else None,
-            list(backseat.stats.ticks),
-            list(backseat.stats.input_age_ms),
-            dict(watchdog.violations),
-            virtual.stats,
-        )
+        return _result(run, bringup, ended, wall, start_ms, log_path)
     finally:
         if bringup is not None:
             bringup.close()
@@ -187,20 +134,123 @@ def run_vehicle(
         bus.close()
 
 
-def _scenario_meta(flight, connection: str) -> dict:
-    mission = flight.mission
-    return {
-        "mission": mission.name,
-        "mission_file": flight.mission_file or mission.source,
-        "scenario_id": flight.scenario_id,
-        "plan_id": flight.plan_id,
-        "u": np.asarray(flight.u, dtype=float).tolist(),
-        "parameters": jsonable(mission.space.decode(np.asarray(flight.u, dtype=float)[None, :])[0]),
-        "vehicle_link": connection,
-        "pacing": "vehicle",
-        "origin": [mission.origin_lat, mission.origin_lon],
-        "dt": mission.dt,
-    }
+def _check_options(action: str, record_only: Iterable[str], connection: str) -> None:
+    """InputError (one line) for an unknown watchdog action or reason, or an empty connection string."""
+    if action not in WATCHDOG_ACTIONS:
+        raise InputError(f"--watchdog-action: expected one of {', '.join(WATCHDOG_ACTIONS)}, got {action!r}")
+    unknown = sorted(set(record_only) - set(REASONS))
+    if unknown:
+        raise InputError(f"--watchdog-record: unknown reason {unknown[0]!r}; known: {', '.join(REASONS)}")
+    if not isinstance(connection, str) or not connection.strip():
+        raise InputError("--mavlink: expected a pymavlink connection string such as tcp:127.0.0.1:5760")
+
+
+@dataclass
+class _Parts:
+    """The parts of a run that follow the vehicle, started on its bus."""
+
+    bridge: MavlinkBridge
+    virtual: VirtualRange
+    referee: Referee
+    backseat: BackSeat
+    watchdog: Watchdog
+
+    def begin(self, start_ms: int) -> None:
+        """Start the scenario clock at the vehicle's ``time_boot_ms`` = ``start_ms`` (the bring-up is done)."""
+        self.virtual.begin()
+        self.referee.begin(start_ms)
+        self.backseat.begin(start_ms)
+        self.watchdog.begin()
+
+
+def _start_parts(
+    bus: RunBus,
+    vehicle: str,
+    flight,
+    connection: str,
+    log_path: str | Path | None,
+    action: str,
+    record_only: Iterable[str],
+    parts: list,
+) -> _Parts:
+    """Start the logger (with the scenario's map), the bridge, the virtual range, the referee, the back-seat and
+    the watchdog, each added to ``parts`` (to be closed); return once their subscriptions are at the hub."""
+    mission, u = flight.mission, np.asarray(flight.u, dtype=float)
+    heard = [keys.DEFAULT_ACTIVE, keys.WATCHDOG_SOURCE]
+    if log_path is not None:
+        from bridge.logger import McapLogger
+
+        # the map is put when the logger appears
+        parts.append(ScenarioMap(bus.session(PART_ROLES["scenario_map"]), vehicle, mission, u).start())
+        logger = McapLogger(log_path, bus.session(PART_ROLES["logger"]), vehicle=vehicle, roles=bus.put_roles())
+        parts.append(logger.start())
+        heard.append("logger")
+    hub = bus.session("bridge")
+    bridge = MavlinkBridge(connection, hub, vehicle=vehicle, allow_commands=True, required_mode="GUIDED").start()
+    parts.append(bridge)
+    virtual = VirtualRange(bus.session(PART_ROLES["virtual_range"]), vehicle, mission, u).start()
+    referee = Referee(bus.session(PART_ROLES["referee"]), vehicle, mission, u).start()
+    backseat = BackSeat(bus.session(PART_ROLES["backseat"]), vehicle, mission, u, pacing="vehicle").start()
+    rules = WatchdogRules(record_only=frozenset(record_only))
+    watchdog = Watchdog(
+        bus.session(PART_ROLES["watchdog"]), vehicle, mission, u, bridge, action=action, rules=rules
+    ).start()
+    parts += [virtual, referee, backseat, watchdog]
+    bus.wait_for_parts(*heard)  # their subscriptions are at the hub before the bring-up's first put
+    return _Parts(bridge, virtual, referee, backseat, watchdog)
+
+
+def _stop(exc: BaseException, run: _Parts, bringup: BringUp, say) -> None:
+    """The run stopped before its end (``exc``): end it, stop commanding, and recover the vehicle if it is ours."""
+    run.referee.end("stopped by the operator" if isinstance(exc, KeyboardInterrupt) else f"stopped: {exc}")
+    run.backseat.close()
+    run.watchdog.close()
+    hb = run.bridge.autopilot
+    left = _left_guided(hb) if hb is not None and hb.armed else ""
+    if bringup.took_control and left:  # a failsafe or a pilot has it now
+        bringup.note("recover", "ok", f"nothing commanded: {VEHICLE_ENDED}{left}")
+    elif bringup.took_control:  # never touch a vehicle the checks refused: someone else may fly it
+        _recover(run.bridge, run.referee, bringup, "surface", say)
+
+
+def _land(ended: str, run: _Parts, bringup: BringUp, action: str, say) -> None:
+    """After the run's end: no more set-points; surface (or hold) the vehicle unless it took itself back."""
+    run.backseat.close()  # the run is over: no more set-points of the scenario's
+    run.watchdog.close()
+    if ended.startswith(VEHICLE_ENDED):  # the vehicle, a failsafe or a pilot took it: command nothing
+        bringup.note("recover", "ok", f"nothing commanded: {ended}")
+    else:
+        recovery = "hold" if run.watchdog.intervention and action == "hold" else "surface"
+        _recover(run.bridge, run.referee, bringup, recovery, say)
+
+
+def _result(
+    run: _Parts, bringup: BringUp, ended: str, wall: float, start_ms: int, log_path: str | Path | None
+) -> VehicleRunResult:
+    """The run's result, scored by the referee; once the last reports had time to reach the logger."""
+    backseat, watchdog = run.backseat, run.watchdog
+    autonomy = backseat.autonomy
+    track = run.referee.track()
+    scores = run.referee.scorer.scores([bool(v) for v in autonomy.wp_aborted[0]], int(autonomy.return_reason[0]))
+    time.sleep(0.3)  # the last reports reach the logger
+    return VehicleRunResult(
+        scores,
+        track,
+        ended,
+        watchdog.intervention or "",
+        float(track[-1, 0]) if len(track) else 0.0,
+        wall,
+        start_ms,
+        backseat.stats.as_dict(),
+        dict(vars(backseat.telemetry.counts)),
+        list(bringup.timeline),
+        dict(run.bridge.stats),
+        Path(log_path) if log_path else None,
+        list(backseat.stats.ticks),
+        list(backseat.stats.input_age_ms),
+        dict(watchdog.violations),
+        run.virtual.stats,
+    )
 
 
 #: Watchdog reasons the referee also calls from its track rows (the scenario's virtual battery empty,

@@ -51,7 +51,6 @@ __all__ = [
     "LINK_LOST",
     "REASONS",
     "ACTIONS",
-    "SOURCE",
     "Trigger",
     "WatchdogRules",
     "contact_distances",
@@ -73,8 +72,6 @@ _EKF_POS_HORIZ_ABS = 16
 _EKF_CONST_POS_MODE = 128
 #: What the watchdog does when it takes over.
 ACTIONS = ("surface", "hold")
-#: The source name the watchdog commands under (and its status key).
-SOURCE = "watchdog"
 #: Vertical speed of the rising set-points (m/s, NED: negative rises).
 SURFACE_VZ = -0.5
 
@@ -250,7 +247,7 @@ class Watchdog(Service):
     """Watch scenario ``u`` of ``mission`` flown by back-seat source ``watched``; take over on the first broken rule.
 
     Nothing is judged before :meth:`begin`. On a trigger :attr:`intervention` becomes its
-    reason, ``control/active`` becomes :data:`SOURCE`, set-points go out as that source at
+    reason, ``control/active`` becomes :data:`bridge.keys.WATCHDOG_SOURCE`, set-points go out as that source at
     ``setpoint_hz`` until :meth:`close` (rising for ``"surface"``, zero velocity for
     ``"hold"``), and for ``"surface"`` ``commander.set_mode("SURFACE")`` is sent from the
     watchdog's own thread, retried while the link is down. The intervention is published
@@ -281,8 +278,8 @@ class Watchdog(Service):
         if action == "surface" and commander is None:
             raise InputError("commander: the 'surface' action needs a commander with set_mode (the bridge)")
         keys.command(vehicle, watched)  # validates both names
-        if watched == SOURCE:
-            raise InputError(f"watched: {SOURCE!r} is the watchdog's own source")
+        if watched == keys.WATCHDOG_SOURCE:
+            raise InputError(f"watched: {keys.WATCHDOG_SOURCE!r} is the watchdog's own source")
         self.mission, self.vehicle, self.watched, self.action = mission, vehicle, watched, action
         #: Rules broken that were only recorded (``rules.record_only``): reason -> detail.
         self.violations: dict[str, str] = {}
@@ -312,9 +309,11 @@ class Watchdog(Service):
         self._session = session
         self._raw = session.declare_subscriber(keys.raw(vehicle))  # FIFO channels, read by our thread
         self._commands = session.declare_subscriber(keys.command(vehicle, watched))
-        self._out = session.declare_publisher(keys.command(vehicle, SOURCE))
-        self._status = session.declare_publisher(keys.status(vehicle, SOURCE), encoding=zenoh.Encoding.APPLICATION_JSON)
-        self._token = session.liveliness().declare_token(keys.alive(vehicle, SOURCE))
+        self._out = session.declare_publisher(keys.command(vehicle, keys.WATCHDOG_SOURCE))
+        self._status = session.declare_publisher(
+            keys.status(vehicle, keys.WATCHDOG_SOURCE), encoding=zenoh.Encoding.APPLICATION_JSON
+        )
+        self._token = session.liveliness().declare_token(keys.alive(vehicle, keys.WATCHDOG_SOURCE))
 
     # -- life cycle ------------------------------------------------------------------
     def _open(self) -> None:
@@ -459,7 +458,7 @@ class Watchdog(Service):
         heading = 0.0 if pose is None else pose.heading
         vz = SURFACE_VZ if self.action == "surface" else 0.0
         self._setpoint = Setpoint(0.0, 0.0, vz, heading, now if now >= 0 else None)
-        self._session.put(keys.active(self.vehicle), SOURCE)
+        self._session.put(keys.active(self.vehicle), keys.WATCHDOG_SOURCE)
         self._send_setpoint()
         self.event = {
             "event": "intervention",

@@ -232,7 +232,8 @@ def test_a_plan_scenario_flown_on_ardusub_like_on_the_range(tmp_path):
     assert texts and len(vehicle_lines) == len(texts)
     assert len(channels["/map/scenario"].messages) == 1
     # the range day's next step: `rapt-plan compare` reads the firmware's log like any other run's
-    from planner.review.compare import CompareConfig, compare
+    from planner.review.compare import compare
+    from planner.review.runs import CompareConfig
 
     out = tmp_path / "comparison"
     comparison = compare("field_plans/range2017/plan.json", [log], out, CompareConfig(dithers=0, bootstrap=0))

@@ -11,7 +11,8 @@ os.environ["MAVLINK20"] = "1"  # before pymavlink is imported (CONVENTIONS 2g)
 from pymavlink import mavwp  # noqa: E402
 
 import sim.uuv  # noqa: E402
-from planner.plan.exports import geojson, qgc_plan, wpl, write_scenario_files  # noqa: E402
+from planner.common.geojson import geojson  # noqa: E402
+from planner.plan.exports import qgc_plan, wpl, write_scenario_files  # noqa: E402
 from sim.uuv.geo import LocalFrame  # noqa: E402
 from sim.uuv.scenario import make_scenarios  # noqa: E402
 from tests.support.qgc_loader import plan_errors, wpl_errors  # noqa: E402

@@ -13,7 +13,8 @@ import pytest
 
 import sim.uuv
 from planner.review.biasfit import END_MISMATCH_LOGLIK, PRIORS, check_end_conditions, end_condition_loglik, fit_bias
-from planner.review.compare import NO_SUPPORT, CompareConfig, Observation, _support, cross_validate
+from planner.review.correction import NO_SUPPORT, correction_support, cross_validate
+from planner.review.runs import CompareConfig, Observation
 from sim.uuv.bias import Bias, parse_bias
 from sim.uuv.scenario import make_scenarios
 from sim.uuv.scoring import mode_name
@@ -135,4 +136,4 @@ def test_a_correction_that_does_not_help_is_not_used():
     ],
 )
 def test_the_rule_uses_a_correction_only_on_held_out_evidence(agree_u, agree_c, path_u, path_c, used):
-    assert _support(agree_u, agree_c, path_u, path_c)[0] is used
+    assert correction_support(agree_u, agree_c, path_u, path_c)[0] is used

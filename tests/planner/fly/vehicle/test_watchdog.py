@@ -13,10 +13,11 @@ import pytest
 
 import sim.uuv
 from bridge import keys
+from bridge.keys import WATCHDOG_SOURCE
 from bridge.mavlink_bridge import MavlinkBridge
 from bridge.setpoint import Setpoint
 from planner.common.telemetry import VIRTUAL_BATTERY_ID, Pose
-from planner.fly.sil_loop import free_port
+from planner.fly.run_bus import free_port
 from planner.fly.vehicle.virtual_range import scenario_of
 from planner.fly.vehicle.watchdog import (
     BATTERY,
@@ -25,7 +26,6 @@ from planner.fly.vehicle.watchdog import (
     NOGO,
     OPERATIONAL_AREA,
     POSITION_LOST,
-    SOURCE,
     STALE_COMMANDS,
     Watchdog,
     WatchdogRules,
@@ -163,9 +163,9 @@ class Rig:
         self.mission = _mission()
         self.session = session
         self.vehicle = FakeVehicle(session, self.mission)
-        self.status = Listener(session, keys.status(VEHICLE, SOURCE))
+        self.status = Listener(session, keys.status(VEHICLE, WATCHDOG_SOURCE))
         self.active = Listener(session, keys.active(VEHICLE))
-        self.setpoints = Listener(session, keys.command(VEHICLE, SOURCE))
+        self.setpoints = Listener(session, keys.command(VEHICLE, WATCHDOG_SOURCE))
         self.commander = commander if commander is not None else FakeCommander()
         rules = rules or WatchdogRules(command_stale_s=60.0, link_lost_s=30.0)
         self.dog = Watchdog(
@@ -177,14 +177,14 @@ class Rig:
         wait_until(lambda: self.dog.armed, what="the watchdog armed")
 
     def events(self) -> list[dict]:
-        return [json.loads(p) for p in self.status.payloads(keys.status(VEHICLE, SOURCE))]
+        return [json.loads(p) for p in self.status.payloads(keys.status(VEHICLE, WATCHDOG_SOURCE))]
 
     def wait_event(self, n: int = 1) -> list[dict]:
         wait_until(lambda: len(self.events()) >= n, what=f"{n} watchdog event(s)")
         return self.events()
 
     def sent(self) -> list[Setpoint]:
-        return [Setpoint.from_json(p) for p in self.setpoints.payloads(keys.command(VEHICLE, SOURCE))]
+        return [Setpoint.from_json(p) for p in self.setpoints.payloads(keys.command(VEHICLE, WATCHDOG_SOURCE))]
 
     def close(self):
         self.dog.close()
@@ -306,7 +306,7 @@ def test_the_watched_source_cannot_be_the_watchdog_and_surface_needs_a_commander
     m = _mission()
     with bus() as session:
         with pytest.raises(InputError, match="watched"):
-            Watchdog(session, VEHICLE, m, U, FakeCommander(), watched=SOURCE)
+            Watchdog(session, VEHICLE, m, U, FakeCommander(), watched=WATCHDOG_SOURCE)
         with pytest.raises(InputError, match="commander"):
             Watchdog(session, VEHICLE, m, U, None)
         with pytest.raises(InputError, match="action"):
@@ -325,7 +325,7 @@ def test_on_a_real_link_the_watchdog_puts_the_vehicle_in_surface_mode():
     fs_thread.start()
     try:
         with bus() as session:
-            status = Listener(session, keys.status(VEHICLE, SOURCE))
+            status = Listener(session, keys.status(VEHICLE, WATCHDOG_SOURCE))
             with MavlinkBridge(f"udpout:127.0.0.1:{port}", session, vehicle=VEHICLE, allow_commands=True) as bridge:
                 wait_until(lambda: bridge.target is not None, what="the vehicle's heartbeat")
                 assert bridge.set_mode("GUIDED") == 0 and bridge.arm(True) == 0
@@ -335,7 +335,9 @@ def test_on_a_real_link_the_watchdog_puts_the_vehicle_in_surface_mode():
                     wait_until(lambda: fs.mode == SURFACE, timeout=10, what="SURFACE on the vehicle")
                     wait_until(lambda: status.items(), what="the event")
                     assert dog.intervention == STALE_COMMANDS
-                    wait_until(lambda: bridge.active == SOURCE, what="the bridge taking the watchdog's commands")
+                    wait_until(
+                        lambda: bridge.active == WATCHDOG_SOURCE, what="the bridge taking the watchdog's commands"
+                    )
             event = json.loads(status.items()[0][1])
             status.close()
     finally:
