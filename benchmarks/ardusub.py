@@ -104,7 +104,7 @@ def fly(
 ) -> dict:
     """One scenario from a cold boot of the firmware; ``vehicle_s`` cuts the flight after that much vehicle time."""
     from planner.fly.ardusub_sitl import ArduSubSitl, launch_point
-    from planner.fly.sil_flight import flight_from_plan
+    from planner.fly.flight import flight_from_plan
     from planner.fly.vehicle.run import run_vehicle
     from rapt.errors import RaptError
 

@@ -46,7 +46,7 @@ from bridge.mavlink_bridge import MavlinkBridge  # noqa: E402
 from bridge.session import open_session, zenoh_config  # noqa: E402
 from planner.fly.backseat import BackSeat  # noqa: E402
 from planner.fly.run_bus import free_port  # noqa: E402
-from planner.fly.sil_loop import run_sil  # noqa: E402
+from planner.fly.sil.loop import run_sil  # noqa: E402
 
 MISSION = Path(__file__).resolve().parents[1] / "examples" / "range2017.toml"
 

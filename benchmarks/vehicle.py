@@ -64,7 +64,7 @@ def _vehicle(plan_path: str, sid: str, port: int, speedup: float, stop, results)
 
 def _stack(plan_path: str, sid: str, port: int, speedup: float, record: tuple, results) -> None:
     """The whole range-day stack on the vehicle's port, as `rapt-plan run PLAN --scenario ID --mavlink`."""
-    from planner.fly.sil_flight import flight_from_plan
+    from planner.fly.flight import flight_from_plan
     from planner.fly.vehicle.bringup import BringUpTimeouts
     from planner.fly.vehicle.run import run_vehicle
     from sim.uuv.scoring import mode_name

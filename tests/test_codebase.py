@@ -70,6 +70,7 @@ def test_the_import_layers_hold():
         ("planner/review/logs.py", "planner.fly", "the range day's stages"),
         ("planner/common/plans.py", "planner.plan", "the range day's stages"),
         ("bridge/link.py", "bridge.relay", "the bridge's layers"),
+        ("planner/fly/vehicle/watchdog.py", "planner.fly.sil.loop", "the SIL flight and the run on a vehicle"),
         ("sim/uuv/simulate.py", "sim.uuv.ardusub.frontseat", "the batch simulator never imports the front-seat"),
         ("sim/robots/planar.py", "sim.robots.stability", "robot files over the model"),
     ],

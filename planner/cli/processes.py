@@ -56,7 +56,7 @@ def frontseat(
     ] = 5.0,
 ) -> None:
     """Serve the simulated front-seat of one scenario on a MAVLink connection."""
-    from planner.fly.sil_flight import flight_from_plan, is_plan
+    from planner.fly.flight import flight_from_plan, is_plan
     from sim.uuv.ardusub.frontseat import FrontSeat
 
     if is_plan(mission_file):

@@ -72,7 +72,7 @@ def run(
     With --bus-keys DIR the parts talk over the range's secure bus, each as its role
     (the bridge is the hub; a --surrogate needs an autonomy role named surrogate in DIR).
     """
-    from planner.fly.sil_flight import check_against_batch, fly
+    from planner.fly.sil.rehearse import check_against_batch, fly
     from sim.uuv.bias import parse_bias
 
     try:
@@ -121,8 +121,8 @@ def run(
 
 
 def _flight(mission_file: Path, scenario: str | None):
-    """The flight of MISSION_OR_PLAN's scenario (:class:`planner.fly.sil_flight.Flight`); a one-line error."""
-    from planner.fly.sil_flight import Flight, flight_from_plan, is_plan
+    """The flight of MISSION_OR_PLAN's scenario (:class:`planner.fly.flight.Flight`); a one-line error."""
+    from planner.fly.flight import Flight, flight_from_plan, is_plan
 
     if is_plan(mission_file):
         try:

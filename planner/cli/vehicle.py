@@ -24,7 +24,7 @@ def run_on_vehicle(
     bus_keys: Path | None = None,
 ) -> None:
     """Fly ``flight`` at ``connection``; print the bring-up timeline, the end, the mode and the decisions' figures."""
-    from planner.fly.sil_flight import is_plan
+    from planner.fly.flight import is_plan
     from planner.fly.vehicle.bringup import BringUpTimeouts
     from planner.fly.vehicle.run import run_vehicle
     from rapt.errors import RaptError

@@ -1,6 +1,6 @@
 """Runs as a log holds them, straight from the batch simulator: fast inputs for the fits.
 
-Lock-step SIL is bit-exact with the batch simulator (tests/planner/fly/test_sil_loop.py), so a
+Lock-step SIL is bit-exact with the batch simulator (tests/planner/fly/sil/test_loop.py), so a
 batch trajectory carries what :func:`planner.review.logs.read_run` returns for a logged run:
 the reported steps and the set-point flown after each.  The slow tests fly real logs.
 """

@@ -73,7 +73,7 @@ def run_vehicle(
     say: Callable[[Step], None] | None = None,
     bus_keys: str | Path | None = None,
 ) -> VehicleRunResult:
-    """Fly ``flight`` (:class:`planner.fly.sil_flight.Flight`) on the vehicle at ``connection`` (a pymavlink string).
+    """Fly ``flight`` (:class:`planner.fly.flight.Flight`) on the vehicle at ``connection`` (a pymavlink string).
 
     Raises a :class:`rapt.errors.RaptError` with one line when bring-up fails; by then nothing
     has been commanded that the failed check could have prevented.  ``timeout_s`` bounds the

@@ -191,7 +191,7 @@ def test_a_plan_scenario_flown_on_ardusub_like_on_the_range(tmp_path):
     towards the first waypoint, the vehicle surfaced and disarmed at the end, a log read back as a run."""
     from pathlib import Path
 
-    from planner.fly.sil_flight import flight_from_plan
+    from planner.fly.flight import flight_from_plan
     from planner.fly.vehicle.run import run_vehicle
     from planner.review.logs import read_run
 
@@ -252,7 +252,7 @@ def test_ardusubs_ground_station_failsafe_ends_the_run_and_the_vehicle_is_left_a
     commanded, and the log is closed and readable."""
     import threading
 
-    from planner.fly.sil_flight import flight_from_plan
+    from planner.fly.flight import flight_from_plan
     from planner.fly.vehicle.run import run_vehicle
     from planner.review.logs import read_run
 
@@ -300,7 +300,7 @@ def test_a_vehicle_port_another_client_holds_is_one_line_and_nothing_is_commande
     stops at the first bring-up step in one line, its log closed and readable."""
     import socket
 
-    from planner.fly.sil_flight import flight_from_plan
+    from planner.fly.flight import flight_from_plan
     from planner.fly.vehicle.bringup import BringUpTimeouts
     from planner.fly.vehicle.run import run_vehicle
     from planner.review.logs import read_run
@@ -329,7 +329,7 @@ def test_a_firmware_that_never_gets_a_position_estimate_is_never_armed(tmp_path)
     """With no horizontal position source for its EKF (EK3_SRC1_POSXY 0: a sensor setting, no failsafe
     touched), ArduSub never reports an absolute position: the bring-up stops at its estimate step in
     one line after 80 s of vehicle time, GUIDED never asked, nothing armed, the log readable."""
-    from planner.fly.sil_flight import flight_from_plan
+    from planner.fly.flight import flight_from_plan
     from planner.fly.vehicle.bringup import BringUpTimeouts
     from planner.fly.vehicle.run import run_vehicle
     from planner.review.logs import read_run
@@ -376,7 +376,7 @@ FLIGHT_SPEEDUP = 20.0
 
 def _imitation7_flight(sonar_range_m: float | None = None):
     """imitation7's obstacle scenario; ``sonar_range_m`` shortens the (virtual) sonar's reach in the mission file."""
-    from planner.fly.sil_flight import Flight
+    from planner.fly.flight import Flight
     from sim.uuv.missionfile import load_mission_text
 
     path = ROOT / "examples" / "imitation7.toml"

@@ -421,7 +421,7 @@ def test_the_goal_threshold_is_calibrated_where_the_expert_turned():
 def test_on_the_bus_the_surrogate_flies_while_the_expert_commands_are_logged(tmp_path):
     """Figure 6.3: the surrogate is the active source; the expert still decides every step, recorded."""
     from bridge.logger import read_log
-    from planner.fly.sil_loop import run_sil
+    from planner.fly.sil.loop import run_sil
 
     sur = Surrogate.for_mission(IMITATION7, _steering_policy())
     X = np.random.default_rng(3).random((12, IMITATION7.dim))
@@ -444,7 +444,7 @@ def test_on_the_bus_the_surrogate_flies_while_the_expert_commands_are_logged(tmp
 
 
 def test_the_bus_refuses_a_surrogate_of_another_mission():
-    from planner.fly.sil_loop import run_sil
+    from planner.fly.sil.loop import run_sil
 
     other = sim.uuv.load_mission(EXAMPLES / "range2017.toml")
     sur = Surrogate.for_mission(IMITATION7, _steering_policy())

@@ -12,7 +12,7 @@ import pytest
 os.environ.setdefault("MAVLINK20", "1")
 from pymavlink import mavutil  # noqa: E402
 
-from planner.fly.sil_flight import Flight, flight_from_plan  # noqa: E402
+from planner.fly.flight import Flight, flight_from_plan  # noqa: E402
 from planner.fly.vehicle.bringup import BringUpTimeouts  # noqa: E402
 from planner.fly.vehicle.run import run_vehicle  # noqa: E402
 from rapt.errors import InputError, LinkTimeoutError, RefusedError, RunError  # noqa: E402

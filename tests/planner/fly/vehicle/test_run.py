@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 import sim.uuv
-from planner.fly.sil_flight import Flight, flight_from_plan
+from planner.fly.flight import Flight, flight_from_plan
 from planner.fly.vehicle.run import run_vehicle
 from planner.review.logs import read_run
 from sim.uuv.ardusub.frontseat import FrontSeat

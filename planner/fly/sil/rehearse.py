@@ -1,7 +1,7 @@
-"""One scenario flown in the loop, then checked against the batch simulator.
+"""A rehearsal: one scenario flown in the loop, then checked against the batch simulator.
 
 ``rapt-plan run`` flies a scenario of a mission, or of a field plan, through the
-interfaces used on the water (:func:`planner.fly.sil_loop.run_sil`).  The loop adds no physics of
+interfaces used on the water (:func:`planner.fly.sil.loop.run_sil`).  The loop adds no physics of
 its own, so a deterministic flight must score exactly what the batch simulator scores
 for the same row, bias and surrogate; a stochastic flight is scored from what the
 navigation believed, so the batch's mode is the ground truth beside it.
@@ -10,25 +10,13 @@ navigation believed, so the batch's mode is the ground truth beside it.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 
-from sim.uuv.mission import Mission
+from planner.fly.flight import Flight
 from sim.uuv.scoring import MODE_NAMES
 
-__all__ = ["Flight", "BatchCheck", "is_plan", "flight_from_plan", "fly", "check_against_batch"]
-
-
-@dataclass(frozen=True)
-class Flight:
-    """What to fly: one scenario of a mission, and where it came from (both go into the log)."""
-
-    mission: Mission
-    u: np.ndarray  # the scenario's unit-cube row
-    scenario_id: str
-    mission_file: str
-    plan_id: str = ""
+__all__ = ["BatchCheck", "fly", "check_against_batch"]
 
 
 @dataclass(frozen=True)
@@ -38,22 +26,6 @@ class BatchCheck:
     names: list  # the scores' names
     mode: str  # the batch's performance mode
     same: bool  # the flight scored exactly the batch's scores
-
-
-def is_plan(path: Path) -> bool:
-    """A field plan (its plan.json or its directory) rather than a mission file."""
-    return path.suffix == ".json" or path.is_dir()
-
-
-def flight_from_plan(path: Path, scenario_id: str | None) -> Flight:
-    """Scenario ``scenario_id`` (e.g. pair1a) of the plan at ``path``; ValueError names what is wrong
-    (a plan has no default scenario: ``None`` is answered with its ids)."""
-    from planner.common.plans import load_plan
-
-    plan = load_plan(path)
-    scenario = plan.scenario(scenario_id)
-    mission, u = plan.mission, plan.u(scenario["id"])
-    return Flight(mission, u, scenario["id"], str(plan.mission_file), plan.id)
 
 
 def fly(
@@ -68,10 +40,10 @@ def fly(
     surrogate=None,
     bus_keys=None,
 ):
-    """Fly ``flight`` software-in-the-loop (:func:`planner.fly.sil_loop.run_sil`); returns its :class:`~planner.fly.sil_loop.SilResult`.
+    """Fly ``flight`` software-in-the-loop (:func:`planner.fly.sil.loop.run_sil`); returns its :class:`~planner.fly.sil.loop.SilResult`.
 
     ``bus_keys``: the range's keys directory; the run's parts then join the secure bus each as its role."""
-    from planner.fly.sil_loop import run_sil
+    from planner.fly.sil.loop import run_sil
 
     return run_sil(
         flight.mission,

@@ -6,11 +6,11 @@ import numpy as np
 import pytest
 
 import sim.uuv
-from planner.fly.sil_loop import run_sil
+from planner.fly.sil.loop import run_sil
 
 pytestmark = [pytest.mark.slow, pytest.mark.integration]
 
-EXAMPLES = Path(__file__).resolve().parents[3] / "examples"
+EXAMPLES = Path(__file__).resolve().parents[4] / "examples"
 
 
 @pytest.mark.parametrize("name,count", [("range2017", 4), ("imitation7", 6)])

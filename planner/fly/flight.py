@@ -1,0 +1,43 @@
+"""What to fly: one scenario of a mission or of a field plan, and where it came from.
+
+Both ways of flying it take a :class:`Flight`: in the loop (:mod:`planner.fly.sil`) and on a
+vehicle's MAVLink port (:mod:`planner.fly.vehicle`); where it came from goes into the log.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from sim.uuv.mission import Mission
+
+__all__ = ["Flight", "is_plan", "flight_from_plan"]
+
+
+@dataclass(frozen=True)
+class Flight:
+    """What to fly: one scenario of a mission, and where it came from (both go into the log)."""
+
+    mission: Mission
+    u: np.ndarray  # the scenario's unit-cube row
+    scenario_id: str
+    mission_file: str
+    plan_id: str = ""
+
+
+def is_plan(path: Path) -> bool:
+    """A field plan (its plan.json or its directory) rather than a mission file."""
+    return path.suffix == ".json" or path.is_dir()
+
+
+def flight_from_plan(path: Path, scenario_id: str | None) -> Flight:
+    """Scenario ``scenario_id`` (e.g. pair1a) of the plan at ``path``; ValueError names what is wrong
+    (a plan has no default scenario: ``None`` is answered with its ids)."""
+    from planner.common.plans import load_plan
+
+    plan = load_plan(path)
+    scenario = plan.scenario(scenario_id)
+    mission, u = plan.mission, plan.u(scenario["id"])
+    return Flight(mission, u, scenario["id"], str(plan.mission_file), plan.id)
