@@ -1,1 +1,3 @@
-"""Stage 2, fly it: the SIL flight, the back-seat process, the run's bus and process lifecycle, ArduSub SITL."""
+"""Stage 2, fly it: what to fly (:mod:`planner.fly.flight`), in the loop (:mod:`planner.fly.sil`) or
+on a vehicle's MAVLink port (:mod:`planner.fly.vehicle`), with the back-seat process, the run's
+bus and process lifecycle that both use, and ArduSub's SITL firmware to rehearse on."""
