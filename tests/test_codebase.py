@@ -27,10 +27,6 @@ CHECKED = (*PACKAGES, "benchmarks")
 MAX_FUNCTION_LINES = 80
 #: The longest a module may be.
 MAX_MODULE_LINES = 600
-#: Modules allowed to be longer, each with the reason: data written as code, not logic.
-LONG_MODULES = {
-    "tests/sim/uuv/ardusub/conformance.py": "the conformance table: one row per ArduSub answer, read as a spec",
-}
 
 
 def _tool(name: str, *args: str, cwd: Path = ROOT, env: dict | None = None) -> subprocess.CompletedProcess:
@@ -117,25 +113,18 @@ def _body_lines(node: ast.FunctionDef | ast.AsyncFunctionDef) -> int:
 
 
 def test_functions_and_modules_stay_short():
-    """Every function body fits in MAX_FUNCTION_LINES and every module in MAX_MODULE_LINES (named exceptions aside)."""
+    """Every function body fits in MAX_FUNCTION_LINES and every module in MAX_MODULE_LINES, tests and benchmarks too."""
     over = []
     for path in _python_files():
         rel = path.relative_to(ROOT).as_posix()
         text = path.read_text()
         lines = len(text.splitlines())
-        if lines > MAX_MODULE_LINES and rel not in LONG_MODULES:
+        if lines > MAX_MODULE_LINES:
             over.append(f"{rel}: {lines} lines (limit {MAX_MODULE_LINES}): split it at a seam")
         for node in ast.walk(ast.parse(text)):
             if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef) and _body_lines(node) > MAX_FUNCTION_LINES:
                 over.append(f"{rel}:{node.lineno} {node.name}: {_body_lines(node)} lines (limit {MAX_FUNCTION_LINES})")
     assert not over, "\n".join(over)
-
-
-def test_the_size_exceptions_are_still_needed():
-    """A named exception that has come under the limit, or whose file is gone, is taken off the list."""
-    for rel in LONG_MODULES:
-        path = ROOT / rel
-        assert path.exists() and len(path.read_text().splitlines()) > MAX_MODULE_LINES, rel
 
 
 def _circles(edges: dict[str, set[str]]) -> list[list[str]]:
