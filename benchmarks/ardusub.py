@@ -100,20 +100,29 @@ def setpoint_gaps(log: Path, vehicle: str = "uuv1") -> np.ndarray:
 
 
 def fly(
-    sid: str, speedup: float, log: Path, vehicle_s: float | None = None, pack_ah: float = REHEARSAL_PACK_AH
+    sid: str,
+    speedup: float,
+    log: Path,
+    vehicle_s: float | None = None,
+    pack_ah: float = REHEARSAL_PACK_AH,
+    *,
+    plan: Path = PLAN,
+    parameters: dict[str, float] | None = None,
 ) -> dict:
-    """One scenario from a cold boot of the firmware; ``vehicle_s`` cuts the flight after that much vehicle time."""
+    """One scenario of ``plan`` from a cold boot of the firmware; ``vehicle_s`` cuts the flight after that much
+    vehicle time; ``parameters`` are more SITL parameters (the vehicle or the water: see benchmarks/range_day.py)."""
     from planner.fly.ardusub_sitl import ArduSubSitl, launch_point
     from planner.fly.flight import flight_from_plan
     from planner.fly.vehicle.run import run_vehicle
     from rapt.errors import RaptError
 
-    flight = flight_from_plan(PLAN, sid)
+    flight = flight_from_plan(plan, sid)
     limit = flight.mission.time_limit_s + 600.0 if vehicle_s is None else vehicle_s
     row: dict = {"scenario": sid, "speedup": speedup, "log": str(log), "pack_ah": pack_ah}
     started = time.perf_counter()
     try:
-        with ArduSubSitl(launch_point(flight.mission), speedup=speedup, parameters=pack_parameters(pack_ah)) as sitl:
+        params = {**pack_parameters(pack_ah), **(parameters or {})}
+        with ArduSubSitl(launch_point(flight.mission), speedup=speedup, parameters=params) as sitl:
             booted = time.perf_counter()
             result = run_vehicle(
                 flight,

@@ -1,0 +1,219 @@
+"""A range day on ArduSub's real firmware (issue 38): calibrate the vehicle, re-plan for it, fly the new plan.
+
+For each vehicle configuration (:data:`CONFIGS`: SITL parameters that change the vehicle),
+flown from cold boots at ``--speedup`` as a range would:
+
+1. **Morning.**  The calibration run (``rapt-plan shakedown MISSION --out DIR``) flown on the
+   vehicle through ``rapt-plan run --mavlink``'s machinery (:func:`planner.fly.vehicle.run.run_vehicle`).
+2. **Noon.**  ``rapt-plan calibrate MISSION shakedown.mcap --out calibrated.toml``, then
+   ``rapt-plan generate calibrated.toml --budget 20000 --refine``: timed together (the noon step).
+3. **Afternoon.**  Every scenario of the new plan flown, each side as its robust "M" variant
+   where the plan made one (the scenarios a range flies); then ``rapt-plan compare``.
+4. **Side by side.**  The committed plan (``field_plans/range2017``) flown on the same vehicle
+   and compared: with the plan's vehicle, and re-predicted with the calibrated one.
+
+The figures: the calibration run re-predicted by its own calibration (path RMS, energy);
+the committed plan's scenarios re-predicted with the calibrated vehicle (median path RMS,
+energy); pairs observed as predicted and predicted modes held, for the re-plan and for the
+committed plan; the day's Brier score; the noon step's wall time.
+
+Run:  ARDUSUB_SITL=../shared/ardusub/ardusub python benchmarks/range_day.py
+      [--configs bluerov2,limited] [--speedup 40] [--budget 20000] [--work DIR] [--stages ...] [--quick]
+
+``--work`` keeps every log and row; run again with it and only what is missing is flown or
+computed.  ``--quick``: one configuration, a 2,000-run re-plan and its first four scenarios.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+from ardusub import NOT_AN_END, fly  # noqa: E402  benchmarks/ardusub.py, beside this script
+
+MISSION = ROOT / "examples" / "range2017.toml"
+COMMITTED = ROOT / "field_plans" / "range2017" / "plan.json"
+#: A BlueROV2's pack (Ah): what the vehicle on the range carries (SITL's default is 3.3 Ah).
+PACK_AH = 18.0
+#: The vehicles flown: name -> (what it is, SITL parameters beyond the pack).  ArduPilot's
+#: libraries/SITL/SIM_Submarine.cpp maps each thruster's PWM to thrust and current; limiting the
+#: motors' PWM range (as a range does to protect ESCs or save the pack) makes a slower vehicle
+#: that draws less.  A current (SIM_WIND_*) is not used: the firmware's velocity controller
+#: holds ground velocity against it, so it changes nothing a plan sees.
+CONFIGS: dict[str, tuple[str, dict[str, float]]] = {
+    "bluerov2": ("BlueROV2, 18 Ah pack", {}),
+    "limited": (
+        "BlueROV2, 18 Ah pack, thrusters limited to 1250-1750 us",
+        {"MOT_PWM_MIN": 1250.0, "MOT_PWM_MAX": 1750.0},
+    ),
+}
+
+
+def rapt_plan(*args: str) -> subprocess.CompletedProcess:
+    """``rapt-plan ARGS`` in a subprocess (this checkout's code), its output captured."""
+    cmd = [sys.executable, "-m", "planner.cli", *args]
+    return subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, env=None)
+
+
+def cached(path: Path, make) -> dict:
+    """A row kept in ``path`` (JSON); made once per ``--work`` directory."""
+    if path.is_file():
+        return json.loads(path.read_text())
+    row = make()
+    if "error" not in row:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        path.write_text(json.dumps(row, indent=1))
+    return row
+
+
+def fly_plan(plan: Path, ids: list[str], out: Path, speedup: float, params: dict[str, float]) -> list[dict]:
+    """Every scenario ``ids`` of ``plan`` from a cold boot, logs in ``out``; rows cached beside them."""
+    rows = []
+    for sid in ids:
+        log = out / f"{sid}.mcap"
+
+        def make(sid=sid, log=log) -> dict:
+            log.parent.mkdir(parents=True, exist_ok=True)
+            return fly(sid, speedup, log, None, PACK_AH, plan=plan, parameters=params)
+
+        rows.append(cached(out / f"{sid}.json", make))
+        print(
+            f"    {plan.parent.name}/{sid}: {rows[-1].get('ended') or rows[-1].get('error')}",
+            file=sys.stderr,
+            flush=True,
+        )
+    return rows
+
+
+def flown_ids(plan: Path) -> list[str]:
+    """The scenarios a range flies from ``plan``: each pair side as its robust variant where there is one."""
+    doc = json.loads(plan.read_text())
+    ids = []
+    for pair in doc["pairs"]:
+        for sid in pair["scenarios"]:
+            variant = f"{sid}M"
+            ids.append(variant if any(s["id"] == variant for s in doc["scenarios"]) else sid)
+    return ids
+
+
+def ended_by_scenario(row: dict) -> bool:
+    return "error" not in row and not row["ended"].startswith(NOT_AN_END)
+
+
+#: Watchdog reasons that mean our rig fell behind the firmware, not what the vehicle did: such a
+#: flight is flown again (once) rather than counted.
+RIG_FAILURES = ("watchdog: link_lost", "watchdog: stale_commands")
+
+
+def refly_rig_failures(out: Path) -> None:
+    """Forget the cached rows of flights our rig lost (a loaded machine at a high speed-up), so they fly again."""
+    for path in out.glob("*.json"):
+        if json.loads(path.read_text()).get("ended", "").startswith(RIG_FAILURES):
+            path.unlink()
+
+
+def morning(work: Path, speedup: float, params: dict[str, float]) -> dict:
+    """The calibration run designed for the mission and flown on the vehicle."""
+    design = work / "shakedown"
+    if not (design / "plan.json").is_file():
+        proc = rapt_plan("shakedown", str(MISSION), "--out", str(design))
+        if proc.returncode:
+            return {"error": proc.stdout + proc.stderr}
+    (row,) = fly_plan(design / "plan.json", ["shakedown"], work / "morning", speedup, params)
+    return row
+
+
+def noon(work: Path, budget: int) -> dict:
+    """Calibrate on the calibration run's log, then re-plan on the calibrated mission; both timed together."""
+
+    def make() -> dict:
+        started = time.perf_counter()
+        cal = rapt_plan("calibrate", str(MISSION), str(work / "morning" / "shakedown.mcap"), "--out",
+                        str(work / "calibrated.toml"))  # fmt: skip
+        if cal.returncode:
+            return {"error": cal.stdout + cal.stderr}
+        calibrated_s = time.perf_counter() - started
+        gen = rapt_plan("generate", str(work / "calibrated.toml"), "--out", str(work / "plan"), "--budget",
+                        str(budget), "--refine")  # fmt: skip
+        if gen.returncode:
+            return {"error": gen.stdout + gen.stderr}
+        return {"calibrate_s": calibrated_s, "noon_s": time.perf_counter() - started, "calibrate_out": cal.stdout}
+
+    return cached(work / "noon.json", make)
+
+
+def compare(plan: Path, logs: Path, out: Path, *extra: str) -> dict | None:
+    """``rapt-plan compare`` on every log in ``logs``; its comparison.json (None when it failed)."""
+    mcaps = sorted(str(p) for p in logs.glob("*.mcap"))
+    if not (out / "comparison.json").is_file():
+        proc = rapt_plan("compare", str(plan.parent), *mcaps, "--out", str(out), *extra)
+        if proc.returncode:
+            print(proc.stdout + proc.stderr, file=sys.stderr)
+            return None
+    return json.loads((out / "comparison.json").read_text())
+
+
+def main(argv: list[str] | None = None) -> int:
+    from planner.fly.ardusub_sitl import ENV, sitl_binary
+
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--configs", default=",".join(CONFIGS), help=f"Vehicles to fly ({', '.join(CONFIGS)}).")
+    ap.add_argument("--speedup", type=float, default=40.0)
+    ap.add_argument("--budget", type=int, default=20000, help="Runs in the re-plan's search.")
+    ap.add_argument("--stages", default="committed,day", help="committed (the committed plan), day (the loop).")
+    ap.add_argument("--work", type=Path, default=None, help="Directory for logs, plans and rows (resumable).")
+    ap.add_argument("--quick", action="store_true")
+    args = ap.parse_args(argv)
+    if sitl_binary() is None:
+        print(
+            f"error: {ENV} is not set; point it at the ArduSub SITL binary (../shared/ardusub/ardusub)", file=sys.stderr
+        )
+        return 2
+    configs = [c.strip() for c in args.configs.split(",") if c.strip()]
+    unknown = [c for c in configs if c not in CONFIGS]
+    if unknown:
+        print(f"error: --configs: unknown {unknown[0]!r}; choose from {', '.join(CONFIGS)}", file=sys.stderr)
+        return 2
+    work = args.work or Path(tempfile.mkdtemp(prefix="rapt_range_day_"))
+    stages = set(args.stages.split(","))
+    committed_ids = [s["id"] for s in json.loads(COMMITTED.read_text())["scenarios"]]
+    for name in configs[:1] if args.quick else configs:
+        params = CONFIGS[name][1]
+        print(f"  {name}: {CONFIGS[name][0]}", file=sys.stderr, flush=True)
+        here = work / name
+        if "committed" in stages:
+            refly_rig_failures(here / "committed")
+            fly_plan(
+                COMMITTED, committed_ids[:4] if args.quick else committed_ids, here / "committed", args.speedup, params
+            )
+        if "day" in stages:
+            refly_rig_failures(here / "morning")
+            row = morning(here, args.speedup, params)
+            if "error" in row or not ended_by_scenario(row):
+                print(
+                    f"  {name}: the calibration run did not finish: {row.get('error') or row['ended']}", file=sys.stderr
+                )
+                continue
+            timing = noon(here, 2000 if args.quick else args.budget)
+            if "error" in timing:
+                print(f"  {name}: noon step failed: {timing['error']}", file=sys.stderr)
+                continue
+            ids = flown_ids(here / "plan" / "plan.json")
+            refly_rig_failures(here / "afternoon")
+            fly_plan(
+                here / "plan" / "plan.json", ids[:4] if args.quick else ids, here / "afternoon", args.speedup, params
+            )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
