@@ -27,7 +27,17 @@ from sim.uuv.autonomy import GOAL_RETURN, GOAL_WAYPOINT, RETURN_COMPLETE, Comman
 from sim.uuv.environment import tidal_current
 from sim.uuv.scenario import Scenarios
 
-__all__ = ["Leg", "LegAutonomy", "LEG_KINDS", "legs_from_json", "legs_to_json", "leg_schedule", "TURN_RAMP"]
+__all__ = [
+    "Leg",
+    "LegAutonomy",
+    "LEG_KINDS",
+    "legs_from_json",
+    "legs_to_json",
+    "leg_schedule",
+    "leg_records",
+    "leg_driver",
+    "TURN_RAMP",
+]
 
 #: What a leg does: hold a heading and speed, turn, hold station (speed 0), rise, dive, go home.
 LEG_KINDS = ("straight", "turn", "hold", "ascent", "dive", "return")
@@ -90,6 +100,19 @@ def check_legs(legs: Sequence[Leg]) -> None:
 def leg_schedule(legs: Sequence[Leg]) -> np.ndarray:
     """(len(legs) + 1,) mission seconds each leg starts at; the last entry is when the return leg must end."""
     return np.concatenate([[0.0], np.cumsum([leg.duration_s for leg in legs])])
+
+
+def leg_records(legs: Sequence[Leg]) -> list[dict]:
+    """Each leg with its scheduled ``start_s`` and ``end_s`` (mission seconds; the return leg's end is the
+    most it may take): what a calibration run's log records (``meta/scenario``) for the fit to read."""
+    t = leg_schedule(legs)
+    return [{**item, "start_s": float(t[k]), "end_s": float(t[k + 1])} for k, item in enumerate(legs_to_json(legs))]
+
+
+def leg_driver(legs: Sequence[Leg]):
+    """``driver`` for :func:`sim.uuv.simulate.simulate`: the batch simulator flies ``legs``."""
+    legs = tuple(legs)
+    return lambda scen: LegAutonomy(scen, legs)
 
 
 class LegAutonomy:
