@@ -257,6 +257,12 @@ def _problem(design: ShakedownDesign) -> tuple[str, str] | None:
     """What keeps a simulated design from flying, and the fix (None: it fits)."""
     o = design.options
     lever = f"lower --margin (now {o.margin_m:g}) or shorten the legs with --measure-s (now {o.measure_s:g})"
+    worst = min(design.clearance, key=lambda k: design.clearance[k])
+    if design.clearance[worst] < o.margin_m:
+        fix = "give the launch point more room in the operational area" if "edge" in worst else f"move {worst}"
+        return f"its track comes within {design.clearance[worst]:.0f} m of {worst} (margin {o.margin_m:g} m)", (
+            f"{fix}, or {lever}"
+        )
     if not np.isfinite(design.end_s):
         return "its predicted run does not end surfaced at the recovery point", f"raise --max-minutes or {lever}"
     if design.end_s < design.starts[-1]:
@@ -268,12 +274,6 @@ def _problem(design: ShakedownDesign) -> tuple[str, str] | None:
         return (
             f"its predicted run takes {design.end_s / 60:.1f} min",
             f"raise --max-minutes (now {o.max_minutes:g}) or shorten the legs with --measure-s",
-        )
-    worst = min(design.clearance, key=lambda k: design.clearance[k])
-    if design.clearance[worst] < o.margin_m:
-        fix = "give the launch point more room in the operational area" if "edge" in worst else f"move {worst}"
-        return f"its track comes within {design.clearance[worst]:.0f} m of {worst} (margin {o.margin_m:g} m)", (
-            f"{fix}, or {lever}"
         )
     return None
 
