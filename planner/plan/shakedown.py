@@ -214,13 +214,13 @@ def design_shakedown(mission: Mission, options: ShakedownOptions | None = None) 
     bearings = np.arange(0.0, 360.0, BEARING_STEP_DEG)
     free = [_free_distance(mission, scen, float(b), options.margin_m) for b in bearings]
     order = sorted(range(len(bearings)), key=lambda k: (-free[k], k))[:TRIED_BEARINGS]
-    first = None
+    first: tuple[float, float, str, str] | None = None
     for k in order:
         design = _fly(mission, u, scen, float(bearings[k]), options)
-        problem = _problem(design)
-        if problem is None:
+        found = _problem(design)
+        if found is None:
             return design
-        first = first or (float(bearings[k]), free[k], *problem)
+        first = first or (float(bearings[k]), free[k], *found)
     assert first is not None
     bearing, clear, problem, fix = first
     raise InputError(

@@ -1,5 +1,5 @@
-"""`rapt-plan shakedown`: a calibration run that fits each example range, flies its legs as designed in the
-batch simulator, and refuses in one line, writing nothing, a range it cannot fit."""
+"""The calibration run: it fits each example range, flies its legs as designed in the batch simulator, and is
+written as a plan that validates and flies as a scenario with its legs."""
 
 from __future__ import annotations
 
@@ -9,15 +9,12 @@ from pathlib import Path
 import jsonschema
 import numpy as np
 import pytest
-from typer.testing import CliRunner
 
 import planner
 import sim.uuv
-from planner.cli import app
 from planner.fly.flight import flight_from_plan
-from planner.plan.shakedown import ShakedownOptions, design_shakedown
+from planner.plan.shakedown import ShakedownOptions, design_shakedown, write_shakedown
 from sim.uuv.legs import leg_driver
-from sim.uuv.missionfile import load_mission_text
 from sim.uuv.simulate import TRAJECTORY_FIELDS
 
 EXAMPLES = Path(__file__).resolve().parents[3] / "examples"
@@ -27,7 +24,6 @@ VALIDATOR = jsonschema.Draft202012Validator(
 T, X, Y, SPEED, YAW_RATE, SPEED_CMD, SURFACED = (
     TRAJECTORY_FIELDS.index(k) for k in ("t", "x", "y", "speed", "yaw_rate", "speed_cmd", "surfaced")
 )
-runner = CliRunner()
 
 
 def _during(track: np.ndarray, leg: dict, skip_s: float = 0.0) -> np.ndarray:
@@ -76,8 +72,8 @@ def test_the_run_fits_the_range_and_its_legs_identify_the_vehicle(name):
 
 def test_the_plan_validates_and_flies_as_a_scenario_with_its_legs(tmp_path):
     out = tmp_path / "shakedown"
-    result = runner.invoke(app, ["shakedown", str(EXAMPLES / "range2017.toml"), "--out", str(out)])
-    assert result.exit_code == 0, result.output
+    path = EXAMPLES / "range2017.toml"
+    write_shakedown(design_shakedown(sim.uuv.load_mission(path)), path, out)
     plan = json.loads((out / "plan.json").read_text())
     VALIDATOR.validate(plan)
     scenario = plan["scenarios"][0]
@@ -101,44 +97,3 @@ def test_the_plan_validates_and_flies_as_a_scenario_with_its_legs(tmp_path):
     del bad["scenarios"][0]["legs"]
     paths = {tuple(e.absolute_path) for e in VALIDATOR.iter_errors(bad)}
     assert ("pairs",) in paths and ("scenarios", 0) in paths
-
-
-def _imitation7(old: str, new: str) -> str:
-    text = (EXAMPLES / "imitation7.toml").read_text()
-    assert old in text
-    return text.replace(old, new)
-
-
-@pytest.mark.parametrize(
-    "text, expect",
-    [
-        (  # the launch point 30 m from the southern edge of a smaller area
-            _imitation7("width = 1000.0\nheight = 1000.0", "width = 700.0\nheight = 860.0"),
-            "the operational area's edge (margin 50 m); give the launch point more room",
-        ),
-        (  # a no-go band across the range, 40 m north of the launch point
-            _imitation7(
-                "[[waypoints]]",
-                '[[nogo]]\nname = "Z"\nx = 0.0\ny = -310.0\nwidth = 1000.0\nheight = 100.0\n\n[[waypoints]]',
-            ),
-            "no-go area Z (margin 50 m); move no-go area Z",
-        ),
-    ],
-)
-def test_a_range_it_cannot_fit_is_one_line_and_writes_nothing(tmp_path, text, expect):
-    path = tmp_path / "mission.toml"
-    path.write_text(text)
-    load_mission_text(text, str(path))  # a valid mission: only the calibration run cannot fit
-    out = tmp_path / "out"
-    result = runner.invoke(app, ["shakedown", str(path), "--out", str(out)])
-    lines = [line for line in result.output.splitlines() if line.strip()]
-    assert result.exit_code == 2 and len(lines) == 1, result.output
-    assert "no calibration run fits mission 'imitation7'" in lines[0] and expect in lines[0], lines[0]
-    assert not out.exists() and path.read_text() == text
-
-
-def test_options_out_of_range_are_one_line():
-    result = runner.invoke(app, ["shakedown", str(EXAMPLES / "range2017.toml"), "--out", "x", "--max-minutes", "5"])
-    lines = [line for line in result.output.splitlines() if line.strip()]
-    assert result.exit_code == 2 and len(lines) == 1 and "--max-minutes" in lines[0], result.output
-    assert not Path("x").exists()
