@@ -260,9 +260,15 @@ def _problem(design: ShakedownDesign) -> tuple[str, str] | None:
     worst = min(design.clearance, key=lambda k: design.clearance[k])
     if design.clearance[worst] < o.margin_m:
         fix = "give the launch point more room in the operational area" if "edge" in worst else f"move {worst}"
-        return f"its track comes within {design.clearance[worst]:.0f} m of {worst} (margin {o.margin_m:g} m)", (
-            f"{fix}, or {lever}"
-        )
+        d = design.clearance[worst]
+        where = f"comes within {d:.0f} m of {worst}"
+        if d < 0:
+            where = (
+                f"leaves the operational area ({-d:.0f} m out)"
+                if "edge" in worst
+                else f"crosses {worst} ({-d:.0f} m deep)"
+            )
+        return f"its track {where} (margin {o.margin_m:g} m)", f"{fix}, or {lever}"
     if not np.isfinite(design.end_s):
         return "its predicted run does not end surfaced at the recovery point", f"raise --max-minutes or {lever}"
     if design.end_s < design.starts[-1]:

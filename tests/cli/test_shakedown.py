@@ -34,14 +34,14 @@ def _imitation7(old: str, new: str) -> str:
     [
         (  # the launch point 30 m from the southern edge of a smaller area
             _imitation7("width = 1000.0\nheight = 1000.0", "width = 700.0\nheight = 860.0"),
-            "the operational area's edge (margin 50 m); give the launch point more room",
+            "leaves the operational area (2 m out) (margin 50 m); give the launch point more room",
         ),
         (  # a no-go band across the range, 40 m north of the launch point
             _imitation7(
                 "[[waypoints]]",
                 '[[nogo]]\nname = "Z"\nx = 0.0\ny = -310.0\nwidth = 1000.0\nheight = 100.0\n\n[[waypoints]]',
             ),
-            "no-go area Z (margin 50 m); move no-go area Z",
+            "crosses no-go area Z (49 m deep) (margin 50 m); move no-go area Z",
         ),
     ],
 )
