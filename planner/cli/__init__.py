@@ -13,7 +13,18 @@ from __future__ import annotations
 
 import typer
 
-from planner.cli import bus_keys, calibrate, compare, generate, processes, run, search, selfright, surrogate
+from planner.cli import (
+    bus_keys,
+    calibrate,
+    compare,
+    generate,
+    processes,
+    run,
+    search,
+    selfright,
+    shakedown,
+    surrogate,
+)
 from planner.cli.console import print_error
 from rapt.errors import RaptError
 
@@ -32,6 +43,7 @@ app.command("search")(search.search)
 app.command("study")(search.study)
 app.command("run")(run.run)
 app.command("generate")(generate.generate)
+app.command("shakedown")(shakedown.shakedown)
 app.command("surrogate")(surrogate.surrogate)
 app.command("compare")(compare.compare)
 app.command("calibrate")(calibrate.calibrate)

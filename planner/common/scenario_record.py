@@ -21,6 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from planner.common.jsonio import jsonable
+from sim.uuv.legs import Leg, leg_records
 from sim.uuv.mission import Mission
 
 __all__ = ["SCENARIO_META", "scenario_json", "metadata_fields", "PacedClock", "paced_clock"]
@@ -28,7 +29,7 @@ __all__ = ["SCENARIO_META", "scenario_json", "metadata_fields", "PacedClock", "p
 #: The record's name: ``rapt/<v>/meta/scenario`` on the bus, the ``scenario`` metadata record in the log.
 SCENARIO_META = "scenario"
 #: The fields whose metadata-record text is JSON (the rest are plain text).
-_JSON_FIELDS = ("u", "parameters")
+_JSON_FIELDS = ("u", "parameters", "legs")
 #: The period of a vehicle-paced record without ``dt`` (s).
 _DEFAULT_DT = 2.0
 
@@ -41,11 +42,14 @@ def scenario_json(
     scenario_id: str = "",
     plan_id: str = "",
     vehicle_link: str | None = None,
+    legs: tuple[Leg, ...] = (),
 ) -> str:
     """The record of scenario ``u`` of ``mission`` as JSON text; ``mission_file`` defaults to ``mission.source``.
 
     ``vehicle_link`` (the pymavlink connection string of a vehicle we do not simulate) adds the
-    vehicle-paced fields: the link, the pacing, the mission's origin and period.
+    vehicle-paced fields: the link, the pacing, the mission's origin and period.  ``legs`` (a calibration
+    run's) add ``"calibration": "shakedown"`` and each leg with its scheduled start and end
+    (:func:`sim.uuv.legs.leg_records`), which the calibration fit reads.
     """
     row = np.asarray(u, dtype=float)
     record = {
@@ -56,6 +60,8 @@ def scenario_json(
         "u": row.tolist(),
         "parameters": jsonable(mission.space.decode(row[None, :])[0]),
     }
+    if legs:
+        record |= {"calibration": "shakedown", "legs": leg_records(legs)}
     if vehicle_link is not None:
         record |= {
             "vehicle_link": vehicle_link,

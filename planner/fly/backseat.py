@@ -48,6 +48,7 @@ from rapt.errors import InputError  # noqa: E402
 from sim.uuv.autonomy import GOAL_RETURN, Autonomy, Observation  # noqa: E402
 from sim.uuv.geo import LocalFrame  # noqa: E402
 from sim.uuv.interface import battery_fraction, depth_rate, encode_command  # noqa: E402
+from sim.uuv.legs import LegAutonomy  # noqa: E402
 from sim.uuv.mission import Mission  # noqa: E402
 from sim.uuv.scenario import make_scenarios  # noqa: E402
 
@@ -124,6 +125,7 @@ class BackSeat(Service):
     battery read is the virtual fuel gauge's (BATTERY_STATUS id
     :data:`~planner.common.telemetry.VIRTUAL_BATTERY_ID`) unless ``battery_id`` says otherwise, and
     the scenario clock starts at :meth:`begin` or at the ``meta/clock`` key's ``start_ms``.
+    ``legs`` (a calibration run's, :mod:`sim.uuv.legs`) fly in place of the mission's autonomy.
     The bus entities are declared at construction; :meth:`start` starts the loop's thread and
     :meth:`close` stops it and undeclares them (the session is left open).
     """
@@ -143,6 +145,7 @@ class BackSeat(Service):
         stale_s: float | None = None,
         battery_id: int = VIRTUAL_BATTERY_ID,
         refresh_s: float = 1.0,
+        legs: tuple = (),
     ):
         super().__init__()
         if pacing not in PACINGS:
@@ -151,12 +154,17 @@ class BackSeat(Service):
         if not scen.valid[0]:
             raise InputError(f"scenario: invalid for mission '{mission.name}' ({scen.invalid_reason[0]})")
         self.mission, self.scen, self.vehicle, self.source, self.pacing = mission, scen, vehicle, source, pacing
+        if legs and surrogate is not None:
+            raise InputError("legs: a calibration run flies its own legs, not a surrogate")
         if surrogate is not None:
             surrogate.check(mission)
             if pacing == "vehicle" and surrogate.spec.beams:
                 raise InputError("surrogate: a scan-fed surrogate needs the simulator's sonar scan; fly it lock-step")
             self.autonomy = surrogate.autonomy(scen)
             self.beams = surrogate.spec.beams
+        elif legs:  # a calibration run: its scripted legs (sim.uuv.legs) fly instead of the mission's autonomy
+            self.autonomy = LegAutonomy(scen, legs)
+            self.beams = 0
         else:
             self.autonomy = Autonomy(scen)
             self.beams = 0

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
+from sim.uuv.legs import Leg, legs_from_json
 from sim.uuv.mission import Mission
 
 __all__ = ["Flight", "is_plan", "flight_from_plan"]
@@ -18,13 +19,16 @@ __all__ = ["Flight", "is_plan", "flight_from_plan"]
 
 @dataclass(frozen=True)
 class Flight:
-    """What to fly: one scenario of a mission, and where it came from (both go into the log)."""
+    """What to fly: one scenario of a mission, and where it came from (both go into the log).
+
+    ``legs`` (a calibration run's, :mod:`sim.uuv.legs`) are flown in place of the mission's autonomy."""
 
     mission: Mission
     u: np.ndarray  # the scenario's unit-cube row
     scenario_id: str
     mission_file: str
     plan_id: str = ""
+    legs: tuple[Leg, ...] = ()
 
 
 def is_plan(path: Path) -> bool:
@@ -40,4 +44,5 @@ def flight_from_plan(path: Path, scenario_id: str | None) -> Flight:
     plan = load_plan(path)
     scenario = plan.scenario(scenario_id)
     mission, u = plan.mission, plan.u(scenario["id"])
-    return Flight(mission, u, scenario["id"], str(plan.mission_file), plan.id)
+    legs = legs_from_json(scenario["legs"]) if "legs" in scenario else ()
+    return Flight(mission, u, scenario["id"], str(plan.mission_file), plan.id, legs)

@@ -81,14 +81,31 @@ def _items(mission: Mission, scen: Scenarios) -> list[_Item]:
     return items
 
 
+def _route_items(mission: Mission, scen: Scenarios, route) -> list[_Item]:
+    """The scenario's items, or ``route``'s: (x, y, loiter seconds) points, the last one the recovery point."""
+    if route is None:
+        return _items(mission, scen)
+    points = [(float(x), float(y), float(s)) for x, y, s in route]
+    radius = [float(mission.waypoint_radius)] * (len(points) - 1) + [float(mission.recovery_radius)]
+    return [
+        _Item(MAV_CMD_NAV_LOITER_TIME, (s, 0.0, 0.0, 0.0), x, y)
+        if s > 0
+        else _Item(MAV_CMD_NAV_WAYPOINT, (0.0, r, 0.0, 0.0), x, y)
+        for (x, y, s), r in zip(points, radius)
+    ]
+
+
 def _num(v: float) -> float | None:
     """A JSON number, or null for NaN/inf (the ``.plan`` convention)."""
     v = float(v)
     return v if math.isfinite(v) else None
 
 
-def qgc_plan(mission: Mission, u) -> dict[str, Any]:
-    """The QGroundControl ``.plan`` (a JSON-ready dict) of scenario ``u`` (shape (mission.dim,))."""
+def qgc_plan(mission: Mission, u, route=None) -> dict[str, Any]:
+    """The QGroundControl ``.plan`` (a JSON-ready dict) of scenario ``u`` (shape (mission.dim,)).
+
+    ``route`` ((x, y, loiter seconds) points ending at the recovery point) replaces the mission's
+    items, e.g. with a calibration run's turn points (:mod:`planner.plan.shakedown`)."""
     scen = decode_scenario(mission, u)
     frame = LocalFrame(mission.origin_lat, mission.origin_lon)
     alt = -float(DEPTH_M)
@@ -98,7 +115,7 @@ def qgc_plan(mission: Mission, u) -> dict[str, Any]:
         return [lat, lon]
 
     items = []
-    for seq, it in enumerate(_items(mission, scen), start=1):
+    for seq, it in enumerate(_route_items(mission, scen, route), start=1):
         items.append(
             {
                 "AMSLAltAboveTerrain": None,
@@ -138,8 +155,9 @@ def qgc_plan(mission: Mission, u) -> dict[str, Any]:
     }
 
 
-def wpl(mission: Mission, u) -> str:
-    """The ``QGC WPL 110`` text of scenario ``u``: home (the launch point) then the ``.plan`` items."""
+def wpl(mission: Mission, u, route=None) -> str:
+    """The ``QGC WPL 110`` text of scenario ``u``: home (the launch point) then the ``.plan`` items (``route``'s
+    when given, see :func:`qgc_plan`)."""
     scen = decode_scenario(mission, u)
     frame = LocalFrame(mission.origin_lat, mission.origin_lon)
 
@@ -151,7 +169,7 @@ def wpl(mission: Mission, u) -> str:
         return "\t".join(fields)
 
     lines = ["QGC WPL 110", line(0, 1, MAV_FRAME_GLOBAL, MAV_CMD_NAV_WAYPOINT, (0, 0, 0, 0), *mission.launch, 0.0)]
-    for seq, it in enumerate(_items(mission, scen), start=1):
+    for seq, it in enumerate(_route_items(mission, scen, route), start=1):
         lines.append(line(seq, 0, MAV_FRAME_GLOBAL_RELATIVE_ALT, it.command, it.params, it.x, it.y, -DEPTH_M))
     return "\n".join(lines) + "\n"
 

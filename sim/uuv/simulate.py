@@ -81,6 +81,7 @@ def simulate(
     bias=None,
     surrogate=None,
     plant: Vehicle | None = None,
+    driver=None,
 ) -> Result:
     """Simulate unit-cube scenarios ``X`` (N, mission.dim) of ``mission``.
 
@@ -94,7 +95,11 @@ def simulate(
     power and battery while the autonomy plans with ``mission.vehicle``: how runs of the
     plan's autonomy go on a vehicle calibrated from logs (``rapt-plan calibrate``); None or
     a plant equal to ``mission.vehicle`` gives exactly the results without one.
+    ``driver(scen)`` builds the back-seat in place of the expert autonomy, e.g. a
+    :class:`sim.uuv.legs.LegAutonomy` flying a calibration run's legs (not with ``surrogate``).
     """
+    if driver is not None and surrogate is not None:
+        raise InputError("driver: give a driver or a surrogate, not both")
     scen = make_scenarios(mission, X)
     names, types = metric_names(mission), metric_types(mission)
     scores = np.full((scen.n, len(names)), np.nan)
@@ -109,7 +114,7 @@ def simulate(
             trajectories,
             bias_arrays(bias, scen.n).select(rows),
             plant=plant,
-            **({} if surrogate is None else surrogate.driver_options()),
+            **({"driver": driver} if surrogate is None else surrogate.driver_options()),
         )
         scores[rows] = got
         if trajs is not None:  # trajectories asked for

@@ -130,6 +130,7 @@ def run_sil(
     seed: int = 0,
     surrogate=None,
     bus_keys: str | Path | None = None,
+    legs: tuple = (),
 ) -> SilResult:
     """Fly scenario ``u`` through front-seat, bridge, back-seat (and logger); return its scores.
 
@@ -149,6 +150,9 @@ def run_sil(
     ``bus_keys``: the range's keys directory (``rapt-plan bus-keys``); each part then joins the
     secure bus as its role (:data:`planner.fly.run_bus.PART_ROLES`; a surrogate as the autonomy role
     ``surrogate``, and the operator makes it active), the bridge's session being the hub.
+
+    ``legs`` (a calibration run's, :mod:`sim.uuv.legs`) fly in place of the mission's autonomy and
+    go into the log's scenario record.
     """
     u = np.asarray(u, dtype=float)
     if surrogate is not None:
@@ -176,7 +180,7 @@ def run_sil(
             ).start()
             heard.append("logger")
         recorder = _Recorder(bus.session(PART_ROLES["recorder"]), vehicle)  # declared before the back-seat's token
-        backseat = flying = BackSeat(autonomy, vehicle, mission, u).start()
+        backseat = flying = BackSeat(autonomy, vehicle, mission, u, legs=legs).start()
         if surrogate is not None:
             learned = flying = BackSeat(
                 bus.session(keys.SURROGATE_SOURCE),
@@ -188,7 +192,7 @@ def run_sil(
             ).start()
             heard.append(keys.SURROGATE_SOURCE)
         bus.wait_for_parts(*heard)  # every part's subscriptions are at the hub before the first frame
-        meta = scenario_json(mission, u, mission_file=mission_file, scenario_id=scenario_id, plan_id=plan_id)
+        meta = scenario_json(mission, u, mission_file=mission_file, scenario_id=scenario_id, plan_id=plan_id, legs=legs)
         # the logger may be a client of the hub: put once it is heard
         bus.put(PART_ROLES["scenario_meta"], keys.meta(vehicle, SCENARIO_META), meta, when_heard=logger is not None)
         bridge = MavlinkBridge(

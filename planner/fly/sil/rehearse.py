@@ -14,6 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from planner.fly.flight import Flight
+from sim.uuv.legs import leg_driver
 from sim.uuv.scoring import MODE_NAMES
 
 __all__ = ["BatchCheck", "fly", "check_against_batch"]
@@ -59,16 +60,23 @@ def fly(
         seed=seed,
         surrogate=surrogate,
         bus_keys=bus_keys,
+        legs=flight.legs,
     )
 
 
 def check_against_batch(
     flight: Flight, scores: np.ndarray, *, bias=None, stochastic: bool = False, seed: int = 0, surrogate=None
 ) -> BatchCheck:
-    """The batch simulator on the flight's row with the same bias, seed and surrogate, against its ``scores``."""
+    """The batch simulator on the flight's row with the same bias, seed and surrogate (or legs), against its ``scores``."""
     import sim.uuv
 
     batch = sim.uuv.simulate(
-        flight.mission, flight.u[None, :], bias=bias, seed=seed, stochastic=stochastic, surrogate=surrogate
+        flight.mission,
+        flight.u[None, :],
+        bias=bias,
+        seed=seed,
+        stochastic=stochastic,
+        surrogate=surrogate,
+        driver=leg_driver(flight.legs) if flight.legs else None,
     )
     return BatchCheck(batch.names, MODE_NAMES[int(batch.modes[0])], bool(np.array_equal(scores, batch.scores[0])))

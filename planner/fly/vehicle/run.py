@@ -104,6 +104,7 @@ def run_vehicle(
             scenario_id=flight.scenario_id,
             plan_id=flight.plan_id,
             vehicle_link=connection,
+            legs=flight.legs,
         )
         bus.put(PART_ROLES["scenario_meta"], keys.meta(vehicle, SCENARIO_META), meta, when_heard=log_path is not None)
         bringup = BringUp(
@@ -190,7 +191,9 @@ def _start_parts(
     parts.append(bridge)
     virtual = VirtualRange(bus.session(PART_ROLES["virtual_range"]), vehicle, mission, u).start()
     referee = Referee(bus.session(PART_ROLES["referee"]), vehicle, mission, u).start()
-    backseat = BackSeat(bus.session(PART_ROLES["backseat"]), vehicle, mission, u, pacing="vehicle").start()
+    backseat = BackSeat(
+        bus.session(PART_ROLES["backseat"]), vehicle, mission, u, pacing="vehicle", legs=flight.legs
+    ).start()
     rules = WatchdogRules(record_only=frozenset(record_only))
     watchdog = Watchdog(
         bus.session(PART_ROLES["watchdog"]), vehicle, mission, u, bridge, action=action, rules=rules
