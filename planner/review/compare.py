@@ -20,8 +20,11 @@ to identify and apply this bias to our predictions").  :func:`compare`
    mode and better in mode or path; otherwise the report says "the logs do not support a
    correction; plan unchanged" and the corrected predictions are the uncorrected ones;
 5. re-predicts every run and every plan scenario under the bias used — the corrected
-   predictions — and flags the pairs that no longer straddle their boundary, with an
-   adjusted "M" scenario for each side that moved (:mod:`planner.review.replan`);
+   predictions — and forecasts each as mode probabilities under the plan's execution noise,
+   alone and with the fitted bias's uncertainty, scoring the day by its Brier score
+   (:mod:`planner.review.forecast`); flags the pairs that straddle their boundary with a
+   probability below one half under the corrected forecast, with an adjusted "M" scenario
+   for each side to move (:mod:`planner.review.replan`);
 6. writes ``comparison.json`` and ``comparison.html`` (:mod:`planner.review.report`), and per
    flown scenario an MCAP for Foxglove overlaying observed, predicted and corrected tracks
    (:mod:`planner.review.overlay`).
@@ -59,7 +62,7 @@ from sim.uuv.scoring import MODE_NAMES
 
 __all__ = ["compare", "COMPARISON_SCHEMA"]
 
-COMPARISON_SCHEMA = "rapt.comparison/2"
+COMPARISON_SCHEMA = "rapt.comparison/3"
 RESULT_NAME = "comparison.json"
 #: How the Foxglove overlays' file names begin (:func:`planner.review.overlay.overlay_name`).
 OVERLAY_PREFIX = "overlay_"

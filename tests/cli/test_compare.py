@@ -443,9 +443,9 @@ def test_compare_writes_a_foxglove_overlay_per_flown_scenario(flown):
     }
 
 
-def test_the_corrected_forecast_says_how_sure_it_is_and_scores_no_worse_than_one_prediction(flown):
+def test_the_corrected_forecast_says_how_sure_it_is_and_scores_no_worse_than_the_plan(flown):
     """Per run the mode probabilities under the plan's noise, alone and with the fitted bias's uncertainty;
-    the day's Brier score of the corrected forecast no worse than the corrected deterministic prediction's."""
+    the day's Brier score of the corrected forecast no worse than the plan's single prediction's."""
     c = flown["comparison"]
     fc = c["forecast"]
     assert fc["draws"] == 100 and fc["corrected_is"] == "bias_noise"  # the correction is used (test above)
@@ -460,7 +460,12 @@ def test_the_corrected_forecast_says_how_sure_it_is_and_scores_no_worse_than_one
     b = fc["brier"]
     assert b["runs"] == sum(r["observed_mode"] is not None for r in c["scenarios"])
     assert b["corrected"] == b["bias_noise"]
-    assert b["corrected"]["mode"] <= b["deterministic_corrected"]["mode"] + 1e-12, b
-    assert b["corrected"]["held"] <= b["deterministic_corrected"]["held"] + 1e-12, b
+    # this SIL day flies every scenario exactly as planned (no start, position or timing slip), so the corrected
+    # single prediction is exact here and a forecast that allows for the plan's execution noise cannot beat it;
+    # it must beat the plan's own prediction and the forecast without the bias (tests/planner/review/
+    # test_forecast.py flies a day with execution noise, where it beats the corrected single prediction too)
+    for kind in ("mode", "held"):
+        assert b["corrected"][kind] <= b["deterministic_uncorrected"][kind], b
+        assert b["corrected"][kind] <= b["noise"][kind], b
     assert "Brier" in flown["output"] and "bias+noise" in flown["output"]
     assert "How sure were the predictions?" in (flown["out"] / "comparison.html").read_text()

@@ -137,29 +137,36 @@ def test_bias_draws_vary_only_identified_parameters_within_their_limits():
     np.testing.assert_array_equal(d["heading"], bias_draws(fit, centre, 200, seed=1)["heading"])
 
 
-def test_a_day_with_execution_noise_is_scored_better_by_the_forecast_than_by_one_prediction(plan):
-    """Every plan scenario flown five times, each run off plan by the plan's execution noise (seed 99):
-    the noise forecast's Brier score beats the deterministic prediction's, in modes and in "held"."""
+@pytest.mark.parametrize("bias", [Bias(), Bias(speed=1.1, current_offset=0.2)], ids=["unbiased", "biased"])
+def test_a_day_with_execution_noise_is_scored_better_by_the_forecast_than_by_one_prediction(plan, bias):
+    """Every plan scenario flown five times under ``bias``, each run off plan by the plan's execution noise
+    (seed 99); the bias known to the fit within a small standard error.  The corrected forecast's Brier
+    score beats the corrected deterministic prediction's, in modes and in "held"."""
     m, sigma = plan.mission, plan_noise(plan)
     ids = [s["id"] for s in plan.scenarios]
     U = np.array([plan.u(s) for s in ids])
-    _, day = dithered_runs(m, U, 6, sigma, seed=99)
+    _, day = dithered_runs(m, U, 6, sigma, seed=99, bias=bias)
     flown = day.modes.reshape(len(ids), 6)[:, 1:]  # the first dither is the plan's own row: not a day's run
     ok = day.valid.reshape(len(ids), 6)[:, 1:]
+    used = not bias.is_neutral
+    fit = fit_with({"speed": 0.01, "current_offset": 0.02} if used else {}, bias)
     noise = ensemble(m, ids, U, sigma, 60, 0)
+    biased = ensemble(m, ids, U, sigma, 60, 0, bias=bias_draws(fit, bias, 60, 0)) if used else noise
+    corrected = sim.uuv.simulate(m, U, bias=bias)
     rows = []
     for k, sid in enumerate(ids):
         planned = plan.scenario(sid)["predicted"]["mode"]
-        det = {"planned": planned, "uncorrected": planned, "corrected": planned}
+        det = {"planned": planned, "uncorrected": planned, "corrected": MODE_NAMES[corrected.modes[k]]}
         for mode in flown[k][ok[k]]:
             obs = MODE_NAMES[mode]
             rows.append({"observed_mode": obs, "predicted_mode": planned})
-            rows[-1]["forecast"] = run_forecast(noise, noise, sid, obs, det, used=False)
-    b = day_brier(rows, corrected_used=False)
+            rows[-1]["forecast"] = run_forecast(noise, biased, sid, obs, det, used=used)
+    b = day_brier(rows, corrected_used=used)
     assert b["runs"] == int(ok.sum()) >= 40
-    assert b["noise"]["mode"] < b["deterministic_uncorrected"]["mode"], b
-    assert b["noise"]["held"] < b["deterministic_uncorrected"]["held"], b
-    assert b["corrected"] == b["noise"]  # no correction used: the corrected forecast is the noise one
+    assert b["corrected"] == b["bias_noise" if used else "noise"]
+    for kind in ("mode", "held"):
+        assert b["corrected"][kind] < b["deterministic_corrected"][kind], b
+        assert b["corrected"][kind] < b["deterministic_uncorrected"][kind], b
 
 
 def test_a_plan_without_its_execution_noise_is_one_line(plan, tmp_path):
