@@ -223,7 +223,7 @@ def _brier_table(result: dict) -> Table:
     """The day's Brier scores (lower is better): the deterministic predictions against the forecasts."""
     fc = result["forecast"]
     b = fc["brier"]
-    table = Table(title=f"the day's Brier score ({b['runs']} runs; 0 is perfect)")
+    table = Table(title=f"Brier score, {b['runs']} runs (0: perfect)")
     for col in ("prediction", "modes", "held"):
         table.add_column(col, justify="left" if col == "prediction" else "right")
     used = "bias_noise" if fc["corrected_is"] == "bias_noise" else "noise"

@@ -211,7 +211,12 @@ def day_brier(rows: list[dict], corrected_used: bool) -> dict:
     """The day's Brier scores (multi-class ``mode`` and binary ``held``) of each forecast, over the scenario
     rows with an observed mode and a forecast: ``deterministic_uncorrected`` (one-hot, as planned or on the
     calibrated vehicle), ``deterministic_corrected``, ``noise``, ``bias_noise`` and ``corrected`` (the one used)."""
-    scored = [r for r in rows if r["observed_mode"] is not None and r["forecast"]["modes"]["noise"] is not None]
+    scored = [
+        r
+        for r in rows
+        if r["observed_mode"] is not None
+        and None not in (r["forecast"]["modes"]["noise"], r["forecast"]["modes"]["bias_noise"])
+    ]
     observed = [r["observed_mode"] for r in scored]
     held = [r["observed_mode"] == r["predicted_mode"] for r in scored]
     out: dict[str, dict] = {}
@@ -261,7 +266,9 @@ class DayForecast:
         }
 
 
-def forecast_day(plan: Plan, obs: list[Observation], runs: PlanRuns, fit: BiasFit, used: bool, cfg: CompareConfig):
+def forecast_day(
+    plan: Plan, obs: list[Observation], runs: PlanRuns, fit: BiasFit, used: bool, cfg: CompareConfig
+) -> DayForecast:
     """Both forecasts (module docstring) of every scenario flown or in a pair, ``cfg.draws`` runs each,
     seeded by ``cfg.seed``, with the calibrated vehicle when there is one."""
     if cfg.draws < 1:
