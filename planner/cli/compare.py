@@ -28,6 +28,13 @@ def compare(
     ] = None,
     dithers: Annotated[int, typer.Option(help="Stochastic runs checking each adjusted scenario (0: none).")] = 20,
     seed: Annotated[int, typer.Option(help="Seed of every random choice.")] = 0,
+    draws: Annotated[
+        int,
+        typer.Option(
+            help="Monte-Carlo runs per scenario of each forecast (the plan's execution noise, with and "
+            "without draws of the fitted bias)."
+        ),
+    ] = 100,
     bootstrap: Annotated[
         int,
         typer.Option(
@@ -49,15 +56,19 @@ def compare(
 
     names = _bias_names(fit)
     _check_options(dithers, bootstrap, logs)
+    if draws < 1:
+        fail(f"--draws: expected a number of runs >= 1, got {draws}")
     plant = None
     if calibrated is not None:
         plant = _calibrated_vehicle(plan_dir, calibrated)
-    config = CompareConfig(dithers=dithers, seed=seed, fit=names, plant=plant, bootstrap=bootstrap)
+    config = CompareConfig(dithers=dithers, seed=seed, fit=names, plant=plant, bootstrap=bootstrap, draws=draws)
     result = _run_compare(plan_dir, logs, out_dir, config)
     _warn_lost(result)
     out.print(_scenario_table(result))
     out.print(_bias_table(result))
     _print_agreement(result)
+    out.print(_forecast_table(result))
+    out.print(_brier_table(result))
     _print_flagged(result)
     overlays = len(result.get("overlays", {}))
     out.print(
@@ -184,6 +195,47 @@ def _print_agreement(result: dict) -> None:
         highlight=False,
         soft_wrap=True,
     )
+
+
+def _prob(v: float | None) -> str:
+    return "-" if v is None else f"{v:.2f}"
+
+
+def _forecast_table(result: dict) -> Table:
+    """Per logged run: the deterministic (corrected) mode beside P(observed mode) under each forecast."""
+    fc = result["forecast"]
+    table = Table(title=f"P(observed mode), {fc['draws']} runs per scenario")
+    for col in ("scenario", "observed", "det.", "noise", "bias+noise"):
+        table.add_column(col, justify="left" if col == "scenario" else "right")
+    for r in result["scenarios"]:
+        p = r["forecast"]["p_observed_mode"]
+        table.add_row(
+            r["id"],
+            r["observed_mode"] or "-",
+            r["forecast"]["deterministic"]["corrected"],
+            _prob(p["noise"]),
+            _prob(p["bias_noise"]),
+        )
+    return table
+
+
+def _brier_table(result: dict) -> Table:
+    """The day's Brier scores (lower is better): the deterministic predictions against the forecasts."""
+    fc = result["forecast"]
+    b = fc["brier"]
+    table = Table(title=f"Brier score, {b['runs']} runs (0: perfect)")
+    for col in ("prediction", "modes", "held"):
+        table.add_column(col, justify="left" if col == "prediction" else "right")
+    used = "bias_noise" if fc["corrected_is"] == "bias_noise" else "noise"
+    rows = [
+        ("deterministic_uncorrected", "as planned"),
+        ("deterministic_corrected", "corrected"),
+        ("noise", "noise"),
+        ("bias_noise", "bias+noise"),
+    ]
+    for key, label in rows:
+        table.add_row(label + (" (used)" if key == used else ""), _prob(b[key]["mode"]), _prob(b[key]["held"]))
+    return table
 
 
 def _print_flagged(result: dict) -> None:

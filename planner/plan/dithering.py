@@ -27,6 +27,7 @@ from typing import Any
 import numpy as np
 
 import sim.uuv
+from planner.common.execution_noise import dithered_runs
 from rapt.errors import InputError
 from sim.uuv.mission import Mission
 from sim.uuv.scoring import MODE_NAMES
@@ -450,12 +451,9 @@ def _p_shown(
 def _dithered(
     mission: Mission, centres: np.ndarray, n: int, sigma: np.ndarray, seed: int, surrogate
 ) -> tuple[np.ndarray, sim.uuv.Result]:
-    """``n`` seeded Gaussian dithers of each centre, the first the centre itself, run stochastic in one batch.
+    """``n`` seeded Gaussian dithers of each centre, the first the centre itself, run stochastic in one batch
+    (:func:`planner.common.execution_noise.dithered_runs`, shared with ``rapt-plan compare``'s forecast).
 
     Returns the dithers' unit-cube rows, (k, n, d), and their runs in that order (k * n rows).
     """
-    k, d = centres.shape
-    rng = np.random.default_rng(seed)
-    U = np.clip(centres[:, None, :] + np.asarray(sigma) * rng.standard_normal((k, n, d)), 0.0, 1.0)
-    U[:, 0] = centres
-    return U, sim.uuv.simulate(mission, U.reshape(k * n, d), seed=seed, stochastic=True, surrogate=surrogate)
+    return dithered_runs(mission, centres, n, sigma, seed, surrogate)

@@ -20,8 +20,11 @@ to identify and apply this bias to our predictions").  :func:`compare`
    mode and better in mode or path; otherwise the report says "the logs do not support a
    correction; plan unchanged" and the corrected predictions are the uncorrected ones;
 5. re-predicts every run and every plan scenario under the bias used — the corrected
-   predictions — and flags the pairs that no longer straddle their boundary, with an
-   adjusted "M" scenario for each side that moved (:mod:`planner.review.replan`);
+   predictions — and forecasts each as mode probabilities under the plan's execution noise,
+   alone and with the fitted bias's uncertainty, scoring the day by its Brier score
+   (:mod:`planner.review.forecast`); flags the pairs that straddle their boundary with a
+   probability below one half under the corrected forecast, with an adjusted "M" scenario
+   for each side to move (:mod:`planner.review.replan`);
 6. writes ``comparison.json`` and ``comparison.html`` (:mod:`planner.review.report`), and per
    flown scenario an MCAP for Foxglove overlaying observed, predicted and corrected tracks
    (:mod:`planner.review.overlay`).
@@ -40,6 +43,7 @@ import sim.uuv
 from planner.common.jsonio import json_value, jsonable
 from planner.common.plans import Plan, load_plan
 from planner.review.correction import cross_validate, fit_observed, path_error, rms_path_error
+from planner.review.forecast import STRADDLE_BELOW, DayForecast, forecast_day, run_forecast
 from planner.review.logs import read_run
 from planner.review.replan import adjust_for_bias
 from planner.review.runs import (
@@ -58,7 +62,7 @@ from sim.uuv.scoring import MODE_NAMES
 
 __all__ = ["compare", "COMPARISON_SCHEMA"]
 
-COMPARISON_SCHEMA = "rapt.comparison/2"
+COMPARISON_SCHEMA = "rapt.comparison/3"
 RESULT_NAME = "comparison.json"
 #: How the Foxglove overlays' file names begin (:func:`planner.review.overlay.overlay_name`).
 OVERLAY_PREFIX = "overlay_"
@@ -118,10 +122,12 @@ def compare(
         else baseline
     )
     plan_runs = PlanRuns(ids, U_plan, pred, corr, calib)
-    scen_rows = _scenario_rows(m, obs, plan_runs)
+    say("forecasting under the execution noise and the bias's uncertainty")
+    fc = forecast_day(plan, obs, plan_runs, fit, cv["correction_used"], cfg)
+    scen_rows = _scenario_rows(m, obs, plan_runs, fc)
     agreement = _mode_agreement(scen_rows)
     say("re-planning")
-    pair_rows, proposals = _pair_rows(plan, obs, plan_runs, bias_used, cfg)
+    pair_rows, proposals = _pair_rows(plan, obs, plan_runs, bias_used, cfg, fc)
     result = {
         "schema": COMPARISON_SCHEMA,
         "plan": {"id": plan.id, "path": str(plan.path), "mission": m.name, "mission_file": str(plan.mission_file)},
@@ -148,6 +154,7 @@ def compare(
         },
         "scenarios": scen_rows,
         "mode_agreement": agreement,
+        "forecast": fc.summary(scen_rows),
         "pairs": pair_rows,
         "remaining": _remaining(plan, obs, plan_runs),
         "proposals": proposals,
@@ -175,9 +182,11 @@ def _check_out_dir(plan_path: str | Path, log_paths: Sequence[str | Path], out_d
         raise InputError(f"--out: {out_dir} would overwrite an input (an overlay_*.mcap); choose another directory")
 
 
-def _scenario_rows(m, obs: list[Observation], runs: PlanRuns) -> list[dict]:
-    """One row per logged run: predicted, observed and corrected modes and sub-scores, path errors."""
+def _scenario_rows(m, obs: list[Observation], runs: PlanRuns, fc: DayForecast) -> list[dict]:
+    """One row per logged run: predicted, observed and corrected modes and sub-scores, path errors, and the
+    forecasts' mode probabilities (:func:`planner.review.forecast.run_forecast`)."""
     pred, corr, names = runs.pred, runs.corr, runs.pred.names
+    base = runs.calib if runs.calib is not None else pred
     scen_rows = []
     for o in obs:
         k = runs.row_of[o.sid]
@@ -207,6 +216,8 @@ def _scenario_rows(m, obs: list[Observation], runs: PlanRuns) -> list[dict]:
                 "sub_scores": sub,
             }
         )
+        det = {s: MODE_NAMES[r.modes[k]] for s, r in (("planned", pred), ("uncorrected", base), ("corrected", corr))}
+        scen_rows[-1]["forecast"] = run_forecast(fc.noise, fc.biased, o.sid, o.mode, det, fc.used)
         if runs.calib is not None:  # before (as planned) and after calibrating the vehicle model
             scen_rows[-1]["calibrated_mode"] = MODE_NAMES[runs.calib.modes[k]]
             scen_rows[-1]["path_error_calibrated_m"] = rms_path_error(o.run.track, runs.calibrated_trajectory(o.sid))
@@ -233,10 +244,11 @@ def _mode_agreement(scen_rows: list[dict]) -> dict:
 
 
 def _pair_rows(
-    plan: Plan, obs: list[Observation], runs: PlanRuns, bias, cfg: CompareConfig
+    plan: Plan, obs: list[Observation], runs: PlanRuns, bias, cfg: CompareConfig, fc: DayForecast
 ) -> tuple[list[dict], list[dict]]:
-    """Per plan pair: did it straddle its boundary as observed and under the fitted bias; and an
-    adjusted "M" scenario proposed for each side the bias moved."""
+    """Per plan pair: did it straddle its boundary as observed, deterministically under the fitted bias, and
+    with what probability under the corrected forecast; flagged by that probability, with an adjusted "M"
+    scenario proposed (when the correction is used) for each side to move (:func:`_judge`)."""
     m, pred, corr, row_of = plan.mission, runs.pred, runs.corr, runs.row_of
     names = pred.names
     flown = {o.sid for o in obs}
@@ -270,23 +282,39 @@ def _pair_rows(
             row["observed_straddles"] = row["observed_as_predicted"] = None
         moved = [s for s in (a, b) if not np.array_equal(biased[s], intended[s])]
         row["straddles_under_bias"] = bool(np.any(biased[a] != biased[b]))
-        row["flagged"] = bool(moved)
         row["moved_sides"] = moved
-        if moved:
-            why = (
-                "both sides now show the same " + ", ".join(names[c] for c in cols)
-                if not row["straddles_under_bias"]
-                else "side(s) "
-                + ", ".join(moved)
-                + " no longer show their predicted "
-                + ", ".join(names[c] for c in cols)
-            )
-            row["reason"] = why
-            for s in moved:
+        outcome = sorted(set(cols) | {0, 1})  # the sides' outcomes: mode and the pair's elements
+        row.update(fc.corrected.p_both(a, b, outcome, pred.scores[ka, outcome], pred.scores[kb, outcome]))
+        adjust = _judge(row, moved, [names[c] for c in cols])
+        if adjust and fc.used:
+            for s in adjust:
                 partner = b if s == a else a
                 proposals.append(_proposal(m, runs, pair, s, partner, cols, intended[s], biased[s], bias, sens, cfg))
         pair_rows.append(row)
     return pair_rows, proposals
+
+
+def _judge(row: dict, moved: list[str], elements: list[str]) -> list[str]:
+    """Flag the pair when it straddles with P below :data:`STRADDLE_BELOW` under the corrected forecast (the
+    deterministic verdict, a side moved, stays beside it as ``flagged_deterministic``); the sides to adjust."""
+    a, b = row["scenarios"]
+    p, sides = row["p_straddles"], row["p_sides"]
+    row["flagged_deterministic"] = bool(moved)
+    row["flagged"] = bool(moved) if p is None else bool(p < STRADDLE_BELOW)
+    if not row["flagged"]:
+        return []
+    why = []
+    if p is not None:
+        why.append(f"straddles with P {p:.2f} < {STRADDLE_BELOW:g} (sides {sides[0]:.2f}, {sides[1]:.2f})")
+    if moved and not row["straddles_under_bias"]:
+        why.append("both sides now show the same " + ", ".join(elements))
+    elif moved:
+        why.append("side(s) " + ", ".join(moved) + " no longer show their predicted " + ", ".join(elements))
+    row["reason"] = "; ".join(why)
+    if moved or p is None:
+        return moved
+    weak = [s for s, q in zip((a, b), sides) if q < STRADDLE_BELOW**0.5]  # a side no pair-mate can make up for
+    return weak or [a if sides[0] <= sides[1] else b]
 
 
 def _proposal(

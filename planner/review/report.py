@@ -9,7 +9,10 @@ Agg backend like the plan's own report:
 * mode agreement before and after the bias correction;
 * per logged run a map: the mission's elements for that scenario, the predicted track
   (as planned), the track re-predicted under the fitted bias, and the observed track;
-* per pair: did it straddle its boundary on the water, does it still under the bias;
+* how sure the predictions were: per run the mode probabilities under the plan's execution
+  noise alone and with the fitted bias's uncertainty, and the day's Brier scores;
+* per pair: did it straddle its boundary on the water, does it still under the bias, and
+  with what probability under the corrected forecast;
 * the re-plan table: the adjusted "M" scenarios proposed for the next runs.
 """
 
@@ -234,12 +237,57 @@ def _scenario_section(result: dict, plan, tracks: list[tuple[str, np.ndarray]], 
     return parts
 
 
+def _forecast_section(result: dict) -> list[str]:
+    """Per run the forecasts' mode probabilities beside the deterministic prediction, and the day's Brier scores."""
+    fc = result["forecast"]
+    b = fc["brier"]
+    used = "bias + noise" if fc["corrected_is"] == "bias_noise" else "noise only"
+    parts = [
+        "<h2>How sure were the predictions?</h2><p>Each scenario forecast from "
+        f"{fc['draws']} seeded runs (seed {fc['seed']}) under the plan's execution noise alone, and with each run "
+        f"also under a draw of the fitted bias (varied: {_e(', '.join(fc['bias_varied']) or 'none identified')}). "
+        f"The corrected forecast is <b>{used}</b>.</p>",
+        "<table><tr><th class='l'>scenario</th><th class='l'>log</th><th>observed</th><th>deterministic</th>"
+        "<th class='l'>noise only</th><th class='l'>bias + noise</th><th>P(observed) noise</th>"
+        "<th>P(observed) bias + noise</th></tr>",
+    ]
+
+    def dist(d: dict | None) -> str:
+        return MISSING if d is None else ", ".join(f"{m} {p:.2f}" for m, p in d.items() if p > 0)
+
+    for r in result["scenarios"]:
+        f = r["forecast"]
+        parts.append(
+            f"<tr><td class='l'>{_e(r['id'])}</td><td class='l'>{_e(r['log'])}</td>"
+            f"<td>{_e(r['observed_mode'] or MISSING)}</td><td>{_e(f['deterministic']['corrected'])}</td>"
+            f"<td class='l'>{_e(dist(f['modes']['noise']))}</td><td class='l'>{_e(dist(f['modes']['bias_noise']))}</td>"
+            f"<td>{_num(f['p_observed_mode']['noise'])}</td><td>{_num(f['p_observed_mode']['bias_noise'])}</td></tr>"
+        )
+    parts.append(
+        f"</table><p>The day's Brier score over {b['runs']} run(s) with a logged end (0 is perfect; modes: "
+        "multi-class, at most 2; held: whether the plan's predicted mode held, at most 1):</p>"
+        "<table><tr><th class='l'>prediction</th><th>modes</th><th>held</th></tr>"
+    )
+    for key, label in (
+        ("deterministic_uncorrected", "deterministic, as planned"),
+        ("deterministic_corrected", "deterministic, corrected"),
+        ("noise", "execution noise only"),
+        ("bias_noise", "fitted bias's uncertainty + execution noise"),
+    ):
+        parts.append(
+            f"<tr><td class='l'>{label}</td><td>{_num(b[key]['mode'])}</td><td>{_num(b[key]['held'])}</td></tr>"
+        )
+    parts.append("</table>")
+    return parts
+
+
 def _pair_section(result: dict) -> list[str]:
     """Per pair: whether it straddled its boundary on the water and still does under the bias."""
     parts: list[str] = []
     parts.append(
         "<h2>Pairs</h2><table><tr><th>pair</th><th class='l'>scenarios</th><th class='l'>elements</th>"
-        "<th>predicted</th><th>observed</th><th>straddled on the water</th><th>under the bias</th></tr>"
+        "<th>predicted</th><th>observed</th><th>straddled on the water</th><th>P(straddles)</th>"
+        "<th>deterministic, under the bias</th><th>verdict</th></tr>"
     )
 
     def yn(v: bool | None) -> str:
@@ -250,7 +298,8 @@ def _pair_section(result: dict) -> list[str]:
             f"<tr><td>{_e(p['id'])}</td><td class='l'>{_e(' / '.join(p['scenarios']))}</td>"
             f"<td class='l'>{_e(', '.join(p['elements']))}</td><td>{_e(' / '.join(p['predicted_modes']))}</td>"
             f"<td>{_e(' / '.join(m or MISSING for m in p['observed_modes']))}</td>"
-            f"<td>{yn(p['observed_straddles'])}</td>"
+            f"<td>{yn(p['observed_straddles'])}</td><td>{_num(p.get('p_straddles'), 2)}</td>"
+            f"<td>{'moved: ' + _e(', '.join(p['moved_sides'])) if p['flagged_deterministic'] else 'holds'}</td>"
             f"<td>{'<span class=bad>flagged: ' + _e(p.get('reason')) + '</span>' if p['flagged'] else 'holds'}"
             "</td></tr>"
         )
@@ -319,6 +368,7 @@ def write_comparison_report(
         )
     parts += _bias_section(result, fig_dir)
     parts += _scenario_section(result, plan, tracks, traj, fig_dir)
+    parts += _forecast_section(result)
     parts += _pair_section(result)
     parts += _replan_section(result)
     parts.append("</body></html>")

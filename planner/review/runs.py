@@ -37,6 +37,7 @@ class CompareConfig:
     p_target: float = 0.8
     bootstrap: int = 20  # block-bootstrap refits for the standard errors (0: analytic only)
     plant: Vehicle | None = None  # a calibrated vehicle (rapt-plan calibrate): flown in every prediction
+    draws: int = 100  # Monte-Carlo runs per scenario of each forecast (planner.review.forecast)
 
 
 @dataclass

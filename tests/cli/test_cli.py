@@ -237,3 +237,13 @@ def test_frontseat_without_scenario_serves_the_first_valid_one(tmp_path):
     assert heard is not None and heard.type == mavutil.mavlink.MAV_TYPE_SUBMARINE, stderr
     assert proc.returncode == 0, stderr
     assert f"front-seat: mission 'range2017' scenario sobol-1 on udpin:127.0.0.1:{udp}" in stderr
+
+
+def test_compare_refuses_draws_below_one_before_reading_anything(tmp_path):
+    log = tmp_path / "run.mcap"
+    log.write_text("not read\n")
+    result = runner.invoke(app, ["compare", str(tmp_path / "plan"), str(log), "--draws", "0", "--out", str(tmp_path)])
+    assert result.exit_code == 2, result.output
+    assert "--draws: expected a number of runs >= 1, got 0" in result.output and "Traceback" not in result.output
+    assert len([line for line in result.output.splitlines() if line.strip()]) == 1
+    assert sorted(tmp_path.iterdir()) == [log]

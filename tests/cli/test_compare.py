@@ -118,8 +118,11 @@ def test_pairs_are_reported_and_fragile_ones_re_planned_under_the_bias(flown):
     assert [p["id"] for p in c["pairs"]] == [p["id"] for p in plan.pairs]
     for p in c["pairs"]:
         assert p["observed_straddles"] is not None  # both sides flown to the end
+        assert 0.0 <= p["p_straddles"] <= min(p["p_sides"])  # both sides at once: no likelier than either
+        assert p["flagged"] == (p["p_straddles"] < c["forecast"]["straddle_below"])  # judged by the forecast
+        assert p["flagged_deterministic"] == bool(p["moved_sides"])  # the single prediction's verdict beside it
         if p["flagged"]:
-            assert p["moved_sides"] and p["reason"]
+            assert p["reason"].startswith("straddles with P")
     for q in c["proposals"]:
         assert q["id"] == q["variant_of"] + "M"
         if q["found"]:  # under the fitted bias the adjusted scenario shows what the plan intended
@@ -438,3 +441,31 @@ def test_compare_writes_a_foxglove_overlay_per_flown_scenario(flown):
     assert {t: (v["schema"], v["messages"]) for t, v in ts["channels"].items()} == {
         t: (ch.schema_name, len(ch.messages)) for t, ch in channels.items()
     }
+
+
+def test_the_corrected_forecast_says_how_sure_it_is_and_scores_no_worse_than_the_plan(flown):
+    """Per run the mode probabilities under the plan's noise, alone and with the fitted bias's uncertainty;
+    the day's Brier score of the corrected forecast no worse than the plan's single prediction's."""
+    c = flown["comparison"]
+    fc = c["forecast"]
+    assert fc["draws"] == 100 and fc["corrected_is"] == "bias_noise"  # the correction is used (test above)
+    assert set(fc["bias_varied"]) >= set(INJECTED)  # the identified parameters are drawn
+    for r in c["scenarios"]:
+        for name in ("noise", "bias_noise"):
+            dist = r["forecast"]["modes"][name]
+            assert set(dist) == {"TF", "SS", "MS", "TS"} and sum(dist.values()) == pytest.approx(1.0)
+        if r["observed_mode"] is not None:
+            p = r["forecast"]["p_observed_mode"]
+            assert p["corrected"] == p["bias_noise"] == r["forecast"]["modes"]["bias_noise"][r["observed_mode"]]
+    b = fc["brier"]
+    assert b["runs"] == sum(r["observed_mode"] is not None for r in c["scenarios"])
+    assert b["corrected"] == b["bias_noise"]
+    # this SIL day flies every scenario exactly as planned (no start, position or timing slip), so the corrected
+    # single prediction is exact here and a forecast that allows for the plan's execution noise cannot beat it;
+    # it must beat the plan's own prediction and the forecast without the bias (tests/planner/review/
+    # test_forecast.py flies a day with execution noise, where it beats the corrected single prediction too)
+    for kind in ("mode", "held"):
+        assert b["corrected"][kind] <= b["deterministic_uncorrected"][kind], b
+        assert b["corrected"][kind] <= b["noise"][kind], b
+    assert "Brier" in flown["output"] and "bias+noise" in flown["output"]
+    assert "How sure were the predictions?" in (flown["out"] / "comparison.html").read_text()
