@@ -97,12 +97,8 @@ def fly_plan(plan: Path, ids: list[str], out: Path, speedup: float, params: dict
 def flown_ids(plan: Path) -> list[str]:
     """The scenarios a range flies from ``plan``: each pair side as its robust variant where there is one."""
     doc = json.loads(plan.read_text())
-    ids = []
-    for pair in doc["pairs"]:
-        for sid in pair["scenarios"]:
-            variant = f"{sid}M"
-            ids.append(variant if any(s["id"] == variant for s in doc["scenarios"]) else sid)
-    return ids
+    variant_of = {v["variant_of"]: v["id"] for v in doc.get("variants", [])}
+    return [variant_of.get(sid, sid) for pair in doc["pairs"] for sid in pair["scenarios"]]
 
 
 def ended_by_scenario(row: dict) -> bool:

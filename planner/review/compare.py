@@ -260,23 +260,28 @@ def _pair_rows(
         ka, kb = row_of[a], row_of[b]
         intended = {a: pred.scores[ka, cols], b: pred.scores[kb, cols]}
         biased = {a: corr.scores[ka, cols], b: corr.scores[kb, cols]}
+        side = {s: _flown_as(plan, obs, s) for s in (a, b)}
         observed: dict[str, np.ndarray] = {}
-        for o in obs:
-            if o.sid in (a, b) and o.mode is not None and o.scores is not None:  # a mode comes with scores
-                observed.setdefault(o.sid, o.scores[cols])
+        for s in (a, b):
+            o = next((o for o in obs if o.sid == side[s] and o.mode is not None and o.scores is not None), None)
+            if o is not None:  # a mode comes with scores
+                observed[s] = o.scores[cols]
+        # a side flown as its robust variant is judged against the variant's own prediction
+        shown = {s: pred.scores[row_of[side[s]], cols] for s in (a, b)}
         row = {
             "id": pair["id"],
             "scenarios": [a, b],
+            "flown": [side[a], side[b]],
             "elements": [names[c] for c in cols],
             "predicted_modes": [MODE_NAMES[pred.modes[ka]], MODE_NAMES[pred.modes[kb]]],
-            "observed_modes": [_obs_mode(obs, a), _obs_mode(obs, b)],
+            "observed_modes": [_obs_mode(obs, side[a]), _obs_mode(obs, side[b])],
             "corrected_modes": [MODE_NAMES[corr.modes[ka]], MODE_NAMES[corr.modes[kb]]],
-            "remaining": [s for s in (a, b) if s not in flown],
+            "remaining": [s for s in (a, b) if side[s] not in flown],
         }
         if a in observed and b in observed:
             row["observed_straddles"] = bool(np.any(observed[a] != observed[b]))
             row["observed_as_predicted"] = bool(
-                np.array_equal(observed[a], intended[a]) and np.array_equal(observed[b], intended[b])
+                np.array_equal(observed[a], shown[a]) and np.array_equal(observed[b], shown[b])
             )
         else:
             row["observed_straddles"] = row["observed_as_predicted"] = None
@@ -292,6 +297,15 @@ def _pair_rows(
                 proposals.append(_proposal(m, runs, pair, s, partner, cols, intended[s], biased[s], bias, sens, cfg))
         pair_rows.append(row)
     return pair_rows, proposals
+
+
+def _flown_as(plan: Plan, obs: list[Observation], sid: str) -> str:
+    """The scenario flown for pair side ``sid``: itself when a run of it shows a mode, else its robust
+    variant (``variant_of``) when one of those does (a range flies the variant the plan made), else ``sid``."""
+    observed = {o.sid for o in obs if o.mode is not None}
+    if sid in observed:
+        return sid
+    return next((v["id"] for v in plan.variants if v.get("variant_of") == sid and v["id"] in observed), sid)
 
 
 def _judge(row: dict, moved: list[str], elements: list[str]) -> list[str]:
