@@ -263,9 +263,9 @@ def _pair_rows(
         side = {s: _flown_as(plan, obs, s) for s in (a, b)}
         observed: dict[str, np.ndarray] = {}
         for s in (a, b):
-            o = next((o for o in obs if o.sid == side[s] and o.mode is not None and o.scores is not None), None)
-            if o is not None:  # a mode comes with scores
-                observed[s] = o.scores[cols]
+            got = [o.scores for o in obs if o.sid == side[s] and o.mode is not None and o.scores is not None]
+            if got:  # a mode comes with scores
+                observed[s] = got[0][cols]
         # a side flown as its robust variant is judged against the variant's own prediction
         shown = {s: pred.scores[row_of[side[s]], cols] for s in (a, b)}
         row = {
