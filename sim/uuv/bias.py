@@ -47,6 +47,7 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, fields
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -215,20 +216,22 @@ def bias_arrays(bias: Bias | BiasArrays | Sequence[Bias] | Mapping[str, np.ndarr
 SCALE_FIELDS: tuple[str, ...] = ("speed", "current_scale", "battery")
 
 
-def compose(base: Bias, relative: Bias) -> Bias:
+def compose(base: Bias, relative):
     """The bias of ``relative`` applied on top of ``base``: scales multiply, offsets add.
 
     Not range-checked: a composed bias is what the world flies, not something a user
     typed, so it may leave :data:`BIAS_LIMITS` (two 1.5x speed biases make 2.25x).
+    ``relative`` may also be any object with the fields as attributes (arrays of trial
+    biases in a batched replay); the result is then a namespace of the same shape.
     """
-    if relative.is_neutral:
-        return base
-    if base.is_neutral:
-        return relative
+    if base.is_neutral or (isinstance(relative, Bias) and relative.is_neutral):
+        return relative if base.is_neutral else base
     values = {
         n: getattr(base, n) * getattr(relative, n) if n in SCALE_FIELDS else getattr(base, n) + getattr(relative, n)
         for n in BIAS_NAMES
     }
+    if not isinstance(relative, Bias):
+        return SimpleNamespace(**values)
     out = object.__new__(Bias)  # skip __post_init__'s limits (see above)
     for n, v in values.items():
         object.__setattr__(out, n, float(v))

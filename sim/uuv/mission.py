@@ -198,8 +198,9 @@ class Mission:
     #: vehicle the world flies, while the autonomy plans with the file's tide table and vehicle;
     #: every simulation composes its own bias argument on top (:func:`sim.uuv.bias.compose`).
     execution_bias: Bias = field(default_factory=Bias)
-    #: Where that bias came from (the table's ``source``; empty without one).
-    execution_bias_source: str = ""
+    #: Where that bias came from: the table's ``source`` ("" when it names none), None when
+    #: the file has no ``[execution_bias]`` table.
+    execution_bias_source: str | None = None
 
     @property
     def dim(self) -> int:

@@ -39,13 +39,13 @@ __all__ = ["SECTION", "read_execution_bias"]
 SECTION = "execution_bias"
 
 
-def read_execution_bias(checker: FieldChecker, data: Mapping) -> tuple[Bias, str]:
-    """The day's bias and its source from the parsed file ``data`` (neutral and "" without the table).
+def read_execution_bias(checker: FieldChecker, data: Mapping) -> tuple[Bias, str | None]:
+    """The day's bias and its source from the parsed file ``data`` (neutral and None without the table).
 
     Problems are ``checker``'s one-line errors naming ``execution_bias.<key>``.
     """
     if SECTION not in data:
-        return Bias(), ""
+        return Bias(), None
     tbl = checker.table(data[SECTION], SECTION, f"[{SECTION}]")
     checker.keys(tbl, SECTION, (), (*BIAS_NAMES, "source"))
     values = {}

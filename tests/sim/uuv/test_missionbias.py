@@ -35,7 +35,7 @@ def test_the_table_loads_into_the_mission_with_its_source():
     m = load_mission_text(table_of(DAY), "day.toml")
     assert m.execution_bias == DAY and m.execution_bias_source == "morning compare"
     plain = sim.uuv.load_mission(MISSION)
-    assert plain.execution_bias.is_neutral and plain.execution_bias_source == ""
+    assert plain.execution_bias.is_neutral and plain.execution_bias_source is None
     partial = load_mission_text(with_table("current_scale = 0.5"), "p.toml")
     assert partial.execution_bias == Bias(current_scale=0.5)  # omitted keys stay neutral
 
