@@ -80,7 +80,7 @@ def _print_water(water) -> None:
     """The day's water written into [execution_bias], and what was left out and why."""
     taken = ", ".join(f"{n} {v['value']:.5g} +- {v['stderr']:.2g}" for n, v in water.fields.items())
     out.print(
-        f"[execution_bias] from {water.source}: {taken or 'nothing identified and cross-validated'}",
+        escape(f"[execution_bias] from {water.source}: {taken or 'nothing identified and cross-validated'}"),
         highlight=False,
         soft_wrap=True,
     )

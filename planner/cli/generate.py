@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
+from rich.markup import escape
 from rich.table import Table
 
 from planner.cli.console import err, fail, out, progress_bar
@@ -160,7 +161,7 @@ def generate(
             close_executor()
     out.print(summary_table(plan, f"{mission.name}: field plan in {out_dir}"))
     for line in summary_lines(plan["mission"].get("planned_for")):
-        out.print(line, soft_wrap=True, highlight=False)
+        out.print(escape(line), soft_wrap=True, highlight=False)
     for p in plan["pairs"]:
         if p.get("reason"):
             out.print(f"pair {p['id']} is fragile: {p['reason']}", soft_wrap=True, highlight=False)
