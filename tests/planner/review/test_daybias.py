@@ -9,6 +9,7 @@ import pytest
 
 import sim.uuv
 from planner.review.biasfit import fit_bias
+from planner.review.calibrate import calibrate
 from planner.review.daybias import WATER_FIELDS, day_bias_record, water_from_comparison, with_execution_bias
 from sim.uuv.bias import Bias, compose
 from sim.uuv.missionfile import load_mission_text
@@ -116,3 +117,12 @@ def test_a_fit_on_logs_of_the_planned_water_is_neutral_and_otherwise_relative():
     assert rest.bias.speed == pytest.approx(1.2 / 1.1, abs=2e-3)
     assert compose(day_bias, rest.bias).speed == pytest.approx(1.2, abs=2e-3)
     np.testing.assert_allclose(rest.rms_position_m, 0.0, atol=0.05)
+
+
+def test_calibrate_refuses_an_out_whose_sidecar_would_overwrite_the_comparison(tmp_path):
+    cmp = comparison(tmp_path)
+    before = cmp.read_bytes()
+    logs = [tmp_path / "a.mcap", tmp_path / "b.mcap"]
+    with pytest.raises(ValueError, match=r"^--out: .* would overwrite the --bias input"):
+        calibrate(EXAMPLES / "range2017.toml", logs, tmp_path / "comparison.toml", bias=cmp)
+    assert cmp.read_bytes() == before and not (tmp_path / "comparison.toml").exists()
