@@ -22,6 +22,14 @@ def calibrate(
         Path, typer.Option("--out", help="Calibrated mission file to write (a .json sidecar is written beside it).")
     ] = Path("calibrated.toml"),
     seed: Annotated[int, typer.Option(help="Seed of the bootstrap behind the standard errors.")] = 0,
+    bias: Annotated[
+        Path | None,
+        typer.Option(
+            "--bias",
+            help="comparison.json of rapt-plan compare on these runs: write the day's water it identified and "
+            "cross-validated into [execution_bias] and fit the vehicle in that water.",
+        ),
+    ] = None,
 ) -> None:
     """Fit the vehicle's speed, turn and power terms to logs; write a mission file the planner can use."""
     from planner.review.calibrate import UNITS, sidecar_path
@@ -34,7 +42,7 @@ def calibrate(
             fail(f"LOGS: {p} does not exist; give the .mcap files of the mission's runs")
     with err.status("calibrating", spinner="dots") if err.is_terminal else nullcontext():
         try:
-            result = run_calibrate(mission, logs, out_path, seed=seed)
+            result = run_calibrate(mission, logs, out_path, seed=seed, bias=bias)
         except ValueError as exc:
             fail(str(exc))
     table = Table(title=escape(f"[vehicle] calibrated from {result.runs} run(s), {result.segments} segments"))
@@ -63,4 +71,18 @@ def calibrate(
         highlight=False,
         soft_wrap=True,
     )
+    if result.water is not None:
+        _print_water(result.water)
     out.print(f"{out_path} and {sidecar_path(out_path)} written", highlight=False, soft_wrap=True)
+
+
+def _print_water(water) -> None:
+    """The day's water written into [execution_bias], and what was left out and why."""
+    taken = ", ".join(f"{n} {v['value']:.5g} +- {v['stderr']:.2g}" for n, v in water.fields.items())
+    out.print(
+        escape(f"[execution_bias] from {water.source}: {taken or 'nothing identified and cross-validated'}"),
+        highlight=False,
+        soft_wrap=True,
+    )
+    for n, why in water.dropped.items():
+        out.print(f"  {n} not written: {why}", highlight=False, soft_wrap=True)

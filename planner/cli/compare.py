@@ -66,6 +66,7 @@ def compare(
     _warn_lost(result)
     out.print(_scenario_table(result))
     out.print(_bias_table(result))
+    _print_day_bias(result)
     _print_agreement(result)
     out.print(_forecast_table(result))
     out.print(_brier_table(result))
@@ -278,3 +279,21 @@ def _calibrated_vehicle(plan_dir: Path, calibrated: Path):
             "calibrate from the plan's own mission file"
         )
     return mission.vehicle
+
+
+def _print_day_bias(result: dict) -> None:
+    """When the plan was made for a day's bias: the fit is relative to it; say so, with the totals."""
+    day = result.get("day_bias") or {}
+    if not day.get("relative"):
+        return
+    from sim.uuv.bias import NEUTRAL
+
+    def changed(values: dict) -> str:
+        return ", ".join(f"{n}={v:.4g}" for n, v in values.items() if v != NEUTRAL[n]) or "none"
+
+    out.print(
+        f"the plan was made for the day's bias {changed(day['assumed'])}; the bias above is relative to it. "
+        f"Total fitted: {changed(day['fitted_total'])}; total used: {changed(day['correction_total'])}",
+        highlight=False,
+        soft_wrap=True,
+    )

@@ -7,6 +7,7 @@ from pathlib import Path
 from typing import Annotated
 
 import typer
+from rich.markup import escape
 from rich.table import Table
 
 from planner.cli.console import err, fail, out, progress_bar
@@ -103,6 +104,7 @@ def generate(
     """Search a mission, choose boundary pairs, dither them and write a field plan."""
     from planner.plan.generate import GenerateConfig, make_executor
     from planner.plan.generate import generate as run_generate
+    from planner.plan.planned_for import summary_lines
 
     mission = load_mission(mission_file)
     store = out_dir / ("study.db" if surrogate is None else "study-surrogate.db")
@@ -158,6 +160,8 @@ def generate(
         finally:
             close_executor()
     out.print(summary_table(plan, f"{mission.name}: field plan in {out_dir}"))
+    for line in summary_lines(plan["mission"].get("planned_for")):
+        out.print(escape(line), soft_wrap=True, highlight=False)
     for p in plan["pairs"]:
         if p.get("reason"):
             out.print(f"pair {p['id']} is fragile: {p['reason']}", soft_wrap=True, highlight=False)

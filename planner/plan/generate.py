@@ -45,6 +45,7 @@ from planner.plan.analysis import Analysis, analyse, confirm_with_expert, pair_p
 from planner.plan.confirmation import Confirmation
 from planner.plan.dithering import DEFAULT_NOISE, DitherNoise, Outcome, dither_many, outcome_columns, robust_variants
 from planner.plan.plan_scenarios import scenario_entries, variant_entries
+from planner.plan.planned_for import planned_for
 from planner.plan.refinement import MIN_REFINE_RUNS, refine_pairs
 from planner.plan.report import write_report
 from planner.plan.search_status import SearchStatus
@@ -472,6 +473,7 @@ def _plan_document(
             "dim": mission.dim,
             "parameters": mission.space.names,
             **embedded,
+            **_planned_for(mission, embedded),
         },
         "study": {
             "budget": cfg.budget,
@@ -492,6 +494,12 @@ def _plan_document(
         "variants": variants,
         "run_order": [s["id"] for s in scenarios] + [v["id"] for v in variants],
     }
+
+
+def _planned_for(mission: Mission, embedded: dict[str, str]) -> dict:
+    """``{"planned_for": ...}`` when the mission file names its day's vehicle or water, else nothing."""
+    rec = planned_for(mission, embedded.get("toml", ""), embedded.get("sha256", ""))
+    return {} if rec is None else {"planned_for": rec}
 
 
 _CONFIRMED_FIELDS = ("confirmed_by_expert", "surrogate_modes", "surrogate_elements", "moved_by", "expert_runs")

@@ -34,6 +34,7 @@ import numpy as np
 
 from planner.common.html.text import EM_DASH, decimal, escape, percent
 from planner.common.plans import PLAN_SCHEMA
+from planner.plan.planned_for import summary_lines
 from planner.plan.report_figures import (
     MODE_COLOURS,
     MODE_LABELS,
@@ -200,7 +201,8 @@ def _header(plan: dict) -> str:
         ("scenarios", len(plan["scenarios"])),
     ]
     dl = "".join(f'<div class="item"><dt>{escape(k)}</dt><dd>{escape(v)}</dd></div>' for k, v in items)
-    return f"<header><h1>Field-test plan: {escape(m.get('name', '?'))}</h1><dl>{dl}</dl></header>"
+    day = "".join(f"<p>{escape(line)}</p>" for line in summary_lines(m.get("planned_for")))
+    return f"<header><h1>Field-test plan: {escape(m.get('name', '?'))}</h1><dl>{dl}</dl>{day}</header>"
 
 
 def _summary_table(plan: dict) -> str:

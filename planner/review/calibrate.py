@@ -53,6 +53,7 @@ from pathlib import Path
 import numpy as np
 
 from planner.review.biasfit import bootstrap_blocks
+from planner.review.daybias import DayWater, header_lines, water_from_comparison, water_record, with_execution_bias
 from planner.review.logs import LogError, read_run
 from planner.review.segments import SEGMENT_STEPS, Segments, replay, segment_batch
 from rapt.errors import InputError
@@ -165,6 +166,7 @@ class Calibration:
     runs: int
     logs: list[dict] = field(default_factory=list)  # name, sha256, scenario, steps (calibrate only)
     model_share: float = 0.0  # share of each value added to its s.e. for the replay's approximation
+    water: DayWater | None = None  # the day's water written beside the vehicle (calibrate --bias)
 
     @property
     def fitted(self) -> tuple[str, ...]:
@@ -215,6 +217,7 @@ class Calibration:
             "bootstrap": est.bootstrap,
             "fit_converged": est.success,
             "logs": self.logs,
+            **({"execution_bias": water_record(self.water)} if self.water is not None else {}),
         }
 
 
@@ -353,8 +356,13 @@ def calibrate(
     fit: Sequence[str] = FITTED,
     seed: int = 0,
     bootstrap: int = BOOTSTRAP,
+    bias: str | Path | None = None,
 ) -> Calibration:
     """Fit the mission's vehicle block to the logs and write ``out_path`` and its JSON sidecar (module docstring).
+
+    ``bias``, a ``comparison.json`` of ``rapt-plan compare``, adds the day's water it
+    established (:func:`planner.review.daybias.water_from_comparison`): the vehicle is then
+    fitted in that water and the file gets an ``[execution_bias]`` table beside it.
 
     Refused with a one-line error before anything is written: fewer than :data:`MIN_LOGS`
     logs, a log given twice, an ``out_path`` that is not ``.toml`` or would overwrite an
@@ -364,7 +372,13 @@ def calibrate(
     mission_path, out_path = Path(mission_path), Path(out_path)
     logs = [Path(p) for p in log_paths]
     _check_paths(mission_path, logs, out_path)
+    if bias is not None and Path(bias).resolve() in {out_path.resolve(), sidecar_path(out_path).resolve()}:
+        raise InputError(f"--out: writing {out_path} would overwrite the --bias input {bias}; choose another file name")
     mission = load_mission(mission_path)
+    water = None
+    if bias is not None:
+        water = water_from_comparison(bias, mission)
+        mission = dataclasses.replace(mission, execution_bias=water.bias, execution_bias_source=water.source)
     runs, start_times, info = [], [], []
     for p in logs:
         run = read_run(p)
@@ -392,8 +406,11 @@ def calibrate(
         )
     result = fit_vehicle(mission, runs, start_times, fit, bootstrap=bootstrap, seed=seed)
     result.logs = info
+    result.water = water
     text = mission_path.read_text(encoding="utf-8")
     written = calibrated_text(text, result)
+    if water is not None:
+        written = with_execution_bias(written, water)
     sidecar = json.dumps(result.to_dict(), indent=2, sort_keys=False, allow_nan=False) + "\n"
     _write_checked(out_path, written, sidecar)
     return result
@@ -475,6 +492,11 @@ def _header_comment(cal: Calibration) -> list[str]:
         f"{a['position_m']:.3g} m, heading {b['heading_deg']:.3g} -> {a['heading_deg']:.3g} deg, "
         f"energy {b['energy_wh']:.3g} -> {a['energy_wh']:.3g} Wh"
     )
-    out.append("# Everything below is the input mission file; only those [vehicle] values changed.")
+    if cal.water is not None:
+        out.extend(header_lines(cal.water))
+    out.append(
+        "# Everything below is the input mission file; only those [vehicle] values changed"
+        + (" and [execution_bias] was set." if cal.water is not None else ".")
+    )
     out.append("")
     return out

@@ -43,6 +43,7 @@ import sim.uuv
 from planner.common.jsonio import json_value, jsonable
 from planner.common.plans import Plan, load_plan
 from planner.review.correction import cross_validate, fit_observed, path_error, rms_path_error
+from planner.review.daybias import day_bias_record
 from planner.review.forecast import STRADDLE_BELOW, DayForecast, forecast_day, run_forecast
 from planner.review.logs import read_run
 from planner.review.replan import adjust_for_bias
@@ -144,6 +145,7 @@ def compare(
             for o in obs
         ],
         "bias": fit.to_dict(),
+        "day_bias": day_bias_record(m, fit.bias, bias_used),
         "bias_fit": _biasfit_observed(fit, cfg),
         "calibrated_vehicle": None if plant is None else jsonable(dataclasses.asdict(plant)),
         "cross_validation": cv,

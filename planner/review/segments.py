@@ -29,7 +29,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim.uuv.bias import Bias
+from sim.uuv.bias import Bias, compose
 from sim.uuv.environment import tidal_current
 from sim.uuv.mission import Mission, Vehicle
 from sim.uuv.vehicle import SWAY_COUPLING, VehicleState, step_vehicle
@@ -201,8 +201,9 @@ def replay(
     ``bias`` (default neutral) biases the vehicle and tide; ``vehicle`` (default the
     mission's) is the vehicle model flown.  Each segment starts from its logged state,
     its surge rebuilt from the logged ground velocity under this bias's tide and course.
+    ``bias`` is relative to the mission's day bias (``Mission.execution_bias``), as in the world.
     """
-    bias = bias or Bias()
+    bias = compose(mission.execution_bias, bias or Bias())
     n, L = seg.t.shape
     spec, dt = vehicle or mission.vehicle, mission.dt
     course = np.deg2rad(bias.heading)

@@ -29,6 +29,17 @@ name                neutral  meaning
 Written on the command line as ``speed=1.15,current_offset=0.3`` (:func:`parse_bias`);
 omitted fields stay neutral.  The neutral bias changes nothing: the simulator's results
 are bit-identical to a run without one.
+
+**Composition.**  A mission file may carry the day's bias (``[execution_bias]``,
+:mod:`sim.uuv.missionbias`): the water and vehicle the morning's logs showed.  A bias
+given on top of it (``simulate(..., bias=)``, ``rapt-plan run --inject-bias``, a bias
+fit in ``rapt-plan compare``) is *relative* to it, and the two compose field by field
+(:func:`compose`): the scales multiply (``speed``, ``current_scale``, ``battery``), the
+offsets add (``current_offset``, ``heading``, ``start_time``).  The world then flies
+``current = scale1*scale2 * tide(t + start1 + start2) + (offset1 + offset2)`` along the
+flood direction, a course ``heading1 + heading2`` clockwise of the bow, and so on: the
+composition is exactly the bias a single argument would give, and composing with the
+neutral bias returns the other bias's values unchanged (bit for bit).
 """
 
 from __future__ import annotations
@@ -36,12 +47,24 @@ from __future__ import annotations
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import asdict, dataclass, fields
+from types import SimpleNamespace
 
 import numpy as np
 
 from rapt.errors import InputError
 
-__all__ = ["Bias", "BiasArrays", "BIAS_NAMES", "BIAS_UNITS", "BIAS_LIMITS", "parse_bias", "bias_arrays"]
+__all__ = [
+    "Bias",
+    "BiasArrays",
+    "BIAS_NAMES",
+    "BIAS_UNITS",
+    "BIAS_LIMITS",
+    "SCALE_FIELDS",
+    "parse_bias",
+    "bias_arrays",
+    "compose",
+    "compose_arrays",
+]
 
 
 @dataclass(frozen=True)
@@ -186,4 +209,48 @@ def bias_arrays(bias: Bias | BiasArrays | Sequence[Bias] | Mapping[str, np.ndarr
         np.deg2rad(cols["heading"]),
         cols["battery"],
         cols["start_time"],
+    )
+
+
+#: Fields that multiply when biases compose; the others (offsets) add (module docstring).
+SCALE_FIELDS: tuple[str, ...] = ("speed", "current_scale", "battery")
+
+
+def compose(base: Bias, relative):
+    """The bias of ``relative`` applied on top of ``base``: scales multiply, offsets add.
+
+    Not range-checked: a composed bias is what the world flies, not something a user
+    typed, so it may leave :data:`BIAS_LIMITS` (two 1.5x speed biases make 2.25x).
+    ``relative`` may also be any object with the fields as attributes (arrays of trial
+    biases in a batched replay); the result is then a namespace of the same shape.
+    """
+    if base.is_neutral or (isinstance(relative, Bias) and relative.is_neutral):
+        return relative if base.is_neutral else base
+    values = {
+        n: getattr(base, n) * getattr(relative, n) if n in SCALE_FIELDS else getattr(base, n) + getattr(relative, n)
+        for n in BIAS_NAMES
+    }
+    if not isinstance(relative, Bias):
+        return SimpleNamespace(**values)
+    out = object.__new__(Bias)  # skip __post_init__'s limits (see above)
+    for n, v in values.items():
+        object.__setattr__(out, n, float(v))
+    return out
+
+
+def compose_arrays(relative: BiasArrays, base: Bias) -> BiasArrays:
+    """Per-vehicle biases ``relative`` applied on top of one ``base`` bias (:func:`compose`).
+
+    A neutral ``base`` returns ``relative`` itself, so a mission without a day's bias
+    flies exactly as before.
+    """
+    if base.is_neutral:
+        return relative
+    return BiasArrays(
+        relative.speed * base.speed,
+        relative.current_scale * base.current_scale,
+        relative.current_offset + base.current_offset,
+        relative.heading_rad + np.deg2rad(base.heading),
+        relative.battery * base.battery,
+        relative.start_time + base.start_time,
     )

@@ -19,6 +19,7 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from rapt.space import StateSpace
+from sim.uuv.bias import Bias
 
 __all__ = [
     "Rect",
@@ -164,7 +165,8 @@ class Mission:
     (Table 3.2: waypoints are recommended, not required; the chapter 6 mission requires
     only its waypoint).  Safety success needs every safety rule.  ``score_tree`` is a
     rapt score-tree mapping (``name``, ``indices`` into :func:`sim.uuv.metrics.metric_names`,
-    ``children``).
+    ``children``).  ``execution_bias`` is the day's bias (neutral without an
+    ``[execution_bias]`` table: then everything runs exactly as without the field).
     """
 
     name: str
@@ -192,6 +194,13 @@ class Mission:
     mission_requires: tuple[str, ...] = ("mission_areas", "transmission", "mission_time")
     dt: float = 2.0
     source: str = field(default="<memory>", compare=False)
+    #: The day's execution bias (``[execution_bias]``, :mod:`sim.uuv.missionbias`): the water and
+    #: vehicle the world flies, while the autonomy plans with the file's tide table and vehicle;
+    #: every simulation composes its own bias argument on top (:func:`sim.uuv.bias.compose`).
+    execution_bias: Bias = field(default_factory=Bias)
+    #: Where that bias came from: the table's ``source`` ("" when it names none), None when
+    #: the file has no ``[execution_bias]`` table.
+    execution_bias_source: str | None = None
 
     @property
     def dim(self) -> int:

@@ -38,6 +38,8 @@ centre.  Keys marked ``=value`` are optional with that default; the others are r
                                   #   speed_gain=1: through-water speed reached per unit commanded
                                   #   (at most max_speed); rapt-plan calibrate fits it from logs
     [current]                     # optional overrides of sim.uuv.mission.Current fields
+    [execution_bias]              # optional: the day's water and vehicle as logs showed them
+                                  #   (sim.uuv.missionbias; rapt-plan calibrate --bias writes it)
 
     [[parameters]]                # one per state-space parameter, in state-space order
     name = "nogo_x"
@@ -99,6 +101,7 @@ from pathlib import Path
 from typing import Any
 
 from sim.uuv.mission import Current, Mission, MissionArea, Rect, Transmission, Triangle, Vehicle
+from sim.uuv.missionbias import read_execution_bias
 from sim.uuv.missionfields import MISSING, FieldChecker, fmt, names
 from sim.uuv.missionparameters import ParameterReader
 from sim.uuv.missionscoretree import ScoreTreeReader
@@ -120,6 +123,7 @@ _SECTIONS = (
     "obstacles",
     "vehicle",
     "current",
+    "execution_bias",
     "parameters",
     "score_tree",
 )
@@ -214,6 +218,7 @@ class _Loader(FieldChecker):
 
         vehicle = self.overrides(data.get("vehicle", {}), "vehicle", Vehicle)
         current = self.overrides(data.get("current", {}), "current", Current)
+        day_bias, day_source = read_execution_bias(self, data)
 
         self.elements = {
             "nogo": [z.name for z in nogo],
@@ -251,6 +256,8 @@ class _Loader(FieldChecker):
             mission_requires=tuple(requires),
             dt=dt,
             source=self.label,
+            execution_bias=day_bias,
+            execution_bias_source=day_source,
         )
         tree = ScoreTreeReader(self.label, mission).read(data["score_tree"])
         return dataclasses.replace(mission, score_tree=tree)

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sim.uuv.bias import bias_arrays
+from sim.uuv.bias import bias_arrays, compose_arrays
 from sim.uuv.environment import tidal_current
 from sim.uuv.interface import battery_fraction, energy_consumed_hj, report_heading, report_position
 from sim.uuv.mission import Vehicle
@@ -91,7 +91,8 @@ class World:
     """Vehicles of the scenarios ``scen`` at their launch point, at rest, submerged.
 
     ``bias`` (one :class:`sim.uuv.bias.Bias`, or one per scenario) makes the vehicles behave
-    like biased real ones; the autonomy never sees it.  ``scan_beams`` > 0 adds a
+    like biased real ones; the autonomy never sees it.  It is composed on top of the
+    mission's day bias (``Mission.execution_bias``, :func:`sim.uuv.bias.compose`).  ``scan_beams`` > 0 adds a
     360-degree range scan to the telemetry (what a learned back-seat sees, section 6.5.3).
     ``plant`` (a :class:`sim.uuv.mission.Vehicle`, default the mission's) is the vehicle that
     actually flies: its dynamics, power, battery and sensors; the autonomy keeps the mission's.
@@ -119,7 +120,8 @@ class World:
         self.surfaced = np.zeros(n, dtype=bool)
         self.drift_e = np.zeros(n)
         self.drift_n = np.zeros(n)
-        self.bias = bias_arrays(bias, n)
+        # the day's water and vehicle (the mission's [execution_bias]), ``bias`` relative to it
+        self.bias = compose_arrays(bias_arrays(bias, n), m.execution_bias)
         self.scan_beams = int(scan_beams)
 
     def take(self, keep: np.ndarray) -> None:

@@ -30,13 +30,15 @@ def digests(paths) -> dict[str, str]:
     return {str(p): hashlib.sha256(Path(p).read_bytes()).hexdigest() for p in paths}
 
 
-def fly_plan(base: Path, run_options: list[str]) -> tuple[Path, dict, list[str], list[subprocess.CompletedProcess]]:
-    """Generate the plan in ``base/plan`` and fly each scenario to ``base/logs/ID.mcap`` with
-    ``run_options``: (plan directory, plan, scenario ids, the finished ``rapt-plan run`` processes)."""
+def fly_plan(
+    base: Path, run_options: list[str], mission_file: Path = MISSION
+) -> tuple[Path, dict, list[str], list[subprocess.CompletedProcess]]:
+    """Generate the plan of ``mission_file`` in ``base/plan`` and fly each scenario to ``base/logs/ID.mcap``
+    with ``run_options``: (plan directory, plan, scenario ids, the finished ``rapt-plan run`` processes)."""
     plan_dir = base / "plan"
     plan = generate(
-        sim.uuv.load_mission(MISSION),
-        MISSION,
+        sim.uuv.load_mission(mission_file),
+        mission_file,
         plan_dir,
         GenerateConfig(budget=500, batch_size=250, dithers=0, pairs=2, seed=0),
     )
