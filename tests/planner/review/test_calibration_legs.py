@@ -16,11 +16,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from typer.testing import CliRunner
 
 import planner.review.calibrate as calibration
 import sim.uuv
-from planner.cli import app
 from planner.review.calibrate import FITTED, calibrate, fit_vehicle
 from planner.review.calibration_legs import NEEDS, cut_legs, is_calibration_log
 from rapt.errors import InputError
@@ -69,7 +67,7 @@ LEGS = [
 ]
 
 
-def _mission_text(block: dict) -> str:
+def mission_text(block: dict) -> str:
     text = MISSION.read_text(encoding="utf-8")
     lines = text.splitlines()
     start = lines.index("[vehicle]")
@@ -79,12 +77,16 @@ def _mission_text(block: dict) -> str:
     return "\n".join(lines[: start + 1] + body + kept + lines[end:]) + "\n"
 
 
+def thruster_missions(d: Path) -> tuple:
+    """The file's mission (path and loaded) and the true one, written in ``d``."""
+    (d / "file.toml").write_text(mission_text(FILE_BLOCK))
+    (d / "true.toml").write_text(mission_text(TRUE_BLOCK))
+    return d / "file.toml", sim.uuv.load_mission(d / "file.toml"), sim.uuv.load_mission(d / "true.toml")
+
+
 @pytest.fixture(scope="module")
 def missions(tmp_path_factory):
-    d = tmp_path_factory.mktemp("thruster")
-    (d / "file.toml").write_text(_mission_text(FILE_BLOCK))
-    (d / "true.toml").write_text(_mission_text(TRUE_BLOCK))
-    return d / "file.toml", sim.uuv.load_mission(d / "file.toml"), sim.uuv.load_mission(d / "true.toml")
+    return thruster_missions(tmp_path_factory.mktemp("thruster"))
 
 
 def fly_legs(mission, truth) -> tuple[SimRun, float, np.ndarray]:
@@ -168,7 +170,7 @@ def test_a_cubic_model_cannot_fit_the_thruster_draw(missions, flown, fitted):
 
 
 # -- the command: one log is enough; legs cut short write nothing ---------------------------------
-def _fake_log(tmp_path, monkeypatch, run) -> Path:
+def fake_log(tmp_path, monkeypatch, run) -> Path:
     p = tmp_path / "calibration.mcap"
     p.write_bytes(b"calibration run log")
     monkeypatch.setattr(calibration, "read_run", lambda path: run)
@@ -182,7 +184,7 @@ def _digest(p: Path) -> str:
 def test_calibrate_accepts_the_calibration_log_alone(missions, flown, tmp_path, monkeypatch):
     file_path, _, _ = missions
     run, _, _ = flown
-    log = _fake_log(tmp_path, monkeypatch, run)
+    log = fake_log(tmp_path, monkeypatch, run)
     before = (_digest(file_path), _digest(log))
     out = tmp_path / "cal.toml"
     result = calibrate(file_path, [log], out, bootstrap=0)
@@ -195,7 +197,7 @@ def test_calibrate_accepts_the_calibration_log_alone(missions, flown, tmp_path, 
     assert side["unidentified"] == {} and side["cut_short_legs"] == [] and side["ascents_timed"] == 1
 
 
-def _cut(run, at_s: float, events: list) -> object:
+def cut_run(run, at_s: float, events: list) -> object:
     keep = run.steps[:, 0] <= at_s
     sp = run.setpoints[keep].copy()
     sp[-1] = np.nan
@@ -207,8 +209,8 @@ def _cut(run, at_s: float, events: list) -> object:
 def test_legs_cut_short_by_the_watchdog_write_nothing_and_say_which(missions, flown, tmp_path, monkeypatch):
     file_path, _, _ = missions
     run, _, _ = flown
-    cut = _cut(run, 480.0, [{"source": "watchdog", "event": "intervention", "reason": "operational_area"}])
-    log = _fake_log(tmp_path, monkeypatch, cut)
+    cut = cut_run(run, 480.0, [{"source": "watchdog", "event": "intervention", "reason": "operational_area"}])
+    log = fake_log(tmp_path, monkeypatch, cut)
     out = tmp_path / "cal.toml"
     with pytest.raises(InputError) as e:
         calibrate(file_path, [log], out, bootstrap=0)
@@ -234,27 +236,7 @@ def test_a_log_that_ends_early_names_the_end_and_complete_legs_are_not_refused(m
     file_path, _, _ = missions
     run, _, _ = flown
     # only the dive (which identifies nothing) is missing: every parameter is identified, so it is written
-    log = _fake_log(tmp_path, monkeypatch, _cut(run, 670.0, []))
+    log = fake_log(tmp_path, monkeypatch, cut_run(run, 670.0, []))
     result = calibrate(file_path, [log], tmp_path / "ok.toml", bootstrap=0)
     assert [c.name for c in result.cut] == ["dive"] and "the log ended" in result.cut[0].reason
     assert result.unidentified == {}
-
-
-@pytest.mark.slow
-def test_the_command_refuses_in_one_line_and_names_what_is_kept_when_told(missions, flown, tmp_path, monkeypatch):
-    file_path, _, _ = missions
-    run, _, _ = flown
-    cut = _cut(run, 480.0, [{"source": "watchdog", "event": "intervention", "reason": "battery"}])
-    log = _fake_log(tmp_path, monkeypatch, cut)
-    out = tmp_path / "cli.toml"
-    runner = CliRunner()
-    refused = runner.invoke(app, ["calibrate", str(file_path), str(log), "--out", str(out)])
-    lines = [ln for ln in refused.output.splitlines() if ln.strip()]
-    assert refused.exit_code == 2 and len(lines) == 1 and "--keep-unidentified" in lines[0], refused.output
-    assert not out.exists()
-    kept = runner.invoke(app, ["calibrate", str(file_path), str(log), "--out", str(out), "--keep-unidentified"])
-    assert kept.exit_code == 0, kept.output
-    assert (
-        f"to identify max_speed: {NEEDS['max_speed']}" in kept.output and "watchdog took over: battery" in kept.output
-    )
-    assert out.exists()
