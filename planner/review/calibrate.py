@@ -19,9 +19,18 @@ costs.  :func:`calibrate` fits the observable properties of the ``[vehicle]`` bl
   when a run's residuals move together (cluster-robust and a block bootstrap by run,
   :func:`planner.review.biasfit.bootstrap_blocks`), plus, for vehicle-paced runs, the replay's
   own approximation (:data:`MODEL_SHARE_PACED`);
-- a property the logs do not identify (its posterior not clearly narrower than its
-  prior: ``max_speed`` when no command asked for more than the vehicle reaches, the
-  hotel load when the vehicle never changed speed) keeps the file's value and is flagged.
+- the ascent rate leaves no trace in positions and energy: it is timed from each surface
+  command to the first report that says surfaced
+  (:func:`planner.review.calibration_legs.fit_ascent`);
+- a property is identified when its posterior s.d. is below half its prior's (that rule
+  alone); one the logs do not identify (``max_speed`` when no command asked for more than
+  the vehicle reaches, the power exponent with speed legs at fewer than 3 speeds) keeps
+  the file's value and is named with the leg that would identify it
+  (:data:`planner.review.calibration_legs.NEEDS`);
+- a calibration run's log (its record lists legs) is enough alone; if a field is left
+  unidentified because a leg that identifies it was cut short (the watchdog or a pilot
+  took over, or the log ended), nothing is written unless the caller keeps those fields
+  at the file's values.
 
 Not fitted, and why: ``cruise_speed`` is what the autonomy commands (a choice, not a
 property of the vehicle; ``speed_gain`` carries what the vehicle makes of it);
