@@ -400,9 +400,8 @@ def _check_paths(mission_path: Path, log_paths: Sequence[Path], out_path: Path) 
 
 def _too_few(n: int) -> None:
     raise InputError(
-        f"LOGS: {n} plan-run log(s) given and no calibration run; a calibration needs a calibration run's log "
-        f"(rapt-plan shakedown) or at least {MIN_LOGS} runs (one run's errors cannot be told from the vehicle's); "
-        "give more .mcap logs"
+        f"LOGS: {n} log(s) given; a calibration needs at least {MIN_LOGS} runs (one run's errors cannot be told "
+        "from the vehicle's) or a calibration run's log, whose legs are enough alone; give more .mcap logs"
     )
 
 
