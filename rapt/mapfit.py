@@ -202,6 +202,7 @@ def fit_map(
     jackknife: bool = False,
     seed: int = 0,
     identify_below: float = IDENTIFIED_BELOW,
+    significant: float = SIGNIFICANT,
     max_nfev: int = 200,
     diff_step: float = 1e-6,
     residuals_many: Callable[[np.ndarray], np.ndarray] | None = None,
@@ -216,6 +217,8 @@ def fit_map(
     on its own, so a precise kind is not drowned by a noisy one.  ``residuals_many(thetas)``
     (p, k) -> (p, m), when given, evaluates several parameter vectors at once: the
     Jacobian's finite differences then cost one batched call instead of k + 1.
+    ``significant`` is the survivor rule's threshold (:data:`SIGNIFICANT`); 0 drops the rule,
+    so that *identified* means exactly "posterior s.d. below ``identify_below`` of the prior's".
     """
     priors = tuple(priors)
     names = [p.name for p in priors]
@@ -267,7 +270,7 @@ def fit_map(
         # keep it only if the data need it (its estimate significantly off its centre)
         idx = np.flatnonzero(free)
         z = np.abs(final.x) / np.maximum(sd_f, 1e-300)
-        weak = [i for i in range(idx.size) if not own[idx[i]] and z[i] < SIGNIFICANT]
+        weak = [i for i in range(idx.size) if not own[idx[i]] and z[i] < significant]
         if not weak:
             break
         free[idx[min(weak, key=lambda i: z[i])]] = False

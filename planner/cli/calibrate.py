@@ -17,7 +17,13 @@ __all__ = ["calibrate"]
 
 def calibrate(
     mission: Annotated[Path, typer.Argument(help="The mission file (.toml) whose [vehicle] block is calibrated.")],
-    logs: Annotated[list[Path], typer.Argument(help="MCAP logs of runs of this mission (SIL or a real vehicle).")],
+    logs: Annotated[
+        list[Path],
+        typer.Argument(
+            help="MCAP logs of runs of this mission (SIL or a real vehicle): a calibration run's alone, "
+            "or at least two plan runs, or both."
+        ),
+    ],
     out_path: Annotated[
         Path, typer.Option("--out", help="Calibrated mission file to write (a .json sidecar is written beside it).")
     ] = Path("calibrated.toml"),
@@ -30,6 +36,14 @@ def calibrate(
             "cross-validated into [execution_bias] and fit the vehicle in that water.",
         ),
     ] = None,
+    keep_unidentified: Annotated[
+        bool,
+        typer.Option(
+            "--keep-unidentified",
+            help="Write the file even when calibration legs were cut short: what they would have "
+            "identified keeps the file's values.",
+        ),
+    ] = False,
 ) -> None:
     """Fit the vehicle's speed, turn and power terms to logs; write a mission file the planner can use."""
     from planner.review.calibrate import UNITS, sidecar_path
@@ -42,7 +56,7 @@ def calibrate(
             fail(f"LOGS: {p} does not exist; give the .mcap files of the mission's runs")
     with err.status("calibrating", spinner="dots") if err.is_terminal else nullcontext():
         try:
-            result = run_calibrate(mission, logs, out_path, seed=seed, bias=bias)
+            result = run_calibrate(mission, logs, out_path, seed=seed, bias=bias, keep_unidentified=keep_unidentified)
         except ValueError as exc:
             fail(str(exc))
     table = Table(title=escape(f"[vehicle] calibrated from {result.runs} run(s), {result.segments} segments"))
@@ -60,9 +74,11 @@ def calibrate(
             "yes" if ident else "no",
         )
     out.print(table)
-    kept = [n for n in result.fitted if not est.identified[n]]
+    kept = result.unidentified
     if kept:
         out.print(f"not identified by these logs, file value kept: {', '.join(kept)}", highlight=False, soft_wrap=True)
+        for n, need in kept.items():
+            out.print(f"  to identify {n}: {need}", highlight=False, soft_wrap=True)
     b, a = result.rms_before, result.rms_after
     out.print(
         f"segment residual RMS, file vehicle -> calibrated: position {b['position_m']:.3g} -> {a['position_m']:.3g} m, "

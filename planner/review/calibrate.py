@@ -19,9 +19,18 @@ costs.  :func:`calibrate` fits the observable properties of the ``[vehicle]`` bl
   when a run's residuals move together (cluster-robust and a block bootstrap by run,
   :func:`planner.review.biasfit.bootstrap_blocks`), plus, for vehicle-paced runs, the replay's
   own approximation (:data:`MODEL_SHARE_PACED`);
-- a property the logs do not identify (its posterior not clearly narrower than its
-  prior: ``max_speed`` when no command asked for more than the vehicle reaches, the
-  hotel load when the vehicle never changed speed) keeps the file's value and is flagged.
+- the ascent rate leaves no trace in positions and energy: it is timed from each surface
+  command to the first report that says surfaced
+  (:func:`planner.review.calibration_legs.fit_ascent`);
+- a property is identified when its posterior s.d. is below half its prior's (that rule
+  alone); one the logs do not identify (``max_speed`` when no command asked for more than
+  the vehicle reaches, the power exponent with speed legs at fewer than 3 speeds) keeps
+  the file's value and is named with the leg that would identify it
+  (:data:`planner.review.calibration_legs.NEEDS`);
+- a calibration run's log (its record lists legs) is enough alone; if a field is left
+  unidentified because a leg that identifies it was cut short (the watchdog or a pilot
+  took over, or the log ended), nothing is written unless the caller keeps those fields
+  at the file's values.
 
 Not fitted, and why: ``cruise_speed`` is what the autonomy commands (a choice, not a
 property of the vehicle; ``speed_gain`` carries what the vehicle makes of it);
@@ -53,6 +62,18 @@ from pathlib import Path
 import numpy as np
 
 from planner.review.biasfit import bootstrap_blocks
+from planner.review.calibration_legs import (
+    LEG_KINDS,
+    NEEDS,
+    AscentFit,
+    CutLeg,
+    ascent_prior,
+    cut_legs,
+    empty_estimate,
+    fit_ascent,
+    is_calibration_log,
+    with_ascent,
+)
 from planner.review.daybias import DayWater, header_lines, water_from_comparison, water_record, with_execution_bias
 from planner.review.logs import LogError, read_run
 from planner.review.segments import SEGMENT_STEPS, Segments, replay, segment_batch
@@ -84,7 +105,12 @@ FITTED: tuple[str, ...] = (
     "yaw_time_constant_s",
     "hotel_w",
     "drag_w",
+    "power_exponent",
+    "ascent_rate_mps",
 )
+#: Those fitted to the segment replay's positions, headings and energy (the ascent rate is timed instead:
+#: :func:`planner.review.calibration_legs.fit_ascent`).
+SEGMENT_FITTED: tuple[str, ...] = FITTED[:-1]
 UNITS = {
     "speed_gain": "x",
     "max_speed": "m/s",
@@ -93,11 +119,16 @@ UNITS = {
     "yaw_time_constant_s": "s",
     "hotel_w": "W",
     "drag_w": "W",
+    "power_exponent": "x",
+    "ascent_rate_mps": "m/s",
 }
-#: Fewest logs a calibration takes.  One run's segments share one tide phase, one route
-#: and one navigation drift, so its errors cannot be told from the vehicle's; a second,
+#: Fewest plan-run logs a calibration takes.  One run's segments share one tide phase, one
+#: route and one navigation drift, so its errors cannot be told from the vehicle's; a second,
 #: independent run is the least that lets the standard errors (which resample runs or
-#: blocks of segments) see how much the estimate moves from run to run.
+#: blocks of segments) see how much the estimate moves from run to run.  A calibration
+#: run's log (its scenario record lists legs at several speeds, turns, a hold and an
+#: ascent: :func:`planner.review.calibration_legs.is_calibration_log`) is enough alone: its
+#: legs separate what one plan run confounds, and its standard errors resample its blocks.
 MIN_LOGS = 2
 #: Prior s.d. as a share of the file's value: a datasheet or an earlier calibration
 #: that is 30 % off is what a test engineer would still accept; larger errors are found
@@ -112,7 +143,10 @@ PRIOR_SD_FLOOR = {
     "yaw_time_constant_s": 0.3,
     "hotel_w": 5.0,
     "drag_w": 10.0,
+    "power_exponent": 0.3,
 }
+#: The power exponent's range (the mission file's rule): 0.5 (flatter than a thruster's) to 4.
+EXPONENT_RANGE = (0.5, 4.0)
 #: Upper bound of the power terms (W): the logs decide within it, however far from the file.
 POWER_HIGH_W = 20000.0
 #: Residual units: metres of position, degrees of heading, watt-hours of energy used.
@@ -136,14 +170,21 @@ def vehicle_priors(vehicle: Vehicle, names: Sequence[str] = FITTED) -> list[Prio
 
     Bounds keep the file loadable and the model physical: positive time constants and
     rates, power terms >= 0 (and up to :data:`POWER_HIGH_W`: a thruster vehicle's pack may
-    draw ten times a torpedo's), ``max_speed`` >= ``cruise_speed`` (the mission file's rule).
+    draw ten times a torpedo's), ``max_speed`` >= ``cruise_speed`` (the mission file's rule),
+    ``power_exponent`` within :data:`EXPONENT_RANGE`; the ascent rate's is
+    :func:`planner.review.calibration_legs.ascent_prior`.
     """
     out = []
     for n in names:
+        if n == "ascent_rate_mps":
+            out.append(ascent_prior(vehicle.ascent_rate_mps))
+            continue
         c = float(getattr(vehicle, n))
         sd = max(PRIOR_SHARE * abs(c), PRIOR_SD_FLOOR[n])
         if n == "max_speed":
             low, high = float(vehicle.cruise_speed), max(4.0 * c, c + 4 * sd)
+        elif n == "power_exponent":
+            low, high = EXPONENT_RANGE
         elif n in ("hotel_w", "drag_w"):  # a real pack may draw kilowatts where the file says watts
             low, high = 0.0, max(POWER_HIGH_W, 50.0 * c)
         else:
@@ -167,10 +208,37 @@ class Calibration:
     logs: list[dict] = field(default_factory=list)  # name, sha256, scenario, steps (calibrate only)
     model_share: float = 0.0  # share of each value added to its s.e. for the replay's approximation
     water: DayWater | None = None  # the day's water written beside the vehicle (calibrate --bias)
+    ascent: AscentFit | None = None  # the ascent rate's own fit (also merged into ``estimate``)
+    cut: list[CutLeg] = field(default_factory=list)  # calibration legs the back-seat did not finish
 
     @property
     def fitted(self) -> tuple[str, ...]:
         return tuple(p.name for p in self.estimate.priors)
+
+    @property
+    def unidentified(self) -> dict[str, str]:
+        """Per parameter left at the file's value: the leg that would identify it (and any cut short)."""
+        out = {}
+        for n in self.fitted:
+            if self.estimate.identified[n]:
+                continue
+            need = NEEDS[n]
+            if n == "ascent_rate_mps" and self.ascent is not None and self.ascent.note:
+                need = f"{need}; {self.ascent.note}"
+            cut = self.cut_short(n)
+            if cut:
+                need += "; cut short: " + ", ".join(c.describe() for c in cut)
+            out[n] = need
+        return out
+
+    def cut_short(self, name: str) -> list[CutLeg]:
+        """The cut-short legs of a kind that identifies ``name``."""
+        return [c for c in self.cut if c.kind in LEG_KINDS[name]]
+
+    @property
+    def unidentified_by_cut(self) -> list[str]:
+        """Parameters left unidentified where a leg that would identify them was cut short."""
+        return [n for n in self.fitted if not self.estimate.identified[n] and self.cut_short(n)]
 
     @property
     def stderr(self) -> dict[str, float]:
@@ -204,6 +272,9 @@ class Calibration:
             "schema": CALIBRATION_SCHEMA,
             "parameters": params,
             "not_fitted": [f.name for f in dataclasses.fields(Vehicle) if f.name not in self.fitted],
+            "unidentified": self.unidentified,
+            "cut_short_legs": [dataclasses.asdict(c) for c in self.cut],
+            "ascents_timed": 0 if self.ascent is None else self.ascent.events,
             "residual_rms": {"before": self.rms_before, "after": self.rms_after},
             "residual_sigmas": {
                 "position_m": SIGMA_POSITION_M,
@@ -249,10 +320,15 @@ def fit_vehicle(
     length: int = SEGMENT_STEPS,
 ) -> Calibration:
     """MAP fit of the ``[vehicle]`` fields ``fit`` to ``runs`` (:class:`planner.review.logs.LoggedRun`-like)
-    flown from scenario start times ``start_times``; priors centred on ``mission.vehicle``."""
-    names = tuple(n for n in FITTED if n in fit)
+    flown from scenario start times ``start_times``; priors centred on ``mission.vehicle``.
+
+    Every field is *identified* when its posterior s.d. is below half its prior's
+    (:data:`rapt.mapfit.IDENTIFIED_BELOW`, without :func:`rapt.mapfit.fit_map`'s survivor
+    rule); the ascent rate is timed on its own (:func:`planner.review.calibration_legs.fit_ascent`).
+    """
+    names = tuple(n for n in SEGMENT_FITTED if n in fit)
     unknown = [n for n in fit if n not in FITTED]
-    if unknown or not names:
+    if unknown or not fit:
         raise InputError(
             f"fit: unknown vehicle field {unknown[0] if unknown else fit!r}; choose from {', '.join(FITTED)}"
         )
@@ -272,15 +348,23 @@ def fit_vehicle(
 
     per_step = np.nonzero(seg.valid)[0]
     blocks = bootstrap_blocks(seg)[per_step]
-    est = fit_map(
-        residuals,
-        vehicle_priors(base, names),
-        groups=np.concatenate([blocks] * 4),
-        kinds=np.repeat(np.array(["position", "position", "heading", "energy"]), per_step.size),
-        bootstrap=bootstrap,
-        seed=seed,
+    est = (
+        fit_map(
+            residuals,
+            vehicle_priors(base, names),
+            groups=np.concatenate([blocks] * 4),
+            kinds=np.repeat(np.array(["position", "position", "heading", "energy"]), per_step.size),
+            bootstrap=bootstrap,
+            seed=seed,
+            significant=0.0,
+        )
+        if names
+        else empty_estimate()
     )
-    calibrated = vehicle_of(np.array([est.value[n] for n in names]))
+    ascent = fit_ascent(mission, runs, base.ascent_rate_mps) if "ascent_rate_mps" in fit else None
+    if ascent is not None:
+        est = with_ascent(est, ascent)
+    calibrated = dataclasses.replace(base, **{n: float(est.value[n]) for n in est.names})
     paced = seg.substeps is not None and bool(np.any(seg.substeps > 1))
     return Calibration(
         calibrated,
@@ -291,6 +375,7 @@ def fit_vehicle(
         int(seg.valid.shape[0]),
         int(len(set(seg.run.tolist()))),
         model_share=MODEL_SHARE_PACED if paced else 0.0,
+        ascent=ascent,
     )
 
 
@@ -310,13 +395,17 @@ def _check_paths(mission_path: Path, log_paths: Sequence[Path], out_path: Path) 
         raise InputError(
             f"--out: {out_path} is not a .toml file; name the calibrated mission file e.g. calibrated.toml"
         )
-    if len(log_paths) < MIN_LOGS:
-        raise InputError(
-            f"LOGS: {len(log_paths)} log(s) given; a calibration needs at least {MIN_LOGS} runs "
-            "(one run's errors cannot be told from the vehicle's); give more .mcap logs"
-        )
+    if not log_paths:
+        _too_few(0)
     if len({p.resolve() for p in log_paths}) < len(log_paths):
         raise InputError("LOGS: a log is given twice; give each run's log once")
+
+
+def _too_few(n: int) -> None:
+    raise InputError(
+        f"LOGS: {n} log(s) given; a calibration needs at least {MIN_LOGS} runs (one run's errors cannot be told "
+        "from the vehicle's) or a calibration run's log, whose legs are enough alone; give more .mcap logs"
+    )
 
 
 def _sha256(path: Path) -> str:
@@ -357,6 +446,7 @@ def calibrate(
     seed: int = 0,
     bootstrap: int = BOOTSTRAP,
     bias: str | Path | None = None,
+    keep_unidentified: bool = False,
 ) -> Calibration:
     """Fit the mission's vehicle block to the logs and write ``out_path`` and its JSON sidecar (module docstring).
 
@@ -365,9 +455,12 @@ def calibrate(
     fitted in that water and the file gets an ``[execution_bias]`` table beside it.
 
     Refused with a one-line error before anything is written: fewer than :data:`MIN_LOGS`
-    logs, a log given twice, an ``out_path`` that is not ``.toml`` or would overwrite an
+    logs unless one is a calibration run's (its record lists legs), a log given twice, an ``out_path`` that is not ``.toml`` or would overwrite an
     input, a log that is unreadable, of another mission, without a scenario row, or with
-    no replayable step.
+    no replayable step; and, unless ``keep_unidentified``, a fit that leaves a parameter
+    unidentified because a calibration leg that would identify it was cut short (the
+    watchdog or a pilot took over, or the log ended): it names them (with it, they keep the
+    file's values and the header and sidecar say so).
     """
     mission_path, out_path = Path(mission_path), Path(out_path)
     logs = [Path(p) for p in log_paths]
@@ -404,9 +497,20 @@ def calibrate(
                 "steps": int(run.steps.shape[0]),
             }
         )
+    if len(runs) < MIN_LOGS and not any(is_calibration_log(r) for r in runs):
+        _too_few(len(runs))
     result = fit_vehicle(mission, runs, start_times, fit, bootstrap=bootstrap, seed=seed)
     result.logs = info
     result.water = water
+    result.cut = cut_legs(runs, [p.name for p in logs], mission.dt)
+    refused = result.unidentified_by_cut
+    if refused and not keep_unidentified:
+        cut = sorted({c.describe() for n in refused for c in result.cut_short(n)})
+        raise InputError(
+            f"LOGS: {', '.join(refused)} not identified because calibration legs were cut short "
+            f"({'; '.join(cut)}); nothing written: fly those legs again, or give --keep-unidentified "
+            "to keep them at the file's values"
+        )
     text = mission_path.read_text(encoding="utf-8")
     written = calibrated_text(text, result)
     if water is not None:
@@ -486,6 +590,8 @@ def _header_comment(cal: Calibration) -> list[str]:
             out.append(f"#   {n:<22} {old:.5g} -> {new:.5g} +- {cal.stderr[n]:.2g} {unit}")
         else:
             out.append(f"#   {n:<22} {old:.5g} {unit} kept: not identified by these logs")
+    for n, need in cal.unidentified.items():
+        out.append(f"#   to identify {n}: {need}")
     b, a = cal.rms_before, cal.rms_after
     out.append(
         f"# Segment residual RMS, file vehicle -> calibrated: position {b['position_m']:.3g} -> "

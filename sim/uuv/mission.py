@@ -91,8 +91,13 @@ class Vehicle:
     The speed loop drives the through-water surge towards ``speed_gain`` times the
     commanded speed, at most ``max_speed`` (1: the vehicle reaches what it is asked; a
     vehicle without a speed loop, e.g. a thruster-throttle ROV, reaches a fixed share).
-    Propulsion power is ``drag_w * (speed / cruise_speed)^3`` plus ``hotel_w``; the
-    battery starts at ``start_battery`` of ``battery_wh``.  The autonomy returns home when
+    Propulsion power is ``drag_w * (speed / cruise_speed)^power_exponent`` plus ``hotel_w``:
+    3 is a torpedo's (drag grows with the square of speed, power with its cube); a
+    thruster vehicle's draw rises about linearly with speed (exponent near 1), since its
+    thrusters' current follows their command while thrust goes with its square.  The
+    battery starts at ``start_battery`` of ``battery_wh``.  ``ascent_rate_mps`` is how fast
+    the vehicle rises from its running depth (:data:`sim.uuv.interface.DEPTH_M`) when told
+    to surface, and dives back (0: instantaneously, surfaced in the step it is told).  The autonomy returns home when
     its estimate of the energy to get there, times ``reserve_factor``, reaches the charge
     left; below ``critical_battery`` it also ignores no-go areas.
     """
@@ -114,6 +119,8 @@ class Vehicle:
     ins_drift_m_per_s: float = 0.05
     gps_sigma_m: float = 3.0
     speed_gain: float = 1.0
+    power_exponent: float = 3.0
+    ascent_rate_mps: float = 0.0
 
 
 @dataclass(frozen=True)

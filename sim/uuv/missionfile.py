@@ -482,6 +482,16 @@ class _Loader(FieldChecker):
                         f"vehicle.{key}",
                         f"{fmt(getattr(obj, key))} is a fraction of the battery; use a value in [0, 1]",
                     )
+            if not 0.5 <= obj.power_exponent <= 4.0:
+                self.fail(
+                    "vehicle.power_exponent",
+                    f"{fmt(obj.power_exponent)} is outside [0.5, 4]; use 3 for a torpedo, about 1 for a thruster vehicle",
+                )
+            if obj.ascent_rate_mps < 0:
+                self.fail(
+                    "vehicle.ascent_rate_mps",
+                    f"{fmt(obj.ascent_rate_mps)} must be >= 0; give the rise rate in m/s (0: surfaces at once)",
+                )
             if obj.max_speed < obj.cruise_speed:
                 self.fail(
                     "vehicle.max_speed",

@@ -2,7 +2,9 @@
 
 First-order surge and yaw-rate responses, a turn-rate limit and sway induced by turning
 are what make a torpedo vehicle overshoot and drift off a potential-field path; battery
-drain grows with the cube of speed, which makes the fuel decisions of the autonomy bite.
+drain grows with the cube of speed (a torpedo's; ``Vehicle.power_exponent`` sets another
+power of speed, e.g. about 1 for a thruster vehicle), which makes the fuel decisions of
+the autonomy bite.
 Headings are compass radians (0 north, clockwise); positions x east, y north in metres.
 Vectorised over scenarios: every array is (N,).
 """
@@ -52,8 +54,9 @@ class VehicleState:
 
 
 def propulsion_power(spec: Vehicle, speed: np.ndarray) -> np.ndarray:
-    """Electrical power in W at a through-water speed (hotel load plus cubic drag)."""
-    return spec.hotel_w + spec.drag_w * (np.abs(speed) / spec.cruise_speed) ** 3
+    """Electrical power in W at a through-water speed: the hotel load plus ``drag_w`` times
+    (speed / cruise speed) to the vehicle's ``power_exponent`` (3, cubic drag, by default)."""
+    return spec.hotel_w + spec.drag_w * (np.abs(speed) / spec.cruise_speed) ** spec.power_exponent
 
 
 def step_vehicle(

@@ -16,7 +16,7 @@ import numpy as np
 
 from sim.uuv.bias import bias_arrays, compose_arrays
 from sim.uuv.environment import tidal_current
-from sim.uuv.interface import battery_fraction, energy_consumed_hj, report_heading, report_position
+from sim.uuv.interface import DEPTH_M, battery_fraction, energy_consumed_hj, report_heading, report_position
 from sim.uuv.mission import Vehicle
 from sim.uuv.navigation import Navigation
 from sim.uuv.scenario import Scenarios
@@ -118,6 +118,7 @@ class World:
         self.noise = NoiseStreams(rngs) if rngs is not None else None
         self.nav = Navigation(n, self.spec)
         self.surfaced = np.zeros(n, dtype=bool)
+        self.depth = np.full(n, DEPTH_M)
         self.drift_e = np.zeros(n)
         self.drift_n = np.zeros(n)
         # the day's water and vehicle (the mission's [execution_bias]), ``bias`` relative to it
@@ -131,7 +132,7 @@ class World:
         self.nav.ex, self.nav.ey, self.nav.var = self.nav.ex[keep], self.nav.ey[keep], self.nav.var[keep]
         if self.noise is not None:
             self.noise.take(keep)
-        self.start_wh, self.surfaced = self.start_wh[keep], self.surfaced[keep]
+        self.start_wh, self.surfaced, self.depth = self.start_wh[keep], self.surfaced[keep], self.depth[keep]
         self.drift_e, self.drift_n = self.drift_e[keep], self.drift_n[keep]
         self.bias = self.bias.select(keep)
 
@@ -180,15 +181,24 @@ class World:
         surface: np.ndarray,
         moving: np.ndarray,
         dt: float | None = None,
+        *,
+        vertical: bool = True,
     ) -> None:
         """Apply a decoded set-point to the ``moving`` vehicles for one step from time ``t``.
 
         ``dt`` defaults to the mission's step; the bare front-seat advances in shorter
-        sub-steps so that positions move smoothly between its reports.
+        sub-steps so that positions move smoothly between its reports.  ``surface`` is the
+        surface command, flown at the vehicle's ascent rate (:meth:`rise`); with
+        ``vertical=False`` it is the vehicle's surfaced state itself (the bare front-seat
+        models depth on its own, :mod:`sim.uuv.ardusub.depth`).
         """
         m = self.mission
         dt = m.dt if dt is None else float(dt)
-        self.surfaced = np.asarray(surface, dtype=bool) & moving
+        if vertical:
+            self.rise(np.asarray(surface, dtype=bool), moving, dt)
+        else:
+            self.surfaced = np.asarray(surface, dtype=bool) & moving
+            self.depth = np.where(self.surfaced, 0.0, DEPTH_M)
         b = self.bias
         ce, cn = tidal_current(m.current, self.scen.start_time + b.start_time + t, b.current_scale, b.current_offset)
         z = self.noise.next() if self.noise is not None else None
@@ -212,3 +222,19 @@ class World:
             energy_scale=b.battery,
         )
         self.nav.step(dt, self.surfaced, None if z is None else z[:, 2:])
+
+    def rise(self, surface: np.ndarray, moving: np.ndarray, dt: float) -> None:
+        """Move the ``moving`` vehicles towards the surface (``surface``) or their running depth for ``dt`` s.
+
+        At the plant's ``ascent_rate_mps`` (the same rate down); surfaced once at the top.
+        Rate 0 is instantaneous: surfaced in the very step the command asks for it.
+        """
+        rate = float(self.spec.ascent_rate_mps)
+        if rate <= 0.0:
+            self.surfaced = surface & moving
+            self.depth = np.where(self.surfaced, 0.0, DEPTH_M)
+            return
+        up = np.maximum(self.depth - rate * dt, 0.0)
+        down = np.minimum(self.depth + rate * dt, DEPTH_M)
+        self.depth = np.where(moving, np.where(surface, up, down), self.depth)
+        self.surfaced = surface & moving & (self.depth <= 1e-9)

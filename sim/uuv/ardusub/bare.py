@@ -169,7 +169,8 @@ class BareAutopilot:
         x, y = float(s.x[0]), float(s.y[0])
         self.depth.step(vz, dt)
         one = np.ones(1, dtype=bool)
-        self.world.advance(self.t, np.array([heading]), np.array([speed]), np.array([self.depth.surfaced]), one, dt=dt)
+        surfaced = np.array([self.depth.surfaced])  # depth is this front-seat's own state (ascent included)
+        self.world.advance(self.t, np.array([heading]), np.array([speed]), surfaced, one, dt=dt, vertical=False)
         self.t += dt
         self.vn, self.ve = (float(s.y[0]) - y) / dt, (float(s.x[0]) - x) / dt
         fs.stats.ticks += 1

@@ -1,0 +1,242 @@
+"""A thruster vehicle's calibration run, flown by the batch world, calibrates it alone; legs cut short are refused.
+
+The vehicle is not the file's and not a torpedo: its draw rises linearly with speed (power
+exponent 1), it is slower and saturates (speed gain 0.8, at most 1.2 m/s), turns faster
+and takes 6-7 s to surface.  A small scripted autonomy flies the legs a calibration run
+would (a hold, straight legs at four commanded speeds, the last above saturation, a turn
+at the rate limit after each, both ways, an ascent and a dive) and the log lists them in its record.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import hashlib
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import planner.review.calibrate as calibration
+import sim.uuv
+from planner.review.calibrate import FITTED, calibrate, fit_vehicle
+from planner.review.calibration_legs import NEEDS, cut_legs, is_calibration_log
+from rapt.errors import InputError
+from sim.uuv.scenario import make_scenarios
+from sim.uuv.world import World
+from tests.support.simlogs import SimRun
+
+MISSION = Path(__file__).resolve().parents[3] / "examples" / "range2017.toml"
+#: The mission file's vehicle block: a thruster vehicle's datasheet, 20-50 % off.
+FILE_BLOCK = {
+    "cruise_speed": 1.0,
+    "max_speed": 1.5,
+    "speed_gain": 1.0,
+    "surge_time_constant_s": 3.0,
+    "max_turn_rate_dps": 15.0,
+    "yaw_time_constant_s": 2.0,
+    "hotel_w": 90.0,
+    "drag_w": 180.0,
+}
+#: The vehicle that flies.
+TRUE_BLOCK = {
+    **FILE_BLOCK,
+    "max_speed": 1.2,
+    "speed_gain": 0.8,
+    "surge_time_constant_s": 2.2,
+    "max_turn_rate_dps": 20.0,
+    "yaw_time_constant_s": 1.5,
+    "hotel_w": 120.0,
+    "drag_w": 250.0,
+    "power_exponent": 1.0,
+    "ascent_rate_mps": 0.3,
+}
+#: (kind, name, start s, end s, commanded speed, turn: +1 right / -1 left / 0 straight, surface)
+LEGS = [
+    ("hold", "hold", 0, 120, 0.0, 0, False),
+    ("speed", "speed-0.5", 120, 210, 0.5, 0, False),
+    ("turn", "turn-right-0.5", 210, 230, 0.5, 1, False),
+    ("speed", "speed-0.9", 230, 340, 0.9, 0, False),
+    ("turn", "turn-left-0.9", 340, 360, 0.9, -1, False),
+    ("speed", "speed-1.3", 360, 460, 1.3, 0, False),
+    ("turn", "turn-right-1.3", 460, 480, 1.3, 1, False),
+    ("speed", "speed-1.8", 480, 600, 1.8, 0, False),
+    ("turn", "turn-left-1.8", 600, 620, 1.8, -1, False),
+    ("ascent", "ascent", 620, 660, 0.0, 0, True),
+    ("dive", "dive", 660, 690, 0.0, 0, False),
+]
+
+
+def mission_text(block: dict) -> str:
+    text = MISSION.read_text(encoding="utf-8")
+    lines = text.splitlines()
+    start = lines.index("[vehicle]")
+    end = next(i for i in range(start + 1, len(lines)) if lines[i].startswith("["))
+    kept = [ln for ln in lines[start + 1 : end] if "=" not in ln or ln.split("=")[0].strip() not in block]
+    body = [f"{k} = {float(v)!r}" for k, v in block.items()]
+    return "\n".join(lines[: start + 1] + body + kept + lines[end:]) + "\n"
+
+
+def thruster_missions(d: Path) -> tuple:
+    """The file's mission (path and loaded) and the true one, written in ``d``."""
+    (d / "file.toml").write_text(mission_text(FILE_BLOCK))
+    (d / "true.toml").write_text(mission_text(TRUE_BLOCK))
+    return d / "file.toml", sim.uuv.load_mission(d / "file.toml"), sim.uuv.load_mission(d / "true.toml")
+
+
+@pytest.fixture(scope="module")
+def missions(tmp_path_factory):
+    return thruster_missions(tmp_path_factory.mktemp("thruster"))
+
+
+def fly_legs(mission, truth) -> tuple[SimRun, float, np.ndarray]:
+    """The legs flown by ``truth`` in the batch world (lock-step, as SIL logs it): a run, its start time, its row."""
+    u = np.full(mission.dim, 0.5)
+    scen = make_scenarios(mission, u[None, :])
+    assert scen.valid[0]
+    world = World(scen, plant=truth)
+    one = np.ones(1, dtype=bool)
+    dt = mission.dt
+    steps, sps = [], []
+    heading_cmd = float(world.state.heading[0])
+    for k in range(int(LEGS[-1][3] / dt) + 1):
+        t = k * dt
+        tel = world.telemetry(t)
+        s = world.state
+        steps.append(
+            [t, tel.x[0], tel.y[0], tel.heading[0], tel.energy_hj[0], tel.surfaced[0], s.surge[0], s.yaw_rate[0]]
+        )
+        leg = next((lg for lg in LEGS if lg[2] <= t < lg[3]), None)
+        if leg is None:
+            sps.append([np.nan, np.nan, np.nan])
+            continue
+        _, _, _, _, speed, turn, surface = leg
+        if turn:  # ask for more than the rate limit allows
+            heading_cmd = float(tel.heading[0]) + turn * 2.5
+        sps.append([heading_cmd, speed, float(surface)])
+        world.advance(t, np.array([heading_cmd]), np.array([speed]), np.array([surface]), one)
+    legs = [{"kind": k, "name": n, "t0_s": float(a), "t1_s": float(b), "speed": v} for k, n, a, b, v, _, _ in LEGS]
+    meta = {"mission": mission.name, "u": u.tolist(), "scenario_id": "calibration", "legs": legs}
+    run = SimRun(np.array(steps, dtype=float), np.array(sps, dtype=float), meta, path=Path("calibration.mcap"))
+    run.events, run.ended, run.complete_file = [], "", True  # type: ignore[attr-defined]
+    return run, float(scen.start_time[0]), u
+
+
+@pytest.fixture(scope="module")
+def flown(missions):
+    _, file_mission, true_mission = missions
+    return fly_legs(file_mission, true_mission.vehicle)
+
+
+@pytest.fixture(scope="module")
+def fitted(missions, flown):
+    _, file_mission, _ = missions
+    run, start, _ = flown
+    return fit_vehicle(file_mission, [run], [start], bootstrap=0)
+
+
+def test_the_log_is_a_calibration_run_with_legs_flown_to_their_end(missions, flown):
+    _, mission, _ = missions
+    run, _, _ = flown
+    assert is_calibration_log(run)
+    assert cut_legs([run], ["calibration.mcap"], mission.dt) == []
+    # the vehicle saturates: the fastest leg's surge is max_speed, not 0.8 x 1.8
+    fast = (run.steps[:, 0] > 560) & (run.steps[:, 0] < 600)
+    assert run.steps[fast, 6] == pytest.approx(TRUE_BLOCK["max_speed"], abs=0.01)
+
+
+def test_one_calibration_log_identifies_every_parameter_of_a_thruster_vehicle(fitted):
+    est = fitted.estimate
+    assert set(est.names) == set(FITTED)
+    for n in FITTED:
+        truth, got, se = TRUE_BLOCK[n], getattr(fitted.vehicle, n), fitted.stderr[n]
+        assert est.identified[n], (n, est.stderr[n], fitted.unidentified)
+        # identified: posterior s.d. below half the prior's
+        prior = next(p for p in est.priors if p.name == n)
+        assert est.stderr[n] < 0.5 * prior.sd, n
+        # within its standard errors (plus the optimiser's tolerance: the turn terms are noise-free here)
+        assert abs(got - truth) < 3 * se + 1e-6 * truth, (n, got, truth, se)
+        assert got == pytest.approx(truth, rel=0.1), n
+    assert fitted.unidentified == {}
+    assert fitted.rms_after["energy_wh"] < 0.1 * fitted.rms_before["energy_wh"]
+
+
+def test_a_cubic_model_cannot_fit_the_thruster_draw(missions, flown, fitted):
+    """Fixed at the torpedo's exponent, the energy residual stays far above the log's hectojoule steps."""
+    _, mission, _ = missions
+    run, start, _ = flown
+    cubic = fit_vehicle(mission, [run], [start], fit=[n for n in FITTED if n != "power_exponent"], bootstrap=0)
+    assert cubic.rms_after["energy_wh"] > 5 * fitted.rms_after["energy_wh"]
+
+
+# -- the command: one log is enough; legs cut short write nothing ---------------------------------
+def fake_log(tmp_path, monkeypatch, run) -> Path:
+    p = tmp_path / "calibration.mcap"
+    p.write_bytes(b"calibration run log")
+    monkeypatch.setattr(calibration, "read_run", lambda path: run)
+    return p
+
+
+def _digest(p: Path) -> str:
+    return hashlib.sha256(p.read_bytes()).hexdigest()
+
+
+def test_calibrate_accepts_the_calibration_log_alone(missions, flown, tmp_path, monkeypatch):
+    file_path, _, _ = missions
+    run, _, _ = flown
+    log = fake_log(tmp_path, monkeypatch, run)
+    before = (_digest(file_path), _digest(log))
+    out = tmp_path / "cal.toml"
+    result = calibrate(file_path, [log], out, bootstrap=0)
+    assert (_digest(file_path), _digest(log)) == before
+    assert result.runs == 1 and result.unidentified == {}
+    cal = sim.uuv.load_mission(out)
+    assert cal.vehicle.power_exponent == pytest.approx(1.0, rel=0.1)
+    assert cal.vehicle.ascent_rate_mps == pytest.approx(0.3, rel=0.1)
+    side = json.loads(out.with_suffix(".json").read_text())
+    assert side["unidentified"] == {} and side["cut_short_legs"] == [] and side["ascents_timed"] == 1
+
+
+def cut_run(run, at_s: float, events: list) -> object:
+    keep = run.steps[:, 0] <= at_s
+    sp = run.setpoints[keep].copy()
+    sp[-1] = np.nan
+    out = dataclasses.replace(run, steps=run.steps[keep], setpoints=sp)
+    out.events, out.ended, out.complete_file = events, "", True  # type: ignore[attr-defined]
+    return out
+
+
+def test_legs_cut_short_by_the_watchdog_write_nothing_and_say_which(missions, flown, tmp_path, monkeypatch):
+    file_path, _, _ = missions
+    run, _, _ = flown
+    cut = cut_run(run, 480.0, [{"source": "watchdog", "event": "intervention", "reason": "operational_area"}])
+    log = fake_log(tmp_path, monkeypatch, cut)
+    out = tmp_path / "cal.toml"
+    with pytest.raises(InputError) as e:
+        calibrate(file_path, [log], out, bootstrap=0)
+    msg = str(e.value)
+    assert "\n" not in msg and "--keep-unidentified" in msg and "nothing written" in msg
+    assert "max_speed" in msg and "ascent_rate_mps" in msg and "the watchdog took over: operational_area" in msg
+    assert "'speed-1.8'" in msg and "'ascent'" in msg
+    assert not out.exists() and not out.with_suffix(".json").exists()
+    # told to keep them: written, those at the file's values, and the header and sidecar say which and why
+    result = calibrate(file_path, [log], out, bootstrap=0, keep_unidentified=True)
+    kept = result.unidentified
+    assert {"max_speed", "ascent_rate_mps"} <= set(kept)
+    assert kept["max_speed"].startswith(NEEDS["max_speed"]) and "cut short" in kept["max_speed"]
+    cal = sim.uuv.load_mission(out)
+    assert cal.vehicle.max_speed == FILE_BLOCK["max_speed"] and cal.vehicle.ascent_rate_mps == 0.0
+    text = out.read_text()
+    assert f"#   to identify max_speed: {NEEDS['max_speed']}" in text and "watchdog took over" in text
+    side = json.loads(out.with_suffix(".json").read_text())
+    assert {c["name"] for c in side["cut_short_legs"]} >= {"speed-1.8", "ascent", "dive"}
+
+
+def test_a_log_that_ends_early_names_the_end_and_complete_legs_are_not_refused(missions, flown, tmp_path, monkeypatch):
+    file_path, _, _ = missions
+    run, _, _ = flown
+    # only the dive (which identifies nothing) is missing: every parameter is identified, so it is written
+    log = fake_log(tmp_path, monkeypatch, cut_run(run, 670.0, []))
+    result = calibrate(file_path, [log], tmp_path / "ok.toml", bootstrap=0)
+    assert [c.name for c in result.cut] == ["dive"] and "the log ended" in result.cut[0].reason
+    assert result.unidentified == {}
