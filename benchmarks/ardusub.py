@@ -322,7 +322,7 @@ def _pack_section(packs: list[dict]) -> list[str]:
 
 def _calibration_section(cal: dict) -> list[str]:
     """Held-out predictions before and after calibration, and the fitted parameters per fold."""
-    from planner.review.calibrate import FITTED
+    from planner.review.vehicle_fit import FITTED
 
     out = ["## Held-out predictions before and after calibration", ""]
     out += _head("fitted on", "scenario", "observed", "predicted (plan's vehicle)", "calibrated",

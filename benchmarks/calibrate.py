@@ -174,8 +174,9 @@ def evaluate(plan_json: Path, logs: dict[str, Path], work: Path, seed: int = 0, 
     """Calibrate on each half, predict the other; returns the rows and the fitted values per fold."""
     import sim.uuv
     from planner.common.plans import load_plan
-    from planner.review.calibrate import FITTED, calibrate
+    from planner.review.calibrate import calibrate
     from planner.review.logs import read_run
+    from planner.review.vehicle_fit import FITTED
     from sim.uuv.scoring import MODE_NAMES
 
     plan = load_plan(plan_json)
@@ -294,7 +295,7 @@ def report(result: dict) -> str:
 
 def fitted_table(result: dict) -> str:
     """Fitted versus true [vehicle] values per fold (true: the flown vehicle; file: the planner's)."""
-    from planner.review.calibrate import FITTED
+    from planner.review.vehicle_fit import FITTED
 
     file = result["file"]
     head = "| field | file (planner) | true (flown) | " + " | ".join(

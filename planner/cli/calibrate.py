@@ -46,8 +46,9 @@ def calibrate(
     ] = False,
 ) -> None:
     """Fit the vehicle's speed, turn and power terms to logs; write a mission file the planner can use."""
-    from planner.review.calibrate import UNITS, sidecar_path
     from planner.review.calibrate import calibrate as run_calibrate
+    from planner.review.calibrate import sidecar_path
+    from planner.review.vehicle_fit import UNITS
 
     if not mission.is_file():
         fail(f"MISSION: {mission} does not exist; give the mission file (.toml) the runs were flown on")

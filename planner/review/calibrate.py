@@ -1,50 +1,14 @@
-"""Calibrate a mission's vehicle block from logged runs: ``rapt-plan calibrate MISSION.toml LOG.mcap... --out F.toml``.
+"""``rapt-plan calibrate MISSION.toml LOG.mcap... --out F.toml``: the vehicle fit written as a mission file.
 
-A vehicle whose dynamics differ from the mission file's (a real vehicle, another vehicle
-model) shows steady differences that no execution bias (:mod:`sim.uuv.bias`) describes:
-the speed it reaches per commanded speed, how fast it turns, how much energy a metre
-costs.  :func:`calibrate` fits the observable properties of the ``[vehicle]`` block
-(:data:`FITTED`) to logs flown by any autonomy:
-
-- every log is cut into short open-loop segments replayed on the logged set-points from
-  the logged state (:mod:`planner.review.segments`), so no autonomy decision sits inside a
-  prediction and the fit is smooth in the parameters;
-- the residuals are the predicted minus logged positions (:data:`SIGMA_POSITION_M`),
-  headings (wrapped, :data:`SIGMA_HEADING_DEG`) and energy used (:data:`SIGMA_ENERGY_WH`),
-  each kind weighted by its own robust noise scale, so a precise kind is not drowned by
-  a noisy one;
-- the estimate is the maximum a posteriori fit of :func:`rapt.mapfit.fit_map` under one
-  prior per property centred on the file's value, :data:`PRIOR_SHARE` of it wide (what a
-  test engineer would accept a datasheet to be off by), with standard errors that hold
-  when a run's residuals move together (cluster-robust and a block bootstrap by run,
-  :func:`planner.review.biasfit.bootstrap_blocks`), plus, for vehicle-paced runs, the replay's
-  own approximation (:data:`MODEL_SHARE_PACED`);
-- the ascent rate leaves no trace in positions and energy: it is timed from each surface
-  command to the first report that says surfaced
-  (:func:`planner.review.calibration_legs.fit_ascent`);
-- a property is identified when its posterior s.d. is below half its prior's (that rule
-  alone); one the logs do not identify (``max_speed`` when no command asked for more than
-  the vehicle reaches, the power exponent with speed legs at fewer than 3 speeds) keeps
-  the file's value and is named with the leg that would identify it
-  (:data:`planner.review.calibration_legs.NEEDS`);
-- a calibration run's log (its record lists legs) is enough alone; if a field is left
-  unidentified because a leg that identifies it was cut short (the watchdog or a pilot
-  took over, or the log ended), nothing is written unless the caller keeps those fields
-  at the file's values.
-
-Not fitted, and why: ``cruise_speed`` is what the autonomy commands (a choice, not a
-property of the vehicle; ``speed_gain`` carries what the vehicle makes of it);
-``battery_wh``, ``start_battery``, ``reserve_factor`` and ``critical_battery`` are the
-range's and the autonomy's settings, not seen in a track; the sonar and navigation noise
-(``sonar_*``, ``ins_drift_m_per_s``, ``gps_sigma_m``) and ``sway_damping`` leave no
-steady trace in position and energy a few minutes long.  The tide and the clock are taken
-as the mission file says: fit an execution bias with ``rapt-plan compare`` for those.
-
-The output is the input mission file with only the fitted ``[vehicle]`` values changed
-(comments and layout kept), a comment block at its top naming the logs and each fitted
-value with its standard error, and a JSON sidecar (``--out`` with ``.json``) with the
-estimates, standard errors, priors and residual RMS before and after.  Both are
-deterministic.  Inputs are only read.  Bad inputs are one-line errors naming the problem.
+The logs are checked and read (:func:`calibrate`), the ``[vehicle]`` block fitted
+(:mod:`planner.review.vehicle_fit`), the vehicle's own pack read from its reports
+(:mod:`planner.review.pack`), and, with ``--bias``, the day's water a comparison established
+added (:mod:`planner.review.daybias`).  The output is the input mission file with only the
+fitted ``[vehicle]`` values changed (comments and layout kept), a comment block at its top
+naming the logs and each fitted value with its standard error, and a JSON sidecar (``--out``
+with ``.json``) with the estimates, standard errors, priors and residual RMS before and
+after.  Both are deterministic.  Inputs are only read; outputs are written atomically.  Bad
+inputs are one-line errors naming the problem.
 """
 
 from __future__ import annotations
@@ -56,327 +20,32 @@ import math
 import os
 import re
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
-from planner.review.biasfit import bootstrap_blocks
 from planner.review.calibration_legs import (
-    LEG_KINDS,
-    NEEDS,
-    AscentFit,
-    CutLeg,
-    ascent_prior,
     cut_legs,
-    empty_estimate,
-    fit_ascent,
     is_calibration_log,
-    with_ascent,
 )
-from planner.review.daybias import DayWater, header_lines, water_from_comparison, water_record, with_execution_bias
+from planner.review.daybias import header_lines, water_from_comparison, with_execution_bias
 from planner.review.logs import LogError, read_run
-from planner.review.segments import SEGMENT_STEPS, Segments, replay, segment_batch
+from planner.review.pack import PACK_CRITICAL_PERCENT, read_pack
+from planner.review.vehicle_fit import (
+    BOOTSTRAP,
+    DIGITS,
+    FITTED,
+    MIN_LOGS,
+    UNITS,
+    Calibration,
+    fit_vehicle,
+)
 from rapt.errors import InputError
-from rapt.mapfit import MapEstimate, Prior, fit_map
-from sim.uuv.angles import wrap_angle
-from sim.uuv.mission import Mission, Vehicle
+from sim.uuv.mission import Mission
 from sim.uuv.missionfile import load_mission
 from sim.uuv.scenario import make_scenarios
 
-__all__ = [
-    "Calibration",
-    "calibrate",
-    "fit_vehicle",
-    "vehicle_priors",
-    "FITTED",
-    "MIN_LOGS",
-    "CALIBRATION_SCHEMA",
-]
-
-CALIBRATION_SCHEMA = "rapt.calibration/1"
-
-#: The ``[vehicle]`` fields fitted, in this order.
-FITTED: tuple[str, ...] = (
-    "speed_gain",
-    "max_speed",
-    "surge_time_constant_s",
-    "max_turn_rate_dps",
-    "yaw_time_constant_s",
-    "hotel_w",
-    "drag_w",
-    "power_exponent",
-    "ascent_rate_mps",
-)
-#: Those fitted to the segment replay's positions, headings and energy (the ascent rate is timed instead:
-#: :func:`planner.review.calibration_legs.fit_ascent`).
-SEGMENT_FITTED: tuple[str, ...] = FITTED[:-1]
-UNITS = {
-    "speed_gain": "x",
-    "max_speed": "m/s",
-    "surge_time_constant_s": "s",
-    "max_turn_rate_dps": "deg/s",
-    "yaw_time_constant_s": "s",
-    "hotel_w": "W",
-    "drag_w": "W",
-    "power_exponent": "x",
-    "ascent_rate_mps": "m/s",
-}
-#: Fewest plan-run logs a calibration takes.  One run's segments share one tide phase, one
-#: route and one navigation drift, so its errors cannot be told from the vehicle's; a second,
-#: independent run is the least that lets the standard errors (which resample runs or
-#: blocks of segments) see how much the estimate moves from run to run.  A calibration
-#: run's log (its scenario record lists legs at several speeds, turns, a hold and an
-#: ascent: :func:`planner.review.calibration_legs.is_calibration_log`) is enough alone: its
-#: legs separate what one plan run confounds, and its standard errors resample its blocks.
-MIN_LOGS = 2
-#: Prior s.d. as a share of the file's value: a datasheet or an earlier calibration
-#: that is 30 % off is what a test engineer would still accept; larger errors are found
-#: when the logs show them clearly.
-PRIOR_SHARE = 0.3
-#: Smallest prior s.d. per field (a file value of 0 still gets a usable prior).
-PRIOR_SD_FLOOR = {
-    "speed_gain": 0.05,
-    "max_speed": 0.1,
-    "surge_time_constant_s": 0.3,
-    "max_turn_rate_dps": 1.0,
-    "yaw_time_constant_s": 0.3,
-    "hotel_w": 5.0,
-    "drag_w": 10.0,
-    "power_exponent": 0.3,
-}
-#: The power exponent's range (the mission file's rule): 0.5 (flatter than a thruster's) to 4.
-EXPONENT_RANGE = (0.5, 4.0)
-#: Upper bound of the power terms (W): the logs decide within it, however far from the file.
-POWER_HIGH_W = 20000.0
-#: Residual units: metres of position, degrees of heading, watt-hours of energy used.
-SIGMA_POSITION_M = 1.0
-SIGMA_HEADING_DEG = 2.0
-SIGMA_ENERGY_WH = 0.05
-#: Share of a value added (in quadrature) to its standard error when vehicle-paced runs are
-#: fitted: the replay's own approximation of a continuously moving vehicle (sub-steps,
-#: heading and energy reports a fraction of a second older than the position) biases the
-#: estimates by up to about this much on the bare-autopilot front-seat, which the
-#: statistical standard errors do not see.
-MODEL_SHARE_PACED = 0.03
-#: Bootstrap refits for the standard errors (0: analytic ones only).
-BOOTSTRAP = 20
-#: Significant digits of a calibrated value in the written file.
-DIGITS = 5
-
-
-def vehicle_priors(vehicle: Vehicle, names: Sequence[str] = FITTED) -> list[Prior]:
-    """One prior per field: centred on the file's value, :data:`PRIOR_SHARE` of it wide.
-
-    Bounds keep the file loadable and the model physical: positive time constants and
-    rates, power terms >= 0 (and up to :data:`POWER_HIGH_W`: a thruster vehicle's pack may
-    draw ten times a torpedo's), ``max_speed`` >= ``cruise_speed`` (the mission file's rule),
-    ``power_exponent`` within :data:`EXPONENT_RANGE`; the ascent rate's is
-    :func:`planner.review.calibration_legs.ascent_prior`.
-    """
-    out = []
-    for n in names:
-        if n == "ascent_rate_mps":
-            out.append(ascent_prior(vehicle.ascent_rate_mps))
-            continue
-        c = float(getattr(vehicle, n))
-        sd = max(PRIOR_SHARE * abs(c), PRIOR_SD_FLOOR[n])
-        if n == "max_speed":
-            low, high = float(vehicle.cruise_speed), max(4.0 * c, c + 4 * sd)
-        elif n == "power_exponent":
-            low, high = EXPONENT_RANGE
-        elif n in ("hotel_w", "drag_w"):  # a real pack may draw kilowatts where the file says watts
-            low, high = 0.0, max(POWER_HIGH_W, 50.0 * c)
-        else:
-            low, high = min(c / 5.0, c), max(5.0 * c, c + 5 * sd)
-            low = max(low, 1e-3)
-        out.append(Prior(n, c, sd, min(low, c), high))
-    return out
-
-
-@dataclass
-class Calibration:
-    """A fitted vehicle block and the fit behind it (see :func:`fit_vehicle`)."""
-
-    vehicle: Vehicle  # the file's vehicle with the identified fields replaced
-    original: Vehicle
-    estimate: MapEstimate
-    rms_before: dict[str, float]  # position_m, heading_deg, energy_wh under the file's vehicle
-    rms_after: dict[str, float]  # the same under the calibrated vehicle
-    segments: int
-    runs: int
-    logs: list[dict] = field(default_factory=list)  # name, sha256, scenario, steps (calibrate only)
-    model_share: float = 0.0  # share of each value added to its s.e. for the replay's approximation
-    water: DayWater | None = None  # the day's water written beside the vehicle (calibrate --bias)
-    ascent: AscentFit | None = None  # the ascent rate's own fit (also merged into ``estimate``)
-    cut: list[CutLeg] = field(default_factory=list)  # calibration legs the back-seat did not finish
-
-    @property
-    def fitted(self) -> tuple[str, ...]:
-        return tuple(p.name for p in self.estimate.priors)
-
-    @property
-    def unidentified(self) -> dict[str, str]:
-        """Per parameter left at the file's value: the leg that would identify it (and any cut short)."""
-        out = {}
-        for n in self.fitted:
-            if self.estimate.identified[n]:
-                continue
-            need = NEEDS[n]
-            if n == "ascent_rate_mps" and self.ascent is not None and self.ascent.note:
-                need = f"{need}; {self.ascent.note}"
-            cut = self.cut_short(n)
-            if cut:
-                need += "; cut short: " + ", ".join(c.describe() for c in cut)
-            out[n] = need
-        return out
-
-    def cut_short(self, name: str) -> list[CutLeg]:
-        """The cut-short legs of a kind that identifies ``name``."""
-        return [c for c in self.cut if c.kind in LEG_KINDS[name]]
-
-    @property
-    def unidentified_by_cut(self) -> list[str]:
-        """Parameters left unidentified where a leg that would identify them was cut short."""
-        return [n for n in self.fitted if not self.estimate.identified[n] and self.cut_short(n)]
-
-    @property
-    def stderr(self) -> dict[str, float]:
-        """Per fitted field: the fit's standard error, with :attr:`model_share` of the value added in quadrature."""
-        est = self.estimate
-        return {
-            n: float(np.hypot(est.stderr[n], self.model_share * abs(getattr(self.vehicle, n))))
-            if est.identified[n]
-            else float(est.stderr[n])
-            for n in self.fitted
-        }
-
-    def to_dict(self) -> dict:
-        """What the JSON sidecar holds (no paths beyond the logs' names, no times: deterministic)."""
-        est, se = self.estimate, self.stderr
-        params = {}
-        for p in est.priors:
-            n = p.name
-            params[n] = {
-                "file_value": float(getattr(self.original, n)),
-                "calibrated": float(getattr(self.vehicle, n)),
-                "stderr": se[n],
-                "stderr_fit": float(est.stderr[n]),
-                "identified": bool(est.identified[n]),
-                "map_estimate": float(est.map_value[n]),
-                "stderr_source": est.stderr_sources.get(n, ""),
-                "unit": UNITS[n],
-                "prior": {"centre": p.centre, "sd": p.sd, "low": p.low, "high": p.high},
-            }
-        return {
-            "schema": CALIBRATION_SCHEMA,
-            "parameters": params,
-            "not_fitted": [f.name for f in dataclasses.fields(Vehicle) if f.name not in self.fitted],
-            "unidentified": self.unidentified,
-            "cut_short_legs": [dataclasses.asdict(c) for c in self.cut],
-            "ascents_timed": 0 if self.ascent is None else self.ascent.events,
-            "residual_rms": {"before": self.rms_before, "after": self.rms_after},
-            "residual_sigmas": {
-                "position_m": SIGMA_POSITION_M,
-                "heading_deg": SIGMA_HEADING_DEG,
-                "energy_wh": SIGMA_ENERGY_WH,
-            },
-            "correlation": est.correlation,
-            "model_share": self.model_share,
-            "segments": self.segments,
-            "runs": self.runs,
-            "bootstrap": est.bootstrap,
-            "fit_converged": est.success,
-            "logs": self.logs,
-            **({"execution_bias": water_record(self.water)} if self.water is not None else {}),
-        }
-
-
-def _residual_parts(mission: Mission, seg: Segments, vehicle: Vehicle) -> tuple[np.ndarray, ...]:
-    """Position (m, east and north), heading (deg) and energy (Wh) errors of every valid segment step."""
-    px, py, pe, ph = replay(mission, seg, vehicle=vehicle)
-    v = seg.valid
-    dh = np.rad2deg(wrap_angle(ph - seg.obs_heading))
-    return (px - seg.obs_x)[v], (py - seg.obs_y)[v], dh[v], (pe - seg.obs_energy_wh)[v]
-
-
-def _rms(parts: tuple[np.ndarray, ...]) -> dict[str, float]:
-    dx, dy, dh, de = parts
-    return {
-        "position_m": float(np.sqrt(np.mean(dx**2 + dy**2))),
-        "heading_deg": float(np.sqrt(np.mean(dh**2))),
-        "energy_wh": float(np.sqrt(np.mean(de**2))),
-    }
-
-
-def fit_vehicle(
-    mission: Mission,
-    runs: list,
-    start_times: Sequence[float],
-    fit: Sequence[str] = FITTED,
-    *,
-    bootstrap: int = BOOTSTRAP,
-    seed: int = 0,
-    length: int = SEGMENT_STEPS,
-) -> Calibration:
-    """MAP fit of the ``[vehicle]`` fields ``fit`` to ``runs`` (:class:`planner.review.logs.LoggedRun`-like)
-    flown from scenario start times ``start_times``; priors centred on ``mission.vehicle``.
-
-    Every field is *identified* when its posterior s.d. is below half its prior's
-    (:data:`rapt.mapfit.IDENTIFIED_BELOW`, without :func:`rapt.mapfit.fit_map`'s survivor
-    rule); the ascent rate is timed on its own (:func:`planner.review.calibration_legs.fit_ascent`).
-    """
-    names = tuple(n for n in SEGMENT_FITTED if n in fit)
-    unknown = [n for n in fit if n not in FITTED]
-    if unknown or not fit:
-        raise InputError(
-            f"fit: unknown vehicle field {unknown[0] if unknown else fit!r}; choose from {', '.join(FITTED)}"
-        )
-    seg = segment_batch(mission, runs, list(start_times), length)
-    if not seg.valid.any():
-        raise InputError("LOGS: no replayable flight in the logs (no telemetry steps with set-points); nothing to fit")
-    base = mission.vehicle
-
-    def vehicle_of(theta: np.ndarray) -> Vehicle:
-        return dataclasses.replace(base, **{n: float(v) for n, v in zip(names, theta)})
-
-    def residuals(theta: np.ndarray) -> np.ndarray:
-        dx, dy, dh, de = _residual_parts(mission, seg, vehicle_of(theta))
-        return np.concatenate(
-            [dx / SIGMA_POSITION_M, dy / SIGMA_POSITION_M, dh / SIGMA_HEADING_DEG, de / SIGMA_ENERGY_WH]
-        )
-
-    per_step = np.nonzero(seg.valid)[0]
-    blocks = bootstrap_blocks(seg)[per_step]
-    est = (
-        fit_map(
-            residuals,
-            vehicle_priors(base, names),
-            groups=np.concatenate([blocks] * 4),
-            kinds=np.repeat(np.array(["position", "position", "heading", "energy"]), per_step.size),
-            bootstrap=bootstrap,
-            seed=seed,
-            significant=0.0,
-        )
-        if names
-        else empty_estimate()
-    )
-    ascent = fit_ascent(mission, runs, base.ascent_rate_mps) if "ascent_rate_mps" in fit else None
-    if ascent is not None:
-        est = with_ascent(est, ascent)
-    calibrated = dataclasses.replace(base, **{n: float(est.value[n]) for n in est.names})
-    paced = seg.substeps is not None and bool(np.any(seg.substeps > 1))
-    return Calibration(
-        calibrated,
-        base,
-        est,
-        _rms(_residual_parts(mission, seg, base)),
-        _rms(_residual_parts(mission, seg, calibrated)),
-        int(seg.valid.shape[0]),
-        int(len(set(seg.run.tolist()))),
-        model_share=MODEL_SHARE_PACED if paced else 0.0,
-        ascent=ascent,
-    )
+__all__ = ["calibrate", "calibrated_text", "sidecar_path"]
 
 
 # -- the command ------------------------------------------------------------------------
@@ -502,6 +171,7 @@ def calibrate(
     result = fit_vehicle(mission, runs, start_times, fit, bootstrap=bootstrap, seed=seed)
     result.logs = info
     result.water = water
+    _limit_battery_to_pack(result, logs)
     result.cut = cut_legs(runs, [p.name for p in logs], mission.dt)
     refused = result.unidentified_by_cut
     if refused and not keep_unidentified:
@@ -518,6 +188,19 @@ def calibrate(
     sidecar = json.dumps(result.to_dict(), indent=2, sort_keys=False, allow_nan=False) + "\n"
     _write_checked(out_path, written, sidecar)
     return result
+
+
+def _limit_battery_to_pack(cal: Calibration, logs: Sequence[Path]) -> None:
+    """Give the scenario's virtual gauge no more energy than the vehicle's pack holds to the watchdog's limit.
+
+    A scenario's charge is ``start_battery`` of ``battery_wh``; when that is more than the
+    real pack holds down to the limit at which the watchdog surfaces the vehicle, the plan
+    predicts ends the vehicle never reaches, so ``battery_wh`` becomes the pack's usable energy.
+    """
+    cal.pack = read_pack(logs)
+    if cal.pack is not None and 0.0 < cal.pack.usable_wh < cal.vehicle.battery_wh:
+        cal.vehicle = dataclasses.replace(cal.vehicle, battery_wh=float(_fmt(cal.pack.usable_wh)))
+        cal.pack_limits_battery = True
 
 
 def _write_checked(out_path: Path, text: str, sidecar: str) -> None:
@@ -555,6 +238,8 @@ def calibrated_text(text: str, cal: Calibration) -> str:
     there is none).
     """
     changes = {n: _fmt(getattr(cal.vehicle, n)) for n in cal.fitted if cal.estimate.identified[n]}
+    if cal.pack_limits_battery:
+        changes["battery_wh"] = _fmt(cal.vehicle.battery_wh)
     lines = text.splitlines()
     start = next((i for i, ln in enumerate(lines) if (m := _HEADER.match(ln)) and m.group(1) == "vehicle"), None)
     if start is None:
@@ -598,10 +283,22 @@ def _header_comment(cal: Calibration) -> list[str]:
         f"{a['position_m']:.3g} m, heading {b['heading_deg']:.3g} -> {a['heading_deg']:.3g} deg, "
         f"energy {b['energy_wh']:.3g} -> {a['energy_wh']:.3g} Wh"
     )
+    if cal.pack is not None:
+        p = cal.pack
+        kept = "" if cal.pack_limits_battery else "; battery_wh kept: the file's is smaller"
+        out.append(
+            f"# The vehicle's pack: {p.capacity_wh:.4g} Wh, {p.start_percent:.0f}% at the start, {p.usable_wh:.4g} Wh "
+            f"to the watchdog's {PACK_CRITICAL_PERCENT:g}% limit{kept}"
+        )
+        if cal.pack_limits_battery:
+            out.append(
+                f"#   battery_wh {cal.original.battery_wh:.5g} -> {cal.vehicle.battery_wh:.5g} Wh: the pack's usable energy"
+            )
     if cal.water is not None:
         out.extend(header_lines(cal.water))
     out.append(
         "# Everything below is the input mission file; only those [vehicle] values changed"
+        + (" (battery_wh included)" if cal.pack_limits_battery else "")
         + (" and [execution_bias] was set." if cal.water is not None else ".")
     )
     out.append("")

@@ -2,11 +2,13 @@
 
 A calibration run (``rapt-plan shakedown``) flies legs chosen to identify the vehicle, and
 its log's scenario record (``meta/scenario``) lists them: ``legs`` is a list of
-``{kind, name, t0_s, t1_s, speed, ...}`` on the run's clock (the log's step times), with
-kinds ``speed``, ``turn``, ``hold``, ``ascent``, ``dive`` and ``return``.  Such a log is a
+``{kind, name, start_s, end_s, speed, ...}`` in mission seconds (the log's step clock), with
+the kinds of :data:`sim.uuv.legs.LEG_KINDS` (``straight``, ``turn``, ``hold``, ``ascent``,
+``dive``, ``return``; the return leg's ``end_s`` is a limit, not a plan: it ends when the
+vehicle is recovered).  Such a log is a
 calibration on its own (:func:`is_calibration_log`).  A parameter the fit leaves
 unidentified is named with the leg that would identify it (:data:`NEEDS`), and when a leg
-of that kind was cut short (the back-seat stopped flying before ``t1_s``: the watchdog or
+of that kind was cut short (the back-seat stopped flying before its ``end_s``: the watchdog or
 a pilot took over, or the log ended) :func:`cut_legs` says which and why.
 
 The ascent rate is not seen in the positions and energy the segment replay fits, only in
@@ -55,14 +57,14 @@ NEEDS = {
 }
 #: The leg kinds that identify each fitted parameter.
 LEG_KINDS = {
-    "speed_gain": ("speed",),
-    "max_speed": ("speed",),
-    "surge_time_constant_s": ("speed",),
+    "speed_gain": ("straight",),
+    "max_speed": ("straight",),
+    "surge_time_constant_s": ("straight",),
     "max_turn_rate_dps": ("turn",),
     "yaw_time_constant_s": ("turn",),
     "hotel_w": ("hold",),
-    "drag_w": ("speed",),
-    "power_exponent": ("speed", "hold"),
+    "drag_w": ("straight",),
+    "power_exponent": ("straight", "hold"),
     "ascent_rate_mps": ("ascent",),
 }
 #: Prior of the ascent rate when the file says 0 (instantaneous): a nominal rate, as wide as itself.
@@ -94,7 +96,7 @@ class CutLeg:
 def legs_of(run) -> list[dict]:
     """The calibration legs in a run's scenario record (a list, or its JSON text), [] when it has none.
 
-    Only legs with a kind and finite ``t0_s`` < ``t1_s`` count.
+    Only legs with a kind and finite ``start_s`` < ``end_s`` count; they come back with ``t0_s`` and ``t1_s``.
     """
     raw = getattr(run, "meta", {}).get("legs")
     if isinstance(raw, str):
@@ -109,7 +111,7 @@ def legs_of(run) -> list[dict]:
         if not isinstance(leg, dict) or not isinstance(leg.get("kind"), str):
             continue
         try:
-            t0, t1 = float(leg.get("t0_s", math.nan)), float(leg.get("t1_s", math.nan))
+            t0, t1 = float(leg.get("start_s", math.nan)), float(leg.get("end_s", math.nan))
         except (TypeError, ValueError):
             continue
         if math.isfinite(t0) and math.isfinite(t1) and t0 < t1:
@@ -151,6 +153,8 @@ def cut_legs(runs: Sequence, names: Sequence[str], dt: float) -> list[CutLeg]:
     for run, name in zip(runs, names):
         until = _flown_until(run)
         for leg in legs_of(run):
+            if leg["kind"] == "return":  # ends when the vehicle is recovered, not at its end_s
+                continue
             if leg["t1_s"] > until + dt + 1e-6:
                 out.append(CutLeg(name, leg["kind"], leg["name"], leg["t1_s"], max(until, 0.0), _why_cut(run)))
     return out

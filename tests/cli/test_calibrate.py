@@ -15,8 +15,8 @@ from typer.testing import CliRunner
 
 import sim.uuv
 from planner.cli import app
-from planner.review.calibrate import FITTED, MIN_LOGS
 from planner.review.logs import read_run
+from planner.review.vehicle_fit import FITTED, MIN_LOGS
 from sim.uuv.replay import score_track
 from sim.uuv.scoring import MODE_NAMES, mode_name
 from tests.planner.review.test_calibrate import wrong_mission_text

@@ -18,9 +18,10 @@ import pytest
 
 import planner.review.calibrate as calibration
 import sim.uuv
-from planner.review.calibrate import FITTED, MIN_LOGS, calibrate, calibrated_text, fit_vehicle
+from planner.review.calibrate import calibrate, calibrated_text
 from planner.review.logs import LogError
 from planner.review.segments import MAX_SETPOINT_DELAY_S, replay, segment_batch
+from planner.review.vehicle_fit import FITTED, MIN_LOGS, fit_vehicle
 from rapt.errors import InputError
 from sim.uuv.environment import tidal_current
 from sim.uuv.scenario import make_scenarios

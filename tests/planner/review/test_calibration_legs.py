@@ -19,8 +19,9 @@ import pytest
 
 import planner.review.calibrate as calibration
 import sim.uuv
-from planner.review.calibrate import FITTED, calibrate, fit_vehicle
+from planner.review.calibrate import calibrate
 from planner.review.calibration_legs import NEEDS, cut_legs, is_calibration_log
+from planner.review.vehicle_fit import FITTED, fit_vehicle
 from rapt.errors import InputError
 from sim.uuv.scenario import make_scenarios
 from sim.uuv.world import World
@@ -54,13 +55,13 @@ TRUE_BLOCK = {
 #: (kind, name, start s, end s, commanded speed, turn: +1 right / -1 left / 0 straight, surface)
 LEGS = [
     ("hold", "hold", 0, 120, 0.0, 0, False),
-    ("speed", "speed-0.5", 120, 210, 0.5, 0, False),
+    ("straight", "speed-0.5", 120, 210, 0.5, 0, False),
     ("turn", "turn-right-0.5", 210, 230, 0.5, 1, False),
-    ("speed", "speed-0.9", 230, 340, 0.9, 0, False),
+    ("straight", "speed-0.9", 230, 340, 0.9, 0, False),
     ("turn", "turn-left-0.9", 340, 360, 0.9, -1, False),
-    ("speed", "speed-1.3", 360, 460, 1.3, 0, False),
+    ("straight", "speed-1.3", 360, 460, 1.3, 0, False),
     ("turn", "turn-right-1.3", 460, 480, 1.3, 1, False),
-    ("speed", "speed-1.8", 480, 600, 1.8, 0, False),
+    ("straight", "speed-1.8", 480, 600, 1.8, 0, False),
     ("turn", "turn-left-1.8", 600, 620, 1.8, -1, False),
     ("ascent", "ascent", 620, 660, 0.0, 0, True),
     ("dive", "dive", 660, 690, 0.0, 0, False),
@@ -115,7 +116,7 @@ def fly_legs(mission, truth) -> tuple[SimRun, float, np.ndarray]:
             heading_cmd = float(tel.heading[0]) + turn * 2.5
         sps.append([heading_cmd, speed, float(surface)])
         world.advance(t, np.array([heading_cmd]), np.array([speed]), np.array([surface]), one)
-    legs = [{"kind": k, "name": n, "t0_s": float(a), "t1_s": float(b), "speed": v} for k, n, a, b, v, _, _ in LEGS]
+    legs = [{"kind": k, "name": n, "start_s": float(a), "end_s": float(b), "speed": v} for k, n, a, b, v, _, _ in LEGS]
     meta = {"mission": mission.name, "u": u.tolist(), "scenario_id": "calibration", "legs": legs}
     run = SimRun(np.array(steps, dtype=float), np.array(sps, dtype=float), meta, path=Path("calibration.mcap"))
     run.events, run.ended, run.complete_file = [], "", True  # type: ignore[attr-defined]
