@@ -54,7 +54,7 @@ import numpy as np
 
 from planner.review.biasfit import bootstrap_blocks
 from planner.review.logs import LogError, read_run
-from planner.review.segments import SEGMENT_STEPS, Segments, replay, segment_batch
+from planner.review.segments import MAX_STEP_SHARE, SEGMENT_STEPS, Segments, replay, replayable_steps, segment_batch
 from rapt.errors import InputError
 from rapt.mapfit import MapEstimate, Prior, fit_map
 from sim.uuv.angles import wrap_angle
@@ -339,10 +339,7 @@ def _start_time(mission: Mission, run, name: str) -> float:
 
 
 def _replayable_steps(run, dt: float) -> int:
-    s, sp = run.steps, run.setpoints
-    if s.shape[0] < 2:
-        return 0
-    return int(np.sum((np.abs(np.diff(s[:, 0]) - dt) < 1e-6) & np.isfinite(sp[:-1, 1])))
+    return int(np.sum(replayable_steps(run, dt)))
 
 
 def calibrate(
@@ -376,8 +373,8 @@ def calibrate(
             )
         if _replayable_steps(run, mission.dt) == 0:
             raise LogError(
-                f"LOG: {p.name} has no replayable step (no telemetry steps {mission.dt:g} s apart with the "
-                "set-point flown after them); give logs of runs that flew"
+                f"LOG: {p.name} has no replayable step (no telemetry steps {mission.dt:g} s "
+                f"± {MAX_STEP_SHARE:.0%} apart with the set-point flown after them); give logs of runs that flew"
             )
         start_times.append(_start_time(mission, run, p.name))
         runs.append(run)
