@@ -54,10 +54,45 @@ def frontseat(
     ekf_ready: Annotated[
         float, typer.Option("--ekf-ready", help="With --bare: vehicle seconds until the position estimate is ready.")
     ] = 5.0,
+    jitter: Annotated[
+        float,
+        typer.Option(
+            "--jitter",
+            help="With --bare: send each position and attitude report up to this many vehicle seconds early or "
+            "late (uniform, seeded; stamped with its true time), as over a radio link.",
+        ),
+    ] = 0.0,
+    drop_reports: Annotated[
+        float,
+        typer.Option("--drop-reports", help="With --bare: this share of position and attitude reports is never sent."),
+    ] = 0.0,
+    seed: Annotated[int, typer.Option(help="Seed of --jitter and --drop-reports.")] = 0,
+    inject_bias: Annotated[
+        str | None,
+        typer.Option(
+            "--inject-bias",
+            help="Fly a biased vehicle for rehearsal, e.g. speed=1.15,current_offset=0.3 (see rapt-plan run).",
+        ),
+    ] = None,
 ) -> None:
     """Serve the simulated front-seat of one scenario on a MAVLink connection."""
     from planner.fly.flight import flight_from_plan, is_plan
     from sim.uuv.ardusub.frontseat import FrontSeat
+    from sim.uuv.ardusub.jitter import check_report_timing
+    from sim.uuv.bias import parse_bias
+
+    for name, given in (("--jitter", jitter), ("--drop-reports", drop_reports)):
+        if given and not bare:
+            fail(f"{name}: only with --bare (the lock-step front-seat closes each step itself); add --bare")
+    try:
+        check_report_timing(jitter, drop_reports)
+    except ValueError as exc:  # "jitter: ..." or "drop_reports: ...": name the option
+        field, why = str(exc).split(": ", 1)
+        fail(f"--{field.replace('_', '-')}: {why}")
+    try:
+        bias = parse_bias(inject_bias) if inject_bias is not None else None
+    except ValueError as exc:
+        fail(f"--inject-bias: {exc}")
 
     if is_plan(mission_file):
         try:
@@ -76,6 +111,10 @@ def frontseat(
             speedup=speedup or 1.0,
             bare=bare,
             ekf_ready_s=ekf_ready,
+            report_jitter_s=jitter,
+            drop_reports=drop_reports,
+            seed=seed,
+            bias=bias,
         )
     except (ValueError, OSError) as exc:
         fail(f"--mavlink: {exc}")

@@ -31,6 +31,7 @@ from planner.review.calibration_legs import (
 from planner.review.daybias import header_lines, water_from_comparison, with_execution_bias
 from planner.review.logs import LogError, read_run
 from planner.review.pack import PACK_CRITICAL_PERCENT, read_pack
+from planner.review.segments import MAX_STEP_SHARE, replayable_steps
 from planner.review.vehicle_fit import (
     BOOTSTRAP,
     DIGITS,
@@ -100,10 +101,7 @@ def _start_time(mission: Mission, run, name: str) -> float:
 
 
 def _replayable_steps(run, dt: float) -> int:
-    s, sp = run.steps, run.setpoints
-    if s.shape[0] < 2:
-        return 0
-    return int(np.sum((np.abs(np.diff(s[:, 0]) - dt) < 1e-6) & np.isfinite(sp[:-1, 1])))
+    return int(np.sum(replayable_steps(run, dt)))
 
 
 def calibrate(
@@ -152,8 +150,8 @@ def calibrate(
             )
         if _replayable_steps(run, mission.dt) == 0:
             raise LogError(
-                f"LOG: {p.name} has no replayable step (no telemetry steps {mission.dt:g} s apart with the "
-                "set-point flown after them); give logs of runs that flew"
+                f"LOG: {p.name} has no replayable step (no telemetry steps {mission.dt:g} s "
+                f"± {MAX_STEP_SHARE:.0%} apart with the set-point flown after them); give logs of runs that flew"
             )
         start_times.append(_start_time(mission, run, p.name))
         runs.append(run)

@@ -19,6 +19,25 @@ first order for any vehicle.  A vehicle-paced run (a real vehicle, the bare auto
 moves continuously, so its segments are replayed in :data:`PACED_SUBSTEPS` sub-steps per
 step with the set-point held; the lock-step front-seat steps by ``mission.dt`` as the
 batch simulator does, and is replayed so.
+
+A real vehicle's reports do not land on the back-seat's decision period: a radio link or a
+busy autopilot moves each by a fraction of a second, and some never arrive.  The back-seat
+decides on the first report of each period (:class:`planner.common.telemetry.TrackSampler`
+and the back-seat's decision clock share that rule), so the logged steps are the vehicle's
+own report times, ``dt`` apart give or take the wait for a report.  Each step is replayed
+over its own logged length (:func:`step_lengths`): the set-point flown after a report was
+flown from that report's time to the next one's, which is what the vehicle did; the
+vehicle-paced replay's physics sub-steps divide each step's own length.  This is more
+faithful than resampling the log onto the decision grid by interpolation, which would
+invent positions between reports (cutting the corner of every turn), blur the instant
+each set-point took over across two grid steps, and put the energy counter's
+whole-hectojoule steps where they were not reported.  A step counts while its length is
+within :data:`MAX_STEP_SHARE` of ``dt``: a longer one means a decision period passed with
+no report (a gap in the link or the log: the vehicle flew an old set-point, or, past
+ArduSub's 3 s, none), which the logged set-points do not describe.  Such gaps, dropped
+reports and late set-points (:data:`MAX_SETPOINT_DELAY_S`) cut a segment short; the rest
+of the log still counts.  Steps exactly ``dt`` apart (within 1e-6 s: every lock-step log)
+are replayed with ``dt`` itself, so those logs give the figures they always gave.
 Used by the execution-bias fit (:mod:`planner.review.biasfit`) and the vehicle calibration
 (:mod:`planner.review.calibrate`).
 """
@@ -41,7 +60,10 @@ __all__ = [
     "SEGMENT_STEPS",
     "PACED_SUBSTEPS",
     "MAX_SETPOINT_DELAY_S",
+    "MAX_STEP_SHARE",
     "substeps_of",
+    "step_lengths",
+    "replayable_steps",
 ]
 
 #: Steps per open-loop segment (2 s steps: two minutes of flight).
@@ -52,6 +74,11 @@ PACED_SUBSTEPS = 10
 #: replayed: the vehicle flew the previous set-point for a noticeable share of the step (or,
 #: unanswered for 3 s, stopped), which the logged set-point does not say.
 MAX_SETPOINT_DELAY_S = 0.3
+#: A step counts while its logged length is within this share of ``mission.dt`` (at 2 s:
+#: 1 to 3 s).  Longer, a decision period passed with no report and the vehicle flew an old
+#: set-point (or, past ArduSub's 3 s velocity timeout, none); shorter, the reports are not
+#: the back-seat's steps.  Report jitter of a few tenths of a second stays well inside.
+MAX_STEP_SHARE = 0.5
 
 
 @dataclass
@@ -72,11 +99,29 @@ class Segments:
     substeps: np.ndarray | None = None  # (N,) physics sub-steps per step (None: 1)
     # the logged ground velocity the start surge is rebuilt from, and the time whose tide it carries
     ground: dict | None = None  # ve, vn, t_tide: (N,); ok: (N,) bool (False: use start["surge"])
+    step_dt: np.ndarray | None = None  # (N, L) each step's own length, s (None: mission.dt throughout)
 
 
 def substeps_of(run) -> int:
     """Physics sub-steps per step to replay ``run`` with: :data:`PACED_SUBSTEPS` for a vehicle-paced run."""
     return PACED_SUBSTEPS if getattr(run, "meta", {}).get("pacing") == "vehicle" else 1
+
+
+def step_lengths(t: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+    """Each step's length (from step k's time to step k+1's, ``dt`` itself where within 1e-6 s of it)
+    and whether it counts (within :data:`MAX_STEP_SHARE` of ``dt``): (n - 1,) each."""
+    raw = np.diff(np.asarray(t, dtype=float))
+    exact = np.abs(raw - dt) < 1e-6
+    lengths = np.where(exact, dt, raw)
+    return lengths, exact | (np.abs(raw - dt) <= MAX_STEP_SHARE * dt)
+
+
+def replayable_steps(run, dt: float) -> np.ndarray:
+    """Per step but the last of ``run``: its length counts (:func:`step_lengths`) and the set-point flown after it is logged."""
+    s, sp = run.steps, run.setpoints
+    if s.shape[0] < 2:
+        return np.zeros(0, dtype=bool)
+    return step_lengths(s[:, 0], dt)[1] & np.isfinite(sp[:-1, 1])
 
 
 def _ground_velocity(
@@ -86,7 +131,8 @@ def _ground_velocity(
 
     Backward (the step before, as the lock-step simulator moves) or central (around the
     step, a continuously moving vehicle; forward at a run's first step) differences of
-    the logged positions; only over steps exactly ``dt`` apart.
+    the logged positions over each step's own length; only over steps that count
+    (:func:`step_lengths`).
     """
     n = steps.shape[0]
     t, x, y = steps[:, 0], steps[:, 1], steps[:, 2]
@@ -94,23 +140,25 @@ def _ground_velocity(
     ok = np.zeros(n, dtype=bool)
     if n < 2:
         return ve, vn, tt, ok
-    step_ok = np.abs(np.diff(t) - dt) < 1e-6  # step k -> k+1
+    h, step_ok = step_lengths(t, dt)  # step k -> k+1
+    h = np.where(step_ok, h, dt)  # a gap's velocity is never used: any divisor will do
     back = np.zeros(n, dtype=bool)
     back[1:] = step_ok
-    ve[1:], vn[1:] = np.diff(x) / dt, np.diff(y) / dt
+    ve[1:], vn[1:] = np.diff(x) / h, np.diff(y) / h
     tt[1:] = t[:-1]
     ok = back.copy()
     if central:
         both = np.zeros(n, dtype=bool)
         both[1:-1] = step_ok[:-1] & step_ok[1:]
-        ve = np.where(both, np.concatenate([[0.0], (x[2:] - x[:-2]) / (2 * dt), [0.0]]), ve)
-        vn = np.where(both, np.concatenate([[0.0], (y[2:] - y[:-2]) / (2 * dt), [0.0]]), vn)
+        span = h[:-1] + h[1:]  # 2 dt exactly where both steps are dt
+        ve = np.where(both, np.concatenate([[0.0], (x[2:] - x[:-2]) / span, [0.0]]), ve)
+        vn = np.where(both, np.concatenate([[0.0], (y[2:] - y[:-2]) / span, [0.0]]), vn)
         tt = np.where(both, t, tt)
         # where no step comes before (a run's first), the step after: a vehicle at rest drifts with the tide
         fwd = np.zeros(n, dtype=bool)
         fwd[:-1] = step_ok & ~back[:-1]
-        ve = np.where(fwd, np.concatenate([np.diff(x) / dt, [0.0]]), ve)
-        vn = np.where(fwd, np.concatenate([np.diff(y) / dt, [0.0]]), vn)
+        ve = np.where(fwd, np.concatenate([np.diff(x) / h, [0.0]]), ve)
+        vn = np.where(fwd, np.concatenate([np.diff(y) / h, [0.0]]), vn)
         ok = back | both | fwd
     return ve, vn, tt, ok
 
@@ -125,22 +173,27 @@ def _surge_through_water(mission: Mission, steps: np.ndarray, start_time: float,
 
 
 def _sway(steps: np.ndarray, mission: Mission, surge: np.ndarray) -> np.ndarray:
-    """Sway rebuilt from the surge and logged turn rate with the vehicle model's sway equation."""
+    """Sway rebuilt from the surge and logged turn rate with the vehicle model's sway equation, step by step."""
     dt = mission.dt
-    a_v = 1.0 - np.exp(-dt * mission.vehicle.sway_damping)
+    a_v = np.full(steps.shape[0], 1.0 - np.exp(-dt * mission.vehicle.sway_damping))
+    if steps.shape[0] > 1:  # a step of its own length (a gap's length is the period's)
+        h, ok = step_lengths(steps[:, 0], dt)
+        own = ok & (h != dt)
+        a_v[1:][own] = 1.0 - np.exp(-h[own] * mission.vehicle.sway_damping)
     v = np.zeros(steps.shape[0])
     for k in range(1, steps.shape[0]):
         u, r = surge[k], steps[k, 7]
-        v[k] = v[k - 1] + (-SWAY_COUPLING * u * r - v[k - 1]) * a_v
+        v[k] = v[k - 1] + (-SWAY_COUPLING * u * r - v[k - 1]) * a_v[k]
     return v
 
 
 def segment_batch(mission: Mission, runs: list, start_times: list[float], length: int = SEGMENT_STEPS) -> Segments:
     """Cut every run (a :class:`planner.review.logs.LoggedRun`) into segments of ``length`` steps.
 
-    A step counts when the next step follows it by exactly ``mission.dt`` (no gap from a
-    lost chunk), the set-point flown after it is in the log, and that set-point answered
-    this step within :data:`MAX_SETPOINT_DELAY_S` (``LoggedRun.setpoint_delay_s``).
+    A step counts when the next step follows it within :data:`MAX_STEP_SHARE` of
+    ``mission.dt`` (no gap from lost reports or a lost chunk; it is replayed over its own
+    length), the set-point flown after it is in the log, and that set-point answered this
+    step within :data:`MAX_SETPOINT_DELAY_S` (``LoggedRun.setpoint_delay_s``).
     """
     dt = mission.dt
     rows = []
@@ -152,7 +205,8 @@ def segment_batch(mission: Mission, runs: list, start_times: list[float], length
         surge = _surge_through_water(mission, s, t0, central=nsub > 1)
         sway = _sway(s, mission, surge)
         ground = _ground_velocity(s, dt, central=nsub > 1)
-        ok = (np.abs(np.diff(s[:, 0]) - dt) < 1e-6) & np.isfinite(sp[:-1, 1])
+        ok = replayable_steps(run, dt)
+        lengths = step_lengths(s[:, 0], dt)[0]
         delay = getattr(run, "setpoint_delay_s", None)
         if delay is not None and len(delay) == s.shape[0]:
             ok &= np.asarray(delay[:-1]) <= MAX_SETPOINT_DELAY_S
@@ -164,19 +218,20 @@ def segment_batch(mission: Mission, runs: list, start_times: list[float], length
             end = k
             while end < len(ok) and ok[end] and end - k < length:
                 end += 1
-            rows.append((i, t0, k, end, s, sp, sway, nsub, ground))
+            rows.append((i, t0, k, end, s, sp, sway, nsub, ground, lengths))
             k = end
     n = len(rows)
     L = length
     t = np.zeros((n, L))
     hc, sc = np.zeros((n, L)), np.zeros((n, L))
     ox, oy, oe, oh = np.zeros((n, L)), np.zeros((n, L)), np.zeros((n, L)), np.zeros((n, L))
+    step_dt = np.full((n, L), dt)
     valid = np.zeros((n, L), dtype=bool)
     start = {key: np.zeros(n) for key in ("x", "y", "heading", "surge", "sway", "yaw_rate")}
     st, run_index = np.zeros(n), np.zeros(n, dtype=np.int64)
     nsubs = np.ones(n, dtype=np.int64)
     gr = {"ve": np.zeros(n), "vn": np.zeros(n), "t_tide": np.zeros(n), "ok": np.zeros(n, dtype=bool)}
-    for j, (i, t0, k, end, s, sp, sway, nsub, ground) in enumerate(rows):
+    for j, (i, t0, k, end, s, sp, sway, nsub, ground, lengths) in enumerate(rows):
         m = end - k
         nsubs[j] = nsub
         for key, col in zip(("ve", "vn", "t_tide", "ok"), ground):
@@ -185,12 +240,13 @@ def segment_batch(mission: Mission, runs: list, start_times: list[float], length
         start["surge"][j], start["sway"][j], start["yaw_rate"][j] = s[k, 6], sway[k], s[k, 7]
         st[j], run_index[j] = t0, i
         t[j, :m] = s[k:end, 0]
+        step_dt[j, :m] = lengths[k:end]
         hc[j, :m], sc[j, :m] = sp[k:end, 0], sp[k:end, 1]
         ox[j, :m], oy[j, :m] = s[k + 1 : end + 1, 1], s[k + 1 : end + 1, 2]
         oe[j, :m] = (s[k + 1 : end + 1, 4] - s[k, 4]) / 36.0
         oh[j, :m] = s[k + 1 : end + 1, 3]
         valid[j, :m] = True
-    return Segments(start, t, st, hc, sc, ox, oy, oe, oh, valid, run_index, nsubs, gr)
+    return Segments(start, t, st, hc, sc, ox, oy, oe, oh, valid, run_index, nsubs, gr, step_dt)
 
 
 def replay(
@@ -200,8 +256,9 @@ def replay(
 
     ``bias`` (default neutral) biases the vehicle and tide; ``vehicle`` (default the
     mission's) is the vehicle model flown.  Each segment starts from its logged state,
-    its surge rebuilt from the logged ground velocity under this bias's tide and course.
-    ``bias`` is relative to the mission's day bias (``Mission.execution_bias``), as in the world.
+    its surge rebuilt from the logged ground velocity under this bias's tide and course; each
+    step is flown over its own logged length (``seg.step_dt``).  ``bias`` is relative to the
+    mission's day bias (``Mission.execution_bias``), as in the world.
     """
     bias = compose(mission.execution_bias, bias or Bias())
     n, L = seg.t.shape
@@ -231,8 +288,10 @@ def replay(
     px, py, pe, ph = np.zeros((n, L)), np.zeros((n, L)), np.zeros((n, L)), np.zeros((n, L))
     nsub = np.ones(n, dtype=np.int64) if seg.substeps is None else seg.substeps
     most = int(nsub.max()) if n else 1
-    sub_dt = dt / nsub
     for j in range(L):
+        # each step over its own logged length (mission.dt itself, a scalar, wherever it is that)
+        h = dt if seg.step_dt is None or bool(np.all(seg.step_dt[:, j] == dt)) else seg.step_dt[:, j].copy()
+        sub_dt = h / nsub
         for q in range(most):
             moving = seg.valid[:, j] & (q < nsub)
             ce, cn = tide(seg.t[:, j] + q * sub_dt)
@@ -243,7 +302,7 @@ def replay(
                 seg.speed_cmd[:, j],
                 ce,
                 cn,
-                dt if most == 1 else sub_dt,
+                h if most == 1 else sub_dt,
                 moving,
                 speed_scale=bias.speed,
                 course_bias=course,

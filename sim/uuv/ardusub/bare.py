@@ -15,6 +15,8 @@ only when surfaced) 2 Hz; HOME_POSITION and GPS_GLOBAL_ORIGIN once when the esti
 sonar.  Ground-station requests (commands, modes, parameters, stream rates) are answered
 by :mod:`sim.uuv.ardusub.gcs`, as in the lock-step front-seat.  The position estimate is ready
 ``ekf_ready_s`` after boot (:mod:`sim.uuv.ardusub.ekf`); GUIDED and POSHOLD are refused before.
+With ``jitter_s`` or ``drop_reports`` the position and attitude reports go out off their
+cadence and some never do, as over a radio link (:mod:`sim.uuv.ardusub.jitter`, seeded).
 
 Modes: GUIDED flies set-points (:mod:`sim.uuv.ardusub.guided`); AUTO flies the uploaded mission
 (:mod:`sim.uuv.ardusub.auto`); SURFACE rises to the surface, where it switches itself to ALT_HOLD as
@@ -46,6 +48,8 @@ from sim.uuv.ardusub.ekf import EkfReadiness  # noqa: E402
 from sim.uuv.ardusub.gcs import heartbeat_send, sensor_bits  # noqa: E402
 from sim.uuv.ardusub.guided import Target, from_global_int, from_local_ned  # noqa: E402
 from sim.uuv.ardusub.host import Host  # noqa: E402
+from sim.uuv.ardusub.jitter import JitteredSchedule  # noqa: E402
+from sim.uuv.ardusub.streams import StreamSchedule  # noqa: E402
 from sim.uuv.interface import energy_consumed_hj  # noqa: E402
 
 __all__ = ["BareAutopilot", "Truth", "SUBSTEP_S"]
@@ -80,7 +84,7 @@ class Truth:
 class BareAutopilot:
     """A front-seat's (its :class:`~sim.uuv.ardusub.host.Host`'s) vehicle run as ArduSub runs it (see module docstring)."""
 
-    def __init__(self, fs: Host, ekf_ready_s: float):
+    def __init__(self, fs: Host, ekf_ready_s: float, jitter_s: float = 0.0, drop_reports: float = 0.0, seed: int = 0):
         self.fs, self.conn, self.world = fs, fs.conn, fs.world
         self.spec = fs.mission.vehicle
         self.ekf = EkfReadiness(float(ekf_ready_s))
@@ -89,7 +93,10 @@ class BareAutopilot:
         self.t = 0.0
         self.depth = Depth()
         self.target = Target.hold(0.0, 0.0)
-        self.streams = fs.streams
+        # a vehicle behind a radio link: position and attitude reports off their cadence, some lost (seeded)
+        self.streams: StreamSchedule | JitteredSchedule = fs.streams
+        if jitter_s or drop_reports:
+            self.streams = JitteredSchedule(fs.streams, jitter_s, drop_reports, seed)
         self.auto = AutoMission(fs.missions, self._north_east)
         self.vn = self.ve = 0.0  # ground velocity over the last sub-step
         self._origin_sent = False

@@ -24,7 +24,8 @@ collision, out of the area, battery empty, time limit) and the vehicle disarms.
 With ``bare`` it is none of that but a bare ArduSub (:mod:`sim.uuv.ardusub.bare`): real time times
 ``speedup``, each message streamed at ArduSub's own rate, a position estimate that is
 ready only ``ekf_ready_s`` after boot, GUIDED set-points as ArduSub reads them, depth as
-a state, no sonar and no referee.
+a state, no sonar and no referee; ``report_jitter_s`` and ``drop_reports`` (seeded by ``seed``)
+disturb its position and attitude reports as a radio link would (:mod:`sim.uuv.ardusub.jitter`).
 """
 
 from __future__ import annotations
@@ -44,6 +45,7 @@ from sim.uuv.ardusub.bare import PACK_V, BareAutopilot  # noqa: E402
 from sim.uuv.ardusub.ekf import FLAGS_READY  # noqa: E402
 from sim.uuv.ardusub.gcs import GroundStationLink, heartbeat_send, sensor_bits  # noqa: E402
 from sim.uuv.ardusub.host import FrontSeatStats  # noqa: E402
+from sim.uuv.ardusub.jitter import check_report_timing  # noqa: E402
 from sim.uuv.ardusub.mission_server import MissionServer  # noqa: E402
 from sim.uuv.ardusub.params import ParameterTable  # noqa: E402
 from sim.uuv.ardusub.streams import StreamSchedule  # noqa: E402
@@ -94,6 +96,8 @@ class FrontSeat:
         bare: bool = False,
         ekf_ready_s: float = 5.0,
         gcs_failsafe_s: float | None = 5.0,
+        report_jitter_s: float = 0.0,
+        drop_reports: float = 0.0,
     ):
         self.mission = mission
         self.u = np.asarray(u, dtype=float).reshape(1, -1)
@@ -104,6 +108,12 @@ class FrontSeat:
             raise InputError(f"speedup: expected a factor > 0, got {speedup}")
         if not ekf_ready_s >= 0:
             raise InputError(f"ekf_ready_s: expected vehicle seconds >= 0, got {ekf_ready_s}")
+        check_report_timing(report_jitter_s, drop_reports)
+        if (report_jitter_s or drop_reports) and not bare:
+            raise InputError(
+                "report_jitter_s: report jitter and drops are the bare front-seat's (lock-step closes each step "
+                "itself); fly bare"
+            )
         self.scen = scen
         # a biased vehicle (sim.uuv.bias) flies like a real one whose speed, tide, compass or
         # battery differ from the model; the back-seat on the far side does not know
@@ -131,7 +141,7 @@ class FrontSeat:
         home = self.frame.to_latlon(float(self.world.state.x[0]), float(self.world.state.y[0]))
         self.missions = MissionServer(self.conn, (*home, 0.0), self.send_status, self._mission_clock)
         if bare:  # a real vehicle knows no referee
-            self.bare = BareAutopilot(self, ekf_ready_s)
+            self.bare = BareAutopilot(self, ekf_ready_s, report_jitter_s, drop_reports, seed)
         else:
             self._referee()  # the first report counts, as in a batch
         self.link = GroundStationLink(self, self.bare if self.bare is not None else self, self.params, self.streams)
