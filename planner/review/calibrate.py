@@ -46,7 +46,10 @@ from sim.uuv.mission import Mission
 from sim.uuv.missionfile import load_mission
 from sim.uuv.scenario import make_scenarios
 
-__all__ = ["calibrate", "calibrated_text", "sidecar_path"]
+__all__ = ["calibrate", "calibrated_text", "sidecar_path", "PACK_TOLERANCE"]
+
+#: A pack read within this share of the file's battery is the file's battery (the fit's own spread).
+PACK_TOLERANCE = 0.1
 
 
 # -- the command ------------------------------------------------------------------------
@@ -191,12 +194,14 @@ def calibrate(
 def _limit_battery_to_pack(cal: Calibration, logs: Sequence[Path]) -> None:
     """Give the scenario's virtual gauge no more energy than the vehicle's pack holds to the watchdog's limit.
 
-    A scenario's charge is ``start_battery`` of ``battery_wh``; when that is more than the
-    real pack holds down to the limit at which the watchdog surfaces the vehicle, the plan
-    predicts ends the vehicle never reaches, so ``battery_wh`` becomes the pack's usable energy.
+    A scenario's charge is ``start_battery`` of ``battery_wh``; when the vehicle's real pack is
+    smaller than that battery (by more than :data:`PACK_TOLERANCE`: a simulated vehicle's pack
+    is the file's battery itself), the watchdog surfaces the vehicle before the scenario's
+    fuel runs out and the plan predicts ends the vehicle never reaches, so ``battery_wh``
+    becomes the pack's energy down to that limit.
     """
     cal.pack = read_pack(logs)
-    if cal.pack is not None and 0.0 < cal.pack.usable_wh < cal.vehicle.battery_wh:
+    if cal.pack is not None and cal.pack.capacity_wh < (1.0 - PACK_TOLERANCE) * cal.vehicle.battery_wh:
         cal.vehicle = dataclasses.replace(cal.vehicle, battery_wh=float(_fmt(cal.pack.usable_wh)))
         cal.pack_limits_battery = True
 
@@ -283,10 +288,10 @@ def _header_comment(cal: Calibration) -> list[str]:
     )
     if cal.pack is not None:
         p = cal.pack
-        kept = "" if cal.pack_limits_battery else "; battery_wh kept: the file's is smaller"
+        kept = "" if cal.pack_limits_battery else "; battery_wh kept: the pack is not smaller than it"
         out.append(
-            f"# The vehicle's pack: {p.capacity_wh:.4g} Wh, {p.start_percent:.0f}% at the start, {p.usable_wh:.4g} Wh "
-            f"to the watchdog's {PACK_CRITICAL_PERCENT:g}% limit{kept}"
+            f"# The vehicle's pack: {p.capacity_wh:.4g} Wh ({p.start_percent:.0f}% at the first log's start), "
+            f"{p.usable_wh:.4g} Wh when full to the watchdog's {PACK_CRITICAL_PERCENT:g}% limit{kept}"
         )
         if cal.pack_limits_battery:
             out.append(

@@ -9,16 +9,19 @@ reaches (on ArduSub SITL with an 18 Ah pack most 45-minute scenarios ended this 
 the plan predicted success).  So calibration reads the pack's size from what the logs show:
 the charge it reports remaining against the energy it reports drawn (ArduPilot counts
 ``battery_remaining`` down from ``BATT_CAPACITY`` by the charge drawn), fitted by least
-squares over every report, and the energy left between the first report and the limit.
+squares over every report, and the energy a full pack holds down to the limit (a range
+charges the pack before each run; the charge a log happens to start at is recorded too).
 """
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from mcap.exceptions import McapError
 
 from bridge import keys
 from bridge.logger import read_log
@@ -38,7 +41,7 @@ class PackReading:
 
     capacity_wh: float  # energy of a full pack (Wh)
     start_percent: float  # charge reported when the first log starts
-    usable_wh: float  # energy from that charge down to the watchdog's limit (Wh)
+    usable_wh: float  # energy of a full pack down to the watchdog's limit (Wh)
     reports: int  # BATTERY_STATUS reports of the pack the fit used
     span_percent: float  # how far the reported charge fell over the logs
 
@@ -54,8 +57,15 @@ class PackReading:
 
 
 def _pack_reports(path: Path, vehicle: str) -> list[tuple[float, float]]:
-    """(energy drawn in Wh, charge remaining in %) of every report of the pack (BATTERY_STATUS id 0)."""
-    topic = keys.telemetry(vehicle, "BATTERY_STATUS")
+    """(energy drawn in Wh, charge remaining in %) of every report of the pack (BATTERY_STATUS id 0); none
+    from a file that is not a readable MCAP log (its run was read otherwise: it tells nothing of the pack)."""
+    try:
+        return _reports(path, keys.telemetry(vehicle, "BATTERY_STATUS"))
+    except (OSError, ValueError, struct.error, McapError):
+        return []
+
+
+def _reports(path: Path, topic: str) -> list[tuple[float, float]]:
     out = []
     for t, _, msg in read_log(path):
         if t != topic or not isinstance(msg, dict) or int(msg.get("id", -1)) != 0:
@@ -102,5 +112,5 @@ def read_pack(paths: Iterable[Path], vehicle: str = keys.DEFAULT_VEHICLE) -> Pac
         return None
     capacity = -100.0 / float(coef[0])
     start = float(first_start if first_start is not None else r[0])
-    usable = max(0.0, (start - PACK_CRITICAL_PERCENT) / 100.0 * capacity)
+    usable = (100.0 - PACK_CRITICAL_PERCENT) / 100.0 * capacity
     return PackReading(capacity, start, usable, int(e.size), span)
