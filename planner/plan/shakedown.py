@@ -42,7 +42,6 @@ from sim.uuv.missionfile import load_mission_text
 from sim.uuv.scenario import make_scenarios
 from sim.uuv.scoring import MODE_NAMES
 from sim.uuv.simulate import TRAJECTORY_FIELDS
-from sim.uuv.vehicle import HEADING_TIME_S
 
 __all__ = [
     "ShakedownOptions",
@@ -133,7 +132,7 @@ def shakedown_legs(mission: Mission, bearing_deg: float, options: ShakedownOptio
     b, back = float(bearing_deg) % 360.0, (float(bearing_deg) + 180.0) % 360.0
     run_s = SETTLE_TAUS * v.surge_time_constant_s + options.measure_s
     rate = v.max_turn_rate_dps
-    turn_s = 180.0 / (3.0 * rate) + 180.0 / rate + 3.0 * v.yaw_time_constant_s + 2.0 * HEADING_TIME_S
+    turn_s = 180.0 / (3.0 * rate) + 180.0 / rate + 3.0 * v.yaw_time_constant_s + 2.0 * v.heading_time_s
     slow = 0.5 * v.cruise_speed
     legs = [
         Leg("straight", "half_cruise", run_s, slow, b),

@@ -89,6 +89,7 @@ FITTED: tuple[str, ...] = (
     "surge_time_constant_s",
     "max_turn_rate_dps",
     "yaw_time_constant_s",
+    "heading_time_s",
     "hotel_w",
     "drag_w",
     "power_exponent",
@@ -103,6 +104,7 @@ UNITS = {
     "surge_time_constant_s": "s",
     "max_turn_rate_dps": "deg/s",
     "yaw_time_constant_s": "s",
+    "heading_time_s": "s",
     "hotel_w": "W",
     "drag_w": "W",
     "power_exponent": "x",
@@ -127,10 +129,13 @@ PRIOR_SD_FLOOR = {
     "surge_time_constant_s": 0.3,
     "max_turn_rate_dps": 1.0,
     "yaw_time_constant_s": 0.3,
+    "heading_time_s": 0.3,
     "hotel_w": 5.0,
     "drag_w": 10.0,
     "power_exponent": 0.3,
 }
+#: The fitted time constants (s): a thruster vehicle's may be a twentieth of a torpedo's.
+TIME_CONSTANTS = ("surge_time_constant_s", "yaw_time_constant_s", "heading_time_s")
 #: The power exponent's range (the mission file's rule): 0.5 (flatter than a thruster's) to 4.
 EXPONENT_RANGE = (0.5, 4.0)
 #: Upper bound of the power terms (W): the logs decide within it, however far from the file.
@@ -156,7 +161,9 @@ def vehicle_priors(vehicle: Vehicle, names: Sequence[str] = FITTED) -> list[Prio
 
     Bounds keep the file loadable and the model physical: positive time constants and
     rates, power terms >= 0 (and up to :data:`POWER_HIGH_W`: a thruster vehicle's pack may
-    draw ten times a torpedo's), ``max_speed`` >= ``cruise_speed`` (the mission file's rule),
+    draw ten times a torpedo's), time constants down to a twentieth of the file's (a thruster
+    vehicle answers far faster than a torpedo), ``max_speed`` free to fall below ``cruise_speed``
+    (a vehicle slower than the autonomy's cruise command saturates at its own top speed),
     ``power_exponent`` within :data:`EXPONENT_RANGE`; the ascent rate's is
     :func:`planner.review.calibration_legs.ascent_prior`.
     """
@@ -168,7 +175,9 @@ def vehicle_priors(vehicle: Vehicle, names: Sequence[str] = FITTED) -> list[Prio
         c = float(getattr(vehicle, n))
         sd = max(PRIOR_SHARE * abs(c), PRIOR_SD_FLOOR[n])
         if n == "max_speed":
-            low, high = float(vehicle.cruise_speed), max(4.0 * c, c + 4 * sd)
+            low, high = c / 5.0, max(4.0 * c, c + 4 * sd)
+        elif n in TIME_CONSTANTS:
+            low, high = c / 20.0, max(5.0 * c, c + 5 * sd)
         elif n == "power_exponent":
             low, high = EXPONENT_RANGE
         elif n in ("hotel_w", "drag_w"):  # a real pack may draw kilowatts where the file says watts

@@ -121,6 +121,7 @@ class Vehicle:
     speed_gain: float = 1.0
     power_exponent: float = 3.0
     ascent_rate_mps: float = 0.0
+    heading_time_s: float = 4.0
 
 
 @dataclass(frozen=True)

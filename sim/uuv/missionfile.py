@@ -487,16 +487,15 @@ class _Loader(FieldChecker):
                     "vehicle.power_exponent",
                     f"{fmt(obj.power_exponent)} is outside [0.5, 4]; use 3 for a torpedo, about 1 for a thruster vehicle",
                 )
+            if not obj.heading_time_s > 0:
+                self.fail(
+                    "vehicle.heading_time_s",
+                    f"{fmt(obj.heading_time_s)} must be > 0; give the seconds the autopilot takes to close a heading error",
+                )
             if obj.ascent_rate_mps < 0:
                 self.fail(
                     "vehicle.ascent_rate_mps",
                     f"{fmt(obj.ascent_rate_mps)} must be >= 0; give the rise rate in m/s (0: surfaces at once)",
-                )
-            if obj.max_speed < obj.cruise_speed:
-                self.fail(
-                    "vehicle.max_speed",
-                    f"{fmt(obj.max_speed)} is below cruise_speed {fmt(obj.cruise_speed)}; "
-                    "raise max_speed or lower cruise_speed",
                 )
         if cls is Current:
             if obj.speed < 0 or obj.perturbation < 0:

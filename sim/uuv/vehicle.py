@@ -22,7 +22,9 @@ __all__ = ["VehicleState", "step_vehicle", "propulsion_power"]
 
 #: Sideslip per unit of (speed x yaw rate): a few degrees of crab angle in a hard turn.
 SWAY_COUPLING = 0.8
-#: Seconds to close a heading error (the autopilot's proportional gain is 1/this).
+#: Seconds to close a heading error (the autopilot's proportional gain is 1/this): the
+#: default of ``Vehicle.heading_time_s``, a torpedo's gentle heading loop (a thruster
+#: vehicle's autopilot closes an error far sooner, up to its turn-rate limit).
 HEADING_TIME_S = 4.0
 
 
@@ -81,7 +83,7 @@ def step_vehicle(
     """
     rmax = np.deg2rad(spec.max_turn_rate_dps)
     err = wrap_angle(heading_cmd - s.heading)
-    r_des = np.clip(err / HEADING_TIME_S, -rmax, rmax)
+    r_des = np.clip(err / spec.heading_time_s, -rmax, rmax)
     a_r = 1.0 - np.exp(-dt / spec.yaw_time_constant_s)
     a_u = 1.0 - np.exp(-dt / spec.surge_time_constant_s)
     a_v = 1.0 - np.exp(-dt * spec.sway_damping)

@@ -39,6 +39,7 @@ WRONG = {
     "surge_time_constant_s": 5.5,
     "max_turn_rate_dps": 9.0,
     "yaw_time_constant_s": 4.0,
+    "heading_time_s": 5.0,
     "hotel_w": 52.0,
     "drag_w": 115.0,
     "power_exponent": 2.2,

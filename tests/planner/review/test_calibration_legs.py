@@ -36,6 +36,7 @@ FILE_BLOCK = {
     "surge_time_constant_s": 3.0,
     "max_turn_rate_dps": 15.0,
     "yaw_time_constant_s": 2.0,
+    "heading_time_s": 3.0,
     "hotel_w": 90.0,
     "drag_w": 180.0,
 }
@@ -47,6 +48,7 @@ TRUE_BLOCK = {
     "surge_time_constant_s": 2.2,
     "max_turn_rate_dps": 20.0,
     "yaw_time_constant_s": 1.5,
+    "heading_time_s": 2.0,
     "hotel_w": 120.0,
     "drag_w": 250.0,
     "power_exponent": 1.0,
@@ -100,6 +102,7 @@ def fly_legs(mission, truth) -> tuple[SimRun, float, np.ndarray]:
     dt = mission.dt
     steps, sps = [], []
     heading_cmd = float(world.state.heading[0])
+    last = None
     for k in range(int(LEGS[-1][3] / dt) + 1):
         t = k * dt
         tel = world.telemetry(t)
@@ -112,8 +115,9 @@ def fly_legs(mission, truth) -> tuple[SimRun, float, np.ndarray]:
             sps.append([np.nan, np.nan, np.nan])
             continue
         _, _, _, _, speed, turn, surface = leg
-        if turn:  # ask for more than the rate limit allows
+        if turn and leg is not last:  # a heading step: turned at the rate limit, then closed by the heading loop
             heading_cmd = float(tel.heading[0]) + turn * 2.5
+        last = leg
         sps.append([heading_cmd, speed, float(surface)])
         world.advance(t, np.array([heading_cmd]), np.array([speed]), np.array([surface]), one)
     legs = [{"kind": k, "name": n, "start_s": float(a), "end_s": float(b), "speed": v} for k, n, a, b, v, _, _ in LEGS]
