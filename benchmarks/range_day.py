@@ -158,6 +158,115 @@ def compare(plan: Path, logs: Path, out: Path, *extra: str) -> dict | None:
     return json.loads((out / "comparison.json").read_text())
 
 
+def track_errors(mission, u, run, driver=None) -> tuple[float, float]:
+    """RMS path error (m) of ``run``'s logged track against ``mission``'s prediction of row ``u`` (at the same
+    times), and the energy used by the log's last step as a share of the logged energy (predicted / logged - 1)."""
+    import numpy as np
+
+    import sim.uuv
+
+    pred = sim.uuv.simulate(mission, np.asarray(u, float)[None, :], trajectories=True, driver=driver).trajectory(0)
+    track = run.steps
+    if pred is None or not track.shape[0]:
+        return float("nan"), float("nan")
+    t = np.clip(track[:, 0], pred[0, 0], pred[-1, 0])
+    px, py = np.interp(t, pred[:, 0], pred[:, 1]), np.interp(t, pred[:, 0], pred[:, 2])
+    rms = float(np.sqrt(np.mean((track[:, 1] - px) ** 2 + (track[:, 2] - py) ** 2)))
+    used = track[-1, 4] - track[0, 4]
+    predicted = np.interp(t[-1], pred[:, 0], pred[:, 4]) - np.interp(t[0], pred[:, 0], pred[:, 4])
+    return rms, float(predicted / used - 1.0) if used > 0 else float("nan")
+
+
+def repredictions(here: Path) -> dict:
+    """The calibration run and the committed plan's flights re-predicted with the calibrated vehicle."""
+    import numpy as np
+
+    import sim.uuv
+    from planner.common.plans import load_plan
+    from planner.review.logs import read_run
+    from sim.uuv.legs import leg_driver, legs_from_json
+
+    calibrated = sim.uuv.load_mission(here / "calibrated.toml")
+    design = load_plan(here / "shakedown" / "plan.json")
+    entry = design.scenario("shakedown")
+    run = read_run(here / "morning" / "shakedown.mcap")
+    driver = leg_driver(legs_from_json(entry["legs"]))
+    flown = dataclasses_replace_vehicle(design.mission, calibrated.vehicle)  # the gauge the run counted from
+    out = {"shakedown": dict(zip(("path_m", "energy"), track_errors(flown, entry["u"], run, driver)))}
+    out["shakedown_before"] = dict(zip(("path_m", "energy"), track_errors(design.mission, entry["u"], run, driver)))
+    committed = load_plan(COMMITTED)
+    rows = []
+    for log in sorted((here / "committed").glob("*.mcap")):
+        sid = log.stem
+        run = read_run(log)
+        before = track_errors(committed.mission, committed.u(sid), run)
+        after = track_errors(dataclasses_replace_vehicle(committed.mission, calibrated.vehicle), committed.u(sid), run)
+        rows.append({"scenario": sid, "path_before_m": before[0], "path_after_m": after[0],
+                     "energy_before": before[1], "energy_after": after[1]})  # fmt: skip
+    out["committed"] = rows
+    out["median_path_after_m"] = float(np.median([r["path_after_m"] for r in rows])) if rows else None
+    out["median_abs_energy_after"] = float(np.median([abs(r["energy_after"]) for r in rows])) if rows else None
+    return out
+
+
+def dataclasses_replace_vehicle(mission, vehicle):
+    """``mission`` flying ``vehicle``'s dynamics and power (the committed plan's scenarios on the calibrated
+    vehicle) with the battery those flights' virtual gauge counted from: the committed mission's."""
+    import dataclasses
+
+    return dataclasses.replace(mission, vehicle=dataclasses.replace(vehicle, battery_wh=mission.vehicle.battery_wh))
+
+
+def pct(v) -> str:
+    return "-" if v is None or v != v else f"{100 * v:+.1f} %"
+
+
+def num(v, fmt: str = ".0f") -> str:
+    return "-" if v is None or v != v else format(v, fmt)
+
+
+def modes_held(comparison: dict) -> tuple[int, int]:
+    """Scenarios whose observed mode is the plan's predicted one, of those with an observed mode."""
+    rows = [r for r in comparison["scenarios"] if r["observed_mode"] is not None]
+    return sum(r["observed_mode"] == r["predicted_mode"] for r in rows), len(comparison["scenarios"])
+
+
+def pairs_held(comparison: dict) -> tuple[int, int]:
+    return sum(bool(p.get("observed_as_predicted")) for p in comparison["pairs"]), len(comparison["pairs"])
+
+
+def report(name: str, here: Path, timing: dict | None, rep: dict | None, day: dict | None, base: dict | None) -> str:
+    """One vehicle's figures as markdown."""
+    out = [f"## {name}: {CONFIGS[name][0]}", ""]
+    if rep is not None:
+        sh, b = rep["shakedown"], rep["shakedown_before"]
+        out += [
+            f"Calibration run re-predicted: path RMS {num(b['path_m'])} m -> {num(sh['path_m'], '.1f')} m, "
+            f"energy {pct(b['energy'])} -> {pct(sh['energy'])} (file's vehicle -> calibrated).",
+            "",
+            "| committed scenario | path RMS, plan's vehicle (m) | calibrated (m) | energy, plan's | calibrated |",
+            "|---|---|---|---|---|",
+        ]
+        for r in rep["committed"]:
+            out.append(f"| {r['scenario']} | {num(r['path_before_m'])} | {num(r['path_after_m'], '.1f')} | "
+                       f"{pct(r['energy_before'])} | {pct(r['energy_after'])} |")  # fmt: skip
+        out += ["", f"Median path RMS with the calibrated vehicle: {num(rep['median_path_after_m'], '.1f')} m; "
+                f"median |energy error| {pct(rep['median_abs_energy_after'])}.", ""]  # fmt: skip
+    if timing is not None:
+        out += [f"Noon step (calibrate + {timing.get('budget', '?')}-run re-plan): {timing['noon_s']:.0f} s "
+                f"(calibrate {timing['calibrate_s']:.0f} s).", ""]  # fmt: skip
+    for label, comp in (("re-plan", day), ("committed plan", base)):
+        if comp is None:
+            continue
+        m, n = modes_held(comp)
+        p, q = pairs_held(comp)
+        brier = comp.get("forecast", {}).get("brier", {}).get("corrected", {})
+        out.append(f"- {label}: pairs observed as predicted {p}/{q}; predicted mode held {m}/{n}; "
+                   f"Brier (corrected forecast) modes {num(brier.get('mode'), '.2f')}, held {num(brier.get('held'), '.2f')}")  # fmt: skip
+    out.append("")
+    return "\n".join(out)
+
+
 def main(argv: list[str] | None = None) -> int:
     from planner.fly.ardusub_sitl import ENV, sitl_binary
 
@@ -208,6 +317,11 @@ def main(argv: list[str] | None = None) -> int:
             fly_plan(
                 here / "plan" / "plan.json", ids[:4] if args.quick else ids, here / "afternoon", args.speedup, params
             )
+            timing["budget"] = 2000 if args.quick else args.budget
+            day = compare(here / "plan" / "plan.json", here / "afternoon", here / "comparison")
+            base = compare(COMMITTED, here / "committed", here / "committed_comparison")
+            rep = repredictions(here) if (here / "committed").is_dir() else None
+            print(report(name, here, timing, rep, day, base), flush=True)
     return 0
 
 

@@ -1,0 +1,81 @@
+"""The range day's calibration on ArduSub's real firmware: the calibration run flown, the vehicle calibrated from it.
+
+Needs the ArduSub SITL binary named by ``ARDUSUB_SITL`` (CI sets it) and skips with that
+reason where it is absent. The run is designed for range2017 (``rapt-plan shakedown``), flown
+from a cold boot at speed-up 40 through the vehicle run's bring-up, watchdog and log, and
+calibrated from its log alone. What the firmware's BlueROV2 is (a thruster vehicle that
+turns in a second and draws a thruster's current) is what the fit must find, whatever the
+mission file's torpedo says.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import sim.uuv
+from planner.common.plans import load_plan
+from planner.fly.ardusub_sitl import ENV, ArduSubSitl, launch_point, sitl_binary
+from planner.fly.flight import flight_from_plan
+from planner.fly.vehicle.run import run_vehicle
+from planner.plan.shakedown import design_shakedown, write_shakedown
+from planner.review.calibrate import calibrate
+from planner.review.logs import read_run
+from sim.uuv.legs import leg_driver, legs_from_json
+
+ROOT = Path(__file__).resolve().parents[3]
+MISSION = ROOT / "examples" / "range2017.toml"
+#: A BlueROV2's 18 Ah pack (SITL's default is 3.3 Ah).
+PACK = {"BATT_CAPACITY": 18000.0, "SIM_BATT_CAP_AH": 18.0}
+
+needs_firmware = pytest.mark.skipif(sitl_binary() is None, reason=f"{ENV} is not set: no ArduSub SITL binary to fly")
+
+
+@needs_firmware
+@pytest.mark.sitl
+@pytest.mark.integration
+@pytest.mark.slow
+def test_one_calibration_run_on_the_firmware_calibrates_the_thruster_vehicle(tmp_path):
+    mission = sim.uuv.load_mission(MISSION)
+    plan = write_shakedown(design_shakedown(mission), MISSION, tmp_path / "shakedown")
+    flight = flight_from_plan(plan, "shakedown")
+    log = tmp_path / "shakedown.mcap"
+    with ArduSubSitl(launch_point(mission), speedup=40, parameters=PACK) as sitl:
+        result = run_vehicle(flight, sitl.connection, log_path=log, timeout_s=120.0)
+    assert result.ended == "recovered" and not result.watchdog, (result.ended, result.watchdog)
+    assert result.decisions["missed"] == 0
+
+    out = tmp_path / "calibrated.toml"
+    cal = calibrate(MISSION, [log], out)  # the calibration run's log alone
+    side = json.loads(out.with_suffix(".json").read_text())
+    v = cal.vehicle
+    # a thruster vehicle, as the firmware's model is: it turns in about a second, at tens of degrees a second,
+    # and its draw rises far less than cubically with speed; the pack it carries caps the scenarios' battery
+    for n in ("max_turn_rate_dps", "heading_time_s", "yaw_time_constant_s", "power_exponent", "drag_w", "max_speed"):
+        assert cal.estimate.identified[n], (n, side.get("unidentified"))
+    assert v.max_turn_rate_dps > 30 and v.heading_time_s < 2 and v.power_exponent < 1.5
+    assert v.max_speed < mission.vehicle.cruise_speed  # the BlueROV2 cannot make the torpedo's cruise
+    assert cal.pack_limits_battery and v.battery_wh < 0.5 * mission.vehicle.battery_wh
+    assert cal.rms_after["heading_deg"] < 0.2 * cal.rms_before["heading_deg"]
+    assert cal.rms_after["position_m"] < cal.rms_before["position_m"]
+    assert cal.rms_after["energy_wh"] < cal.rms_before["energy_wh"]
+
+    # the run re-predicted from its legs by the calibrated vehicle (with the battery its gauge counted from):
+    # its energy within 10 %, against the file's torpedo missing it by a third or more
+    entry = load_plan(plan).scenario("shakedown")
+    run = read_run(log)
+    flown = dataclasses.replace(mission, vehicle=dataclasses.replace(v, battery_wh=mission.vehicle.battery_wh))
+    drive = leg_driver(legs_from_json(entry["legs"]))
+
+    def energy_error(m) -> float:
+        pred = sim.uuv.simulate(m, np.asarray(entry["u"])[None, :], trajectories=True, driver=drive).trajectory(0)
+        t = np.clip(run.steps[:, 0], pred[0, 0], pred[-1, 0])
+        used = run.steps[-1, 4] - run.steps[0, 4]
+        return float((np.interp(t[-1], pred[:, 0], pred[:, 4]) - np.interp(t[0], pred[:, 0], pred[:, 4])) / used - 1)
+
+    assert abs(energy_error(flown)) < 0.10
+    assert abs(energy_error(mission)) > 0.30
