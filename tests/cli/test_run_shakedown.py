@@ -3,10 +3,7 @@ loopback MAVLink with the whole vehicle stack; each ends recovered and its log s
 
 from __future__ import annotations
 
-import contextlib
 import re
-import socket
-import threading
 from pathlib import Path
 
 import pytest
@@ -16,9 +13,8 @@ from planner.cli import app
 from planner.fly.flight import flight_from_plan
 from planner.fly.vehicle.run import run_vehicle
 from planner.review.logs import read_run
-from sim.uuv.ardusub.frontseat import FrontSeat
 from sim.uuv.metrics import metric_names
-from tests.support.loopback import free_port, no_new_threads
+from tests.support.bare_vehicle import bare_vehicle
 
 pytestmark = pytest.mark.integration
 
@@ -57,27 +53,12 @@ def test_in_the_loop_it_ends_recovered_as_predicted_and_the_log_carries_its_legs
     assert [leg["surface"] for leg in legs if leg["kind"] == "ascent"] == [True]
 
 
-@contextlib.contextmanager
-def _bare_vehicle(mission, u, speedup: float):
-    port = free_port(socket.SOCK_DGRAM)
-    with no_new_threads():
-        fs = FrontSeat(mission, u, f"udpin:127.0.0.1:{port}", bare=True, speedup=speedup)
-        thread = threading.Thread(target=fs.serve, name="bare-vehicle", daemon=True)
-        thread.start()
-        try:
-            yield f"udpout:127.0.0.1:{port}"
-        finally:
-            fs.stop()
-            thread.join(timeout=5)
-            fs.close()
-
-
 @pytest.mark.slow
 def test_on_a_bare_autopilot_it_ends_recovered_and_the_log_carries_its_legs(plan, tmp_path):
     """Vehicle-paced: real depth (the ascent rises, the dive goes back down), its own clock, the watchdog on."""
     flight = flight_from_plan(plan, "shakedown")
     log = tmp_path / "vehicle.mcap"
-    with _bare_vehicle(flight.mission, flight.u, speedup=25.0) as connection:
+    with bare_vehicle(flight.mission, flight.u, speedup=25.0) as (connection, _):
         result = run_vehicle(flight, connection, log_path=log, timeout_s=120)
     assert result.ended == "recovered" and not result.watchdog, (result.ended, result.watchdog)
     names = metric_names(flight.mission)

@@ -8,14 +8,12 @@ vehicle; no process, socket or thread outlives it.
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import signal
 import socket
 import subprocess
 import sys
-import threading
 from pathlib import Path
 
 import numpy as np
@@ -25,35 +23,17 @@ import sim.uuv
 from planner.fly.flight import Flight, flight_from_plan
 from planner.fly.vehicle.run import run_vehicle
 from planner.review.logs import read_run
-from sim.uuv.ardusub.frontseat import FrontSeat
 from sim.uuv.geometry import polygon_signed_distance
 from sim.uuv.missionfile import load_mission
 from sim.uuv.scenario import make_scenarios
+from tests.support.bare_vehicle import SPEEDUP, bare_vehicle
 from tests.support.foxglove_check import check_channel, foxglove_channels
-from tests.support.loopback import free_port, no_new_threads
+from tests.support.loopback import free_port
 
 pytestmark = pytest.mark.integration
 
 ROOT = Path(__file__).resolve().parents[4]
 PLAN = ROOT / "field_plans" / "range2017" / "plan.json"
-#: Fast, yet slow enough that a loaded 2-core machine does not starve the vehicle for seconds of its time.
-SPEEDUP = 25.0
-
-
-@contextlib.contextmanager
-def bare_vehicle(mission, u, speedup: float = SPEEDUP):
-    """Our front-seat as a bare ArduSub on a UDP port; yields (the bridge's connection string, the front-seat)."""
-    port = free_port(socket.SOCK_DGRAM)
-    with no_new_threads():
-        fs = FrontSeat(mission, u, f"udpin:127.0.0.1:{port}", bare=True, speedup=speedup)
-        thread = threading.Thread(target=fs.serve, name="bare-vehicle", daemon=True)
-        thread.start()
-        try:
-            yield f"udpout:127.0.0.1:{port}", fs
-        finally:
-            fs.stop()
-            thread.join(timeout=5)
-            fs.close()
 
 
 def _rapt_plan() -> list[str]:
