@@ -31,7 +31,6 @@ from __future__ import annotations
 import argparse
 import os
 import signal
-import socket
 import subprocess
 import sys
 import tempfile
@@ -46,24 +45,19 @@ PLAN = ROOT / "field_plans" / "range2017" / "plan.json"
 BIAS = "speed=1.15,current_offset=0.3"
 
 from planner.fly.flight import flight_from_plan  # noqa: E402
+from planner.fly.run_bus import free_port  # noqa: E402
 from planner.fly.vehicle.run import run_vehicle  # noqa: E402
 from planner.review.biasfit import fit_bias  # noqa: E402
-from planner.review.calibrate import fit_vehicle  # noqa: E402
 from planner.review.logs import read_run  # noqa: E402
 from planner.review.segments import MAX_SETPOINT_DELAY_S, segment_batch, step_lengths  # noqa: E402
+from planner.review.vehicle_fit import fit_vehicle  # noqa: E402
 from sim.uuv.bias import BIAS_NAMES  # noqa: E402
 from sim.uuv.scenario import make_scenarios  # noqa: E402
 
 
-def _free_udp_port() -> int:
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return int(s.getsockname()[1])
-
-
 def fly(sid: str, log: Path, speedup: float, wall: float, jitter: float, drop: float, seed: int) -> str:
     """One flight of plan scenario ``sid`` on the bare front-seat (its own process); how it ended."""
-    port = _free_udp_port()
+    port = free_port()
     vehicle = subprocess.Popen(
         [sys.executable, "-m", "planner.cli", "frontseat", str(PLAN), "--scenario", sid]
         + ["--mavlink", f"udpin:127.0.0.1:{port}", "--bare", "--speedup", str(speedup), "--inject-bias", BIAS]
