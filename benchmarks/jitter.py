@@ -97,7 +97,7 @@ def estimates(logs: list[Path], bootstrap: int) -> dict:
         out["est"][f"bias {n}"] = (float(getattr(bias.bias, n)), float(bias.stderr[n]), bias.identified[n])
     se_fit = cal.estimate.stderr
     for n in cal.fitted:
-        value = float(getattr(cal.vehicle, n))
+        value = cal.value(n)
         out["est"][f"vehicle {n}"] = (value, float(cal.stderr[n]), cal.estimate.identified[n], float(se_fit[n]))
     return out
 

@@ -48,6 +48,7 @@ def calibrate(
     """Fit the vehicle's speed, turn and power terms to logs; write a mission file the planner can use."""
     from planner.review.calibrate import calibrate as run_calibrate
     from planner.review.calibrate import sidecar_path
+    from planner.review.calibration_terms import term_unit
     from planner.review.vehicle_fit import UNITS
 
     if not mission.is_file():
@@ -68,10 +69,10 @@ def calibrate(
         ident = est.identified[n]
         table.add_row(
             n,
-            f"{getattr(result.original, n):.5g}",
-            f"{getattr(result.vehicle, n):.5g}" if ident else "(kept)",
+            f"{result.file_value(n):.5g}",
+            f"{result.value(n):.5g}" if ident else "(kept)",
             f"{result.stderr[n]:.2g}" if ident else "-",
-            UNITS[n],
+            UNITS.get(n) or term_unit(n),
             "yes" if ident else "no",
         )
     out.print(table)

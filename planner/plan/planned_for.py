@@ -67,6 +67,14 @@ def planned_for(mission: Mission, text: str, sha256: str) -> dict | None:
     }
 
 
+def _speed(values: dict) -> str:
+    """The vehicle's speed answer: its measured curve's knots, else its speed gain."""
+    curve = values.get("speed_curve") or []
+    if curve:
+        return "speed " + ", ".join(f"{c:.3g}->{r:.3g}" for c, r in curve) + " m/s"
+    return f"speed_gain {values['speed_gain']:.4g}"
+
+
 def summary_lines(record: dict | None) -> list[str]:
     """One line for the vehicle and one for the water, for the terminal summary and the report."""
     if not record:
@@ -75,7 +83,7 @@ def summary_lines(record: dict | None) -> list[str]:
     v = veh["values"]
     vehicle = (
         "calibrated vehicle" if veh["calibrated"] else "the mission file's vehicle"
-    ) + f" (speed_gain {v['speed_gain']:.4g}, hotel {v['hotel_w']:.4g} W, drag {v['drag_w']:.4g} W)"
+    ) + f" ({_speed(v)}, hotel {v['hotel_w']:.4g} W, drag {v['drag_w']:.4g} W)"
     if veh["calibrated"] and len(veh["calibration"]) > 1:
         vehicle += f"; {veh['calibration'][0].rstrip(':')}"
     changed = [

@@ -2,8 +2,9 @@
 
 The logs are checked and read (:func:`calibrate`), the ``[vehicle]`` block fitted
 (:mod:`planner.review.vehicle_fit`), the vehicle's own pack read from its reports
-(:mod:`planner.review.pack`), and, with ``--bias``, the day's water a comparison established
-added (:mod:`planner.review.daybias`).  The output is the input mission file with only the
+(:mod:`planner.review.pack`), and the day's water added (:mod:`planner.review.daybias`): the
+current a calibration run measured, and with ``--bias`` what a comparison established.  A
+calibration run's measured speed curve is written as ``[vehicle] speed_curve``.  The output is the input mission file with only the
 fitted ``[vehicle]`` values changed (comments and layout kept), a comment block at its top
 naming the logs and each fitted value with its standard error, and a JSON sidecar (``--out``
 with ``.json``) with the estimates, standard errors, priors and residual RMS before and
@@ -28,7 +29,8 @@ from planner.review.calibration_legs import (
     cut_legs,
     is_calibration_log,
 )
-from planner.review.daybias import header_lines, water_from_comparison, with_execution_bias
+from planner.review.calibration_terms import term_unit
+from planner.review.daybias import DayWater, header_lines, water_from_comparison, water_with_run, with_execution_bias
 from planner.review.logs import LogError, read_run
 from planner.review.pack import PACK_CRITICAL_PERCENT, read_pack
 from planner.review.segments import MAX_STEP_SHARE, replayable_steps
@@ -171,7 +173,7 @@ def calibrate(
         _too_few(len(runs))
     result = fit_vehicle(mission, runs, start_times, fit, bootstrap=bootstrap, seed=seed)
     result.logs = info
-    result.water = water
+    result.water = _day_water(mission, water, result, [p.name for p, r in zip(logs, runs) if is_calibration_log(r)])
     _limit_battery_to_pack(result, logs)
     result.cut = cut_legs(runs, [p.name for p in logs], mission.dt)
     refused = result.unidentified_by_cut
@@ -184,11 +186,21 @@ def calibrate(
         )
     text = mission_path.read_text(encoding="utf-8")
     written = calibrated_text(text, result)
-    if water is not None:
-        written = with_execution_bias(written, water)
+    if result.water is not None:
+        written = with_execution_bias(written, result.water)
     sidecar = json.dumps(result.to_dict(), indent=2, sort_keys=False, allow_nan=False) + "\n"
     _write_checked(out_path, written, sidecar)
     return result
+
+
+def _day_water(mission: Mission, water: DayWater | None, cal: Calibration, names: list[str]) -> DayWater | None:
+    """The water the file gets: compare's (``--bias``) and what the calibration run measured."""
+    measured = cal.water_identified
+    if not measured:
+        return water
+    stderr = {n[len("water.") :]: cal.stderr[n] for n in measured}
+    source = f"rapt-plan calibrate: the calibration run {', '.join(names)}"
+    return water_with_run(water, mission.execution_bias, cal.run_water, stderr, source)
 
 
 def _limit_battery_to_pack(cal: Calibration, logs: Sequence[Path]) -> None:
@@ -240,7 +252,10 @@ def calibrated_text(text: str, cal: Calibration) -> str:
     set is added at the end of ``[vehicle]``'s keys (a ``[vehicle]`` table is appended when
     there is none).
     """
-    changes = {n: _fmt(getattr(cal.vehicle, n)) for n in cal.fitted if cal.estimate.identified[n]}
+    written = [n for n in cal.fitted if cal.estimate.identified[n] and n in FITTED]
+    changes = {n: _fmt(getattr(cal.vehicle, n)) for n in written}
+    if cal.vehicle.speed_curve != cal.original.speed_curve:
+        changes["speed_curve"] = "[" + ", ".join(f"[{_fmt(c)}, {_fmt(r)}]" for c, r in cal.vehicle.speed_curve) + "]"
     if cal.pack_limits_battery:
         changes["battery_wh"] = _fmt(cal.vehicle.battery_wh)
     lines = text.splitlines()
@@ -272,9 +287,9 @@ def _header_comment(cal: Calibration) -> list[str]:
         out.append(f"#   {lg['name']}  (scenario {lg['scenario'] or '?'}, sha256 {lg['sha256'][:12]})")
     out.append("# [vehicle] fields fitted (file value -> calibrated +- standard error):")
     for n in cal.fitted:
-        old, unit = float(getattr(cal.original, n)), UNITS[n]
+        old, unit = cal.file_value(n), UNITS.get(n) or term_unit(n)
         if est.identified[n]:
-            new = float(getattr(cal.vehicle, n))
+            new = cal.value(n)
             out.append(f"#   {n:<22} {old:.5g} -> {new:.5g} +- {cal.stderr[n]:.2g} {unit}")
         else:
             out.append(f"#   {n:<22} {old:.5g} {unit} kept: not identified by these logs")

@@ -41,6 +41,7 @@ __all__ = [
     "ascent_prior",
     "empty_estimate",
     "with_ascent",
+    "with_independent",
 ]
 
 #: The leg that identifies each fitted parameter, as a test engineer would fly it.
@@ -246,23 +247,31 @@ def empty_estimate() -> MapEstimate:
     return MapEstimate((), {}, {}, {}, {}, {}, 0, True, "nothing fitted to the segments")
 
 
-def with_ascent(est: MapEstimate, a: AscentFit) -> MapEstimate:
-    """``est`` with the ascent rate appended: independent of the rest (its covariance block is its own)."""
-    n = a.prior.name
+def with_independent(
+    est: MapEstimate, prior: Prior, value: float, map_value: float, stderr: float, identified: bool, source: str
+) -> MapEstimate:
+    """``est`` with one more parameter fitted on its own (its covariance block is its own)."""
+    n = prior.name
     cov = est.covariance
-    if a.identified:
+    if identified:
         k = cov.shape[0]
         grown = np.zeros((k + 1, k + 1))
         grown[:k, :k] = cov
-        grown[k, k] = a.stderr**2
+        grown[k, k] = stderr**2
         cov = grown
     return dataclasses.replace(
         est,
-        priors=(*est.priors, a.prior),
-        value={**est.value, n: a.value},
-        map_value={**est.map_value, n: a.map_value},
-        stderr={**est.stderr, n: a.stderr},
-        identified={**est.identified, n: a.identified},
+        priors=(*est.priors, prior),
+        value={**est.value, n: value},
+        map_value={**est.map_value, n: map_value},
+        stderr={**est.stderr, n: stderr},
+        identified={**est.identified, n: identified},
         covariance=cov,
-        stderr_sources={**est.stderr_sources, n: "ascent timing" if a.identified else "not identified"},
+        stderr_sources={**est.stderr_sources, n: source},
     )
+
+
+def with_ascent(est: MapEstimate, a: AscentFit) -> MapEstimate:
+    """``est`` with the ascent rate appended (:func:`with_independent`)."""
+    source = "ascent timing" if a.identified else "not identified"
+    return with_independent(est, a.prior, a.value, a.map_value, a.stderr, a.identified, source)

@@ -38,6 +38,7 @@ __all__ = [
     "with_execution_bias",
     "header_lines",
     "water_record",
+    "water_with_run",
 ]
 
 #: The bias fields a calibrated file carries: the water (tide scale and offset, the tide's
@@ -133,6 +134,25 @@ def water_from_comparison(path: str | Path, mission: Mission) -> DayWater:
     plan = data["plan"].get("id", "?")
     source = f"rapt-plan compare of plan {plan} ({path.name} sha256 {data['_sha256'][:12]})"
     return DayWater(_day_bias(water), fields, source, dropped)
+
+
+def water_with_run(
+    water: DayWater | None, assumed: Bias, run_water: Bias, stderr: dict[str, float], source: str
+) -> DayWater:
+    """The day's water with what a calibration run measured in it: ``run_water`` (relative to
+    ``assumed``, the water the fit flew: the file's table or ``water``'s) composed onto it, the
+    fields in ``stderr`` taken with those standard errors.  ``water`` (compare's, or None)
+    keeps every other field it took."""
+    total = compose(assumed, run_water)
+    fields = dict(water.fields) if water is not None else {}
+    unmeasured = {n: "not measured by the calibration run" for n in WATER_FIELDS}
+    dropped = dict(water.dropped) if water is not None else unmeasured
+    for n, se in stderr.items():
+        fields[n] = {"value": round(float(getattr(total, n)), 6), "stderr": float(se)}
+        dropped.pop(n, None)
+    values = {n: (round(getattr(total, n), 6) if n in WATER_FIELDS else NEUTRAL[n]) for n in BIAS_NAMES}
+    both = source if water is None else f"{source}; {water.source}"
+    return DayWater(_day_bias(values), fields, both, dropped)
 
 
 def _day_bias(values: dict[str, float]) -> Bias:

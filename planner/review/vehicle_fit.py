@@ -27,7 +27,11 @@ costs.  :func:`fit_vehicle` fits the observable properties of the ``[vehicle]`` 
   the vehicle reaches, the power exponent with speed legs at fewer than 3 speeds) keeps
   the file's value and is named with the leg that would identify it
   (:data:`planner.review.calibration_legs.NEEDS`);
-- a calibration run's log (its record lists legs) is enough alone; if a field is left
+- a calibration run's log (its record lists legs) is enough alone, and it adds two terms
+  (:mod:`planner.review.calibration_terms`): a measured speed curve in place of
+  ``speed_gain`` and ``max_speed`` when its straight legs span enough commanded speeds, and
+  the current it flew in, so the vehicle is not fitted to water that was not there;
+  if a field is left
   unidentified because a leg that identifies it was cut short (the watchdog or a pilot
   took over, or the log ended), nothing is written unless the caller keeps those fields
   at the file's values.
@@ -60,14 +64,31 @@ from planner.review.calibration_legs import (
     ascent_prior,
     empty_estimate,
     fit_ascent,
+    is_calibration_log,
     with_ascent,
+    with_independent,
+)
+from planner.review.calibration_terms import (
+    CURVE_MIN_SPEEDS,
+    POWER_TERMS,
+    fit_curve,
+    fit_power,
+    is_water,
+    knot_command,
+    term_need,
+    term_prior,
+    term_unit,
+    term_value,
+    water_term,
+    with_terms,
 )
 from planner.review.daybias import DayWater, water_record
 from planner.review.pack import PackReading
 from planner.review.segments import SEGMENT_STEPS, Segments, replay, segment_batch
 from rapt.errors import InputError
-from rapt.mapfit import MapEstimate, Prior, fit_map
+from rapt.mapfit import IDENTIFIED_BELOW, MapEstimate, Prior, fit_map
 from sim.uuv.angles import wrap_angle
+from sim.uuv.bias import Bias
 from sim.uuv.mission import Mission, Vehicle
 
 __all__ = [
@@ -150,6 +171,9 @@ SIGMA_ENERGY_WH = 0.05
 #: estimates by up to about this much on the bare-autopilot front-seat, which the
 #: statistical standard errors do not see.
 MODEL_SHARE_PACED = 0.03
+#: Share of a power term added (in quadrature) to its standard error when measured on a calibration
+#: run's settled legs: a leg's mean power is the power at its mean speed only to about this much.
+LEG_POWER_SHARE = 0.02
 #: Bootstrap refits for the standard errors (0: analytic ones only).
 BOOTSTRAP = 20
 #: Significant digits of a calibrated value in the written file.
@@ -171,6 +195,9 @@ def vehicle_priors(vehicle: Vehicle, names: Sequence[str] = FITTED) -> list[Prio
     for n in names:
         if n == "ascent_rate_mps":
             out.append(ascent_prior(vehicle.ascent_rate_mps))
+            continue
+        if n not in FITTED:  # a calibration run's knot or water term
+            out.append(term_prior(vehicle, n))
             continue
         c = float(getattr(vehicle, n))
         sd = max(PRIOR_SHARE * abs(c), PRIOR_SD_FLOOR[n])
@@ -207,6 +234,25 @@ class Calibration:
     pack_limits_battery: bool = False  # battery_wh set to the pack's energy to the watchdog's limit
     ascent: AscentFit | None = None  # the ascent rate's own fit (also merged into ``estimate``)
     cut: list[CutLeg] = field(default_factory=list)  # calibration legs the back-seat did not finish
+    run_water: Bias = field(default_factory=Bias)  # the current the calibration run flew in, relative to the mission's
+
+    def file_value(self, name: str) -> float:
+        """A fitted term's value before the fit (the file's vehicle, the mission's water)."""
+        return term_value(self.original, Bias(), name)
+
+    def value(self, name: str) -> float:
+        """A fitted term's calibrated value (a field, a knot's reached speed, the run's water)."""
+        return term_value(self.vehicle, self.run_water, name)
+
+    @property
+    def curve_fitted(self) -> bool:
+        """Whether the speed curve replaced ``speed_gain`` and ``max_speed`` in this fit."""
+        return any(n.startswith("speed_curve[") for n in self.fitted)
+
+    @property
+    def water_identified(self) -> list[str]:
+        """The water terms the run identified (``water.current_scale`` or ``water.current_offset``)."""
+        return [n for n in self.fitted if is_water(n) and self.estimate.identified[n]]
 
     @property
     def fitted(self) -> tuple[str, ...]:
@@ -219,7 +265,7 @@ class Calibration:
         for n in self.fitted:
             if self.estimate.identified[n]:
                 continue
-            need = NEEDS[n]
+            need = NEEDS[n] if n in NEEDS else term_need(n)[0]
             if n == "ascent_rate_mps" and self.ascent is not None and self.ascent.note:
                 need = f"{need}; {self.ascent.note}"
             cut = self.cut_short(n)
@@ -230,7 +276,8 @@ class Calibration:
 
     def cut_short(self, name: str) -> list[CutLeg]:
         """The cut-short legs of a kind that identifies ``name``."""
-        return [c for c in self.cut if c.kind in LEG_KINDS[name]]
+        kinds = LEG_KINDS[name] if name in LEG_KINDS else term_need(name)[1]
+        return [c for c in self.cut if c.kind in kinds]
 
     @property
     def unidentified_by_cut(self) -> list[str]:
@@ -242,7 +289,7 @@ class Calibration:
         """Per fitted field: the fit's standard error, with :attr:`model_share` of the value added in quadrature."""
         est = self.estimate
         return {
-            n: float(np.hypot(est.stderr[n], self.model_share * abs(getattr(self.vehicle, n))))
+            n: float(np.hypot(est.stderr[n], self.model_share * abs(self.value(n))))
             if est.identified[n]
             else float(est.stderr[n])
             for n in self.fitted
@@ -255,20 +302,26 @@ class Calibration:
         for p in est.priors:
             n = p.name
             params[n] = {
-                "file_value": float(getattr(self.original, n)),
-                "calibrated": float(getattr(self.vehicle, n)),
+                "file_value": self.file_value(n),
+                "calibrated": self.value(n),
                 "stderr": se[n],
                 "stderr_fit": float(est.stderr[n]),
                 "identified": bool(est.identified[n]),
                 "map_estimate": float(est.map_value[n]),
                 "stderr_source": est.stderr_sources.get(n, ""),
-                "unit": UNITS[n],
+                "unit": UNITS.get(n) or term_unit(n),
                 "prior": {"centre": p.centre, "sd": p.sd, "low": p.low, "high": p.high},
             }
         return {
             "schema": CALIBRATION_SCHEMA,
             "parameters": params,
-            "not_fitted": [f.name for f in dataclasses.fields(Vehicle) if f.name not in self.fitted],
+            "not_fitted": [
+                f.name
+                for f in dataclasses.fields(Vehicle)
+                if f.name not in self.fitted
+                and not (self.curve_fitted and f.name in ("speed_curve", "speed_gain", "max_speed"))
+            ],
+            "speed_curve": [list(k) for k in self.vehicle.speed_curve],
             "unidentified": self.unidentified,
             "cut_short_legs": [dataclasses.asdict(c) for c in self.cut],
             "ascents_timed": 0 if self.ascent is None else self.ascent.events,
@@ -290,9 +343,11 @@ class Calibration:
         }
 
 
-def _residual_parts(mission: Mission, seg: Segments, vehicle: Vehicle) -> tuple[np.ndarray, ...]:
+def _residual_parts(
+    mission: Mission, seg: Segments, vehicle: Vehicle, water: Bias | None = None
+) -> tuple[np.ndarray, ...]:
     """Position (m, east and north), heading (deg) and energy (Wh) errors of every valid segment step."""
-    px, py, pe, ph = replay(mission, seg, vehicle=vehicle)
+    px, py, pe, ph = replay(mission, seg, water, vehicle=vehicle)
     v = seg.valid
     dh = np.rad2deg(wrap_angle(ph - seg.obs_heading))
     return (px - seg.obs_x)[v], (py - seg.obs_y)[v], dh[v], (pe - seg.obs_energy_wh)[v]
@@ -320,11 +375,10 @@ def fit_vehicle(
     """MAP fit of the ``[vehicle]`` fields ``fit`` to ``runs`` (:class:`planner.review.logs.LoggedRun`-like)
     flown from scenario start times ``start_times``; priors centred on ``mission.vehicle``.
 
-    Every field is *identified* when its posterior s.d. is below half its prior's
+    A calibration run's log adds its speed curve and water (:func:`_segment_terms`).  Every term is *identified* when its posterior s.d. is below half its prior's
     (:data:`rapt.mapfit.IDENTIFIED_BELOW`, without :func:`rapt.mapfit.fit_map`'s survivor
     rule); the ascent rate is timed on its own (:func:`planner.review.calibration_legs.fit_ascent`).
     """
-    names = tuple(n for n in SEGMENT_FITTED if n in fit)
     unknown = [n for n in fit if n not in FITTED]
     if unknown or not fit:
         raise InputError(
@@ -334,44 +388,94 @@ def fit_vehicle(
     if not seg.valid.any():
         raise InputError("LOGS: no replayable flight in the logs (no telemetry steps with set-points); nothing to fit")
     base = mission.vehicle
-
-    def vehicle_of(theta: np.ndarray) -> Vehicle:
-        return dataclasses.replace(base, **{n: float(v) for n, v in zip(names, theta)})
-
-    def residuals(theta: np.ndarray) -> np.ndarray:
-        dx, dy, dh, de = _residual_parts(mission, seg, vehicle_of(theta))
-        return np.concatenate(
-            [dx / SIGMA_POSITION_M, dy / SIGMA_POSITION_M, dh / SIGMA_HEADING_DEG, de / SIGMA_ENERGY_WH]
-        )
-
+    names = _segment_terms(mission, runs, start_times, fit)
     per_step = np.nonzero(seg.valid)[0]
     blocks = bootstrap_blocks(seg)[per_step]
-    est = (
-        fit_map(
-            residuals,
-            vehicle_priors(base, names),
-            groups=np.concatenate([blocks] * 4),
-            kinds=np.repeat(np.array(["position", "position", "heading", "energy"]), per_step.size),
-            bootstrap=bootstrap,
-            seed=seed,
-            significant=0.0,
-        )
-        if names
-        else empty_estimate()
-    )
+
+    def solve(names: tuple[str, ...], vehicle: Vehicle, bootstrap: int) -> MapEstimate:
+        def residuals(theta: np.ndarray) -> np.ndarray:
+            dx, dy, dh, de = _residual_parts(mission, seg, *with_terms(vehicle, dict(zip(names, theta))))
+            return np.concatenate(
+                [dx / SIGMA_POSITION_M, dy / SIGMA_POSITION_M, dh / SIGMA_HEADING_DEG, de / SIGMA_ENERGY_WH]
+            )
+
+        if not names:
+            return empty_estimate()
+        kinds = np.repeat(np.array(["position", "position", "heading", "energy"]), per_step.size)
+        priors = vehicle_priors(vehicle, names)
+        groups = np.concatenate([blocks] * 4)
+        return fit_map(residuals, priors, groups=groups, kinds=kinds, bootstrap=bootstrap, seed=seed, significant=0.0)
+
+    knots, power = _legs_measured(mission, runs, start_times, names, solve)
+    if knots:  # the rest fitted again with the measured curve and power in place of their terms
+        measured = {p.name: v for p, v, _, _ in power}
+        curve = tuple((float(knot_command(k.prior.name) or 0.0), k.value) for k in knots)
+        base = dataclasses.replace(base, speed_curve=curve, **measured)
+        names = tuple(n for n in names if n not in ("speed_gain", "max_speed", *measured))
+    est = solve(names, base, bootstrap)
+    for k in knots:
+        source = "settled legs" if k.identified else "not identified"
+        est = with_independent(est, k.prior, k.value, k.map_value, k.stderr, k.identified, source)
+    for p, v, map_value, se in power:
+        est = with_independent(est, p, v, map_value, se, True, "settled legs")
     ascent = fit_ascent(mission, runs, base.ascent_rate_mps) if "ascent_rate_mps" in fit else None
     if ascent is not None:
         est = with_ascent(est, ascent)
-    calibrated = dataclasses.replace(base, **{n: float(est.value[n]) for n in est.names})
+    calibrated, water = with_terms(base, {n: float(est.value[n]) for n in est.names})
     paced = seg.substeps is not None and bool(np.any(seg.substeps > 1))
     return Calibration(
         calibrated,
-        base,
+        mission.vehicle,
         est,
-        _rms(_residual_parts(mission, seg, base)),
-        _rms(_residual_parts(mission, seg, calibrated)),
+        _rms(_residual_parts(mission, seg, mission.vehicle)),
+        _rms(_residual_parts(mission, seg, calibrated, water)),
         int(seg.valid.shape[0]),
         int(len(set(seg.run.tolist()))),
         model_share=MODEL_SHARE_PACED if paced else 0.0,
         ascent=ascent,
+        run_water=water,
     )
+
+
+def _segment_terms(mission: Mission, runs: list, start_times: Sequence[float], fit: Sequence[str]) -> tuple[str, ...]:
+    """The terms fitted to the segments: ``fit``'s fields, and a calibration run's water
+    (:func:`planner.review.calibration_terms.water_term`)."""
+    names = tuple(n for n in SEGMENT_FITTED if n in fit)
+    legs = [(r, t) for r, t in zip(runs, start_times) if is_calibration_log(r)]
+    if not legs:
+        return names
+    return (*names, water_term(mission, [r for r, _ in legs], [t for _, t in legs]))
+
+
+def _legs_measured(
+    mission: Mission, runs: list, start_times: Sequence[float], names: tuple[str, ...], solve
+) -> tuple[list, list[tuple[Prior, float, float, float]]]:
+    """A calibration run's measured speed curve (the knots of
+    :func:`planner.review.calibration_terms.fit_curve`; one a cut-short leg left unidentified keeps
+    the file model's speed) and power terms
+    (:func:`~planner.review.calibration_terms.fit_power`), both in the water a first fit finds;
+    ([], an empty fit) when its straight legs do not span
+    :data:`~planner.review.calibration_terms.CURVE_MIN_SPEEDS` settled commanded speeds or the fit
+    has no ``speed_gain`` and ``max_speed`` to replace.  The power terms come as (prior, value,
+    MAP value, standard error) of those identified, :data:`LEG_POWER_SHARE` of each value added to
+    its standard error."""
+    legs = [(r, t) for r, t in zip(runs, start_times) if is_calibration_log(r)]
+    if not legs or not {"speed_gain", "max_speed"} <= set(names):
+        return [], []
+    first = solve(names, mission.vehicle, 0)
+    water = with_terms(mission.vehicle, {n: float(first.value[n]) for n in first.names})[1]
+    cal_runs, cal_starts = [r for r, _ in legs], [t for _, t in legs]
+    knots = fit_curve(mission, cal_runs, cal_starts, water)
+    if sum(k.identified for k in knots) < CURVE_MIN_SPEEDS:
+        return [], []
+    terms = [n for n in POWER_TERMS if n in names]
+    if len(terms) < len(POWER_TERMS):
+        return knots, []
+    power = fit_power(mission, cal_runs, cal_starts, water, vehicle_priors(mission.vehicle, terms))
+    out = []
+    for p in power.priors:
+        v = power.value[p.name]
+        se = float(np.hypot(power.stderr[p.name], LEG_POWER_SHARE * abs(v)))
+        if power.identified[p.name] and se < IDENTIFIED_BELOW * p.sd:
+            out.append((p, v, power.map_value[p.name], se))
+    return knots, out

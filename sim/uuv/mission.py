@@ -91,6 +91,11 @@ class Vehicle:
     The speed loop drives the through-water surge towards ``speed_gain`` times the
     commanded speed, at most ``max_speed`` (1: the vehicle reaches what it is asked; a
     vehicle without a speed loop, e.g. a thruster-throttle ROV, reaches a fixed share).
+    A measured ``speed_curve`` of (commanded, reached) m/s knots replaces that rule where a
+    vehicle's answer is no single gain (a velocity controller that falls short at low
+    speeds and saturates below its nominal top speed): reached speed is interpolated
+    between the knots, from (0, 0), and held at the last knot's beyond it; ``max_speed``
+    then only caps what the autonomy commands.
     Propulsion power is ``drag_w * (speed / cruise_speed)^power_exponent`` plus ``hotel_w``:
     3 is a torpedo's (drag grows with the square of speed, power with its cube); a
     thruster vehicle's draw rises about linearly with speed (exponent near 1), since its
@@ -122,6 +127,7 @@ class Vehicle:
     power_exponent: float = 3.0
     ascent_rate_mps: float = 0.0
     heading_time_s: float = 4.0
+    speed_curve: tuple[tuple[float, float], ...] = ()
 
 
 @dataclass(frozen=True)

@@ -37,6 +37,8 @@ centre.  Keys marked ``=value`` are optional with that default; the others are r
     [vehicle]                     # optional overrides of sim.uuv.mission.Vehicle fields, e.g.
                                   #   speed_gain=1: through-water speed reached per unit commanded
                                   #   (at most max_speed); rapt-plan calibrate fits it from logs
+                                  #   speed_curve=[[1.0, 0.87], [2.0, 1.93]]: measured (commanded,
+                                  #   reached) m/s knots, replacing speed_gain where given
     [current]                     # optional overrides of sim.uuv.mission.Current fields
     [execution_bias]              # optional: the day's water and vehicle as logs showed them
                                   #   (sim.uuv.missionbias; rapt-plan calibrate --bias writes it)
@@ -441,6 +443,23 @@ class _Loader(FieldChecker):
         return requires
 
     # ------------------------------------------------------------------ vehicle and current
+    def speed_curve(self, raw: Any) -> tuple[tuple[float, float], ...]:
+        """``vehicle.speed_curve``: (commanded, reached) m/s pairs, commands > 0 and increasing, speeds >= 0."""
+        where, fix = "vehicle.speed_curve", "write [[commanded, reached], ...] in m/s, commands increasing"
+        if raw == ():
+            return ()
+        if not isinstance(raw, list) or not raw:
+            self.fail(where, f"expected a list of [commanded, reached] pairs, got {raw!r}; {fix}")
+        knots: list[tuple[float, float]] = []
+        for i, pair in enumerate(raw):
+            if not isinstance(pair, list) or len(pair) != 2:
+                self.fail(f"{where}[{i}]", f"expected a [commanded, reached] pair, got {pair!r}; {fix}")
+            cmd, got = (float(self.check_number(v, f"{where}[{i}]")) for v in pair)
+            if cmd <= (knots[-1][0] if knots else 0.0) or got < 0:
+                self.fail(f"{where}[{i}]", f"{pair!r}: commands must be > 0 and increasing, speeds >= 0; {fix}")
+            knots.append((cmd, got))
+        return tuple(knots)
+
     def overrides(self, tbl: Mapping, where: str, cls: type) -> Any:
         defaults = cls()
         fields = {f.name: getattr(defaults, f.name) for f in dataclasses.fields(cls)}
@@ -492,6 +511,7 @@ class _Loader(FieldChecker):
                     "vehicle.heading_time_s",
                     f"{fmt(obj.heading_time_s)} must be > 0; give the seconds the autopilot takes to close a heading error",
                 )
+            obj = dataclasses.replace(obj, speed_curve=self.speed_curve(obj.speed_curve))
             if obj.ascent_rate_mps < 0:
                 self.fail(
                     "vehicle.ascent_rate_mps",

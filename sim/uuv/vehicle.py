@@ -18,7 +18,7 @@ import numpy as np
 from sim.uuv.angles import wrap_angle
 from sim.uuv.mission import Vehicle
 
-__all__ = ["VehicleState", "step_vehicle", "propulsion_power"]
+__all__ = ["VehicleState", "step_vehicle", "propulsion_power", "reached_speed"]
 
 #: Sideslip per unit of (speed x yaw rate): a few degrees of crab angle in a hard turn.
 SWAY_COUPLING = 0.8
@@ -61,6 +61,19 @@ def propulsion_power(spec: Vehicle, speed: np.ndarray) -> np.ndarray:
     return spec.hotel_w + spec.drag_w * (np.abs(speed) / spec.cruise_speed) ** spec.power_exponent
 
 
+def reached_speed(spec: Vehicle, speed_cmd: np.ndarray | float) -> np.ndarray:
+    """The through-water speed the speed loop settles at for a commanded speed (negative: 0).
+
+    ``spec.speed_curve`` when the vehicle has one (interpolated from (0, 0), flat beyond its
+    last knot), else ``speed_gain`` times the command, at most ``max_speed``.
+    """
+    cmd = np.maximum(np.asarray(speed_cmd, dtype=float), 0.0)
+    if spec.speed_curve:
+        knots = np.asarray(spec.speed_curve, dtype=float)
+        return np.interp(cmd, np.concatenate([[0.0], knots[:, 0]]), np.concatenate([[0.0], knots[:, 1]]))
+    return np.minimum(spec.speed_gain * cmd, spec.max_speed)
+
+
 def step_vehicle(
     s: VehicleState,
     spec: Vehicle,
@@ -88,8 +101,7 @@ def step_vehicle(
     a_u = 1.0 - np.exp(-dt / spec.surge_time_constant_s)
     a_v = 1.0 - np.exp(-dt * spec.sway_damping)
     r = s.yaw_rate + (r_des - s.yaw_rate) * a_r
-    # the speed loop's target: speed_gain x the command, at most max_speed (gain 1: clip(cmd, 0, max_speed))
-    target = np.minimum(spec.speed_gain * np.maximum(speed_cmd, 0.0), spec.max_speed)
+    target = reached_speed(spec, speed_cmd)
     u = s.surge + (target * speed_scale - s.surge) * a_u
     v = s.sway + (-SWAY_COUPLING * u * r - s.sway) * a_v
     psi = wrap_angle(s.heading + r * dt)

@@ -6,7 +6,7 @@ import pytest
 from typer.testing import CliRunner
 
 from planner.cli import app
-from planner.review.calibration_legs import NEEDS
+from planner.review.calibration_terms import term_need
 from tests.planner.review.test_calibration_legs import cut_run, fake_log, fly_legs, thruster_missions
 
 
@@ -35,6 +35,7 @@ def test_the_command_refuses_in_one_line_and_names_what_is_kept_when_told(missio
     kept = runner.invoke(app, ["calibrate", str(file_path), str(log), "--out", str(out), "--keep-unidentified"])
     assert kept.exit_code == 0, kept.output
     assert (
-        f"to identify max_speed: {NEEDS['max_speed']}" in kept.output and "watchdog took over: battery" in kept.output
+        f"to identify speed_curve[1.8]: {term_need('speed_curve[1.8]')[0]}" in kept.output
+        and "watchdog took over: battery" in kept.output
     )
     assert out.exists()

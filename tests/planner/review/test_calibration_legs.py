@@ -20,9 +20,11 @@ import pytest
 import planner.review.calibrate as calibration
 import sim.uuv
 from planner.review.calibrate import calibrate
-from planner.review.calibration_legs import NEEDS, cut_legs, is_calibration_log
+from planner.review.calibration_legs import cut_legs, is_calibration_log
+from planner.review.calibration_terms import is_water, knot_command, knot_name, term_need
 from planner.review.vehicle_fit import FITTED, fit_vehicle
 from rapt.errors import InputError
+from sim.uuv.bias import Bias
 from sim.uuv.scenario import make_scenarios
 from sim.uuv.world import World
 from tests.support.simlogs import SimRun
@@ -92,12 +94,13 @@ def missions(tmp_path_factory):
     return thruster_missions(tmp_path_factory.mktemp("thruster"))
 
 
-def fly_legs(mission, truth) -> tuple[SimRun, float, np.ndarray]:
-    """The legs flown by ``truth`` in the batch world (lock-step, as SIL logs it): a run, its start time, its row."""
+def fly_legs(mission, truth, water: Bias | None = None) -> tuple[SimRun, float, np.ndarray]:
+    """The legs flown by ``truth`` in the batch world (lock-step, as SIL logs it) in ``water`` (default:
+    the tide table's): a run, its start time, its row."""
     u = np.full(mission.dim, 0.5)
     scen = make_scenarios(mission, u[None, :])
     assert scen.valid[0]
-    world = World(scen, plant=truth)
+    world = World(scen, plant=truth, bias=water)
     one = np.ones(1, dtype=bool)
     dt = mission.dt
     steps, sps = [], []
@@ -150,11 +153,24 @@ def test_the_log_is_a_calibration_run_with_legs_flown_to_their_end(missions, flo
     assert run.steps[fast, 6] == pytest.approx(TRUE_BLOCK["max_speed"], abs=0.01)
 
 
+def truth_of(name: str) -> float:
+    """The flown vehicle's value of a fitted term: a field, its settled speed at a knot's command, or the water."""
+    cmd = knot_command(name)
+    if cmd is not None:
+        return min(TRUE_BLOCK["speed_gain"] * cmd, TRUE_BLOCK["max_speed"])
+    if is_water(name):
+        return 1.0  # the batch world flew the tide table's current
+    return TRUE_BLOCK[name]
+
+
 def test_one_calibration_log_identifies_every_parameter_of_a_thruster_vehicle(fitted):
     est = fitted.estimate
-    assert set(est.names) == set(FITTED)
-    for n in FITTED:
-        truth, got, se = TRUE_BLOCK[n], getattr(fitted.vehicle, n), fitted.stderr[n]
+    # the measured speed curve replaces speed_gain and max_speed, one knot per commanded speed, and the
+    # current the run flew in is fitted beside the vehicle
+    knots = {knot_name(v) for *_, v, _, _ in LEGS if v > 0}
+    assert set(est.names) == (set(FITTED) - {"speed_gain", "max_speed"}) | knots | {"water.current_scale"}
+    for n in est.names:
+        truth, got, se = truth_of(n), fitted.value(n), fitted.stderr[n]
         assert est.identified[n], (n, est.stderr[n], fitted.unidentified)
         # identified: posterior s.d. below half the prior's
         prior = next(p for p in est.priors if p.name == n)
@@ -172,6 +188,29 @@ def test_a_cubic_model_cannot_fit_the_thruster_draw(missions, flown, fitted):
     run, start, _ = flown
     cubic = fit_vehicle(mission, [run], [start], fit=[n for n in FITTED if n != "power_exponent"], bootstrap=0)
     assert cubic.rms_after["energy_wh"] > 5 * fitted.rms_after["energy_wh"]
+
+
+def test_the_water_the_run_flew_in_is_fitted_beside_the_vehicle_and_written(missions, tmp_path, monkeypatch):
+    """A vehicle in slack water where the tide table says 1 m/s (as on the firmware): the run's legs
+    tell the current from the vehicle, so the speeds come out right and the file gets the water."""
+    file_path, file_mission, true_mission = missions
+    run, start, _ = fly_legs(file_mission, true_mission.vehicle, Bias(current_scale=0.0))
+    log = fake_log(tmp_path, monkeypatch, run)
+    out = tmp_path / "slack.toml"
+    result = calibrate(file_path, [log], out, bootstrap=0)
+    assert result.estimate.identified["water.current_scale"]
+    assert abs(result.value("water.current_scale")) < 3 * result.stderr["water.current_scale"] + 0.02
+    for cmd in (0.9, 1.3, 1.8):
+        assert result.value(knot_name(cmd)) == pytest.approx(truth_of(knot_name(cmd)), abs=0.02)
+    cal = sim.uuv.load_mission(out)
+    assert cal.execution_bias.current_scale == pytest.approx(0.0, abs=0.05)
+    assert "calibration run calibration.mcap" in (cal.execution_bias_source or "")
+    # the same legs fitted in the table's water (no water term: not read as a calibration run) fit worse
+    naive_run = dataclasses.replace(run, meta={**run.meta, "legs": []})
+    naive = fit_vehicle(
+        file_mission, [naive_run], [start], fit=[n for n in FITTED if n != "ascent_rate_mps"], bootstrap=0
+    )
+    assert naive.rms_after["position_m"] > 3 * result.rms_after["position_m"]
 
 
 # -- the command: one log is enough; legs cut short write nothing ---------------------------------
@@ -221,18 +260,22 @@ def test_legs_cut_short_by_the_watchdog_write_nothing_and_say_which(missions, fl
         calibrate(file_path, [log], out, bootstrap=0)
     msg = str(e.value)
     assert "\n" not in msg and "--keep-unidentified" in msg and "nothing written" in msg
-    assert "max_speed" in msg and "ascent_rate_mps" in msg and "the watchdog took over: operational_area" in msg
+    # the curve's fastest knot (its leg was cut) and the ascent
+    assert "speed_curve[1.8]" in msg and "ascent_rate_mps" in msg and "the watchdog took over: operational_area" in msg
     assert "'speed-1.8'" in msg and "'ascent'" in msg
     assert not out.exists() and not out.with_suffix(".json").exists()
     # told to keep them: written, those at the file's values, and the header and sidecar say which and why
     result = calibrate(file_path, [log], out, bootstrap=0, keep_unidentified=True)
     kept = result.unidentified
-    assert {"max_speed", "ascent_rate_mps"} <= set(kept)
-    assert kept["max_speed"].startswith(NEEDS["max_speed"]) and "cut short" in kept["max_speed"]
+    assert {"speed_curve[1.8]", "ascent_rate_mps"} <= set(kept)
+    need = term_need("speed_curve[1.8]")[0]
+    assert kept["speed_curve[1.8]"].startswith(need) and "cut short" in kept["speed_curve[1.8]"]
     cal = sim.uuv.load_mission(out)
-    assert cal.vehicle.max_speed == FILE_BLOCK["max_speed"] and cal.vehicle.ascent_rate_mps == 0.0
+    # the knot keeps the file's vehicle's speed at 1.8 m/s (speed_gain 1, at most max_speed), the ascent its 0
+    assert cal.vehicle.speed_curve[-1] == (1.8, FILE_BLOCK["max_speed"]) and cal.vehicle.ascent_rate_mps == 0.0
+    assert [c for c, _ in cal.vehicle.speed_curve] == [0.5, 0.9, 1.3, 1.8]
     text = out.read_text()
-    assert f"#   to identify max_speed: {NEEDS['max_speed']}" in text and "watchdog took over" in text
+    assert f"#   to identify speed_curve[1.8]: {need}" in text and "watchdog took over" in text
     side = json.loads(out.with_suffix(".json").read_text())
     assert {c["name"] for c in side["cut_short_legs"]} >= {"speed-1.8", "ascent", "dive"}
 

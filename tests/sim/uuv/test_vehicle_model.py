@@ -14,7 +14,7 @@ from rapt.errors import InputError
 from sim.uuv.interface import DEPTH_M
 from sim.uuv.scenario import make_scenarios
 from sim.uuv.simulate import TRAJECTORY_FIELDS
-from sim.uuv.vehicle import propulsion_power
+from sim.uuv.vehicle import propulsion_power, reached_speed
 from sim.uuv.world import World
 
 MISSION = Path(__file__).resolve().parents[3] / "examples" / "range2017.toml"
@@ -105,3 +105,40 @@ def test_bad_exponent_or_ascent_rate_is_a_one_line_error_naming_the_field(tmp_pa
         sim.uuv.load_mission(_with_vehicle_lines(tmp_path, line))
     msg = str(e.value)
     assert field in msg and "\n" not in msg
+
+
+# -- a measured speed curve -----------------------------------------------------------------------
+CURVE = "speed_curve = [[1.0, 0.87], [2.0, 1.95], [3.0, 1.6]]"
+
+
+def test_a_speed_curve_sets_the_speed_each_command_settles_at(mission, tmp_path):
+    """Knots interpolate from (0, 0), hold beyond the last and may fall (a controller that saturates
+    and then loses speed): no speed_gain x command capped at max_speed says that."""
+    curved = sim.uuv.load_mission(_with_vehicle_lines(tmp_path, CURVE)).vehicle
+    assert curved.speed_curve == ((1.0, 0.87), (2.0, 1.95), (3.0, 1.6))
+    got = reached_speed(curved, np.array([-1.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 5.0]))
+    assert got == pytest.approx([0.0, 0.435, 0.87, 1.41, 1.95, 1.775, 1.6, 1.6])
+    # without a curve: speed_gain x the command, at most max_speed
+    plain = dataclasses.replace(mission.vehicle, speed_gain=0.8, max_speed=1.5)
+    assert reached_speed(plain, np.array([1.0, 3.0])) == pytest.approx([0.8, 1.5])
+
+
+def test_a_vehicle_with_a_curve_settles_where_the_curve_says(mission, tmp_path):
+    curved = sim.uuv.load_mission(_with_vehicle_lines(tmp_path, CURVE))
+    scen = make_scenarios(curved, np.full((3, curved.dim), 0.5))
+    world = World(scen)
+    speeds = np.array([1.0, 2.0, 3.0])
+    for k in range(60):  # 120 s: 30 surge time constants
+        world.advance(k * curved.dt, world.state.heading.copy(), speeds, np.zeros(3, dtype=bool), np.ones(3, bool))
+    assert world.state.surge == pytest.approx([0.87, 1.95, 1.6], rel=1e-6)
+
+
+@pytest.mark.parametrize(
+    "value",
+    ["[[1.0, 0.87], [0.5, 1.0]]", "[[0.0, 0.5]]", "[[1.0, -0.1]]", "[[1.0]]", "[1.0, 2.0]", '"fast"', "[]"],
+)
+def test_a_bad_speed_curve_is_a_one_line_error_naming_the_knot(tmp_path, value):
+    with pytest.raises(InputError) as e:
+        sim.uuv.load_mission(_with_vehicle_lines(tmp_path, f"speed_curve = {value}"))
+    msg = str(e.value)
+    assert "vehicle.speed_curve" in msg and "\n" not in msg and "[[commanded, reached]" in msg

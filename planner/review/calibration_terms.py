@@ -1,0 +1,294 @@
+"""The terms a calibration run adds to the vehicle fit: a measured speed curve and the water it flew in.
+
+A calibration run (``rapt-plan shakedown``) flies straight legs at several commanded speeds
+on headings that come back on themselves.  Two things follow that plan runs at one cruise
+speed cannot give:
+
+- **The speed curve.**  A vehicle's velocity controller is seldom one gain of the command
+  with one time constant: ArduSub's jumps to two thirds of a new speed in a few seconds,
+  then creeps for a minute to what was asked (1 m/s for 1, 1.96 for 2), and saturates near
+  2 m/s beyond.  A first-order model fitted to the whole leg splits the difference (a gain
+  of 0.86), and a plan made with it has the vehicle 12 % slow for its whole mission.  So
+  with straight legs at :data:`CURVE_MIN_SPEEDS` or more commanded speeds the speed it
+  settles at is measured on each leg's settled part (:func:`fit_curve`: the through-water
+  speed along the heading over the leg's last :data:`SETTLED_SHARE`, in the fitted water):
+  ``speed_curve[2]`` is the m/s reached when 2 m/s is commanded, written as the file's
+  ``[vehicle] speed_curve``, which then replaces ``speed_gain`` and ``max_speed`` in the
+  vehicle's dynamics.
+- **The water.**  Fitting a vehicle in water it was not in turns a current into a speed
+  gain: the firmware feels no tide where the tide table says 0.2 m/s, and a fit in the
+  table's water calls the vehicle 10 % slower than it is.  The run's out-and-back legs tell
+  the current from the vehicle, so the current is fitted beside it: as ``current_scale``
+  (the true tide over the table's) when the table's current during the run is at least
+  :data:`TIDE_FOR_SCALE_MPS`, else as ``current_offset`` (m/s along the flood direction),
+  the one a current the table says is slack can show.  ``rapt-plan calibrate`` writes it
+  into the calibrated file's ``[execution_bias]``.
+
+Term names are ``speed_curve[<commanded m/s>]`` and ``water.<bias field>``; the fit's other
+names are ``[vehicle]`` fields.  :func:`term_value` and :func:`with_terms` read and set any
+of them on a vehicle and a bias.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import re
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from planner.review.calibration_legs import legs_of
+from rapt.mapfit import IDENTIFIED_BELOW, MapEstimate, Prior, fit_map
+from sim.uuv.bias import Bias, compose
+from sim.uuv.environment import tidal_current
+from sim.uuv.interface import HJ_PER_WH
+from sim.uuv.mission import Mission, Vehicle
+from sim.uuv.vehicle import reached_speed
+
+__all__ = [
+    "CURVE_MIN_SPEEDS",
+    "TIDE_FOR_SCALE_MPS",
+    "knot_name",
+    "knot_command",
+    "water_name",
+    "is_water",
+    "water_term",
+    "term_value",
+    "with_terms",
+    "term_prior",
+    "term_unit",
+    "term_need",
+    "KnotFit",
+    "fit_curve",
+    "fit_power",
+    "POWER_TERMS",
+]
+
+#: Fewest distinct commanded speeds of straight legs that make a curve worth fitting.
+CURVE_MIN_SPEEDS = 3
+#: The tide table's mean current (m/s) during the calibration legs above which the water is
+#: fitted as a scale of the table; below it the table's tide is too weak to scale.
+TIDE_FOR_SCALE_MPS = 0.1
+#: Prior s.d. of a knot's reached speed as a share of the file model's (the vehicle fit's 30 %),
+#: and its floor in m/s.
+KNOT_SHARE, KNOT_SD_FLOOR = 0.3, 0.1
+#: Priors of the water terms: (centre, s.d., low, high).  A tide table off by half its
+#: amplitude, or a quarter-knot current it does not list, is what a range expects.
+WATER_PRIORS = {"current_scale": (1.0, 0.5, 0.0, 3.0), "current_offset": (0.0, 0.3, -2.0, 2.0)}
+#: The share of a straight leg, at its end, over which its speed counts as settled.
+SETTLED_SHARE = 0.5
+#: Consecutive steps per block of the settled speeds' standard error (neighbouring steps share
+#: the controller's slow wander, so they are not independent draws).
+SE_BLOCK = 3
+#: The power terms measured on the legs when a curve is: ``hotel_w + drag_w (v / cruise)^power_exponent``.
+POWER_TERMS = ("hotel_w", "drag_w", "power_exponent")
+#: Nominal error of a leg's settled power (W); the fit estimates the actual scale.
+SIGMA_POWER_W = 10.0
+#: Smallest standard error of a settled speed (m/s): what a position fix's noise and the
+#: model's own approximation leave however steady the leg.
+SE_FLOOR_MPS = 0.01
+#: Commanded speeds (m/s) this close are one knot.
+SAME_COMMAND = 0.05
+_KNOT = re.compile(r"^speed_curve\[([0-9.eE+-]+)\]$")
+_WATER = "water."
+
+
+def knot_name(command: float) -> str:
+    return f"speed_curve[{command:g}]"
+
+
+def knot_command(name: str) -> float | None:
+    """The commanded speed of a knot's name, None for any other name."""
+    m = _KNOT.match(name)
+    return float(m.group(1)) if m else None
+
+
+def water_name(field: str) -> str:
+    return _WATER + field
+
+
+def is_water(name: str) -> bool:
+    return name.startswith(_WATER)
+
+
+def water_term(mission: Mission, runs: Sequence, start_times: Sequence[float]) -> str:
+    """``water.current_scale`` when the table's current over the calibration legs averages
+    :data:`TIDE_FOR_SCALE_MPS` or more, else ``water.current_offset``."""
+    speeds = []
+    b = mission.execution_bias
+    for run, t0 in zip(runs, start_times):
+        legs = legs_of(run)
+        if not legs:
+            continue
+        t = np.linspace(min(leg["t0_s"] for leg in legs), max(leg["t1_s"] for leg in legs), 50)
+        ce, cn = tidal_current(mission.current, t0 + b.start_time + t, b.current_scale, b.current_offset)
+        speeds.append(np.hypot(ce, cn))
+    strong = bool(speeds) and float(np.mean(np.concatenate(speeds))) >= TIDE_FOR_SCALE_MPS
+    return water_name("current_scale" if strong else "current_offset")
+
+
+def term_value(vehicle: Vehicle, water: Bias, name: str) -> float:
+    """A term's value: a ``[vehicle]`` field, the reached speed at a knot's command, or a water field."""
+    cmd = knot_command(name)
+    if cmd is not None:
+        return float(reached_speed(vehicle, cmd))
+    if is_water(name):
+        return float(getattr(water, name[len(_WATER) :]))
+    return float(getattr(vehicle, name))
+
+
+def with_terms(vehicle: Vehicle, values: Mapping[str, float]) -> tuple[Vehicle, Bias]:
+    """``vehicle`` with ``values``' fields and knots set, and the (relative) water bias of its water terms.
+
+    Knots given replace the vehicle's whole speed curve: they are the curve.
+    """
+    fields: dict[str, float] = {}
+    knots: list[tuple[float, float]] = []
+    water: dict[str, float] = {}
+    for n, v in values.items():
+        cmd = knot_command(n)
+        if cmd is not None:
+            knots.append((cmd, max(float(v), 0.0)))
+        elif is_water(n):
+            water[n[len(_WATER) :]] = float(v)
+        else:
+            fields[n] = float(v)
+    out = dataclasses.replace(vehicle, **fields)  # type: ignore[arg-type]  # float fields only
+    if knots:
+        out = dataclasses.replace(out, speed_curve=tuple(sorted(knots)))
+    return out, Bias(**water)
+
+
+def term_prior(vehicle: Vehicle, name: str) -> Prior:
+    """The prior of a knot (centred on the file model's reached speed) or a water term."""
+    cmd = knot_command(name)
+    if cmd is not None:
+        c = float(reached_speed(vehicle, cmd))
+        sd = max(KNOT_SHARE * c, KNOT_SD_FLOOR)
+        return Prior(name, c, sd, 0.0, max(4.0 * c, c + 5 * sd, 1.5 * cmd))
+    centre, sd, low, high = WATER_PRIORS[name[len(_WATER) :]]
+    return Prior(name, centre, sd, low, high)
+
+
+def term_unit(name: str) -> str:
+    if knot_command(name) is not None:
+        return "m/s"
+    return "x" if name.endswith("scale") else "m/s"
+
+
+def term_need(name: str) -> tuple[str, tuple[str, ...]]:
+    """The leg that identifies a knot or water term, and the leg kinds that are it."""
+    cmd = knot_command(name)
+    if cmd is not None:
+        return f"a straight leg commanded at {cmd:g} m/s, long enough to settle", ("straight",)
+    return "straight legs on opposite headings (out and back)", ("straight",)
+
+
+@dataclass
+class KnotFit:
+    """The settled speed at one commanded speed, with its prior and posterior (as the ascent rate's)."""
+
+    prior: Prior
+    value: float  # identified: the posterior mean; otherwise the file model's reached speed
+    map_value: float
+    stderr: float
+    identified: bool
+    steps: int  # settled steps measured
+    note: str  # why not identified ("" when it is)
+
+
+def _settled(mission: Mission, run, t0: float, water: Bias, leg: dict) -> tuple[float, np.ndarray, float]:
+    """A ``leg``'s mean commanded speed, its through-water speeds along the heading and its mean
+    electrical power (W), over its settled, flown, submerged steps (NaN and none when too few)."""
+    s, sp = run.steps, run.setpoints
+    t = s[:, 0]
+    start = leg["t1_s"] - SETTLED_SHARE * (leg["t1_s"] - leg["t0_s"])
+    keep = (t >= start) & (t <= leg["t1_s"]) & np.isfinite(sp[:, 1]) & (np.nan_to_num(sp[:, 2], nan=0.0) < 0.5)
+    if t.size < 3 or keep.sum() < 2:
+        return math.nan, np.zeros(0), math.nan
+    b = compose(mission.execution_bias, water)
+    ve, vn = np.gradient(s[:, 1], t), np.gradient(s[:, 2], t)
+    ce, cn = tidal_current(mission.current, t0 + b.start_time + t, b.current_scale, b.current_offset)
+    course = s[:, 3] + np.deg2rad(b.heading)
+    surge = (ve - ce) * np.sin(course) + (vn - cn) * np.cos(course)
+    first, last = np.flatnonzero(keep)[[0, -1]]
+    power = (s[last, 4] - s[first, 4]) / HJ_PER_WH * 3600.0 / (t[last] - t[first])
+    return float(np.mean(sp[keep, 1])), surge[keep], float(power)
+
+
+def _knot(prior: Prior, cmd: float, v: np.ndarray) -> KnotFit:
+    """The settled speeds ``v`` at ``cmd`` combined with the knot's prior (as the ascent rate's)."""
+    blocks = v.size // SE_BLOCK
+    if blocks < 2:
+        note = f"{v.size} settled step(s) at {cmd:g} m/s: too few to measure the speed"
+        return KnotFit(prior, prior.centre, prior.centre, prior.sd, False, int(v.size), note)
+    means = v[: blocks * SE_BLOCK].reshape(blocks, SE_BLOCK).mean(axis=1)
+    se = max(float(means.std(ddof=1)) / math.sqrt(blocks), SE_FLOOR_MPS)
+    w_data, w_prior = 1 / se**2, 1 / prior.sd**2
+    post = min(max((float(v.mean()) * w_data + prior.centre * w_prior) / (w_data + w_prior), prior.low), prior.high)
+    post_sd = 1 / math.sqrt(w_data + w_prior)
+    ident = post_sd < IDENTIFIED_BELOW * prior.sd
+    note = "" if ident else f"the speed at {cmd:g} m/s wanders too much over its leg to settle"
+    return KnotFit(prior, post if ident else prior.centre, post, post_sd, ident, int(v.size), note)
+
+
+def fit_curve(mission: Mission, runs: Sequence, start_times: Sequence[float], water: Bias) -> list[KnotFit]:
+    """One :class:`KnotFit` per commanded speed of the calibration runs' straight legs, ascending.
+
+    Each leg's command is the mean set-point over its settled part (a leg crabbing against
+    the tide table commands a little more or less than its nominal speed); legs within
+    :data:`SAME_COMMAND` m/s of each other are pooled.  The settled speeds' mean, with a
+    standard error from means of :data:`SE_BLOCK`-step blocks, is combined with the knot's
+    prior (:func:`term_prior`); identified when the posterior s.d. is below
+    :data:`rapt.mapfit.IDENTIFIED_BELOW` of the prior's.
+    """
+    pooled: list[tuple[float, list[np.ndarray]]] = []
+    for run, t0 in zip(runs, start_times):
+        for leg in legs_of(run):
+            if leg["kind"] != "straight":
+                continue
+            cmd, v, _ = _settled(mission, run, t0, water, leg)
+            if not math.isfinite(cmd):  # cut short before it settled: a knot still to measure
+                cmd = float(leg.get("speed", math.nan))
+            if not math.isfinite(cmd) or cmd <= 0:
+                continue
+            near = next((g for g in pooled if abs(g[0] - cmd) <= SAME_COMMAND), None)
+            if near is None:
+                pooled.append((cmd, [v]))
+            else:
+                near[1].append(v)
+    out = []
+    for cmd, vs in sorted(pooled, key=lambda g: g[0]):
+        cmd = round(cmd, 3)
+        out.append(_knot(term_prior(mission.vehicle, knot_name(cmd)), cmd, np.concatenate(vs)))
+    return out
+
+
+def fit_power(
+    mission: Mission, runs: Sequence, start_times: Sequence[float], water: Bias, priors: Sequence[Prior]
+) -> MapEstimate:
+    """The power terms (:data:`POWER_TERMS`, ``priors`` in that order) fitted to each straight and
+    hold leg's settled (speed, power): the hold gives the hotel load, the speeds the curve above it.
+
+    A leg's settled power is its energy used over its settled part; its speed the mean
+    through-water speed there.  The MAP fit and its identification are
+    :func:`rapt.mapfit.fit_map`'s, a leg one residual.
+    """
+    points = []
+    for run, t0 in zip(runs, start_times):
+        for leg in legs_of(run):
+            if leg["kind"] in ("straight", "hold"):
+                _, v, watts = _settled(mission, run, t0, water, leg)
+                if v.size >= 2 and math.isfinite(watts):
+                    points.append((abs(float(v.mean())), watts))
+    speed = np.array([v for v, _ in points], dtype=float)
+    used = np.array([w for _, w in points], dtype=float)
+    cruise = mission.vehicle.cruise_speed
+
+    def residuals(theta: np.ndarray) -> np.ndarray:
+        hotel, drag, k = theta
+        return (hotel + drag * (speed / cruise) ** k - used) / SIGMA_POWER_W
+
+    return fit_map(residuals, priors, significant=0.0)
