@@ -158,14 +158,16 @@ def compare(plan: Path, logs: Path, out: Path, *extra: str) -> dict | None:
     return json.loads((out / "comparison.json").read_text())
 
 
-def track_errors(mission, u, run, driver=None) -> tuple[float, float]:
+def track_errors(mission, u, run, driver=None, plant=None) -> tuple[float, float]:
     """RMS path error (m) of ``run``'s logged track against ``mission``'s prediction of row ``u`` (at the same
-    times), and the energy used by the log's last step as a share of the logged energy (predicted / logged - 1)."""
+    times), and the energy used by the log's last step as a share of the logged energy (predicted / logged - 1).
+    ``plant`` flies in ``mission``'s water while the autonomy believes ``mission.vehicle``."""
     import numpy as np
 
     import sim.uuv
 
-    pred = sim.uuv.simulate(mission, np.asarray(u, float)[None, :], trajectories=True, driver=driver).trajectory(0)
+    row = np.asarray(u, float)[None, :]
+    pred = sim.uuv.simulate(mission, row, trajectories=True, driver=driver, plant=plant).trajectory(0)
     track = run.steps
     if pred is None or not track.shape[0]:
         return float("nan"), float("nan")
@@ -178,7 +180,8 @@ def track_errors(mission, u, run, driver=None) -> tuple[float, float]:
 
 
 def repredictions(here: Path) -> dict:
-    """The calibration run and the committed plan's flights re-predicted with the calibrated vehicle."""
+    """The calibration run and the committed plan's flights re-predicted with the calibrated vehicle in the
+    calibrated file's water, their back-seat believing the vehicle and tide table it flew with."""
     import numpy as np
 
     import sim.uuv
@@ -191,8 +194,9 @@ def repredictions(here: Path) -> dict:
     entry = design.scenario("shakedown")
     run = read_run(here / "morning" / "shakedown.mcap")
     driver = leg_driver(legs_from_json(entry["legs"]))
-    flown = dataclasses_replace_vehicle(design.mission, calibrated.vehicle)  # the gauge the run counted from
-    out = {"shakedown": dict(zip(("path_m", "energy"), track_errors(flown, entry["u"], run, driver)))}
+    flown = in_the_days_water(design.mission, calibrated)
+    plant = gauge_of(design.mission, calibrated.vehicle)
+    out = {"shakedown": dict(zip(("path_m", "energy"), track_errors(flown, entry["u"], run, driver, plant)))}
     out["shakedown_before"] = dict(zip(("path_m", "energy"), track_errors(design.mission, entry["u"], run, driver)))
     committed = load_plan(COMMITTED)
     rows = []
@@ -200,7 +204,8 @@ def repredictions(here: Path) -> dict:
         sid = log.stem
         run = read_run(log)
         before = track_errors(committed.mission, committed.u(sid), run)
-        after = track_errors(dataclasses_replace_vehicle(committed.mission, calibrated.vehicle), committed.u(sid), run)
+        flown, plant = in_the_days_water(committed.mission, calibrated), gauge_of(committed.mission, calibrated.vehicle)
+        after = track_errors(flown, committed.u(sid), run, plant=plant)
         rows.append({"scenario": sid, "path_before_m": before[0], "path_after_m": after[0],
                      "energy_before": before[1], "energy_after": after[1]})  # fmt: skip
     out["committed"] = rows
@@ -209,12 +214,20 @@ def repredictions(here: Path) -> dict:
     return out
 
 
-def dataclasses_replace_vehicle(mission, vehicle):
-    """``mission`` flying ``vehicle``'s dynamics and power (the committed plan's scenarios on the calibrated
-    vehicle) with the battery those flights' virtual gauge counted from: the committed mission's."""
+def gauge_of(mission, vehicle):
+    """``vehicle``'s dynamics and power with the battery the flights' virtual gauge counted from: ``mission``'s."""
     import dataclasses
 
-    return dataclasses.replace(mission, vehicle=dataclasses.replace(vehicle, battery_wh=mission.vehicle.battery_wh))
+    return dataclasses.replace(vehicle, battery_wh=mission.vehicle.battery_wh)
+
+
+def in_the_days_water(mission, calibrated):
+    """``mission`` (its autonomy, tide table and vehicle as flown) in the water the calibrated file measured."""
+    import dataclasses
+
+    return dataclasses.replace(
+        mission, execution_bias=calibrated.execution_bias, execution_bias_source=calibrated.execution_bias_source
+    )
 
 
 def pct(v) -> str:

@@ -21,7 +21,9 @@ __all__ = ["Flight", "is_plan", "flight_from_plan"]
 class Flight:
     """What to fly: one scenario of a mission, and where it came from (both go into the log).
 
-    ``legs`` (a calibration run's, :mod:`sim.uuv.legs`) are flown in place of the mission's autonomy."""
+    ``legs`` (a calibration run's, :mod:`sim.uuv.legs`) are flown in place of the mission's autonomy;
+    ``route`` is where its legs begin on the predicted track, then the recovery point (x, y m), which
+    bring-up uploads as the vehicle's mission in place of the mission's waypoints."""
 
     mission: Mission
     u: np.ndarray  # the scenario's unit-cube row
@@ -29,6 +31,7 @@ class Flight:
     mission_file: str
     plan_id: str = ""
     legs: tuple[Leg, ...] = ()
+    route: tuple[tuple[float, float], ...] = ()
 
 
 def is_plan(path: Path) -> bool:
@@ -45,4 +48,17 @@ def flight_from_plan(path: Path, scenario_id: str | None) -> Flight:
     scenario = plan.scenario(scenario_id)
     mission, u = plan.mission, plan.u(scenario["id"])
     legs = legs_from_json(scenario["legs"]) if "legs" in scenario else ()
-    return Flight(mission, u, scenario["id"], str(plan.mission_file), plan.id, legs)
+    route = _leg_route(scenario, mission) if legs else ()
+    return Flight(mission, u, scenario["id"], str(plan.mission_file), plan.id, legs, route)
+
+
+def _leg_route(scenario: dict, mission: Mission) -> tuple[tuple[float, float], ...]:
+    """Where each leg begins on the scenario's predicted track, then the recovery point."""
+    track = scenario.get("predicted", {}).get("track", {})
+    fields, rows = track.get("fields", []), np.asarray(track.get("rows", []), dtype=float)
+    if rows.ndim != 2 or rows.shape[0] == 0 or not {"t", "x", "y"} <= set(fields):
+        return ()
+    t, x, y = (rows[:, fields.index(k)] for k in ("t", "x", "y"))
+    starts = [float(leg["start_s"]) for leg in scenario["legs"]]
+    points = [(float(np.interp(s, t, x)), float(np.interp(s, t, y))) for s in starts]
+    return (*points, (float(mission.recovery[0]), float(mission.recovery[1])))

@@ -134,8 +134,8 @@ def term_value(vehicle: Vehicle, water: Bias, name: str) -> float:
     cmd = knot_command(name)
     if cmd is not None:
         return float(reached_speed(vehicle, cmd))
-    if is_water(name):
-        return float(getattr(water, name[len(_WATER) :]))
+    if is_water(name):  # to a micro-unit: a fit pressed against its bound reads 0, not 1e-16
+        return round(float(getattr(water, name[len(_WATER) :])), 6)
     return float(getattr(vehicle, name))
 
 

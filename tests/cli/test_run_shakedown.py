@@ -3,16 +3,19 @@ loopback MAVLink with the whole vehicle stack; each ends recovered and its log s
 
 from __future__ import annotations
 
+import math
 import re
 from pathlib import Path
 
 import pytest
 from typer.testing import CliRunner
 
+from bridge.mission_upload import MissionItem
 from planner.cli import app
 from planner.fly.flight import flight_from_plan
 from planner.fly.vehicle.run import run_vehicle
 from planner.review.logs import read_run
+from sim.uuv.geo import LocalFrame
 from sim.uuv.metrics import metric_names
 from tests.support.bare_vehicle import bare_vehicle
 
@@ -58,9 +61,17 @@ def test_on_a_bare_autopilot_it_ends_recovered_and_the_log_carries_its_legs(plan
     """Vehicle-paced: real depth (the ascent rises, the dive goes back down), its own clock, the watchdog on."""
     flight = flight_from_plan(plan, "shakedown")
     log = tmp_path / "vehicle.mcap"
-    with bare_vehicle(flight.mission, flight.u, speedup=25.0) as (connection, _):
+    with bare_vehicle(flight.mission, flight.u, speedup=25.0) as (connection, fs):
         result = run_vehicle(flight, connection, log_path=log, timeout_s=120)
+        uploaded = [MissionItem.from_message(m) for m in fs.mission_items]
     assert result.ended == "recovered" and not result.watchdog, (result.ended, result.watchdog)
+    # the vehicle's mission is the run's route: home, where each leg starts (at depth), recovery on top
+    frame = LocalFrame(flight.mission.origin_lat, flight.mission.origin_lon)
+    assert len(flight.route) == len(flight.legs) + 1 and len(uploaded) == len(flight.route) + 1
+    for item, (x, y) in zip(uploaded[1:], flight.route):
+        east, north = frame.to_local(item.x * 1e-7, item.y * 1e-7)
+        assert math.hypot(east - x, north - y) < 1.0
+    assert uploaded[-1].z == 0.0 and all(item.z < 0 for item in uploaded[1:-1])
     names = metric_names(flight.mission)
     assert result.scores[names.index("recovery")] == 1 and result.sim_s <= 15 * 60
     legs = {leg["name"]: leg for leg in _legs_of(log)}

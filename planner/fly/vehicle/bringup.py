@@ -16,7 +16,7 @@ import json
 import math
 import os
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import asdict, dataclass, field
 from typing import Any, NoReturn
 
@@ -79,11 +79,21 @@ class BringUpTimeouts:
         return BringUpTimeouts(**{k: v * factor for k, v in asdict(self).items()})
 
 
-def mission_items(mission: Mission, home: tuple[float, float]) -> list[MissionItem]:
-    """The scenario's route as mission items: home (seq 0, ArduPilot's), waypoints at depth, recovery on top."""
+def mission_items(
+    mission: Mission, home: tuple[float, float], route: Sequence[tuple[float, float]] = ()
+) -> list[MissionItem]:
+    """The scenario's route as mission items: home (seq 0, ArduPilot's), waypoints at depth, recovery on top.
+
+    ``route`` (a calibration run's leg starts, ending at the recovery point) replaces the
+    mission's waypoints and recovery: what the vehicle will fly is what its mission shows.
+    """
     frame = LocalFrame(mission.origin_lat, mission.origin_lon)
-    points = [(*frame.to_latlon(x, y), -DEPTH_M) for x, y in mission.waypoints]
-    points.append((*frame.to_latlon(*mission.recovery), 0.0))
+    if route:
+        points = [(*frame.to_latlon(x, y), -DEPTH_M) for x, y in route[:-1]]
+        points.append((*frame.to_latlon(*route[-1]), 0.0))
+    else:
+        points = [(*frame.to_latlon(x, y), -DEPTH_M) for x, y in mission.waypoints]
+        points.append((*frame.to_latlon(*mission.recovery), 0.0))
     items = [MissionItem.waypoint(0, home[0], home[1], 0.0, frame=mavlink.MAV_FRAME_GLOBAL)]
     return items + [MissionItem.waypoint(seq, lat, lon, z) for seq, (lat, lon, z) in enumerate(points, start=1)]
 
@@ -113,6 +123,7 @@ class BringUp:
     timeouts: BringUpTimeouts = field(default_factory=BringUpTimeouts)
     say: Callable[[Step], None] | None = None
     timeline: list[Step] = field(default_factory=list)
+    route: tuple[tuple[float, float], ...] = ()  # a calibration run's leg starts (:func:`mission_items`)
 
     def __post_init__(self) -> None:
         #: GUIDED was accepted: from here on the vehicle is ours to bring back (never before:
@@ -251,7 +262,7 @@ class BringUp:
 
     def upload(self) -> None:
         gpi = self._latest("GLOBAL_POSITION_INT")
-        items = mission_items(self.mission, (gpi.lat * 1e-7, gpi.lon * 1e-7))
+        items = mission_items(self.mission, (gpi.lat * 1e-7, gpi.lon * 1e-7), self.route)
         try:
             result = self.bridge.upload_mission(items, timeout=min(1.5, self.timeouts.mission / 6))
         except TimeoutError as exc:
@@ -263,7 +274,8 @@ class BringUp:
                 else result
             )
             self._fail("mission", RefusedError(f"bring-up mission: the vehicle refused the upload ({name})"))
-        self._ok("mission", f"{len(items)} items uploaded (home, {len(self.mission.waypoints)} waypoints, recovery)")
+        what = f"{len(self.route) - 1} leg starts" if self.route else f"{len(self.mission.waypoints)} waypoints"
+        self._ok("mission", f"{len(items)} items uploaded (home, {what}, recovery)")
 
     def guided(self) -> None:
         self._command_until("guided", lambda: self.bridge.set_mode("GUIDED"), self.timeouts.guided)

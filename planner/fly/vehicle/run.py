@@ -115,6 +115,7 @@ def run_vehicle(
             connection,
             timeouts or BringUpTimeouts(),
             say,
+            route=flight.route,
         )
         try:
             start_ms = bringup.run()

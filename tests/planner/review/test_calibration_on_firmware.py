@@ -55,10 +55,20 @@ def test_one_calibration_run_on_the_firmware_calibrates_the_thruster_vehicle(tmp
     v = cal.vehicle
     # a thruster vehicle, as the firmware's model is: it turns in about a second, at tens of degrees a second,
     # and its draw rises far less than cubically with speed; the pack it carries caps the scenarios' battery
-    for n in ("power_exponent", "drag_w", "max_speed", "speed_gain"):
+    for n in ("power_exponent", "drag_w", "hotel_w", "water.current_scale"):
         assert cal.estimate.identified[n], (n, side.get("unidentified"))
-    assert v.power_exponent < 1.5 and v.max_speed < mission.vehicle.cruise_speed  # slower than the torpedo's cruise
+    assert v.power_exponent < 1.5
     assert cal.pack_limits_battery and v.battery_wh < 0.5 * mission.vehicle.battery_wh
+    # the firmware feels no tide, whatever the table says, and the file gets that water
+    assert cal.value("water.current_scale") < 0.2
+    assert sim.uuv.load_mission(out).execution_bias.current_scale < 0.2
+    # its speed controller reaches what it is asked up to about 2 m/s and no more: a measured curve, each
+    # commanded speed of the legs a knot, where the torpedo's gain x command would run on to 3 m/s
+    knots = dict(v.speed_curve)
+    assert len(knots) >= 3 and all(cal.estimate.identified[f"speed_curve[{c:g}]"] for c in knots)
+    slow, fast = min(knots), max(knots)
+    assert knots[slow] == pytest.approx(slow, rel=0.1)
+    assert 1.5 < knots[fast] < 2.3 and knots[fast] < 0.8 * fast  # saturated
     # the turn terms: identified as a thruster vehicle's (tens of degrees a second, about a second to close a
     # heading error), or, where a flight's report gaps left the turns out of the replayed segments (1 of 3 flights
     # at speed-up 40 on a loaded machine), kept and named with the leg that would identify them
