@@ -120,6 +120,10 @@ def _robust_scale(r: np.ndarray) -> float:
     return max(s, 1e-3 * rms, 1e-12)
 
 
+#: How far inside its bounds (in prior s.d.) a parameter starts a fit.
+START_MARGIN = 0.05
+
+
 class _Problem:
     """The MAP fit as ``least_squares`` sees it: parameters in prior-scaled units ``z``, so the prior
     term is ``z`` itself and a parameter fixed at its centre is ``z = 0``."""
@@ -178,9 +182,13 @@ class _Problem:
                     R = R * w
                 return np.vstack([((R[1:] - R[0]) / h[:, None]).T, np.eye(k)])
 
+        # start well inside the bounds: from a point on (or 1e-9 off) a bound, trf's scaling shrinks
+        # that coordinate's steps to nothing and the fit stops where it started (a prior centred on
+        # its bound, e.g. a file value of 0 for a share in [0, 1])
+        margin = np.minimum(START_MARGIN, (hi[free] - lo[free]) / 4)
         return least_squares(
             fun,
-            np.clip(z0, lo[free] + 1e-9, hi[free] - 1e-9),
+            np.clip(z0, lo[free] + margin, hi[free] - margin),
             bounds=(lo[free], hi[free]),
             method="trf",
             loss="soft_l1",

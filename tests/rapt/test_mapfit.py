@@ -34,6 +34,21 @@ def test_identified_parameters_are_estimated_and_an_unseen_one_stays_at_its_prio
     assert fit.stderr["a"] < IDENTIFIED_BELOW * 0.3
 
 
+@pytest.mark.parametrize("truth", [0.0, 0.4])
+def test_a_prior_centred_on_its_bound_still_fits(truth):
+    """A share whose file value is 0 in [0, 1] (a vehicle that keeps its speed through turns): the fit
+    must still move it, and the other parameters, wherever the data say."""
+    y = 1.3 * X + truth + np.random.default_rng(1).normal(0, 0.5, X.size)
+    priors = [Prior("a", 1.0, 0.3, 0.0, 3.0), Prior("b", 0.0, 0.3, 0.0, 1.0), Prior("c", 0.0, 1.0, -5.0, 5.0)]
+    fit = fit_map(line_residuals(y), priors)
+    assert fit.identified["a"] and fit.value["a"] == pytest.approx(1.3, abs=3 * fit.stderr["a"])
+    assert 0.0 <= fit.value["b"] <= 1.0
+    if truth:  # moved off its bound to where the data put it
+        assert fit.identified["b"] and fit.value["b"] == pytest.approx(truth, abs=3 * fit.stderr["b"])
+    else:  # the data put it at its centre: within its error of 0, whether kept or fitted
+        assert fit.value["b"] <= 3 * fit.stderr["b"]
+
+
 def test_of_two_confounded_parameters_the_one_the_data_explain_better_is_kept():
     # b and d enter as b + 0.98 d: neither alone is identified with both free; fixing the
     # one the data explain least (d, whose prior is narrow) leaves b identified
