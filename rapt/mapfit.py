@@ -31,7 +31,7 @@ Knows nothing of vehicles: the caller's ``residuals(theta)`` does the physics.
 from __future__ import annotations
 
 import math
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -214,6 +214,7 @@ def fit_map(
     max_nfev: int = 200,
     diff_step: float = 1e-6,
     residuals_many: Callable[[np.ndarray], np.ndarray] | None = None,
+    start: Mapping[str, float] | None = None,
 ) -> MapEstimate:
     """MAP estimate of ``priors``' parameters from ``residuals(theta) -> (m,)`` (see the module docstring).
 
@@ -225,6 +226,9 @@ def fit_map(
     on its own, so a precise kind is not drowned by a noisy one.  ``residuals_many(thetas)``
     (p, k) -> (p, m), when given, evaluates several parameter vectors at once: the
     Jacobian's finite differences then cost one batched call instead of k + 1.
+    ``start`` (name -> value) starts the search there instead of at the prior centres: a good
+    first guess from another measurement, for a fit whose robust loss flattens far from its
+    optimum (the priors, and so the estimate, are unchanged).
     ``significant`` is the survivor rule's threshold (:data:`SIGNIFICANT`); 0 drops the rule,
     so that *identified* means exactly "posterior s.d. below ``identify_below`` of the prior's".
     """
@@ -247,7 +251,8 @@ def fit_map(
     def scales(r: np.ndarray) -> np.ndarray:
         return np.array([_robust_scale(r[kind == k]) for k in range(int(kind.max(initial=0)) + 1)])[kind]
 
-    first = solve(every, np.zeros(len(priors)), 1.0)
+    z0 = np.array([((start or {}).get(p.name, p.centre) - p.centre) / p.sd for p in priors])
+    first = solve(every, z0, 1.0)
     scale = scales(first.fun[:m])
     sol = solve(every, first.x, scale)
     scale = scales(sol.fun[:m] * scale)

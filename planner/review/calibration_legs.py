@@ -42,6 +42,7 @@ __all__ = [
     "empty_estimate",
     "with_ascent",
     "with_independent",
+    "without_terms",
 ]
 
 #: The leg that identifies each fitted parameter, as a test engineer would fly it.
@@ -268,6 +269,26 @@ def with_independent(
         identified={**est.identified, n: identified},
         covariance=cov,
         stderr_sources={**est.stderr_sources, n: source},
+    )
+
+
+def without_terms(est: MapEstimate, names: Sequence[str]) -> MapEstimate:
+    """``est`` without the parameters ``names`` (and their rows of the covariance and correlations)."""
+    drop = set(names)
+    kept = [i for i, n in enumerate(est.identified_names) if n not in drop]
+    cov = est.covariance[np.ix_(kept, kept)] if est.covariance.size else est.covariance
+    return dataclasses.replace(
+        est,
+        priors=tuple(p for p in est.priors if p.name not in drop),
+        value={n: v for n, v in est.value.items() if n not in drop},
+        map_value={n: v for n, v in est.map_value.items() if n not in drop},
+        stderr={n: v for n, v in est.stderr.items() if n not in drop},
+        identified={n: v for n, v in est.identified.items() if n not in drop},
+        covariance=cov,
+        correlation={
+            n: {m: c for m, c in row.items() if m not in drop} for n, row in est.correlation.items() if n not in drop
+        },
+        stderr_sources={n: v for n, v in est.stderr_sources.items() if n not in drop},
     )
 
 

@@ -67,6 +67,7 @@ from planner.review.calibration_legs import (
     is_calibration_log,
     with_ascent,
     with_independent,
+    without_terms,
 )
 from planner.review.calibration_terms import (
     CURVE_MIN_SPEEDS,
@@ -392,7 +393,7 @@ def fit_vehicle(
     per_step = np.nonzero(seg.valid)[0]
     blocks = bootstrap_blocks(seg)[per_step]
 
-    def solve(names: tuple[str, ...], vehicle: Vehicle, bootstrap: int) -> MapEstimate:
+    def solve(names: tuple[str, ...], vehicle: Vehicle, bootstrap: int, start=None) -> MapEstimate:
         def residuals(theta: np.ndarray) -> np.ndarray:
             dx, dy, dh, de = _residual_parts(mission, seg, *with_terms(vehicle, dict(zip(names, theta))))
             return np.concatenate(
@@ -404,20 +405,33 @@ def fit_vehicle(
         kinds = np.repeat(np.array(["position", "position", "heading", "energy"]), per_step.size)
         priors = vehicle_priors(vehicle, names)
         groups = np.concatenate([blocks] * 4)
-        return fit_map(residuals, priors, groups=groups, kinds=kinds, bootstrap=bootstrap, seed=seed, significant=0.0)
+        kw = {"groups": groups, "kinds": kinds, "bootstrap": bootstrap, "seed": seed, "start": start}
+        return fit_map(residuals, priors, significant=0.0, **kw)
 
     knots, power = _legs_measured(mission, runs, start_times, names, solve)
-    if knots:  # the rest fitted again with the measured curve and power in place of their terms
-        measured = {p.name: v for p, v, _, _ in power}
+    legs = {p.name: (p, v, map_value, se) for p, v, map_value, se in power}
+    hotel = legs.pop("hotel_w", None)
+    if knots:  # the rest fitted again with the measured curve in place of speed_gain and max_speed
         curve = tuple((float(knot_command(k.prior.name) or 0.0), k.value) for k in knots)
-        base = dataclasses.replace(base, speed_curve=curve, **measured)
-        names = tuple(n for n in names if n not in ("speed_gain", "max_speed", *measured))
-    est = solve(names, base, bootstrap)
+        base = dataclasses.replace(base, speed_curve=curve, **({"hotel_w": hotel[1]} if hotel else {}))
+        names = tuple(n for n in names if n not in ("speed_gain", "max_speed") and not (hotel and n == "hotel_w"))
+    # the hold leg measures the hotel load; the power curve above it is fitted to the segments (they see
+    # the whole run, turns and accelerations included), searched from the legs' measurement, and where
+    # the segments cannot pin it the legs' measurement stands
+    est = solve(names, base, bootstrap, {n: t[1] for n, t in legs.items()})
+    if legs and not all(est.identified[n] for n in legs):
+        est = without_terms(est, list(legs))
+    elif hotel:  # fitted over the pinned hotel load: its share of error is theirs too
+        pinned = {n: float(np.hypot(est.stderr[n], LEG_POWER_SHARE * abs(est.value[n]))) for n in legs}
+        est = dataclasses.replace(est, stderr={**est.stderr, **pinned})
+        legs = {}
+    else:
+        legs = {}
+    for p, v, map_value, se in ([hotel] if hotel else []) + list(legs.values()):
+        est = with_independent(est, p, v, map_value, se, True, "settled legs")
     for k in knots:
         source = "settled legs" if k.identified else "not identified"
         est = with_independent(est, k.prior, k.value, k.map_value, k.stderr, k.identified, source)
-    for p, v, map_value, se in power:
-        est = with_independent(est, p, v, map_value, se, True, "settled legs")
     ascent = fit_ascent(mission, runs, base.ascent_rate_mps) if "ascent_rate_mps" in fit else None
     if ascent is not None:
         est = with_ascent(est, ascent)

@@ -49,6 +49,17 @@ def test_a_prior_centred_on_its_bound_still_fits(truth):
         assert fit.value["b"] <= 3 * fit.stderr["b"]
 
 
+def test_a_start_moves_where_the_search_begins_not_the_estimate():
+    """A first guess from another measurement (a leg's power) far from the prior centre: the same MAP."""
+    y = 1.3 * X + 0.4 + np.random.default_rng(2).normal(0, 0.5, X.size)
+    plain = fit_map(line_residuals(y), PRIORS)
+    started = fit_map(line_residuals(y), PRIORS, start={"a": 2.5, "b": -3.0})
+    for n in ("a", "b"):
+        assert started.value[n] == pytest.approx(plain.value[n], abs=1e-4)
+        assert started.stderr[n] == pytest.approx(plain.stderr[n], rel=1e-3)
+    assert started.identified == plain.identified
+
+
 def test_of_two_confounded_parameters_the_one_the_data_explain_better_is_kept():
     # b and d enter as b + 0.98 d: neither alone is identified with both free; fixing the
     # one the data explain least (d, whose prior is narrow) leaves b identified
