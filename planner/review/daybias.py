@@ -67,11 +67,19 @@ def day_bias_record(mission: Mission, fitted: Bias, used: Bias) -> dict:
 class DayWater:
     """The water a comparison established, ready for a calibrated file's ``[execution_bias]``."""
 
-    def __init__(self, bias: Bias, fields: dict[str, dict], source: str, dropped: dict[str, str]):
+    def __init__(
+        self,
+        bias: Bias,
+        fields: dict[str, dict],
+        source: str,
+        dropped: dict[str, str],
+        rule: str = "identified, cross-validated",
+    ):
         self.bias = bias  # total: relative to the tide table; fields not taken are neutral
         self.fields = fields  # name -> {"value", "stderr"} of each field taken
         self.source = source
         self.dropped = dropped  # name -> why it was not taken
+        self.rule = rule  # what a field needed to be taken
 
 
 def _read(path: Path) -> dict:
@@ -152,7 +160,8 @@ def water_with_run(
         dropped.pop(n, None)
     values = {n: (round(getattr(total, n), 6) if n in WATER_FIELDS else NEUTRAL[n]) for n in BIAS_NAMES}
     both = source if water is None else f"{source}; {water.source}"
-    return DayWater(_day_bias(values), fields, both, dropped)
+    rule = "identified by the calibration run" + ("" if water is None else f"; compare's: {water.rule}")
+    return DayWater(_day_bias(values), fields, both, dropped, rule)
 
 
 def _day_bias(values: dict[str, float]) -> Bias:
@@ -202,7 +211,7 @@ def header_lines(water: DayWater) -> list[str]:
     taken = ", ".join(f"{n} {v['value']:.5g} +- {v['stderr']:.2g}" for n, v in water.fields.items()) or "none"
     return [
         f"# [execution_bias] the day's water from {water.source}:",
-        f"#   taken (identified, cross-validated): {taken}",
+        f"#   taken ({water.rule}): {taken}",
         "#   the [vehicle] fit above was made in that water",
     ]
 
