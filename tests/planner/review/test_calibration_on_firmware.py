@@ -81,18 +81,27 @@ def test_one_calibration_run_on_the_firmware_calibrates_the_thruster_vehicle(tmp
     assert cal.rms_after["position_m"] < cal.rms_before["position_m"]
     assert cal.rms_after["energy_wh"] < cal.rms_before["energy_wh"]
 
-    # the run re-predicted from its legs by the calibrated vehicle (with the battery its gauge counted from):
-    # its energy within 10 %, against the file's torpedo missing it by a third or more
+    # the run re-predicted from its legs by the calibrated vehicle (with the battery its gauge counted from) in the
+    # water the run measured: its energy within 5 % and its track within a third of the file torpedo's error
     entry = load_plan(plan).scenario("shakedown")
     run = read_run(log)
-    flown = dataclasses.replace(mission, vehicle=dataclasses.replace(v, battery_wh=mission.vehicle.battery_wh))
+    calibrated = sim.uuv.load_mission(out)
+    in_water = dataclasses.replace(mission, execution_bias=calibrated.execution_bias)
+    plant = dataclasses.replace(v, battery_wh=mission.vehicle.battery_wh)
     drive = leg_driver(legs_from_json(entry["legs"]))
 
-    def energy_error(m) -> float:
-        pred = sim.uuv.simulate(m, np.asarray(entry["u"])[None, :], trajectories=True, driver=drive).trajectory(0)
+    def errors(m, plant=None) -> tuple[float, float]:
+        """(path RMS m, energy used predicted / logged - 1) of the run re-predicted."""
+        u = np.asarray(entry["u"])[None, :]
+        pred = sim.uuv.simulate(m, u, trajectories=True, driver=drive, plant=plant).trajectory(0)
         t = np.clip(run.steps[:, 0], pred[0, 0], pred[-1, 0])
+        px, py = np.interp(t, pred[:, 0], pred[:, 1]), np.interp(t, pred[:, 0], pred[:, 2])
+        path = float(np.sqrt(np.mean((run.steps[:, 1] - px) ** 2 + (run.steps[:, 2] - py) ** 2)))
         used = run.steps[-1, 4] - run.steps[0, 4]
-        return float((np.interp(t[-1], pred[:, 0], pred[:, 4]) - np.interp(t[0], pred[:, 0], pred[:, 4])) / used - 1)
+        energy = (np.interp(t[-1], pred[:, 0], pred[:, 4]) - np.interp(t[0], pred[:, 0], pred[:, 4])) / used - 1
+        return path, float(energy)
 
-    assert abs(energy_error(flown)) < 0.10
-    assert abs(energy_error(mission)) > 0.30
+    path, energy = errors(in_water, plant)
+    file_path, file_energy = errors(mission)
+    assert abs(energy) < 0.05 and abs(file_energy) > 0.30
+    assert path < file_path / 3, (path, file_path)
