@@ -48,8 +48,6 @@ def calibrate(
     """Fit the vehicle's speed, turn and power terms to logs; write a mission file the planner can use."""
     from planner.review.calibrate import calibrate as run_calibrate
     from planner.review.calibrate import sidecar_path
-    from planner.review.calibration_terms import term_unit
-    from planner.review.vehicle_fit import UNITS
 
     if not mission.is_file():
         fail(f"MISSION: {mission} does not exist; give the mission file (.toml) the runs were flown on")
@@ -72,7 +70,7 @@ def calibrate(
             f"{result.file_value(n):.5g}",
             f"{result.value(n):.5g}" if ident else "(kept)",
             f"{result.stderr[n]:.2g}" if ident else "-",
-            UNITS.get(n) or term_unit(n),
+            result.unit(n),
             "yes" if ident else "no",
         )
     out.print(table)

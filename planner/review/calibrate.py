@@ -29,7 +29,7 @@ from planner.review.calibration_legs import (
     cut_legs,
     is_calibration_log,
 )
-from planner.review.calibration_terms import term_unit
+from planner.review.calibration_terms import water_field
 from planner.review.daybias import DayWater, header_lines, water_from_comparison, water_with_run, with_execution_bias
 from planner.review.logs import LogError, read_run
 from planner.review.pack import PACK_CRITICAL_PERCENT, read_pack
@@ -39,7 +39,6 @@ from planner.review.vehicle_fit import (
     DIGITS,
     FITTED,
     MIN_LOGS,
-    UNITS,
     Calibration,
     fit_vehicle,
 )
@@ -198,7 +197,7 @@ def _day_water(mission: Mission, water: DayWater | None, cal: Calibration, names
     measured = cal.water_identified
     if not measured:
         return water
-    stderr = {n[len("water.") :]: cal.stderr[n] for n in measured}
+    stderr = {water_field(n): cal.stderr[n] for n in measured}
     source = f"rapt-plan calibrate: the calibration run {', '.join(names)}"
     return water_with_run(water, mission.execution_bias, cal.run_water, stderr, source)
 
@@ -287,7 +286,7 @@ def _header_comment(cal: Calibration) -> list[str]:
         out.append(f"#   {lg['name']}  (scenario {lg['scenario'] or '?'}, sha256 {lg['sha256'][:12]})")
     out.append("# [vehicle] fields fitted (file value -> calibrated +- standard error):")
     for n in cal.fitted:
-        old, unit = cal.file_value(n), UNITS.get(n) or term_unit(n)
+        old, unit = cal.file_value(n), cal.unit(n)
         if est.identified[n]:
             new = cal.value(n)
             out.append(f"#   {n:<22} {old:.5g} -> {new:.5g} +- {cal.stderr[n]:.2g} {unit}")

@@ -54,6 +54,7 @@ __all__ = [
     "knot_command",
     "water_name",
     "is_water",
+    "water_field",
     "water_term",
     "term_value",
     "with_terms",
@@ -113,6 +114,11 @@ def is_water(name: str) -> bool:
     return name.startswith(_WATER)
 
 
+def water_field(name: str) -> str:
+    """The bias field of a water term (``water.current_scale`` -> ``current_scale``)."""
+    return name[len(_WATER) :]
+
+
 def water_term(mission: Mission, runs: Sequence, start_times: Sequence[float]) -> str:
     """``water.current_scale`` when the table's current over the calibration legs averages
     :data:`TIDE_FOR_SCALE_MPS` or more, else ``water.current_offset``."""
@@ -135,7 +141,7 @@ def term_value(vehicle: Vehicle, water: Bias, name: str) -> float:
     if cmd is not None:
         return float(reached_speed(vehicle, cmd))
     if is_water(name):  # to a micro-unit: a fit pressed against its bound reads 0, not 1e-16
-        return round(float(getattr(water, name[len(_WATER) :])), 6)
+        return round(float(getattr(water, water_field(name))), 6)
     return float(getattr(vehicle, name))
 
 
@@ -152,7 +158,7 @@ def with_terms(vehicle: Vehicle, values: Mapping[str, float]) -> tuple[Vehicle, 
         if cmd is not None:
             knots.append((cmd, max(float(v), 0.0)))
         elif is_water(n):
-            water[n[len(_WATER) :]] = float(v)
+            water[water_field(n)] = float(v)
         else:
             fields[n] = float(v)
     out = dataclasses.replace(vehicle, **fields)  # type: ignore[arg-type]  # float fields only
@@ -168,7 +174,7 @@ def term_prior(vehicle: Vehicle, name: str) -> Prior:
         c = float(reached_speed(vehicle, cmd))
         sd = max(KNOT_SHARE * c, KNOT_SD_FLOOR)
         return Prior(name, c, sd, 0.0, max(4.0 * c, c + 5 * sd, 1.5 * cmd))
-    centre, sd, low, high = WATER_PRIORS[name[len(_WATER) :]]
+    centre, sd, low, high = WATER_PRIORS[water_field(name)]
     return Prior(name, centre, sd, low, high)
 
 

@@ -245,10 +245,14 @@ class Calibration:
         """A fitted term's calibrated value (a field, a knot's reached speed, the run's water)."""
         return term_value(self.vehicle, self.run_water, name)
 
+    def unit(self, name: str) -> str:
+        """A fitted term's unit."""
+        return UNITS.get(name) or term_unit(name)
+
     @property
     def curve_fitted(self) -> bool:
         """Whether the speed curve replaced ``speed_gain`` and ``max_speed`` in this fit."""
-        return any(n.startswith("speed_curve[") for n in self.fitted)
+        return any(knot_command(n) is not None for n in self.fitted)
 
     @property
     def water_identified(self) -> list[str]:
@@ -310,7 +314,7 @@ class Calibration:
                 "identified": bool(est.identified[n]),
                 "map_estimate": float(est.map_value[n]),
                 "stderr_source": est.stderr_sources.get(n, ""),
-                "unit": UNITS.get(n) or term_unit(n),
+                "unit": self.unit(n),
                 "prior": {"centre": p.centre, "sd": p.sd, "low": p.low, "high": p.high},
             }
         return {
@@ -376,7 +380,8 @@ def fit_vehicle(
     """MAP fit of the ``[vehicle]`` fields ``fit`` to ``runs`` (:class:`planner.review.logs.LoggedRun`-like)
     flown from scenario start times ``start_times``; priors centred on ``mission.vehicle``.
 
-    A calibration run's log adds its speed curve and water (:func:`_segment_terms`).  Every term is *identified* when its posterior s.d. is below half its prior's
+    A calibration run's log adds its water (:func:`planner.review.calibration_terms.water_term`) and
+    speed curve and power (:func:`_legs_measured`).  Every term is *identified* when its posterior s.d. is below half its prior's
     (:data:`rapt.mapfit.IDENTIFIED_BELOW`, without :func:`rapt.mapfit.fit_map`'s survivor
     rule); the ascent rate is timed on its own (:func:`planner.review.calibration_legs.fit_ascent`).
     """
@@ -389,7 +394,11 @@ def fit_vehicle(
     if not seg.valid.any():
         raise InputError("LOGS: no replayable flight in the logs (no telemetry steps with set-points); nothing to fit")
     base = mission.vehicle
-    names = _segment_terms(mission, runs, start_times, fit)
+    cal_runs = [r for r in runs if is_calibration_log(r)]
+    cal_starts = [t for r, t in zip(runs, start_times) if is_calibration_log(r)]
+    names = tuple(n for n in SEGMENT_FITTED if n in fit)
+    if cal_runs:  # the current the calibration run flew in, fitted beside the vehicle
+        names = (*names, water_term(mission, cal_runs, cal_starts))
     per_step = np.nonzero(seg.valid)[0]
     blocks = bootstrap_blocks(seg)[per_step]
 
@@ -408,7 +417,7 @@ def fit_vehicle(
         kw = {"groups": groups, "kinds": kinds, "bootstrap": bootstrap, "seed": seed, "start": start}
         return fit_map(residuals, priors, significant=0.0, **kw)
 
-    knots, power = _legs_measured(mission, runs, start_times, names, solve)
+    knots, power = _legs_measured(mission, cal_runs, cal_starts, names, solve)
     legs = {p.name: (p, v, map_value, se) for p, v, map_value, se in power}
     hotel = legs.pop("hotel_w", None)
     if knots:  # the rest fitted again with the measured curve in place of speed_gain and max_speed
@@ -451,20 +460,10 @@ def fit_vehicle(
     )
 
 
-def _segment_terms(mission: Mission, runs: list, start_times: Sequence[float], fit: Sequence[str]) -> tuple[str, ...]:
-    """The terms fitted to the segments: ``fit``'s fields, and a calibration run's water
-    (:func:`planner.review.calibration_terms.water_term`)."""
-    names = tuple(n for n in SEGMENT_FITTED if n in fit)
-    legs = [(r, t) for r, t in zip(runs, start_times) if is_calibration_log(r)]
-    if not legs:
-        return names
-    return (*names, water_term(mission, [r for r, _ in legs], [t for _, t in legs]))
-
-
 def _legs_measured(
-    mission: Mission, runs: list, start_times: Sequence[float], names: tuple[str, ...], solve
+    mission: Mission, cal_runs: list, cal_starts: Sequence[float], names: tuple[str, ...], solve
 ) -> tuple[list, list[tuple[Prior, float, float, float]]]:
-    """A calibration run's measured speed curve (the knots of
+    """The calibration runs' (``cal_runs``, flown from ``cal_starts``) measured speed curve (the knots of
     :func:`planner.review.calibration_terms.fit_curve`; one a cut-short leg left unidentified keeps
     the file model's speed) and power terms
     (:func:`~planner.review.calibration_terms.fit_power`), both in the water a first fit finds;
@@ -473,12 +472,10 @@ def _legs_measured(
     has no ``speed_gain`` and ``max_speed`` to replace.  The power terms come as (prior, value,
     MAP value, standard error) of those identified, :data:`LEG_POWER_SHARE` of each value added to
     its standard error."""
-    legs = [(r, t) for r, t in zip(runs, start_times) if is_calibration_log(r)]
-    if not legs or not {"speed_gain", "max_speed"} <= set(names):
+    if not cal_runs or not {"speed_gain", "max_speed"} <= set(names):
         return [], []
     first = solve(names, mission.vehicle, 0)
     water = with_terms(mission.vehicle, {n: float(first.value[n]) for n in first.names})[1]
-    cal_runs, cal_starts = [r for r, _ in legs], [t for _, t in legs]
     knots = fit_curve(mission, cal_runs, cal_starts, water)
     if sum(k.identified for k in knots) < CURVE_MIN_SPEEDS:
         return [], []

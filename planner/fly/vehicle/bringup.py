@@ -88,12 +88,9 @@ def mission_items(
     mission's waypoints and recovery: what the vehicle will fly is what its mission shows.
     """
     frame = LocalFrame(mission.origin_lat, mission.origin_lon)
-    if route:
-        points = [(*frame.to_latlon(x, y), -DEPTH_M) for x, y in route[:-1]]
-        points.append((*frame.to_latlon(*route[-1]), 0.0))
-    else:
-        points = [(*frame.to_latlon(x, y), -DEPTH_M) for x, y in mission.waypoints]
-        points.append((*frame.to_latlon(*mission.recovery), 0.0))
+    route = route or (*mission.waypoints, mission.recovery)
+    points = [(*frame.to_latlon(x, y), -DEPTH_M) for x, y in route[:-1]]
+    points.append((*frame.to_latlon(*route[-1]), 0.0))
     items = [MissionItem.waypoint(0, home[0], home[1], 0.0, frame=mavlink.MAV_FRAME_GLOBAL)]
     return items + [MissionItem.waypoint(seq, lat, lon, z) for seq, (lat, lon, z) in enumerate(points, start=1)]
 
