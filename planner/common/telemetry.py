@@ -36,6 +36,7 @@ __all__ = [
     "KINDS",
     "VIRTUAL_BATTERY_ID",
     "SURFACED_DEPTH_M",
+    "SurfaceDetector",
 ]
 
 #: The messages :class:`VehicleTelemetry` reads; anything else on the stream is skipped undecoded.
@@ -53,6 +54,17 @@ KINDS = (
 VIRTUAL_BATTERY_ID = 99
 #: A vehicle this close to the surface counts as surfaced (a real depth reading hovers around 0).
 SURFACED_DEPTH_M = 0.3
+#: A vehicle shallower than this whose depth has stopped rising counts as surfaced too: a depth
+#: sensor sits below the waterline (ArduSub SITL floats at 0.36 m under a surface command, a
+#: BlueROV2's sensor a few decimetres down), so the reading at the top is the vehicle's own,
+#: not 0.  Half the running depth (:data:`sim.uuv.interface.DEPTH_M`), where nothing holds but
+#: a vehicle at the surface.
+SURFACE_BAND_M = 1.0
+#: "Stopped rising": the depth reports over the last this many vehicle milliseconds span at
+#: most :data:`SETTLED_SPAN_M` (a rise at 0.5 m/s moves 1.5 m in that time; a turnaround at
+#: the top of an ascent or the start of a dive passes in well under it).
+SETTLED_MS = 3000
+SETTLED_SPAN_M = 0.05
 #: GLOBAL_POSITION_INT.hdg when the heading is unknown.
 _NO_HDG = 65535
 
@@ -92,10 +104,40 @@ class Pose:
     heading_ms: int
     speed: float = 0.0  # over ground, m/s (GLOBAL_POSITION_INT vx, vy)
     yaw_rate: float = 0.0  # rad/s (ATTITUDE.yawspeed)
+    settled_at_top: bool = False  # shallower than SURFACE_BAND_M and stopped rising (SurfaceDetector)
 
     @property
     def surfaced(self) -> bool:
-        return self.depth <= SURFACED_DEPTH_M
+        """Near 0 m, or at the top of an ascent where the vehicle's own depth sensor reads more."""
+        return self.depth <= SURFACED_DEPTH_M or self.settled_at_top
+
+
+class SurfaceDetector:
+    """Whether a vehicle's depth reports say it has stopped rising within :data:`SURFACE_BAND_M`.
+
+    Fed every position report in vehicle-time order; true once the reports of the last
+    :data:`SETTLED_MS` (and at least that long a history inside the band) span at most
+    :data:`SETTLED_SPAN_M`.  Stateful because one report cannot tell a vehicle floating at
+    0.36 m from one passing 0.36 m on its way up or down.
+    """
+
+    def __init__(self) -> None:
+        self._band: deque[tuple[int, float]] = deque()
+
+    def add(self, time_ms: int, depth: float) -> bool:
+        if not depth < SURFACE_BAND_M:
+            self._band.clear()
+            return False
+        band = self._band
+        if band and time_ms < band[-1][0]:  # a clock that went back: the vehicle rebooted
+            band.clear()
+        band.append((time_ms, depth))
+        while len(band) > 1 and band[1][0] <= time_ms - SETTLED_MS:
+            band.popleft()
+        if time_ms - band[0][0] < SETTLED_MS:
+            return False
+        depths = [d for _, d in band]
+        return max(depths) - min(depths) <= SETTLED_SPAN_M
 
 
 @dataclass(frozen=True)
@@ -139,6 +181,7 @@ class VehicleTelemetry:
         self._last: dict[str, int] = {}  # newest time_boot_ms per kind
         self._yaw: tuple[int, float, float] | None = None
         self.pose: Pose | None = None
+        self._surface = SurfaceDetector()
         self._poses: deque[Pose] = deque(maxlen=self.POSE_HISTORY)
         self.energy_hj: int | None = None  # of the selected battery
         self.energy_ms = -1  # vehicle time when it arrived
@@ -207,7 +250,8 @@ class VehicleTelemetry:
             heading_ms, heading = stamp, 0.0
         speed = math.hypot(msg.vx, msg.vy) / 100.0
         depth = -msg.relative_alt / 1000.0
-        self.pose = Pose(stamp, float(east), float(north), depth, heading, heading_ms, speed, yaw_rate)
+        top = self._surface.add(stamp, depth)
+        self.pose = Pose(stamp, float(east), float(north), depth, heading, heading_ms, speed, yaw_rate, top)
         self._poses.append(self.pose)
         self.counts.positions += 1
         return "position"

@@ -175,3 +175,37 @@ def test_telemetry_reads_a_real_vehicles_frames(plan):
         mavlink.MAVLink_global_position_int_message(50, round(lat * 1e7), round(lon * 1e7), 0, 0, 0, 0, 0, 0)
     )
     assert tel.counts.reboots == 1 and tel.pose.time_ms == 50
+
+
+def _depth_profile(tel: VehicleTelemetry, frame: LocalFrame, depths: list[float], period_ms: int = 200) -> list[bool]:
+    """Feed one position report per ``period_ms`` at each depth; whether each pose counted as surfaced."""
+    lat, lon = frame.to_latlon(-480.0, -520.0)
+    out = []
+    for k, depth in enumerate(depths):
+        msg = mavlink.MAVLink_global_position_int_message(
+            1000 + k * period_ms, round(lat * 1e7), round(lon * 1e7), 0, round(-depth * 1000), 0, 0, 0, 0
+        )
+        tel.add(msg)
+        out.append(tel.pose.surfaced)
+    return out
+
+
+def test_a_vehicle_floating_with_its_sensor_below_the_waterline_counts_as_surfaced(plan):
+    # ArduSub SITL under a surface command floats at 0.36 m: a depth rule of "near 0" never says
+    # surfaced, and a transmission that waits for it never goes out
+    mission = plan.mission
+    frame = LocalFrame(mission.origin_lat, mission.origin_lon)
+    tel = VehicleTelemetry(frame, VIRTUAL_BATTERY_ID)
+    rising = [2.0 - 0.1 * k for k in range(17)]  # 2.0 -> 0.4 m at 0.5 m/s
+    floating = [0.36 + 0.01 * (k % 2) for k in range(30)]  # 6 s at the top, bobbing 1 cm
+    flags = _depth_profile(tel, frame, [2.0] * 20 + rising + floating)
+    assert not any(flags[: 20 + 17]), "at depth or rising is never surfaced"
+    top = flags[20 + 17 :]
+    assert not any(top[:14]), "not before the depth has stopped rising for 3 s"
+    assert all(top[16:]), "floating at 0.36 m for more than 3 s is surfaced"
+    # diving again ends it at once; a vehicle holding its running depth never counts
+    assert _depth_profile(tel, frame, [0.5, 0.8, 1.1]) == [False, False, False]
+    still = VehicleTelemetry(frame, VIRTUAL_BATTERY_ID)
+    assert not any(_depth_profile(still, frame, [1.2] * 40))
+    # a real reading of 0 is surfaced at once, as before
+    assert _depth_profile(VehicleTelemetry(frame, VIRTUAL_BATTERY_ID), frame, [0.1]) == [True]
