@@ -75,6 +75,14 @@ def _speed(values: dict) -> str:
     return f"speed_gain {values['speed_gain']:.4g}"
 
 
+def _surface(values: dict) -> str:
+    """The vehicle's surface terms, when it has any."""
+    cap, extra = values.get("surface_max_speed") or 0.0, values.get("surface_power_w") or 0.0
+    if not cap and not extra:
+        return ""
+    return ", at the surface" + (f" at most {cap:.3g} m/s" if cap else "") + (f" {extra:+.4g} W" if extra else "")
+
+
 def summary_lines(record: dict | None) -> list[str]:
     """One line for the vehicle and one for the water, for the terminal summary and the report."""
     if not record:
@@ -83,7 +91,7 @@ def summary_lines(record: dict | None) -> list[str]:
     v = veh["values"]
     vehicle = (
         "calibrated vehicle" if veh["calibrated"] else "the mission file's vehicle"
-    ) + f" ({_speed(v)}, hotel {v['hotel_w']:.4g} W, drag {v['drag_w']:.4g} W)"
+    ) + f" ({_speed(v)}, hotel {v['hotel_w']:.4g} W, drag {v['drag_w']:.4g} W{_surface(v)})"
     if veh["calibrated"] and len(veh["calibration"]) > 1:
         vehicle += f"; {veh['calibration'][0].rstrip(':')}"
     changed = [

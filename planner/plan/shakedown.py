@@ -5,7 +5,8 @@ calibration fit (``rapt-plan calibrate``) something about the vehicle: straight 
 commanded speeds spanning its range and beyond its saturation (half cruise, cruise,
 ``max_speed`` and :data:`OVER_MAX` times it), each :data:`SETTLE_TAUS` surge time constants to
 reach steady speed plus a measured stretch; 180-degree turns both ways at the turn-rate
-limit; a hold at speed 0 (hotel and depth-keeping draw); an ascent to the surface and a dive
+limit; a hold at speed 0 (hotel and depth-keeping draw); an ascent to the surface that goes on
+at cruise speed there (what a thruster vehicle makes at the surface, and draws), and a dive
 back; and the way home to the recovery point, ending surfaced there (:mod:`sim.uuv.legs`).
 
 The legs run out and back along one bearing from the launch point (a racetrack whose
@@ -62,8 +63,11 @@ ROW = "centre of the unit cube"
 OVER_MAX = 1.3
 #: Surge time constants each speed leg allows to reach steady speed before its measured stretch.
 SETTLE_TAUS = 5.0
-#: Seconds at the surface, and seconds to dive back (a real vehicle rises and dives at ~0.5 m/s).
-SURFACE_S = 30.0
+#: Seconds of the ascent leg (rising at ~0.5 m/s from 2 m, then about 45 s at cruise at the
+#: surface: :data:`planner.review.calibration_terms.SURFACE_SETTLE_S` to slow down, the rest measured).
+SURFACE_S = 60.0
+#: Seconds to dive back (a real vehicle dives at ~0.5 m/s).
+DIVE_S = 30.0
 #: Bearings tried, degrees apart.
 BEARING_STEP_DEG = 15.0
 _T, _X, _Y, _HEADING, _SPEED, _SURFACED = (
@@ -142,8 +146,8 @@ def shakedown_legs(mission: Mission, bearing_deg: float, options: ShakedownOptio
         Leg("turn", "turn_left", turn_s, v.cruise_speed, b, -180.0),
         Leg("straight", "over_max", run_s, OVER_MAX * v.max_speed, b),
         Leg("hold", "hold", run_s, 0.0, b),
-        Leg("ascent", "ascent", SURFACE_S, slow, b, surface=True),
-        Leg("dive", "dive", SURFACE_S, slow, b),
+        Leg("ascent", "ascent", SURFACE_S, v.cruise_speed, b, surface=True),
+        Leg("dive", "dive", DIVE_S, slow, b),
     ]
     used = float(sum(leg.duration_s for leg in legs))
     limit = min(60.0 * options.max_minutes, mission.time_limit_s)

@@ -251,7 +251,11 @@ def calibrated_text(text: str, cal: Calibration) -> str:
     set is added at the end of ``[vehicle]``'s keys (a ``[vehicle]`` table is appended when
     there is none).
     """
-    written = [n for n in cal.fitted if cal.estimate.identified[n] and n in FITTED]
+    written = [
+        n
+        for n in cal.fitted
+        if cal.estimate.identified[n] and n in FITTED and getattr(cal.vehicle, n) != getattr(cal.original, n)
+    ]
     changes = {n: _fmt(getattr(cal.vehicle, n)) for n in written}
     if cal.vehicle.speed_curve != cal.original.speed_curve:
         changes["speed_curve"] = "[" + ", ".join(f"[{_fmt(c)}, {_fmt(r)}]" for c, r in cal.vehicle.speed_curve) + "]"

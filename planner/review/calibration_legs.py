@@ -57,6 +57,8 @@ NEEDS = {
     "drag_w": "a speed leg",
     "power_exponent": "speed legs at 3 or more speeds",
     "ascent_rate_mps": "an ascent (a surface command from depth)",
+    "surface_max_speed": "an ascent leg that stays at the surface, commanded faster than the vehicle goes there",
+    "surface_power_w": "an ascent leg that stays at the surface",
 }
 #: The leg kinds that identify each fitted parameter.
 LEG_KINDS = {
@@ -70,6 +72,8 @@ LEG_KINDS = {
     "drag_w": ("straight",),
     "power_exponent": ("straight", "hold"),
     "ascent_rate_mps": ("ascent",),
+    "surface_max_speed": ("ascent",),
+    "surface_power_w": ("ascent",),
 }
 #: Prior of the ascent rate when the file says 0 (instantaneous): a nominal rate, as wide as itself.
 ASCENT_NOMINAL_MPS = 0.5

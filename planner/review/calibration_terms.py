@@ -24,6 +24,14 @@ speed cannot give:
   the one a current the table says is slack can show.  ``rapt-plan calibrate`` writes it
   into the calibrated file's ``[execution_bias]``.
 
+- **The vehicle at the surface.**  A thruster vehicle told to surface pushes itself against
+  the surface and moves on with what its horizontal thrusters have left: ArduSub's BlueROV2
+  model makes 0.33 m/s there whatever is asked, at 350 W.  A plan that has it transmit at
+  the surface, or come home surfaced, is wrong by minutes without that.  Every stretch a
+  log spends surfaced under a surface command, after :data:`SURFACE_SETTLE_S`, measures
+  ``surface_max_speed`` (when commands there asked clearly more than it made) and
+  ``surface_power_w`` (the draw above the speed's propulsion power): :func:`fit_surface`.
+
 Term names are ``speed_curve[<commanded m/s>]`` and ``water.<bias field>``; the fit's other
 names are ``[vehicle]`` fields.  :func:`term_value` and :func:`with_terms` read and set any
 of them on a vehicle and a bias.
@@ -64,7 +72,10 @@ __all__ = [
     "KnotFit",
     "fit_curve",
     "fit_power",
+    "fit_surface",
+    "surface_prior",
     "POWER_TERMS",
+    "SURFACE_TERMS",
 ]
 
 #: Fewest distinct commanded speeds of straight legs that make a curve worth fitting.
@@ -90,6 +101,15 @@ SIGMA_POWER_W = 10.0
 #: Smallest standard error of a settled speed (m/s): what a position fix's noise and the
 #: model's own approximation leave however steady the leg.
 SE_FLOOR_MPS = 0.01
+#: The ``[vehicle]`` fields measured at the surface (:func:`fit_surface`).
+SURFACE_TERMS = ("surface_max_speed", "surface_power_w")
+#: Seconds at the surface before its speed and power count (the vehicle slows from its dived speed).
+SURFACE_SETTLE_S = 10.0
+#: A surface step counts as held back by the surface when the vehicle would reach this much more
+#: submerged at its command than it made at the surface.
+SURFACE_HELD_SHARE = 1.2
+#: Prior s.d. floors of the surface terms (m/s, W).
+SURFACE_SPEED_SD_FLOOR, SURFACE_POWER_SD_FLOOR = 0.1, 20.0
 #: Commanded speeds (m/s) this close are one knot.
 SAME_COMMAND = 0.05
 _KNOT = re.compile(r"^speed_curve\[([0-9.eE+-]+)\]$")
@@ -224,20 +244,32 @@ def _settled(mission: Mission, run, t0: float, water: Bias, leg: dict) -> tuple[
     return float(np.mean(sp[keep, 1])), surge[keep], float(power)
 
 
-def _knot(prior: Prior, cmd: float, v: np.ndarray) -> KnotFit:
-    """The settled speeds ``v`` at ``cmd`` combined with the knot's prior (as the ascent rate's)."""
+def _measured(prior: Prior, v: np.ndarray, floor: float, too_few: str, wanders: str) -> KnotFit:
+    """The mean of per-step measurements ``v`` combined with ``prior`` (as the ascent rate's): a
+    standard error from means of :data:`SE_BLOCK`-step blocks, at least ``floor``; identified when
+    the posterior s.d. is below :data:`rapt.mapfit.IDENTIFIED_BELOW` of the prior's.  ``too_few``
+    and ``wanders`` are the notes when it is not."""
     blocks = v.size // SE_BLOCK
     if blocks < 2:
-        note = f"{v.size} settled step(s) at {cmd:g} m/s: too few to measure the speed"
-        return KnotFit(prior, prior.centre, prior.centre, prior.sd, False, int(v.size), note)
+        return KnotFit(prior, prior.centre, prior.centre, prior.sd, False, int(v.size), too_few)
     means = v[: blocks * SE_BLOCK].reshape(blocks, SE_BLOCK).mean(axis=1)
-    se = max(float(means.std(ddof=1)) / math.sqrt(blocks), SE_FLOOR_MPS)
+    se = max(float(means.std(ddof=1)) / math.sqrt(blocks), floor)
     w_data, w_prior = 1 / se**2, 1 / prior.sd**2
     post = min(max((float(v.mean()) * w_data + prior.centre * w_prior) / (w_data + w_prior), prior.low), prior.high)
     post_sd = 1 / math.sqrt(w_data + w_prior)
     ident = post_sd < IDENTIFIED_BELOW * prior.sd
-    note = "" if ident else f"the speed at {cmd:g} m/s wanders too much over its leg to settle"
-    return KnotFit(prior, post if ident else prior.centre, post, post_sd, ident, int(v.size), note)
+    return KnotFit(prior, post if ident else prior.centre, post, post_sd, ident, int(v.size), "" if ident else wanders)
+
+
+def _knot(prior: Prior, cmd: float, v: np.ndarray) -> KnotFit:
+    """The settled speeds ``v`` at ``cmd`` combined with the knot's prior."""
+    return _measured(
+        prior,
+        v,
+        SE_FLOOR_MPS,
+        f"{v.size} settled step(s) at {cmd:g} m/s: too few to measure the speed",
+        f"the speed at {cmd:g} m/s wanders too much over its leg to settle",
+    )
 
 
 def fit_curve(mission: Mission, runs: Sequence, start_times: Sequence[float], water: Bias) -> list[KnotFit]:
@@ -298,3 +330,87 @@ def fit_power(
         return (hotel + drag * (speed / cruise) ** k - used) / SIGMA_POWER_W
 
     return fit_map(residuals, priors, significant=0.0)
+
+
+def surface_prior(vehicle: Vehicle, name: str) -> Prior:
+    """The prior of a surface term: the file's value, 30 % wide; a file without a surface limit
+    gets one centred on its cruise speed's reached speed, and no extra draw one as wide as a
+    third of its hotel and drag."""
+    if name == "surface_max_speed":
+        c = vehicle.surface_max_speed or float(reached_speed(vehicle, vehicle.cruise_speed))
+        sd = max(KNOT_SHARE * c, SURFACE_SPEED_SD_FLOOR)
+        return Prior(name, c, sd, 0.0, max(4.0 * c, c + 5 * sd))
+    c = vehicle.surface_power_w
+    sd = max(KNOT_SHARE * abs(c), KNOT_SHARE * (vehicle.hotel_w + vehicle.drag_w), SURFACE_POWER_SD_FLOOR)
+    return Prior(name, c, sd, -vehicle.hotel_w, max(20000.0, c + 5 * sd))
+
+
+def _surface_steps(mission: Mission, run, t0: float, water: Bias) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per settled surface step of ``run``: commanded speed, through-water speed and electrical power (W).
+
+    A step counts when the vehicle reported itself surfaced under a surface command it was
+    flying, had been so for :data:`SURFACE_SETTLE_S`, and the next report follows within the
+    decision period's tolerance.
+    """
+    s, sp = run.steps, run.setpoints
+    n = s.shape[0]
+    if n < 3 or sp.shape[1] < 3:
+        return np.zeros(0), np.zeros(0), np.zeros(0)
+    t = s[:, 0]
+    up = (s[:, 5] > 0.5) & (np.nan_to_num(sp[:, 2], nan=0.0) > 0.5) & np.isfinite(sp[:, 1])
+    since = np.full(n, -np.inf)  # when the current surfaced stretch began
+    for i in range(n):
+        since[i] = (since[i - 1] if i and up[i - 1] else t[i]) if up[i] else -np.inf
+    ok = np.zeros(n, dtype=bool)
+    ok[:-1] = up[:-1] & up[1:] & (t[:-1] - since[:-1] >= SURFACE_SETTLE_S)
+    ok[:-1] &= np.abs(np.diff(t) - mission.dt) <= 0.5 * mission.dt
+    b = compose(mission.execution_bias, water)
+    ce, cn = tidal_current(mission.current, t0 + b.start_time + t, b.current_scale, b.current_offset)
+    h = np.diff(t)
+    k = np.flatnonzero(ok)
+    speed = np.hypot(np.diff(s[:, 1])[k] / h[k] - ce[k], np.diff(s[:, 2])[k] / h[k] - cn[k])
+    power = np.diff(s[:, 4])[k] / HJ_PER_WH * 3600.0 / h[k]
+    return sp[k, 1], speed, power
+
+
+def fit_surface(
+    mission: Mission, runs: Sequence, start_times: Sequence[float], water: Bias, vehicle: Vehicle
+) -> list[KnotFit]:
+    """``surface_max_speed`` and ``surface_power_w`` from every log's settled surface steps
+    (:func:`_surface_steps`), in the fitted ``water``, above ``vehicle``'s dived model; [] when the
+    logs spend no settled time at the surface.
+
+    The limit counts the steps whose command the vehicle would turn into at least
+    :data:`SURFACE_HELD_SHARE` times the step's speed submerged: a vehicle that makes what
+    it is asked at the surface shows no limit, and keeps the file's.  The extra draw is each
+    step's power less the propulsion power of its speed.
+    """
+    cmds, speeds, powers = [], [], []
+    for run, t0 in zip(runs, start_times):
+        c, v, w = _surface_steps(mission, run, t0, water)
+        cmds.append(c)
+        speeds.append(v)
+        powers.append(w)
+    cmd, speed, power = (np.concatenate(a) if a else np.zeros(0) for a in (cmds, speeds, powers))
+    if cmd.size == 0:
+        return []
+    held = reached_speed(vehicle, cmd) >= SURFACE_HELD_SHARE * speed
+    cap = _measured(
+        surface_prior(vehicle, "surface_max_speed"),
+        speed[held],
+        SE_FLOOR_MPS,
+        f"{int(held.sum())} settled surface step(s) commanded faster than the vehicle went there: "
+        "it made what it was asked at the surface",
+        "the speed at the surface wanders too much to settle",
+    )
+    if not cap.identified:  # no limit seen: the file's (0, none) stands, not the prior's centre
+        cap = dataclasses.replace(cap, value=vehicle.surface_max_speed)
+    extra = power - (vehicle.hotel_w + vehicle.drag_w * (speed / vehicle.cruise_speed) ** vehicle.power_exponent)
+    draw = _measured(
+        surface_prior(vehicle, "surface_power_w"),
+        extra,
+        SIGMA_POWER_W / 10.0,
+        f"{speed.size} settled surface step(s): too few to measure the draw there",
+        "the draw at the surface wanders too much to settle",
+    )
+    return [cap, draw]

@@ -100,6 +100,7 @@ class Segments:
     # the logged ground velocity the start surge is rebuilt from, and the time whose tide it carries
     ground: dict | None = None  # ve, vn, t_tide: (N,); ok: (N,) bool (False: use start["surge"])
     step_dt: np.ndarray | None = None  # (N, L) each step's own length, s (None: mission.dt throughout)
+    surfaced: np.ndarray | None = None  # (N, L) bool: the vehicle reported itself surfaced at the step's end
 
 
 def substeps_of(run) -> int:
@@ -226,6 +227,7 @@ def segment_batch(mission: Mission, runs: list, start_times: list[float], length
     hc, sc = np.zeros((n, L)), np.zeros((n, L))
     ox, oy, oe, oh = np.zeros((n, L)), np.zeros((n, L)), np.zeros((n, L)), np.zeros((n, L))
     step_dt = np.full((n, L), dt)
+    surfaced = np.zeros((n, L), dtype=bool)
     valid = np.zeros((n, L), dtype=bool)
     start = {key: np.zeros(n) for key in ("x", "y", "heading", "surge", "sway", "yaw_rate")}
     st, run_index = np.zeros(n), np.zeros(n, dtype=np.int64)
@@ -245,8 +247,9 @@ def segment_batch(mission: Mission, runs: list, start_times: list[float], length
         ox[j, :m], oy[j, :m] = s[k + 1 : end + 1, 1], s[k + 1 : end + 1, 2]
         oe[j, :m] = (s[k + 1 : end + 1, 4] - s[k, 4]) / 36.0
         oh[j, :m] = s[k + 1 : end + 1, 3]
+        surfaced[j, :m] = s[k + 1 : end + 1, 5] > 0.5  # the world rises before it moves: the state after the step
         valid[j, :m] = True
-    return Segments(start, t, st, hc, sc, ox, oy, oe, oh, valid, run_index, nsubs, gr, step_dt)
+    return Segments(start, t, st, hc, sc, ox, oy, oe, oh, valid, run_index, nsubs, gr, step_dt, surfaced)
 
 
 def replay(
@@ -307,6 +310,7 @@ def replay(
                 speed_scale=bias.speed,
                 course_bias=course,
                 energy_scale=bias.battery,
+                surfaced=None if seg.surfaced is None else seg.surfaced[:, j],
             )
         px[:, j], py[:, j], pe[:, j], ph[:, j] = s.x, s.y, -s.energy_wh, s.heading
     return px, py, pe, ph

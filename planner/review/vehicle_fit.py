@@ -72,10 +72,13 @@ from planner.review.calibration_legs import (
 from planner.review.calibration_terms import (
     CURVE_MIN_SPEEDS,
     POWER_TERMS,
+    SURFACE_TERMS,
     fit_curve,
     fit_power,
+    fit_surface,
     is_water,
     knot_command,
+    surface_prior,
     term_need,
     term_prior,
     term_unit,
@@ -116,10 +119,13 @@ FITTED: tuple[str, ...] = (
     "drag_w",
     "power_exponent",
     "ascent_rate_mps",
+    "surface_max_speed",
+    "surface_power_w",
 )
 #: Those fitted to the segment replay's positions, headings and energy (the ascent rate is timed instead:
-#: :func:`planner.review.calibration_legs.fit_ascent`).
-SEGMENT_FITTED: tuple[str, ...] = FITTED[:-1]
+#: :func:`planner.review.calibration_legs.fit_ascent`; the surface terms measured on the surfaced
+#: steps: :func:`planner.review.calibration_terms.fit_surface`).
+SEGMENT_FITTED: tuple[str, ...] = FITTED[:-3]
 UNITS = {
     "speed_gain": "x",
     "max_speed": "m/s",
@@ -131,6 +137,8 @@ UNITS = {
     "drag_w": "W",
     "power_exponent": "x",
     "ascent_rate_mps": "m/s",
+    "surface_max_speed": "m/s",
+    "surface_power_w": "W",
 }
 #: Fewest plan-run logs a calibration takes.  One run's segments share one tide phase, one
 #: route and one navigation drift, so its errors cannot be told from the vehicle's; a second,
@@ -156,6 +164,8 @@ PRIOR_SD_FLOOR = {
     "drag_w": 10.0,
     "power_exponent": 0.3,
 }
+#: A surface term this many standard errors or less from the file's value confirms it.
+SAME_AS_FILE_SE = 2.0
 #: The fitted time constants (s): a thruster vehicle's may be a twentieth of a torpedo's.
 TIME_CONSTANTS = ("surge_time_constant_s", "yaw_time_constant_s", "heading_time_s")
 #: The power exponent's range (the mission file's rule): 0.5 (flatter than a thruster's) to 4.
@@ -196,6 +206,9 @@ def vehicle_priors(vehicle: Vehicle, names: Sequence[str] = FITTED) -> list[Prio
     for n in names:
         if n == "ascent_rate_mps":
             out.append(ascent_prior(vehicle.ascent_rate_mps))
+            continue
+        if n in SURFACE_TERMS:
+            out.append(surface_prior(vehicle, n))
             continue
         if n not in FITTED:  # a calibration run's knot or water term
             out.append(term_prior(vehicle, n))
@@ -424,6 +437,10 @@ def fit_vehicle(
         curve = tuple((float(knot_command(k.prior.name) or 0.0), k.value) for k in knots)
         base = dataclasses.replace(base, speed_curve=curve, **({"hotel_w": hotel[1]} if hotel else {}))
         names = tuple(n for n in names if n not in ("speed_gain", "max_speed") and not (hotel and n == "hotel_w"))
+    # the surface terms a first time, above the legs' power curve, so the segments replay the surface
+    # as the vehicle flew it (measured again over the fitted vehicle below)
+    first, _ = with_terms(base, {n: t[1] for n, t in legs.items()})
+    base, _ = with_terms(base, _surface_values(mission, runs, start_times, fit, first, Bias()))
     # the hold leg measures the hotel load; the power curve above it is fitted to the segments (they see
     # the whole run, turns and accelerations included), searched from the legs' measurement, and where
     # the segments cannot pin it the legs' measurement stands
@@ -441,6 +458,7 @@ def fit_vehicle(
     for k in knots:
         source = "settled legs" if k.identified else "not identified"
         est = with_independent(est, k.prior, k.value, k.map_value, k.stderr, k.identified, source)
+    est = _with_surface(mission, runs, start_times, fit, base, est)
     ascent = fit_ascent(mission, runs, base.ascent_rate_mps) if "ascent_rate_mps" in fit else None
     if ascent is not None:
         est = with_ascent(est, ascent)
@@ -458,6 +476,45 @@ def fit_vehicle(
         ascent=ascent,
         run_water=water,
     )
+
+
+def _surface_values(
+    mission: Mission, runs: list, start_times: Sequence[float], fit: Sequence[str], vehicle: Vehicle, water: Bias
+) -> dict[str, float]:
+    """The surface terms of ``fit`` the logs identify above ``vehicle`` in ``water``: {field: value}."""
+    if not any(n in fit for n in SURFACE_TERMS):
+        return {}
+    found = fit_surface(mission, runs, list(start_times), water, vehicle)
+    return {f.prior.name: f.value for f in found if f.identified and f.prior.name in fit}
+
+
+def _with_surface(
+    mission: Mission, runs: list, start_times: Sequence[float], fit: Sequence[str], base: Vehicle, est: MapEstimate
+) -> MapEstimate:
+    """``est`` with the surface terms asked for in ``fit``, measured on the logs' settled surface steps
+    above the vehicle fitted so far (:func:`planner.review.calibration_terms.fit_surface`); unidentified
+    at the file's values when the logs spend no settled time at the surface.  A term within
+    :data:`SAME_AS_FILE_SE` standard errors of the file's value keeps it: a vehicle that shows no
+    surface effect leaves a file without one as it was."""
+    names = [n for n in SURFACE_TERMS if n in fit]
+    if not names:
+        return est
+    vehicle, water = with_terms(base, {n: float(est.value[n]) for n in est.names})
+    vehicle = dataclasses.replace(vehicle, **{n: getattr(mission.vehicle, n) for n in SURFACE_TERMS})
+    found = {f.prior.name: f for f in fit_surface(mission, runs, list(start_times), water, vehicle)}
+    for n in names:
+        f = found.get(n)
+        file_value = getattr(mission.vehicle, n)
+        if f is None:
+            p = surface_prior(mission.vehicle, n)
+            est = with_independent(est, p, file_value, p.centre, p.sd, False, "not identified")
+        else:
+            source = "surface steps" if f.identified else "not identified"
+            value = f.value if f.identified else file_value
+            if f.identified and abs(value - file_value) <= SAME_AS_FILE_SE * f.stderr:
+                value, source = file_value, "surface steps (the file's value, within the error)"
+            est = with_independent(est, f.prior, value, f.map_value, f.stderr, f.identified, source)
+    return est
 
 
 def _legs_measured(

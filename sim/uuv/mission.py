@@ -102,7 +102,11 @@ class Vehicle:
     thrusters' current follows their command while thrust goes with its square.  The
     battery starts at ``start_battery`` of ``battery_wh``.  ``ascent_rate_mps`` is how fast
     the vehicle rises from its running depth (:data:`sim.uuv.interface.DEPTH_M`) when told
-    to surface, and dives back (0: instantaneously, surfaced in the step it is told).  The autonomy returns home when
+    to surface, and dives back (0: instantaneously, surfaced in the step it is told).  At the
+    surface a thruster vehicle is another machine: its vertical thrusters push it against
+    the surface and its horizontal ones lose water, so it moves at most
+    ``surface_max_speed`` (0: no limit) and draws ``surface_power_w`` more (ArduSub's
+    BlueROV2 model: 0.33 m/s whatever is asked, 350 W).  The autonomy returns home when
     its estimate of the energy to get there, times ``reserve_factor``, reaches the charge
     left; below ``critical_battery`` it also ignores no-go areas.
     """
@@ -128,6 +132,8 @@ class Vehicle:
     ascent_rate_mps: float = 0.0
     heading_time_s: float = 4.0
     speed_curve: tuple[tuple[float, float], ...] = ()
+    surface_max_speed: float = 0.0
+    surface_power_w: float = 0.0
 
 
 @dataclass(frozen=True)

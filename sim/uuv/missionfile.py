@@ -39,6 +39,8 @@ centre.  Keys marked ``=value`` are optional with that default; the others are r
                                   #   (at most max_speed); rapt-plan calibrate fits it from logs
                                   #   speed_curve=[[1.0, 0.87], [2.0, 1.93]]: measured (commanded,
                                   #   reached) m/s knots, replacing speed_gain where given
+                                  #   surface_max_speed=0.33, surface_power_w=180: at the surface
+                                  #   (0: no limit, no extra draw); rapt-plan calibrate measures them
     [current]                     # optional overrides of sim.uuv.mission.Current fields
     [execution_bias]              # optional: the day's water and vehicle as logs showed them
                                   #   (sim.uuv.missionbias; rapt-plan calibrate --bias writes it)
@@ -512,6 +514,17 @@ class _Loader(FieldChecker):
                     f"{fmt(obj.heading_time_s)} must be > 0; give the seconds the autopilot takes to close a heading error",
                 )
             obj = dataclasses.replace(obj, speed_curve=self.speed_curve(obj.speed_curve))
+            if not obj.surface_max_speed >= 0:
+                self.fail(
+                    "vehicle.surface_max_speed",
+                    f"{fmt(obj.surface_max_speed)} must be >= 0; give the m/s the vehicle reaches at the surface (0: no limit)",
+                )
+            if not obj.surface_power_w >= -obj.hotel_w:
+                self.fail(
+                    "vehicle.surface_power_w",
+                    f"{fmt(obj.surface_power_w)} would draw less than nothing at the surface; give the extra W "
+                    f"drawn there, at least -hotel_w ({fmt(-obj.hotel_w)})",
+                )
             if obj.ascent_rate_mps < 0:
                 self.fail(
                     "vehicle.ascent_rate_mps",

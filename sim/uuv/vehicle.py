@@ -87,12 +87,15 @@ def step_vehicle(
     speed_scale=1.0,
     course_bias=0.0,
     energy_scale=1.0,
+    surfaced: np.ndarray | None = None,
 ) -> None:
     """Advance every ``moving`` vehicle by ``dt`` seconds (one, or one per vehicle) in place; the others stay frozen.
 
     Execution bias (:mod:`sim.uuv.bias`): ``speed_scale`` multiplies the speed the vehicle
     achieves, ``course_bias`` (radians) turns its track through water clockwise of its
     bow, ``energy_scale`` divides the charge drawn.  The defaults change nothing.
+    ``surfaced`` (per vehicle; None: all submerged) applies the vehicle's surface terms:
+    at most ``spec.surface_max_speed`` (when > 0) and ``spec.surface_power_w`` more draw.
     """
     rmax = np.deg2rad(spec.max_turn_rate_dps)
     err = wrap_angle(heading_cmd - s.heading)
@@ -102,6 +105,8 @@ def step_vehicle(
     a_v = 1.0 - np.exp(-dt * spec.sway_damping)
     r = s.yaw_rate + (r_des - s.yaw_rate) * a_r
     target = reached_speed(spec, speed_cmd)
+    if surfaced is not None and spec.surface_max_speed > 0:
+        target = np.where(surfaced, np.minimum(target, spec.surface_max_speed), target)
     u = s.surge + (target * speed_scale - s.surge) * a_u
     v = s.sway + (-SWAY_COUPLING * u * r - s.sway) * a_v
     psi = wrap_angle(s.heading + r * dt)
@@ -110,6 +115,8 @@ def step_vehicle(
     ve = u * sin + v * cos + current_e
     vn = u * cos - v * sin + current_n
     power = propulsion_power(spec, u)
+    if surfaced is not None and spec.surface_power_w != 0:
+        power = power + np.where(surfaced, spec.surface_power_w, 0.0)
     m = moving
     s.x = np.where(m, s.x + ve * dt, s.x)
     s.y = np.where(m, s.y + vn * dt, s.y)

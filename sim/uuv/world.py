@@ -220,6 +220,7 @@ class World:
             speed_scale=b.speed,
             course_bias=b.heading_rad,
             energy_scale=b.battery,
+            surfaced=self.surfaced,
         )
         self.nav.step(dt, self.surfaced, None if z is None else z[:, 2:])
 

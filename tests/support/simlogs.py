@@ -47,7 +47,9 @@ def sim_runs(mission, U, bias=None, stochastic: bool = False, seed: int = 0, veh
         assert tr is not None, "sim_runs: an invalid scenario has no run"
         steps = tr[:, _COLS].astype(float)
         assert steps.shape[1] == len(STEP_FIELDS)
-        sp = np.column_stack([tr[:, _CMD], tr[:, TRAJECTORY_FIELDS.index("surfaced")] * 0.0])
+        # the surface command: where the vehicle surfaced (at an ascent rate of 0 it surfaces the step it is told)
+        surface = tr[:, TRAJECTORY_FIELDS.index("surfaced")] if mission.vehicle.ascent_rate_mps == 0 else np.nan
+        sp = np.column_stack([tr[:, _CMD], np.broadcast_to(surface, tr.shape[:1])])
         sp[-1] = np.nan  # nothing is flown after the last step
         out.append(SimRun(steps, sp, {"mission": mission.name}, r.scores[k].copy(), Path(f"run{k}.mcap")))
     return out

@@ -2,9 +2,9 @@
 
 The vehicle is not the file's and not a torpedo: its draw rises linearly with speed (power
 exponent 1), it is slower and saturates (speed gain 0.8, at most 1.2 m/s), turns faster
-and takes 6-7 s to surface.  A small scripted autonomy flies the legs a calibration run
+and takes 6-7 s to surface, where it makes at most 0.45 m/s and draws 70 W more.  A small scripted autonomy flies the legs a calibration run
 would (a hold, straight legs at four commanded speeds, the last above saturation, a turn
-at the rate limit after each, both ways, an ascent and a dive) and the log lists them in its record.
+at the rate limit after each, both ways, an ascent that goes on at the surface, and a dive) and the log lists them in its record.
 """
 
 from __future__ import annotations
@@ -55,6 +55,8 @@ TRUE_BLOCK = {
     "drag_w": 250.0,
     "power_exponent": 1.0,
     "ascent_rate_mps": 0.3,
+    "surface_max_speed": 0.45,
+    "surface_power_w": 70.0,
 }
 #: (kind, name, start s, end s, commanded speed, turn: +1 right / -1 left / 0 straight, surface)
 LEGS = [
@@ -67,8 +69,8 @@ LEGS = [
     ("turn", "turn-right-1.3", 460, 480, 1.3, 1, False),
     ("straight", "speed-1.8", 480, 600, 1.8, 0, False),
     ("turn", "turn-left-1.8", 600, 620, 1.8, -1, False),
-    ("ascent", "ascent", 620, 660, 0.0, 0, True),
-    ("dive", "dive", 660, 690, 0.0, 0, False),
+    ("ascent", "ascent", 620, 690, 1.0, 0, True),
+    ("dive", "dive", 690, 720, 0.0, 0, False),
 ]
 
 
@@ -167,7 +169,7 @@ def test_one_calibration_log_identifies_every_parameter_of_a_thruster_vehicle(fi
     est = fitted.estimate
     # the measured speed curve replaces speed_gain and max_speed, one knot per commanded speed, and the
     # current the run flew in is fitted beside the vehicle
-    knots = {knot_name(v) for *_, v, _, _ in LEGS if v > 0}
+    knots = {knot_name(v) for kind, *_, v, _, _ in LEGS if kind == "straight"}
     assert set(est.names) == (set(FITTED) - {"speed_gain", "max_speed"}) | knots | {"water.current_scale"}
     for n in est.names:
         truth, got, se = truth_of(n), fitted.value(n), fitted.stderr[n]
@@ -175,8 +177,9 @@ def test_one_calibration_log_identifies_every_parameter_of_a_thruster_vehicle(fi
         # identified: posterior s.d. below half the prior's
         prior = next(p for p in est.priors if p.name == n)
         assert est.stderr[n] < 0.5 * prior.sd, n
-        # within its standard errors (plus the optimiser's tolerance: the turn terms are noise-free here)
-        assert abs(got - truth) < 3 * se + 1e-6 * truth, (n, got, truth, se)
+        # within its standard errors, plus 0.2 %: the turn terms are noise-free here, and a settled speed is
+        # measured a few mm/s short of where a first-order lag ends, which the water fitted beside it shares
+        assert abs(got - truth) < 3 * se + 2e-3 * truth, (n, got, truth, se)
         assert got == pytest.approx(truth, rel=0.1), n
     assert fitted.unidentified == {}
     assert fitted.rms_after["energy_wh"] < 0.1 * fitted.rms_before["energy_wh"]
@@ -284,7 +287,7 @@ def test_a_log_that_ends_early_names_the_end_and_complete_legs_are_not_refused(m
     file_path, _, _ = missions
     run, _, _ = flown
     # only the dive (which identifies nothing) is missing: every parameter is identified, so it is written
-    log = fake_log(tmp_path, monkeypatch, cut_run(run, 670.0, []))
+    log = fake_log(tmp_path, monkeypatch, cut_run(run, 700.0, []))
     result = calibrate(file_path, [log], tmp_path / "ok.toml", bootstrap=0)
     assert [c.name for c in result.cut] == ["dive"] and "the log ended" in result.cut[0].reason
     assert result.unidentified == {}

@@ -98,6 +98,8 @@ def test_a_slow_ascent_delays_every_surfacing_of_a_batch_run(mission):
         ("ascent_rate_mps = -0.2", "vehicle.ascent_rate_mps"),
         ("power_exponent = 7.0", "vehicle.power_exponent"),
         ("power_exponent = 0.1", "vehicle.power_exponent"),
+        ("surface_max_speed = -0.3", "vehicle.surface_max_speed"),
+        ("surface_power_w = -500.0", "vehicle.surface_power_w"),
     ],
 )
 def test_bad_exponent_or_ascent_rate_is_a_one_line_error_naming_the_field(tmp_path, line, field):
@@ -142,3 +144,25 @@ def test_a_bad_speed_curve_is_a_one_line_error_naming_the_knot(tmp_path, value):
         sim.uuv.load_mission(_with_vehicle_lines(tmp_path, f"speed_curve = {value}"))
     msg = str(e.value)
     assert "vehicle.speed_curve" in msg and "\n" not in msg and "[[commanded, reached]" in msg
+
+
+# -- the vehicle at the surface ---------------------------------------------------------------------
+def test_at_the_surface_a_vehicle_makes_at_most_its_surface_speed_and_draws_more(mission, tmp_path):
+    """Two vehicles told the same: the surfaced one settles at surface_max_speed and draws surface_power_w
+    more than its speed's propulsion power; the submerged one is untouched by either."""
+    m = sim.uuv.load_mission(_with_vehicle_lines(tmp_path, "surface_max_speed = 0.4", "surface_power_w = 150.0"))
+    scen = make_scenarios(m, np.full((2, m.dim), 0.5))
+    world = World(scen)
+    e0 = world.state.energy_wh.copy()
+    surface = np.array([True, False])
+    for k in range(60):
+        world.advance(k * m.dt, world.state.heading.copy(), np.full(2, 2.0), surface, np.ones(2, bool))
+    assert world.surfaced.tolist() == [True, False]
+    assert world.state.surge == pytest.approx([0.4, 2.0], rel=1e-6)
+    # over the last step both are settled: the draw is the speed's power, plus 150 W at the surface
+    before = world.state.energy_wh.copy()
+    world.advance(60 * m.dt, world.state.heading.copy(), np.full(2, 2.0), surface, np.ones(2, bool))
+    watts = (before - world.state.energy_wh) * 3600.0 / m.dt
+    expected = propulsion_power(m.vehicle, np.array([0.4, 2.0])) + np.array([150.0, 0.0])
+    assert watts == pytest.approx(expected, rel=1e-6)
+    assert np.all(e0 > world.state.energy_wh)
