@@ -135,9 +135,10 @@ class _Problem:
         residuals_many: Callable[[np.ndarray], np.ndarray] | None,
         max_nfev: int,
         diff_step: float,
+        loss: str = "soft_l1",
     ):
         self.residuals, self.residuals_many = residuals, residuals_many
-        self.max_nfev, self.diff_step = max_nfev, diff_step
+        self.max_nfev, self.diff_step, self.loss = max_nfev, diff_step, loss
         self.centre = np.array([p.centre for p in priors])
         self.sd = np.array([p.sd for p in priors])
         self.lo = (np.array([p.low for p in priors]) - self.centre) / self.sd
@@ -191,7 +192,7 @@ class _Problem:
             np.clip(z0, lo[free] + margin, hi[free] - margin),
             bounds=(lo[free], hi[free]),
             method="trf",
-            loss="soft_l1",
+            loss=self.loss,
             f_scale=ROBUST_SCALE,
             jac=jac,
             diff_step=diff_step,
@@ -215,6 +216,7 @@ def fit_map(
     diff_step: float = 1e-6,
     residuals_many: Callable[[np.ndarray], np.ndarray] | None = None,
     start: Mapping[str, float] | None = None,
+    robust: bool = True,
 ) -> MapEstimate:
     """MAP estimate of ``priors``' parameters from ``residuals(theta) -> (m,)`` (see the module docstring).
 
@@ -229,12 +231,15 @@ def fit_map(
     ``start`` (name -> value) starts the search there instead of at the prior centres: a good
     first guess from another measurement, for a fit whose robust loss flattens far from its
     optimum (the priors, and so the estimate, are unchanged).
+    ``robust=False`` fits plain least squares with each kind's RMS as its noise scale: for data
+    whose information lives in a few large residuals (a heading that only moves in turns), which
+    the robust loss and median scale would treat as outliers.
     ``significant`` is the survivor rule's threshold (:data:`SIGNIFICANT`); 0 drops the rule,
     so that *identified* means exactly "posterior s.d. below ``identify_below`` of the prior's".
     """
     priors = tuple(priors)
     names = [p.name for p in priors]
-    problem = _Problem(residuals, priors, residuals_many, max_nfev, diff_step)
+    problem = _Problem(residuals, priors, residuals_many, max_nfev, diff_step, "soft_l1" if robust else "linear")
     centre, sd, theta_of, solve = problem.centre, problem.sd, problem.theta, problem.solve
 
     r0 = np.asarray(residuals(centre), dtype=float)
@@ -248,8 +253,11 @@ def fit_map(
     # the data's noise scale: from a fit with nominal units, then the MAP with the data's own scale
     kind = np.zeros(m, dtype=np.int64) if kinds is None else np.unique(np.asarray(kinds), return_inverse=True)[1]
 
+    def scale_of(r: np.ndarray) -> float:
+        return _robust_scale(r) if robust else max(float(np.sqrt(np.mean(r**2))) if r.size else 1.0, 1e-12)
+
     def scales(r: np.ndarray) -> np.ndarray:
-        return np.array([_robust_scale(r[kind == k]) for k in range(int(kind.max(initial=0)) + 1)])[kind]
+        return np.array([scale_of(r[kind == k]) for k in range(int(kind.max(initial=0)) + 1)])[kind]
 
     z0 = np.array([((start or {}).get(p.name, p.centre) - p.centre) / p.sd for p in priors])
     first = solve(every, z0, 1.0)
@@ -299,7 +307,7 @@ def fit_map(
         {n: float(v) for n, v in zip(names, map_value)},
         {n: float(v * s) for n, v, s in zip(names, stderr_z, sd)},
         {n: bool(f) for n, f in zip(names, free)},
-        {str(k): _robust_scale(res[kind == i]) for i, k in enumerate(np.unique(kinds) if kinds is not None else [0])},
+        {str(k): scale_of(res[kind == i]) for i, k in enumerate(np.unique(kinds) if kinds is not None else [0])},
         int(m),
         bool(final.success),
         str(final.message),

@@ -259,6 +259,8 @@ def calibrated_text(text: str, cal: Calibration) -> str:
     changes = {n: _fmt(getattr(cal.vehicle, n)) for n in written}
     if cal.vehicle.speed_curve != cal.original.speed_curve:
         changes["speed_curve"] = "[" + ", ".join(f"[{_fmt(c)}, {_fmt(r)}]" for c, r in cal.vehicle.speed_curve) + "]"
+    if cal.vehicle.velocity_control != cal.original.velocity_control:
+        changes["velocity_control"] = f'"{cal.vehicle.velocity_control}"'
     if cal.pack_limits_battery:
         changes["battery_wh"] = _fmt(cal.vehicle.battery_wh)
     lines = text.splitlines()
@@ -298,6 +300,12 @@ def _header_comment(cal: Calibration) -> list[str]:
             out.append(f"#   {n:<22} {old:.5g} {unit} kept: not identified by these logs")
     for n, need in cal.unidentified.items():
         out.append(f"#   to identify {n}: {need}")
+    if cal.control:
+        rms = cal.control["position_rms_m"]
+        out.append(
+            f"#   velocity_control       {cal.control['file']} -> {cal.control['chosen']}: segment position RMS "
+            f"{rms['surge']:.3g} m with a surge loop, {rms['vector']:.3g} m with a vector loop"
+        )
     b, a = cal.rms_before, cal.rms_after
     out.append(
         f"# Segment residual RMS, file vehicle -> calibrated: position {b['position_m']:.3g} -> "

@@ -43,6 +43,7 @@ __all__ = [
     "with_ascent",
     "with_independent",
     "without_terms",
+    "merged",
 ]
 
 #: The leg that identifies each fitted parameter, as a test engineer would fly it.
@@ -56,6 +57,8 @@ NEEDS = {
     "hotel_w": "a hold (speed 0)",
     "drag_w": "a speed leg",
     "power_exponent": "speed legs at 3 or more speeds",
+    "slow_share": "a speed leg long enough for the speed loop's slow part to settle (a minute or more)",
+    "slow_time_constant_s": "a speed leg long enough for the speed loop's slow part to settle (a minute or more)",
     "ascent_rate_mps": "an ascent (a surface command from depth)",
     "surface_max_speed": "an ascent leg that stays at the surface, commanded faster than the vehicle goes there",
     "surface_power_w": "an ascent leg that stays at the surface",
@@ -71,6 +74,8 @@ LEG_KINDS = {
     "hotel_w": ("hold",),
     "drag_w": ("straight",),
     "power_exponent": ("straight", "hold"),
+    "slow_share": ("straight",),
+    "slow_time_constant_s": ("straight",),
     "ascent_rate_mps": ("ascent",),
     "surface_max_speed": ("ascent",),
     "surface_power_w": ("ascent",),
@@ -273,6 +278,29 @@ def with_independent(
         identified={**est.identified, n: identified},
         covariance=cov,
         stderr_sources={**est.stderr_sources, n: source},
+    )
+
+
+def merged(a: MapEstimate, b: MapEstimate) -> MapEstimate:
+    """Two fits of disjoint parameters as one (their covariance blocks apart: independent)."""
+    ka, kb = a.covariance.shape[0], b.covariance.shape[0]
+    cov = np.zeros((ka + kb, ka + kb))
+    cov[:ka, :ka], cov[ka:, ka:] = a.covariance, b.covariance
+    return dataclasses.replace(
+        a,
+        priors=(*a.priors, *b.priors),
+        value={**a.value, **b.value},
+        map_value={**a.map_value, **b.map_value},
+        stderr={**a.stderr, **b.stderr},
+        identified={**a.identified, **b.identified},
+        noise_scale={**b.noise_scale, **a.noise_scale},
+        residuals=a.residuals + b.residuals,
+        success=a.success and b.success,
+        message=a.message if a.message == b.message else f"{a.message}; {b.message}",
+        correlation={**a.correlation, **b.correlation},
+        covariance=cov,
+        bootstrap=max(a.bootstrap, b.bootstrap),
+        stderr_sources={**a.stderr_sources, **b.stderr_sources},
     )
 
 

@@ -47,7 +47,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from planner.review.calibration_legs import legs_of
+from planner.review.calibration_legs import legs_of, with_independent
 from rapt.mapfit import IDENTIFIED_BELOW, MapEstimate, Prior, fit_map
 from sim.uuv.bias import Bias, compose
 from sim.uuv.environment import tidal_current
@@ -74,6 +74,8 @@ __all__ = [
     "fit_power",
     "fit_surface",
     "surface_prior",
+    "surface_values",
+    "with_surface",
     "POWER_TERMS",
     "SURFACE_TERMS",
 ]
@@ -414,3 +416,46 @@ def fit_surface(
         "the draw at the surface wanders too much to settle",
     )
     return [cap, draw]
+
+
+#: A surface term this many standard errors or less from the file's value confirms it.
+SAME_AS_FILE_SE = 2.0
+
+
+def surface_values(
+    mission: Mission, runs: list, start_times: Sequence[float], fit: Sequence[str], vehicle: Vehicle, water: Bias
+) -> dict[str, float]:
+    """The surface terms of ``fit`` the logs identify above ``vehicle`` in ``water``: {field: value}."""
+    if not any(n in fit for n in SURFACE_TERMS):
+        return {}
+    found = fit_surface(mission, runs, list(start_times), water, vehicle)
+    return {f.prior.name: f.value for f in found if f.identified and f.prior.name in fit}
+
+
+def with_surface(
+    mission: Mission, runs: list, start_times: Sequence[float], fit: Sequence[str], base: Vehicle, est: MapEstimate
+) -> MapEstimate:
+    """``est`` with the surface terms asked for in ``fit``, measured on the logs' settled surface steps
+    above the vehicle fitted so far (:func:`planner.review.calibration_terms.fit_surface`); unidentified
+    at the file's values when the logs spend no settled time at the surface.  A term within
+    :data:`SAME_AS_FILE_SE` standard errors of the file's value keeps it: a vehicle that shows no
+    surface effect leaves a file without one as it was."""
+    names = [n for n in SURFACE_TERMS if n in fit]
+    if not names:
+        return est
+    vehicle, water = with_terms(base, {n: float(est.value[n]) for n in est.names})
+    vehicle = dataclasses.replace(vehicle, **{n: getattr(mission.vehicle, n) for n in SURFACE_TERMS})
+    found = {f.prior.name: f for f in fit_surface(mission, runs, list(start_times), water, vehicle)}
+    for n in names:
+        f = found.get(n)
+        file_value = getattr(mission.vehicle, n)
+        if f is None:
+            p = surface_prior(mission.vehicle, n)
+            est = with_independent(est, p, file_value, p.centre, p.sd, False, "not identified")
+        else:
+            source = "surface steps" if f.identified else "not identified"
+            value = f.value if f.identified else file_value
+            if f.identified and abs(value - file_value) <= SAME_AS_FILE_SE * f.stderr:
+                value, source = file_value, "surface steps (the file's value, within the error)"
+            est = with_independent(est, f.prior, value, f.map_value, f.stderr, f.identified, source)
+    return est

@@ -51,7 +51,7 @@ import numpy as np
 from sim.uuv.bias import Bias, compose
 from sim.uuv.environment import tidal_current
 from sim.uuv.mission import Mission, Vehicle
-from sim.uuv.vehicle import SWAY_COUPLING, VehicleState, step_vehicle
+from sim.uuv.vehicle import SWAY_COUPLING, VehicleState, reached_speed, step_vehicle
 
 __all__ = [
     "Segments",
@@ -68,6 +68,10 @@ __all__ = [
 
 #: Steps per open-loop segment (2 s steps: two minutes of flight).
 SEGMENT_STEPS = 60
+#: Steps of set-points before each segment kept to warm up a vector speed loop's slow part: it
+#: follows the commands alone (not the position), so the history says where it stands at the
+#: segment's start (a minute at 2 s steps: four of ArduSub's slow time constants).
+HISTORY_STEPS = 30
 #: Physics sub-steps per step when replaying a vehicle-paced run (0.2 s at 2 s steps).
 PACED_SUBSTEPS = 10
 #: A step whose set-point reached the bus more than this many vehicle seconds after it is not
@@ -101,6 +105,8 @@ class Segments:
     ground: dict | None = None  # ve, vn, t_tide: (N,); ok: (N,) bool (False: use start["surge"])
     step_dt: np.ndarray | None = None  # (N, L) each step's own length, s (None: mission.dt throughout)
     surfaced: np.ndarray | None = None  # (N, L) bool: the vehicle reported itself surfaced at the step's end
+    # the HISTORY_STEPS set-points flown before each segment (oldest first; invalid: no set-point, or padding)
+    history: dict | None = None  # heading_cmd, speed_cmd, step_dt, surfaced, valid: (N, H)
 
 
 def substeps_of(run) -> int:
@@ -228,6 +234,14 @@ def segment_batch(mission: Mission, runs: list, start_times: list[float], length
     ox, oy, oe, oh = np.zeros((n, L)), np.zeros((n, L)), np.zeros((n, L)), np.zeros((n, L))
     step_dt = np.full((n, L), dt)
     surfaced = np.zeros((n, L), dtype=bool)
+    H = HISTORY_STEPS
+    hist = {
+        "heading_cmd": np.zeros((n, H)),
+        "speed_cmd": np.zeros((n, H)),
+        "step_dt": np.full((n, H), dt),
+        "surfaced": np.zeros((n, H), dtype=bool),
+        "valid": np.zeros((n, H), dtype=bool),
+    }
     valid = np.zeros((n, L), dtype=bool)
     start = {key: np.zeros(n) for key in ("x", "y", "heading", "surge", "sway", "yaw_rate")}
     st, run_index = np.zeros(n), np.zeros(n, dtype=np.int64)
@@ -248,8 +262,15 @@ def segment_batch(mission: Mission, runs: list, start_times: list[float], length
         oe[j, :m] = (s[k + 1 : end + 1, 4] - s[k, 4]) / 36.0
         oh[j, :m] = s[k + 1 : end + 1, 3]
         surfaced[j, :m] = s[k + 1 : end + 1, 5] > 0.5  # the world rises before it moves: the state after the step
+        a = max(k - H, 0)
+        w = k - a
+        if w:
+            hist["heading_cmd"][j, H - w :], hist["speed_cmd"][j, H - w :] = sp[a:k, 0], sp[a:k, 1]
+            hist["step_dt"][j, H - w :] = np.where(np.isfinite(lengths[a:k]), lengths[a:k], dt)
+            hist["surfaced"][j, H - w :] = s[a + 1 : k + 1, 5] > 0.5
+            hist["valid"][j, H - w :] = np.isfinite(sp[a:k, 1]) & (np.abs(lengths[a:k] - dt) <= MAX_STEP_SHARE * dt)
         valid[j, :m] = True
-    return Segments(start, t, st, hc, sc, ox, oy, oe, oh, valid, run_index, nsubs, gr, step_dt, surfaced)
+    return Segments(start, t, st, hc, sc, ox, oy, oe, oh, valid, run_index, nsubs, gr, step_dt, surfaced, hist)
 
 
 def replay(
@@ -274,11 +295,14 @@ def replay(
         )
 
     surge = seg.start["surge"].copy()
+    h0 = seg.start["heading"] + course
+    we, wn = surge * np.sin(h0), surge * np.cos(h0)  # through water, where no ground velocity says better
     if seg.ground is not None:
         g = seg.ground
         ce, cn = tide(g["t_tide"])
         c = seg.start["heading"] + course
         surge = np.where(g["ok"], (g["ve"] - ce) * np.sin(c) + (g["vn"] - cn) * np.cos(c), surge)
+        we, wn = np.where(g["ok"], g["ve"] - ce, we), np.where(g["ok"], g["vn"] - cn, wn)
     s = VehicleState(
         seg.start["x"].copy(),
         seg.start["y"].copy(),
@@ -288,6 +312,8 @@ def replay(
         seg.start["yaw_rate"].copy(),
         np.zeros(n),
     )
+    if spec.velocity_control == "vector":
+        s.set_water_velocity(spec, we, wn, _slow_part(spec, seg, bias.speed, course))
     px, py, pe, ph = np.zeros((n, L)), np.zeros((n, L)), np.zeros((n, L)), np.zeros((n, L))
     nsub = np.ones(n, dtype=np.int64) if seg.substeps is None else seg.substeps
     most = int(nsub.max()) if n else 1
@@ -314,3 +340,25 @@ def replay(
             )
         px[:, j], py[:, j], pe[:, j], ph[:, j] = s.x, s.y, -s.energy_wh, s.heading
     return px, py, pe, ph
+
+
+def _slow_part(spec: Vehicle, seg: Segments, speed_scale: float, course: float) -> tuple[np.ndarray, np.ndarray] | None:
+    """A vector loop's slow part at each segment's start, run over the set-points flown before it
+    (``seg.history``); None without a history.  It follows the commands alone, so the log's
+    commands say where it stands where its positions cannot."""
+    h = seg.history
+    if h is None or spec.slow_share == 0:
+        return None
+    n, H = h["speed_cmd"].shape
+    se, sn = np.zeros(n), np.zeros(n)
+    for j in range(H):
+        target = reached_speed(spec, h["speed_cmd"][:, j])
+        if spec.surface_max_speed > 0:
+            target = np.where(h["surfaced"][:, j], np.minimum(target, spec.surface_max_speed), target)
+        target = spec.slow_share * target * speed_scale
+        c = h["heading_cmd"][:, j] + course
+        a = 1.0 - np.exp(-h["step_dt"][:, j] / spec.slow_time_constant_s)
+        ok = h["valid"][:, j]
+        se = np.where(ok, se + (target * np.sin(c) - se) * a, se)
+        sn = np.where(ok, sn + (target * np.cos(c) - sn) * a, sn)
+    return se, sn

@@ -62,7 +62,6 @@ from planner.review.calibration_legs import (
     AscentFit,
     CutLeg,
     ascent_prior,
-    empty_estimate,
     fit_ascent,
     is_calibration_log,
     with_ascent,
@@ -75,23 +74,34 @@ from planner.review.calibration_terms import (
     SURFACE_TERMS,
     fit_curve,
     fit_power,
-    fit_surface,
     is_water,
     knot_command,
+    knot_name,
     surface_prior,
+    surface_values,
     term_need,
     term_prior,
     term_unit,
     term_value,
     water_term,
+    with_surface,
     with_terms,
 )
 from planner.review.daybias import DayWater, water_record
 from planner.review.pack import PackReading
-from planner.review.segments import SEGMENT_STEPS, Segments, replay, segment_batch
+from planner.review.segment_fit import (
+    SIGMA_ENERGY_WH,
+    SIGMA_HEADING_DEG,
+    SIGMA_POSITION_M,
+    SLOW_TERMS,
+    SegmentSolver,
+    choose_loop,
+    residual_parts,
+    rms_of,
+)
+from planner.review.segments import SEGMENT_STEPS, segment_batch
 from rapt.errors import InputError
-from rapt.mapfit import IDENTIFIED_BELOW, MapEstimate, Prior, fit_map
-from sim.uuv.angles import wrap_angle
+from rapt.mapfit import IDENTIFIED_BELOW, MapEstimate, Prior
 from sim.uuv.bias import Bias
 from sim.uuv.mission import Mission, Vehicle
 
@@ -118,6 +128,8 @@ FITTED: tuple[str, ...] = (
     "hotel_w",
     "drag_w",
     "power_exponent",
+    "slow_share",
+    "slow_time_constant_s",
     "ascent_rate_mps",
     "surface_max_speed",
     "surface_power_w",
@@ -136,6 +148,8 @@ UNITS = {
     "hotel_w": "W",
     "drag_w": "W",
     "power_exponent": "x",
+    "slow_share": "x",
+    "slow_time_constant_s": "s",
     "ascent_rate_mps": "m/s",
     "surface_max_speed": "m/s",
     "surface_power_w": "W",
@@ -163,19 +177,18 @@ PRIOR_SD_FLOOR = {
     "hotel_w": 5.0,
     "drag_w": 10.0,
     "power_exponent": 0.3,
+    "slow_share": 0.3,
+    "slow_time_constant_s": 10.0,
 }
-#: A surface term this many standard errors or less from the file's value confirms it.
-SAME_AS_FILE_SE = 2.0
+#: Largest slow share the fit considers: a loop that answers almost wholly slowly is no vector loop.
+SLOW_SHARE_HIGH = 0.9
+
 #: The fitted time constants (s): a thruster vehicle's may be a twentieth of a torpedo's.
 TIME_CONSTANTS = ("surge_time_constant_s", "yaw_time_constant_s", "heading_time_s")
 #: The power exponent's range (the mission file's rule): 0.5 (flatter than a thruster's) to 4.
 EXPONENT_RANGE = (0.5, 4.0)
 #: Upper bound of the power terms (W): the logs decide within it, however far from the file.
 POWER_HIGH_W = 20000.0
-#: Residual units: metres of position, degrees of heading, watt-hours of energy used.
-SIGMA_POSITION_M = 1.0
-SIGMA_HEADING_DEG = 2.0
-SIGMA_ENERGY_WH = 0.05
 #: Share of a value added (in quadrature) to its standard error when vehicle-paced runs are
 #: fitted: the replay's own approximation of a continuously moving vehicle (sub-steps,
 #: heading and energy reports a fraction of a second older than the position) biases the
@@ -185,8 +198,11 @@ MODEL_SHARE_PACED = 0.03
 #: Share of a power term added (in quadrature) to its standard error when measured on a calibration
 #: run's settled legs: a leg's mean power is the power at its mean speed only to about this much.
 LEG_POWER_SHARE = 0.02
-#: Bootstrap refits for the standard errors (0: analytic ones only).
-BOOTSTRAP = 20
+#: Bootstrap refits for the standard errors (0: analytic ones only).  The largest of the Laplace,
+#: cluster-robust and bootstrap errors is reported, so ten refits guard against optimistic
+#: analytic ones at half the cost of twenty: what lets a vector loop's calibration, with its slow
+#: part and refined knots, fit in the noon step's five minutes.
+BOOTSTRAP = 10
 #: Significant digits of a calibrated value in the written file.
 DIGITS = 5
 
@@ -221,6 +237,10 @@ def vehicle_priors(vehicle: Vehicle, names: Sequence[str] = FITTED) -> list[Prio
             low, high = c / 20.0, max(5.0 * c, c + 5 * sd)
         elif n == "power_exponent":
             low, high = EXPONENT_RANGE
+        elif n == "slow_share":
+            low, high = 0.0, SLOW_SHARE_HIGH
+        elif n == "slow_time_constant_s":
+            low, high = c / 20.0, 10.0 * c
         elif n in ("hotel_w", "drag_w"):  # a real pack may draw kilowatts where the file says watts
             low, high = 0.0, max(POWER_HIGH_W, 50.0 * c)
         else:
@@ -249,6 +269,7 @@ class Calibration:
     ascent: AscentFit | None = None  # the ascent rate's own fit (also merged into ``estimate``)
     cut: list[CutLeg] = field(default_factory=list)  # calibration legs the back-seat did not finish
     run_water: Bias = field(default_factory=Bias)  # the current the calibration run flew in, relative to the mission's
+    control: dict = field(default_factory=dict)  # the speed loop chosen: chosen, file, position_rms_m per loop
 
     def file_value(self, name: str) -> float:
         """A fitted term's value before the fit (the file's vehicle, the mission's water)."""
@@ -340,6 +361,7 @@ class Calibration:
                 and not (self.curve_fitted and f.name in ("speed_curve", "speed_gain", "max_speed"))
             ],
             "speed_curve": [list(k) for k in self.vehicle.speed_curve],
+            "velocity_control": {"value": self.vehicle.velocity_control, **self.control},
             "unidentified": self.unidentified,
             "cut_short_legs": [dataclasses.asdict(c) for c in self.cut],
             "ascents_timed": 0 if self.ascent is None else self.ascent.events,
@@ -359,25 +381,6 @@ class Calibration:
             **({"execution_bias": water_record(self.water)} if self.water is not None else {}),
             **({"pack": {**self.pack.to_dict(), "limits_battery_wh": self.pack_limits_battery}} if self.pack else {}),
         }
-
-
-def _residual_parts(
-    mission: Mission, seg: Segments, vehicle: Vehicle, water: Bias | None = None
-) -> tuple[np.ndarray, ...]:
-    """Position (m, east and north), heading (deg) and energy (Wh) errors of every valid segment step."""
-    px, py, pe, ph = replay(mission, seg, water, vehicle=vehicle)
-    v = seg.valid
-    dh = np.rad2deg(wrap_angle(ph - seg.obs_heading))
-    return (px - seg.obs_x)[v], (py - seg.obs_y)[v], dh[v], (pe - seg.obs_energy_wh)[v]
-
-
-def _rms(parts: tuple[np.ndarray, ...]) -> dict[str, float]:
-    dx, dy, dh, de = parts
-    return {
-        "position_m": float(np.sqrt(np.mean(dx**2 + dy**2))),
-        "heading_deg": float(np.sqrt(np.mean(dh**2))),
-        "energy_wh": float(np.sqrt(np.mean(de**2))),
-    }
 
 
 def fit_vehicle(
@@ -410,41 +413,34 @@ def fit_vehicle(
     cal_runs = [r for r in runs if is_calibration_log(r)]
     cal_starts = [t for r, t in zip(runs, start_times) if is_calibration_log(r)]
     names = tuple(n for n in SEGMENT_FITTED if n in fit)
+    slow = tuple(n for n in names if n in SLOW_TERMS)  # fitted only if the logs choose a vector loop
+    names = tuple(n for n in names if n not in SLOW_TERMS)
     if cal_runs:  # the current the calibration run flew in, fitted beside the vehicle
         names = (*names, water_term(mission, cal_runs, cal_starts))
-    per_step = np.nonzero(seg.valid)[0]
-    blocks = bootstrap_blocks(seg)[per_step]
-
-    def solve(names: tuple[str, ...], vehicle: Vehicle, bootstrap: int, start=None) -> MapEstimate:
-        def residuals(theta: np.ndarray) -> np.ndarray:
-            dx, dy, dh, de = _residual_parts(mission, seg, *with_terms(vehicle, dict(zip(names, theta))))
-            return np.concatenate(
-                [dx / SIGMA_POSITION_M, dy / SIGMA_POSITION_M, dh / SIGMA_HEADING_DEG, de / SIGMA_ENERGY_WH]
-            )
-
-        if not names:
-            return empty_estimate()
-        kinds = np.repeat(np.array(["position", "position", "heading", "energy"]), per_step.size)
-        priors = vehicle_priors(vehicle, names)
-        groups = np.concatenate([blocks] * 4)
-        kw = {"groups": groups, "kinds": kinds, "bootstrap": bootstrap, "seed": seed, "start": start}
-        return fit_map(residuals, priors, significant=0.0, **kw)
+    solve = SegmentSolver(mission, seg, vehicle_priors, bootstrap_blocks(seg)[np.nonzero(seg.valid)[0]], seed).solve
 
     knots, power = _legs_measured(mission, cal_runs, cal_starts, names, solve)
     legs = {p.name: (p, v, map_value, se) for p, v, map_value, se in power}
     hotel = legs.pop("hotel_w", None)
     if knots:  # the rest fitted again with the measured curve in place of speed_gain and max_speed
         curve = tuple((float(knot_command(k.prior.name) or 0.0), k.value) for k in knots)
-        base = dataclasses.replace(base, speed_curve=curve, **({"hotel_w": hotel[1]} if hotel else {}))
+        base = dataclasses.replace(base, speed_curve=curve)
+        if hotel:
+            base = dataclasses.replace(base, hotel_w=hotel[1])
         names = tuple(n for n in names if n not in ("speed_gain", "max_speed") and not (hotel and n == "hotel_w"))
     # the surface terms a first time, above the legs' power curve, so the segments replay the surface
     # as the vehicle flew it (measured again over the fitted vehicle below)
     first, _ = with_terms(base, {n: t[1] for n, t in legs.items()})
-    base, _ = with_terms(base, _surface_values(mission, runs, start_times, fit, first, Bias()))
+    base, _ = with_terms(base, surface_values(mission, runs, start_times, fit, first, Bias()))
     # the hold leg measures the hotel load; the power curve above it is fitted to the segments (they see
     # the whole run, turns and accelerations included), searched from the legs' measurement, and where
     # the segments cannot pin it the legs' measurement stands
-    est = solve(names, base, bootstrap, {n: t[1] for n, t in legs.items()})
+    start = {n: t[1] for n, t in legs.items()}
+    # a vector loop's slow part and the water trade against a settled speed measured on a leg's end:
+    # under that loop the knots are refined on the segments with the rest, from their measurement
+    vector_extra = slow + tuple(knot_name(c) for c, _ in base.speed_curve if knots)
+    base, names, control, start = choose_loop(mission, seg, names, vector_extra, base, solve, start)
+    est = solve(names, base, bootstrap, start)
     if legs and not all(est.identified[n] for n in legs):
         est = without_terms(est, list(legs))
     elif hotel:  # fitted over the pinned hotel load: its share of error is theirs too
@@ -455,10 +451,10 @@ def fit_vehicle(
         legs = {}
     for p, v, map_value, se in ([hotel] if hotel else []) + list(legs.values()):
         est = with_independent(est, p, v, map_value, se, True, "settled legs")
-    for k in knots:
+    for k in (k for k in knots if k.prior.name not in est.names):
         source = "settled legs" if k.identified else "not identified"
         est = with_independent(est, k.prior, k.value, k.map_value, k.stderr, k.identified, source)
-    est = _with_surface(mission, runs, start_times, fit, base, est)
+    est = with_surface(mission, runs, start_times, fit, base, est)
     ascent = fit_ascent(mission, runs, base.ascent_rate_mps) if "ascent_rate_mps" in fit else None
     if ascent is not None:
         est = with_ascent(est, ascent)
@@ -468,53 +464,15 @@ def fit_vehicle(
         calibrated,
         mission.vehicle,
         est,
-        _rms(_residual_parts(mission, seg, mission.vehicle)),
-        _rms(_residual_parts(mission, seg, calibrated, water)),
+        rms_of(residual_parts(mission, seg, mission.vehicle)),
+        rms_of(residual_parts(mission, seg, calibrated, water)),
         int(seg.valid.shape[0]),
         int(len(set(seg.run.tolist()))),
         model_share=MODEL_SHARE_PACED if paced else 0.0,
         ascent=ascent,
         run_water=water,
+        control=control,
     )
-
-
-def _surface_values(
-    mission: Mission, runs: list, start_times: Sequence[float], fit: Sequence[str], vehicle: Vehicle, water: Bias
-) -> dict[str, float]:
-    """The surface terms of ``fit`` the logs identify above ``vehicle`` in ``water``: {field: value}."""
-    if not any(n in fit for n in SURFACE_TERMS):
-        return {}
-    found = fit_surface(mission, runs, list(start_times), water, vehicle)
-    return {f.prior.name: f.value for f in found if f.identified and f.prior.name in fit}
-
-
-def _with_surface(
-    mission: Mission, runs: list, start_times: Sequence[float], fit: Sequence[str], base: Vehicle, est: MapEstimate
-) -> MapEstimate:
-    """``est`` with the surface terms asked for in ``fit``, measured on the logs' settled surface steps
-    above the vehicle fitted so far (:func:`planner.review.calibration_terms.fit_surface`); unidentified
-    at the file's values when the logs spend no settled time at the surface.  A term within
-    :data:`SAME_AS_FILE_SE` standard errors of the file's value keeps it: a vehicle that shows no
-    surface effect leaves a file without one as it was."""
-    names = [n for n in SURFACE_TERMS if n in fit]
-    if not names:
-        return est
-    vehicle, water = with_terms(base, {n: float(est.value[n]) for n in est.names})
-    vehicle = dataclasses.replace(vehicle, **{n: getattr(mission.vehicle, n) for n in SURFACE_TERMS})
-    found = {f.prior.name: f for f in fit_surface(mission, runs, list(start_times), water, vehicle)}
-    for n in names:
-        f = found.get(n)
-        file_value = getattr(mission.vehicle, n)
-        if f is None:
-            p = surface_prior(mission.vehicle, n)
-            est = with_independent(est, p, file_value, p.centre, p.sd, False, "not identified")
-        else:
-            source = "surface steps" if f.identified else "not identified"
-            value = f.value if f.identified else file_value
-            if f.identified and abs(value - file_value) <= SAME_AS_FILE_SE * f.stderr:
-                value, source = file_value, "surface steps (the file's value, within the error)"
-            est = with_independent(est, f.prior, value, f.map_value, f.stderr, f.identified, source)
-    return est
 
 
 def _legs_measured(

@@ -8,7 +8,8 @@ same :class:`~sim.uuv.autonomy.Command`), in the batch simulator, in the loop an
 
 Every leg but the last is scheduled by mission time alone and commands a known function of
 time (a straight leg a fixed heading and speed through water; a turn a heading that ramps
-at :data:`TURN_RAMP` times the vehicle's turn-rate limit, so the autopilot saturates), so a
+at :data:`TURN_RAMP` times the file's turn-rate limit, and at least :data:`TURN_STEP_DEG` a step,
+so the autopilot saturates), so a
 log's commands are known from the legs without reading the back-seat's mind.  The last leg
 (``return``) steers over ground to the recovery point, crabbing against the predicted tide,
 slows as it gets there and surfaces within :data:`SURFACE_WITHIN` of the recovery radius.
@@ -41,8 +42,13 @@ __all__ = [
 
 #: What a leg does: hold a heading and speed, turn, hold station (speed 0), rise, dive, go home.
 LEG_KINDS = ("straight", "turn", "hold", "ascent", "dive", "return")
-#: A turn's commanded heading ramps at this multiple of the turn-rate limit (the autopilot saturates).
+#: A turn's commanded heading ramps at this multiple of the file's turn-rate limit (the autopilot
+#: saturates), and at least :data:`TURN_STEP_DEG` per decision step: a vehicle five times quicker
+#: than its file still turns at its own limit, and shows it.
 TURN_RAMP = 3.0
+#: Most a turn's commanded heading moves in one decision step: under 180 degrees, so the
+#: autopilot cannot take the short way round the other side.
+TURN_STEP_DEG = 150.0
 #: The return leg surfaces within this share of the recovery radius.
 SURFACE_WITHIN = 0.5
 #: The return leg's ground speed towards the recovery point: distance / this (s), at most cruise.
@@ -160,7 +166,8 @@ class LegAutonomy:
         leg = self.legs[i]
         if leg.kind != "turn":
             return float(np.deg2rad(leg.heading_deg))
-        ramp = TURN_RAMP * self.spec.max_turn_rate_dps * max(since_s, 0.0)
+        rate = max(TURN_RAMP * self.spec.max_turn_rate_dps, TURN_STEP_DEG / self.mission.dt)
+        ramp = rate * max(since_s, 0.0)
         turned = float(np.sign(leg.turn_deg)) * min(abs(leg.turn_deg), ramp)
         return float(wrap_angle(np.asarray(self._heading_in[i] + np.deg2rad(turned))))
 

@@ -106,7 +106,15 @@ class Vehicle:
     surface a thruster vehicle is another machine: its vertical thrusters push it against
     the surface and its horizontal ones lose water, so it moves at most
     ``surface_max_speed`` (0: no limit) and draws ``surface_power_w`` more (ArduSub's
-    BlueROV2 model: 0.33 m/s whatever is asked, 350 W).  The autonomy returns home when
+    BlueROV2 model: 0.33 m/s whatever is asked, 350 W).
+    ``velocity_control`` says what the speed loop drives: ``"surge"``, the speed along the
+    bow (a torpedo: it goes where it points, and a turn keeps its speed); ``"vector"``, the
+    commanded velocity in the earth frame, with the heading held apart (a thruster vehicle in
+    ArduSub's GUIDED mode: a new course is reached by slowing the old one down and building
+    the new one up, so a reversal passes near standstill, and the bow is irrelevant to the
+    track).  A vector loop with an integrator answers in two parts: ``1 - slow_share`` of a
+    change within ``surge_time_constant_s``, the rest within ``slow_time_constant_s`` (ArduSub:
+    about two thirds in a few seconds, the rest over tens of seconds).  The autonomy returns home when
     its estimate of the energy to get there, times ``reserve_factor``, reaches the charge
     left; below ``critical_battery`` it also ignores no-go areas.
     """
@@ -134,6 +142,13 @@ class Vehicle:
     speed_curve: tuple[tuple[float, float], ...] = ()
     surface_max_speed: float = 0.0
     surface_power_w: float = 0.0
+    velocity_control: str = "surge"
+    slow_share: float = 0.0
+    slow_time_constant_s: float = 30.0
+
+
+#: What a vehicle's speed loop drives (``Vehicle.velocity_control``).
+VELOCITY_CONTROLS = ("surge", "vector")
 
 
 @dataclass(frozen=True)

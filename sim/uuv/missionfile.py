@@ -40,6 +40,8 @@ centre.  Keys marked ``=value`` are optional with that default; the others are r
                                   #   speed_curve=[[1.0, 0.87], [2.0, 1.93]]: measured (commanded,
                                   #   reached) m/s knots, replacing speed_gain where given
                                   #   surface_max_speed=0.33, surface_power_w=180: at the surface
+                                  #   velocity_control="vector", slow_share=0.3, slow_time_constant_s=25:
+                                  #   an earth-frame velocity loop (default "surge": along the bow)
                                   #   (0: no limit, no extra draw); rapt-plan calibrate measures them
     [current]                     # optional overrides of sim.uuv.mission.Current fields
     [execution_bias]              # optional: the day's water and vehicle as logs showed them
@@ -104,7 +106,7 @@ from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
-from sim.uuv.mission import Current, Mission, MissionArea, Rect, Transmission, Triangle, Vehicle
+from sim.uuv.mission import VELOCITY_CONTROLS, Current, Mission, MissionArea, Rect, Transmission, Triangle, Vehicle
 from sim.uuv.missionbias import read_execution_bias
 from sim.uuv.missionfields import MISSING, FieldChecker, fmt, names
 from sim.uuv.missionparameters import ParameterReader
@@ -485,51 +487,7 @@ class _Loader(FieldChecker):
                 values[key] = v
         obj = dataclasses.replace(defaults, **values)
         if cls is Vehicle:
-            positive = (
-                "cruise_speed",
-                "max_speed",
-                "battery_wh",
-                "speed_gain",
-                "surge_time_constant_s",
-                "yaw_time_constant_s",
-                "max_turn_rate_dps",
-            )
-            for key in positive:
-                if getattr(obj, key) <= 0:
-                    self.fail(f"vehicle.{key}", f"{fmt(getattr(obj, key))} must be > 0; give a positive number")
-            for key in ("start_battery", "critical_battery"):
-                if not 0.0 <= getattr(obj, key) <= 1.0:
-                    self.fail(
-                        f"vehicle.{key}",
-                        f"{fmt(getattr(obj, key))} is a fraction of the battery; use a value in [0, 1]",
-                    )
-            if not 0.5 <= obj.power_exponent <= 4.0:
-                self.fail(
-                    "vehicle.power_exponent",
-                    f"{fmt(obj.power_exponent)} is outside [0.5, 4]; use 3 for a torpedo, about 1 for a thruster vehicle",
-                )
-            if not obj.heading_time_s > 0:
-                self.fail(
-                    "vehicle.heading_time_s",
-                    f"{fmt(obj.heading_time_s)} must be > 0; give the seconds the autopilot takes to close a heading error",
-                )
-            obj = dataclasses.replace(obj, speed_curve=self.speed_curve(obj.speed_curve))
-            if not obj.surface_max_speed >= 0:
-                self.fail(
-                    "vehicle.surface_max_speed",
-                    f"{fmt(obj.surface_max_speed)} must be >= 0; give the m/s the vehicle reaches at the surface (0: no limit)",
-                )
-            if not obj.surface_power_w >= -obj.hotel_w:
-                self.fail(
-                    "vehicle.surface_power_w",
-                    f"{fmt(obj.surface_power_w)} would draw less than nothing at the surface; give the extra W "
-                    f"drawn there, at least -hotel_w ({fmt(-obj.hotel_w)})",
-                )
-            if obj.ascent_rate_mps < 0:
-                self.fail(
-                    "vehicle.ascent_rate_mps",
-                    f"{fmt(obj.ascent_rate_mps)} must be >= 0; give the rise rate in m/s (0: surfaces at once)",
-                )
+            obj = self.check_vehicle(obj)
         if cls is Current:
             if obj.speed < 0 or obj.perturbation < 0:
                 self.fail(
@@ -538,4 +496,65 @@ class _Loader(FieldChecker):
                 )
             if obj.period_h <= 0:
                 self.fail("current.period_h", f"{fmt(obj.period_h)} must be > 0; give the tidal period in hours")
+        return obj
+
+    def check_vehicle(self, obj: Vehicle) -> Vehicle:
+        """``[vehicle]``'s values checked (one line naming the field and the fix); its speed curve parsed."""
+        positive = (
+            "cruise_speed",
+            "max_speed",
+            "battery_wh",
+            "speed_gain",
+            "surge_time_constant_s",
+            "yaw_time_constant_s",
+            "max_turn_rate_dps",
+            "slow_time_constant_s",
+        )
+        for key in positive:
+            if getattr(obj, key) <= 0:
+                self.fail(f"vehicle.{key}", f"{fmt(getattr(obj, key))} must be > 0; give a positive number")
+        for key in ("start_battery", "critical_battery"):
+            if not 0.0 <= getattr(obj, key) <= 1.0:
+                self.fail(
+                    f"vehicle.{key}",
+                    f"{fmt(getattr(obj, key))} is a fraction of the battery; use a value in [0, 1]",
+                )
+        if not 0.5 <= obj.power_exponent <= 4.0:
+            self.fail(
+                "vehicle.power_exponent",
+                f"{fmt(obj.power_exponent)} is outside [0.5, 4]; use 3 for a torpedo, about 1 for a thruster vehicle",
+            )
+        if not obj.heading_time_s > 0:
+            self.fail(
+                "vehicle.heading_time_s",
+                f"{fmt(obj.heading_time_s)} must be > 0; give the seconds the autopilot takes to close a heading error",
+            )
+        obj = dataclasses.replace(obj, speed_curve=self.speed_curve(obj.speed_curve))
+        if obj.velocity_control not in VELOCITY_CONTROLS:
+            self.fail(
+                "vehicle.velocity_control",
+                f'{obj.velocity_control!r} is not a speed loop; write "surge" (speed along the bow, a torpedo) '
+                'or "vector" (an earth-frame velocity, a thruster vehicle in GUIDED)',
+            )
+        if not 0.0 <= obj.slow_share < 1.0:
+            self.fail(
+                "vehicle.slow_share",
+                f"{fmt(obj.slow_share)} is the share of a speed change that comes slowly; use a value in [0, 1)",
+            )
+        if not obj.surface_max_speed >= 0:
+            self.fail(
+                "vehicle.surface_max_speed",
+                f"{fmt(obj.surface_max_speed)} must be >= 0; give the m/s the vehicle reaches at the surface (0: no limit)",
+            )
+        if not obj.surface_power_w >= -obj.hotel_w:
+            self.fail(
+                "vehicle.surface_power_w",
+                f"{fmt(obj.surface_power_w)} would draw less than nothing at the surface; give the extra W "
+                f"drawn there, at least -hotel_w ({fmt(-obj.hotel_w)})",
+            )
+        if obj.ascent_rate_mps < 0:
+            self.fail(
+                "vehicle.ascent_rate_mps",
+                f"{fmt(obj.ascent_rate_mps)} must be >= 0; give the rise rate in m/s (0: surfaces at once)",
+            )
         return obj

@@ -11,7 +11,7 @@ Vectorised over scenarios: every array is (N,).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -37,6 +37,29 @@ class VehicleState:
     sway: np.ndarray
     yaw_rate: np.ndarray
     energy_wh: np.ndarray
+    # a vector-controlled vehicle's through-water velocity (east, north), its fast and slow parts;
+    # zero and unused under surge control
+    fast_e: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    fast_n: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    slow_e: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    slow_n: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    def __post_init__(self) -> None:
+        for name in ("fast_e", "fast_n", "slow_e", "slow_n"):
+            if getattr(self, name).shape != np.shape(self.x):
+                setattr(self, name, np.zeros_like(self.x, dtype=float))
+
+    def set_water_velocity(
+        self, spec: Vehicle, ve: np.ndarray, vn: np.ndarray, slow: tuple[np.ndarray, np.ndarray] | None = None
+    ) -> None:
+        """Start a vector-controlled vehicle moving through water at (``ve``, ``vn``) m/s: its slow
+        part ``slow`` (east, north) when known, else settled (``spec.slow_share`` of the velocity),
+        the fast part the rest."""
+        ve, vn = np.asarray(ve, dtype=float), np.asarray(vn, dtype=float)
+        if slow is None:
+            slow = (spec.slow_share * ve, spec.slow_share * vn)
+        self.slow_e, self.slow_n = np.asarray(slow[0], dtype=float), np.asarray(slow[1], dtype=float)
+        self.fast_e, self.fast_n = ve - self.slow_e, vn - self.slow_n
 
     @classmethod
     def at_rest(cls, x: np.ndarray, y: np.ndarray, heading: np.ndarray, energy_wh: np.ndarray) -> VehicleState:
@@ -107,14 +130,21 @@ def step_vehicle(
     target = reached_speed(spec, speed_cmd)
     if surfaced is not None and spec.surface_max_speed > 0:
         target = np.where(surfaced, np.minimum(target, spec.surface_max_speed), target)
-    u = s.surge + (target * speed_scale - s.surge) * a_u
-    v = s.sway + (-SWAY_COUPLING * u * r - s.sway) * a_v
     psi = wrap_angle(s.heading + r * dt)
-    course = psi + course_bias
-    sin, cos = np.sin(course), np.cos(course)
-    ve = u * sin + v * cos + current_e
-    vn = u * cos - v * sin + current_n
-    power = propulsion_power(spec, u)
+    if spec.velocity_control == "vector":
+        fast_e, fast_n, slow_e, slow_n, u, v, water = _vector_velocity(
+            s, spec, heading_cmd + course_bias, target * speed_scale, psi, a_u, dt
+        )
+        ve, vn = fast_e + slow_e + current_e, fast_n + slow_n + current_n
+    else:
+        u = s.surge + (target * speed_scale - s.surge) * a_u
+        v = s.sway + (-SWAY_COUPLING * u * r - s.sway) * a_v
+        course = psi + course_bias
+        sin, cos = np.sin(course), np.cos(course)
+        ve = u * sin + v * cos + current_e
+        vn = u * cos - v * sin + current_n
+        water = u
+    power = propulsion_power(spec, water)
     if surfaced is not None and spec.surface_power_w != 0:
         power = power + np.where(surfaced, spec.surface_power_w, 0.0)
     m = moving
@@ -124,4 +154,22 @@ def step_vehicle(
     s.surge = np.where(m, u, s.surge)
     s.sway = np.where(m, v, s.sway)
     s.yaw_rate = np.where(m, r, s.yaw_rate)
+    if spec.velocity_control == "vector":
+        s.fast_e, s.fast_n = np.where(m, fast_e, s.fast_e), np.where(m, fast_n, s.fast_n)
+        s.slow_e, s.slow_n = np.where(m, slow_e, s.slow_e), np.where(m, slow_n, s.slow_n)
     s.energy_wh = np.where(m, s.energy_wh - power * dt / 3600.0 / energy_scale, s.energy_wh)
+
+
+def _vector_velocity(s: VehicleState, spec: Vehicle, course: np.ndarray, speed: np.ndarray, psi, a_fast, dt):
+    """A vector speed loop's step: the fast and slow parts of the through-water velocity towards
+    ``speed`` along ``course``, the surge and sway they make on heading ``psi``, and their speed."""
+    te, tn = speed * np.sin(course), speed * np.cos(course)
+    share = spec.slow_share
+    a_slow = 1.0 - np.exp(-dt / spec.slow_time_constant_s)
+    fast_e = s.fast_e + ((1.0 - share) * te - s.fast_e) * a_fast
+    fast_n = s.fast_n + ((1.0 - share) * tn - s.fast_n) * a_fast
+    slow_e = s.slow_e + (share * te - s.slow_e) * a_slow
+    slow_n = s.slow_n + (share * tn - s.slow_n) * a_slow
+    we, wn = fast_e + slow_e, fast_n + slow_n
+    sin, cos = np.sin(psi), np.cos(psi)
+    return fast_e, fast_n, slow_e, slow_n, we * sin + wn * cos, we * cos - wn * sin, np.hypot(we, wn)

@@ -34,7 +34,7 @@ def _imitation7(old: str, new: str) -> str:
     [
         (  # the launch point 30 m from the southern edge of a smaller area
             _imitation7("width = 1000.0\nheight = 1000.0", "width = 700.0\nheight = 860.0"),
-            "leaves the operational area (2 m out) (margin 50 m); give the launch point more room",
+            "leaves the operational area (1 m out) (margin 50 m); give the launch point more room",
         ),
         (  # a no-go band across the range, 40 m north of the launch point
             _imitation7(

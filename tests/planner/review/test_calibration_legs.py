@@ -2,7 +2,9 @@
 
 The vehicle is not the file's and not a torpedo: its draw rises linearly with speed (power
 exponent 1), it is slower and saturates (speed gain 0.8, at most 1.2 m/s), turns faster
-and takes 6-7 s to surface, where it makes at most 0.45 m/s and draws 70 W more.  A small scripted autonomy flies the legs a calibration run
+and takes 6-7 s to surface, where it makes at most 0.45 m/s and draws 70 W more.  Its speed
+loop flies an earth-frame velocity (as ArduSub's GUIDED does), 30 % of a change coming with an
+8 s time constant.  A small scripted autonomy flies the legs a calibration run
 would (a hold, straight legs at four commanded speeds, the last above saturation, a turn
 at the rate limit after each, both ways, an ascent that goes on at the surface, and a dive) and the log lists them in its record.
 """
@@ -22,7 +24,7 @@ import sim.uuv
 from planner.review.calibrate import calibrate
 from planner.review.calibration_legs import cut_legs, is_calibration_log
 from planner.review.calibration_terms import is_water, knot_command, knot_name, term_need
-from planner.review.vehicle_fit import FITTED, fit_vehicle
+from planner.review.vehicle_fit import FITTED, SLOW_TERMS, fit_vehicle
 from rapt.errors import InputError
 from sim.uuv.bias import Bias
 from sim.uuv.scenario import make_scenarios
@@ -57,7 +59,11 @@ TRUE_BLOCK = {
     "ascent_rate_mps": 0.3,
     "surface_max_speed": 0.45,
     "surface_power_w": 70.0,
+    "slow_share": 0.3,
+    "slow_time_constant_s": 8.0,
 }
+#: The flown vehicle's speed loop (the file's is a torpedo's "surge" loop).
+TRUE_CONTROL = "vector"
 #: (kind, name, start s, end s, commanded speed, turn: +1 right / -1 left / 0 straight, surface)
 LEGS = [
     ("hold", "hold", 0, 120, 0.0, 0, False),
@@ -80,14 +86,14 @@ def mission_text(block: dict) -> str:
     start = lines.index("[vehicle]")
     end = next(i for i in range(start + 1, len(lines)) if lines[i].startswith("["))
     kept = [ln for ln in lines[start + 1 : end] if "=" not in ln or ln.split("=")[0].strip() not in block]
-    body = [f"{k} = {float(v)!r}" for k, v in block.items()]
+    body = [f"{k} = {v!r}" if isinstance(v, str) else f"{k} = {float(v)!r}" for k, v in block.items()]
     return "\n".join(lines[: start + 1] + body + kept + lines[end:]) + "\n"
 
 
 def thruster_missions(d: Path) -> tuple:
     """The file's mission (path and loaded) and the true one, written in ``d``."""
     (d / "file.toml").write_text(mission_text(FILE_BLOCK))
-    (d / "true.toml").write_text(mission_text(TRUE_BLOCK))
+    (d / "true.toml").write_text(mission_text({**TRUE_BLOCK, "velocity_control": TRUE_CONTROL}))
     return d / "file.toml", sim.uuv.load_mission(d / "file.toml"), sim.uuv.load_mission(d / "true.toml")
 
 
@@ -171,15 +177,22 @@ def test_one_calibration_log_identifies_every_parameter_of_a_thruster_vehicle(fi
     # current the run flew in is fitted beside the vehicle
     knots = {knot_name(v) for kind, *_, v, _, _ in LEGS if kind == "straight"}
     assert set(est.names) == (set(FITTED) - {"speed_gain", "max_speed"}) | knots | {"water.current_scale"}
+    # its speed loop flies an earth-frame velocity with a slow part: the fit says so
+    assert fitted.vehicle.velocity_control == "vector" and fitted.control["file"] == "surge"
+    rms = fitted.control["position_rms_m"]
+    assert rms["vector"] < 0.2 * rms["surge"]
     for n in est.names:
         truth, got, se = truth_of(n), fitted.value(n), fitted.stderr[n]
         assert est.identified[n], (n, est.stderr[n], fitted.unidentified)
         # identified: posterior s.d. below half the prior's
         prior = next(p for p in est.priors if p.name == n)
         assert est.stderr[n] < 0.5 * prior.sd, n
-        # within its standard errors, plus 0.2 %: the turn terms are noise-free here, and a settled speed is
-        # measured a few mm/s short of where a first-order lag ends, which the water fitted beside it shares
-        assert abs(got - truth) < 3 * se + 2e-3 * truth, (n, got, truth, se)
+        # within its standard errors, plus 0.2 % (the turn terms are noise-free here, and a settled speed is
+        # measured a few mm/s short of where a first-order lag ends, which the water fitted beside it
+        # shares), or 8 % for the slow part (warmed over the minute of set-points before each segment:
+        # the run's first segment has none)
+        floor = 0.08 if n in SLOW_TERMS else 2e-3
+        assert abs(got - truth) < 3 * se + floor * truth, (n, got, truth, se)
         assert got == pytest.approx(truth, rel=0.1), n
     assert fitted.unidentified == {}
     assert fitted.rms_after["energy_wh"] < 0.1 * fitted.rms_before["energy_wh"]

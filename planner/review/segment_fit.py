@@ -1,0 +1,158 @@
+"""Vehicle terms fitted to segment replays, and which speed loop the segments say the vehicle has.
+
+:func:`planner.review.vehicle_fit.fit_vehicle` fits a vehicle block to logs by replaying their
+open-loop segments (:mod:`planner.review.segments`) under trial values and comparing the
+predicted positions, headings and energy with the logged ones.  :class:`SegmentSolver` is that
+fit for one set of segments; :func:`choose_loop` fits both speed loops a vehicle may have (a
+torpedo's, driving the speed along its bow; a thruster vehicle's vector loop, driving an
+earth-frame velocity with a slow part) and keeps the one the positions bear out.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable, Sequence
+
+import numpy as np
+
+from planner.review.calibration_legs import empty_estimate, merged
+from planner.review.calibration_terms import with_terms
+from planner.review.segments import Segments, replay
+from rapt.mapfit import MapEstimate, Prior, fit_map
+from sim.uuv.angles import wrap_angle
+from sim.uuv.bias import Bias
+from sim.uuv.mission import Mission, Vehicle
+
+__all__ = [
+    "SegmentSolver",
+    "choose_loop",
+    "residual_parts",
+    "rms_of",
+    "SIGMA_POSITION_M",
+    "SIGMA_HEADING_DEG",
+    "SIGMA_ENERGY_WH",
+    "TURN_TERMS",
+    "SLOW_TERMS",
+    "CONTROL_MARGIN",
+]
+
+#: Residual units: metres of position, degrees of heading, watt-hours of energy used.
+SIGMA_POSITION_M = 1.0
+SIGMA_HEADING_DEG = 2.0
+SIGMA_ENERGY_WH = 0.05
+#: The terms that shape the heading alone when the speed loop is a vector one.
+TURN_TERMS = ("max_turn_rate_dps", "yaw_time_constant_s", "heading_time_s")
+#: The terms of a vector speed loop's slow part: fitted only when the logs choose that loop.
+SLOW_TERMS = ("slow_share", "slow_time_constant_s")
+#: The vector loop is chosen when its segment position residual is at least this share below the surge loop's.
+CONTROL_MARGIN = 0.1
+
+
+def residual_parts(
+    mission: Mission, seg: Segments, vehicle: Vehicle, water: Bias | None = None
+) -> tuple[np.ndarray, ...]:
+    """Position (m, east and north), heading (deg) and energy (Wh) errors of every valid segment step."""
+    px, py, pe, ph = replay(mission, seg, water, vehicle=vehicle)
+    v = seg.valid
+    dh = np.rad2deg(wrap_angle(ph - seg.obs_heading))
+    return (px - seg.obs_x)[v], (py - seg.obs_y)[v], dh[v], (pe - seg.obs_energy_wh)[v]
+
+
+def rms_of(parts: tuple[np.ndarray, ...]) -> dict[str, float]:
+    dx, dy, dh, de = parts
+    return {
+        "position_m": float(np.sqrt(np.mean(dx**2 + dy**2))),
+        "heading_deg": float(np.sqrt(np.mean(dh**2))),
+        "energy_wh": float(np.sqrt(np.mean(de**2))),
+    }
+
+
+class SegmentSolver:
+    """MAP fits of vehicle terms to one set of segments (``priors`` gives each term's prior;
+    ``blocks`` labels each valid step's bootstrap block; ``seed`` seeds the bootstrap)."""
+
+    def __init__(
+        self,
+        mission: Mission,
+        seg: Segments,
+        priors: Callable[[Vehicle, Sequence[str]], list[Prior]],
+        blocks: np.ndarray,
+        seed: int = 0,
+    ):
+        self.mission, self.seg, self.priors, self.blocks, self.seed = mission, seg, priors, blocks, seed
+
+    def solve_kinds(
+        self,
+        names: tuple[str, ...],
+        vehicle: Vehicle,
+        bootstrap: int,
+        start,
+        used: tuple[str, ...],
+        robust: bool = True,
+    ) -> MapEstimate:
+        """The MAP fit of ``names`` to the residual kinds ``used`` (of position, heading, energy)."""
+        mission, seg = self.mission, self.seg
+
+        def residuals(theta: np.ndarray) -> np.ndarray:
+            dx, dy, dh, de = residual_parts(mission, seg, *with_terms(vehicle, dict(zip(names, theta))))
+            parts = {
+                "position": (dx / SIGMA_POSITION_M, dy / SIGMA_POSITION_M),
+                "heading": (dh / SIGMA_HEADING_DEG,),
+                "energy": (de / SIGMA_ENERGY_WH,),
+            }
+            return np.concatenate([r for k in used for r in parts[k]])
+
+        if not names:
+            return empty_estimate()
+        width = {"position": 2, "heading": 1, "energy": 1}
+        kinds = np.repeat(np.array([k for k in used for _ in range(width[k])]), self.blocks.size)
+        groups = np.concatenate([self.blocks] * sum(width[k] for k in used))
+        kw = {"groups": groups, "kinds": kinds, "bootstrap": bootstrap, "seed": self.seed, "start": start}
+        return fit_map(residuals, self.priors(vehicle, names), significant=0.0, robust=robust, **kw)
+
+    def solve(self, names: tuple[str, ...], vehicle: Vehicle, bootstrap: int, start=None) -> MapEstimate:
+        """The MAP fit of ``names``.  A vector loop's track does not depend on its heading, so its
+        turn terms are fitted to the headings alone and the rest to positions and energy: the same
+        optimum, found as two well-scaled problems instead of one whose heading part is lost."""
+        if vehicle.velocity_control != "vector" or not set(TURN_TERMS) & set(names):
+            return self.solve_kinds(names, vehicle, bootstrap, start, ("position", "heading", "energy"))
+        turn = tuple(n for n in names if n in TURN_TERMS)
+        rest = tuple(n for n in names if n not in TURN_TERMS)
+        a = self.solve_kinds(rest, vehicle, bootstrap, start, ("position", "energy"))
+        # a heading moves only in turns: its information is in the few large residuals a robust fit discards
+        b = self.solve_kinds(turn, vehicle, bootstrap, start, ("heading",), robust=False)
+        return merged(a, b) if rest else b
+
+
+def choose_loop(
+    mission: Mission,
+    seg: Segments,
+    names: tuple[str, ...],
+    slow: tuple[str, ...],
+    base: Vehicle,
+    solve,
+    start: dict[str, float],
+) -> tuple[Vehicle, tuple[str, ...], dict, dict[str, float]]:
+    """The speed loop the segments say the vehicle has, the names to fit with it, the account, and
+    where its fit ended (the full fit starts there).
+
+    Both loops are fitted to the segments (without the bootstrap): the surge loop with
+    ``names``, the vector loop with its slow part (``slow``) as well.  The vector loop is
+    taken when its position residual RMS is at least :data:`CONTROL_MARGIN` below the surge
+    loop's; otherwise the simpler surge loop stands.  No ``slow`` terms asked for: the
+    file's loop, unexamined.
+    """
+    if not slow:
+        return base, names, {}, start
+    rms: dict[str, float] = {}
+    found: dict[str, dict[str, float]] = {}
+    for control, fitted in (("surge", names), ("vector", names + slow)):
+        vehicle = dataclasses.replace(base, velocity_control=control)
+        est = solve(fitted, vehicle, 0, start)
+        found[control] = {n: float(est.map_value[n]) for n in est.names}
+        trial = with_terms(vehicle, found[control])  # each loop at its best, every term free
+        rms[control] = rms_of(residual_parts(mission, seg, *trial))["position_m"]
+    chosen = "vector" if rms["vector"] < (1.0 - CONTROL_MARGIN) * rms["surge"] else "surge"
+    account = {"chosen": chosen, "file": base.velocity_control, "position_rms_m": rms}
+    fitted = names + slow if chosen == "vector" else names
+    return dataclasses.replace(base, velocity_control=chosen), fitted, account, found[chosen]
