@@ -417,9 +417,10 @@ def fit_vehicle(
     names = tuple(n for n in names if n not in SLOW_TERMS)
     if cal_runs:  # the current the calibration run flew in, fitted beside the vehicle
         names = (*names, water_term(mission, cal_runs, cal_starts))
-    solve = SegmentSolver(mission, seg, vehicle_priors, bootstrap_blocks(seg)[np.nonzero(seg.valid)[0]], seed).solve
+    solver = SegmentSolver(mission, seg, vehicle_priors, bootstrap_blocks(seg)[np.nonzero(seg.valid)[0]], seed)
+    solve = solver.solve
 
-    knots, power = _legs_measured(mission, cal_runs, cal_starts, names, solve)
+    knots, power, first = _legs_measured(mission, cal_runs, cal_starts, names, solver)
     legs = {p.name: (p, v, map_value, se) for p, v, map_value, se in power}
     hotel = legs.pop("hotel_w", None)
     if knots:  # the rest fitted again with the measured curve in place of speed_gain and max_speed
@@ -430,12 +431,12 @@ def fit_vehicle(
         names = tuple(n for n in names if n not in ("speed_gain", "max_speed") and not (hotel and n == "hotel_w"))
     # the surface terms a first time, above the legs' power curve, so the segments replay the surface
     # as the vehicle flew it (measured again over the fitted vehicle below)
-    first, _ = with_terms(base, {n: t[1] for n, t in legs.items()})
-    base, _ = with_terms(base, surface_values(mission, runs, start_times, fit, first, Bias()))
+    powered, _ = with_terms(base, {n: t[1] for n, t in legs.items()})
+    base, _ = with_terms(base, surface_values(mission, runs, start_times, fit, powered, Bias()))
     # the hold leg measures the hotel load; the power curve above it is fitted to the segments (they see
     # the whole run, turns and accelerations included), searched from the legs' measurement, and where
     # the segments cannot pin it the legs' measurement stands
-    start = {n: t[1] for n, t in legs.items()}
+    start = {**first, **{n: t[1] for n, t in legs.items()}}  # both loops search from the first fit
     # a vector loop's slow part and the water trade against a settled speed measured on a leg's end:
     # under that loop the knots are refined on the segments with the rest, from their measurement
     vector_extra = slow + tuple(knot_name(c) for c, _ in base.speed_curve if knots)
@@ -476,27 +477,31 @@ def fit_vehicle(
 
 
 def _legs_measured(
-    mission: Mission, cal_runs: list, cal_starts: Sequence[float], names: tuple[str, ...], solve
-) -> tuple[list, list[tuple[Prior, float, float, float]]]:
+    mission: Mission, cal_runs: list, cal_starts: Sequence[float], names: tuple[str, ...], solver: SegmentSolver
+) -> tuple[list, list[tuple[Prior, float, float, float]], dict[str, float]]:
     """The calibration runs' (``cal_runs``, flown from ``cal_starts``) measured speed curve (the knots of
     :func:`planner.review.calibration_terms.fit_curve`; one a cut-short leg left unidentified keeps
     the file model's speed) and power terms
     (:func:`~planner.review.calibration_terms.fit_power`), both in the water a first fit finds;
+    and where the first fit ended (its MAP values: a start for the fits that follow);
     ([], an empty fit) when its straight legs do not span
     :data:`~planner.review.calibration_terms.CURVE_MIN_SPEEDS` settled commanded speeds or the fit
     has no ``speed_gain`` and ``max_speed`` to replace.  The power terms come as (prior, value,
     MAP value, standard error) of those identified, :data:`LEG_POWER_SHARE` of each value added to
     its standard error."""
     if not cal_runs or not {"speed_gain", "max_speed"} <= set(names):
-        return [], []
-    first = solve(names, mission.vehicle, 0)
+        return [], [], {}
+    # the water is in the track: a first fit of the terms that move it, to positions and headings alone
+    track = tuple(n for n in names if n not in POWER_TERMS)
+    first = solver.solve_kinds(track, mission.vehicle, 0, None, ("position", "heading"))
+    found = {n: float(first.map_value[n]) for n in first.names}
     water = with_terms(mission.vehicle, {n: float(first.value[n]) for n in first.names})[1]
     knots = fit_curve(mission, cal_runs, cal_starts, water)
     if sum(k.identified for k in knots) < CURVE_MIN_SPEEDS:
-        return [], []
+        return [], [], found
     terms = [n for n in POWER_TERMS if n in names]
     if len(terms) < len(POWER_TERMS):
-        return knots, []
+        return knots, [], found
     power = fit_power(mission, cal_runs, cal_starts, water, vehicle_priors(mission.vehicle, terms))
     out = []
     for p in power.priors:
@@ -504,4 +509,4 @@ def _legs_measured(
         se = float(np.hypot(power.stderr[p.name], LEG_POWER_SHARE * abs(v)))
         if power.identified[p.name] and se < IDENTIFIED_BELOW * p.sd:
             out.append((p, v, power.map_value[p.name], se))
-    return knots, out
+    return knots, out, found

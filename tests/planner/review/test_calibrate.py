@@ -185,6 +185,7 @@ def _digests(paths) -> dict:
     return {str(p): hashlib.sha256(Path(p).read_bytes()).hexdigest() for p in paths}
 
 
+@pytest.mark.slow
 def test_calibrate_writes_the_file_and_sidecar_and_modifies_no_input(fake_logs, wrong, tmp_path, true_mission):
     paths, _ = fake_logs
     paths = paths[:MIN_LOGS]
@@ -284,6 +285,7 @@ def _continuous_vehicle_runs(mission, runs, starts, vehicle, substep: float = 0.
     return out
 
 
+@pytest.mark.slow
 def test_a_continuously_moving_vehicle_of_another_block_is_recovered(true_mission, flown):
     """Not our simulator's 2 s steps: a vehicle flown in 0.1 s steps, logged as a real vehicle logs."""
     _, runs, starts = flown

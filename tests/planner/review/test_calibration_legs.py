@@ -206,6 +206,7 @@ def test_a_cubic_model_cannot_fit_the_thruster_draw(missions, flown, fitted):
     assert cubic.rms_after["energy_wh"] > 5 * fitted.rms_after["energy_wh"]
 
 
+@pytest.mark.slow
 def test_the_water_the_run_flew_in_is_fitted_beside_the_vehicle_and_written(missions, tmp_path, monkeypatch):
     """A vehicle in slack water where the tide table says 1 m/s (as on the firmware): the run's legs
     tell the current from the vehicle, so the speeds come out right and the file gets the water."""

@@ -4,8 +4,8 @@ Needs the ArduSub SITL binary named by ``ARDUSUB_SITL`` (CI sets it) and skips w
 reason where it is absent. The run is designed for range2017 (``rapt-plan shakedown``), flown
 from a cold boot at speed-up 40 through the vehicle run's bring-up, watchdog and log, and
 calibrated from its log alone. What the firmware's BlueROV2 is (a thruster vehicle that
-turns in a second and draws a thruster's current) is what the fit must find, whatever the
-mission file's torpedo says.
+turns in a second, flies an earth-frame velocity, crawls at the surface and draws a
+thruster's current) is what the fit must find, whatever the mission file's torpedo says.
 """
 
 from __future__ import annotations
@@ -78,6 +78,12 @@ def test_one_calibration_run_on_the_firmware_calibrates_the_thruster_vehicle(tmp
         assert cal.rms_after["heading_deg"] < 0.2 * cal.rms_before["heading_deg"]
     else:
         assert all("turn" in side["unidentified"][n] for n in turns if not cal.estimate.identified[n])
+    # ArduSub's GUIDED flies an earth-frame velocity with an integrator: the fit takes the vector loop, slow part
+    # and all, and at the surface the vehicle makes a fraction of what it is asked and draws more
+    assert v.velocity_control == "vector", cal.control
+    assert cal.control["position_rms_m"]["vector"] < 0.5 * cal.control["position_rms_m"]["surge"]
+    assert all(cal.estimate.identified[n] for n in ("surface_max_speed", "surface_power_w")), side["unidentified"]
+    assert 0 < v.surface_max_speed < 0.5 * mission.vehicle.cruise_speed and v.surface_power_w > 50
     assert cal.rms_after["position_m"] < cal.rms_before["position_m"]
     assert cal.rms_after["energy_wh"] < cal.rms_before["energy_wh"]
 
@@ -104,4 +110,4 @@ def test_one_calibration_run_on_the_firmware_calibrates_the_thruster_vehicle(tmp
     path, energy = errors(in_water, plant)
     file_path, file_energy = errors(mission)
     assert abs(energy) < 0.05 and abs(file_energy) > 0.30
-    assert path < file_path / 3, (path, file_path)
+    assert path < 10.0 and path < file_path / 3, (path, file_path)
