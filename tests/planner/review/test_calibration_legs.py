@@ -198,6 +198,7 @@ def test_one_calibration_log_identifies_every_parameter_of_a_thruster_vehicle(fi
     assert fitted.rms_after["energy_wh"] < 0.1 * fitted.rms_before["energy_wh"]
 
 
+@pytest.mark.slow
 def test_a_cubic_model_cannot_fit_the_thruster_draw(missions, flown, fitted):
     """Fixed at the torpedo's exponent, the energy residual stays far above the log's hectojoule steps."""
     _, mission, _ = missions
@@ -267,6 +268,7 @@ def cut_run(run, at_s: float, events: list) -> object:
     return out
 
 
+@pytest.mark.slow
 def test_legs_cut_short_by_the_watchdog_write_nothing_and_say_which(missions, flown, tmp_path, monkeypatch):
     file_path, _, _ = missions
     run, _, _ = flown
