@@ -53,7 +53,7 @@ from sim.uuv.bias import Bias, compose
 from sim.uuv.environment import tidal_current
 from sim.uuv.interface import HJ_PER_WH
 from sim.uuv.mission import Mission, Vehicle
-from sim.uuv.vehicle import reached_speed
+from sim.uuv.vehicle import propulsion_power, reached_speed
 
 __all__ = [
     "CURVE_MIN_SPEEDS",
@@ -407,7 +407,7 @@ def fit_surface(
     )
     if not cap.identified:  # no limit seen: the file's (0, none) stands, not the prior's centre
         cap = dataclasses.replace(cap, value=vehicle.surface_max_speed)
-    extra = power - (vehicle.hotel_w + vehicle.drag_w * (speed / vehicle.cruise_speed) ** vehicle.power_exponent)
+    extra = power - propulsion_power(vehicle, speed)
     draw = _measured(
         surface_prior(vehicle, "surface_power_w"),
         extra,

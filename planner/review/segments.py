@@ -51,7 +51,7 @@ import numpy as np
 from sim.uuv.bias import Bias, compose
 from sim.uuv.environment import tidal_current
 from sim.uuv.mission import Mission, Vehicle
-from sim.uuv.vehicle import SWAY_COUPLING, VehicleState, reached_speed, step_vehicle
+from sim.uuv.vehicle import SWAY_COUPLING, VehicleState, reached_speed, step_vehicle, surface_limited
 
 __all__ = [
     "Segments",
@@ -300,8 +300,7 @@ def replay(
     if seg.ground is not None:
         g = seg.ground
         ce, cn = tide(g["t_tide"])
-        c = seg.start["heading"] + course
-        surge = np.where(g["ok"], (g["ve"] - ce) * np.sin(c) + (g["vn"] - cn) * np.cos(c), surge)
+        surge = np.where(g["ok"], (g["ve"] - ce) * np.sin(h0) + (g["vn"] - cn) * np.cos(h0), surge)
         we, wn = np.where(g["ok"], g["ve"] - ce, we), np.where(g["ok"], g["vn"] - cn, wn)
     s = VehicleState(
         seg.start["x"].copy(),
@@ -352,9 +351,7 @@ def _slow_part(spec: Vehicle, seg: Segments, speed_scale: float, course: float) 
     n, H = h["speed_cmd"].shape
     se, sn = np.zeros(n), np.zeros(n)
     for j in range(H):
-        target = reached_speed(spec, h["speed_cmd"][:, j])
-        if spec.surface_max_speed > 0:
-            target = np.where(h["surfaced"][:, j], np.minimum(target, spec.surface_max_speed), target)
+        target = surface_limited(spec, reached_speed(spec, h["speed_cmd"][:, j]), h["surfaced"][:, j])
         target = spec.slow_share * target * speed_scale
         c = h["heading_cmd"][:, j] + course
         a = 1.0 - np.exp(-h["step_dt"][:, j] / spec.slow_time_constant_s)

@@ -410,8 +410,8 @@ def fit_vehicle(
     if not seg.valid.any():
         raise InputError("LOGS: no replayable flight in the logs (no telemetry steps with set-points); nothing to fit")
     base = mission.vehicle
-    cal_runs = [r for r in runs if is_calibration_log(r)]
-    cal_starts = [t for r, t in zip(runs, start_times) if is_calibration_log(r)]
+    cal = [(r, t) for r, t in zip(runs, start_times) if is_calibration_log(r)]
+    cal_runs, cal_starts = [r for r, _ in cal], [t for _, t in cal]
     names = tuple(n for n in SEGMENT_FITTED if n in fit)
     slow = tuple(n for n in names if n in SLOW_TERMS)  # fitted only if the logs choose a vector loop
     names = tuple(n for n in names if n not in SLOW_TERMS)
@@ -439,7 +439,7 @@ def fit_vehicle(
     start = {**first, **{n: t[1] for n, t in legs.items()}}  # both loops search from the first fit
     # a vector loop's slow part and the water trade against a settled speed measured on a leg's end:
     # under that loop the knots are refined on the segments with the rest, from their measurement
-    vector_extra = slow + tuple(knot_name(c) for c, _ in base.speed_curve if knots)
+    vector_extra = slow + (tuple(knot_name(c) for c, _ in base.speed_curve) if knots else ())
     base, names, control, start = choose_loop(mission, seg, names, vector_extra, base, solve, start)
     est = solve(names, base, bootstrap, start)
     if legs and not all(est.identified[n] for n in legs):

@@ -18,7 +18,7 @@ import numpy as np
 from sim.uuv.angles import wrap_angle
 from sim.uuv.mission import Vehicle
 
-__all__ = ["VehicleState", "step_vehicle", "propulsion_power", "reached_speed"]
+__all__ = ["VehicleState", "step_vehicle", "propulsion_power", "reached_speed", "surface_limited"]
 
 #: Sideslip per unit of (speed x yaw rate): a few degrees of crab angle in a hard turn.
 SWAY_COUPLING = 0.8
@@ -97,6 +97,13 @@ def reached_speed(spec: Vehicle, speed_cmd: np.ndarray | float) -> np.ndarray:
     return np.minimum(spec.speed_gain * cmd, spec.max_speed)
 
 
+def surface_limited(spec: Vehicle, target: np.ndarray, surfaced: np.ndarray | None) -> np.ndarray:
+    """``target`` speeds held to ``spec.surface_max_speed`` where ``surfaced`` (no limit when it is 0 or None)."""
+    if surfaced is None or spec.surface_max_speed <= 0:
+        return target
+    return np.where(surfaced, np.minimum(target, spec.surface_max_speed), target)
+
+
 def step_vehicle(
     s: VehicleState,
     spec: Vehicle,
@@ -127,9 +134,7 @@ def step_vehicle(
     a_u = 1.0 - np.exp(-dt / spec.surge_time_constant_s)
     a_v = 1.0 - np.exp(-dt * spec.sway_damping)
     r = s.yaw_rate + (r_des - s.yaw_rate) * a_r
-    target = reached_speed(spec, speed_cmd)
-    if surfaced is not None and spec.surface_max_speed > 0:
-        target = np.where(surfaced, np.minimum(target, spec.surface_max_speed), target)
+    target = surface_limited(spec, reached_speed(spec, speed_cmd), surfaced)
     psi = wrap_angle(s.heading + r * dt)
     if spec.velocity_control == "vector":
         fast_e, fast_n, slow_e, slow_n, u, v, water = _vector_velocity(
