@@ -26,11 +26,19 @@ from planner.cli import (
     surrogate,
 )
 from planner.cli.console import print_error
+from planner.cli.help_format import RaptCommand, RaptGroup
 from rapt.errors import RaptError
 
 __all__ = ["app", "rapt_plan"]
 
-app = typer.Typer(no_args_is_help=True, add_completion=False, help=__doc__.splitlines()[0])
+app = typer.Typer(
+    cls=RaptGroup,
+    no_args_is_help=True,
+    add_completion=False,
+    # click's plain help: brackets ([vehicle]) are text, paragraphs wrap to the terminal (planner.cli.help_format)
+    rich_markup_mode=None,
+    help="Plan field tests of autonomous underwater vehicles from adaptive boundary searches.",
+)
 
 
 @app.callback()
@@ -39,21 +47,21 @@ def main() -> None:
 
 
 # in this order in --help
-app.command("search")(search.search)
-app.command("study")(search.study)
-app.command("run")(run.run)
-app.command("generate")(generate.generate)
-app.command("shakedown")(shakedown.shakedown)
-app.command("surrogate")(surrogate.surrogate)
-app.command("compare")(compare.compare)
-app.command("calibrate")(calibrate.calibrate)
-app.command("frontseat")(processes.frontseat)
-app.command("bridge")(processes.bridge)
-app.command("autonomy")(processes.autonomy)
-app.command("log")(processes.log)
-app.command("bus-keys")(bus_keys.bus_keys)
+app.command("search", cls=RaptCommand)(search.search)
+app.command("study", cls=RaptCommand)(search.study)
+app.command("run", cls=RaptCommand)(run.run)
+app.command("generate", cls=RaptCommand)(generate.generate)
+app.command("shakedown", cls=RaptCommand)(shakedown.shakedown)
+app.command("surrogate", cls=RaptCommand)(surrogate.surrogate)
+app.command("compare", cls=RaptCommand)(compare.compare)
+app.command("calibrate", cls=RaptCommand)(calibrate.calibrate)
+app.command("frontseat", cls=RaptCommand)(processes.frontseat)
+app.command("bridge", cls=RaptCommand)(processes.bridge)
+app.command("autonomy", cls=RaptCommand)(processes.autonomy)
+app.command("log", cls=RaptCommand)(processes.log)
+app.command("bus-keys", cls=RaptCommand)(bus_keys.bus_keys)
 # Chapter 5's second system under test: self-righting ground robots (planner/selfright/).
-app.command("selfright")(selfright.selfright)
+app.command("selfright", cls=RaptCommand)(selfright.selfright)
 
 
 def rapt_plan() -> None:

@@ -10,7 +10,7 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
-from planner.cli.console import err, fail, out
+from planner.cli.console import err, fail, out, print_table
 
 __all__ = ["calibrate"]
 
@@ -61,7 +61,7 @@ def calibrate(
             fail(str(exc))
     table = Table(title=escape(f"[vehicle] calibrated from {result.runs} run(s), {result.segments} segments"))
     for col in ("parameter", "file", "calibrated", "s.e.", "unit", "identified"):
-        table.add_column(col, justify="left" if col in ("parameter", "unit", "identified") else "right", no_wrap=True)
+        table.add_column(col, justify="left" if col in ("parameter", "unit", "identified") else "right")
     est = result.estimate
     for n in result.fitted:
         ident = est.identified[n]
@@ -73,7 +73,7 @@ def calibrate(
             result.unit(n),
             "yes" if ident else "no",
         )
-    out.print(table)
+    print_table(table)
     kept = result.unidentified
     if kept:
         out.print(f"not identified by these logs, file value kept: {', '.join(kept)}", highlight=False, soft_wrap=True)

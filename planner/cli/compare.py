@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from planner.cli.console import err, fail, out
+from planner.cli.console import err, fail, out, print_table
 
 __all__ = ["compare"]
 
@@ -64,12 +64,12 @@ def compare(
     config = CompareConfig(dithers=dithers, seed=seed, fit=names, plant=plant, bootstrap=bootstrap, draws=draws)
     result = _run_compare(plan_dir, logs, out_dir, config)
     _warn_lost(result)
-    out.print(_scenario_table(result))
-    out.print(_bias_table(result))
+    print_table(_scenario_table(result))
+    print_table(_bias_table(result))
     _print_day_bias(result)
     _print_agreement(result)
-    out.print(_forecast_table(result))
-    out.print(_brier_table(result))
+    print_table(_forecast_table(result))
+    print_table(_brier_table(result))
     _print_flagged(result)
     overlays = len(result.get("overlays", {}))
     out.print(

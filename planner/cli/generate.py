@@ -10,7 +10,7 @@ import typer
 from rich.markup import escape
 from rich.table import Table
 
-from planner.cli.console import err, fail, out, progress_bar
+from planner.cli.console import err, fail, out, print_table, progress_bar
 from planner.cli.inputs import load_mission
 
 __all__ = ["generate", "summary_table"]
@@ -20,12 +20,7 @@ def summary_table(plan: dict, title: str) -> Table:
     """Per pair: its sub-boundary and modes, distance, P(predicted outcome) of each side and variant, verdict."""
     table = Table(title=title)
     for col in ("pair", "sub-boundary", "modes", "distance", "P a / b", "variant P", "verdict"):
-        table.add_column(
-            col,
-            justify="left" if col in ("sub-boundary", "verdict") else "right",
-            overflow="fold" if col == "sub-boundary" else "ellipsis",
-            no_wrap=col != "sub-boundary",
-        )
+        table.add_column(col, justify="left" if col in ("sub-boundary", "verdict") else "right")
 
     def pct(values) -> str:
         return " / ".join("-" if v is None else f"{v:.0%}" for v in values or (None, None))
@@ -159,7 +154,7 @@ def generate(
             fail(str(exc))
         finally:
             close_executor()
-    out.print(summary_table(plan, f"{mission.name}: field plan in {out_dir}"))
+    print_table(summary_table(plan, f"{mission.name}: field plan in {out_dir}"))
     for line in summary_lines(plan["mission"].get("planned_for")):
         out.print(escape(line), soft_wrap=True, highlight=False)
     for p in plan["pairs"]:

@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from planner.cli.console import fail, out
+from planner.cli.console import fail, print_table
 from planner.cli.inputs import BusKeys, ScenarioOpt, SurrogateOpt, load_surrogate, mission_and_scenario
 from rapt.errors import RaptError
 
@@ -117,7 +117,7 @@ def run(
         fail(str(exc))
     batch = check_against_batch(flight, result.scores, bias=bias, stochastic=stochastic, seed=seed, surrogate=learned)
     flown_by = surrogate.name if learned is not None and surrogate is not None else None
-    out.print(_result_table(flight, result, batch, bias, flown_by, stochastic, log))
+    print_table(_result_table(flight, result, batch, bias, flown_by, stochastic, log))
 
 
 def _flight(mission_file: Path, scenario: str | None):

@@ -14,7 +14,7 @@ import typer
 from rich.table import Table
 
 import rapt
-from planner.cli.console import fail, out, progress_bar
+from planner.cli.console import fail, out, print_table, progress_bar
 from planner.cli.inputs import load_mission
 from rapt.metrics import quality_table
 from rapt.testfunctions.registry import REFERENCE_SETTINGS, SYSTEMS, get_system, search_output_types
@@ -102,7 +102,7 @@ def search(
             ratio_p,
             ratio_c,
         )
-    out.print(table)
+    print_table(table)
     study = rows[0][3]
     if study.failures:
         out.print(f"{len(study.failures)} rows failed; first reason: {study.failures[0]}", soft_wrap=True)
@@ -160,7 +160,7 @@ def study(
         "median pair distance", *["-" if (d := r.median_pair_distance()) is None else f"{d:.3f}" for r in results]
     )
     table.add_row("time (s)", *[f"{r.seconds:.1f}" for r in results])
-    out.print(table)
+    print_table(table)
     if store is not None:
         out.print(
             f"study stored in {store} ({results[0].found.n_evaluated} scenarios)", soft_wrap=True, highlight=False

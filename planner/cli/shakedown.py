@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from planner.cli.console import fail, out
+from planner.cli.console import fail, out, print_table
 from planner.cli.inputs import load_mission
 from rapt.errors import RaptError
 
@@ -53,6 +53,6 @@ def shakedown(
             f"{leg['start_s']:.0f}",
             f"{leg['end_s']:.0f}",
         )
-    out.print(table)
+    print_table(table)
     clear = min(design.clearance.values())
     out.print(f"predicted: ends recovered at {design.end_s:.0f} s; closest approach {clear:.0f} m; {path}")

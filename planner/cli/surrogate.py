@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
-from planner.cli.console import err, fail, out
+from planner.cli.console import err, fail, out, print_table
 from planner.cli.inputs import load_mission
 
 __all__ = ["surrogate"]
@@ -86,7 +86,7 @@ def surrogate(
     except ValueError as exc:
         fail(f"--{str(exc)}" if str(exc).split(":")[0] in ("method", "quantile", "epochs") else str(exc))
     sur.save(out_file)
-    out.print(table)
+    print_table(table)
     t = sur.training
     kept = (
         f"update {t['chosen_iteration']} kept ({t['selection_accuracy']:.1%} on {t['select_runs']} held-out runs), "

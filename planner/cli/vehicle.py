@@ -6,7 +6,7 @@ from pathlib import Path
 
 from rich.table import Table
 
-from planner.cli.console import err, fail, out
+from planner.cli.console import err, fail, print_table
 
 __all__ = ["run_on_vehicle"]
 
@@ -78,7 +78,7 @@ def run_on_vehicle(
     table.add_row("telemetry late / repeated", f"{t.get('out_of_order', 0)} / {t.get('duplicates', 0)}")
     if log is not None:
         table.add_row("log", str(log))
-    out.print(table)
+    print_table(table)
 
 
 def _predicted_mode(source: Path, scenario_id: str) -> str | None:
