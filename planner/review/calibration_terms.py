@@ -72,6 +72,9 @@ __all__ = [
     "KnotFit",
     "fit_curve",
     "fit_power",
+    "leg_power_points",
+    "power_curve",
+    "power_curve_fits",
     "fit_surface",
     "surface_prior",
     "surface_values",
@@ -100,6 +103,10 @@ SE_BLOCK = 3
 POWER_TERMS = ("hotel_w", "drag_w", "power_exponent")
 #: Nominal error of a leg's settled power (W); the fit estimates the actual scale.
 SIGMA_POWER_W = 10.0
+#: How close the MAP power curve must come to every leg's power for the curve to count as identified whole.
+CURVE_POWER_FIT = 0.05
+#: A leg slower than this (m/s, through the water) is a hold.
+HOLD_SPEED = 0.1
 #: Smallest standard error of a settled speed (m/s): what a position fix's noise and the
 #: model's own approximation leave however steady the leg.
 SE_FLOOR_MPS = 0.01
@@ -306,16 +313,11 @@ def fit_curve(mission: Mission, runs: Sequence, start_times: Sequence[float], wa
     return out
 
 
-def fit_power(
-    mission: Mission, runs: Sequence, start_times: Sequence[float], water: Bias, priors: Sequence[Prior]
-) -> MapEstimate:
-    """The power terms (:data:`POWER_TERMS`, ``priors`` in that order) fitted to each straight and
-    hold leg's settled (speed, power): the hold gives the hotel load, the speeds the curve above it.
-
-    A leg's settled power is its energy used over its settled part; its speed the mean
-    through-water speed there.  The MAP fit and its identification are
-    :func:`rapt.mapfit.fit_map`'s, a leg one residual.
-    """
+def leg_power_points(
+    mission: Mission, runs: Sequence, start_times: Sequence[float], water: Bias
+) -> tuple[np.ndarray, np.ndarray]:
+    """Each straight and hold leg's settled (through-water speed, power): its energy used over its settled
+    part, and its mean speed there."""
     points = []
     for run, t0 in zip(runs, start_times):
         for leg in legs_of(run):
@@ -323,15 +325,44 @@ def fit_power(
                 _, v, watts = _settled(mission, run, t0, water, leg)
                 if v.size >= 2 and math.isfinite(watts):
                     points.append((abs(float(v.mean())), watts))
-    speed = np.array([v for v, _ in points], dtype=float)
-    used = np.array([w for _, w in points], dtype=float)
+    return np.array([v for v, _ in points], dtype=float), np.array([w for _, w in points], dtype=float)
+
+
+def power_curve(theta: Sequence[float], speed: np.ndarray, cruise: float) -> np.ndarray:
+    """``hotel_w + drag_w (v / cruise)^power_exponent`` at ``speed``; ``theta`` in :data:`POWER_TERMS` order."""
+    hotel, drag, k = theta
+    return hotel + drag * (np.asarray(speed, dtype=float) / cruise) ** k
+
+
+def fit_power(
+    mission: Mission, runs: Sequence, start_times: Sequence[float], water: Bias, priors: Sequence[Prior]
+) -> MapEstimate:
+    """The power terms (:data:`POWER_TERMS`, ``priors`` in that order) fitted to each straight and
+    hold leg's settled (speed, power) (:func:`leg_power_points`): the hold gives the hotel load, the
+    speeds the curve above it. The MAP fit and its identification are :func:`rapt.mapfit.fit_map`'s,
+    a leg one residual.
+    """
+    speed, used = leg_power_points(mission, runs, start_times, water)
     cruise = mission.vehicle.cruise_speed
 
     def residuals(theta: np.ndarray) -> np.ndarray:
-        hotel, drag, k = theta
-        return (hotel + drag * (speed / cruise) ** k - used) / SIGMA_POWER_W
+        return (power_curve(theta, speed, cruise) - used) / SIGMA_POWER_W
 
     return fit_map(residuals, priors, significant=0.0)
+
+
+def power_curve_fits(fit: MapEstimate, speed: np.ndarray, used: np.ndarray, cruise: float) -> bool:
+    """Whether the MAP power curve of ``fit`` reproduces every leg's power (within :data:`CURVE_POWER_FIT`
+    of it, or :data:`SIGMA_POWER_W` x 3) from at least two distinct speeds and a hold, with no term pinned at
+    a bound of its prior: the curve is then identified as a whole even where its terms, correlated (a
+    thruster vehicle's legs at one saturated speed), are not one by one."""
+    if speed.size < 3 or np.unique(np.round(speed[speed > HOLD_SPEED], 1)).size < 2 or not (speed <= HOLD_SPEED).any():
+        return False
+    theta = [fit.map_value[n] for n in POWER_TERMS]
+    if any(not (p.low < fit.map_value[p.name] < p.high) for p in fit.priors):
+        return False
+    miss = np.abs(power_curve(theta, speed, cruise) - used)
+    return bool(np.all(miss <= np.maximum(CURVE_POWER_FIT * used, 3 * SIGMA_POWER_W)))
 
 
 def surface_prior(vehicle: Vehicle, name: str) -> Prior:

@@ -77,6 +77,8 @@ from planner.review.calibration_terms import (
     is_water,
     knot_command,
     knot_name,
+    leg_power_points,
+    power_curve_fits,
     surface_prior,
     surface_values,
     term_need,
@@ -509,4 +511,11 @@ def _legs_measured(
         se = float(np.hypot(power.stderr[p.name], LEG_POWER_SHARE * abs(v)))
         if power.identified[p.name] and se < IDENTIFIED_BELOW * p.sd:
             out.append((p, v, power.map_value[p.name], se))
+    speed, used = leg_power_points(mission, cal_runs, cal_starts, water)
+    if len(out) < len(power.priors) and power_curve_fits(power, speed, used, mission.vehicle.cruise_speed):
+        # the terms together: one alone beside the file's others would be a curve no leg flew
+        out = []
+        for p in power.priors:
+            v = power.map_value[p.name]
+            out.append((p, v, v, float(np.hypot(power.stderr[p.name], LEG_POWER_SHARE * abs(v)))))
     return knots, out, found
