@@ -12,8 +12,15 @@
    socket's kernel drops, bus gaps, write errors; target: zero lost at 20,000/s for 60 s).
    ``--load-in-process`` runs the bridge and the logger in this process instead, on one
    session, as ``rapt-plan run --log`` does (they then share one interpreter lock).
+4. The Foxglove live view's cost, side by side with none: part 3's load at 20,000 frames/s with
+   ``rapt-plan log --foxglove`` and a client subscribed to every channel against ``rapt-plan
+   log`` alone (frames lost, the logger's CPU seconds per 1,000 frames and their ratio; target
+   nothing lost and <= 1.10), and part 2's round trip with a live view and a subscribed client
+   on the back-seat's session against none, and with clients connecting and leaving over and over,
+   alternated (p50 and p99 and their ratios).
 
 Run:  python benchmarks/sil.py [--scenarios 5] [--trips 2000] [--rates 20000,5000] [--seconds 60] [--quick]
+      python benchmarks/sil.py --only live [--seconds 60] [--trips 2000]   (part 4 alone)
       python benchmarks/sil.py --only load --quick   (part 3 alone)
 
 ``--quick`` prints the same three results from a short run: 2 scenarios, 300 round trips,
@@ -29,6 +36,7 @@ import socket
 import subprocess
 import sys
 import tempfile
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -234,9 +242,10 @@ class LoadRig:
     and its ``rapt.losses`` into :attr:`losses`.
     """
 
-    def __init__(self, path: Path, bus: BusOptions | None = None):
+    def __init__(self, path: Path, bus: BusOptions | None = None, logger_args: tuple[str, ...] = ()):
         self.path = path
         self.bus = bus if bus is not None else BusOptions.tcp()
+        self.logger_args = logger_args
         self.port = free_port()
         self.sent = 0
         self.messages: list = []
@@ -247,7 +256,7 @@ class LoadRig:
     def start(self) -> None:
         """Start the bridge and the logger, without waiting for them (:meth:`ready` waits)."""
         bridge = _cli("bridge", "--mavlink", f"udpin:127.0.0.1:{self.port}", *self.bus.bridge)
-        self._procs = [_cli("log", "--out", str(self.path), *self.bus.logger), bridge]
+        self._procs = [_cli("log", "--out", str(self.path), *self.bus.logger, *self.logger_args), bridge]
 
     def ready(self, settle_s: float = 2.0) -> None:
         """Wait until the hub listens, the bridge's status is heard and the logger's file exists, then ``settle_s``
@@ -385,12 +394,148 @@ def sustained(rates: list[int], seconds: float, in_process: bool = False) -> Non
     print(f"   (target: 20,000/s logged 100 %, every loss reported; load average {os.getloadavg()[0]:.1f} at the end)")
 
 
+class _LiveClient:
+    """A Foxglove client (subprotocol foxglove.sdk.v1) subscribed to every channel it is told of, counting what
+    arrives: the crew's Foxglove, on its own thread."""
+
+    def __init__(self, url: str, timeout_s: float = 30.0):
+        from websockets.sync.client import connect
+
+        deadline = time.monotonic() + timeout_s
+        while True:
+            try:
+                self._cm = connect(url, subprotocols=["foxglove.sdk.v1"], open_timeout=5, max_size=None)
+                self.ws = self._cm.__enter__()
+                break
+            except OSError:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.05)
+        self.messages = self.bytes = 0
+        self._subs = 0
+        self._thread = threading.Thread(target=self._read, name="live-client", daemon=True)
+        self._thread.start()
+
+    def _read(self) -> None:
+        from websockets.exceptions import ConnectionClosed
+
+        try:
+            for frame in self.ws:
+                if isinstance(frame, str):
+                    msg = json.loads(frame)
+                    if msg.get("op") == "advertise":
+                        subs = []
+                        for ch in msg["channels"]:
+                            self._subs += 1
+                            subs.append({"id": self._subs, "channelId": ch["id"]})
+                        self.ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
+                else:
+                    self.messages += 1
+                    self.bytes += len(frame)
+        except ConnectionClosed:
+            pass
+
+    def close(self) -> None:
+        self._cm.__exit__(None, None, None)
+        self._thread.join(timeout=5)
+
+
+def _load_cpu(rate: int, seconds: float, live: bool) -> dict:
+    """Part 3's load through ``rapt-plan bridge`` and ``rapt-plan log`` (with ``--foxglove`` and a client when
+    ``live``): frames lost, and the logger's and the bridge's CPU seconds over the burst."""
+    with tempfile.TemporaryDirectory() as tmp:
+        port = free_port(socket.SOCK_STREAM)
+        args = ("--foxglove", f"127.0.0.1:{port}") if live else ()
+        with LoadRig(Path(tmp) / "load.mcap", logger_args=args) as rig:
+            client = _LiveClient(f"ws://127.0.0.1:{port}") if live else None
+            pids = rig.pids
+            before = {k: process_cpu_s(p) for k, p in pids.items()}
+            sent = rig.burst(rate, seconds)
+            cpu = {k: process_cpu_s(p) - before[k] for k, p in pids.items()}
+            shown = client.messages if client is not None else 0
+            if client is not None:
+                client.close()
+        logged = sum(1 for topic, _, _ in rig.messages if topic == RAW_TOPIC)
+    return {"sent": sent, "logged": logged, "lost": sent - logged, "cpu": cpu, "shown": shown}
+
+
+def _churn(url: str, stop: threading.Event) -> None:
+    """A client that connects, subscribes to everything and disconnects, over and over, until ``stop``."""
+    while not stop.is_set():
+        client = _LiveClient(url)
+        time.sleep(0.05)
+        client.close()
+
+
+def _trip_with_live(mission, u, trips: int, how: str) -> np.ndarray:
+    """Part 2's round trip with nothing else (``how`` "none"), with a live view and a client subscribed to every
+    channel on the back-seat's session ("client"), or with one client after another connecting and leaving
+    ("churn")."""
+    from bridge.live_view import LiveView
+
+    session = open_session(listen=[f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"])
+    try:
+        if how == "none":
+            return round_trip_ms(mission, u, trips, (session, session))
+        with LiveView(session, vehicle="uuv1", port=0) as view:
+            if how == "client":
+                client = _LiveClient(view.url)
+                try:
+                    return round_trip_ms(mission, u, trips, (session, session))
+                finally:
+                    client.close()
+            stop = threading.Event()
+            churner = threading.Thread(target=_churn, args=(view.url, stop), name="churn", daemon=True)
+            churner.start()
+            try:
+                return round_trip_ms(mission, u, trips, (session, session))
+            finally:
+                stop.set()
+                churner.join(timeout=10)
+    finally:
+        session.close()
+
+
+def live_cost(mission, rate: int, seconds: float, trips: int, repeats: int = 2) -> None:
+    """Part 4: what a live view with a client attached costs, side by side with none (module docstring)."""
+    rows = {False: [], True: []}
+    for _ in range(repeats):  # alternated: the machine's drift falls on both
+        for live in (False, True):
+            rows[live].append(_load_cpu(rate, seconds, live))
+    print(f"\n4a. Live view under load: {rate:,} frames/s for {seconds:g} s, rapt-plan log with and without --foxglove")
+    print(f"{'':>22} {'sent':>10} {'lost':>8} {'logger cpu s/1000':>18} {'bridge cpu s/1000':>18} {'shown':>8}")
+    per = {}
+    for live in (False, True):
+        for r in rows[live]:
+            lg, br = 1000 * r["cpu"]["logger"] / r["sent"], 1000 * r["cpu"]["bridge"] / r["sent"]
+            per.setdefault(live, []).append(lg)
+            name = "live view + client" if live else "no live view"
+            print(f"{name:>22} {r['sent']:>10,} {r['lost']:>8,} {lg:>18.4f} {br:>18.4f} {r['shown']:>8,}")
+    ratio = np.median(per[True]) / np.median(per[False])
+    print(f"   logger CPU per frame, live / none (medians): {ratio:.3f} (target <= 1.10, nothing lost)")
+    u = first_valid_scenario(mission)
+    hows = {"none": "no live view", "client": "live view + client", "churn": "clients come and go"}
+    lat: dict[str, list] = {h: [] for h in hows}
+    for _ in range(repeats):
+        for how in hows:
+            lat[how].append(_trip_with_live(mission, u, trips, how))
+    runs = {h: np.concatenate(v) for h, v in lat.items()}
+    print(f"\n4b. Round trip with a live view on the back-seat's session, {runs['none'].size} steps each")
+    print(f"{'':>22} {'p50 ms':>8} {'p99 ms':>8} {'p50 / none':>11} {'p99 / none':>11}")
+    base = runs["none"]
+    for how, name in hows.items():
+        v = runs[how]
+        r50 = np.percentile(v, 50) / np.percentile(base, 50)
+        r99 = np.percentile(v, 99) / np.percentile(base, 99)
+        print(f"{name:>22} {np.percentile(v, 50):>8.3f} {np.percentile(v, 99):>8.3f} {r50:>11.3f} {r99:>11.3f}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenarios", type=int, default=None, help="lock-step SIL runs (default 5; --quick: 2)")
     ap.add_argument("--trips", type=int, default=None, help="bridge round trips (default 2000; --quick: 300)")
     ap.add_argument("--rates", default="20000,5000", help="sustained-load rates, frames/s, comma-separated")
-    ap.add_argument("--only", choices=("lockstep", "trip", "load"), default=None, help="run one part")
+    ap.add_argument("--only", choices=("lockstep", "trip", "load", "live"), default=None, help="run one part")
     ap.add_argument("--load-in-process", action="store_true", help="part 3 with bridge and logger in this process")
     ap.add_argument("--seconds", type=float, default=None, help="sustained load (default 60; --quick: 5)")
     ap.add_argument("--quick", action="store_true", help="a short run of all three parts (well under a minute)")
@@ -408,6 +553,8 @@ def main() -> None:
         round_trip(mission, args.trips)
     if args.only in (None, "load"):
         sustained([int(r) for r in args.rates.split(",")], args.seconds, args.load_in_process)
+    if args.only in (None, "live"):
+        live_cost(mission, int(args.rates.split(",")[0]), args.seconds, args.trips)
 
 
 if __name__ == "__main__":

@@ -1,11 +1,12 @@
 """Foxglove's well-known messages derived from the bus, so Foxglove's panels show a log unconfigured.
 
 Foxglove draws a channel in its Map, Log and 3D panels when the channel's schema is one of
-its well-known schemas (schema encoding ``jsonschema``, name spelt as Foxglove spells it).
-The schemas in ``bridge/schemas/foxglove/`` are copied unchanged from Foxglove's schema
-repository (``github.com/foxglove/schemas``, ``schemas/jsonschema/``, commit dd8b4f38,
-MIT licence). :class:`FoxgloveMessages` turns what the bus carries into these messages,
-next to the logger's own channels (which stay as they are):
+its well-known schemas. Those schemas and their encoder come from Foxglove's own Python SDK
+(``foxglove-sdk``, :mod:`foxglove.messages`): each message is written as Protobuf under the
+SDK's ``FileDescriptorSet``, the encoding Foxglove's own SDK logs them in, so the log, the live
+view (:mod:`bridge.live_view`) and Foxglove agree on every field. :class:`FoxgloveMessages`
+turns what the bus carries into these messages (as plain dicts with Foxglove's field names;
+:func:`encode` makes the wire bytes), next to the logger's own channels (which stay JSON):
 
 =======================  ==========================  =================================================
 topic                    schema                      from
@@ -30,14 +31,17 @@ from __future__ import annotations
 
 import json
 import math
-from functools import cache
-from pathlib import Path
+from collections.abc import Callable
 from typing import Any
+
+from foxglove import Schema
+from foxglove import messages as fox
 
 from bridge import keys
 
 __all__ = [
     "WELL_KNOWN",
+    "ENCODING",
     "FIX_TOPIC",
     "LOG_TOPIC",
     "TF_TOPIC",
@@ -46,6 +50,7 @@ __all__ = [
     "VEHICLE_FRAME",
     "MAX_TRAIL",
     "schema",
+    "encode",
     "map_topic",
     "stamp",
     "location_fix",
@@ -54,21 +59,14 @@ __all__ = [
     "FoxgloveMessages",
 ]
 
-SCHEMA_DIR = Path(__file__).with_name("schemas") / "foxglove"
-#: The Foxglove schemas the logs use (file ``SCHEMA_DIR/<name after the dot>.json``).
-WELL_KNOWN = (
-    "foxglove.LocationFix",
-    "foxglove.Log",
-    "foxglove.FrameTransform",
-    "foxglove.PosesInFrame",
-    "foxglove.GeoJSON",
-)
 FIX_TOPIC = "/vehicle/fix"
 LOG_TOPIC = "/vehicle/log"
 TF_TOPIC = "/vehicle/tf"
 TRAIL_TOPIC = "/vehicle/track_local"
 LOCAL_FRAME = "local"
 VEHICLE_FRAME = "vehicle"
+#: The message encoding of every Foxglove channel (the SDK's schemas are Protobuf descriptors).
+ENCODING = "protobuf"
 #: Poses kept in the local-frame trail; beyond it every other pose is dropped and the spacing doubles.
 MAX_TRAIL = 100
 #: Vehicle time between two poses of the trail at first (ms).
@@ -86,14 +84,97 @@ WATCHDOG_LEVEL = {"intervention": ERROR, "violation": WARNING}
 
 Derived = tuple[str, str, dict]  # (topic, schema name, message)
 
+_LEVELS = {
+    int(v.value): v
+    for v in (
+        fox.LogLevel.Debug,
+        fox.LogLevel.Info,
+        fox.LogLevel.Warning,
+        fox.LogLevel.Error,
+        fox.LogLevel.Fatal,
+        fox.LogLevel.Unknown,
+    )
+}
+_COVARIANCE_TYPES = {
+    int(v.value): v
+    for v in (
+        fox.LocationFixPositionCovarianceType.Unknown,
+        fox.LocationFixPositionCovarianceType.Approximated,
+        fox.LocationFixPositionCovarianceType.DiagonalKnown,
+        fox.LocationFixPositionCovarianceType.Known,
+    )
+}
 
-@cache
-def schema(name: str) -> dict:
-    """The JSON Schema of Foxglove's well-known ``name`` (e.g. ``"foxglove.LocationFix"``), as Foxglove publishes
-    it; one shared dict per name, not to be modified."""
-    if name not in WELL_KNOWN:
+
+def _time(t: dict) -> Any:
+    return fox.Timestamp(int(t["sec"]), int(t["nsec"]))
+
+
+def _pose_of(p: dict) -> Any:
+    q, r = p["position"], p["orientation"]
+    return fox.Pose(position=fox.Vector3(x=q["x"], y=q["y"], z=q["z"]), orientation=fox.Quaternion(**r))
+
+
+#: Schema name -> (the SDK's message class, its constructor from our dict).
+_SDK: dict[str, tuple[Any, Callable[[dict], Any]]] = {
+    "foxglove.LocationFix": (
+        fox.LocationFix,
+        lambda m: fox.LocationFix(
+            timestamp=_time(m["timestamp"]),
+            frame_id=m["frame_id"],
+            latitude=m["latitude"],
+            longitude=m["longitude"],
+            altitude=m["altitude"],
+            position_covariance=list(m["position_covariance"]),
+            position_covariance_type=_COVARIANCE_TYPES[int(m["position_covariance_type"])],
+        ),
+    ),
+    "foxglove.Log": (
+        fox.Log,
+        lambda m: fox.Log(
+            timestamp=_time(m["timestamp"]),
+            level=_LEVELS[int(m["level"])],
+            message=m["message"],
+            name=m["name"],
+            file=m["file"],
+            line=int(m["line"]),
+        ),
+    ),
+    "foxglove.FrameTransform": (
+        fox.FrameTransform,
+        lambda m: fox.FrameTransform(
+            timestamp=_time(m["timestamp"]),
+            parent_frame_id=m["parent_frame_id"],
+            child_frame_id=m["child_frame_id"],
+            translation=fox.Vector3(**m["translation"]),
+            rotation=fox.Quaternion(**m["rotation"]),
+        ),
+    ),
+    "foxglove.PosesInFrame": (
+        fox.PosesInFrame,
+        lambda m: fox.PosesInFrame(
+            timestamp=_time(m["timestamp"]), frame_id=m["frame_id"], poses=[_pose_of(p) for p in m["poses"]]
+        ),
+    ),
+    "foxglove.GeoJSON": (fox.GeoJson, lambda m: fox.GeoJson(geojson=m["geojson"])),
+}
+#: The Foxglove schemas the logs use.
+WELL_KNOWN = tuple(_SDK)
+
+
+def schema(name: str) -> Schema:
+    """The SDK's schema of Foxglove's well-known ``name`` (e.g. ``"foxglove.LocationFix"``): ``.name``,
+    ``.encoding`` (``"protobuf"``) and ``.data`` (its ``FileDescriptorSet``)."""
+    if name not in _SDK:
         raise ValueError(f"schema: {name!r} is not one of {', '.join(WELL_KNOWN)}")
-    return json.loads((SCHEMA_DIR / f"{name.split('.', 1)[1]}.json").read_text(encoding="utf-8"))
+    return _SDK[name][0].get_schema()
+
+
+def encode(name: str, message: dict) -> bytes:
+    """``message`` (a dict with the fields of Foxglove's ``name``) as the SDK encodes it."""
+    if name not in _SDK:
+        raise ValueError(f"encode: {name!r} is not one of {', '.join(WELL_KNOWN)}")
+    return _SDK[name][1](message).encode()
 
 
 def map_topic(name: str) -> str:

@@ -38,6 +38,7 @@ from __future__ import annotations
 import argparse
 import base64
 import collections
+import functools
 import json
 import logging
 import signal
@@ -58,7 +59,7 @@ from . import foxglove, keys
 from .channel_roles import HUB, ChannelRoles
 from .frames import strip_signature
 from .loss import PublicationGaps
-from .mcap_channels import McapChannels
+from .mcap_channels import McapChannels, Schema, json_schema
 from .service import Service
 from .session import open_session, undeclare, use_session
 
@@ -99,18 +100,22 @@ _SCHEMAS: dict[str, dict] = {
 }
 
 
-def _schema_for(kind: str, name: str) -> tuple[str, dict]:
+@functools.cache
+def _schema_for(kind: str, name: str) -> Schema:
     if kind in ("mavlink", "virtual"):  # a virtual message has the same fields as a real one
-        return f"mavlink.{name}", {
-            "type": "object",
-            "title": f"MAVLink {name}",
-            "properties": {"mavpackettype": {"type": "string"}, "_recv_ns": {"type": "integer"}},
-        }
+        return json_schema(
+            f"mavlink.{name}",
+            {
+                "type": "object",
+                "title": f"MAVLink {name}",
+                "properties": {"mavpackettype": {"type": "string"}, "_recv_ns": {"type": "integer"}},
+            },
+        )
     if kind == "command":
-        return "rapt.Setpoint", _SCHEMAS["rapt.Setpoint"]
+        return json_schema("rapt.Setpoint", _SCHEMAS["rapt.Setpoint"])
     if kind == "alive":
-        return "rapt.Liveliness", _SCHEMAS["rapt.Liveliness"]
-    return "rapt.Json", _SCHEMAS["rapt.Json"]
+        return json_schema("rapt.Liveliness", _SCHEMAS["rapt.Liveliness"])
+    return json_schema("rapt.Json", _SCHEMAS["rapt.Json"])
 
 
 def _as_object(payload: bytes) -> tuple[bytes, dict]:
@@ -438,7 +443,7 @@ class McapLogger(Service):
         mcap = self._mcap
         assert mcap is not None, "written only after _open"
         for topic, schema_name, message in derived:
-            mcap.add_json(topic, (schema_name, foxglove.schema(schema_name)), message, recv_ns, recv_ns)
+            mcap.add_foxglove(topic, schema_name, message, recv_ns, recv_ns)
             self._counts[counter] += 1
 
 

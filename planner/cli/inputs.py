@@ -23,6 +23,9 @@ __all__ = [
     "Vehicle",
     "BusKeys",
     "BusRole",
+    "FoxgloveOpt",
+    "live_address",
+    "say_live",
     "load_mission",
     "mission_and_scenario",
     "load_surrogate",
@@ -72,6 +75,44 @@ BusKeys = Annotated[
         "with the role's config instead of the loopback endpoints.",
     ),
 ]
+
+
+FoxgloveOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--foxglove",
+        metavar="[HOST:]PORT",
+        help="Show the run live in Foxglove: a WebSocket server (foxglove.sdk.v1) on PORT, on loopback unless "
+        "HOST is given (e.g. 8765, or 0.0.0.0:8765 for the range's network). The protocol has no "
+        "authentication: anyone who reaches the port sees the run.",
+    ),
+]
+
+
+def live_address(text: str | None) -> tuple[str, int] | None:
+    """``--foxglove [HOST:]PORT`` as (host, port), None when not given; a one-line error when malformed."""
+    if text is None:
+        return None
+    from bridge.live_view import parse_address
+    from rapt.errors import InputError
+
+    try:
+        return parse_address(text)
+    except InputError as exc:
+        fail(str(exc))
+
+
+def say_live(address: tuple[str, int] | None) -> None:
+    """Tell the crew where the live view is (on stderr)."""
+    if address is not None:
+        from planner.cli.console import err
+
+        host, port = address
+        err.print(
+            f"live view: ws://{host}:{port} (Foxglove: Open connection, Foxglove WebSocket)",
+            highlight=False,
+            soft_wrap=True,
+        )
 
 
 BusRole = Annotated[

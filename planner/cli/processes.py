@@ -21,6 +21,7 @@ from planner.cli.console import err, fail
 from planner.cli.inputs import (
     BusKeys,
     BusRole,
+    FoxgloveOpt,
     ScenarioOpt,
     SurrogateOpt,
     Vehicle,
@@ -29,10 +30,13 @@ from planner.cli.inputs import (
     ZenohListen,
     bus_config,
     bus_session,
+    live_address,
     load_surrogate,
     mission_and_scenario,
+    say_live,
 )
 from planner.fly.lifecycle import arm_when_heard, run_until_signal, serve_until_signal, wait_for_signal
+from rapt.errors import RaptError
 
 __all__ = ["frontseat", "bridge", "autonomy", "log"]
 
@@ -137,6 +141,7 @@ def bridge(
     arm: Annotated[
         bool, typer.Option("--arm", help="Once the vehicle is heard: GUIDED and arm (needs --allow-commands).")
     ] = False,
+    foxglove: FoxgloveOpt = None,
 ) -> None:
     """Join a vehicle's MAVLink port (simulated or real) to the Zenoh bus.
 
@@ -167,23 +172,38 @@ def bridge(
         "bridge" if bus_keys is not None else bus_role,
         endpoints_given=zenoh_listen != ["tcp/127.0.0.1:7447"] or bool(zenoh_connect),
     )
+    live = live_address(foxglove)
+    if arm and not allow_commands:
+        fail("--arm: arming sends commands to the vehicle; add --allow-commands")
     try:
-        if arm and not allow_commands:
-            fail("--arm: arming sends commands to the vehicle; add --allow-commands")
-        with MavlinkBridge(
-            mavlink,
-            conf,
-            vehicle=vehicle,
-            allow_commands=allow_commands,
-            geofence=fence,
-            max_rate_hz=max_rate,
-            signing_key=signing_key,
-        ) as link:
+        session = zenoh.open(conf)
+    except zenoh.ZError as exc:
+        fail(f"--zenoh-listen: the bus cannot start: {exc}")
+    try:
+        with contextlib.ExitStack() as parts:
+            if live is not None:  # up before the vehicle is heard: it shows the bring-up too
+                from bridge.live_view import LiveView
+
+                parts.enter_context(LiveView(session, vehicle=vehicle, host=live[0], port=live[1]))
+                say_live(live)
+            link = parts.enter_context(
+                MavlinkBridge(
+                    mavlink,
+                    session,
+                    vehicle=vehicle,
+                    allow_commands=allow_commands,
+                    geofence=fence,
+                    max_rate_hz=max_rate,
+                    signing_key=signing_key,
+                )
+            )
             if arm and not arm_when_heard(link, timeout_s=30.0):
                 fail("--mavlink: no vehicle HEARTBEAT within 30 s; check the connection string")
             wait_for_signal()
-    except (ValueError, OSError) as exc:
+    except (RaptError, ValueError, OSError) as exc:
         fail(str(exc))
+    finally:
+        session.close()
 
 
 def autonomy(
@@ -250,6 +270,7 @@ def log(
     zenoh_config: ZenohConfig = None,
     bus_keys: BusKeys = None,
     bus_role: BusRole = None,
+    foxglove: FoxgloveOpt = None,
 ) -> None:
     """Record a vehicle's bus traffic to MCAP until stopped.
 
@@ -259,9 +280,25 @@ def log(
     from bridge.logger import McapLogger
     from planner.fly.run_bus import put_roles_of
 
+    live = live_address(foxglove)
     role = (bus_role or "logger") if bus_keys is not None else bus_role
     session = bus_session(
         zenoh_connect, zenoh_config, bus_keys, role, endpoints_given=zenoh_connect != ["tcp/127.0.0.1:7447"]
     )
     roles = None if bus_keys is None else put_roles_of(bus_keys, vehicle)
-    run_until_signal(session, lambda: McapLogger(out_file, session, vehicle=vehicle, roles=roles))
+
+    def start() -> contextlib.ExitStack:
+        """The live view first (its subscriptions are up when the logger's arrival puts the map), the logger."""
+        with contextlib.ExitStack() as parts:
+            if live is not None:
+                from bridge.live_view import LiveView
+
+                parts.enter_context(LiveView(session, vehicle=vehicle, host=live[0], port=live[1]))
+                say_live(live)
+            parts.enter_context(McapLogger(out_file, session, vehicle=vehicle, roles=roles))
+            return parts.pop_all()
+
+    try:
+        run_until_signal(session, start)
+    except RaptError as exc:
+        fail(str(exc))

@@ -9,7 +9,16 @@ import typer
 from rich.table import Table
 
 from planner.cli.console import fail, print_table
-from planner.cli.inputs import BusKeys, ScenarioOpt, SurrogateOpt, load_surrogate, mission_and_scenario
+from planner.cli.inputs import (
+    BusKeys,
+    FoxgloveOpt,
+    ScenarioOpt,
+    SurrogateOpt,
+    live_address,
+    load_surrogate,
+    mission_and_scenario,
+    say_live,
+)
 from rapt.errors import RaptError
 
 __all__ = ["run"]
@@ -63,6 +72,7 @@ def run(
         float, typer.Option("--heartbeat-timeout", help="With --mavlink: seconds to wait for the vehicle's HEARTBEAT.")
     ] = 15.0,
     bus_keys: BusKeys = None,
+    foxglove: FoxgloveOpt = None,
 ) -> None:
     """Fly one scenario software-in-the-loop: front-seat, bridge, autonomy (and logger).
 
@@ -80,6 +90,7 @@ def run(
     except ValueError as exc:
         fail(f"--inject-bias: {exc}")
     flight = _flight(mission_file, scenario)
+    live = live_address(foxglove)
     if bus_keys is not None:
         _check_bus_keys(bus_keys, surrogate is not None)
     if mavlink is not None:
@@ -96,11 +107,13 @@ def run(
             record_only=watchdog_record or [],
             heartbeat_timeout=heartbeat_timeout,
             bus_keys=bus_keys,
+            live=live,
         )
         return
     if speedup is not None and speedup <= 0:
         fail(f"--speedup: expected a factor > 0, got {speedup}")
     learned = load_surrogate(surrogate, flight.mission)
+    say_live(live)
     try:
         result = fly(
             flight,
@@ -112,6 +125,7 @@ def run(
             seed=seed,
             surrogate=learned,
             bus_keys=bus_keys,
+            live=live,
         )
     except (RaptError, ValueError, RuntimeError, TimeoutError, ConnectionError) as exc:
         fail(str(exc))

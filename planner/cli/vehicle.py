@@ -22,6 +22,7 @@ def run_on_vehicle(
     record_only: list[str] | None = None,
     heartbeat_timeout: float = 15.0,
     bus_keys: Path | None = None,
+    live: tuple[str, int] | None = None,
 ) -> None:
     """Fly ``flight`` at ``connection``; print the bring-up timeline, the end, the mode and the decisions' figures."""
     from planner.fly.flight import is_plan
@@ -42,6 +43,9 @@ def run_on_vehicle(
         mark = {"ok": "[green]ok[/]", "failed": "[red]failed[/]"}.get(step.status, f"[yellow]{step.status}[/]")
         err.print(f"{step.wall_s:8.1f} s  {step.name:<9} {mark}  {step.detail}", highlight=False, soft_wrap=True)
 
+    from planner.cli.inputs import say_live
+
+    say_live(live)
     try:
         result = run_vehicle(
             flight,
@@ -53,6 +57,7 @@ def run_on_vehicle(
             timeouts=timeouts,
             say=say,
             bus_keys=bus_keys,
+            live=live,
         )
     except KeyboardInterrupt:
         fail("stopped by the operator: the vehicle was told to surface and disarm")

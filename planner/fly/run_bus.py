@@ -48,6 +48,7 @@ PART_ROLES = {
     "watchdog": keys.WATCHDOG_SOURCE,
     "control": "operator",
     "logger": "logger",
+    "live_view": "logger",  # it only reads, as the logger does
 }
 
 #: How long a part's declarations may take to cross the hub.

@@ -17,6 +17,9 @@ topic                          schema                  what
 ``/map/calibrated``            ``foxglove.GeoJSON``    with a calibrated vehicle only
 ``/fix/observed/<log>``        ``foxglove.LocationFix`` the same tracks as positions over time, so
 ``/fix/predicted`` ...                                 playback moves them side by side
+``/checks``                    ``foxglove.Log``        each run's automatic checks that did not pass
+                                                       (:mod:`planner.review.run_checks`), at the time
+                                                       of their evidence, named after the log
 =============================  ======================  ==============================================
 
 Log time is scenario time (seconds since the run's start, from the epoch): the runs of one
@@ -54,12 +57,14 @@ def write_overlay(
     observed: list[tuple[str, np.ndarray]],
     tracks: dict[str, np.ndarray | None],
     properties: dict | None = None,
+    checks: list[tuple[str, list[dict]]] | None = None,
 ) -> Path:
     """Write scenario ``u``'s overlay (see the module docstring) to ``path``.
 
     ``observed``: (log name, track) per logged run, tracks with columns t, x, y first
     (:data:`sim.uuv.replay.TRACK_FIELDS`); ``tracks``: predicted, corrected, calibrated
-    trajectories by name (None: not available); ``properties`` go on the corrected track.
+    trajectories by name (None: not available); ``properties`` go on the corrected track; ``checks``:
+    (log name, its run checks as dicts) per logged run.
     """
     frame = LocalFrame(mission.origin_lat, mission.origin_lon)
     path = Path(path)
@@ -70,7 +75,7 @@ def write_overlay(
         mcap = McapChannels(writer)
 
         def add(topic: str, schema_name: str, message: dict, ns: int) -> None:
-            mcap.add_json(topic, (schema_name, foxglove.schema(schema_name)), message, ns, ns)
+            mcap.add_foxglove(topic, schema_name, message, ns, ns)
 
         add("/map/scenario", "foxglove.GeoJSON", foxglove.geojson_message(geojson(mission, u)), 0)
         observed = [(name, t) for name, t in observed if t.shape[0] >= 2]  # a line needs two points
@@ -92,10 +97,33 @@ def write_overlay(
             fixes += [
                 (int(n), topic, float(a), float(b)) for n, a, b in zip(ns, np.atleast_1d(lat), np.atleast_1d(lon))
             ]
-        for n, topic, a, b in sorted(fixes):  # in time order across the tracks, as a recording is
-            add(topic, "foxglove.LocationFix", foxglove.location_fix(a, b, 0.0, n, frame_id=topic), n)
+        records = [
+            (n, topic, "foxglove.LocationFix", foxglove.location_fix(a, b, 0.0, n, frame_id=topic))
+            for n, topic, a, b in fixes
+        ]
+        records += _check_events(checks or [])
+        for n, topic, schema_name, message in sorted(records, key=lambda r: (r[0], r[1])):  # in time order
+            add(topic, schema_name, message, n)
         writer.finish()
     return path
+
+
+#: foxglove.LogLevel of a check's verdict (a pass is not logged).
+CHECK_LEVEL = {"warn": foxglove.WARNING, "unknown": foxglove.WARNING, "fail": foxglove.ERROR}
+
+
+def _check_events(checks: list[tuple[str, list[dict]]]) -> list[tuple[int, str, str, dict]]:
+    """Each check that did not pass as a ``foxglove.Log`` line on ``/checks`` at its evidence's time."""
+    out = []
+    for name, run_checks in checks:
+        for c in run_checks:
+            if c["verdict"] in CHECK_LEVEL:
+                n = int(round(float(c.get("time_s") or 0.0) * 1e9))
+                text = f"{c['name']} {c['verdict']}: {c['reason']}"
+                out.append(
+                    (n, "/checks", "foxglove.Log", foxglove.log_message(CHECK_LEVEL[c["verdict"]], text, name, n))
+                )
+    return out
 
 
 def _line(frame: LocalFrame, track: np.ndarray, properties: dict) -> dict:

@@ -1,5 +1,6 @@
-"""Read a log's Foxglove channels back, with the Python MCAP reader (checked against their schemas) and
-with Foxglove's TypeScript reader (``tests/support/ts_reader``, installed from npm when missing)."""
+"""Read a log's Foxglove channels back, with the Python MCAP reader (decoded with the Protobuf descriptors the
+log itself carries) and with Foxglove's TypeScript reader (``tests/support/ts_reader``, installed from npm when
+missing)."""
 
 from __future__ import annotations
 
@@ -10,10 +11,12 @@ import shutil
 import subprocess
 import tempfile
 from dataclasses import dataclass, field
+from functools import cache
 from pathlib import Path
+from typing import Any
 
-import jsonschema
 import pytest
+from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from mcap.reader import make_reader
 
 from bridge import foxglove
@@ -25,8 +28,45 @@ class FoxgloveChannel:
     schema_name: str
     schema_encoding: str
     message_encoding: str
-    schema: dict
+    schema: bytes
     messages: list[dict] = field(default_factory=list)
+
+
+@cache
+def message_class(name: str, descriptor_set: bytes) -> Any:
+    """The Protobuf message class ``name`` of a schema's ``FileDescriptorSet`` (as a reader that knows only
+    the log would build it)."""
+    files = descriptor_pb2.FileDescriptorSet.FromString(descriptor_set)
+    pool = descriptor_pool.DescriptorPool()
+    for f in files.file:
+        pool.Add(f)
+    return message_factory.GetMessageClass(pool.FindMessageTypeByName(name))
+
+
+def as_dict(message: Any) -> dict:
+    """A decoded Protobuf message as Foxglove's field names and values: nested messages as dicts (an
+    unset one None), repeated fields as lists, enums as numbers, timestamps as ``{"sec", "nsec"}``."""
+    if message.DESCRIPTOR.full_name == "google.protobuf.Timestamp":
+        return {"sec": int(message.seconds), "nsec": int(message.nanos)}
+    out: dict = {}
+    for f in message.DESCRIPTOR.fields:
+        value = getattr(message, f.name)
+        if f.message_type is not None:
+            if f.is_repeated:
+                out[f.name] = [as_dict(v) for v in value]
+            else:
+                out[f.name] = as_dict(value) if message.HasField(f.name) else None
+        elif f.is_repeated:
+            out[f.name] = list(value)
+        elif f.has_presence and not message.HasField(f.name):
+            out[f.name] = None
+        else:
+            out[f.name] = value
+    return out
+
+
+def decode(schema_name: str, descriptor_set: bytes, data: bytes) -> dict:
+    return as_dict(message_class(schema_name, descriptor_set).FromString(data))
 
 
 def foxglove_channels(path: str | Path) -> dict[str, FoxgloveChannel]:
@@ -40,23 +80,26 @@ def foxglove_channels(path: str | Path) -> dict[str, FoxgloveChannel]:
             entry = out.get(channel.topic)
             if entry is None:
                 entry = out[channel.topic] = FoxgloveChannel(
-                    channel.topic, schema.name, schema.encoding, channel.message_encoding, json.loads(schema.data)
+                    channel.topic, schema.name, schema.encoding, channel.message_encoding, bytes(schema.data)
                 )
-            entry.messages.append(json.loads(message.data))
+            entry.messages.append(decode(schema.name, bytes(schema.data), message.data))
     return out
 
 
+#: Fields of Foxglove's schemas that the project does not fill (later additions to a schema, all optional).
+UNFILLED = {"heading", "velocity", "color", "metadata"}
+
+
 def check_channel(channel: FoxgloveChannel) -> None:
-    """The channel is JSON under Foxglove's own schema of that name, and every message validates with every
-    field present (Foxglove's JSON Schemas list no ``required``; its panels expect all fields)."""
+    """The channel is Protobuf under the Foxglove SDK's own schema of that name, and every message carries
+    every field the project fills (Foxglove's panels expect them all)."""
     assert channel.schema_name in foxglove.WELL_KNOWN, channel.schema_name
-    assert channel.schema_encoding == "jsonschema" and channel.message_encoding == "json", channel
-    assert channel.schema == foxglove.schema(channel.schema_name)
-    assert channel.schema["title"] == channel.schema_name
-    validator = jsonschema.Draft7Validator(channel.schema)
+    assert channel.schema_encoding == "protobuf" and channel.message_encoding == "protobuf", channel
+    assert channel.schema == foxglove.schema(channel.schema_name).data
+    fields = {f.name for f in message_class(channel.schema_name, channel.schema).DESCRIPTOR.fields} - UNFILLED
     for message in channel.messages:
-        validator.validate(message)
-        assert set(message) == set(channel.schema["properties"]), (channel.topic, sorted(message))
+        assert all(message[k] is not None for k in fields if k in message), (channel.topic, message)
+        assert fields <= set(message), (channel.topic, sorted(message))
 
 
 # --------------------------------------------------------------------------- the TypeScript reader
@@ -69,7 +112,7 @@ def typescript_reader() -> Path:
     ``$RAPT_NPM_CACHE``); skips the test only when node or npm is not installed."""
     if shutil.which("node") is None or shutil.which("npm") is None:
         pytest.skip("node and npm are needed for the TypeScript MCAP reader check")
-    files = ("package.json", "package-lock.json", "read_mcap.mjs")
+    files = ("package.json", "package-lock.json", "read_mcap.mjs", "live_client.mjs")
     digest = hashlib.sha256(b"".join((TS_READER / n).read_bytes() for n in files)).hexdigest()[:16]
     root = Path(os.environ.get("RAPT_NPM_CACHE", Path.home() / ".cache" / "rapt-npm"))
     target = root / digest
@@ -102,3 +145,27 @@ def read_with_typescript(path: str | Path, *decode: str) -> dict:
     )
     assert done.returncode == 0, done.stderr
     return json.loads(done.stdout)
+
+
+def watch_with_typescript(url: str, seconds: float = 120.0) -> subprocess.Popen:
+    """``live_client.mjs`` watching the live view at ``url`` (it retries until the server is up); its report
+    comes on stdout when the server closes (:func:`typescript_report`)."""
+    reader = typescript_reader()
+    return subprocess.Popen(
+        ["node", str(reader / "live_client.mjs"), url, str(seconds)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
+
+
+def typescript_report(watcher: subprocess.Popen, timeout: float = 60.0) -> dict:
+    """What :func:`watch_with_typescript`'s client saw: channels (schema, encodings, count), first and last
+    message per topic, the subprotocol."""
+    try:
+        out, errors = watcher.communicate(timeout=timeout)
+    except subprocess.TimeoutExpired:
+        watcher.kill()
+        out, errors = watcher.communicate()
+    assert watcher.returncode == 0, errors
+    return json.loads(out)

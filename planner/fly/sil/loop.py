@@ -28,6 +28,7 @@ from bridge.session import receive, undeclare  # noqa: E402
 from planner.common.scenario_record import SCENARIO_META, scenario_json  # noqa: E402
 from planner.fly.backseat import BackSeat  # noqa: E402
 from planner.fly.lifecycle import wait_for  # noqa: E402
+from planner.fly.live import start_live_view  # noqa: E402
 from planner.fly.run_bus import PART_ROLES, RunBus, free_port  # noqa: E402
 from planner.fly.scenario_map import ScenarioMap  # noqa: E402
 from rapt.errors import LinkTimeoutError  # noqa: E402
@@ -131,6 +132,7 @@ def run_sil(
     surrogate=None,
     bus_keys: str | Path | None = None,
     legs: tuple = (),
+    live: tuple[str, int] | None = None,
 ) -> SilResult:
     """Fly scenario ``u`` through front-seat, bridge, back-seat (and logger); return its scores.
 
@@ -152,20 +154,22 @@ def run_sil(
     ``surrogate``, and the operator makes it active), the bridge's session being the hub.
 
     ``legs`` (a calibration run's, :mod:`sim.uuv.legs`) fly in place of the mission's autonomy and
-    go into the log's scenario record.
+    go into the log's scenario record. ``live``: ``(host, port)`` of a Foxglove live view of the run
+    (:class:`bridge.live_view.LiveView`).
     """
     u = np.asarray(u, dtype=float)
     if surrogate is not None:
         surrogate.check(mission)
     port = free_port()
-    roles = [keys.DEFAULT_ACTIVE] + (["logger"] if log_path is not None else [])
+    roles = [keys.DEFAULT_ACTIVE] + (["logger"] if log_path is not None or live is not None else [])
     roles += [keys.SURROGATE_SOURCE, "operator"] if surrogate is not None else []
     bus = RunBus(bus_keys, vehicle=vehicle, roles=tuple(roles))  # keys checked before the front-seat starts
     fs = _frontseat(mission, u, port, speedup, bias, stochastic, seed)
     fs_thread = threading.Thread(target=fs.serve, name="frontseat", daemon=True)
-    logger = bridge = backseat = recorder = learned = scenario_map = None
+    logger = bridge = backseat = recorder = learned = scenario_map = view = None
     started = time.perf_counter()
     try:
+        view = start_live_view(bus, vehicle, mission, u, live)
         fs_thread.start()
         autonomy = bus.session(PART_ROLES["backseat"])
         heard = [keys.DEFAULT_ACTIVE]
@@ -206,7 +210,7 @@ def run_sil(
         track = recorder.builder.track()
         stats = dict(bridge.stats)
     finally:
-        for part in (learned, backseat, bridge, recorder, scenario_map, logger):
+        for part in (learned, backseat, bridge, recorder, scenario_map, logger, view):
             if part is not None:
                 part.close()
         fs.stop()

@@ -40,10 +40,12 @@ def fly(
     seed: int = 0,
     surrogate=None,
     bus_keys=None,
+    live=None,
 ):
     """Fly ``flight`` software-in-the-loop (:func:`planner.fly.sil.loop.run_sil`); returns its :class:`~planner.fly.sil.loop.SilResult`.
 
-    ``bus_keys``: the range's keys directory; the run's parts then join the secure bus each as its role."""
+    ``bus_keys``: the range's keys directory; the run's parts then join the secure bus each as its role.
+    ``live``: ``(host, port)`` of a Foxglove live view of the run."""
     from planner.fly.sil.loop import run_sil
 
     return run_sil(
@@ -61,6 +63,7 @@ def fly(
         surrogate=surrogate,
         bus_keys=bus_keys,
         legs=flight.legs,
+        live=live,
     )
 
 

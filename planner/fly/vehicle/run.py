@@ -25,6 +25,7 @@ from bridge.mavlink_bridge import MavlinkBridge
 from bridge.vehicle_commands import Autopilot
 from planner.common.scenario_record import SCENARIO_META, scenario_json
 from planner.fly.backseat import BackSeat
+from planner.fly.live import start_live_view
 from planner.fly.run_bus import PART_ROLES, RunBus
 from planner.fly.scenario_map import ScenarioMap
 from planner.fly.vehicle.bringup import GUIDED, BringUp, BringUpTimeouts, Step
@@ -72,6 +73,7 @@ def run_vehicle(
     timeout_s: float | None = None,
     say: Callable[[Step], None] | None = None,
     bus_keys: str | Path | None = None,
+    live: tuple[str, int] | None = None,
 ) -> VehicleRunResult:
     """Fly ``flight`` (:class:`planner.fly.flight.Flight`) on the vehicle at ``connection`` (a pymavlink string).
 
@@ -81,7 +83,8 @@ def run_vehicle(
     ``record_only`` names watchdog reasons (:data:`planner.fly.vehicle.watchdog.REASONS`) that are logged
     as violations without taking control, e.g. ``nogo`` where the no-go areas are virtual.
     ``bus_keys``: the range's keys directory; each part then joins the secure bus as its role
-    (:data:`planner.fly.run_bus.PART_ROLES`), the bridge's session being the hub.
+    (:data:`planner.fly.run_bus.PART_ROLES`), the bridge's session being the hub. ``live``: ``(host, port)``
+    of a Foxglove live view of the run (:class:`bridge.live_view.LiveView`).
     """
     _check_options(action, record_only, connection)
     mission, u = flight.mission, np.asarray(flight.u, dtype=float)
@@ -90,12 +93,16 @@ def run_vehicle(
         raise InputError(
             f"--scenario {flight.scenario_id}: invalid for mission '{mission.name}' ({scen.invalid_reason[0]})"
         )
-    roles = (keys.DEFAULT_ACTIVE, keys.WATCHDOG_SOURCE, "operator") + (("logger",) if log_path is not None else ())
+    reader = log_path is not None or live is not None
+    roles = (keys.DEFAULT_ACTIVE, keys.WATCHDOG_SOURCE, "operator") + (("logger",) if reader else ())
     bus = RunBus(bus_keys, vehicle=vehicle, roles=roles)  # every key checked before anything joins
     parts: list = []
     bringup = None
     started = time.perf_counter()
     try:
+        view = start_live_view(bus, vehicle, mission, u, live)
+        if view is not None:
+            parts.append(view)  # closed last: it shows the run's end
         run = _start_parts(bus, vehicle, flight, connection, log_path, action, record_only, parts)
         meta = scenario_json(
             mission,

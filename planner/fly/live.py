@@ -1,0 +1,23 @@
+"""A run's Foxglove live view (:class:`bridge.live_view.LiveView`), wired to the run's bus and handed the map."""
+
+from __future__ import annotations
+
+from bridge.live_view import LiveView
+from planner.fly.run_bus import PART_ROLES, RunBus
+from planner.fly.scenario_map import SCENARIO_MAP, scenario_map
+from sim.uuv.mission import Mission
+
+__all__ = ["start_live_view"]
+
+
+def start_live_view(bus: RunBus, vehicle: str, mission: Mission, u, live: tuple[str, int] | None) -> LiveView | None:
+    """The live view on ``live`` = ``(host, port)`` (None: no view), on the bus as a reader (the logger's role),
+    showing scenario ``u``'s map from the start (the bus carries it only once a logger appears)."""
+    if live is None:
+        return None
+    host, port = live
+    view = LiveView(bus.session(PART_ROLES["live_view"]), vehicle=vehicle, host=host, port=port).start()
+    document = scenario_map(mission, u)
+    if document is not None:
+        view.show_map(SCENARIO_MAP, document)
+    return view
