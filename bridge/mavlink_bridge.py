@@ -269,6 +269,10 @@ class MavlinkBridge(Service):
         """Start (or stop) a MAV_DATA_STREAM group (:meth:`VehicleCommands.request_data_stream`)."""
         self._commands.request_data_stream(stream_id, rate_hz, start)
 
+    def request_parameter(self, name: str) -> None:
+        """Ask for one parameter's value (:meth:`VehicleCommands.request_parameter`)."""
+        self._commands.request_parameter(name)
+
     def upload_mission(
         self,
         items: Iterable[MissionItem | Any],

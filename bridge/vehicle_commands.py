@@ -284,6 +284,15 @@ class VehicleCommands:
         msg = mavlink2.MAVLink_request_data_stream_message(target[0], target[1], stream_id, rate_hz, int(start))
         self._send_or_raise(msg, "request_data_stream")
 
+    def request_parameter(self, name: str) -> None:
+        """Ask for parameter ``name`` with PARAM_REQUEST_READ (20); the vehicle's PARAM_VALUE comes as
+        telemetry (``latest("PARAM_VALUE")``, and the log). No reply for a name it does not have."""
+        if not (isinstance(name, str) and 0 < len(name) <= 16 and name.isascii()):
+            raise InputError(f"name: expected a parameter name of 1-16 ASCII characters, got {name!r}")
+        target = self._ready("request_parameter")
+        msg = mavlink2.MAVLink_param_request_read_message(target[0], target[1], name.encode(), -1)
+        self._send_or_raise(msg, "request_parameter")
+
     def _command_long(self, command: int, params: Sequence[float], timeout: float, retries: int, what: str) -> int:
         if not (_is_number(timeout) and timeout > 0):
             raise InputError(f"timeout: expected a number of seconds > 0, got {timeout!r}")

@@ -16,6 +16,7 @@ import typer
 from planner.cli import (
     bus_keys,
     calibrate,
+    check,
     compare,
     generate,
     processes,
@@ -55,6 +56,7 @@ app.command("shakedown", cls=RaptCommand)(shakedown.shakedown)
 app.command("surrogate", cls=RaptCommand)(surrogate.surrogate)
 app.command("compare", cls=RaptCommand)(compare.compare)
 app.command("calibrate", cls=RaptCommand)(calibrate.calibrate)
+app.command("check", cls=RaptCommand)(check.check)
 app.command("frontseat", cls=RaptCommand)(processes.frontseat)
 app.command("bridge", cls=RaptCommand)(processes.bridge)
 app.command("autonomy", cls=RaptCommand)(processes.autonomy)

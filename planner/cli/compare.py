@@ -9,6 +9,7 @@ from typing import Annotated
 import typer
 from rich.table import Table
 
+from planner.cli.check import checks_table
 from planner.cli.console import err, fail, out, print_table
 
 __all__ = ["compare"]
@@ -50,8 +51,16 @@ def compare(
             "start_time)."
         ),
     ] = None,
+    keep_failed: Annotated[
+        bool,
+        typer.Option(
+            "--keep-failed",
+            help="Count runs whose automatic checks failed in the bias fit (by default they are shown but not "
+            "counted).",
+        ),
+    ] = False,
 ) -> None:
-    """Compare run logs with the plan: predicted vs observed, execution bias, re-plan."""
+    """Compare run logs with the plan: predicted vs observed, run checks, execution bias, re-plan."""
     from planner.review.runs import CompareConfig
 
     names = _bias_names(fit)
@@ -61,10 +70,23 @@ def compare(
     plant = None
     if calibrated is not None:
         plant = _calibrated_vehicle(plan_dir, calibrated)
-    config = CompareConfig(dithers=dithers, seed=seed, fit=names, plant=plant, bootstrap=bootstrap, draws=draws)
+    config = CompareConfig(
+        dithers=dithers, seed=seed, fit=names, plant=plant, bootstrap=bootstrap, draws=draws, keep_failed=keep_failed
+    )
     result = _run_compare(plan_dir, logs, out_dir, config)
     _warn_lost(result)
     print_table(_scenario_table(result))
+    checks = checks_table([(Path(lg["path"]).name, lg["checks"]) for lg in result["logs"]])
+    if checks is not None:
+        print_table(checks)
+    excluded = result["run_checks"]["excluded_from_bias_fit"]
+    if excluded:
+        err.print(
+            f"[yellow]warning:[/] not counted in the bias fit (a check failed; --keep-failed counts them): "
+            f"{', '.join(excluded)}",
+            highlight=False,
+            soft_wrap=True,
+        )
     print_table(_bias_table(result))
     _print_day_bias(result)
     _print_agreement(result)
@@ -139,8 +161,18 @@ def _scenario_table(result: dict) -> Table:
     table = Table(
         title=f"{result['plan']['mission']}: {len(result['scenarios'])} run(s) against plan {result['plan']['id']}"
     )
-    for col in ("scenario", "predicted", "observed", "corrected", "path error (m)", "corrected (m)", "frames lost"):
-        table.add_column(col, justify="left" if col == "scenario" else "right")
+    cols = (
+        "scenario",
+        "predicted",
+        "observed",
+        "corrected",
+        "path error (m)",
+        "corrected (m)",
+        "frames lost",
+        "checks",
+    )
+    for col in cols:
+        table.add_column(col, justify="left" if col in ("scenario", "checks") else "right")
     for r in result["scenarios"]:
         pe, pc = r["path_error_m"], r["path_error_corrected_m"]
         table.add_row(
@@ -151,6 +183,7 @@ def _scenario_table(result: dict) -> Table:
             "-" if pe is None else f"{pe:.1f}",
             "-" if pc is None else f"{pc:.1f}",
             str(r.get("frames_lost", "unknown")),
+            r.get("checks", "-"),
         )
     return table
 

@@ -12,6 +12,7 @@ command's whole summary, wrapped.
 from __future__ import annotations
 
 import re
+from typing import Any
 
 import typer
 import typer.core
@@ -27,7 +28,10 @@ def _keep_hyphens(text: str) -> str:
     return _WORD_HYPHEN.sub(_NB_HYPHEN, text)
 
 
-class HelpFormatter(typer.Context.formatter_class):  # click's formatter, as typer ships it
+_ClickFormatter: Any = typer.Context.formatter_class  # click's formatter, as typer ships it
+
+
+class HelpFormatter(_ClickFormatter):
     """click's formatter, with hyphenated words (``--no-stochastic``, ``lock-step``) never split across lines."""
 
     def write_text(self, text: str) -> None:

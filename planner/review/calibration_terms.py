@@ -328,7 +328,7 @@ def leg_power_points(
     return np.array([v for v, _ in points], dtype=float), np.array([w for _, w in points], dtype=float)
 
 
-def power_curve(theta: Sequence[float], speed: np.ndarray, cruise: float) -> np.ndarray:
+def power_curve(theta: Sequence[float] | np.ndarray, speed: np.ndarray, cruise: float) -> np.ndarray:
     """``hotel_w + drag_w (v / cruise)^power_exponent`` at ``speed``; ``theta`` in :data:`POWER_TERMS` order."""
     hotel, drag, k = theta
     return hotel + drag * (np.asarray(speed, dtype=float) / cruise) ** k

@@ -5,7 +5,10 @@ to identify and apply this bias to our predictions").  :func:`compare`
 
 1. reads every log (:mod:`planner.review.logs`; never modified, damaged ones as far as they go)
    and matches it to its plan scenario by the recorded metadata (:mod:`planner.review.runs`)
-   — a log of another mission or plan is refused with a one-line error;
+   — a log of another mission or plan is refused with a one-line error — and checks each run
+   itself (:mod:`planner.review.run_checks`: estimator, position, link, set-point gaps,
+   thrusters, depth, pack, gauge, failsafes, uncommanded modes, watchdog); a run whose checks
+   fail does not count towards the bias fit unless ``keep_failed``;
 2. rebuilds each run's track, scores it with the mission's own scorer and score tree
    (:func:`sim.uuv.replay.score_track`), and sets predicted against observed mode and
    sub-scores per scenario and per pair (did the pair straddle its boundary?), with the
@@ -27,7 +30,7 @@ to identify and apply this bias to our predictions").  :func:`compare`
    for each side to move (:mod:`planner.review.replan`);
 6. writes ``comparison.json`` and ``comparison.html`` (:mod:`planner.review.report`), and per
    flown scenario an MCAP for Foxglove overlaying observed, predicted and corrected tracks
-   (:mod:`planner.review.overlay`).
+   and the runs' checks that warned or failed as Log events (:mod:`planner.review.overlay`).
 """
 
 from __future__ import annotations
@@ -47,6 +50,7 @@ from planner.review.daybias import day_bias_record
 from planner.review.forecast import STRADDLE_BELOW, DayForecast, forecast_day, run_forecast
 from planner.review.logs import read_run
 from planner.review.replan import adjust_for_bias
+from planner.review.run_checks import summary_line, verdict_of
 from planner.review.runs import (
     CompareConfig,
     Observation,
@@ -111,10 +115,11 @@ def compare(
         calib = sim.uuv.simulate(m, U_plan, trajectories=True, plant=plant)
     baseline = calib if calib is not None else pred
     say("fitting the execution bias")
-    start_times = [float(make_scenarios(m, o.u[None, :]).start_time[0]) for o in obs]
-    fit = fit_observed(m, obs, start_times, cfg, cfg.bootstrap)
+    counted = _counted(obs, cfg)
+    start_times = [float(make_scenarios(m, o.u[None, :]).start_time[0]) for o in counted]
+    fit = fit_observed(m, counted, start_times, cfg, cfg.bootstrap)
     say("cross-validating the correction")
-    cv = cross_validate(m, obs, start_times, baseline, row_index(ids), cfg)
+    cv = cross_validate(m, counted, start_times, baseline, row_index(ids), cfg)
     bias_used = fit.bias if cv["correction_used"] else Bias()
     say("re-predicting under the fitted bias")
     corr = (
@@ -125,25 +130,18 @@ def compare(
     plan_runs = PlanRuns(ids, U_plan, pred, corr, calib)
     say("forecasting under the execution noise and the bias's uncertainty")
     fc = forecast_day(plan, obs, plan_runs, fit, cv["correction_used"], cfg)
-    scen_rows = _scenario_rows(m, obs, plan_runs, fc)
+    scen_rows = _scenario_rows(m, obs, plan_runs, fc, counted)
     agreement = _mode_agreement(scen_rows)
     say("re-planning")
     pair_rows, proposals = _pair_rows(plan, obs, plan_runs, bias_used, cfg, fc)
     result = {
         "schema": COMPARISON_SCHEMA,
         "plan": {"id": plan.id, "path": str(plan.path), "mission": m.name, "mission_file": str(plan.mission_file)},
-        "logs": [
-            {
-                "path": str(o.run.path),
-                "scenario": o.sid,
-                "messages": o.run.messages,
-                "complete": bool(o.run.complete_file and o.run.has_end),
-                "lost": o.run.problems,
-                "frames_lost": o.run.frames_lost,
-                "losses": o.run.losses if o.run.losses is not None else "unknown",
-            }
-            for o in obs
-        ],
+        "logs": _log_rows(obs),
+        "run_checks": {
+            "keep_failed": cfg.keep_failed,
+            "excluded_from_bias_fit": [o.run.path.name for o in obs if not any(o is c for c in counted)],
+        },
         "bias": fit.to_dict(),
         "day_bias": day_bias_record(m, fit.bias, bias_used),
         "bias_fit": _biasfit_observed(fit, cfg),
@@ -184,9 +182,41 @@ def _check_out_dir(plan_path: str | Path, log_paths: Sequence[str | Path], out_d
         raise InputError(f"--out: {out_dir} would overwrite an input (an overlay_*.mcap); choose another directory")
 
 
-def _scenario_rows(m, obs: list[Observation], runs: PlanRuns, fc: DayForecast) -> list[dict]:
-    """One row per logged run: predicted, observed and corrected modes and sub-scores, path errors, and the
-    forecasts' mode probabilities (:func:`planner.review.forecast.run_forecast`)."""
+def _log_rows(obs: list[Observation]) -> list[dict]:
+    """Per log: its path and scenario, what it holds and lost, and its run checks."""
+    return [
+        {
+            "path": str(o.run.path),
+            "scenario": o.sid,
+            "messages": o.run.messages,
+            "complete": bool(o.run.complete_file and o.run.has_end),
+            "lost": o.run.problems,
+            "frames_lost": o.run.frames_lost,
+            "losses": o.run.losses if o.run.losses is not None else "unknown",
+            "checks": o.run.checks,
+        }
+        for o in obs
+    ]
+
+
+def _counted(obs: list[Observation], cfg: CompareConfig) -> list[Observation]:
+    """The runs the bias fit counts: those whose automatic checks did not fail, or all with ``keep_failed``;
+    InputError (one line) when that leaves none."""
+    counted = [o for o in obs if cfg.keep_failed or verdict_of(o.run.checks) != "fail"]
+    if not counted:
+        failed = "; ".join(f"{o.run.path.name} ({summary_line(o.run.checks)})" for o in obs)
+        raise InputError(
+            f"LOGS: every run failed its automatic checks ({failed}); fly again, or give --keep-failed to "
+            "count them in the bias fit anyway"
+        )
+    return counted
+
+
+def _scenario_rows(
+    m, obs: list[Observation], runs: PlanRuns, fc: DayForecast, counted: list[Observation]
+) -> list[dict]:
+    """One row per logged run: predicted, observed and corrected modes and sub-scores, path errors, the
+    forecasts' mode probabilities (:func:`planner.review.forecast.run_forecast`) and the run's checks."""
     pred, corr, names = runs.pred, runs.corr, runs.pred.names
     base = runs.calib if runs.calib is not None else pred
     scen_rows = []
@@ -216,6 +246,8 @@ def _scenario_rows(m, obs: list[Observation], runs: PlanRuns, fc: DayForecast) -
                 "lost": list(o.run.problems),
                 "frames_lost": o.run.frames_lost,
                 "sub_scores": sub,
+                "checks": summary_line(o.run.checks),
+                "counted_in_bias_fit": any(o is c for c in counted),
             }
         )
         det = {s: MODE_NAMES[r.modes[k]] for s, r in (("planned", pred), ("uncorrected", base), ("corrected", corr))}
@@ -460,8 +492,9 @@ def _write_overlays(result: dict, plan: Plan, obs: list[Observation], runs: Plan
         predicted, corrected = runs.trajectories(sid)
         tracks = {"predicted": predicted, "corrected": corrected, "calibrated": runs.calibrated_trajectory(sid)}
         observed = [(o.run.path.stem, o.run.track) for o in flown]
+        checks = [(o.run.path.stem, o.run.checks) for o in flown]
         names[sid] = write_overlay(
-            out_dir / overlay_name(sid), plan.mission, flown[0].u, observed, tracks, correction
+            out_dir / overlay_name(sid), plan.mission, flown[0].u, observed, tracks, correction, checks
         ).name
     return names
 

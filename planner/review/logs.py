@@ -36,6 +36,7 @@ from bridge.frames import message_id  # noqa: E402
 from bridge.logger import LOSSES_METADATA, RAW_TOPIC  # noqa: E402
 from planner.common.scenario_record import SCENARIO_META, metadata_fields, paced_clock  # noqa: E402
 from planner.common.telemetry import VIRTUAL_BATTERY_ID, TrackSampler, VehicleTelemetry  # noqa: E402
+from planner.review.run_checks import RunEvidence, run_checks  # noqa: E402
 from rapt.errors import FileFormatError  # noqa: E402
 from sim.uuv.geo import LocalFrame  # noqa: E402
 from sim.uuv.interface import decode_command  # noqa: E402
@@ -73,6 +74,8 @@ class LoggedRun:
     # what the logger counted as lost on the way (:meth:`bridge.logger.McapLogger.losses`: total,
     # link_lost, bus_lost, write_errors, ...); None for a log without the record (older, or killed)
     losses: dict | None = None
+    # the automatic checks of the run itself (planner.review.run_checks), as dicts
+    checks: list[dict] = field(default_factory=list)
 
     @property
     def frames_lost(self) -> int | str:
@@ -149,14 +152,23 @@ class _PacedSteps:
                 self.row_log_ns.append(int(log_ns))
 
 
-#: MAVLink message ids a run's track needs (everything else on /mavlink/raw is skipped unparsed).
-WANTED_IDS = {
+#: MAVLink message ids a run's track needs.
+TRACK_IDS = {
     mavlink.MAVLINK_MSG_ID_GLOBAL_POSITION_INT,
     mavlink.MAVLINK_MSG_ID_LOCAL_POSITION_NED,
     mavlink.MAVLINK_MSG_ID_ATTITUDE,
     mavlink.MAVLINK_MSG_ID_BATTERY_STATUS,
     mavlink.MAVLINK_MSG_ID_SYSTEM_TIME,
     mavlink.MAVLINK_MSG_ID_STATUSTEXT,
+}
+#: ... and its checks (planner.review.run_checks); everything else on /mavlink/raw is skipped unparsed.
+WANTED_IDS = TRACK_IDS | {
+    mavlink.MAVLINK_MSG_ID_HEARTBEAT,
+    mavlink.MAVLINK_MSG_ID_EKF_STATUS_REPORT,
+    mavlink.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW,
+    mavlink.MAVLINK_MSG_ID_SYS_STATUS,
+    mavlink.MAVLINK_MSG_ID_COMMAND_ACK,
+    mavlink.MAVLINK_MSG_ID_PARAM_VALUE,
 }
 
 
@@ -202,6 +214,7 @@ class RunLogReader:
         self.footer = False
         self.n_messages = 0
         self.losses: dict | None = None
+        self.evidence = RunEvidence()  # what the run checks need
 
     def read(self) -> LoggedRun:
         """The run in the log; LogError when the file is missing, not MCAP, or has no scenario metadata."""
@@ -245,7 +258,13 @@ class RunLogReader:
             self.events,
             delay,
             self.losses,
+            [c.as_dict() for c in self._checks()],
         )
+
+    def _checks(self):
+        """The run's automatic checks (planner.review.run_checks), told which parts of the file were lost."""
+        self.evidence.lost_log_ns = list(self.lost_chunks)
+        return run_checks(self.evidence, self.losses)
 
     # -- the file ----------------------------------------------------------------------
     def _stream(self, size: int) -> None:
@@ -327,6 +346,9 @@ class RunLogReader:
         """A vehicle MAVLink frame: telemetry of the track and the run's end."""
         m = _decode_frame(self.parser, bytes(msg.data))
         if m is not None:
+            self.evidence.on_mavlink(m, self.log_ns)
+            if m.get_msgId() not in TRACK_IDS:
+                return
             if self.paced is not None:
                 self.paced.add(m, self.log_ns)
             else:
@@ -341,9 +363,12 @@ class RunLogReader:
         elif name == "clock" and isinstance(obj, dict) and self.paced is not None:
             self.start_ms = int(obj.get("start_ms", 0))
             self.paced.begin(self.start_ms)
+            self.evidence.on_clock(self.start_ms)
 
     def on_command(self, name: str, obj) -> None:
         """A back-seat set-point of source ``name``, by the step (tick) it answers."""
+        if isinstance(obj, dict):
+            self.evidence.on_setpoint(name, self.log_ns)
         if isinstance(obj, dict) and obj.get("tick_ms") is not None:
             self.command_log_ns.setdefault(name, {}).setdefault(int(obj["tick_ms"]), self.log_ns)
             self.commands.setdefault(name, {})[int(obj["tick_ms"])] = (
@@ -358,6 +383,7 @@ class RunLogReader:
             return
         if name in ("referee", keys.BRINGUP_SOURCE, keys.WATCHDOG_SOURCE):
             self.events.append({"source": name, **obj})
+            self.evidence.on_event(name, obj)
             if name == "referee" and self.paced is not None and obj.get("ended"):
                 self.paced.ended = str(obj["ended"])
         else:

@@ -237,6 +237,41 @@ def _scenario_section(result: dict, plan, tracks: list[tuple[str, np.ndarray]], 
     return parts
 
 
+def _checks_section(result: dict) -> list[str]:
+    """Per log, its automatic run checks (planner.review.run_checks): verdict, evidence, why; and which runs the
+    bias fit left out."""
+    names = [c["name"] for c in (result["logs"][0].get("checks") or [])] if result["logs"] else []
+    if not names:
+        return []
+    head = "".join(f"<th>{_e(n)}</th>" for n in names)
+    parts = [f"<h2>Run checks</h2><table><tr><th class='l'>log</th>{head}</tr>"]
+    cls = {"pass": "ok", "fail": "bad", "warn": "", "unknown": ""}
+    details = []
+    for lg in result["logs"]:
+        log = Path(lg["path"]).name
+        cells = ""
+        for c in lg.get("checks") or []:
+            title = f"{c['reason']} (at {c['time_s']} s)" if c.get("time_s") is not None else c["reason"]
+            cells += f"<td class='{cls[c['verdict']]}' title='{_e(title)}'>{_e(c['verdict'])}</td>"
+            if c["verdict"] != "pass":
+                at = "" if c.get("time_s") is None else f" at {c['time_s']:.1f} s"
+                details.append(
+                    f"<li><code>{_e(log)}</code> {_e(c['name'])} <b>{_e(c['verdict'])}</b>{at}: {_e(c['reason'])}</li>"
+                )
+        parts.append(f"<tr><td class='l'>{_e(log)}</td>{cells}</tr>")
+    parts.append("</table>")
+    if details:
+        parts.append("<ul>" + "".join(details) + "</ul>")
+    excluded = result.get("run_checks", {}).get("excluded_from_bias_fit") or []
+    if excluded:
+        parts.append(
+            "<p class='warn'>Not counted in the bias fit (a check failed; <code>--keep-failed</code> counts them): "
+            + ", ".join(f"<code>{_e(n)}</code>" for n in excluded)
+            + "</p>"
+        )
+    return parts
+
+
 def _forecast_section(result: dict) -> list[str]:
     """Per run the forecasts' mode probabilities beside the deterministic prediction, and the day's Brier scores."""
     fc = result["forecast"]
@@ -366,6 +401,7 @@ def write_comparison_report(
             + "".join(f"<li><code>{_e(Path(p).name)}</code>: {_e(msg)}</li>" for p, msg in lost)
             + "</ul></div>"
         )
+    parts += _checks_section(result)
     parts += _bias_section(result, fig_dir)
     parts += _scenario_section(result, plan, tracks, traj, fig_dir)
     parts += _forecast_section(result)

@@ -38,6 +38,7 @@ class CompareConfig:
     bootstrap: int = 20  # block-bootstrap refits for the standard errors (0: analytic only)
     plant: Vehicle | None = None  # a calibrated vehicle (rapt-plan calibrate): flown in every prediction
     draws: int = 100  # Monte-Carlo runs per scenario of each forecast (planner.review.forecast)
+    keep_failed: bool = False  # count runs whose automatic checks failed in the bias fit (planner.review.run_checks)
 
 
 @dataclass

@@ -1,5 +1,6 @@
 """The `rapt-plan` commands as a user runs them: output, exit codes, one-line errors, processes that stop cleanly."""
 
+import json
 import re
 from pathlib import Path
 
@@ -87,6 +88,14 @@ def test_run_flies_a_scenario_in_the_loop_and_logs_it(tmp_path):
     topics = {t for t, _, _ in read_log(log)}
     assert {"rapt/uuv1/mavlink/LOCAL_POSITION_NED", "rapt/uuv1/command/autonomy"} <= topics
     assert read_metadata(log)["scenario"]["scenario_id"] == "sobol-3"
+    # the run itself was sound: every automatic check of its log passes
+    checked = runner.invoke(app, ["check", str(log), "--json"])
+    assert checked.exit_code == 0, checked.output
+    checks = json.loads(checked.output)["run.mcap"]
+    from planner.review.run_checks import CHECKS
+
+    assert [c["name"] for c in checks] == list(CHECKS)
+    assert {c["name"]: c["verdict"] for c in checks} == dict.fromkeys(CHECKS, "pass"), checks
 
 
 @pytest.mark.integration

@@ -190,6 +190,72 @@ def _rewrite_meta(src: Path, dst: Path, losses: dict | None = None, **changes) -
         w.finish()
 
 
+def _without_setpoints(src: Path, dst: Path, share: tuple[float, float]) -> None:
+    """A copy of log ``src`` whose back-seat set-points between ``share`` of its log time are gone: a set-point
+    stream with a gap, every other record (metadata included) as it was."""
+    from mcap.writer import Writer
+
+    with open(src, "rb") as f:
+        reader = make_reader(f)
+        summary = reader.get_summary()
+        t0, t1 = summary.statistics.message_start_time, summary.statistics.message_end_time
+        cut = (t0 + share[0] * (t1 - t0), t0 + share[1] * (t1 - t0))
+        with open(dst, "wb") as out:
+            w = Writer(out)
+            w.start(profile="", library="test")
+            schemas = {sid: w.register_schema(s.name, s.encoding, s.data) for sid, s in summary.schemas.items()}
+            channels = {
+                cid: w.register_channel(c.topic, c.message_encoding, schemas.get(c.schema_id, 0), dict(c.metadata))
+                for cid, c in summary.channels.items()
+            }
+            for _, channel, m in reader.iter_messages(log_time_order=False):
+                if channel.topic.endswith("/command/autonomy") and cut[0] <= m.log_time <= cut[1]:
+                    continue
+                w.add_message(channels[m.channel_id], m.log_time, m.data, m.publish_time, m.sequence)
+            for record in reader.iter_metadata():
+                w.add_metadata(record.name, dict(record.metadata))
+            w.finish()
+
+
+def test_every_run_is_checked_and_one_that_failed_is_not_fitted_unless_kept(flown, tmp_path):
+    """Each log's automatic checks reach comparison.json, the table and the report; a copy of a run whose
+    set-point stream has a gap fails its set-point check (`rapt-plan check` exits 1) and is left out of the
+    bias fit, unless --keep-failed."""
+    from planner.review.run_checks import CHECKS
+
+    c = flown["comparison"]
+    for lg in c["logs"]:
+        assert [k["name"] for k in lg["checks"]] == list(CHECKS), lg["path"]
+    clean = {k["name"]: k["verdict"] for k in c["logs"][0]["checks"]}
+    assert clean == dict.fromkeys(CHECKS, "pass"), c["logs"][0]["checks"]
+    assert all(r["counted_in_bias_fit"] for r in c["scenarios"]) and not c["run_checks"]["excluded_from_bias_fit"]
+    assert "Run checks" in (flown["out"] / "comparison.html").read_text()
+
+    gapped = tmp_path / "gapped.mcap"
+    _without_setpoints(flown["logs"][2], gapped, (0.3, 0.4))
+    checked = runner.invoke(app, ["check", str(gapped)], env={"COLUMNS": "200"})
+    assert checked.exit_code == 1, checked.output
+    assert re.search(r"setpoints\s+│\s+fail", checked.output), checked.output
+    fast = ["--dithers", "0", "--bootstrap", "0", "--draws", "10"]
+    logs = [str(p) for p in flown["logs"]] + [str(gapped)]
+    out = tmp_path / "comparison"
+    result = runner.invoke(app, ["compare", str(flown["plan_dir"]), *logs, "--out", str(out), *fast])
+    assert result.exit_code == 0, result.output
+    assert "not counted in the bias fit" in result.output and "gapped.mcap" in result.output
+    comparison = json.loads((out / "comparison.json").read_text())
+    assert comparison["run_checks"]["excluded_from_bias_fit"] == ["gapped.mcap"]
+    [row] = [r for r in comparison["scenarios"] if r["log"] == "gapped.mcap"]
+    assert row["checks"].startswith("fail: ") and "setpoints" in row["checks"] and not row["counted_in_bias_fit"]
+    channels = foxglove_channels(out / overlay_name(row["id"]))
+    lines = [m["message"] for m in channels["/checks"].messages if m["name"] == "gapped"]
+    assert any(line.startswith("setpoints fail:") for line in lines), lines
+    kept = runner.invoke(
+        app, ["compare", str(flown["plan_dir"]), *logs, "--out", str(tmp_path / "kept"), *fast, "--keep-failed"]
+    )
+    assert kept.exit_code == 0, kept.output
+    assert not json.loads((tmp_path / "kept" / "comparison.json").read_text())["run_checks"]["excluded_from_bias_fit"]
+
+
 def test_each_log_says_how_many_frames_were_lost_on_the_way(flown, tmp_path):
     entries = {Path(lg["path"]).name: lg for lg in flown["comparison"]["logs"]}
     for log in flown["logs"]:  # flown in SIL through the bridge and the logger: nothing lost, and it says so
@@ -363,8 +429,9 @@ def test_an_edited_embedded_mission_is_refused_in_one_line_and_nothing_is_writte
 
 
 def test_run_logs_have_foxglove_channels_the_typescript_reader_decodes(flown):
-    """A log of `rapt-plan run`: Foxglove's well-known channels beside the MAVLink ones, valid under Foxglove's
-    schemas (Python reader), and read back by Foxglove's TypeScript reader from npm with the same content."""
+    """A log of `rapt-plan run`: Foxglove's well-known channels beside the MAVLink ones, Protobuf under the
+    Foxglove SDK's schemas (Python reader), and read back by Foxglove's TypeScript reader from npm with the
+    same content."""
     log = flown["logs"][0]
     channels = foxglove_channels(log)
     expected = {
@@ -398,9 +465,13 @@ def test_run_logs_have_foxglove_channels_the_typescript_reader_decodes(flown):
     ts = read_with_typescript(log, foxglove.FIX_TOPIC, "/map/scenario")
     for topic, name in expected.items():
         got = ts["channels"][topic]
-        assert (got["schema"], got["schemaEncoding"], got["messageEncoding"]) == (name, "jsonschema", "json")
+        assert (got["schema"], got["schemaEncoding"], got["messageEncoding"]) == (name, "protobuf", "protobuf")
         assert got["messages"] == len(channels[topic].messages)
-    assert ts["first"][foxglove.FIX_TOPIC] == fixes[0]
+    first = ts["first"][foxglove.FIX_TOPIC]  # protobufjs's view of the same message
+    assert first["timestamp"] == {"seconds": fixes[0]["timestamp"]["sec"], "nanos": fixes[0]["timestamp"]["nsec"]}
+    assert {k: first[k] for k in ("frame_id", "latitude", "longitude", "altitude", "position_covariance")} == {
+        k: fixes[0][k] for k in ("frame_id", "latitude", "longitude", "altitude", "position_covariance")
+    }
     assert json.loads(ts["first"]["/map/scenario"]["geojson"]) == doc
     assert ts["statisticsMessageCount"] == sum(c["messages"] for c in ts["channels"].values())
     print({t: (c["schema"], c["messages"]) for t, c in ts["channels"].items() if t in expected}, fixes[0])

@@ -46,6 +46,8 @@ STREAMS = {
     "GPS_RAW_INT": 1.0,
     "SYSTEM_TIME": 1.0,
 }
+#: Parameters asked for once, so the log says what the run checks judge against (thrusters' PWM limits).
+LOGGED_PARAMETERS = ("MOT_PWM_MIN", "MOT_PWM_MAX")
 #: REQUEST_DATA_STREAM groups carrying STREAMS (ArduPilot's mapping), for vehicles without SET_MESSAGE_INTERVAL.
 DATA_STREAMS = {
     mavlink.MAV_DATA_STREAM_POSITION: 10,  # GLOBAL_POSITION_INT, LOCAL_POSITION_NED
@@ -203,6 +205,8 @@ class BringUp:
             for stream, hz in DATA_STREAMS.items():
                 b.request_data_stream(stream, hz)
             self.note("streams", "fallback", f"{refused}: REQUEST_DATA_STREAM for all")
+        for name in LOGGED_PARAMETERS:  # answered as telemetry, into the log (planner.review.run_checks)
+            b.request_parameter(name)
         needed = ("GLOBAL_POSITION_INT", "ATTITUDE", "BATTERY_STATUS")
         fresh = self._wait(lambda: all(self._since(n, asked) for n in needed) or None, self.timeouts.streams)
         if fresh is None:

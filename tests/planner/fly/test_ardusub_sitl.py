@@ -8,9 +8,11 @@ session; every process and thread is gone when a test ends.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -183,6 +185,42 @@ def download_mission(gcs, timeout: float = 5.0) -> list:
     return stored
 
 
+@contextlib.contextmanager
+def _watched(port: int):
+    """The crew's Foxglove (a Python client of the live view on ``port``), connecting while the firmware is
+    brought up and flown: ``{"client": ...}`` once connected."""
+    from tests.support.foxglove_client import FoxgloveClient
+
+    watched: dict = {}
+
+    def watch() -> None:
+        deadline = time.monotonic() + 60
+        while "client" not in watched and time.monotonic() < deadline:
+            try:
+                watched["client"] = FoxgloveClient(f"ws://127.0.0.1:{port}")
+            except Exception:  # not serving yet
+                time.sleep(0.05)
+
+    watcher = threading.Thread(target=watch, name="foxglove-watch")
+    watcher.start()
+    try:
+        yield watched
+    finally:
+        watcher.join(timeout=70)
+
+
+def _saw_the_log_live(client, fixes: list[dict], channels: dict) -> None:
+    """What the crew saw live: the log's fixes (thinned to a screen's rate), the map, the bring-up's events."""
+    by_stamp = {(f["timestamp"]["sec"], f["timestamp"]["nsec"]): f for f in fixes}
+    seen = client.received("/vehicle/fix")
+    assert len(seen) > 10 and all(by_stamp[(f["timestamp"]["sec"], f["timestamp"]["nsec"])] == f for f in seen)
+    [doc] = client.received("/map/scenario")[-1:]
+    assert json.loads(doc["geojson"]) == json.loads(channels["/map/scenario"].messages[0]["geojson"])
+    events = [m["message"] for m in client.received("/vehicle/log")]
+    assert any(e.startswith("bring-up heartbeat ok") for e in events), events
+    assert "/status/bridge" in client.topics and "/status/watchdog" in client.topics
+
+
 @needs_firmware
 @pytest.mark.sitl
 @pytest.mark.integration
@@ -197,8 +235,11 @@ def test_a_plan_scenario_flown_on_ardusub_like_on_the_range(tmp_path):
 
     flight = flight_from_plan(Path("field_plans/range2017/plan.json"), "pair2b")
     log = tmp_path / "pair2b.mcap"
-    with ArduSubSitl(LAUNCH, speedup=10) as sitl:
-        result = run_vehicle(flight, sitl.connection, log_path=log, timeout_s=20.0)
+    port = free_port()
+    with ArduSubSitl(LAUNCH, speedup=10) as sitl, _watched(port) as watched:
+        result = run_vehicle(flight, sitl.connection, log_path=log, timeout_s=20.0, live=("127.0.0.1", port))
+    client = watched["client"]
+    client.close()
     steps = [(s.name, s.status) for s in result.timeline]
     names = ["heartbeat", "streams", "estimate", "area", "mission", "guided", "arm", "depth", "clock"]
     assert steps[: len(names)] == [(n, "ok") for n in names], steps
@@ -231,6 +272,11 @@ def test_a_plan_scenario_flown_on_ardusub_like_on_the_range(tmp_path):
     vehicle_lines = [m for m in channels["/vehicle/log"].messages if m["name"] == "vehicle"]
     assert texts and len(vehicle_lines) == len(texts)
     assert len(channels["/map/scenario"].messages) == 1
+    _saw_the_log_live(client, fixes, channels)
+    # and the run was sound: no automatic check failed on the firmware's own flight
+    checks = {c["name"]: c for c in run.checks}
+    assert not [c for c in checks.values() if c["verdict"] == "fail"], checks
+    assert checks["estimator"]["verdict"] == "pass" and checks["thrusters"]["verdict"] in ("pass", "warn")
     # the range day's next step: `rapt-plan compare` reads the firmware's log like any other run's
     from planner.review.compare import compare
     from planner.review.runs import CompareConfig
@@ -290,6 +336,10 @@ def test_ardusubs_ground_station_failsafe_ends_the_run_and_the_vehicle_is_left_a
     assert any("heartbeat lost" in t for t in texts), texts  # ArduSub's own words: it was its failsafe
     run = read_run(log)
     assert run.has_end and run.scenario_id == "pair2b"
+    # the automatic run checks see it: ArduSub's failsafe message, and a disarm nobody commanded
+    checks = {c["name"]: c for c in run.checks}
+    assert checks["statustext"]["verdict"] == "fail" and "heartbeat lost" in checks["statustext"]["reason"]
+    assert checks["modes"]["verdict"] == "fail" and "disarmed" in checks["modes"]["reason"]
 
 
 @needs_firmware

@@ -47,11 +47,13 @@ def _fly(flight, connection, steps: list, **kw):
 
 
 def _commanded(vehicle) -> list[str]:
-    """What the vehicle was told beyond our heartbeat and the message rates."""
+    """What the vehicle was told beyond our heartbeat, the message rates and parameter reads (they change nothing)."""
     out = []
     for m in vehicle.received:
         kind = m.get_type()
         if kind == "COMMAND_LONG" and m.command == M.MAV_CMD_SET_MESSAGE_INTERVAL or kind == "HEARTBEAT":
+            continue
+        if kind == "PARAM_REQUEST_READ":
             continue
         out.append(kind if kind != "COMMAND_LONG" else f"COMMAND_LONG {m.command}")
     return out
@@ -103,6 +105,14 @@ def test_a_step_that_fails_stops_the_run_with_one_line(flight, behaviour, error,
         assert "REQUEST_DATA_STREAM" in told  # the fallback was tried
     if last_step == "depth":  # armed by then: it is brought up and disarmed before the error is raised
         assert vehicle.mode == 9 and not vehicle.armed and steps[-1].name == "recover"
+
+
+def test_the_thrusters_pwm_limits_are_asked_for_so_the_log_carries_them(flight):
+    steps: list = []
+    with fake(flight.mission) as (conn, vehicle):
+        _fly(flight, conn, steps)
+    asked = [m.param_id for m in vehicle.received if m.get_type() == "PARAM_REQUEST_READ"]
+    assert asked == ["MOT_PWM_MIN", "MOT_PWM_MAX"]
 
 
 def test_streams_fall_back_to_request_data_stream(flight):
