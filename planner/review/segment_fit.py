@@ -111,24 +111,17 @@ class SegmentSolver:
         return fit_map(residuals, self.priors(vehicle, names), significant=0.0, robust=robust, **kw)
 
     def solve(self, names: tuple[str, ...], vehicle: Vehicle, bootstrap: int, start=None) -> MapEstimate:
-        """The MAP fit of ``names``: the turn terms to the headings alone, the rest to positions and energy.
-
-        A heading moves only in turns, so its information is in the few large residuals a robust
-        joint fit discards as outliers; fitted alone, by plain least squares, the turn terms are
-        pinned by the turns. A vector loop's track does not depend on its heading, so the two fits
-        are the joint optimum split in two well-scaled problems; a surge loop's track does, so its
-        rest is fitted with the turn terms at their values from the headings.
-        """
-        turn = tuple(n for n in names if n in TURN_TERMS)
-        if not turn:
+        """The MAP fit of ``names``.  A vector loop's track does not depend on its heading, so its
+        turn terms are fitted to the headings alone and the rest to positions and energy: the same
+        optimum, found as two well-scaled problems instead of one whose heading part is lost."""
+        if vehicle.velocity_control != "vector" or not set(TURN_TERMS) & set(names):
             return self.solve_kinds(names, vehicle, bootstrap, start, ("position", "heading", "energy"))
+        turn = tuple(n for n in names if n in TURN_TERMS)
         rest = tuple(n for n in names if n not in TURN_TERMS)
+        a = self.solve_kinds(rest, vehicle, bootstrap, start, ("position", "energy"))
+        # a heading moves only in turns: its information is in the few large residuals a robust fit discards
         b = self.solve_kinds(turn, vehicle, bootstrap, start, ("heading",), robust=False)
-        if not rest:
-            return b
-        steered = with_terms(vehicle, {n: float(b.value[n]) for n in turn})[0]
-        a = self.solve_kinds(rest, steered, bootstrap, start, ("position", "energy"))
-        return merged(a, b)
+        return merged(a, b) if rest else b
 
 
 def choose_loop(

@@ -168,9 +168,6 @@ MIN_LOGS = 2
 #: that is 30 % off is what a test engineer would still accept; larger errors are found
 #: when the logs show them clearly.
 PRIOR_SHARE = 0.3
-#: The turn rate's prior is wider: a thruster vehicle spins several times faster than a torpedo turns
-#: (ArduSub SITL's BlueROV2: 49 deg/s, against a file's 12), and up to ten times the file's value.
-TURN_PRIOR_SHARE, TURN_RATE_HIGH = 1.0, 10.0
 #: Smallest prior s.d. per field (a file value of 0 still gets a usable prior).
 PRIOR_SD_FLOOR = {
     "speed_gain": 0.05,
@@ -218,8 +215,7 @@ def vehicle_priors(vehicle: Vehicle, names: Sequence[str] = FITTED) -> list[Prio
     Bounds keep the file loadable and the model physical: positive time constants and
     rates, power terms >= 0 (and up to :data:`POWER_HIGH_W`: a thruster vehicle's pack may
     draw ten times a torpedo's), time constants down to a twentieth of the file's (a thruster
-    vehicle answers far faster than a torpedo), the turn rate up to :data:`TURN_RATE_HIGH` times the file's
-    with a prior as wide as the file's value, ``max_speed`` free to fall below ``cruise_speed``
+    vehicle answers far faster than a torpedo), ``max_speed`` free to fall below ``cruise_speed``
     (a vehicle slower than the autonomy's cruise command saturates at its own top speed),
     ``power_exponent`` within :data:`EXPONENT_RANGE`; the ascent rate's is
     :func:`planner.review.calibration_legs.ascent_prior`.
@@ -236,10 +232,8 @@ def vehicle_priors(vehicle: Vehicle, names: Sequence[str] = FITTED) -> list[Prio
             out.append(term_prior(vehicle, n))
             continue
         c = float(getattr(vehicle, n))
-        sd = max((TURN_PRIOR_SHARE if n == "max_turn_rate_dps" else PRIOR_SHARE) * abs(c), PRIOR_SD_FLOOR[n])
-        if n == "max_turn_rate_dps":
-            low, high = c / 5.0, TURN_RATE_HIGH * c
-        elif n == "max_speed":
+        sd = max(PRIOR_SHARE * abs(c), PRIOR_SD_FLOOR[n])
+        if n == "max_speed":
             low, high = c / 5.0, max(4.0 * c, c + 4 * sd)
         elif n in TIME_CONSTANTS:
             low, high = c / 20.0, max(5.0 * c, c + 5 * sd)
