@@ -87,10 +87,11 @@ def _fit_columns(table: Table, console: Console) -> bool:
 
 def print_table(table: Table, console: Console = out) -> None:
     """``table`` on ``console`` as a table when every cell fits its column with no word cut or cut short;
-    otherwise stacked, one block of ``header: value`` lines per row, so a narrow terminal loses no text."""
+    otherwise stacked, one block of ``header: value`` lines per row, so a narrow terminal loses no text.
+    A two-column (name, value) table stays a table: only a word longer than the terminal (a path) folds."""
     for column in table.columns:  # wrap at spaces rather than cut or ellipsise
         column.no_wrap, column.overflow = False, "fold"
-    if _fit_columns(table, console):
+    if _fit_columns(table, console) or len(table.columns) <= 2:  # a name-value table gains nothing stacked
         console.print(table)
         return
     if table.title:

@@ -358,6 +358,7 @@ class RunLogReader:
         if name == SCENARIO_META and isinstance(obj, dict):
             self.meta.update(obj)
             clock = paced_clock(obj) if self.paced is None else None
+            self.evidence.paced = obj.get("pacing") == "vehicle"
             if clock is not None:
                 self.paced = _PacedSteps(LocalFrame(clock.origin_lat, clock.origin_lon), clock.dt)
         elif name == "clock" and isinstance(obj, dict) and self.paced is not None:

@@ -74,6 +74,8 @@ CELL_FULL_V, CELL_WARN_V, CELL_FAIL_V = 4.25, 3.5, 3.3
 SAG_WINDOW_S, SAG_FAIL, SAG_WARN = 2.0, 0.20, 0.10
 GAUGE_SILENT_FAIL_S, GAUGE_SILENT_WARN_S = 10.0, 5.0
 MODE_ACK_S = 2.0
+#: A failsafe's words and mode change come as the run ends, reported a moment after its last position.
+END_GRACE_S = 2.0
 MAV_CMD_DO_SET_MODE, MAV_CMD_COMPONENT_ARM_DISARM = 176, 400
 MAV_SAFETY_ARMED = 128
 #: Words of a failsafe in a STATUSTEXT: ArduPilot's own, and ArduSub's GCS failsafe ("MYGCS: 255, heartbeat lost").
@@ -123,8 +125,9 @@ class RunEvidence:
     volts: list[tuple[int, float]] = field(default_factory=list)
     gauge: list[tuple[int, float]] = field(default_factory=list)  # the virtual gauge's energy consumed (hJ)
     texts: list[tuple[int, int, str]] = field(default_factory=list)
-    modes: list[tuple[int, int, bool]] = field(default_factory=list)  # changes: ms, custom_mode, armed
-    acks: list[tuple[int, int]] = field(default_factory=list)  # accepted mode/arming commands: ms, command
+    modes: list[tuple[int, int, bool, int]] = field(default_factory=list)  # changes: ms, custom_mode, armed, log ns
+    acks: list[tuple[int, int]] = field(default_factory=list)  # accepted mode/arming commands: log ns, command
+    paced: bool = True  # the vehicle keeps its own pace (False: a lock-step front-seat that waits for us)
     params: dict[str, float] = field(default_factory=dict)
     clock: list[tuple[int, int]] = field(default_factory=list)  # (log ns, vehicle ms) of position reports
     setpoints: dict[str, list[int]] = field(default_factory=dict)  # source -> log ns of its set-points
@@ -162,12 +165,12 @@ class RunEvidence:
             state = (int(m.custom_mode), bool(m.base_mode & MAV_SAFETY_ARMED))
             if state != self._mode:
                 if self._mode is not None:
-                    self.modes.append((ms, *state))
+                    self.modes.append((ms, *state, log_ns))
                 self._mode = state
         elif (
             kind == "COMMAND_ACK" and m.result == 0 and m.command in (MAV_CMD_DO_SET_MODE, MAV_CMD_COMPONENT_ARM_DISARM)
         ):
-            self.acks.append((ms, int(m.command)))
+            self.acks.append((log_ns, int(m.command)))
         elif kind == "PARAM_VALUE":
             self.params[str(m.param_id).rstrip("\x00")] = float(m.param_value)
 
@@ -247,12 +250,12 @@ def _position(ev: RunEvidence, w: _Window, losses: dict | None) -> Check:
     gaps = np.diff(points) / 1000.0
     k = int(np.argmax(gaps))
     gap, at = float(gaps[k]), w.s(points[k])
-    for verdict, limit in (("fail", POSITION_GAP_FAIL_S), ("warn", POSITION_GAP_WARN_S)):
+    period = float(np.median(np.diff(times))) / 1000.0  # a vehicle reporting every 2 s is not losing them
+    limits = (("fail", max(POSITION_GAP_FAIL_S, 5 * period)), ("warn", max(POSITION_GAP_WARN_S, 2.5 * period)))
+    for verdict, limit in limits:
         if gap > limit:
             return Check("position", verdict, f"no position report for {gap:.1f} s", at, round(gap, 3), limit)
-    return Check(
-        "position", "pass", f"reported throughout; longest gap {gap:.2f} s", at, round(gap, 3), POSITION_GAP_WARN_S
-    )
+    return Check("position", "pass", f"reported throughout; longest gap {gap:.2f} s", at, round(gap, 3), limits[1][1])
 
 
 def _link(ev: RunEvidence, w: _Window, losses: dict | None) -> Check:
@@ -289,6 +292,8 @@ def _vehicle_ms(ev: RunEvidence, log_ns: list[int]) -> np.ndarray:
 
 
 def _setpoints(ev: RunEvidence, w: _Window, losses: dict | None) -> Check:
+    if not ev.paced:
+        return Check("setpoints", "pass", "lock-step: the simulated front-seat waits for every set-point")
     if not ev.setpoints:
         return Check("setpoints", "unknown", "no back-seat set-points in the log")
     source = "autonomy" if "autonomy" in ev.setpoints else max(ev.setpoints, key=lambda k: len(ev.setpoints[k]))
@@ -388,10 +393,13 @@ def _pack(ev: RunEvidence, w: _Window, losses: dict | None) -> Check:
     drop = np.array([(v[max(b, 0) : i + 1].max() - v[i]) / v[0] for i, b in enumerate(back)])
     j = int(np.argmax(drop))
     if cell < CELL_FAIL_V:
+        # without a virtual gauge the pack is the scenario's battery, and running it down may be the scenario
+        scenario_pack = not ev.gauge
         return Check(
             "pack",
-            "fail",
-            f"{cell:.2f} V a cell ({cells} cells): below {CELL_FAIL_V} V",
+            "warn" if scenario_pack else "fail",
+            f"{cell:.2f} V a cell ({cells} cells): below {CELL_FAIL_V} V"
+            + (" (the pack is the scenario's battery)" if scenario_pack else ""),
             w.s(t[k]),
             round(cell, 3),
             CELL_FAIL_V,
@@ -460,7 +468,7 @@ def _gauge(ev: RunEvidence, w: _Window, losses: dict | None) -> Check:
 
 
 def _statustext(ev: RunEvidence, w: _Window, losses: dict | None) -> Check:
-    rows = [r for r in ev.texts if r[0] in w]
+    rows = [r for r in ev.texts if w.t0 <= r[0] <= w.t1 + END_GRACE_S * 1000]  # what ended the run says so after
     bad = [r for r in rows if r[1] <= 3 or any(word in r[2].lower() for word in FAILSAFE_WORDS)]
     if bad:
         ms, severity, text = bad[0]
@@ -487,10 +495,12 @@ def _statustext(ev: RunEvidence, w: _Window, losses: dict | None) -> Check:
 
 
 def _modes(ev: RunEvidence, w: _Window, losses: dict | None) -> Check:
-    for ms, mode, armed in ev.modes:
-        if ms not in w:  # a change that ended the run counts; the recovery after it is commanded
+    """A change is commanded when an accepted mode or arming command's ACK came within MODE_ACK_S of it, on the
+    log's clock (a lock-step front-seat's clock races ahead of its heartbeats)."""
+    for ms, mode, armed, log_ns in ev.modes:
+        if not w.t0 <= ms <= w.t1 + END_GRACE_S * 1000:  # a change that ended the run counts; a recovery is acked
             continue
-        commanded = any(abs(ms - a) <= MODE_ACK_S * 1000 for a, _ in ev.acks)
+        commanded = any(abs(log_ns - a) <= MODE_ACK_S * 1e9 for a, _ in ev.acks)
         if not commanded:
             what = f"custom mode {mode}, {'armed' if armed else 'disarmed'}"
             return Check(

@@ -169,8 +169,8 @@ def run_sil(
     logger = bridge = backseat = recorder = learned = scenario_map = view = None
     started = time.perf_counter()
     try:
-        view = start_live_view(bus, vehicle, mission, u, live)
         fs_thread.start()
+        view = start_live_view(bus, vehicle, mission, u, live)
         autonomy = bus.session(PART_ROLES["backseat"])
         heard = [keys.DEFAULT_ACTIVE]
         if log_path is not None:

@@ -80,8 +80,8 @@ def test_a_ground_station_that_falls_silent_fails_statustext_and_modes():
 
 def test_a_commanded_mode_change_is_not_a_fault():
     def commanded(ev, t, ms):
-        if t == 30.0:
-            ev.on_mavlink(M.command_ack_encode(176, 0), 0)  # MAV_CMD_DO_SET_MODE accepted
+        if t == 30.0:  # MAV_CMD_DO_SET_MODE accepted, logged with that step's reports
+            ev.on_mavlink(M.command_ack_encode(176, 0), 1_000_000_000 + 300 * 100_000_000)
 
     ev = _flight(gcs_lost_at=30.0, extra=commanded)
     assert _by_name(ev)["modes"].verdict == "pass"

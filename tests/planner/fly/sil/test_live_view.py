@@ -20,7 +20,7 @@ from tests.support.foxglove_check import foxglove_channels, typescript_report, w
 from tests.support.foxglove_client import SUBPROTOCOL, FoxgloveClient
 from tests.support.loopback import free_port
 
-pytestmark = pytest.mark.integration
+pytestmark = [pytest.mark.slow, pytest.mark.integration]  # a 30 s flight; tests/bridge/test_live_view.py is fast
 
 PLAN = Path(__file__).resolve().parents[4] / "field_plans" / "range2017" / "plan.json"
 
@@ -72,17 +72,19 @@ def test_a_sil_run_is_seen_live_by_foxgloves_clients_as_it_is_logged(tmp_path):
 
     # the fixes: each one shown live is one the log holds, at the same time, thinned to a screen's rate over the
     # whole run
-    log_fixes = {(f["timestamp"]["sec"], f["timestamp"]["nsec"]): f for f in logged[foxglove.FIX_TOPIC].messages}
+    log_fixes: dict = {}  # a stamp is the bridge's receive time: reports read in one go share it
+    for f in logged[foxglove.FIX_TOPIC].messages:
+        log_fixes.setdefault((f["timestamp"]["sec"], f["timestamp"]["nsec"]), []).append(f)
     seen = client.received(foxglove.FIX_TOPIC)
     assert len(seen) > 50
     for fix in seen:
-        assert fix == log_fixes[(fix["timestamp"]["sec"], fix["timestamp"]["nsec"])]
+        assert fix in log_fixes[(fix["timestamp"]["sec"], fix["timestamp"]["nsec"])]
     stamps = sorted(log_fixes)
     shown = sorted((f["timestamp"]["sec"], f["timestamp"]["nsec"]) for f in seen)
     assert stamps.index(shown[0]) < 0.1 * len(stamps) and stamps.index(shown[-1]) > 0.9 * len(stamps)
     ts_last = ts["last"][foxglove.FIX_TOPIC]
     stamp = (ts_last["timestamp"]["seconds"], ts_last["timestamp"]["nanos"])
-    assert (ts_last["latitude"], ts_last["longitude"]) == (log_fixes[stamp]["latitude"], log_fixes[stamp]["longitude"])
+    assert (ts_last["latitude"], ts_last["longitude"]) in [(f["latitude"], f["longitude"]) for f in log_fixes[stamp]]
     assert ts["channels"][foxglove.FIX_TOPIC]["messages"] > 50
 
     # the scenario map with the predicted track, as the log has it
