@@ -16,7 +16,8 @@ dropped and counted when it is full), and one thread of its own derives, encodes
 messages to the SDK, which drops a slow client's oldest messages rather than wait. A client
 that connects, disconnects or subscribes to everything therefore holds up nothing that
 commands the vehicle. A channel's latest map, trail or status is sent again when a client
-subscribes to it, so a client that connects late still sees the scenario. The scenario's map
+subscribes to it, and the maps every :data:`MAP_EVERY_S` as well, so a client that connects late
+still sees the scenario. The scenario's map
 reaches a view that is up when it is put on the bus (a logger's arrival puts it; see
 :class:`planner.fly.scenario_map.ScenarioMap`); the process that made it may also hand it over
 with :meth:`LiveView.show_map`.
@@ -60,6 +61,8 @@ SHOWN_MAVLINK = ("GLOBAL_POSITION_INT", "STATUSTEXT", "ATTITUDE", "LOCAL_POSITIO
 QUEUE = 4096
 #: The most reports a second of each telemetry message shown (a screen needs no more; events are never thinned).
 TELEMETRY_HZ = 50.0
+#: The scenario's maps are sent again this often (s), whoever subscribed when.
+MAP_EVERY_S = 2.0
 #: How long after a subscription its topic's latest message is sent again.
 RESEND_AFTER_S = 0.2
 #: Topics whose last message is sent again to a client that subscribes late (they change rarely or state a state).
@@ -230,7 +233,7 @@ class LiveView(Service):
     def _feed(self) -> None:
         """The one thread that talks to the server: derive and send what was queued; the view's own status
         once a second."""
-        next_status = time.monotonic()
+        next_status = next_maps = time.monotonic()
         while not self._stop.is_set():
             self._wake.wait(timeout=RESEND_AFTER_S / 2 if self._resend_at else 0.5)
             self._wake.clear()
@@ -247,6 +250,10 @@ class LiveView(Service):
             if time.monotonic() >= next_status:
                 self._send_json(OWN_STATUS, self.stats, time.time_ns())
                 next_status = time.monotonic() + 1.0
+            if time.monotonic() >= next_maps:  # a map changes rarely and is small: every client has it soon
+                for topic in [t for t in self._last if t.startswith("/map/")]:
+                    self._resend(topic)
+                next_maps = time.monotonic() + MAP_EVERY_S
 
     def _take(self, key: str, payload: bytes, put: bool) -> None:
         _, kind, name = keys.split(key)

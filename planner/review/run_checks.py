@@ -160,7 +160,10 @@ class RunEvidence:
         elif kind == "BATTERY_STATUS" and m.id == VIRTUAL_BATTERY_ID and m.energy_consumed >= 0:
             self.gauge.append((ms, float(m.energy_consumed)))
         elif kind == "STATUSTEXT":
-            self.texts.append((ms, int(m.severity), str(m.text).rstrip("\x00")))
+            text = str(m.text).rstrip("\x00")
+            self.texts.append((ms, int(m.severity), text))
+            if text.startswith("run ended:") and self.end_ms is None:  # a lock-step front-seat's own end
+                self.end_ms = ms
         elif kind == "HEARTBEAT" and m.autopilot != 8:  # MAV_AUTOPILOT_INVALID: not the vehicle's own
             state = (int(m.custom_mode), bool(m.base_mode & MAV_SAFETY_ARMED))
             if state != self._mode:
@@ -497,8 +500,11 @@ def _statustext(ev: RunEvidence, w: _Window, losses: dict | None) -> Check:
 def _modes(ev: RunEvidence, w: _Window, losses: dict | None) -> Check:
     """A change is commanded when an accepted mode or arming command's ACK came within MODE_ACK_S of it, on the
     log's clock (a lock-step front-seat's clock races ahead of its heartbeats)."""
+    # on a vehicle a change that ended the run counts (a recovery is acked); a lock-step front-seat ends its
+    # scenario itself, disarming as it says "run ended"
+    last = w.t1 + END_GRACE_S * 1000 if ev.paced else w.t1 - 1
     for ms, mode, armed, log_ns in ev.modes:
-        if not w.t0 <= ms <= w.t1 + END_GRACE_S * 1000:  # a change that ended the run counts; a recovery is acked
+        if not w.t0 <= ms <= last:
             continue
         commanded = any(abs(log_ns - a) <= MODE_ACK_S * 1e9 for a, _ in ev.acks)
         if not commanded:

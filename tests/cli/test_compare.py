@@ -190,10 +190,13 @@ def _rewrite_meta(src: Path, dst: Path, losses: dict | None = None, **changes) -
         w.finish()
 
 
-def _without_setpoints(src: Path, dst: Path, share: tuple[float, float]) -> None:
-    """A copy of log ``src`` whose back-seat set-points between ``share`` of its log time are gone: a set-point
-    stream with a gap, every other record (metadata included) as it was."""
+def _without_positions(src: Path, dst: Path, share: tuple[float, float]) -> None:
+    """A copy of log ``src`` whose position reports (GLOBAL_POSITION_INT, raw and decoded) between ``share`` of its
+    log time are gone: a lost-position segment, every other record (metadata included) as it was."""
     from mcap.writer import Writer
+
+    from bridge.frames import message_id
+    from bridge.logger import RAW_TOPIC
 
     with open(src, "rb") as f:
         reader = make_reader(f)
@@ -209,7 +212,10 @@ def _without_setpoints(src: Path, dst: Path, share: tuple[float, float]) -> None
                 for cid, c in summary.channels.items()
             }
             for _, channel, m in reader.iter_messages(log_time_order=False):
-                if channel.topic.endswith("/command/autonomy") and cut[0] <= m.log_time <= cut[1]:
+                position = channel.topic.endswith("/GLOBAL_POSITION_INT") or (
+                    channel.topic == RAW_TOPIC and message_id(m.data) == 33  # MAVLINK_MSG_ID_GLOBAL_POSITION_INT
+                )
+                if position and cut[0] <= m.log_time <= cut[1]:
                     continue
                 w.add_message(channels[m.channel_id], m.log_time, m.data, m.publish_time, m.sequence)
             for record in reader.iter_metadata():
@@ -218,8 +224,8 @@ def _without_setpoints(src: Path, dst: Path, share: tuple[float, float]) -> None
 
 
 def test_every_run_is_checked_and_one_that_failed_is_not_fitted_unless_kept(flown, tmp_path):
-    """Each log's automatic checks reach comparison.json, the table and the report; a copy of a run whose
-    set-point stream has a gap fails its set-point check (`rapt-plan check` exits 1) and is left out of the
+    """Each log's automatic checks reach comparison.json, the table and the report; a copy of a run that lost its
+    position for a tenth of the run fails its position check (`rapt-plan check` exits 1) and is left out of the
     bias fit, unless --keep-failed."""
     from planner.review.run_checks import CHECKS
 
@@ -230,14 +236,16 @@ def test_every_run_is_checked_and_one_that_failed_is_not_fitted_unless_kept(flow
     assert "fail" not in clean.values(), c["logs"][0]["checks"]
     for name in ("estimator", "position", "link", "setpoints", "depth", "statustext", "modes"):
         assert clean[name] == "pass", c["logs"][0]["checks"]
+    failed = {Path(lg["path"]).name: [k for k in lg["checks"] if k["verdict"] == "fail"] for lg in c["logs"]}
+    assert not any(failed.values()), failed
     assert all(r["counted_in_bias_fit"] for r in c["scenarios"]) and not c["run_checks"]["excluded_from_bias_fit"]
     assert "Run checks" in (flown["out"] / "comparison.html").read_text()
 
     gapped = tmp_path / "gapped.mcap"
-    _without_setpoints(flown["logs"][2], gapped, (0.3, 0.4))
+    _without_positions(flown["logs"][2], gapped, (0.3, 0.4))
     checked = runner.invoke(app, ["check", str(gapped)], env={"COLUMNS": "200"})
     assert checked.exit_code == 1, checked.output
-    assert re.search(r"setpoints\s+│\s+fail", checked.output), checked.output
+    assert re.search(r"position\s+│\s+fail", checked.output), checked.output
     fast = ["--dithers", "0", "--bootstrap", "0", "--draws", "10"]
     logs = [str(p) for p in flown["logs"]] + [str(gapped)]
     out = tmp_path / "comparison"
@@ -247,10 +255,10 @@ def test_every_run_is_checked_and_one_that_failed_is_not_fitted_unless_kept(flow
     comparison = json.loads((out / "comparison.json").read_text())
     assert comparison["run_checks"]["excluded_from_bias_fit"] == ["gapped.mcap"]
     [row] = [r for r in comparison["scenarios"] if r["log"] == "gapped.mcap"]
-    assert row["checks"].startswith("fail: ") and "setpoints" in row["checks"] and not row["counted_in_bias_fit"]
+    assert row["checks"].startswith("fail: ") and "position" in row["checks"] and not row["counted_in_bias_fit"]
     channels = foxglove_channels(out / overlay_name(row["id"]))
     lines = [m["message"] for m in channels["/checks"].messages if m["name"] == "gapped"]
-    assert any(line.startswith("setpoints fail:") for line in lines), lines
+    assert any(line.startswith("position fail:") for line in lines), lines
     kept = runner.invoke(
         app, ["compare", str(flown["plan_dir"]), *logs, "--out", str(tmp_path / "kept"), *fast, "--keep-failed"]
     )
@@ -493,7 +501,7 @@ def test_compare_writes_a_foxglove_overlay_per_flown_scenario(flown):
         check_channel(channel)
     observed = [run.stem for run in (log, flown["truncated"]) if rows[run.name]["id"] == sid]
     assert observed == [log.stem, "killed"]  # the killed logger's copy of the same run
-    assert set(channels) == {"/map/scenario", "/map/observed", "/map/predicted", "/map/corrected"} | {
+    assert set(channels) - {"/checks"} == {"/map/scenario", "/map/observed", "/map/predicted", "/map/corrected"} | {
         f"/fix/{k}" for k in ("predicted", "corrected", *(f"observed/{n}" for n in observed))
     }
     lines = {
