@@ -459,18 +459,36 @@ def _load_cpu(rate: int, seconds: float, live: bool) -> dict:
     return {"sent": sent, "logged": logged, "lost": sent - logged, "cpu": cpu, "shown": shown}
 
 
-def _churn(url: str, stop: threading.Event) -> None:
-    """A client that connects, subscribes to everything and disconnects, over and over, until ``stop``."""
-    while not stop.is_set():
-        client = _LiveClient(url)
+# A Foxglove client in a process of its own, as the crew's Foxglove is: subscribes to every channel and reads
+# until killed; with "churn" it connects, subscribes to everything and leaves, over and over.
+_CLIENT = """
+import json, sys, time
+from websockets.sync.client import connect
+url, churn = sys.argv[1], sys.argv[2] == "churn"
+while True:
+    try:
+        with connect(url, subprotocols=["foxglove.sdk.v1"], open_timeout=5, max_size=None) as ws:
+            subs = 0
+            started = time.monotonic()
+            while not churn or time.monotonic() - started < 0.05:
+                try:
+                    frame = ws.recv(timeout=0.05)
+                except TimeoutError:
+                    continue
+                if isinstance(frame, str):
+                    msg = json.loads(frame)
+                    if msg.get("op") == "advertise":
+                        ids = [{"id": (subs := subs + 1), "channelId": ch["id"]} for ch in msg["channels"]]
+                        ws.send(json.dumps({"op": "subscribe", "subscriptions": ids}))
+    except OSError:
         time.sleep(0.05)
-        client.close()
+"""
 
 
 def _trip_with_live(mission, u, trips: int, how: str) -> np.ndarray:
-    """Part 2's round trip with nothing else (``how`` "none"), with a live view and a client subscribed to every
-    channel on the back-seat's session ("client"), or with one client after another connecting and leaving
-    ("churn")."""
+    """Part 2's round trip with nothing else (``how`` "none"), with a live view on the back-seat's session and a
+    client (a process of its own) subscribed to every channel ("client"), or clients connecting, subscribing
+    and leaving over and over ("churn")."""
     from bridge.live_view import LiveView
 
     session = open_session(listen=[f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"])
@@ -478,20 +496,13 @@ def _trip_with_live(mission, u, trips: int, how: str) -> np.ndarray:
         if how == "none":
             return round_trip_ms(mission, u, trips, (session, session))
         with LiveView(session, vehicle="uuv1", port=0) as view:
-            if how == "client":
-                client = _LiveClient(view.url)
-                try:
-                    return round_trip_ms(mission, u, trips, (session, session))
-                finally:
-                    client.close()
-            stop = threading.Event()
-            churner = threading.Thread(target=_churn, args=(view.url, stop), name="churn", daemon=True)
-            churner.start()
+            client = subprocess.Popen([sys.executable, "-c", _CLIENT, view.url, how])
             try:
+                time.sleep(1.0)  # connected and subscribed
                 return round_trip_ms(mission, u, trips, (session, session))
             finally:
-                stop.set()
-                churner.join(timeout=10)
+                client.kill()
+                client.wait(timeout=10)
     finally:
         session.close()
 

@@ -9,18 +9,19 @@ bridge's and the logger's counters, the watchdog's state, the back-seat's decisi
 beside the view's own counters on ``/status/live_view``.
 
 It is fed off the control path. It subscribes to the few keys it shows, never to
-``mavlink/raw``, and shows each telemetry message at most :data:`TELEMETRY_HZ` times a
-second (a vehicle at 20,000 frames/s costs it almost nothing; STATUSTEXT, status and maps
-are never thinned); its Zenoh callbacks only append to a bounded queue (the oldest sample is
-dropped and counted when it is full), and one thread of its own derives, encodes and hands
-messages to the SDK, which drops a slow client's oldest messages rather than wait. A client
-that connects, disconnects or subscribes to everything therefore holds up nothing that
-commands the vehicle. A channel's latest map, trail or status is sent again when a client
-subscribes to it, and the maps every :data:`MAP_EVERY_S` as well, so a client that connects late
-still sees the scenario. The scenario's map
-reaches a view that is up when it is put on the bus (a logger's arrival puts it; see
-:class:`planner.fly.scenario_map.ScenarioMap`); the process that made it may also hand it over
-with :meth:`LiveView.show_map`.
+``mavlink/raw``, into Zenoh's own ring buffers: no Python runs on the bus's thread, and a
+telemetry message or a back-seat status arriving faster than a screen needs is replaced
+there, in the bus's own code, by the next (a vehicle at 20,000 frames/s costs the view
+nothing it reads). One thread of its own takes what the rings hold :data:`TELEMETRY_HZ`
+times a second, derives, encodes and hands messages to the SDK, which drops a slow client's
+oldest messages rather than wait. STATUSTEXT, the bring-up's, watchdog's and referee's events
+and the maps are kept in order in rings of their own. A client that connects, disconnects or
+subscribes to everything therefore holds up nothing that commands the vehicle. A channel's
+latest map, trail or status is sent again when a client subscribes to it, and the maps
+every :data:`MAP_EVERY_S` as well, so a client that connects late still sees the scenario.
+The scenario's map reaches a view that is up when it is put on the bus (a logger's arrival
+puts it; see :class:`planner.fly.scenario_map.ScenarioMap`); the process that made it may
+also hand it over with :meth:`LiveView.show_map`.
 
 The protocol has no authentication: anyone who reaches the port sees the run. The server
 binds to loopback unless a host is given.
@@ -55,12 +56,14 @@ DEFAULT_PORT = 8765
 STATUS_PREFIX = "/status/"
 #: The live view's own counters.
 OWN_STATUS = "/status/live_view"
-#: The MAVLink messages the Foxglove channels are derived from (bridge.foxglove).
-SHOWN_MAVLINK = ("GLOBAL_POSITION_INT", "STATUSTEXT", "ATTITUDE", "LOCAL_POSITION_NED")
-#: Samples held for the feeding thread; beyond it the oldest is dropped (a live view may thin, a log may not).
-QUEUE = 4096
-#: The most reports a second of each telemetry message shown (a screen needs no more; events are never thinned).
+#: The telemetry the Foxglove channels are derived from (bridge.foxglove): its latest is what is shown.
+TELEMETRY = ("GLOBAL_POSITION_INT", "ATTITUDE", "LOCAL_POSITION_NED")
+#: How often a second the view takes the latest telemetry and statuses (a screen needs no more).
 TELEMETRY_HZ = 50.0
+#: Samples each ring of events (and of statuses) holds between two takes; beyond it the oldest goes.
+EVENT_RING, STATUS_RING = 1024, 64
+#: The processes whose every status is an event (bring-up steps, watchdog rulings, the referee's end).
+EVENT_SOURCES = (keys.BRINGUP_SOURCE, keys.WATCHDOG_SOURCE, "referee")
 #: The scenario's maps are sent again this often (s), whoever subscribed when.
 MAP_EVERY_S = 2.0
 #: How long after a subscription its topic's latest message is sent again.
@@ -142,18 +145,20 @@ class LiveView(Service):
         self._session_arg = session
         self._session: zenoh.Session | None = None
         self._owns_session = False
-        self._queue: collections.deque = collections.deque(maxlen=QUEUE)
+        self._queue: collections.deque = collections.deque()  # maps handed over by show_map
         self._wake = threading.Event()
-        self._subs: list[Any] = []
         self._context = sdk.Context()
         self._server: Any = None
         self._channels: dict[str, Any] = {}
         self._last: dict[str, tuple[bytes, int]] = {}  # resent topics' last message and time
         self._messages = foxglove.FoxgloveMessages()
-        self._counts = dict.fromkeys(("received", "thinned", "dropped", "sent", "errors", "resent"), 0)
-        self._telemetry = {keys.telemetry(vehicle, m) for m in SHOWN_MAVLINK}
+        self._counts = dict.fromkeys(("received", "sent", "errors", "resent"), 0)
+        #: kept in order: the vehicle's messages, the autonomy's events (each one matters), the maps
+        self._event_keys = {keys.status(vehicle, n) for n in EVENT_SOURCES}
+        self._latest: list[Any] = []  # one ring of 1 per telemetry message
+        self._events: list[Any] = []
+        self._statuses: Any = None
         self._resend_at: collections.deque = collections.deque()  # (monotonic time, topic) of late subscriptions
-        self._shown_at: dict[str, float] = {}
 
     # ----------------------------------------------------------------- life cycle
     def _open(self) -> None:
@@ -175,15 +180,17 @@ class LiveView(Service):
         for topic, schema_name in ADVERTISED:
             self._foxglove_channel(topic, schema_name)
         self._session, self._owns_session = use_session(self._session_arg)
-        v = self.vehicle
-        exprs = [keys.telemetry(v, m) for m in SHOWN_MAVLINK] + [keys.status(v, "*"), keys.map_document(v, "*")]
-        self._subs = [self._session.declare_subscriber(e, self._on_sample) for e in exprs]
+        v, ring, sub = self.vehicle, zenoh.handlers.RingChannel, self._session.declare_subscriber
+        self._latest = [sub(keys.telemetry(v, m), ring(1)) for m in TELEMETRY]
+        events = [keys.telemetry(v, "STATUSTEXT"), keys.map_document(v, "*"), *sorted(self._event_keys)]
+        self._events = [sub(k, ring(EVENT_RING)) for k in events]
+        self._statuses = sub(keys.status(v, "*"), ring(STATUS_RING))
         self._spawn("foxglove-live", self._feed)
 
     def _shutdown(self) -> None:
-        undeclare(*self._subs)
         self._wake.set()
-        self._join(self._threads, timeout=5)
+        self._join(self._threads, timeout=5)  # before the rings go: the thread reads them
+        undeclare(*self._latest, *self._events, self._statuses)
         if self._server is not None:
             self._server.stop()
         if self._owns_session and self._session is not None:
@@ -191,9 +198,8 @@ class LiveView(Service):
 
     @property
     def stats(self) -> dict[str, int]:
-        """received (samples shown), thinned (telemetry above TELEMETRY_HZ, not shown), dropped (the queue was
-        full), sent (messages to the server), errors,
-        resent (a latest map or trail sent again for a late subscriber), clients' channels."""
+        """received (samples taken off the rings), sent (messages to the server), errors, resent (a latest map,
+        trail or status sent again for a late subscriber), channels."""
         return {**self._counts, "channels": len(self._channels)}
 
     @property
@@ -202,26 +208,10 @@ class LiveView(Service):
         return f"ws://{self.host}:{self.port}"
 
     # ----------------------------------------------------------------- the feed
-    def _on_sample(self, sample: Any) -> None:
-        """Zenoh's callback: thin telemetry, queue the sample and return (no work here, on the bus's thread)."""
-        key = str(sample.key_expr)
-        if key in self._telemetry:
-            now = time.monotonic()
-            if now - self._shown_at.get(key, -1.0) < 1.0 / TELEMETRY_HZ:
-                self._counts["thinned"] += 1
-                return
-            self._shown_at[key] = now
-        if len(self._queue) == QUEUE:
-            self._counts["dropped"] += 1
-        self._queue.append((key, sample.payload.to_bytes(), sample.kind == zenoh.SampleKind.PUT))
-        self._wake.set()
-
     def show_map(self, name: str, document: dict) -> None:
         """Show GeoJSON ``document`` as ``/map/<name>`` as if it had come on ``map/<name>`` (for the process that
         made it, when no logger's arrival has yet put it on the bus)."""
-        self._queue.append(
-            (keys.map_document(self.vehicle, name), json.dumps(document, allow_nan=False).encode(), True)
-        )
+        self._queue.append((keys.map_document(self.vehicle, name), json.dumps(document, allow_nan=False).encode()))
         self._wake.set()
 
     def _subscribed(self, topic: str) -> None:
@@ -231,14 +221,20 @@ class LiveView(Service):
         self._wake.set()
 
     def _feed(self) -> None:
-        """The one thread that talks to the server: derive and send what was queued; the view's own status
-        once a second."""
+        """The one thread that reads the rings and talks to the server, :data:`TELEMETRY_HZ` times a second: the
+        events in order, each status's latest, each telemetry message's latest; resends; its own status."""
         next_status = next_maps = time.monotonic()
         while not self._stop.is_set():
-            self._wake.wait(timeout=RESEND_AFTER_S / 2 if self._resend_at else 0.5)
+            self._wake.wait(timeout=1.0 / TELEMETRY_HZ)
             self._wake.clear()
-            while self._queue:
-                key, payload, put = self._queue.popleft()
+            samples = [(k, p, True) for k, p in self._drain_queue()]
+            for ring in self._events:
+                samples += self._drain(ring)
+            latest = {key: (key, payload, put) for key, payload, put in self._drain(self._statuses)}
+            samples += [v for k, v in latest.items() if k not in self._event_keys]  # events came in order above
+            for ring in self._latest:
+                samples += self._drain(ring)
+            for key, payload, put in samples:
                 try:
                     self._counts["received"] += 1
                     self._take(key, payload, put)
@@ -254,6 +250,20 @@ class LiveView(Service):
                 for topic in [t for t in self._last if t.startswith("/map/")]:
                     self._resend(topic)
                 next_maps = time.monotonic() + MAP_EVERY_S
+
+    def _drain_queue(self) -> list[tuple[str, bytes]]:
+        out = []
+        while self._queue:
+            out.append(self._queue.popleft())
+        return out
+
+    @staticmethod
+    def _drain(ring: Any) -> list[tuple[str, bytes, bool]]:
+        """What ``ring`` holds, oldest first (key, payload, put)."""
+        out = []
+        while (sample := ring.try_recv()) is not None:
+            out.append((str(sample.key_expr), sample.payload.to_bytes(), sample.kind == zenoh.SampleKind.PUT))
+        return out
 
     def _take(self, key: str, payload: bytes, put: bool) -> None:
         _, kind, name = keys.split(key)

