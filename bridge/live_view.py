@@ -124,7 +124,8 @@ class LiveView(Service):
 
     ``session``: an open ``zenoh.Session`` (left open), a ``zenoh.Config``, or None for an
     in-process session. ``port`` 0 takes a free port (:attr:`port` tells which). A port in use
-    raises :class:`~rapt.errors.InputError` naming it.
+    raises :class:`~rapt.errors.InputError` naming it. ``maps``: GeoJSON documents by name, shown
+    from the start as ``/map/<name>`` (see :meth:`show_map`).
     """
 
     _what = "live view"
@@ -137,11 +138,13 @@ class LiveView(Service):
         host: str = "127.0.0.1",
         port: int = DEFAULT_PORT,
         name: str = "rapt",
+        maps: dict[str, dict] | None = None,
     ):
         super().__init__()
         keys.everything(vehicle)  # validates the name
         self.vehicle, self.host, self.name = vehicle, host, name
         self.port = int(port)
+        self._maps = dict(maps or {})
         self._session_arg = session
         self._session: zenoh.Session | None = None
         self._owns_session = False
@@ -162,6 +165,12 @@ class LiveView(Service):
 
     # ----------------------------------------------------------------- life cycle
     def _open(self) -> None:
+        # the channels known now exist before the server: a client connecting at once sees them complete
+        for topic, schema_name in ADVERTISED:
+            self._foxglove_channel(topic, schema_name)
+        for map_name, document in self._maps.items():
+            self._foxglove_channel(foxglove.map_topic(map_name), "foxglove.GeoJSON")
+            self.show_map(map_name, document)
         try:
             self._server = sdk.start_server(
                 name=self.name,
@@ -177,8 +186,6 @@ class LiveView(Service):
                 ) from None
             raise InputError(f"--foxglove: cannot serve on {self.host}:{self.port}: {exc}") from None
         self.port = int(self._server.port)
-        for topic, schema_name in ADVERTISED:
-            self._foxglove_channel(topic, schema_name)
         self._session, self._owns_session = use_session(self._session_arg)
         v, ring, sub = self.vehicle, zenoh.handlers.RingChannel, self._session.declare_subscriber
         self._latest = [sub(keys.telemetry(v, m), ring(1)) for m in TELEMETRY]

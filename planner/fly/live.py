@@ -16,8 +16,6 @@ def start_live_view(bus: RunBus, vehicle: str, mission: Mission, u, live: tuple[
     if live is None:
         return None
     host, port = live
-    view = LiveView(bus.session(PART_ROLES["live_view"]), vehicle=vehicle, host=host, port=port).start()
     document = scenario_map(mission, u)
-    if document is not None:
-        view.show_map(SCENARIO_MAP, document)
-    return view
+    maps = {SCENARIO_MAP: document} if document is not None else {}
+    return LiveView(bus.session(PART_ROLES["live_view"]), vehicle=vehicle, host=host, port=port, maps=maps).start()

@@ -19,6 +19,7 @@ const first = {};
 const last = {};
 const text = new TextDecoder();
 let subprotocol = null;
+const statuses = []; // the server's status messages (a refused subscription, say)
 
 function decoder(channel) {
   if (channel.encoding === "json") return (data) => JSON.parse(text.decode(data));
@@ -31,7 +32,7 @@ function report() {
   if (reported) return;
   reported = true;
   // a pipe is written asynchronously: exit once the whole line is out
-  process.stdout.write(JSON.stringify({ subprotocol, channels, first, last }) + "\n", () => process.exit(0));
+  process.stdout.write(JSON.stringify({ subprotocol, channels, first, last, statuses }) + "\n", () => process.exit(0));
 }
 
 function connect() {
@@ -58,6 +59,7 @@ function connect() {
       bySubscription.set(client.subscribe(channel.id), channel.id);
     }
   });
+  client.on("status", (status) => statuses.push(status));
   client.on("message", ({ subscriptionId, data }) => {
     const entry = byChannelId.get(bySubscription.get(subscriptionId));
     if (!entry) return;

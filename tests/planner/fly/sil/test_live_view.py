@@ -89,6 +89,7 @@ def test_a_sil_run_is_seen_live_by_foxgloves_clients_as_it_is_logged(tmp_path):
 
     # the scenario map with the predicted track, as the log has it
     [logged_map] = logged["/map/scenario"].messages
+    assert "/map/scenario" in ts["last"], ts["statuses"]
     for doc in (client.received("/map/scenario")[-1], ts["last"]["/map/scenario"]):
         assert json.loads(doc["geojson"]) == json.loads(logged_map["geojson"])
     kinds = {f["properties"]["kind"] for f in json.loads(logged_map["geojson"])["features"]}
