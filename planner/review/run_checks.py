@@ -395,45 +395,19 @@ def _pack(ev: RunEvidence, w: _Window, losses: dict | None) -> Check:
     back = np.searchsorted(t, t - SAG_WINDOW_S * 1000.0)  # the voltage SAG_WINDOW_S before each report
     drop = np.array([(v[max(b, 0) : i + 1].max() - v[i]) / v[0] for i, b in enumerate(back)])
     j = int(np.argmax(drop))
-    if cell < CELL_FAIL_V:
-        # without a virtual gauge the pack is the scenario's battery, and running it down may be the scenario
-        scenario_pack = not ev.gauge
-        return Check(
-            "pack",
-            "warn" if scenario_pack else "fail",
-            f"{cell:.2f} V a cell ({cells} cells): below {CELL_FAIL_V} V"
-            + (" (the pack is the scenario's battery)" if scenario_pack else ""),
-            w.s(t[k]),
-            round(cell, 3),
-            CELL_FAIL_V,
-        )
-    if drop[j] > SAG_FAIL:
-        return Check(
-            "pack",
-            "fail",
-            f"the pack sagged {drop[j]:.0%} within {SAG_WINDOW_S:g} s",
-            w.s(t[j]),
-            round(float(drop[j]), 4),
-            SAG_FAIL,
-        )
-    if cell < CELL_WARN_V:
-        return Check(
-            "pack",
-            "warn",
-            f"{cell:.2f} V a cell ({cells} cells): below {CELL_WARN_V} V",
-            w.s(t[k]),
-            round(cell, 3),
-            CELL_WARN_V,
-        )
-    if drop[j] > SAG_WARN:
-        return Check(
-            "pack",
-            "warn",
-            f"the pack sagged {drop[j]:.0%} within {SAG_WINDOW_S:g} s",
-            w.s(t[j]),
-            round(float(drop[j]), 4),
-            SAG_WARN,
-        )
+    low, sag = f"{cell:.2f} V a cell ({cells} cells)", f"the pack sagged {drop[j]:.0%} within {SAG_WINDOW_S:g} s"
+    # without a virtual gauge the pack is the scenario's battery, and running it down may be the scenario
+    scenario_pack = not ev.gauge
+    flat = f"{low}: below {CELL_FAIL_V} V" + (" (the pack is the scenario's battery)" if scenario_pack else "")
+    ladder = (  # worst first: (verdict, found, reason, at, value, threshold)
+        ("warn" if scenario_pack else "fail", cell < CELL_FAIL_V, flat, t[k], round(cell, 3), CELL_FAIL_V),
+        ("fail", drop[j] > SAG_FAIL, sag, t[j], round(float(drop[j]), 4), SAG_FAIL),
+        ("warn", cell < CELL_WARN_V, f"{low}: below {CELL_WARN_V} V", t[k], round(cell, 3), CELL_WARN_V),
+        ("warn", drop[j] > SAG_WARN, sag, t[j], round(float(drop[j]), 4), SAG_WARN),
+    )
+    for verdict, found, reason, at, value, threshold in ladder:
+        if found:
+            return Check("pack", verdict, reason, w.s(at), value, threshold)
     return Check("pack", "pass", f"lowest {cell:.2f} V a cell ({cells} cells)", w.s(t[k]), round(cell, 3), CELL_WARN_V)
 
 

@@ -300,8 +300,6 @@ def test_ardusubs_ground_station_failsafe_ends_the_run_and_the_vehicle_is_left_a
     """A ground station (system 255) beats through the bring-up and falls silent mid-run: ArduSub's own
     failsafe (FS_GCS_ENABLE 2) disarms it, the run ends at once with that reason, nothing more is
     commanded, and the log is closed and readable."""
-    import threading
-
     from planner.fly.flight import flight_from_plan
     from planner.fly.vehicle.run import run_vehicle
     from planner.review.logs import read_run
