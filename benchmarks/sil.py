@@ -15,12 +15,13 @@
 4. The Foxglove live view's cost, side by side with none: part 3's load at 20,000 frames/s with
    ``rapt-plan log --foxglove`` and a client subscribed to every channel against ``rapt-plan
    log`` alone (frames lost, the logger's CPU seconds per 1,000 frames and their ratio; target
-   nothing lost and <= 1.10), and part 2's round trip with a live view and a subscribed client
-   on the back-seat's session against none, and with clients connecting and leaving over and over,
+   nothing lost and <= 1.10), and part 2's round trip with a live view joined to the back-seat's
+   bus as ``rapt-plan run --foxglove`` starts it (a process of its own) and a subscribed client
+   against none, and with clients connecting and leaving over and over,
    alternated (p50 and p99 and their ratios).
 
 Run:  python benchmarks/sil.py [--scenarios 5] [--trips 2000] [--rates 20000,5000] [--seconds 60] [--quick]
-      python benchmarks/sil.py --only live [--seconds 60] [--trips 2000]   (part 4 alone)
+      python benchmarks/sil.py --only live [--seconds 60] [--trips 2000] [--repeats 2]   (part 4 alone)
       python benchmarks/sil.py --only load --quick   (part 3 alone)
 
 ``--quick`` prints the same three results from a short run: 2 scenarios, 300 round trips,
@@ -36,7 +37,6 @@ import socket
 import subprocess
 import sys
 import tempfile
-import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -394,52 +394,6 @@ def sustained(rates: list[int], seconds: float, in_process: bool = False) -> Non
     print(f"   (target: 20,000/s logged 100 %, every loss reported; load average {os.getloadavg()[0]:.1f} at the end)")
 
 
-class _LiveClient:
-    """A Foxglove client (subprotocol foxglove.sdk.v1) subscribed to every channel it is told of, counting what
-    arrives: the crew's Foxglove, on its own thread."""
-
-    def __init__(self, url: str, timeout_s: float = 30.0):
-        from websockets.sync.client import connect
-
-        deadline = time.monotonic() + timeout_s
-        while True:
-            try:
-                self._cm = connect(url, subprotocols=["foxglove.sdk.v1"], open_timeout=5, max_size=None)
-                self.ws = self._cm.__enter__()
-                break
-            except OSError:
-                if time.monotonic() > deadline:
-                    raise
-                time.sleep(0.05)
-        self.messages = self.bytes = 0
-        self._subs = 0
-        self._thread = threading.Thread(target=self._read, name="live-client", daemon=True)
-        self._thread.start()
-
-    def _read(self) -> None:
-        from websockets.exceptions import ConnectionClosed
-
-        try:
-            for frame in self.ws:
-                if isinstance(frame, str):
-                    msg = json.loads(frame)
-                    if msg.get("op") == "advertise":
-                        subs = []
-                        for ch in msg["channels"]:
-                            self._subs += 1
-                            subs.append({"id": self._subs, "channelId": ch["id"]})
-                        self.ws.send(json.dumps({"op": "subscribe", "subscriptions": subs}))
-                else:
-                    self.messages += 1
-                    self.bytes += len(frame)
-        except ConnectionClosed:
-            pass
-
-    def close(self) -> None:
-        self._cm.__exit__(None, None, None)
-        self._thread.join(timeout=5)
-
-
 def _load_cpu(rate: int, seconds: float, live: bool) -> dict:
     """Part 3's load through ``rapt-plan bridge`` and ``rapt-plan log`` (with ``--foxglove`` and a client when
     ``live``): frames lost, and the logger's and the bridge's CPU seconds over the burst."""
@@ -447,24 +401,31 @@ def _load_cpu(rate: int, seconds: float, live: bool) -> dict:
         port = free_port(socket.SOCK_STREAM)
         args = ("--foxglove", f"127.0.0.1:{port}") if live else ()
         with LoadRig(Path(tmp) / "load.mcap", logger_args=args) as rig:
-            client = _LiveClient(f"ws://127.0.0.1:{port}") if live else None
-            pids = rig.pids
-            before = {k: process_cpu_s(p) for k, p in pids.items()}
-            sent = rig.burst(rate, seconds)
-            cpu = {k: process_cpu_s(p) - before[k] for k, p in pids.items()}
-            shown = client.messages if client is not None else 0
-            if client is not None:
-                client.close()
+            client = _client(f"ws://127.0.0.1:{port}", "client") if live else None
+            try:
+                time.sleep(1.0 if live else 0.0)  # connected and subscribed
+                pids = rig.pids
+                before = {k: process_cpu_s(p) for k, p in pids.items()}
+                sent = rig.burst(rate, seconds)
+                cpu = {k: process_cpu_s(p) - before[k] for k, p in pids.items()}
+            finally:
+                shown = _messages_of(client) if client is not None else 0
         logged = sum(1 for topic, _, _ in rig.messages if topic == RAW_TOPIC)
     return {"sent": sent, "logged": logged, "lost": sent - logged, "cpu": cpu, "shown": shown}
 
 
 # A Foxglove client in a process of its own, as the crew's Foxglove is: subscribes to every channel and reads
-# until killed; with "churn" it connects, subscribes to everything and leaves, over and over.
+# until SIGTERM, then prints how many messages it received; with "churn" it connects, subscribes to everything
+# and leaves, over and over.
 _CLIENT = """
-import json, sys, time
+import json, signal, sys, time
 from websockets.sync.client import connect
 url, churn = sys.argv[1], sys.argv[2] == "churn"
+received = 0
+def stop(*_):
+    print(received, flush=True)
+    sys.exit(0)
+signal.signal(signal.SIGTERM, stop)
 while True:
     try:
         with connect(url, subprotocols=["foxglove.sdk.v1"], open_timeout=5, max_size=None) as ws:
@@ -480,29 +441,43 @@ while True:
                     if msg.get("op") == "advertise":
                         ids = [{"id": (subs := subs + 1), "channelId": ch["id"]} for ch in msg["channels"]]
                         ws.send(json.dumps({"op": "subscribe", "subscriptions": ids}))
+                else:
+                    received += 1
     except OSError:
         time.sleep(0.05)
 """
 
 
-def _trip_with_live(mission, u, trips: int, how: str) -> np.ndarray:
-    """Part 2's round trip with nothing else (``how`` "none"), with a live view on the back-seat's session and a
-    client (a process of its own) subscribed to every channel ("client"), or clients connecting, subscribing
-    and leaving over and over ("churn")."""
-    from bridge.live_view import LiveView
+def _client(url: str, how: str) -> subprocess.Popen:
+    """The crew's Foxglove on ``url`` (``how``: "client" stays subscribed, "churn" comes and goes)."""
+    return subprocess.Popen([sys.executable, "-c", _CLIENT, url, how], stdout=subprocess.PIPE, text=True)
 
-    session = open_session(listen=[f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"])
+
+def _messages_of(client: subprocess.Popen) -> int:
+    """Stop ``client``; how many messages it received."""
+    client.terminate()
+    out, _ = client.communicate(timeout=10)
+    return int(out.strip() or 0)
+
+
+def _trip_with_live(mission, u, trips: int, how: str) -> np.ndarray:
+    """Part 2's round trip with nothing else (``how`` "none"), with a live view joined to the back-seat's bus as
+    ``rapt-plan run --foxglove`` starts it (a process of its own) and a client subscribed to every channel
+    ("client"), or clients connecting, subscribing and leaving over and over ("churn")."""
+    from bridge.live_process import LiveViewProcess
+
+    endpoint = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
+    session = open_session(listen=[endpoint])
     try:
         if how == "none":
             return round_trip_ms(mission, u, trips, (session, session))
-        with LiveView(session, vehicle="uuv1", port=0) as view:
-            client = subprocess.Popen([sys.executable, "-c", _CLIENT, view.url, how])
+        with LiveViewProcess(vehicle="uuv1", port=0, connect=[endpoint]) as view:
+            client = _client(view.url, how)
             try:
                 time.sleep(1.0)  # connected and subscribed
                 return round_trip_ms(mission, u, trips, (session, session))
             finally:
-                client.kill()
-                client.wait(timeout=10)
+                _messages_of(client)
     finally:
         session.close()
 
@@ -531,14 +506,27 @@ def live_cost(mission, rate: int, seconds: float, trips: int, repeats: int = 2) 
         for how in hows:
             lat[how].append(_trip_with_live(mission, u, trips, how))
     runs = {h: np.concatenate(v) for h, v in lat.items()}
-    print(f"\n4b. Round trip with a live view on the back-seat's session, {runs['none'].size} steps each")
-    print(f"{'':>22} {'p50 ms':>8} {'p99 ms':>8} {'p50 / none':>11} {'p99 / none':>11}")
+    p99s = {h: [float(np.percentile(x, 99)) for x in v] for h, v in lat.items()}  # one per run: their spread is noise
+    print(
+        f"\n4b. Round trip with a live view (its own process) on the back-seat's bus, {repeats} runs of {trips} "
+        "steps each, alternated"
+    )
+    print(
+        f"{'':>22} {'p50 ms':>8} {'p99 ms, median':>15} {'p99 runs, min-max':>18} {'p50 / none':>11} {'p99 / none':>11}"
+    )
     base = runs["none"]
     for how, name in hows.items():
-        v = runs[how]
-        r50 = np.percentile(v, 50) / np.percentile(base, 50)
-        r99 = np.percentile(v, 99) / np.percentile(base, 99)
-        print(f"{name:>22} {np.percentile(v, 50):>8.3f} {np.percentile(v, 99):>8.3f} {r50:>11.3f} {r99:>11.3f}")
+        r50 = np.percentile(runs[how], 50) / np.percentile(base, 50)
+        r99 = np.median(p99s[how]) / np.median(p99s["none"])
+        spread = f"{min(p99s[how]):.3f}-{max(p99s[how]):.3f}"
+        print(
+            f"{name:>22} {np.percentile(runs[how], 50):>8.3f} {np.median(p99s[how]):>15.3f} {spread:>18} "
+            f"{r50:>11.3f} {r99:>11.3f}"
+        )
+    print(
+        "   within noise when a case's p99 runs fall inside the spread of the runs without a live view "
+        f"(their max / min: {max(p99s['none']) / min(p99s['none']):.3f})"
+    )
 
 
 def main() -> None:
@@ -549,6 +537,7 @@ def main() -> None:
     ap.add_argument("--only", choices=("lockstep", "trip", "load", "live"), default=None, help="run one part")
     ap.add_argument("--load-in-process", action="store_true", help="part 3 with bridge and logger in this process")
     ap.add_argument("--seconds", type=float, default=None, help="sustained load (default 60; --quick: 5)")
+    ap.add_argument("--repeats", type=int, default=2, help="part 4: runs of each case, alternated (default 2)")
     ap.add_argument("--quick", action="store_true", help="a short run of all three parts (well under a minute)")
     args = ap.parse_args()
     if args.scenarios is None:
@@ -565,7 +554,7 @@ def main() -> None:
     if args.only in (None, "load"):
         sustained([int(r) for r in args.rates.split(",")], args.seconds, args.load_in_process)
     if args.only in (None, "live"):
-        live_cost(mission, int(args.rates.split(",")[0]), args.seconds, args.trips)
+        live_cost(mission, int(args.rates.split(",")[0]), args.seconds, args.trips, args.repeats)
 
 
 if __name__ == "__main__":

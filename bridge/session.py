@@ -25,7 +25,15 @@ import zenoh
 
 from rapt.errors import InputError, LinkError, MissingFileError
 
-__all__ = ["DEFAULT_HUB", "CONNECT_TIMEOUT_S", "zenoh_config", "open_session", "use_session", "undeclare"]
+__all__ = [
+    "DEFAULT_HUB",
+    "CONNECT_TIMEOUT_S",
+    "zenoh_config",
+    "open_session",
+    "use_session",
+    "undeclare",
+    "local_endpoints",
+]
 
 #: The conventional hub endpoint when nothing else is given to a command line.
 DEFAULT_HUB = "tcp/127.0.0.1:7447"
@@ -104,6 +112,22 @@ def zenoh_config(
             "connect/retry", json.dumps({"period_init_ms": 100, "period_max_ms": 1000, "period_increase_factor": 2})
         )
     return config
+
+
+def local_endpoints(config: zenoh.Config) -> list[str]:
+    """Where a process on this machine reaches a session of ``config``: its listen endpoints, a wildcard
+    host (``0.0.0.0``, ``[::]``) as loopback; a mode-keyed list (``{"peer": [...]}``) read for the config's mode."""
+    endpoints = json.loads(config.get_json("listen/endpoints") or "[]")
+    if isinstance(endpoints, dict):
+        endpoints = endpoints.get(json.loads(config.get_json("mode") or '"peer"'), [])
+    out = []
+    for endpoint in endpoints:
+        protocol, _, address = str(endpoint).partition("/")
+        host, sep, rest = address.rpartition(":")
+        if host in ("0.0.0.0", "[::]", "::"):
+            address = ("127.0.0.1" if host == "0.0.0.0" else "[::1]") + sep + rest
+        out.append(f"{protocol}/{address}")
+    return out
 
 
 def open_session(

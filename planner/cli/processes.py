@@ -182,10 +182,13 @@ def bridge(
     try:
         with contextlib.ExitStack() as parts:
             if live is not None:  # up before the vehicle is heard: it shows the bring-up too
-                from bridge.live_view import LiveView
+                from bridge.live_process import LiveViewProcess
+                from bridge.session import local_endpoints
 
-                parts.enter_context(LiveView(session, vehicle=vehicle, host=live[0], port=live[1]))
-                say_live(live)
+                # a process of its own, joined to this hub: the bridge forwards set-points and shares nothing with it
+                access = {"keys_dir": bus_keys, "role": "logger"} if bus_keys else {"connect": local_endpoints(conf)}
+                view = parts.enter_context(LiveViewProcess(vehicle=vehicle, host=live[0], port=live[1], **access))
+                say_live((live[0], view.port))
             link = parts.enter_context(
                 MavlinkBridge(
                     mavlink,

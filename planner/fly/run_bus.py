@@ -77,8 +77,11 @@ class RunBus:
         self.vehicle = vehicle
         self._sessions: dict[str, Any] = {}
         self._shared: Any = None
+        #: the loopback bus's endpoint, where a part in a process of its own connects (None on the secure bus)
+        self.endpoint: str | None = None
         if self.keys_dir is None:
-            self._shared = open_session(listen=[f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"])
+            self.endpoint = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
+            self._shared = open_session(listen=[self.endpoint])
             return
         from bridge.range_keys import role_config
 
@@ -91,6 +94,13 @@ class RunBus:
     def secure(self) -> bool:
         """Whether the parts join the range's secure bus, each as its role."""
         return self.keys_dir is not None
+
+    def joined_as(self, role: str) -> dict[str, Any]:
+        """How a part in a process of its own joins this bus as ``role``: ``{"connect": [endpoint]}`` on the
+        loopback bus, ``{"keys_dir": DIR, "role": role}`` on the secure one."""
+        if self.keys_dir is None:
+            return {"connect": [self.endpoint]}
+        return {"keys_dir": self.keys_dir, "role": role}
 
     def put_roles(self) -> dict[str, list[str]] | None:
         """``{key expression: [roles allowed to put it]}`` from the hub's own config, for the logger
