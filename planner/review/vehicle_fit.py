@@ -445,7 +445,9 @@ def fit_vehicle(
     base, names, control, start = choose_loop(mission, seg, names, vector_extra, base, solve, start)
     est = solve(names, base, bootstrap, start)
     # a knot the segments refine but cannot pin keeps its settled legs' measurement
-    est = without_terms(est, [k.prior.name for k in knots if k.identified and not est.identified.get(k.prior.name, True)])
+    est = without_terms(
+        est, [k.prior.name for k in knots if k.identified and not est.identified.get(k.prior.name, True)]
+    )
     if legs and not all(est.identified[n] for n in legs):
         est = without_terms(est, list(legs))
     elif hotel:  # fitted over the pinned hotel load: its share of error is theirs too
