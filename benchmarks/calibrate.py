@@ -115,7 +115,7 @@ def fly(
         tmp = log.with_suffix(".partial.mcap")
         run = subprocess.run(
             _rapt_plan()
-            + ["run", str(plan_json), "--scenario", sid, "--mavlink", f"udpout:127.0.0.1:{port}"]
+            + ["run", str(plan_json), "--scenario", sid, "--mavlink", f"udpout:127.0.0.1:{port}", "--no-guard"]
             + ["--log", str(tmp), "--timeout", f"{limit:.0f}"],
             capture_output=True,
             text=True,

@@ -80,6 +80,7 @@ def _stack(plan_path: str, sid: str, port: int, speedup: float, record: tuple, r
                 timeouts=BringUpTimeouts().scaled(max(1.0, 10 / speedup)),
                 timeout_s=limit,
                 record_only=record,
+                guard=None,  # the simulated front-seat has no scripting
             )
         except Exception as exc:  # a failed bring-up is a result too
             results.put(("stack", {"error": f"{type(exc).__name__}: {exc}"}))

@@ -402,8 +402,8 @@ class MavlinkLink:
 
     # ----------------------------------------------------------------- heartbeat
     def heartbeat_loop(self) -> None:
-        """The heartbeat thread: this side's HEARTBEAT (an onboard controller) at ``heartbeat_hz``."""
-        period = 1.0 / self.heartbeat_hz
+        """The heartbeat thread: this side's HEARTBEAT (an onboard controller) at ``heartbeat_hz`` (read each
+        beat: bring-up raises it on a vehicle whose clock runs faster than the wall's)."""
         while not self._stop.is_set():
             msg = mavlink2.MAVLink_heartbeat_message(
                 mavlink2.MAV_TYPE_ONBOARD_CONTROLLER,
@@ -418,7 +418,7 @@ class MavlinkLink:
                     self._counts["heartbeats_out"] += 1
             except Exception as error:  # a write on a dying link
                 log.debug("bridge %s: heartbeat not sent: %s", self.vehicle, error)
-            if self._stop.wait(period):
+            if self._stop.wait(1.0 / self.heartbeat_hz):
                 break
 
 

@@ -117,7 +117,7 @@ class MavlinkBridge(Service):
         self.status_interval_s = float(status_interval_s)
         self.device = device
         self.vehicle = vehicle
-        self.heartbeat_hz = float(heartbeat_hz)
+        self._heartbeat_hz = float(heartbeat_hz)
         self.source_system = source_system
         self.source_component = source_component
         self.baud = baud
@@ -132,7 +132,7 @@ class MavlinkBridge(Service):
             counts=self._counts,
             stop=self._stop,
             silence_s=self.gate.silence_s,
-            heartbeat_hz=self.heartbeat_hz,
+            heartbeat_hz=self._heartbeat_hz,
             source_system=source_system,
             source_component=source_component,
             baud=baud,
@@ -178,6 +178,17 @@ class MavlinkBridge(Service):
         self._relay.close()
 
     # ----------------------------------------------------------------- configuration (the gate's)
+    @property
+    def heartbeat_hz(self) -> float:
+        """This side's HEARTBEAT rate (Hz, wall clock); settable while running."""
+        return self._link.heartbeat_hz
+
+    @heartbeat_hz.setter
+    def heartbeat_hz(self, hz: float) -> None:
+        if not (isinstance(hz, (int, float)) and not isinstance(hz, bool) and 0 < hz <= 1000):
+            raise InputError(f"heartbeat_hz: expected a number in (0, 1000] Hz, got {hz!r}")
+        self._link.heartbeat_hz = float(hz)
+
     @property
     def allow_commands(self) -> bool:
         """Whether set-points and COMMAND_LONGs may reach the vehicle at all."""
@@ -272,6 +283,14 @@ class MavlinkBridge(Service):
     def request_parameter(self, name: str) -> None:
         """Ask for one parameter's value (:meth:`VehicleCommands.request_parameter`)."""
         self._commands.request_parameter(name)
+
+    def set_parameter(self, name: str, value: float) -> None:
+        """Set one parameter (:meth:`VehicleCommands.set_parameter`)."""
+        self._commands.set_parameter(name, value)
+
+    def put_file(self, data: bytes, remote: str, *, timeout: float = 10.0) -> None:
+        """Write a file on the vehicle with MAVLink FTP (:meth:`VehicleCommands.put_file`)."""
+        self._commands.put_file(data, remote, timeout=timeout)
 
     def upload_mission(
         self,

@@ -51,7 +51,8 @@ ARDUSUB_MODES = {
 }
 
 _MISSION_REPLIES = frozenset(("MISSION_REQUEST_INT", "MISSION_REQUEST", "MISSION_ACK"))
-_REPLIES = _MISSION_REPLIES | {"COMMAND_ACK"}  # the messages a waiting command or upload is handed
+_FILE_REPLIES = frozenset(("FILE_TRANSFER_PROTOCOL",))
+_REPLIES = _MISSION_REPLIES | _FILE_REPLIES | {"COMMAND_ACK"}  # the messages a waiting command or upload is handed
 
 
 @dataclass(frozen=True)
@@ -115,6 +116,7 @@ class ReplyMailbox:
         self._ack_cond = threading.Condition()
         self._ack_serial = 0
         self._mission_inbox: queue.SimpleQueue | None = None  # the running upload's replies, from the reader
+        self._file_inbox: queue.SimpleQueue | None = None  # the running file transfer's replies
 
     def deliver(self, msg: Any) -> None:
         """Called by the reader with a reply from the autopilot addressed to this side."""
@@ -124,8 +126,8 @@ class ReplyMailbox:
                 self._ack_serial += 1
                 self._acks[msg.command] = (msg.result, msg.progress, self._ack_serial)
                 self._ack_cond.notify_all()
-        elif name in _MISSION_REPLIES:
-            inbox = self._mission_inbox
+        elif name in _MISSION_REPLIES or name in _FILE_REPLIES:
+            inbox = self._mission_inbox if name in _MISSION_REPLIES else self._file_inbox
             if inbox is not None:
                 inbox.put(msg)
 
@@ -159,6 +161,15 @@ class ReplyMailbox:
 
     def close_mission_inbox(self) -> None:
         self._mission_inbox = None
+
+    def open_file_inbox(self) -> queue.SimpleQueue:
+        """An inbox for the MAVLink FTP replies from now on (one transfer at a time)."""
+        inbox: queue.SimpleQueue = queue.SimpleQueue()
+        self._file_inbox = inbox
+        return inbox
+
+    def close_file_inbox(self) -> None:
+        self._file_inbox = None
 
 
 class VehicleCommands:
@@ -293,6 +304,19 @@ class VehicleCommands:
         msg = mavlink2.MAVLink_param_request_read_message(target[0], target[1], name.encode(), -1)
         self._send_or_raise(msg, "request_parameter")
 
+    def set_parameter(self, name: str, value: float) -> None:
+        """Set parameter ``name`` with PARAM_SET (23); the vehicle answers with PARAM_VALUE as telemetry
+        (``latest("PARAM_VALUE")``): read it back to know it was taken."""
+        if not (isinstance(name, str) and 0 < len(name) <= 16 and name.isascii()):
+            raise InputError(f"name: expected a parameter name of 1-16 ASCII characters, got {name!r}")
+        if not (_is_number(value) and math.isfinite(value)):
+            raise InputError(f"value: expected a finite number, got {value!r}")
+        target = self._ready("set_parameter")
+        msg = mavlink2.MAVLink_param_set_message(
+            target[0], target[1], name.encode(), float(value), mavlink2.MAV_PARAM_TYPE_REAL32
+        )
+        self._send_or_raise(msg, "set_parameter")
+
     def _command_long(self, command: int, params: Sequence[float], timeout: float, retries: int, what: str) -> int:
         if not (_is_number(timeout) and timeout > 0):
             raise InputError(f"timeout: expected a number of seconds > 0, got {timeout!r}")
@@ -371,6 +395,23 @@ class VehicleCommands:
         if upload.result != mavlink2.MAV_MISSION_ACCEPTED:
             log.warning("bridge %s: %s ended with %s", self._vehicle, what, describe(upload.result))
         return upload.result
+
+    # ----------------------------------------------------------------- files
+    def put_file(self, data: bytes, remote: str, *, timeout: float = 10.0) -> None:
+        """Write ``data`` to ``remote`` on the vehicle with MAVLink FTP (:mod:`bridge.file_transfer`); a
+        :class:`~rapt.errors.RefusedError` naming the vehicle's FTP error, or LinkTimeoutError."""
+        from .file_transfer import put_file
+
+        what = "put_file"
+        target = self._ready(what)
+        if not self._mission_lock.acquire(blocking=False):
+            raise RunError(f"{what}: an upload is running on this bridge; wait for it to end")
+        try:
+            inbox = self._replies.open_file_inbox()
+            put_file(self._link, inbox, target, data, remote, timeout=timeout)
+        finally:
+            self._replies.close_file_inbox()
+            self._mission_lock.release()
 
     def _send_mission(self, sends: list[int], items: list[MissionItem], target: tuple[int, int], kind: int) -> None:
         for seq in sends:

@@ -73,6 +73,35 @@ def run(
     ] = 15.0,
     bus_keys: BusKeys = None,
     foxglove: FoxgloveOpt = None,
+    no_guard: Annotated[
+        bool,
+        typer.Option(
+            "--no-guard",
+            help="With --mavlink: fly without the onboard guard (a Lua script that surfaces the vehicle when this "
+            "computer's heartbeat stops in GUIDED); the timeline and the log say so.",
+        ),
+    ] = False,
+    guard_timeout: Annotated[
+        float,
+        typer.Option(
+            "--guard-timeout", help="With --mavlink: vehicle seconds of silence before the guard surfaces it."
+        ),
+    ] = 10.0,
+    guard_path: Annotated[
+        str,
+        typer.Option(
+            "--guard-path",
+            help="With --mavlink: the guard script's path on the vehicle (APM/scripts/... on an SD card).",
+        ),
+    ] = "scripts/rapt_guard.lua",
+    guard_reboot: Annotated[
+        bool,
+        typer.Option(
+            "--guard-reboot",
+            help="With --mavlink: if scripting is off, turn it on (SCR_ENABLE 1) and reboot the vehicle, only while "
+            "it is disarmed.",
+        ),
+    ] = False,
 ) -> None:
     """Fly one scenario software-in-the-loop: front-seat, bridge, autonomy (and logger).
 
@@ -108,6 +137,7 @@ def run(
             heartbeat_timeout=heartbeat_timeout,
             bus_keys=bus_keys,
             live=live,
+            guard=None if no_guard else _guard(guard_timeout, guard_path, guard_reboot),
         )
         return
     if speedup is not None and speedup <= 0:
@@ -132,6 +162,16 @@ def run(
     batch = check_against_batch(flight, result.scores, bias=bias, stochastic=stochastic, seed=seed, surrogate=learned)
     flown_by = surrogate.name if learned is not None and surrogate is not None else None
     print_table(_result_table(flight, result, batch, bias, flown_by, stochastic, log))
+
+
+def _guard(timeout_s: float, path: str, reboot: bool):
+    """The onboard guard's options (:class:`planner.fly.vehicle.guard.GuardOptions`); a one-line error."""
+    from planner.fly.vehicle.guard import GuardOptions
+
+    try:
+        return GuardOptions(timeout_s, path, reboot)
+    except RaptError as exc:
+        fail(str(exc))
 
 
 def _flight(mission_file: Path, scenario: str | None):

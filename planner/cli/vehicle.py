@@ -23,6 +23,7 @@ def run_on_vehicle(
     heartbeat_timeout: float = 15.0,
     bus_keys: Path | None = None,
     live: tuple[str, int] | None = None,
+    guard=None,
 ) -> None:
     """Fly ``flight`` at ``connection``; print the bring-up timeline, the end, the mode and the decisions' figures."""
     from planner.fly.flight import is_plan
@@ -58,6 +59,7 @@ def run_on_vehicle(
             say=say,
             bus_keys=bus_keys,
             live=live,
+            guard=guard,
         )
     except KeyboardInterrupt:
         fail("stopped by the operator: the vehicle was told to surface and disarm")

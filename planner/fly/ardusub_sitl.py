@@ -83,13 +83,19 @@ def _free_instance(first: int = 1, last: int = 60) -> int:
     raise LinkTimeoutError(f"instance: no free ArduSub SITL instance in {first}..{last}; stop other SITL processes")
 
 
+#: What a range sets on a vehicle before its first RAPT run: scripting on, for the onboard guard.
+PREPARED = {"SCR_ENABLE": 1}
+
+
 class ArduSubSitl:
     """One ArduSub SITL process: ``with ArduSubSitl(home=(lat, lon, alt, heading), speedup=10) as sitl:``.
 
     ``sitl.connection`` is the pymavlink connection string of SERIAL0 (``tcp:127.0.0.1:PORT``).
     ``binary`` defaults to ``ARDUSUB_SITL``; the defaults file is ``sub.parm`` beside it.
     ``parameters`` are defaults of this run's own, after ``sub.parm`` (a test's firmware that
-    never gets a position, say); the parameter store is wiped at every start either way.
+    never gets a position, say); the parameter store is wiped at every start either way. Lua
+    scripting is on (:data:`PREPARED`), as on a vehicle made ready for RAPT's onboard guard
+    (docs/onboard-guard.md); ``parameters={"SCR_ENABLE": 0}`` gives a vehicle that is not.
     """
 
     def __init__(
@@ -116,7 +122,7 @@ class ArduSubSitl:
             raise InputError(f"speedup: expected a factor > 0, got {speedup!r}")
         self.binary, self.defaults, self.home = binary, defaults, home
         self.speedup = float(speedup)
-        self.parameters = dict(parameters or {})
+        self.parameters = {**PREPARED, **(parameters or {})}
         for name, value in self.parameters.items():
             if not name.replace("_", "").isalnum() or not name.isupper() or not _is_number(value):
                 raise InputError(f"parameters: {name}={value!r} is not an ArduPilot parameter and a number")

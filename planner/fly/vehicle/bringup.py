@@ -12,6 +12,7 @@ Each step is published on ``status/bringup`` as it happens, so the log keeps the
 
 from __future__ import annotations
 
+import functools
 import json
 import math
 import os
@@ -29,6 +30,16 @@ from bridge.mission_upload import MissionItem  # noqa: E402
 from bridge.setpoint import Setpoint  # noqa: E402
 from bridge.vehicle_commands import ARDUSUB_MODES  # noqa: E402
 from planner.common.telemetry import VehicleTelemetry  # noqa: E402
+from planner.fly.vehicle.guard import (  # noqa: E402
+    MAV_CMD_SCRIPTING,
+    REPORT_NAME,
+    SCR_ENABLE,
+    SCRIPTING_CMD_STOP_AND_RESTART,
+    VERSION,
+    GuardOptions,
+    guard_script,
+    heartbeat_rate,
+)
 from rapt.errors import InputError, LinkTimeoutError, RefusedError, RunError  # noqa: E402
 from sim.uuv.geo import LocalFrame  # noqa: E402
 from sim.uuv.interface import DEPTH_M, depth_rate  # noqa: E402
@@ -76,6 +87,7 @@ class BringUpTimeouts:
     arm: float = 20.0
     depth: float = 120.0
     surface: float = 60.0  # after the run: for the vehicle to reach the surface before it is disarmed
+    guard: float = 20.0  # the onboard guard's upload, restart and first report
 
     def scaled(self, factor: float) -> BringUpTimeouts:
         return BringUpTimeouts(**{k: v * factor for k, v in asdict(self).items()})
@@ -123,6 +135,8 @@ class BringUp:
     say: Callable[[Step], None] | None = None
     timeline: list[Step] = field(default_factory=list)
     route: tuple[tuple[float, float], ...] = ()  # a calibration run's leg starts (:func:`mission_items`)
+    #: the onboard guard to install (:mod:`planner.fly.vehicle.guard`); None flies without one, and says so
+    guard_options: GuardOptions | None = field(default_factory=GuardOptions)
 
     def __post_init__(self) -> None:
         #: GUIDED was accepted: from here on the vehicle is ours to bring back (never before:
@@ -146,6 +160,7 @@ class BringUp:
         self.streams()
         self.estimate()
         self.inside_area()
+        self.guard()
         self.upload()
         self.guided()
         self.arm()
@@ -260,6 +275,126 @@ class BringUp:
         self._ok(
             "area", f"inside the operational area, {math.hypot(pose.east - lx, pose.north - ly):.0f} m from launch"
         )
+
+    def guard(self) -> None:
+        """Install the onboard guard (:mod:`planner.fly.vehicle.guard`) while the vehicle is disarmed: our
+        heartbeat at the rate it needs, the script by MAVLink FTP, scripting restarted, its report heard."""
+        options = self.guard_options
+        if options is None:
+            self.note(
+                "guard", "note", "no onboard guard (--no-guard): if this computer stops, nothing surfaces the vehicle"
+            )
+            return
+        if self._armed():
+            self._fail(
+                "guard", RefusedError("bring-up guard: the vehicle is armed; the guard is installed only disarmed")
+            )
+        pace = self._pace()
+        self.bridge.heartbeat_hz = heartbeat_rate(options.timeout_s, pace)
+        enabled = self._parameter(SCR_ENABLE)
+        if enabled is None:
+            self._fail(
+                "guard",
+                InputError(
+                    f"bring-up guard: the vehicle has no scripting (no {SCR_ENABLE} parameter); "
+                    "fly with --no-guard, or load a firmware with Lua scripting"
+                ),
+            )
+        if enabled < 1 and not options.reboot:  # refused before anything is written on the vehicle
+            self._fail(
+                "guard",
+                RefusedError(
+                    f"bring-up guard: scripting is off on the vehicle ({SCR_ENABLE} 0); add --guard-reboot to turn "
+                    "it on and reboot the disarmed vehicle, or fly with --no-guard"
+                ),
+            )
+        owner = (self.bridge.source_system, self.bridge.source_component)
+        try:
+            self.bridge.put_file(guard_script(options.timeout_s, owner), options.path, timeout=self.timeouts.guard / 4)
+        except (RefusedError, LinkTimeoutError) as exc:
+            self._fail("guard", RefusedError(f"bring-up guard: {exc}; fly with --no-guard to run without it"))
+        if enabled < 1:
+            self._reboot_with_scripting()
+        else:
+            asked = self._command(MAV_CMD_SCRIPTING, (SCRIPTING_CMD_STOP_AND_RESTART,))
+            if asked != mavlink.MAV_RESULT_ACCEPTED:
+                self._fail("guard", RefusedError(f"bring-up guard: scripting restart refused ({_result_name(asked)})"))
+        since = time.monotonic()
+        if self._wait(lambda: self._guard_report(since), self.timeouts.guard) is None:
+            self._fail(
+                "guard",
+                RunError(
+                    f"bring-up guard: {options.path} installed but not running (no {REPORT_NAME} report within "
+                    f"{self.timeouts.guard:g} s); see the vehicle's STATUSTEXT for the script's error, or fly with --no-guard"
+                ),
+            )
+        self._ok(
+            "guard",
+            f"v{VERSION} running from {options.path}: SURFACE after {options.timeout_s:g} s (vehicle time) without "
+            f"heartbeat {owner[0]}/{owner[1]} in GUIDED; heartbeat {self.bridge.heartbeat_hz:.1f} Hz "
+            f"(vehicle clock x{pace:.1f})",
+        )
+
+    def _reboot_with_scripting(self) -> None:
+        """Scripting on and a reboot, the operator having consented; then the link's checks again."""
+        if self._armed():
+            self._fail("guard", RefusedError("bring-up guard: the vehicle armed itself; not rebooting it"))
+        self.bridge.set_parameter(SCR_ENABLE, 1.0)
+        if self._parameter(SCR_ENABLE) != 1.0:
+            self._fail("guard", RefusedError(f"bring-up guard: the vehicle did not take {SCR_ENABLE} 1"))
+        self.note("guard", "note", f"{SCR_ENABLE} set to 1; rebooting the vehicle (--guard-reboot)")
+        self._command(mavlink.MAV_CMD_PREFLIGHT_REBOOT_SHUTDOWN, (1,))
+
+        def rebooting() -> bool | None:  # its heartbeat has stopped
+            hb = self.bridge.autopilot
+            return True if hb is None or time.monotonic() - hb.monotonic_s > 1.5 else None
+
+        self._wait(rebooting, 10.0)
+        self.heartbeat()
+        self.streams()
+        self.estimate()
+
+    def _pace(self) -> float:
+        """How many times faster than the wall's the vehicle's clock runs (from its ATTITUDE reports)."""
+        first = self.bridge.latest("ATTITUDE")
+        if first is None:
+            return 1.0
+
+        def later():
+            got = self.bridge.latest("ATTITUDE")
+            return got if got is not None and got[1] - first[1] >= 0.5 else None
+
+        last = self._wait(later, 2.0)
+        if last is None or last[0].time_boot_ms <= first[0].time_boot_ms:
+            return 1.0
+        return (last[0].time_boot_ms - first[0].time_boot_ms) / 1000.0 / (last[1] - first[1])
+
+    def _parameter(self, name: str, tries: int = 3, wait_s: float = 1.0) -> float | None:
+        """Parameter ``name``'s value from the vehicle (None when it does not answer: it has no such parameter)."""
+
+        def answer(asked: float):
+            got = self.bridge.latest("PARAM_VALUE")
+            return got if got is not None and got[1] >= asked and got[0].param_id == name else None
+
+        for _ in range(tries):
+            asked = time.monotonic()
+            self.bridge.request_parameter(name)
+            got = self._wait(functools.partial(answer, asked), wait_s)
+            if got is not None:
+                return float(got[0].param_value)
+        return None
+
+    def _guard_report(self, since: float) -> bool | None:
+        got = self.bridge.latest("NAMED_VALUE_FLOAT")
+        if got is not None and got[1] >= since and got[0].name == REPORT_NAME and int(got[0].value) == VERSION:
+            return True
+        return None
+
+    def _command(self, command: int, params: Sequence[float]) -> int | None:
+        try:
+            return self.bridge.command_long(command, params)
+        except TimeoutError:
+            return None
 
     def upload(self) -> None:
         gpi = self._latest("GLOBAL_POSITION_INT")
@@ -417,6 +552,8 @@ class BringUp:
         raise error
 
 
-def _result_name(result: int) -> str:
+def _result_name(result: int | None) -> str:
+    if result is None:
+        return "no COMMAND_ACK"
     entry = mavlink.enums["MAV_RESULT"].get(result)
     return entry.name if entry is not None else str(result)

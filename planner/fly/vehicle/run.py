@@ -29,6 +29,7 @@ from planner.fly.live import start_live_view
 from planner.fly.run_bus import PART_ROLES, RunBus
 from planner.fly.scenario_map import ScenarioMap
 from planner.fly.vehicle.bringup import GUIDED, BringUp, BringUpTimeouts, Step
+from planner.fly.vehicle.guard import DEFAULT_GUARD, GuardOptions
 from planner.fly.vehicle.referee import Referee
 from planner.fly.vehicle.virtual_range import VirtualRange
 from planner.fly.vehicle.watchdog import BATTERY, COLLISION, OPERATIONAL_AREA, REASONS, Watchdog, WatchdogRules
@@ -74,6 +75,7 @@ def run_vehicle(
     say: Callable[[Step], None] | None = None,
     bus_keys: str | Path | None = None,
     live: tuple[str, int] | None = None,
+    guard: GuardOptions | None = DEFAULT_GUARD,
 ) -> VehicleRunResult:
     """Fly ``flight`` (:class:`planner.fly.flight.Flight`) on the vehicle at ``connection`` (a pymavlink string).
 
@@ -84,7 +86,8 @@ def run_vehicle(
     as violations without taking control, e.g. ``nogo`` where the no-go areas are virtual.
     ``bus_keys``: the range's keys directory; each part then joins the secure bus as its role
     (:data:`planner.fly.run_bus.PART_ROLES`), the bridge's session being the hub. ``live``: ``(host, port)``
-    of a Foxglove live view of the run (:class:`bridge.live_view.LiveView`).
+    of a Foxglove live view of the run (:class:`bridge.live_process.LiveViewProcess`). ``guard``: the onboard
+    guard bring-up installs (:mod:`planner.fly.vehicle.guard`); None flies without one, and the timeline says so.
     """
     _check_options(action, record_only, connection)
     mission, u = flight.mission, np.asarray(flight.u, dtype=float)
@@ -123,6 +126,7 @@ def run_vehicle(
             timeouts or BringUpTimeouts(),
             say,
             route=flight.route,
+            guard_options=guard,
         )
         try:
             start_ms = bringup.run()

@@ -225,6 +225,7 @@ def _saw_the_log_live(client, fixes: list[dict], channels: dict) -> None:
     assert latency and latency[-1] is not None  # the back-seat's decision latency, to plot
 
 
+@pytest.mark.slow  # the firmware's whole range loop with a live client, about 40 s; CI runs it with the slow ones
 @needs_firmware
 @pytest.mark.sitl
 @pytest.mark.integration
@@ -245,7 +246,7 @@ def test_a_plan_scenario_flown_on_ardusub_like_on_the_range(tmp_path):
     client = watched["client"]
     client.close()
     steps = [(s.name, s.status) for s in result.timeline]
-    names = ["heartbeat", "streams", "estimate", "area", "mission", "guided", "arm", "depth", "clock"]
+    names = ["heartbeat", "streams", "estimate", "area", "guard", "mission", "guided", "arm", "depth", "clock"]
     assert steps[: len(names)] == [(n, "ok") for n in names], steps
     assert steps[-1] == ("recover", "ok") and "disarmed" in result.timeline[-1].detail
     assert result.ended.startswith("wall-time limit") and not result.watchdog
@@ -440,6 +441,7 @@ def _imitation7_flight(sonar_range_m: float | None = None):
     return Flight(mission, u, f"imitation7-{OBSTACLE_SCENARIO}", str(path))
 
 
+@pytest.mark.slow  # a firmware flight past an obstacle; CI runs it with the slow ones
 @needs_firmware
 @pytest.mark.sitl
 @pytest.mark.integration

@@ -23,7 +23,7 @@ from tests.support.loopback import free_port, no_new_threads  # noqa: E402
 M = mavutil.mavlink
 ROOT = Path(__file__).resolve().parents[4]
 FAST = BringUpTimeouts(heartbeat=5, streams=2, estimate=1.5, mission=3, guided=1.5, arm=1.5, depth=5, surface=5)
-STEPS = ["heartbeat", "streams", "estimate", "area", "mission", "guided", "arm", "depth", "clock"]
+STEPS = ["heartbeat", "streams", "estimate", "area", "guard", "mission", "guided", "arm", "depth", "clock"]
 
 
 @pytest.fixture(scope="module")
@@ -43,7 +43,7 @@ def fake(route, **behaviour):
 
 
 def _fly(flight, connection, steps: list, **kw):
-    return run_vehicle(flight, connection, timeouts=FAST, timeout_s=0.5, say=steps.append, **kw)
+    return run_vehicle(flight, connection, timeouts=FAST, timeout_s=0.5, say=steps.append, **{"guard": None, **kw})
 
 
 def _commanded(vehicle) -> list[str]:
@@ -63,7 +63,10 @@ def test_every_step_in_order_and_set_points_only_in_guided(flight):
     steps: list = []
     with fake(flight.mission) as (conn, vehicle):
         result = _fly(flight, conn, steps)
-    assert [s.name for s in steps][: len(STEPS)] == STEPS and all(s.status == "ok" for s in steps)
+    assert [s.name for s in steps][: len(STEPS)] == STEPS
+    # the fake vehicle has no scripting: flown with --no-guard, the timeline says so and the rest is ok
+    assert [(s.status, "--no-guard" in s.detail) for s in steps if s.name == "guard"] == [("note", True)]
+    assert all(s.status == "ok" for s in steps if s.name != "guard")
     assert result.timeline[-1].name == "recover" and "disarmed" in result.timeline[-1].detail
     told = _commanded(vehicle)
     guided = told.index(f"COMMAND_LONG {M.MAV_CMD_DO_SET_MODE}")
@@ -180,7 +183,7 @@ def test_a_vehicle_that_ends_the_run_itself_is_left_alone(flight, failsafe_mode,
     reason in one line and in the timeline, and nothing more is commanded (no SURFACE, no disarm)."""
     steps: list = []
     with fake(flight.mission, failsafe_after_s=4.0, failsafe_mode=failsafe_mode) as (conn, vehicle):
-        result = run_vehicle(flight, conn, timeouts=FAST, timeout_s=15.0, say=steps.append)
+        result = run_vehicle(flight, conn, timeouts=FAST, timeout_s=15.0, say=steps.append, guard=None)
         after = vehicle.received[vehicle.failsafe_at :] if vehicle.failsafe_at is not None else None
     assert after is not None and result.ended == ended and result.watchdog == ""
     assert [s.name for s in steps][: len(STEPS)] == STEPS  # it was flying: every step went through

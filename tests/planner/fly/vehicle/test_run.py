@@ -86,7 +86,17 @@ def test_an_operators_range_day_on_a_bare_autopilot_is_accepted_by_compare(tmp_p
     try:
         run = subprocess.run(
             _rapt_plan()
-            + ["run", str(PLAN), "--scenario", sid, "--mavlink", f"udpout:127.0.0.1:{port}", "--log", str(log)]
+            + [
+                "run",
+                str(PLAN),
+                "--scenario",
+                sid,
+                "--mavlink",
+                f"udpout:127.0.0.1:{port}",
+                "--log",
+                str(log),
+                "--no-guard",
+            ]
             + ["--timeout", "150"],
             cwd=ROOT,
             env=env,
@@ -98,7 +108,7 @@ def test_an_operators_range_day_on_a_bare_autopilot_is_accepted_by_compare(tmp_p
         vehicle.send_signal(signal.SIGINT)
         vehicle.communicate(timeout=30)
     assert run.returncode == 0, run.stderr + run.stdout
-    for step in ("heartbeat", "streams", "estimate", "area", "mission", "guided", "arm", "depth", "clock"):
+    for step in ("heartbeat", "streams", "estimate", "area", "guard", "mission", "guided", "arm", "depth", "clock"):
         assert f" {step} " in run.stderr, run.stderr  # the bring-up, step by step, as it happens
     assert "watchdog: nogo" in run.stdout, run.stdout
     observed = next(line for line in run.stdout.splitlines() if "observed mode" in line)
@@ -137,11 +147,14 @@ def _obstacle_scenario():
     return mission, u
 
 
+@pytest.mark.slow  # 450 s of mission on a bare autopilot: about 20 s
 def test_a_virtual_obstacle_is_seen_and_avoided_on_a_vehicle_without_sonar():
     mission, u = _obstacle_scenario()
     flight = Flight(mission, u, "obstacle", str(ROOT / "examples" / "imitation7.toml"))
     with bare_vehicle(mission, u) as (connection, fs):
-        result = run_vehicle(flight, connection, timeout_s=450 / SPEEDUP)  # past all three obstacles by 330 s
+        result = run_vehicle(
+            flight, connection, timeout_s=450 / SPEEDUP, guard=None
+        )  # past all three obstacles by 330 s
     assert fs.stats.setpoints > 0 and result.ended.startswith("wall-time limit") and not result.watchdog
     scen = make_scenarios(mission, u[None, :])
     x, y = result.track[:, 1], result.track[:, 2]
@@ -167,7 +180,7 @@ def test_the_scenarios_battery_running_empty_ends_the_run_as_its_own_outcome():
     u[-1] = 0.0  # the lowest starting charge: 5 Wh, empty about 96 s in
     batch = sim.uuv.simulate(mission, u[None, :], trajectories=True)
     with bare_vehicle(mission, u) as (connection, _):
-        result = run_vehicle(Flight(mission, u, "empty", str(path)), connection, timeout_s=60)
+        result = run_vehicle(Flight(mission, u, "empty", str(path)), connection, timeout_s=60, guard=None)
     assert result.ended == "battery empty", result.ended  # whether or not the watchdog saw it first
     assert abs(result.sim_s - batch.trajectory(0)[-1, 0]) <= 2 * mission.dt
     assert mode_name(result.scores) == batch.mode_names[batch.modes[0]] == "TF"
@@ -183,7 +196,7 @@ def test_ctrl_c_surfaces_and_disarms_the_vehicle():
 
     with bare_vehicle(flight.mission, flight.u) as (connection, fs):
         with pytest.raises(KeyboardInterrupt):
-            run_vehicle(flight, connection, say=operator)
+            run_vehicle(flight, connection, say=operator, guard=None)
         truth = fs.bare.truth()
         # SURFACE, then disarmed; at the surface ArduSub's SURFACE hands over to ALT_HOLD by itself
         assert fs.mode in (9, 2) and not fs.armed

@@ -306,7 +306,8 @@ def ardusub_sitl(speedup: float = 10.0) -> Iterator[Client]:
     from sim.uuv import load_mission
 
     home = launch_point(load_mission(Path(__file__).parents[4] / "examples" / "range2017.toml"))
-    with ArduSubSitl(home, speedup=speedup) as sitl:  # positions are not compared
+    # the firmware as it ships (scripting off): the recording's vehicle; positions are not compared
+    with ArduSubSitl(home, speedup=speedup, parameters={"SCR_ENABLE": 0}) as sitl:
         client = Client(sitl.connection, grace_s=0.3)
         try:
             client.hello()

@@ -1,0 +1,146 @@
+"""The onboard guard on ArduSub's firmware: installed by bring-up, it surfaces a vehicle whose run was killed;
+a vehicle that cannot take it is refused in one line, and the run then proceeds only with --no-guard."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import pytest
+
+os.environ.setdefault("MAVLINK20", "1")
+from pymavlink import mavutil  # noqa: E402
+
+from planner.fly.ardusub_sitl import ENV, ArduSubSitl, launch_point, sitl_binary  # noqa: E402
+from planner.fly.flight import flight_from_plan  # noqa: E402
+from planner.fly.vehicle.guard import GuardOptions  # noqa: E402
+from planner.fly.vehicle.run import run_vehicle  # noqa: E402
+from rapt.errors import RefusedError  # noqa: E402
+from sim.uuv.missionfile import load_mission  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[4]
+PLAN = ROOT / "field_plans" / "range2017" / "plan.json"
+LAUNCH = launch_point(load_mission(ROOT / "examples" / "range2017.toml"))
+SURFACE = 9
+SPEEDUP = 10.0
+
+needs_firmware = pytest.mark.skipif(sitl_binary() is None, reason=f"{ENV} is not set: no ArduSub SITL binary to fly")
+pytestmark = [needs_firmware, pytest.mark.sitl, pytest.mark.integration]
+
+
+class _Monitor:
+    """A listener on the firmware's second port (SERIAL1): its clock, modes and STATUSTEXTs. It sends no
+    heartbeat, so it is no ground station the firmware's own failsafe would watch."""
+
+    def __init__(self, port: int):
+        self.link = mavutil.mavlink_connection(f"tcp:127.0.0.1:{port}", source_system=250, source_component=190)
+        self.now_ms = -1
+        self.modes: list[tuple[int, int]] = []  # (vehicle ms, custom_mode) of each autopilot heartbeat
+        self.texts: list[tuple[int, str]] = []
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._read, name="monitor", daemon=True)
+        self._thread.start()
+
+    def _read(self) -> None:
+        asked = 0.0
+        while not self._stop.is_set():
+            if time.monotonic() - asked > 2.0:  # its stream on this port, whatever the port's defaults
+                self.link.mav.request_data_stream_send(1, 1, mavutil.mavlink.MAV_DATA_STREAM_ALL, 10, 1)
+                asked = time.monotonic()
+            msg = self.link.recv_match(blocking=True, timeout=0.1)
+            if msg is None or msg.get_srcSystem() != 1:
+                continue
+            if hasattr(msg, "time_boot_ms"):
+                self.now_ms = max(self.now_ms, int(msg.time_boot_ms))
+            if msg.get_type() == "HEARTBEAT" and msg.get_srcComponent() == 1:
+                self.modes.append((self.now_ms, int(msg.custom_mode)))
+            elif msg.get_type() == "STATUSTEXT":
+                self.texts.append((self.now_ms, msg.text))
+
+    def wait(self, test, timeout_s: float, what: str):
+        deadline = time.monotonic() + timeout_s
+        while time.monotonic() < deadline:
+            if (got := test()) is not None:
+                return got
+            time.sleep(0.01)
+        raise AssertionError(f"no {what} within {timeout_s} s; modes {self.modes[-5:]}, texts {self.texts[-5:]}")
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=5)
+        self.link.close()
+
+
+def test_a_run_killed_mid_scenario_is_surfaced_by_the_guard_within_its_timeout(tmp_path):
+    """kill -9 of ``rapt-plan run --mavlink`` 20 vehicle seconds into pair2b: nothing of ours is left to
+    command the vehicle, and the guard installed at bring-up switches it to SURFACE within its timeout
+    (10 vehicle seconds) + 3, saying why."""
+    lines: list[str] = []
+    with ArduSubSitl(LAUNCH, speedup=SPEEDUP) as sitl:
+        monitor = _Monitor(sitl.port + 2)
+        run = subprocess.Popen(
+            [sys.executable, "-m", "planner.cli", "run", str(PLAN), "--scenario", "pair2b"]
+            + ["--mavlink", sitl.connection, "--log", str(tmp_path / "killed.mcap")],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.PIPE,
+            text=True,
+            env={**os.environ, "COLUMNS": "200"},
+        )
+        reader = threading.Thread(target=lambda: lines.extend(run.stderr), daemon=True)
+        reader.start()
+        try:
+            monitor.wait(lambda: any(" clock " in line for line in lines) or None, 180, "scenario clock")
+            assert any(" guard " in line and "running" in line for line in lines), lines
+            start_ms = monitor.now_ms
+            monitor.wait(lambda: monitor.now_ms >= start_ms + 20_000 or None, 30, "20 vehicle seconds")
+            assert monitor.modes[-1][1] == 4, monitor.modes[-3:]  # flying the scenario in GUIDED
+            run.send_signal(signal.SIGKILL)
+            run.wait(timeout=10)
+            killed_ms = monitor.now_ms
+            surfaced_ms = monitor.wait(
+                lambda: next((t for t, mode in monitor.modes if t >= killed_ms and mode == SURFACE), None),
+                30,
+                "SURFACE after the kill",
+            )
+            said = monitor.wait(
+                lambda: next((text for _, text in monitor.texts if text.startswith("RAPT guard: back-seat silent")), None),
+                10,
+                "the guard's STATUSTEXT",
+            )
+        finally:
+            if run.poll() is None:
+                run.kill()
+                run.wait(timeout=10)
+            reader.join(timeout=5)
+            monitor.close()
+    assert run.returncode == -signal.SIGKILL
+    # its last beat came up to one beat (2 vehicle s here) before the kill: SURFACE within the timeout + 3 of it
+    assert 0 < surfaced_ms - killed_ms <= 13_000, (killed_ms, surfaced_ms)
+    assert "SURFACE" in said
+
+
+def test_a_vehicle_that_cannot_take_the_guard_is_refused_in_one_line_and_flies_with_no_guard():
+    """Scripting off: refused naming --guard-reboot; a script path the vehicle cannot write: refused naming
+    it, before any reboot; --no-guard (guard None): flown, and the timeline says it flew unguarded."""
+    flight = flight_from_plan(PLAN, "pair2b")
+    with ArduSubSitl(LAUNCH, speedup=SPEEDUP, parameters={"SCR_ENABLE": 0}) as sitl:
+        with pytest.raises(RefusedError) as off:
+            run_vehicle(flight, sitl.connection, timeout_s=5.0)
+        line = str(off.value)
+        assert "\n" not in line and "scripting is off" in line and "--guard-reboot" in line and "--no-guard" in line
+        with pytest.raises(RefusedError) as unwritable:
+            # consent to a reboot given, but the script cannot be written: refused before any reboot
+            bad = GuardOptions(path="no/such/dir/rapt_guard.lua", reboot=True)
+            run_vehicle(flight, sitl.connection, timeout_s=5.0, guard=bad)
+        line = str(unwritable.value)
+        assert "\n" not in line and "refused to write 'no/such/dir/rapt_guard.lua'" in line and "--no-guard" in line
+        steps: list = []
+        result = run_vehicle(flight, sitl.connection, timeout_s=3.0, guard=None, say=steps.append)
+    assert result.ended.startswith("wall-time limit")
+    [guard] = [s for s in steps if s.name == "guard"]
+    assert guard.status == "note" and "--no-guard" in guard.detail and "nothing surfaces the vehicle" in guard.detail
