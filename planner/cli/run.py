@@ -102,6 +102,18 @@ def run(
             "it is disarmed.",
         ),
     ] = False,
+    transit: Annotated[
+        bool,
+        typer.Option(
+            "--transit",
+            help="With --mavlink: a vehicle farther than --start-tolerance from the scenario's start is flown there "
+            "at depth first (logged, not scored) instead of refused.",
+        ),
+    ] = False,
+    start_tolerance: Annotated[
+        float,
+        typer.Option("--start-tolerance", help="With --mavlink: metres from the scenario's start the vehicle may be."),
+    ] = 10.0,
 ) -> None:
     """Fly one scenario software-in-the-loop: front-seat, bridge, autonomy (and logger).
 
@@ -123,6 +135,8 @@ def run(
     if bus_keys is not None:
         _check_bus_keys(bus_keys, surrogate is not None)
     if mavlink is not None:
+        if not start_tolerance > 0:
+            fail(f"--start-tolerance: expected metres > 0, got {start_tolerance}")
         _check_not_with_mavlink(speedup is not None, bias is not None, stochastic, surrogate is not None)
         from planner.cli.vehicle import run_on_vehicle
 
@@ -138,6 +152,8 @@ def run(
             bus_keys=bus_keys,
             live=live,
             guard=None if no_guard else _guard(guard_timeout, guard_path, guard_reboot),
+            start_tolerance_m=start_tolerance,
+            transit=transit,
         )
         return
     if speedup is not None and speedup <= 0:

@@ -24,6 +24,8 @@ def run_on_vehicle(
     bus_keys: Path | None = None,
     live: tuple[str, int] | None = None,
     guard=None,
+    start_tolerance_m: float = 10.0,
+    transit: bool = False,
 ) -> None:
     """Fly ``flight`` at ``connection``; print the bring-up timeline, the end, the mode and the decisions' figures."""
     from planner.fly.flight import is_plan
@@ -60,6 +62,8 @@ def run_on_vehicle(
             bus_keys=bus_keys,
             live=live,
             guard=guard,
+            start_tolerance_m=start_tolerance_m,
+            transit=transit,
         )
     except KeyboardInterrupt:
         fail("stopped by the operator: the vehicle was told to surface and disarm")

@@ -71,6 +71,11 @@ DEPTH_TOLERANCE_M = 0.3
 DEPTH_REPORTS = 3
 
 GUIDED = ARDUSUB_MODES["GUIDED"]
+SURFACE = ARDUSUB_MODES["SURFACE"]
+#: The vehicle starts a scenario within this many metres of its start, unless told otherwise.
+START_TOLERANCE_M = 10.0
+#: A transit leg's speed through the water at most (m/s), and the slowest it is given time for.
+TRANSIT_MPS, TRANSIT_SLOWEST_MPS = 1.0, 0.25
 _EKF_ABS = mavlink.EKF_POS_HORIZ_ABS
 _EKF_CONST = mavlink.EKF_CONST_POS_MODE
 
@@ -88,6 +93,7 @@ class BringUpTimeouts:
     depth: float = 120.0
     surface: float = 60.0  # after the run: for the vehicle to reach the surface before it is disarmed
     guard: float = 20.0  # the onboard guard's upload, restart and first report
+    transit: float = 60.0  # beyond the time a transit leg needs at its slowest
 
     def scaled(self, factor: float) -> BringUpTimeouts:
         return BringUpTimeouts(**{k: v * factor for k, v in asdict(self).items()})
@@ -137,6 +143,9 @@ class BringUp:
     route: tuple[tuple[float, float], ...] = ()  # a calibration run's leg starts (:func:`mission_items`)
     #: the onboard guard to install (:mod:`planner.fly.vehicle.guard`); None flies without one, and says so
     guard_options: GuardOptions | None = field(default_factory=GuardOptions)
+    #: how far from the scenario's start the vehicle may be; farther, it is refused, or flown there with ``transit``
+    start_tolerance_m: float = START_TOLERANCE_M
+    transit: bool = False
 
     def __post_init__(self) -> None:
         #: GUIDED was accepted: from here on the vehicle is ours to bring back (never before:
@@ -144,6 +153,8 @@ class BringUp:
         self.took_control = False
         self._t0 = time.monotonic()
         self.telemetry = VehicleTelemetry(LocalFrame(self.mission.origin_lat, self.mission.origin_lon))
+        self.pace = 1.0  # the vehicle's clock against the wall's, once measured (:meth:`_pace`)
+        self._transit_m = 0.0  # how far :meth:`start` found the vehicle from the scenario's start
         self._status = self.session.declare_publisher(keys.status(self.vehicle, keys.BRINGUP_SOURCE))
         self._commands = self.session.declare_publisher(keys.command(self.vehicle, keys.BRINGUP_SOURCE))
 
@@ -158,13 +169,16 @@ class BringUp:
     def run(self) -> int:
         self.heartbeat()
         self.streams()
+        self.previous()
         self.estimate()
         self.inside_area()
+        self.start()
         self.guard()
         self.upload()
         self.guided()
         self.arm()
         self.dive()
+        self.transit_leg()
         return self.start_clock()
 
     def heartbeat(self) -> None:
@@ -191,7 +205,7 @@ class BringUp:
                 ),
             )
         mode = hb.mode_label
-        if hb.armed and hb.custom_mode != GUIDED:
+        if hb.armed and hb.custom_mode not in (GUIDED, SURFACE):  # GUIDED or SURFACE: an earlier run's (previous())
             self._fail(
                 "heartbeat",
                 RefusedError(
@@ -233,6 +247,44 @@ class BringUp:
                 ),
             )
         self._ok("streams", ", ".join(f"{n} {hz:g} Hz" for n, hz in STREAMS.items()))
+
+    def previous(self) -> None:
+        """A vehicle still armed in GUIDED or SURFACE is an earlier run's (ours, or one whose computer died and
+        whose guard surfaced it): it is surfaced and disarmed before this run starts, so nothing of that
+        run's state (its depth, its place, its armed motors) passes for this scenario's start."""
+        hb = self.bridge.autopilot
+        if hb is None or not hb.armed:
+            return
+        label = hb.mode_label
+        if hb.custom_mode == GUIDED:
+            self._command_until("previous", lambda: self.bridge.set_mode("SURFACE"), self.timeouts.guided)
+
+        def up() -> bool | None:
+            self._feed()
+            if self._mode() not in (GUIDED, SURFACE):
+                self._fail(
+                    "previous",
+                    RefusedError(f"bring-up previous: while surfacing, the vehicle went to {self._mode_label()}"),
+                )
+            pose = self.telemetry.pose
+            return True if pose is not None and pose.surfaced else None
+
+        if self._wait(up, self.timeouts.surface) is None:
+            pose = self.telemetry.pose
+            depth = f"{pose.depth:.1f} m" if pose is not None else "unknown"
+            self._fail(
+                "previous",
+                LinkTimeoutError(
+                    f"bring-up previous: the vehicle, armed in {label} from an earlier run, did not surface within "
+                    f"{self.timeouts.surface:g} s (depth {depth}); recover it by hand, then run again"
+                ),
+            )
+        self._command_until("previous", lambda: self.bridge.arm(False), self.timeouts.arm)
+        if self._wait(lambda: (not self._armed()) or None, 5.0) is None:
+            self._fail(
+                "previous", RunError("bring-up previous: disarming was accepted but the heartbeat does not show it")
+            )
+        self._ok("previous", f"armed in {label} from an earlier run: surfaced and disarmed before this one")
 
     def estimate(self) -> None:
         def ready():
@@ -276,6 +328,31 @@ class BringUp:
             "area", f"inside the operational area, {math.hypot(pose.east - lx, pose.north - ly):.0f} m from launch"
         )
 
+    def start(self) -> None:
+        """The vehicle at the scenario's start, within :attr:`start_tolerance_m`; farther, refused with the
+        distance, or (``transit``) flown there by :meth:`transit_leg` before the clock starts."""
+        pose = self.telemetry.pose
+        assert pose is not None, "estimate() found a pose"
+        sx, sy = self._start_point()
+        d = math.hypot(pose.east - sx, pose.north - sy)
+        tol = self.start_tolerance_m
+        if d <= tol:
+            self._ok("start", f"{d:.1f} m from the scenario's start (tolerance {tol:g} m)")
+            return
+        if not self.transit:
+            self._fail(
+                "start",
+                InputError(
+                    f"--start-tolerance: the vehicle is {d:.0f} m from the scenario's start ({sx:g}, {sy:g}) m, more "
+                    f"than {tol:g} m; put it there, or add --transit to fly there first (logged, not scored)"
+                ),
+            )
+        self._transit_m = d
+        self.note("start", "note", f"{d:.0f} m from the scenario's start: a transit leg after the dive (not scored)")
+
+    def _start_point(self) -> tuple[float, float]:
+        return self.route[0] if self.route else self.mission.launch
+
     def guard(self) -> None:
         """Install the onboard guard (:mod:`planner.fly.vehicle.guard`) while the vehicle is disarmed: our
         heartbeat at the rate it needs, the script by MAVLink FTP, scripting restarted, its report heard."""
@@ -289,7 +366,7 @@ class BringUp:
             self._fail(
                 "guard", RefusedError("bring-up guard: the vehicle is armed; the guard is installed only disarmed")
             )
-        pace = self._pace()
+        pace = self.pace = self._pace()
         self.bridge.heartbeat_hz = heartbeat_rate(options.timeout_s, pace)
         enabled = self._parameter(SCR_ENABLE)
         if enabled is None:
@@ -464,6 +541,52 @@ class BringUp:
         pose = self.telemetry.pose
         assert pose is not None
         self._ok("depth", f"at {pose.depth:.2f} m")
+
+    def transit_leg(self) -> None:
+        """At depth, in GUIDED, on set-points of the bring-up's own: to the scenario's start (to half the
+        tolerance), before the clock starts. Logged as a bring-up step; the scenario's track begins after it."""
+        if not self._transit_m:
+            return
+        sx, sy = self._start_point()
+        arrive = max(1.0, self.start_tolerance_m / 2)
+        speed = min(TRANSIT_MPS, self.mission.vehicle.cruise_speed)
+        budget_s = self._transit_m / TRANSIT_SLOWEST_MPS + self.timeouts.transit  # vehicle seconds
+        deadline = time.monotonic() + budget_s / max(self.pace, 1e-3)
+        first_ms, last_ms = -1, -1
+        while True:
+            if time.monotonic() > deadline:
+                pose = self.telemetry.pose
+                left = math.hypot(pose.east - sx, pose.north - sy) if pose is not None else float("nan")
+                self._fail(
+                    "transit",
+                    LinkTimeoutError(f"bring-up transit: still {left:.0f} m from the start after {budget_s:.0f} s"),
+                )
+            if self._mode() != GUIDED:
+                self._fail("transit", RunError(f"bring-up transit: the vehicle left GUIDED (now {self._mode_label()})"))
+            self._feed()
+            pose = self.telemetry.pose
+            if pose is None or pose.time_ms == last_ms:
+                time.sleep(0.005)
+                continue
+            last_ms = pose.time_ms
+            first_ms = pose.time_ms if first_ms < 0 else first_ms
+            de, dn = sx - pose.east, sy - pose.north
+            d = math.hypot(de, dn)
+            if d <= arrive:
+                break
+            heading = math.atan2(de, dn)  # compass: from north, clockwise
+            v = min(speed, max(0.2, 0.5 * d))  # slows over the last metres
+            sp = Setpoint(
+                v * math.cos(heading), v * math.sin(heading), depth_rate(pose.depth, False), heading, pose.time_ms
+            )
+            self._commands.put(sp.to_json())
+        stop = Setpoint(0.0, 0.0, depth_rate(pose.depth, False), pose.heading, pose.time_ms)
+        self._commands.put(stop.to_json())
+        took = (last_ms - first_ms) / 1000.0
+        self._ok(
+            "transit",
+            f"{self._transit_m:.0f} m to the scenario's start in {took:.0f} s, now {d:.1f} m off (not scored)",
+        )
 
     def start_clock(self) -> int:
         pose = self.telemetry.pose

@@ -28,7 +28,7 @@ from planner.fly.backseat import BackSeat
 from planner.fly.live import start_live_view
 from planner.fly.run_bus import PART_ROLES, RunBus
 from planner.fly.scenario_map import ScenarioMap
-from planner.fly.vehicle.bringup import GUIDED, BringUp, BringUpTimeouts, Step
+from planner.fly.vehicle.bringup import GUIDED, START_TOLERANCE_M, BringUp, BringUpTimeouts, Step
 from planner.fly.vehicle.guard import DEFAULT_GUARD, GuardOptions
 from planner.fly.vehicle.referee import Referee
 from planner.fly.vehicle.virtual_range import VirtualRange
@@ -76,6 +76,8 @@ def run_vehicle(
     bus_keys: str | Path | None = None,
     live: tuple[str, int] | None = None,
     guard: GuardOptions | None = DEFAULT_GUARD,
+    start_tolerance_m: float = START_TOLERANCE_M,
+    transit: bool = False,
 ) -> VehicleRunResult:
     """Fly ``flight`` (:class:`planner.fly.flight.Flight`) on the vehicle at ``connection`` (a pymavlink string).
 
@@ -88,6 +90,8 @@ def run_vehicle(
     (:data:`planner.fly.run_bus.PART_ROLES`), the bridge's session being the hub. ``live``: ``(host, port)``
     of a Foxglove live view of the run (:class:`bridge.live_process.LiveViewProcess`). ``guard``: the onboard
     guard bring-up installs (:mod:`planner.fly.vehicle.guard`); None flies without one, and the timeline says so.
+    A vehicle farther than ``start_tolerance_m`` from the scenario's start is refused, or with ``transit`` flown
+    there before the scenario clock starts; one still armed from an earlier run is surfaced and disarmed first.
     """
     _check_options(action, record_only, connection)
     mission, u = flight.mission, np.asarray(flight.u, dtype=float)
@@ -127,6 +131,8 @@ def run_vehicle(
             say,
             route=flight.route,
             guard_options=guard,
+            start_tolerance_m=start_tolerance_m,
+            transit=transit,
         )
         try:
             start_ms = bringup.run()

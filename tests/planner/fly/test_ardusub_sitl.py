@@ -246,7 +246,7 @@ def test_a_plan_scenario_flown_on_ardusub_like_on_the_range(tmp_path):
     client = watched["client"]
     client.close()
     steps = [(s.name, s.status) for s in result.timeline]
-    names = ["heartbeat", "streams", "estimate", "area", "guard", "mission", "guided", "arm", "depth", "clock"]
+    names = ["heartbeat", "streams", "estimate", "area", "start", "guard", "mission", "guided", "arm", "depth", "clock"]
     assert steps[: len(names)] == [(n, "ok") for n in names], steps
     assert steps[-1] == ("recover", "ok") and "disarmed" in result.timeline[-1].detail
     assert result.ended.startswith("wall-time limit") and not result.watchdog

@@ -23,7 +23,7 @@ from tests.support.loopback import free_port, no_new_threads  # noqa: E402
 M = mavutil.mavlink
 ROOT = Path(__file__).resolve().parents[4]
 FAST = BringUpTimeouts(heartbeat=5, streams=2, estimate=1.5, mission=3, guided=1.5, arm=1.5, depth=5, surface=5)
-STEPS = ["heartbeat", "streams", "estimate", "area", "guard", "mission", "guided", "arm", "depth", "clock"]
+STEPS = ["heartbeat", "streams", "estimate", "area", "start", "guard", "mission", "guided", "arm", "depth", "clock"]
 
 
 @pytest.fixture(scope="module")

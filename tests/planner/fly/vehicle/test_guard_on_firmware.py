@@ -108,7 +108,9 @@ def test_a_run_killed_mid_scenario_is_surfaced_by_the_guard_within_its_timeout(t
                 "SURFACE after the kill",
             )
             said = monitor.wait(
-                lambda: next((text for _, text in monitor.texts if text.startswith("RAPT guard: back-seat silent")), None),
+                lambda: next(
+                    (text for _, text in monitor.texts if text.startswith("RAPT guard: back-seat silent")), None
+                ),
                 10,
                 "the guard's STATUSTEXT",
             )

@@ -108,7 +108,19 @@ def test_an_operators_range_day_on_a_bare_autopilot_is_accepted_by_compare(tmp_p
         vehicle.send_signal(signal.SIGINT)
         vehicle.communicate(timeout=30)
     assert run.returncode == 0, run.stderr + run.stdout
-    for step in ("heartbeat", "streams", "estimate", "area", "guard", "mission", "guided", "arm", "depth", "clock"):
+    for step in (
+        "heartbeat",
+        "streams",
+        "estimate",
+        "area",
+        "start",
+        "guard",
+        "mission",
+        "guided",
+        "arm",
+        "depth",
+        "clock",
+    ):
         assert f" {step} " in run.stderr, run.stderr  # the bring-up, step by step, as it happens
     assert "watchdog: nogo" in run.stdout, run.stdout
     observed = next(line for line in run.stdout.splitlines() if "observed mode" in line)
