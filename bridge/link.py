@@ -122,6 +122,9 @@ class MavlinkLink:
         self.source_component = source_component
         self.baud = baud
         self._key = signing_key
+        #: with a key: take unsigned frames (not badly signed ones) until the vehicle holds the key too
+        self.accept_unsigned = False
+        self._badsig_seen = 0
         self._replies = replies
         self._counts = counts
         self._stop = stop
@@ -249,7 +252,7 @@ class MavlinkLink:
         if isinstance(conn, mavutil.mavudp):
             self._rcvbuf = _grow_rcvbuf(conn.port, UDP_RCVBUF_BYTES)
         if self._key is not None:
-            conn.setup_signing(self._key, sign_outgoing=True, allow_unsigned_callback=_refuse_unsigned)
+            conn.setup_signing(self._key, sign_outgoing=True, allow_unsigned_callback=self._unsigned_allowed)
         with self._send_lock:
             self._conn = conn
         self._splitter.reset()
@@ -285,6 +288,41 @@ class MavlinkLink:
             return conn.mav.decode(buf)
         with self._send_lock:  # signing timestamps are shared with the sending side
             return conn.mav.decode(buf)
+
+    def _unsigned_allowed(self, mav: Any, msg_id: int) -> bool:
+        """pymavlink's question for a frame without a good signature: an unsigned one passes only while
+        :attr:`accept_unsigned`; a badly signed one (pymavlink has just counted it) never."""
+        bad = mav.signing.badsig_count
+        if bad != self._badsig_seen:
+            self._badsig_seen = bad
+            return False
+        return self.accept_unsigned
+
+    @property
+    def signing_timestamp(self) -> int:
+        """Our signing clock (10 µs since 2015-01-01), for SETUP_SIGNING; 0 when not signing or not open."""
+        with self._send_lock:
+            conn = self._conn
+            return 0 if conn is None or self._key is None else int(conn.mav.signing.timestamp)
+
+    @property
+    def signing_key(self) -> bytes | None:
+        return self._key
+
+    def send_unsigned(self, msg: Any) -> bool:
+        """Send one message unsigned (a probe of whether the vehicle accepts unsigned messages on this link)."""
+        with self._send_lock:
+            conn = self._conn
+            if conn is None:
+                return False
+            signing = conn.mav.signing
+            was, signing.sign_outgoing = signing.sign_outgoing, False
+            try:
+                conn.mav.send(msg)
+            finally:
+                signing.sign_outgoing = was
+            self._counts["frames_out"] += 1
+            return True
 
     def send(self, msg: Any) -> bool:
         """Send under the lock; False when there is no open connection."""
@@ -434,7 +472,3 @@ def _grow_rcvbuf(sock: socket.socket, size: int) -> int:
     if granted < size:
         log.info("bridge: UDP receive buffer %d bytes of %d asked (raise net.core.rmem_max for bursts)", granted, size)
     return granted
-
-
-def _refuse_unsigned(mav: Any, msg_id: int) -> bool:
-    return False

@@ -98,6 +98,7 @@ class MavlinkBridge(Service):
         source_system: int = 1,
         source_component: int = mavlink2.MAV_COMP_ID_ONBOARD_COMPUTER,
         baud: int = 115200,
+        accept_unsigned: bool = False,
         status_interval_s: float = 1.0,
     ):
         if not isinstance(device, str) or not device:
@@ -139,6 +140,7 @@ class MavlinkBridge(Service):
             signing_key=key,
             vehicle=vehicle,
         )
+        self._link.accept_unsigned = accept_unsigned  # with a key: until bring-up gives the vehicle it
         self._commands = VehicleCommands(
             self._link, replies, self.gate, counts=self._counts, stop=self._stop, vehicle=vehicle
         )
@@ -283,6 +285,28 @@ class MavlinkBridge(Service):
     def request_parameter(self, name: str) -> None:
         """Ask for one parameter's value (:meth:`VehicleCommands.request_parameter`)."""
         self._commands.request_parameter(name)
+
+    @property
+    def signing_key(self) -> bytes | None:
+        """The MAVLink 2 signing key (None: not signing)."""
+        return self._link.signing_key
+
+    def setup_signing(self) -> None:
+        """Give the vehicle our signing key (:meth:`VehicleCommands.setup_signing`)."""
+        self._commands.setup_signing()
+
+    def accepts_unsigned(self, timeout: float = 1.0) -> bool:
+        """Whether the vehicle answers unsigned commands on this link (:meth:`VehicleCommands.accepts_unsigned`)."""
+        return self._commands.accepts_unsigned(timeout)
+
+    @property
+    def accept_unsigned(self) -> bool:
+        """With a signing key: whether unsigned frames from the vehicle are taken (until it holds the key)."""
+        return self._link.accept_unsigned
+
+    @accept_unsigned.setter
+    def accept_unsigned(self, accept: bool) -> None:
+        self._link.accept_unsigned = bool(accept)
 
     def set_parameter(self, name: str, value: float) -> None:
         """Set one parameter (:meth:`VehicleCommands.set_parameter`)."""

@@ -304,6 +304,31 @@ class VehicleCommands:
         msg = mavlink2.MAVLink_param_request_read_message(target[0], target[1], name.encode(), -1)
         self._send_or_raise(msg, "request_parameter")
 
+    def setup_signing(self) -> None:
+        """Give the vehicle our signing key with SETUP_SIGNING (256); it signs from then on and refuses unsigned
+        messages except on its channel 0. There is no answer: the vehicle's next frames tell."""
+        key = self._link.signing_key
+        if key is None:
+            raise InputError("setup_signing: the bridge has no signing key (--signing-key)")
+        target = self._ready("setup_signing")
+        msg = mavlink2.MAVLink_setup_signing_message(target[0], target[1], list(key), self._link.signing_timestamp)
+        self._send_or_raise(msg, "setup_signing")
+
+    def accepts_unsigned(self, timeout: float = 1.0, tries: int = 2) -> bool:
+        """Whether the vehicle answers an unsigned command on this link: REQUEST_MESSAGE(AUTOPILOT_VERSION) sent
+        unsigned, its COMMAND_ACK awaited. ArduPilot answers it on its channel 0 whatever its signing says."""
+        target = self._ready("accepts_unsigned")
+        command = mavlink2.MAV_CMD_REQUEST_MESSAGE
+        for attempt in range(tries):
+            serial = self._replies.ack_serial()
+            msg = mavlink2.MAVLink_command_long_message(
+                target[0], target[1], command, attempt, mavlink2.MAVLINK_MSG_ID_AUTOPILOT_VERSION, 0, 0, 0, 0, 0, 0
+            )
+            self._link.send_unsigned(msg)
+            if self._replies.wait_ack(command, serial, time.monotonic() + timeout, self._stop, "accepts_unsigned"):
+                return True
+        return False
+
     def set_parameter(self, name: str, value: float) -> None:
         """Set parameter ``name`` with PARAM_SET (23); the vehicle answers with PARAM_VALUE as telemetry
         (``latest("PARAM_VALUE")``): read it back to know it was taken."""

@@ -110,6 +110,14 @@ def run(
             "at depth first (logged, not scored) instead of refused.",
         ),
     ] = False,
+    signing_key: Annotated[
+        Path | None,
+        typer.Option(
+            "--signing-key",
+            help="With --mavlink: MAVLink 2 signing with this key file (32 bytes or 64 hex digits), given to the "
+            "disarmed vehicle at bring-up; refused on a link where the vehicle takes unsigned commands (its channel 0).",
+        ),
+    ] = None,
     start_tolerance: Annotated[
         float,
         typer.Option("--start-tolerance", help="With --mavlink: metres from the scenario's start the vehicle may be."),
@@ -154,6 +162,7 @@ def run(
             guard=None if no_guard else _guard(guard_timeout, guard_path, guard_reboot),
             start_tolerance_m=start_tolerance,
             transit=transit,
+            signing_key=signing_key,
         )
         return
     if speedup is not None and speedup <= 0:

@@ -26,6 +26,7 @@ def run_on_vehicle(
     guard=None,
     start_tolerance_m: float = 10.0,
     transit: bool = False,
+    signing_key: Path | None = None,
 ) -> None:
     """Fly ``flight`` at ``connection``; print the bring-up timeline, the end, the mode and the decisions' figures."""
     from planner.fly.flight import is_plan
@@ -64,6 +65,7 @@ def run_on_vehicle(
             guard=guard,
             start_tolerance_m=start_tolerance_m,
             transit=transit,
+            signing_key=signing_key,
         )
     except KeyboardInterrupt:
         fail("stopped by the operator: the vehicle was told to surface and disarm")

@@ -168,6 +168,7 @@ class BringUp:
     # -- the sequence ------------------------------------------------------------------------
     def run(self) -> int:
         self.heartbeat()
+        self.signing()
         self.streams()
         self.previous()
         self.estimate()
@@ -187,6 +188,12 @@ class BringUp:
         if hb is None:
             failures = b.stats.get("open_failures", 0)
             why = f"could not open it ({failures} tries)" if failures else "no HEARTBEAT from an autopilot"
+            bad = b.stats.get("bad_signature", 0)
+            if bad:
+                why = (
+                    f"its frames are signed with another key ({bad} refused: signatures do not match); give "
+                    "--signing-key the vehicle's key, or clear the key on the vehicle"
+                )
             self._fail(
                 "heartbeat",
                 LinkTimeoutError(
@@ -247,6 +254,48 @@ class BringUp:
                 ),
             )
         self._ok("streams", ", ".join(f"{n} {hz:g} Hz" for n, hz in STREAMS.items()))
+
+    def signing(self) -> None:
+        """With ``--signing-key``: the vehicle signs with our key (given it by SETUP_SIGNING, only while it is
+        disarmed), unsigned frames are refused from then on, and the link must be one where the vehicle
+        refuses unsigned commands too. ArduPilot accepts every unsigned message on its channel 0 (SITL's
+        SERIAL0, a USB port, BlueOS's main endpoint): signing there protects nothing, so the run is refused."""
+        b = self.bridge
+        if b.signing_key is None:
+            return
+        got = b.latest("HEARTBEAT")
+        if got is None or not got[0].get_signed():
+            if self._armed():
+                self._fail(
+                    "signing",
+                    RefusedError(
+                        "--signing-key: the vehicle is armed and does not sign with this key; the key is given to a "
+                        "vehicle only while it is disarmed"
+                    ),
+                )
+            asked = time.monotonic()
+            b.setup_signing()
+
+            def signs() -> bool | None:
+                hb = b.latest("HEARTBEAT")
+                return True if hb is not None and hb[1] > asked and hb[0].get_signed() else None
+
+            if self._wait(signs, 5.0) is None:
+                self._fail(
+                    "signing",
+                    RunError("--signing-key: the vehicle did not take the key (its heartbeats are still unsigned)"),
+                )
+        b.accept_unsigned = False
+        if b.accepts_unsigned():
+            self._fail(
+                "signing",
+                RefusedError(
+                    f"--signing-key: the vehicle answers unsigned commands on {self.connection} (ArduPilot's channel 0: "
+                    "SITL's SERIAL0, a USB port, BlueOS's main endpoint), so signing protects nothing there; connect "
+                    "through another serial or UDP endpoint (SERIAL1 or later)"
+                ),
+            )
+        self._ok("signing", "the vehicle signs with our key and ignores unsigned commands on this link")
 
     def previous(self) -> None:
         """A vehicle still armed in GUIDED or SURFACE is an earlier run's (ours, or one whose computer died and

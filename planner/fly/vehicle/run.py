@@ -78,6 +78,7 @@ def run_vehicle(
     guard: GuardOptions | None = DEFAULT_GUARD,
     start_tolerance_m: float = START_TOLERANCE_M,
     transit: bool = False,
+    signing_key: bytes | str | Path | None = None,
 ) -> VehicleRunResult:
     """Fly ``flight`` (:class:`planner.fly.flight.Flight`) on the vehicle at ``connection`` (a pymavlink string).
 
@@ -92,6 +93,7 @@ def run_vehicle(
     guard bring-up installs (:mod:`planner.fly.vehicle.guard`); None flies without one, and the timeline says so.
     A vehicle farther than ``start_tolerance_m`` from the scenario's start is refused, or with ``transit`` flown
     there before the scenario clock starts; one still armed from an earlier run is surfaced and disarmed first.
+    ``signing_key`` (32 bytes, or a key file): MAVLink 2 signing, the key given to the vehicle at bring-up.
     """
     _check_options(action, record_only, connection)
     mission, u = flight.mission, np.asarray(flight.u, dtype=float)
@@ -110,7 +112,7 @@ def run_vehicle(
         view = start_live_view(bus, vehicle, mission, u, live)
         if view is not None:
             parts.append(view)  # closed last: it shows the run's end
-        run = _start_parts(bus, vehicle, flight, connection, log_path, action, record_only, parts)
+        run = _start_parts(bus, vehicle, flight, connection, log_path, action, record_only, parts, signing_key)
         meta = scenario_json(
             mission,
             u,
@@ -191,6 +193,7 @@ def _start_parts(
     action: str,
     record_only: Iterable[str],
     parts: list,
+    signing_key: bytes | str | Path | None = None,
 ) -> _Parts:
     """Start the logger (with the scenario's map), the bridge, the virtual range, the referee, the back-seat and
     the watchdog, each added to ``parts`` (to be closed); return once their subscriptions are at the hub."""
@@ -205,7 +208,15 @@ def _start_parts(
         parts.append(logger.start())
         heard.append("logger")
     hub = bus.session("bridge")
-    bridge = MavlinkBridge(connection, hub, vehicle=vehicle, allow_commands=True, required_mode="GUIDED").start()
+    bridge = MavlinkBridge(
+        connection,
+        hub,
+        vehicle=vehicle,
+        allow_commands=True,
+        required_mode="GUIDED",
+        signing_key=signing_key,
+        accept_unsigned=signing_key is not None,  # until bring-up has given the vehicle the key
+    ).start()
     parts.append(bridge)
     virtual = VirtualRange(bus.session(PART_ROLES["virtual_range"]), vehicle, mission, u).start()
     referee = Referee(bus.session(PART_ROLES["referee"]), vehicle, mission, u).start()
