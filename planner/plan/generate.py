@@ -48,6 +48,7 @@ from planner.plan.plan_scenarios import scenario_entries, variant_entries
 from planner.plan.planned_for import planned_for
 from planner.plan.refinement import MIN_REFINE_RUNS, refine_pairs
 from planner.plan.report import write_report
+from planner.plan.runtime import numerical_runtime
 from planner.plan.search_status import SearchStatus
 from rapt.errors import InputError, StudyMismatchError
 from sim.uuv.mission import Mission
@@ -488,6 +489,7 @@ def _plan_document(
             **({"refinement": refinement} if refinement is not None else {}),
             **({"surrogate": _surrogate_summary(cfg, confirmation)} if confirmation is not None else {}),
         },
+        "runtime": numerical_runtime(),
         "sensitivity": a.sensitivity,
         "pairs": plan_pairs,
         "scenarios": scenarios,

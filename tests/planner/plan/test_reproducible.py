@@ -1,0 +1,57 @@
+"""The same plan under other CPU paths: NumPy's dispatch without AVX-512 and another OpenBLAS kernel give the same
+pairs, scenario parameters, verdicts, P values and predicted modes; plan.json names the runtime that made it."""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from planner.plan.runtime import numerical_runtime
+
+ROOT = Path(__file__).resolve().parents[3]
+MISSION = ROOT / "examples" / "range2017.toml"
+#: NumPy's dispatch targets above AVX2 (NumPy 2.x names), turned off; OpenBLAS told to use its Haswell kernels
+SETTINGS = {
+    "as installed": {},
+    "no AVX-512 in NumPy": {"NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR"},
+    "OpenBLAS Haswell": {"OPENBLAS_CORETYPE": "Haswell"},
+}
+
+
+def _plan(out: Path, env: dict) -> dict:
+    done = subprocess.run(
+        [sys.executable, "-m", "planner.cli", "generate", str(MISSION), "--out", str(out), "--budget", "1200"],
+        env={**os.environ, **env},
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    return json.loads((out / "plan.json").read_text())
+
+
+@pytest.mark.slow  # three searches of 1,200 runs, about a minute each on 2 cores
+def test_the_plan_is_the_same_under_other_numpy_dispatch_and_blas_kernels(tmp_path):
+    plans = {name: _plan(tmp_path / f"plan{k}", env) for k, (name, env) in enumerate(SETTINGS.items())}
+    reference = plans["as installed"]
+    assert reference["runtime"]["numpy"] and reference["runtime"]["blas"]
+    for name, plan in plans.items():
+        # everything but the runtime record, to the last digit
+        assert {k: v for k, v in plan.items() if k != "runtime"} == {
+            k: v for k, v in reference.items() if k != "runtime"
+        }, name
+    # the settings took: NumPy reports the AVX-512 targets off
+    off = plans["no AVX-512 in NumPy"]["runtime"]["numpy_dispatch"]
+    assert "X86_V4" not in off
+
+
+def test_the_runtime_names_the_libraries_the_blas_and_the_cpu_paths():
+    runtime = numerical_runtime()
+    assert {"python", "numpy", "scipy", "scikit-learn", "blas", "numpy_dispatch"} <= set(runtime)
+    assert runtime["blas"] and all(b["internal_api"] for b in runtime["blas"])
+    assert json.loads(json.dumps(runtime)) == runtime  # plain JSON, as plan.json stores it
