@@ -207,30 +207,22 @@ def main(argv: Sequence[str] | None = None) -> int:
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())
+    session = None
     try:
         args = _arguments(argv)
         host, port = parse_address(args.listen, "--listen")
         maps = _maps(args.map)
         session = _session(args)
-    except InputError as exc:
-        print(exc, file=sys.stderr)
-        return 2
-    except RaptError as exc:
-        print(exc, file=sys.stderr)
-        return 1
-    try:
         with LiveView(session, vehicle=args.vehicle, host=host, port=port, maps=maps) as view:
             print(f"{READY} {view.url}", flush=True)  # the one line the parent reads
             while not stop.wait(0.5):
                 pass
-    except InputError as exc:
-        print(exc, file=sys.stderr)
-        return 2
     except RaptError as exc:
         print(exc, file=sys.stderr)
-        return 1
+        return 2 if isinstance(exc, InputError) else 1
     finally:
-        session.close()
+        if session is not None:
+            session.close()
     return 0
 
 

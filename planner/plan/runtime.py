@@ -9,6 +9,7 @@ library or CPU difference from a changed mission.
 
 from __future__ import annotations
 
+import importlib
 import platform
 from importlib import metadata
 
@@ -23,9 +24,9 @@ def numerical_runtime() -> dict:
     version, CPU kernel and threading) and the CPU features NumPy's dispatch uses on this machine."""
     import numpy  # noqa: F401  (its BLAS is loaded with it: threadpoolctl reports loaded libraries)
     import scipy.linalg  # noqa: F401
-    from threadpoolctl import threadpool_info
+    from threadpoolctl import threadpool_info  # type: ignore[import-untyped]
 
-    versions = {}
+    versions: dict[str, str | None] = {}
     for name in LIBRARIES:
         try:
             versions[name] = metadata.version(name)
@@ -36,15 +37,15 @@ def numerical_runtime() -> dict:
         for info in threadpool_info()
         if info.get("user_api") == "blas"
     ]
-    try:
-        from numpy._core._multiarray_umath import __cpu_baseline__, __cpu_dispatch__, __cpu_features__
-    except ImportError:  # NumPy 1.x
-        from numpy.core._multiarray_umath import __cpu_baseline__, __cpu_dispatch__, __cpu_features__
+    try:  # NumPy 2.x, else 1.x
+        core = importlib.import_module("numpy._core._multiarray_umath")
+    except ImportError:
+        core = importlib.import_module("numpy.core._multiarray_umath")
     return {
         "python": platform.python_version(),
         "machine": platform.machine(),
         **versions,
         "blas": blas,
-        "numpy_baseline": list(__cpu_baseline__),
-        "numpy_dispatch": [name for name in __cpu_dispatch__ if __cpu_features__.get(name)],
+        "numpy_baseline": list(core.__cpu_baseline__),
+        "numpy_dispatch": [name for name in core.__cpu_dispatch__ if core.__cpu_features__.get(name)],
     }

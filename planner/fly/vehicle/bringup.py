@@ -564,32 +564,39 @@ class BringUp:
     def dive(self) -> None:
         """Down to the mission depth on set-points of our own, holding position, in GUIDED."""
         self.session.put(keys.active(self.vehicle), keys.BRINGUP_SOURCE)
-        deadline = time.monotonic() + self.timeouts.depth
-        at_depth, last_ms = 0, -1
-        while at_depth < DEPTH_REPORTS:
+
+        def late() -> Exception:
+            pose = self.telemetry.pose
+            depth = f"{pose.depth:.2f}" if pose is not None else "unknown"
+            return LinkTimeoutError(
+                f"bring-up depth: not at {DEPTH_M:g} m within {self.timeouts.depth:g} s (depth {depth} m)"
+            )
+
+        at_depth = 0
+        for pose in self._reports("depth", time.monotonic() + self.timeouts.depth, late):
+            at_depth = at_depth + 1 if abs(pose.depth - DEPTH_M) <= DEPTH_TOLERANCE_M else 0
+            sp = Setpoint(0.0, 0.0, depth_rate(pose.depth, False), pose.heading, pose.time_ms)
+            self._commands.put(sp.to_json())
+            if at_depth >= DEPTH_REPORTS:
+                break
+        self._ok("depth", f"at {pose.depth:.2f} m")
+
+    def _reports(self, step: str, deadline: float, late: Callable[[], Exception]):
+        """Each new position report, while the vehicle stays in GUIDED; past ``deadline`` (monotonic) the step
+        fails with ``late()``, out of GUIDED with the mode it is in now."""
+        last_ms = -1
+        while True:
             if time.monotonic() > deadline:
-                pose = self.telemetry.pose
-                depth = f"{pose.depth:.2f}" if pose is not None else "unknown"
-                self._fail(
-                    "depth",
-                    LinkTimeoutError(
-                        f"bring-up depth: not at {DEPTH_M:g} m within {self.timeouts.depth:g} s (depth {depth} m)"
-                    ),
-                )
+                self._fail(step, late())
             if self._mode() != GUIDED:
-                self._fail("depth", RunError(f"bring-up depth: the vehicle left GUIDED (now {self._mode_label()})"))
+                self._fail(step, RunError(f"bring-up {step}: the vehicle left GUIDED (now {self._mode_label()})"))
             self._feed()
             pose = self.telemetry.pose
             if pose is None or pose.time_ms == last_ms:
                 time.sleep(0.005)
                 continue
             last_ms = pose.time_ms
-            at_depth = at_depth + 1 if abs(pose.depth - DEPTH_M) <= DEPTH_TOLERANCE_M else 0
-            sp = Setpoint(0.0, 0.0, depth_rate(pose.depth, False), pose.heading, pose.time_ms)
-            self._commands.put(sp.to_json())
-        pose = self.telemetry.pose
-        assert pose is not None
-        self._ok("depth", f"at {pose.depth:.2f} m")
+            yield pose
 
     def transit_leg(self) -> None:
         """At depth, in GUIDED, on set-points of the bring-up's own: to the scenario's start (to half the
@@ -601,24 +608,15 @@ class BringUp:
         speed = min(TRANSIT_MPS, self.mission.vehicle.cruise_speed)
         budget_s = self._transit_m / TRANSIT_SLOWEST_MPS + self.timeouts.transit  # vehicle seconds
         deadline = time.monotonic() + budget_s / max(self.pace, 1e-3)
-        first_ms, last_ms = -1, -1
-        while True:
-            if time.monotonic() > deadline:
-                pose = self.telemetry.pose
-                left = math.hypot(pose.east - sx, pose.north - sy) if pose is not None else float("nan")
-                self._fail(
-                    "transit",
-                    LinkTimeoutError(f"bring-up transit: still {left:.0f} m from the start after {budget_s:.0f} s"),
-                )
-            if self._mode() != GUIDED:
-                self._fail("transit", RunError(f"bring-up transit: the vehicle left GUIDED (now {self._mode_label()})"))
-            self._feed()
+
+        def late() -> Exception:
             pose = self.telemetry.pose
-            if pose is None or pose.time_ms == last_ms:
-                time.sleep(0.005)
-                continue
-            last_ms = pose.time_ms
-            first_ms = pose.time_ms if first_ms < 0 else first_ms
+            left = math.hypot(pose.east - sx, pose.north - sy) if pose is not None else float("nan")
+            return LinkTimeoutError(f"bring-up transit: still {left:.0f} m from the start after {budget_s:.0f} s")
+
+        first_ms = last_ms = -1
+        for pose in self._reports("transit", deadline, late):
+            first_ms, last_ms = (pose.time_ms if first_ms < 0 else first_ms), pose.time_ms
             de, dn = sx - pose.east, sy - pose.north
             d = math.hypot(de, dn)
             if d <= arrive:
