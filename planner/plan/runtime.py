@@ -32,11 +32,14 @@ def numerical_runtime() -> dict:
             versions[name] = metadata.version(name)
         except metadata.PackageNotFoundError:
             versions[name] = None
-    blas = [
-        {k: info.get(k) for k in ("internal_api", "version", "architecture", "threading_layer")}
-        for info in threadpool_info()
-        if info.get("user_api") == "blas"
-    ]
+    blas = sorted(  # in a fixed order: threadpoolctl lists them in the order they were loaded
+        (
+            {k: info.get(k) for k in ("internal_api", "version", "architecture", "threading_layer")}
+            for info in threadpool_info()
+            if info.get("user_api") == "blas"
+        ),
+        key=lambda b: tuple(str(b[k]) for k in ("internal_api", "version", "architecture", "threading_layer")),
+    )
     try:  # NumPy 2.x, else 1.x
         core = importlib.import_module("numpy._core._multiarray_umath")
     except ImportError:
