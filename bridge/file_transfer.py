@@ -18,7 +18,7 @@ import posixpath
 import queue
 from typing import Any
 
-from pymavlink.mavftp import MAVFTP, FtpError, MAVFTPSettings
+from pymavlink.mavftp import MAVFTP, FtpError
 
 from rapt.errors import LinkTimeoutError, RefusedError
 
@@ -64,21 +64,9 @@ def put_file(
     """Write ``data`` to ``remote`` on the autopilot ``target`` (system, component) behind ``link``, whose FTP
     replies arrive in ``inbox``. Raises :class:`RefusedError` with the vehicle's FTP error, or
     :class:`LinkTimeoutError` when it does not answer within ``timeout`` seconds."""
-    settings = MAVFTPSettings(
-        [
-            ("debug", int, 0),
-            ("pkt_loss_tx", int, 0),
-            ("pkt_loss_rx", int, 0),
-            ("max_backlog", int, 5),
-            ("burst_read_size", int, 80),
-            ("write_size", int, 80),
-            ("write_qsize", int, 5),
-            ("idle_detection_time", float, IDLE_S),
-            ("read_retry_time", float, IDLE_S / 2),
-            ("retry_time", float, 0.5),
-        ]
-    )
-    ftp = MAVFTP(_LinkPort(link, inbox, target), target[0], target[1], settings)
+    ftp = MAVFTP(_LinkPort(link, inbox, target), target[0], target[1])
+    ftp.ftp_settings.read_retry_time = IDLE_S / 2  # below the idle time, as MAVFTP requires
+    ftp.ftp_settings.idle_detection_time = IDLE_S
     where = posixpath.dirname(remote) or "."
     ftp.cmd_list([where])  # the session's first request: see the module docstring
     listed = ftp.process_ftp_reply("ListDirectory", timeout=timeout)

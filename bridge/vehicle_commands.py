@@ -20,7 +20,7 @@ import math
 import queue
 import threading
 import time
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -317,17 +317,19 @@ class VehicleCommands:
     def accepts_unsigned(self, timeout: float = 1.0, tries: int = 2) -> bool:
         """Whether the vehicle answers an unsigned command on this link: REQUEST_MESSAGE(AUTOPILOT_VERSION) sent
         unsigned, its COMMAND_ACK awaited. ArduPilot answers it on its channel 0 whatever its signing says."""
-        target = self._ready("accepts_unsigned")
-        command = mavlink2.MAV_CMD_REQUEST_MESSAGE
-        for attempt in range(tries):
-            serial = self._replies.ack_serial()
-            msg = mavlink2.MAVLink_command_long_message(
-                target[0], target[1], command, attempt, mavlink2.MAVLINK_MSG_ID_AUTOPILOT_VERSION, 0, 0, 0, 0, 0, 0
+        params = (mavlink2.MAVLINK_MSG_ID_AUTOPILOT_VERSION, 0, 0, 0, 0, 0, 0)
+        try:
+            self._command_long(
+                mavlink2.MAV_CMD_REQUEST_MESSAGE,
+                params,
+                timeout,
+                tries - 1,
+                "accepts_unsigned",
+                self._link.send_unsigned,
             )
-            self._link.send_unsigned(msg)
-            if self._replies.wait_ack(command, serial, time.monotonic() + timeout, self._stop, "accepts_unsigned"):
-                return True
-        return False
+        except LinkTimeoutError:
+            return False
+        return True
 
     def set_parameter(self, name: str, value: float) -> None:
         """Set parameter ``name`` with PARAM_SET (23); the vehicle answers with PARAM_VALUE as telemetry
@@ -342,7 +344,16 @@ class VehicleCommands:
         )
         self._send_or_raise(msg, "set_parameter")
 
-    def _command_long(self, command: int, params: Sequence[float], timeout: float, retries: int, what: str) -> int:
+    def _command_long(
+        self,
+        command: int,
+        params: Sequence[float],
+        timeout: float,
+        retries: int,
+        what: str,
+        send: Callable[[Any], bool] | None = None,
+    ) -> int:
+        """Send COMMAND_LONG (with ``send``: the link's signed send by default) until its final COMMAND_ACK."""
         if not (_is_number(timeout) and timeout > 0):
             raise InputError(f"timeout: expected a number of seconds > 0, got {timeout!r}")
         if not _is_int(retries, 0, 1000):
@@ -352,7 +363,7 @@ class VehicleCommands:
         for attempt in range(retries + 1):
             serial = self._replies.ack_serial()
             msg = mavlink2.MAVLink_command_long_message(target[0], target[1], command, min(attempt, 255), *params)
-            self._link.send(msg)
+            (send or self._link.send)(msg)
             deadline = time.monotonic() + timeout
             while (ack := self._replies.wait_ack(command, serial, deadline, self._stop, what)) is not None:
                 if ack[0] != mavlink2.MAV_RESULT_IN_PROGRESS:

@@ -23,10 +23,10 @@ def run_on_vehicle(
     heartbeat_timeout: float = 15.0,
     bus_keys: Path | None = None,
     live: tuple[str, int] | None = None,
-    guard=None,
-    start_tolerance_m: float = 10.0,
-    transit: bool = False,
-    signing_key: Path | None = None,
+    guard,
+    start_tolerance_m: float,
+    transit: bool,
+    signing_key: Path | None,
 ) -> None:
     """Fly ``flight`` at ``connection``; print the bring-up timeline, the end, the mode and the decisions' figures."""
     from planner.fly.flight import is_plan

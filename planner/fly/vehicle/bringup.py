@@ -511,7 +511,7 @@ class BringUp(Preflight):
             if last == mavlink.MAV_RESULT_ACCEPTED:
                 return
             time.sleep(0.5)
-        name = "no COMMAND_ACK" if last is None else result_name(last)
+        name = result_name(last)
         self._fail(step, RefusedError(f"bring-up {step}: refused {tries} times in {timeout:g} s (last: {name})"))
 
     def _wait(self, get: Callable[[], object], timeout: float):
