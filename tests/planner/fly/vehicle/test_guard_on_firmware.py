@@ -5,16 +5,11 @@ from __future__ import annotations
 
 import os
 import signal
-import subprocess
-import sys
-import threading
-import time
 from pathlib import Path
 
 import pytest
 
 os.environ.setdefault("MAVLINK20", "1")
-from pymavlink import mavutil  # noqa: E402
 
 from planner.fly.ardusub_sitl import ENV, ArduSubSitl, launch_point, sitl_binary  # noqa: E402
 from planner.fly.flight import flight_from_plan  # noqa: E402
@@ -22,6 +17,7 @@ from planner.fly.vehicle.guard import GuardOptions  # noqa: E402
 from planner.fly.vehicle.run import run_vehicle  # noqa: E402
 from rapt.errors import RefusedError  # noqa: E402
 from sim.uuv.missionfile import load_mission  # noqa: E402
+from tests.support.firmware_run import Monitor, kill_mid_scenario  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[4]
 PLAN = ROOT / "field_plans" / "range2017" / "plan.json"
@@ -33,75 +29,18 @@ needs_firmware = pytest.mark.skipif(sitl_binary() is None, reason=f"{ENV} is not
 pytestmark = [needs_firmware, pytest.mark.sitl, pytest.mark.integration]
 
 
-class _Monitor:
-    """A listener on the firmware's second port (SERIAL1): its clock, modes and STATUSTEXTs. It sends no
-    heartbeat, so it is no ground station the firmware's own failsafe would watch."""
-
-    def __init__(self, port: int):
-        self.link = mavutil.mavlink_connection(f"tcp:127.0.0.1:{port}", source_system=250, source_component=190)
-        self.now_ms = -1
-        self.modes: list[tuple[int, int]] = []  # (vehicle ms, custom_mode) of each autopilot heartbeat
-        self.texts: list[tuple[int, str]] = []
-        self._stop = threading.Event()
-        self._thread = threading.Thread(target=self._read, name="monitor", daemon=True)
-        self._thread.start()
-
-    def _read(self) -> None:
-        asked = 0.0
-        while not self._stop.is_set():
-            if time.monotonic() - asked > 2.0:  # its stream on this port, whatever the port's defaults
-                self.link.mav.request_data_stream_send(1, 1, mavutil.mavlink.MAV_DATA_STREAM_ALL, 10, 1)
-                asked = time.monotonic()
-            msg = self.link.recv_match(blocking=True, timeout=0.1)
-            if msg is None or msg.get_srcSystem() != 1:
-                continue
-            if hasattr(msg, "time_boot_ms"):
-                self.now_ms = max(self.now_ms, int(msg.time_boot_ms))
-            if msg.get_type() == "HEARTBEAT" and msg.get_srcComponent() == 1:
-                self.modes.append((self.now_ms, int(msg.custom_mode)))
-            elif msg.get_type() == "STATUSTEXT":
-                self.texts.append((self.now_ms, msg.text))
-
-    def wait(self, test, timeout_s: float, what: str):
-        deadline = time.monotonic() + timeout_s
-        while time.monotonic() < deadline:
-            if (got := test()) is not None:
-                return got
-            time.sleep(0.01)
-        raise AssertionError(f"no {what} within {timeout_s} s; modes {self.modes[-5:]}, texts {self.texts[-5:]}")
-
-    def close(self) -> None:
-        self._stop.set()
-        self._thread.join(timeout=5)
-        self.link.close()
-
-
 def test_a_run_killed_mid_scenario_is_surfaced_by_the_guard_within_its_timeout(tmp_path):
     """kill -9 of ``rapt-plan run --mavlink`` 20 vehicle seconds into pair2b: nothing of ours is left to
     command the vehicle, and the guard installed at bring-up switches it to SURFACE within its timeout
     (10 vehicle seconds) + 3, saying why."""
-    lines: list[str] = []
     with ArduSubSitl(LAUNCH, speedup=SPEEDUP) as sitl:
-        monitor = _Monitor(sitl.port + 2)
-        run = subprocess.Popen(
-            [sys.executable, "-m", "planner.cli", "run", str(PLAN), "--scenario", "pair2b"]
-            + ["--mavlink", sitl.connection, "--log", str(tmp_path / "killed.mcap")],
-            stdout=subprocess.DEVNULL,
-            stderr=subprocess.PIPE,
-            text=True,
-            env={**os.environ, "COLUMNS": "200"},
-        )
-        reader = threading.Thread(target=lambda: lines.extend(run.stderr), daemon=True)
-        reader.start()
+        monitor = Monitor(sitl.port + 2)
         try:
-            monitor.wait(lambda: any(" clock " in line for line in lines) or None, 180, "scenario clock")
-            assert any(" guard " in line and "running" in line for line in lines), lines
-            start_ms = monitor.now_ms
-            monitor.wait(lambda: monitor.now_ms >= start_ms + 20_000 or None, 30, "20 vehicle seconds")
-            assert monitor.modes[-1][1] == 4, monitor.modes[-3:]  # flying the scenario in GUIDED
-            run.send_signal(signal.SIGKILL)
-            run.wait(timeout=10)
-            killed_ms = monitor.now_ms
+            log = str(tmp_path / "killed.mcap")
+            run = kill_mid_scenario(sitl.connection, monitor, PLAN, "pair2b", 20.0, "--log", log)
+            assert any(" guard " in line and "running" in line for line in run.lines), run.lines
+            assert run.mode_at_kill == 4, monitor.modes[-3:]  # flying the scenario in GUIDED
+            killed_ms = run.killed_ms
             surfaced_ms = monitor.wait(
                 lambda: next((t for t, mode in monitor.modes if t >= killed_ms and mode == SURFACE), None),
                 30,
@@ -115,10 +54,6 @@ def test_a_run_killed_mid_scenario_is_surfaced_by_the_guard_within_its_timeout(t
                 "the guard's STATUSTEXT",
             )
         finally:
-            if run.poll() is None:
-                run.kill()
-                run.wait(timeout=10)
-            reader.join(timeout=5)
             monitor.close()
     assert run.returncode == -signal.SIGKILL
     # its last beat came up to one beat (2 vehicle s here) before the kill: SURFACE within the timeout + 3 of it

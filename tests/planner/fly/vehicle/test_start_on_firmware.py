@@ -5,11 +5,6 @@ transit leg before the scenario clock starts."""
 from __future__ import annotations
 
 import math
-import os
-import signal
-import subprocess
-import sys
-import threading
 import time
 from pathlib import Path
 
@@ -21,7 +16,7 @@ from planner.fly.vehicle.bringup import START_TOLERANCE_M
 from planner.fly.vehicle.run import run_vehicle
 from rapt.errors import InputError
 from sim.uuv.missionfile import load_mission
-from tests.planner.fly.vehicle.test_guard_on_firmware import _Monitor
+from tests.support.firmware_run import Monitor, kill_mid_scenario
 
 ROOT = Path(__file__).resolve().parents[4]
 PLAN = ROOT / "field_plans" / "range2017" / "plan.json"
@@ -34,40 +29,14 @@ needs_firmware = pytest.mark.skipif(sitl_binary() is None, reason=f"{ENV} is not
 pytestmark = [needs_firmware, pytest.mark.sitl, pytest.mark.integration, pytest.mark.slow]
 
 
-def _killed_mid_scenario(sitl: ArduSubSitl, monitor: _Monitor, flown_s: float) -> None:
-    """``rapt-plan run --mavlink --no-guard`` killed ``flown_s`` vehicle seconds into pair2b: the vehicle is left
-    armed in GUIDED at depth, where the run left it."""
-    lines: list[str] = []
-    run = subprocess.Popen(
-        [sys.executable, "-m", "planner.cli", "run", str(PLAN), "--scenario", "pair2b"]
-        + ["--mavlink", sitl.connection, "--no-guard"],
-        stdout=subprocess.DEVNULL,
-        stderr=subprocess.PIPE,
-        text=True,
-        env={**os.environ, "COLUMNS": "200"},
-    )
-    reader = threading.Thread(target=lambda: lines.extend(run.stderr), daemon=True)
-    reader.start()
-    try:
-        monitor.wait(lambda: any(" clock " in line for line in lines) or None, 180, "scenario clock")
-        start_ms = monitor.now_ms
-        monitor.wait(lambda: monitor.now_ms >= start_ms + flown_s * 1000 or None, 120, "the flight")
-        run.send_signal(signal.SIGKILL)
-        run.wait(timeout=10)
-    finally:
-        if run.poll() is None:
-            run.kill()
-            run.wait(timeout=10)
-        reader.join(timeout=5)
-
-
 def test_a_killed_runs_vehicle_is_surfaced_disarmed_and_flown_back_to_the_start_before_the_clock():
     flight = flight_from_plan(PLAN, "pair2b")
     sx, sy = MISSION.launch
     with ArduSubSitl(LAUNCH, speedup=SPEEDUP) as sitl:
-        monitor = _Monitor(sitl.port + 2)
+        monitor = Monitor(sitl.port + 2)
         try:
-            _killed_mid_scenario(sitl, monitor, flown_s=200.0)  # about 150 m along pair2b's first leg
+            # a --no-guard run killed about 150 m along pair2b's first leg
+            kill_mid_scenario(sitl.connection, monitor, PLAN, "pair2b", 200.0, "--no-guard")
             time.sleep(1.0)
             assert monitor.modes[-1][1] == GUIDED  # left armed in GUIDED, at depth, with nobody flying it
 
