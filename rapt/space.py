@@ -16,6 +16,7 @@ from __future__ import annotations
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
+from decimal import Decimal
 from typing import Any
 
 import numpy as np
@@ -41,12 +42,20 @@ def _check_name(name: str) -> str:
 
 @dataclass(frozen=True)
 class Continuous:
-    """A real-valued parameter on ``[low, high]`` (optionally sampled on a log scale)."""
+    """A real-valued parameter on ``[low, high]`` (optionally sampled on a log scale).
+
+    ``resolution`` is the finest step the parameter can be set to in the world it describes (a
+    surveyed position to 0.1 m, a clock to 1 s). A search moves continuously; a scenario that
+    leaves it for the world is moved onto the steps by :meth:`snap_unit` (so it can be set up as
+    simulated, and a last-digit difference in its cube coordinate does not reach it), and a value
+    on a step up to rounding decodes as that step exactly (364.1, not 364.09999999999997).
+    """
 
     name: str
     low: float
     high: float
     log: bool = False
+    resolution: float | None = None
     kind: str = field(default="continuous", init=False)
 
     def __post_init__(self) -> None:
@@ -60,6 +69,13 @@ class Continuous:
             )
         if self.log and low <= 0:
             raise InputError(f"parameter '{self.name}': log scale needs low > 0, got low={low}")
+        if self.resolution is not None:
+            step = self.resolution
+            if isinstance(step, bool) or not isinstance(step, (int, float)) or not (0 < step <= (high - low) / 2):
+                raise InputError(
+                    f"parameter '{self.name}': resolution must be a number in (0, {(high - low) / 2:g}] "
+                    f"(at least three settable values), got {step!r}; give the finest step the value can be set to"
+                )
 
     @property
     def width(self) -> int:
@@ -74,8 +90,40 @@ class Continuous:
     def from_unit(self, u: np.ndarray) -> np.ndarray:
         u = np.clip(np.asarray(u, dtype=float), 0.0, 1.0)
         if self.log:
-            return np.exp(math.log(self.low) + u * (math.log(self.high) - math.log(self.low)))
-        return self.low + u * (self.high - self.low)
+            v = np.exp(math.log(self.low) + u * (math.log(self.high) - math.log(self.low)))
+        else:
+            v = self.low + u * (self.high - self.low)
+        if self.resolution is None:
+            return v
+        k = v / self.resolution
+        on_step = np.abs(k - np.round(k)) <= ON_STEP  # on a step up to the cube's rounding
+        return np.where(on_step, np.clip(_steps(np.round(k), self.resolution), self.low, self.high), v)
+
+    def snap_unit(self, u: npt.ArrayLike, away_from: npt.ArrayLike | None = None) -> np.ndarray:
+        """Cube coordinates ``u`` moved so their values lie on the parameter's steps (unchanged without a
+        resolution): to the nearest step, or, given ``away_from`` (a partner's coordinates), to the
+        step on the far side from the partner, so a boundary pair's sides stay on their sides of it."""
+        cube = np.clip(np.asarray(u, dtype=float), 0.0, 1.0)
+        if self.resolution is None:
+            return cube
+        k = self.from_unit(cube) / self.resolution
+        if away_from is None:
+            k = np.round(k)
+        else:
+            side = np.sign(k - self.from_unit(np.asarray(away_from, dtype=float)) / self.resolution)
+            k = np.where(side > 0, np.ceil(k - ON_STEP), np.where(side < 0, np.floor(k + ON_STEP), np.round(k)))
+        return self.to_unit(np.clip(_steps(k, self.resolution), self.low, self.high))
+
+
+#: How far from a step (in steps) a decoded value may lie and still be that step: the cube's rounding.
+ON_STEP = 1e-6
+
+
+def _steps(k: np.ndarray, step: float) -> np.ndarray:
+    """``k`` steps of ``step``, written as short as ``step`` is."""
+    exponent = Decimal(repr(float(step))).normalize().as_tuple().exponent
+    decimals = max(0, -exponent) if isinstance(exponent, int) else 0
+    return np.round(k * step, decimals)
 
 
 @dataclass(frozen=True)
@@ -313,6 +361,18 @@ class StateSpace:
             out.append(row)
         return out
 
+    def snap(self, U: np.ndarray, away_from: np.ndarray | None = None) -> np.ndarray:
+        """Cube rows moved onto their parameters' resolutions (:meth:`Continuous.snap_unit`; other
+        coordinates unchanged): what a scenario leaving the search for the world becomes.
+        ``away_from``: per row, a partner to snap away from (a boundary pair's other side)."""
+        U = self._check_unit(U).copy()
+        partner = None if away_from is None else self._check_unit(away_from)
+        for p in self.parameters:
+            if isinstance(p, Continuous) and p.resolution is not None:
+                c = self._slices[p.name].start
+                U[:, c] = p.snap_unit(U[:, c], None if partner is None else partner[:, c])
+        return U
+
     def encode(self, scenarios: Sequence[Mapping[str, Any]]) -> np.ndarray:
         """Scenarios as ``{name: value}`` -> unit-cube rows (inverse of :meth:`decode` up to slice centres)."""
         n = len(scenarios)
@@ -340,6 +400,8 @@ class StateSpace:
             d: dict[str, Any] = {"name": p.name, "type": p.kind}
             if isinstance(p, Continuous):
                 d.update(low=float(p.low), high=float(p.high), log=bool(p.log))
+                if p.resolution is not None:
+                    d["resolution"] = float(p.resolution)
             elif isinstance(p, Integer):
                 d.update(low=int(p.low), high=int(p.high))
             elif isinstance(p, Categorical):

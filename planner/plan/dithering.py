@@ -363,7 +363,7 @@ def _moves(mission, u, partner, dither, sensitivity, sigma) -> list[tuple[str, f
         unit_move = sigma * z / np.linalg.norm(z)  # one sigma of noise along v
         previous = u
         for step in VARIANT_STEPS:
-            w = np.clip(u + step * unit_move, 0.0, 1.0)
+            w = mission.space.snap(np.clip(u + step * unit_move, 0.0, 1.0)[None, :])[0]  # as the range sets it
             if np.allclose(w, previous):
                 break  # pinned at the parameters' ranges
             out.append((name, step, w))

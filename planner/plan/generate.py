@@ -238,6 +238,10 @@ def generate(
     sens = coordinate_sensitivity(mission.space, a.sensitivity)
     U = np.vstack([pair_points(a, p) for p in pairs]) if pairs else np.zeros((0, mission.dim))
     ids = [f"pair{p}{side}" for p in range(1, len(pairs) + 1) for side in "ab"]
+    # the scenarios leave the search at the range's resolution, each side a step away from its partner
+    U = mission.space.snap(U, away_from=U[np.arange(len(U)) ^ 1])
+    for p, pair in enumerate(pairs):
+        pair["distance"] = float(np.linalg.norm(U[2 * p] - U[2 * p + 1]))
     partners = U[np.arange(len(U)) ^ 1]  # a's partner is b and b's is a
     chosen = sim.uuv.simulate(mission, U, trajectories=True)
     root = list(a.tree.levels[0])

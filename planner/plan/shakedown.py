@@ -161,7 +161,7 @@ def shakedown_legs(mission: Mission, bearing_deg: float, options: ShakedownOptio
 
 
 def _unit_row(mission: Mission) -> np.ndarray:
-    u = np.full(mission.dim, 0.5)
+    u = mission.space.snap(np.full((1, mission.dim), 0.5))[0]  # the ranges' centres, as the range sets them
     scen = make_scenarios(mission, u[None, :])
     if not scen.valid[0]:
         raise InputError(

@@ -61,6 +61,7 @@ def adjust_for_bias(
             for step in STEPS:
                 v = u.copy()
                 v[c] = np.clip(v[c] + direction * step, 0.0, 1.0)
+                v = mission.space.snap(v[None, :])[0]  # as the range sets it
                 if v[c] != u[c]:
                     cands.append(v)
                     moves.append((abs(v[c] - u[c]), int(c), float(v[c] - u[c])))

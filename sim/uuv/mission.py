@@ -31,6 +31,7 @@ __all__ = [
     "Binding",
     "Mission",
     "TARGET_FIELDS",
+    "FIELD_RESOLUTION",
 ]
 
 
@@ -175,6 +176,19 @@ TARGET_FIELDS: dict[str, tuple[str, ...]] = {
     "obstacle": ("x", "y"),
     "mission_area": ("x", "y", "dwell_s"),
     "mission_areas": ("priority",),
+}
+
+#: The finest step a range sets each target field to, the default ``resolution`` of a continuous
+#: parameter on it: a position surveyed and flown to 0.1 m, a time to 1 s, a charge to 0.1 %.
+#: Scenarios leave a study at these steps, so what the plan says is what the range can set up.
+FIELD_RESOLUTION: dict[str, float] = {
+    "x": 0.1,
+    "y": 0.1,
+    "start_time_s": 1.0,
+    "window_start_s": 1.0,
+    "window_length_s": 1.0,
+    "dwell_s": 1.0,
+    "start_battery": 0.001,
 }
 
 

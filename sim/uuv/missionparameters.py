@@ -12,14 +12,14 @@ import math
 from collections.abc import Mapping
 
 from rapt.space import Categorical, Continuous, Integer, Parameter, Permutation, StateSpace
-from sim.uuv.mission import TARGET_FIELDS, Binding, Rect, Transmission
+from sim.uuv.mission import FIELD_RESOLUTION, TARGET_FIELDS, Binding, Rect, Transmission
 from sim.uuv.missionfields import FieldChecker, fmt, names
 
 __all__ = ["ParameterReader"]
 
 _PARAM_KINDS = ("continuous", "integer", "categorical", "permutation")
 _PARAM_KEYS = {
-    "continuous": (("name", "kind", "target", "low", "high"), ("log",)),
+    "continuous": (("name", "kind", "target", "low", "high"), ("log", "resolution")),
     "integer": (("name", "kind", "target", "low", "high"), ()),
     "categorical": (("name", "kind", "target", "choices"), ()),
     "permutation": (("name", "kind", "target", "items"), ()),
@@ -151,7 +151,22 @@ class ParameterReader(FieldChecker):
             if log and low <= 0:
                 self.fail(f"{where}.low", f"log scale needs low > 0, got {fmt(low)}; raise low or set log = false")
         self.value_range(binding, low, high, where)
-        return Integer(pname, int(low), int(high)) if kind == "integer" else Continuous(pname, low, high, log)
+        if kind == "integer":
+            return Integer(pname, int(low), int(high))
+        return Continuous(pname, low, high, log, self.resolution(p, where, binding, low, high))
+
+    def resolution(self, p: Mapping, where: str, binding: Binding, low: float, high: float) -> float:
+        """The step the parameter's values snap to: the file's ``resolution``, else its field's (FIELD_RESOLUTION)."""
+        if "resolution" not in p:
+            return min(FIELD_RESOLUTION[binding.field], (high - low) / 2)
+        step = self.check_number(p["resolution"], f"{where}.resolution")
+        if not 0 < step <= (high - low) / 2:
+            self.fail(
+                f"{where}.resolution",
+                f"expected a step in (0, {fmt((high - low) / 2)}] (at least three settable values), got {fmt(step)}; "
+                "give the finest step the range can set this value to",
+            )
+        return step
 
     def target(self, p: Mapping, where: str, pname: str) -> Binding:
         field = f"{where}.target"

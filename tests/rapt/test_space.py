@@ -106,10 +106,37 @@ def test_bad_parameters():
         Categorical("c", ("x", "y")).to_unit(["z"])
 
 
+def test_snapping_moves_a_scenario_onto_its_resolution_and_a_pair_s_sides_apart():
+    p = Continuous("x", 0.05, 0.4, resolution=0.001)
+    u = np.linspace(0, 1, 1001)
+    assert np.max(np.abs(p.from_unit(u) - (0.05 + u * 0.35))) < 1e-12  # the search stays continuous
+    v = p.from_unit(p.snap_unit(u))
+    np.testing.assert_array_equal(v, np.round(v, 3))  # on the steps, decoded as the short decimals
+    assert v.min() == 0.05 and v.max() == 0.4 and np.max(np.abs(v - (0.05 + u * 0.35))) <= 0.0005 + 1e-12
+    # last-digit differences in the cube coordinate do not reach the value
+    w = np.random.default_rng(0).random(200)
+    t = Continuous("t", 0, 43200, resolution=1.0)
+    np.testing.assert_array_equal(t.from_unit(t.snap_unit(w * (1 + 1e-13))), np.round(w * 43200))
+    # a pair's sides snap away from each other: they keep the boundary between them
+    a, b = t.to_unit(np.array([100.2, 100.7])), t.to_unit(np.array([100.6, 100.3]))
+    np.testing.assert_array_equal(t.from_unit(t.snap_unit(a, away_from=b)), [100.0, 101.0])
+    np.testing.assert_array_equal(t.from_unit(t.snap_unit(b, away_from=a)), [101.0, 100.0])
+    # a space snaps only the parameters with a resolution
+    space = StateSpace([t, Continuous("free", 0, 1), Permutation("p", ("A", "B"))])
+    U = np.random.default_rng(1).random((4, 4))
+    S = space.snap(U)
+    np.testing.assert_array_equal(S[:, 1:], U[:, 1:])
+    assert all(d["t"] == round(d["t"]) for d in space.decode(S))
+    for bad in (0, -1, 0.3, True, "1"):
+        with pytest.raises(ValueError, match="'x': resolution must be"):
+            Continuous("x", 0.0, 0.5, resolution=bad)
+
+
 def test_parameter_from_mapping_and_config_round_trip():
     space = StateSpace(
         [
             {"name": "t", "type": "continuous", "low": 0, "high": 1},
+            {"name": "r", "type": "continuous", "low": 0, "high": 10, "resolution": 0.5},
             {"name": "k", "type": "integer", "low": 0, "high": 3},
             {"name": "c", "type": "categorical", "choices": ["a", "b"]},
             {"name": "p", "type": "permutation", "items": ["x", "y", "z"]},

@@ -271,6 +271,23 @@ def test_shipped_plan_files_pass_qgroundcontrols_loader_and_mavproxys_wp_load(st
         np.testing.assert_allclose((w.x, w.y, w.z), it["params"][4:7], atol=1e-7)
 
 
+def test_shipped_plan_parameters_are_what_was_simulated_at_the_range_s_resolution():
+    """Every scenario of the bundled plan states its parameters at their resolution (0.1 m, 1 s, 0.1 %),
+    exactly as its cube point decodes: the values the range sets are the values the plan simulated."""
+    plan = json.loads((FIELD_PLAN / "plan.json").read_text())
+    m = _mission("range2017")
+    steps = {p.name: p.resolution for p in m.space.parameters if getattr(p, "resolution", None)}
+    assert steps["start_time"] == 1.0 and steps["tx_x"] == 0.1 and steps["start_battery"] == 0.001
+    scenarios = plan["scenarios"] + list(plan.get("variants", []))
+    assert len(scenarios) >= 10
+    for sc in scenarios:
+        decoded = json.loads(json.dumps(m.space.decode(np.array([sc["u"]]))[0]))
+        assert sc["parameters"] == decoded, sc["id"]
+        for name, step in steps.items():
+            k = sc["parameters"][name] / step
+            assert abs(k - round(k)) < 1e-6, (sc["id"], name, sc["parameters"][name])
+
+
 def test_the_qgc_checker_refuses_what_qgroundcontrol_refuses_or_drops(tmp_path):
     m = _mission("range2017")
     good = qgc_plan(m, _row(m))

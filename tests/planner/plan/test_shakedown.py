@@ -78,7 +78,11 @@ def test_the_plan_validates_and_flies_as_a_scenario_with_its_legs(tmp_path):
     VALIDATOR.validate(plan)
     scenario = plan["scenarios"][0]
     assert scenario["id"] == "shakedown" and plan["run_order"] == ["shakedown"]
-    assert plan["calibration"]["row"] == "centre of the unit cube" and scenario["u"] == [0.5] * len(scenario["u"])
+    # the centre of the unit cube, at the range's resolution: what is simulated is what the range sets up
+    assert plan["calibration"]["row"] == "centre of the unit cube" and np.allclose(scenario["u"], 0.5, atol=2e-3)
+    mission = sim.uuv.load_mission(path)
+    assert scenario["parameters"] == json.loads(json.dumps(mission.space.decode(np.array([scenario["u"]]))[0]))
+    assert scenario["parameters"]["start_battery"] == 0.225 and scenario["parameters"]["tx_x"] == -300.0
     assert sorted(p.name for p in out.iterdir()) == [
         "plan.json",
         "shakedown.geojson",

@@ -227,6 +227,23 @@ def test_base_mission_loads(tmp_path):
     assert isinstance(m.space.parameters[0], Continuous)
 
 
+def test_scenarios_leave_the_search_at_the_range_s_resolution(tmp_path):
+    """A position snaps to 0.1 m unless the file gives its own step; the search itself stays continuous."""
+    import numpy as np
+
+    U = np.random.default_rng(3).random((50, 3))
+    space = load_mission(write(tmp_path, BASE, "tiny.toml")).space
+    assert space.parameters[0].resolution == 0.1
+    np.testing.assert_allclose([s["nogo_x"] for s in space.decode(U)], U[:, 0] * 400, rtol=1e-12)
+    x = np.array([s["nogo_x"] for s in space.decode(space.snap(U))])
+    np.testing.assert_array_equal(x, np.round(U[:, 0] * 400, 1))
+    assert all(len(repr(float(v)).split(".")[1]) <= 1 for v in x)  # written as the range reads them: 364.1
+    coarse = load_mission(write(tmp_path, mutate("low = 0\nhigh = 400", "low = 0\nhigh = 400\nresolution = 5")))
+    x5 = np.array([s["nogo_x"] for s in coarse.space.decode(coarse.space.snap(U))])
+    np.testing.assert_allclose(x5 % 5, 0, atol=1e-9)
+    assert np.max(np.abs(x5 - U[:, 0] * 400)) <= 2.5 + 1e-9
+
+
 BAD = {
     "unknown key": (
         mutate("time_limit_s = 600", 'time_limit_s = 600\ncolour = "red"'),
@@ -251,6 +268,16 @@ BAD = {
         "unknown metric 'waypoint'",
     ),
     "duplicate element": (mutate('name = "B"', 'name = "A"'), "mission_areas[1].name", "duplicate element name"),
+    "resolution too coarse": (
+        mutate("low = 0\nhigh = 400", "low = 0\nhigh = 400\nresolution = 300"),
+        "parameters[0].resolution",
+        "at least three settable values",
+    ),
+    "resolution not positive": (
+        mutate("low = 0\nhigh = 400", "low = 0\nhigh = 400\nresolution = 0"),
+        "parameters[0].resolution",
+        "finest step",
+    ),
     "position outside": (
         mutate("low = 0\nhigh = 400", "low = 0\nhigh = 900"),
         "parameters[0].high",
