@@ -16,7 +16,8 @@
    ``rapt-plan log --foxglove`` and a client subscribed to every channel against ``rapt-plan
    log`` alone (frames lost, the logger's CPU seconds per 1,000 frames and their ratio; target
    nothing lost and <= 1.10), and part 2's round trip with a live view joined to the back-seat's
-   bus as ``rapt-plan run --foxglove`` starts it (a process of its own) and a subscribed client
+   bus as ``rapt-plan run --foxglove`` starts it (a process of its own, over the hub's view link,
+   bridge.view_link) and a subscribed client
    against none, and with clients connecting and leaving over and over,
    alternated (p50 and p99 and their ratios).
 
@@ -465,13 +466,15 @@ def _trip_with_live(mission, u, trips: int, how: str) -> np.ndarray:
     ``rapt-plan run --foxglove`` starts it (a process of its own) and a client subscribed to every channel
     ("client"), or clients connecting, subscribing and leaving over and over ("churn")."""
     from bridge.live_process import LiveViewProcess
+    from bridge.view_link import ViewLink
 
     endpoint = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
-    session = open_session(listen=[endpoint])
+    link = ViewLink("uuv1")
+    session = open_session(listen=[endpoint], extend=link.add_to)
     try:
         if how == "none":
             return round_trip_ms(mission, u, trips, (session, session))
-        with LiveViewProcess(vehicle="uuv1", port=0, connect=[endpoint]) as view:
+        with LiveViewProcess(vehicle="uuv1", port=0, connect=[link.endpoint]) as view:
             client = _client(view.url, how)
             try:
                 time.sleep(1.0)  # connected and subscribed
@@ -480,6 +483,7 @@ def _trip_with_live(mission, u, trips: int, how: str) -> np.ndarray:
                 _messages_of(client)
     finally:
         session.close()
+        link.close()
 
 
 def live_cost(mission, rate: int, seconds: float, trips: int, repeats: int = 2) -> None:

@@ -17,7 +17,7 @@ from __future__ import annotations
 import json
 import logging
 import time
-from collections.abc import Iterable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +32,6 @@ __all__ = [
     "open_session",
     "use_session",
     "undeclare",
-    "local_endpoints",
 ]
 
 #: The conventional hub endpoint when nothing else is given to a command line.
@@ -114,22 +113,6 @@ def zenoh_config(
     return config
 
 
-def local_endpoints(config: zenoh.Config) -> list[str]:
-    """Where a process on this machine reaches a session of ``config``: its listen endpoints, a wildcard
-    host (``0.0.0.0``, ``[::]``) as loopback; a mode-keyed list (``{"peer": [...]}``) read for the config's mode."""
-    endpoints = json.loads(config.get_json("listen/endpoints") or "[]")
-    if isinstance(endpoints, dict):
-        endpoints = endpoints.get(json.loads(config.get_json("mode") or '"peer"'), [])
-    out = []
-    for endpoint in endpoints:
-        protocol, _, address = str(endpoint).partition("/")
-        host, sep, rest = address.rpartition(":")
-        if host in ("0.0.0.0", "[::]", "::"):
-            address = ("127.0.0.1" if host == "0.0.0.0" else "[::1]") + sep + rest
-        out.append(f"{protocol}/{address}")
-    return out
-
-
 def open_session(
     listen: Iterable[str] | str = (),
     connect: Iterable[str] | str = (),
@@ -137,13 +120,18 @@ def open_session(
     *,
     mode: str | None = None,
     connect_timeout: float = CONNECT_TIMEOUT_S,
+    extend: Callable[[zenoh.Config], Any] | None = None,
 ) -> zenoh.Session:
     """Open a session with :func:`zenoh_config` (the same arguments); close it when done.
+
+    ``extend`` changes the config before it opens (:meth:`bridge.view_link.ViewLink.add_to` adds a live view's link).
 
     Raises :class:`~rapt.errors.LinkError` (a ``ConnectionError``) naming the endpoints when no hub answered in time.
     """
     connect = [connect] if isinstance(connect, str) else list(connect)
     config = zenoh_config(listen, connect, config_file, mode=mode, connect_timeout=connect_timeout)
+    if extend is not None:
+        extend(config)
     try:
         return zenoh.open(config)
     except zenoh.ZError as exc:

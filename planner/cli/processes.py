@@ -175,18 +175,27 @@ def bridge(
     live = live_address(foxglove)
     if arm and not allow_commands:
         fail("--arm: arming sends commands to the vehicle; add --allow-commands")
+    view_link = None
+    if live is not None and bus_keys is None:
+        from bridge.view_link import ViewLink
+
+        view_link = ViewLink(vehicle)  # the view's own link, its telemetry thinned to a screen's rate
+        view_link.add_to(conf)
     try:
         session = zenoh.open(conf)
     except zenoh.ZError as exc:
+        if view_link is not None:
+            view_link.close()
         fail(f"--zenoh-listen: the bus cannot start: {exc}")
     try:
         with contextlib.ExitStack() as parts:
             if live is not None:  # up before the vehicle is heard: it shows the bring-up too
                 from bridge.live_process import LiveViewProcess
-                from bridge.session import local_endpoints
 
                 # a process of its own, joined to this hub: the bridge forwards set-points and shares nothing with it
-                access = {"keys_dir": bus_keys, "role": "logger"} if bus_keys else {"connect": local_endpoints(conf)}
+                access = (
+                    {"keys_dir": bus_keys, "role": "logger"} if view_link is None else {"connect": [view_link.endpoint]}
+                )
                 view = parts.enter_context(LiveViewProcess(vehicle=vehicle, host=live[0], port=live[1], **access))
                 say_live((live[0], view.port))
             link = parts.enter_context(
@@ -207,6 +216,8 @@ def bridge(
         fail(str(exc))
     finally:
         session.close()
+        if view_link is not None:
+            view_link.close()
 
 
 def autonomy(

@@ -5,7 +5,7 @@ interpreter with nothing the view does."""
 from __future__ import annotations
 
 from bridge.live_process import LiveViewProcess
-from planner.fly.run_bus import PART_ROLES, RunBus
+from planner.fly.run_bus import RunBus
 from planner.fly.scenario_map import SCENARIO_MAP, scenario_map
 from sim.uuv.mission import Mission
 
@@ -22,5 +22,5 @@ def start_live_view(
     host, port = live
     document = scenario_map(mission, u)
     maps = {SCENARIO_MAP: document} if document is not None else {}
-    access = bus.joined_as(PART_ROLES["live_view"])
+    access = bus.view_joined()
     return LiveViewProcess(vehicle=vehicle, host=host, port=port, maps=maps, **access).start()

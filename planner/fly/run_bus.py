@@ -30,6 +30,7 @@ import zenoh
 
 from bridge import keys
 from bridge.session import open_session
+from bridge.view_link import ViewLink
 from planner.fly.lifecycle import wait_for
 from rapt.errors import LinkError, LinkTimeoutError
 
@@ -79,9 +80,16 @@ class RunBus:
         self._shared: Any = None
         #: the loopback bus's endpoint, where a part in a process of its own connects (None on the secure bus)
         self.endpoint: str | None = None
+        #: the loopback bus's link for a live view, its telemetry thinned to a screen's rate (None on the secure bus)
+        self._view_link: ViewLink | None = None
         if self.keys_dir is None:
             self.endpoint = f"tcp/127.0.0.1:{free_port(socket.SOCK_STREAM)}"
-            self._shared = open_session(listen=[self.endpoint])
+            self._view_link = ViewLink(vehicle)
+            try:
+                self._shared = open_session(listen=[self.endpoint], extend=self._view_link.add_to)
+            except BaseException:
+                self._view_link.close()
+                raise
             return
         from bridge.range_keys import role_config
 
@@ -101,6 +109,13 @@ class RunBus:
         if self.keys_dir is None:
             return {"connect": [self.endpoint]}
         return {"keys_dir": self.keys_dir, "role": role}
+
+    def view_joined(self) -> dict[str, Any]:
+        """How a live view joins this bus: over the hub's view link on the loopback bus
+        (:mod:`bridge.view_link`), as the live view's role on the secure one."""
+        if self._view_link is None:
+            return self.joined_as(PART_ROLES["live_view"])
+        return {"connect": [self._view_link.endpoint]}
 
     def put_roles(self) -> dict[str, list[str]] | None:
         """``{key expression: [roles allowed to put it]}`` from the hub's own config, for the logger
@@ -154,6 +169,8 @@ class RunBus:
         """Close every session, the hub's last."""
         if self._shared is not None:
             self._shared.close()
+            if self._view_link is not None:
+                self._view_link.close()
             return
         for role, session in reversed(list(self._sessions.items())):
             if role != "bridge":

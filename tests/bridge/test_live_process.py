@@ -14,7 +14,7 @@ import pytest
 from bridge import foxglove, keys
 from bridge.frames import mavlink2, message_json
 from bridge.live_process import LiveViewProcess
-from bridge.session import local_endpoints, open_session, zenoh_config
+from bridge.session import open_session
 from rapt.errors import InputError
 from tests.support.foxglove_client import FoxgloveClient
 from tests.support.loopback import free_port
@@ -84,11 +84,3 @@ def test_a_bad_map_file_exits_2_with_one_line_naming_the_option(tmp_path, hub):
     assert done.returncode == 2 and done.stdout == ""
     [line] = done.stderr.strip().splitlines()
     assert line.startswith(f"--map: cannot read GeoJSON {str(bad)!r}")
-
-
-def test_a_hub_listening_on_every_interface_is_reached_on_loopback():
-    import zenoh
-
-    assert local_endpoints(zenoh_config(listen=["tcp/127.0.0.1:7447"])) == ["tcp/127.0.0.1:7447"]
-    config = zenoh.Config.from_json5('{mode: "peer", listen: {endpoints: {peer: ["tls/0.0.0.0:7000"]}}}')
-    assert local_endpoints(config) == ["tls/127.0.0.1:7000"]
