@@ -35,7 +35,7 @@ from planner.cli.inputs import (
     mission_and_scenario,
     say_live,
 )
-from planner.fly.lifecycle import arm_when_heard, run_until_signal, serve_until_signal, wait_for_signal
+from planner.fly.lifecycle import arm_when_heard, run_until_signal, serve_until_signal, wait_for, wait_for_signal
 from rapt.errors import RaptError
 
 __all__ = ["frontseat", "bridge", "autonomy", "log"]
@@ -175,6 +175,11 @@ def bridge(
     live = live_address(foxglove)
     if arm and not allow_commands:
         fail("--arm: arming sends commands to the vehicle; add --allow-commands")
+    if signing_key is not None and not allow_commands:
+        fail(
+            "--signing-key: the bridge gives the vehicle the key (SETUP_SIGNING) and checks its link with a command; "
+            "add --allow-commands"
+        )
     view_link = None
     if live is not None and bus_keys is None:
         from bridge.view_link import ViewLink
@@ -207,8 +212,15 @@ def bridge(
                     geofence=fence,
                     max_rate_hz=max_rate,
                     signing_key=signing_key,
+                    accept_unsigned=signing_key is not None,  # until the vehicle holds the key
                 )
             )
+            if signing_key is not None:  # before anything else is asked of the vehicle
+                from planner.fly.vehicle.signing import sign_vehicle
+
+                if not wait_for(lambda: link.target is not None, 30.0, poll_s=0.05):
+                    fail("--mavlink: no vehicle HEARTBEAT within 30 s; check the connection string")
+                err.print(f"bridge: {sign_vehicle(link, mavlink)}", highlight=False, soft_wrap=True)
             if arm and not arm_when_heard(link, timeout_s=30.0):
                 fail("--mavlink: no vehicle HEARTBEAT within 30 s; check the connection string")
             wait_for_signal()

@@ -26,6 +26,7 @@ from planner.fly.vehicle.guard import (  # noqa: E402
     guard_script,
     heartbeat_rate,
 )
+from planner.fly.vehicle.signing import sign_vehicle  # noqa: E402
 from rapt.errors import InputError, LinkTimeoutError, RefusedError, RunError  # noqa: E402
 
 __all__ = ["Preflight", "result_name"]
@@ -55,42 +56,12 @@ class Preflight:
         disarmed), unsigned frames are refused from then on, and the link must be one where the vehicle
         refuses unsigned commands too. ArduPilot accepts every unsigned message on its channel 0 (SITL's
         SERIAL0, a USB port, BlueOS's main endpoint): signing there protects nothing, so the run is refused."""
-        b = self.bridge
-        if b.signing_key is None:
+        if self.bridge.signing_key is None:
             return
-        got = b.latest("HEARTBEAT")
-        if got is None or not got[0].get_signed():
-            if self._armed():
-                self._fail(
-                    "signing",
-                    RefusedError(
-                        "--signing-key: the vehicle is armed and does not sign with this key; the key is given to a "
-                        "vehicle only while it is disarmed"
-                    ),
-                )
-            asked = time.monotonic()
-            b.setup_signing()
-
-            def signs() -> bool | None:
-                hb = b.latest("HEARTBEAT")
-                return True if hb is not None and hb[1] > asked and hb[0].get_signed() else None
-
-            if self._wait(signs, 5.0) is None:
-                self._fail(
-                    "signing",
-                    RunError("--signing-key: the vehicle did not take the key (its heartbeats are still unsigned)"),
-                )
-        b.accept_unsigned = False
-        if b.accepts_unsigned():
-            self._fail(
-                "signing",
-                RefusedError(
-                    f"--signing-key: the vehicle answers unsigned commands on {self.connection} (ArduPilot's channel 0: "
-                    "SITL's SERIAL0, a USB port, BlueOS's main endpoint), so signing protects nothing there; connect "
-                    "through another serial or UDP endpoint (SERIAL1 or later)"
-                ),
-            )
-        self._ok("signing", "the vehicle signs with our key and ignores unsigned commands on this link")
+        try:
+            self._ok("signing", sign_vehicle(self.bridge, self.connection))
+        except (RefusedError, RunError) as exc:
+            self._fail("signing", exc)
 
     def guard(self) -> None:
         """Install the onboard guard (:mod:`planner.fly.vehicle.guard`) while the vehicle is disarmed: our
