@@ -59,10 +59,18 @@ class _LinkPort:
 
 
 def put_file(
-    link: Any, inbox: queue.SimpleQueue, target: tuple[int, int], data: bytes, remote: str, *, timeout: float = 10.0
+    link: Any,
+    inbox: queue.SimpleQueue,
+    target: tuple[int, int],
+    data: bytes,
+    remote: str,
+    *,
+    timeout: float = 10.0,
+    make_directory: bool = False,
 ) -> None:
     """Write ``data`` to ``remote`` on the autopilot ``target`` (system, component) behind ``link``, whose FTP
-    replies arrive in ``inbox``. Raises :class:`RefusedError` with the vehicle's FTP error, or
+    replies arrive in ``inbox``; with ``make_directory``, a missing directory of ``remote`` is created first (one
+    level: its parent must exist). Raises :class:`RefusedError` with the vehicle's FTP error, or
     :class:`LinkTimeoutError` when it does not answer within ``timeout`` seconds."""
     ftp = MAVFTP(_LinkPort(link, inbox, target), target[0], target[1])
     ftp.ftp_settings.read_retry_time = IDLE_S / 2  # below the idle time, as MAVFTP requires
@@ -73,6 +81,11 @@ def put_file(
     if listed.error_code in _TIMEOUTS:
         raise LinkTimeoutError(f"MAVLink FTP: no answer from the vehicle within {timeout:g} s; does it offer FTP?")
     there = bool(getattr(ftp, "list_result", None))
+    if make_directory and listed.error_code != FtpError.Success:
+        made = ftp.cmd_mkdir([where])
+        there = made.error_code == FtpError.Success
+        if there:
+            log.info("MAVLink FTP: made the directory %s", where)
     put = ftp.cmd_put(["-", remote], fh=io.BytesIO(data), callback=lambda _fh: None)
     if put.error_code == FtpError.Success:
         put = ftp.process_ftp_reply("put", timeout=timeout)  # "put": MAVFTP ends an upload on its last reply

@@ -312,9 +312,9 @@ class MavlinkBridge(Service):
         """Set one parameter (:meth:`VehicleCommands.set_parameter`)."""
         self._commands.set_parameter(name, value)
 
-    def put_file(self, data: bytes, remote: str, *, timeout: float = 10.0) -> None:
+    def put_file(self, data: bytes, remote: str, *, timeout: float = 10.0, make_directory: bool = False) -> None:
         """Write a file on the vehicle with MAVLink FTP (:meth:`VehicleCommands.put_file`)."""
-        self._commands.put_file(data, remote, timeout=timeout)
+        self._commands.put_file(data, remote, timeout=timeout, make_directory=make_directory)
 
     def upload_mission(
         self,

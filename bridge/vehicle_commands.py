@@ -433,9 +433,10 @@ class VehicleCommands:
         return upload.result
 
     # ----------------------------------------------------------------- files
-    def put_file(self, data: bytes, remote: str, *, timeout: float = 10.0) -> None:
-        """Write ``data`` to ``remote`` on the vehicle with MAVLink FTP (:mod:`bridge.file_transfer`); a
-        :class:`~rapt.errors.RefusedError` naming the vehicle's FTP error, or LinkTimeoutError."""
+    def put_file(self, data: bytes, remote: str, *, timeout: float = 10.0, make_directory: bool = False) -> None:
+        """Write ``data`` to ``remote`` on the vehicle with MAVLink FTP (:mod:`bridge.file_transfer`; with
+        ``make_directory`` its missing directory is made); a :class:`~rapt.errors.RefusedError` naming the
+        vehicle's FTP error, or LinkTimeoutError."""
         from .file_transfer import put_file
 
         what = "put_file"
@@ -444,7 +445,7 @@ class VehicleCommands:
             raise RunError(f"{what}: an upload is running on this bridge; wait for it to end")
         try:
             inbox = self._replies.open_file_inbox()
-            put_file(self._link, inbox, target, data, remote, timeout=timeout)
+            put_file(self._link, inbox, target, data, remote, timeout=timeout, make_directory=make_directory)
         finally:
             self._replies.close_file_inbox()
             self._mission_lock.release()

@@ -146,6 +146,8 @@ class ArduSubSitl:
         """Start the firmware and wait until SERIAL0 accepts a connection."""
         self.instance = _free_instance()
         self.port = BASE_PORT + 10 * self.instance
+        # a directory of its own: its parameter store (eeprom.bin) starts empty, so every boot of this SITL starts
+        # from the defaults, and a reboot it is asked for (--guard-reboot) keeps what was set, as a vehicle does
         self.directory = Path(tempfile.mkdtemp(prefix="ardusub-sitl-"))
         shutil.copy(self.defaults, self.directory / "sub.parm")
         defaults = "sub.parm"
@@ -160,7 +162,6 @@ class ArduSubSitl:
             "--speedup", f"{self.speedup:g}",
             "--defaults", defaults,
             "-I", str(self.instance),
-            "-w",  # wipe the parameter store: every run starts from the defaults
             "--home", f"{lat},{lon},{alt},{heading}",
             "--serial0", "tcp:0",  # do not wait for a client
         ]  # fmt: skip

@@ -97,7 +97,9 @@ class Preflight:
             )
         owner = (self.bridge.source_system, self.bridge.source_component)
         try:
-            self.bridge.put_file(guard_script(options.timeout_s, owner), options.path, timeout=self.timeouts.guard / 4)
+            # scripting that was never on has no scripts directory yet: it is made (one level, as a crew would)
+            script = guard_script(options.timeout_s, owner)
+            self.bridge.put_file(script, options.path, timeout=self.timeouts.guard / 4, make_directory=True)
         except (RefusedError, LinkTimeoutError) as exc:
             self._fail("guard", RefusedError(f"bring-up guard: {exc}; fly with --no-guard to run without it"))
         if enabled < 1:

@@ -81,3 +81,22 @@ def test_a_vehicle_that_cannot_take_the_guard_is_refused_in_one_line_and_flies_w
     assert result.ended.startswith("wall-time limit")
     [guard] = [s for s in steps if s.name == "guard"]
     assert guard.status == "note" and "--no-guard" in guard.detail and "nothing surfaces the vehicle" in guard.detail
+
+
+@pytest.mark.slow  # a reboot of the firmware, then a run
+def test_guard_reboot_turns_scripting_on_reboots_the_disarmed_vehicle_and_installs_the_guard():
+    """With the operator's consent (--guard-reboot) a vehicle with scripting off gets SCR_ENABLE 1 and one reboot,
+    comes back with it kept, runs the guard and flies; the timeline says it rebooted."""
+    flight = flight_from_plan(PLAN, "pair2b")
+    with ArduSubSitl(LAUNCH, speedup=SPEEDUP, parameters={"SCR_ENABLE": 0}) as sitl:
+        steps: list = []
+        result = run_vehicle(flight, sitl.connection, timeout_s=3.0, guard=GuardOptions(reboot=True), say=steps.append)
+        assert result.ended.startswith("wall-time limit")
+        guard = [s for s in steps if s.name == "guard"]
+        assert any(s.status == "note" and "rebooting the vehicle (--guard-reboot)" in s.detail for s in guard)
+        assert guard[-1].status == "ok" and "running from" in guard[-1].detail
+        # the vehicle keeps it: the next bring-up (back to the start first) needs no reboot
+        steps.clear()
+        run_vehicle(flight, sitl.connection, timeout_s=3.0, transit=True, say=steps.append)
+        guard = [s for s in steps if s.name == "guard"]
+        assert [s.status for s in guard] == ["ok"] and not any("reboot" in s.detail for s in guard)
