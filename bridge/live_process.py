@@ -3,8 +3,11 @@
 A :class:`~bridge.live_view.LiveView` inside a process that also commands the vehicle shares
 that process's interpreter lock: encoding a map, a client's burst of subscriptions or a
 reconnecting client all hold up, now and then, the thread that answers the vehicle's report
-with its set-point. In a process of its own, at a lower CPU priority (:data:`NICE`), it shares
-only the machine and the bus, which routes it just the few keys it reads.
+with its set-point. In a process of its own it shares only the machine and the bus, which routes
+it just the few keys it reads; and it runs on CPU time nothing else wants (Linux's SCHED_IDLE), so
+on a busy laptop the process that commands the vehicle is never the one that waits. A starved
+view falls behind, not the run: when it runs it shows the latest of each message, and its rings
+keep the last events (bridge.live_view.EVENT_RING).
 
 :class:`LiveViewProcess` starts ``python -m bridge.live_process`` joined to the bus like any
 process of the range (the run's loopback endpoint, or the range's keys as role ``logger``) and
@@ -40,8 +43,7 @@ __all__ = ["LiveViewProcess", "READY", "main"]
 READY = "ready"
 #: How long the child may take to join the bus and start serving.
 START_TIMEOUT_S = 30.0
-#: The child's CPU priority below the run's (``os.nice``): on a busy laptop the scheduler serves the
-#: process that commands the vehicle first.
+#: The child's CPU priority below the run's (``os.nice``) where SCHED_IDLE is not offered.
 NICE = 10
 #: How long the child has to close its server and session after SIGTERM.
 STOP_TIMEOUT_S = 10.0
@@ -201,9 +203,18 @@ def _session(args: argparse.Namespace):
     return open_session(connect=args.connect)
 
 
+def _yield_the_cpu() -> None:
+    """This process, and every thread it starts from now on (Zenoh's, the server's), runs only on CPU time
+    nothing else wants: Linux's SCHED_IDLE, else (another system) :data:`NICE`."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))
+    except (AttributeError, OSError):
+        os.nice(NICE)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
     """Serve the live view until SIGTERM or SIGINT; exit 2 with a one-line error on bad input, 1 on a link error."""
-    os.nice(NICE)
+    _yield_the_cpu()
     stop = threading.Event()
     for sig in (signal.SIGTERM, signal.SIGINT):
         signal.signal(sig, lambda *_: stop.set())

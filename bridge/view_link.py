@@ -5,9 +5,10 @@ The live view (:mod:`bridge.live_view`) shows each telemetry message's latest sa
 it every sample the vehicle sends, and that routing runs on the hub, the process that answers
 the vehicle with its set-points. :class:`ViewLink` gives the hub a second listening endpoint, a
 Unix socket, with Zenoh's egress downsampling on that link protocol only: each telemetry key
-the view reads leaves on it at most ``TELEMETRY_HZ`` times a second. Every other process,
-joined over TCP, still gets every sample; events, maps and statuses pass the view's link
-untouched. A vehicle reporting slower than that loses nothing on it.
+the view reads, and the active autonomy's status (put at every decision), leave on it at most
+``TELEMETRY_HZ`` times a second, each key on its own. Every other process, joined over TCP,
+still gets every sample; events, maps and the other statuses pass the view's link untouched.
+A vehicle reporting slower than that loses nothing on it.
 
 Loopback bus only: on the range's secure bus every role joins over mutual TLS, and a socket file
 beside it would be a way round the access rules.
@@ -44,8 +45,11 @@ class ViewLink:
         self.endpoint = f"{LINK_PROTOCOL}/{Path(self._dir.name) / 'view.sock'}"
 
     def rules(self) -> list[dict]:
-        """Zenoh's ``downsampling`` entry: one rule per telemetry key (a rule's rate is shared by what it matches)."""
-        rules = [{"key_expr": keys.telemetry(self.vehicle, m), "freq": self.hz} for m in TELEMETRY]
+        """Zenoh's ``downsampling`` entry: one rule per thinned key (a rule's rate is shared by what it matches)."""
+        thinned = [keys.telemetry(self.vehicle, m) for m in TELEMETRY] + [
+            keys.status(self.vehicle, keys.DEFAULT_ACTIVE)
+        ]
+        rules = [{"key_expr": key, "freq": self.hz} for key in thinned]
         return [
             {
                 "id": "rapt-live-view",

@@ -38,6 +38,7 @@ def hub():
 def test_the_child_joins_the_bus_and_a_client_sees_the_map_fixes_and_status(hub):
     session, endpoint = hub
     with LiveViewProcess(vehicle="uuv1", port=0, connect=[endpoint], maps={"scenario": DOCUMENT}) as view:
+        assert os.sched_getscheduler(view.process.pid) == os.SCHED_IDLE  # it runs on CPU time nothing else wants
         pid = view.process.pid
         assert view.port > 0 and view.url == f"ws://127.0.0.1:{view.port}"
         with FoxgloveClient(view.url) as client:

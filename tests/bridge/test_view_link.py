@@ -1,5 +1,5 @@
-"""The hub's link for a live view: over it each telemetry key leaves at most at the view's rate, while a
-process joined over TCP still gets every sample and events pass the view's link untouched."""
+"""The hub's link for a live view: over it each telemetry key (and the autonomy's status) leaves at most at the
+view's rate, while a process joined over TCP still gets every sample and events pass the view's link untouched."""
 
 from __future__ import annotations
 
@@ -56,7 +56,7 @@ def test_the_view_link_thins_telemetry_to_the_screen_rate_and_nothing_else(link)
     clients += [tcp, unix]
     everything, thinned = Tally(tcp, "uuv1"), Tally(unix, "uuv1")
     time.sleep(1.0)  # both subscriptions have reached the hub
-    telemetry = [keys.telemetry("uuv1", m) for m in TELEMETRY]
+    telemetry = [keys.telemetry("uuv1", m) for m in TELEMETRY] + [keys.status("uuv1", keys.DEFAULT_ACTIVE)]
     event = keys.telemetry("uuv1", "STATUSTEXT")
     n = int(RATE_HZ * SECONDS)
     start = time.monotonic()
@@ -65,6 +65,7 @@ def test_the_view_link_thins_telemetry_to_the_screen_rate_and_nothing_else(link)
             hub.put(key, b"x" * 40)
         if k % 50 == 0:
             hub.put(event, b"event")
+            hub.put(keys.status("uuv1", keys.BRINGUP_SOURCE), b"step")
         time.sleep(max(0.0, start + (k + 1) / RATE_HZ - time.monotonic()))
     elapsed = time.monotonic() - start
     time.sleep(1.0)
@@ -72,7 +73,8 @@ def test_the_view_link_thins_telemetry_to_the_screen_rate_and_nothing_else(link)
         assert everything.counts[key] == n, key  # TCP: every sample
         # the view's link: each key on its own at most the screen's rate, and about that many
         assert 0.5 * TELEMETRY_HZ * elapsed <= thinned.counts[key] <= TELEMETRY_HZ * elapsed + 5, key
-    assert thinned.counts[event] == everything.counts[event] == len(range(0, n, 50))  # events untouched
+    for key in (event, keys.status("uuv1", keys.BRINGUP_SOURCE)):  # events untouched
+        assert thinned.counts[key] == everything.counts[key] == len(range(0, n, 50)), key
 
 
 def test_a_config_file_s_mode_keyed_listen_list_gains_the_view_endpoint():
