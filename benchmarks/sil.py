@@ -463,8 +463,8 @@ def _messages_of(client: subprocess.Popen) -> int:
 
 def _trip_with_live(mission, u, trips: int, how: str) -> np.ndarray:
     """Part 2's round trip with nothing else (``how`` "none"), with a live view joined to the back-seat's bus as
-    ``rapt-plan run --foxglove`` starts it (a process of its own) and a client subscribed to every channel
-    ("client"), or clients connecting, subscribing and leaving over and over ("churn")."""
+    ``rapt-plan run --foxglove`` starts it (a process of its own) with no client ("alone"), a client subscribed
+    to every channel ("client"), or clients connecting, subscribing and leaving over and over ("churn")."""
     from bridge.live_process import LiveViewProcess
     from bridge.view_link import ViewLink
 
@@ -475,12 +475,13 @@ def _trip_with_live(mission, u, trips: int, how: str) -> np.ndarray:
         if how == "none":
             return round_trip_ms(mission, u, trips, (session, session))
         with LiveViewProcess(vehicle="uuv1", port=0, connect=[link.endpoint]) as view:
-            client = _client(view.url, how)
+            client = _client(view.url, how) if how != "alone" else None
             try:
                 time.sleep(1.0)  # connected and subscribed
                 return round_trip_ms(mission, u, trips, (session, session))
             finally:
-                _messages_of(client)
+                if client is not None:
+                    _messages_of(client)
     finally:
         session.close()
         link.close()
@@ -504,7 +505,12 @@ def live_cost(mission, rate: int, seconds: float, trips: int, repeats: int = 2) 
     ratio = np.median(per[True]) / np.median(per[False])
     print(f"   logger CPU per frame, live / none (medians): {ratio:.3f} (target <= 1.10, nothing lost)")
     u = first_valid_scenario(mission)
-    hows = {"none": "no live view", "client": "live view + client", "churn": "clients come and go"}
+    hows = {
+        "none": "no live view",
+        "alone": "live view, no client",
+        "client": "live view + client",
+        "churn": "clients come and go",
+    }
     lat: dict[str, list] = {h: [] for h in hows}
     for _ in range(repeats):
         for how in hows:
