@@ -1,5 +1,6 @@
-"""The same plan under other CPU paths: NumPy's dispatch without AVX-512 and another OpenBLAS kernel give the same
-pairs, scenario parameters, verdicts, P values and predicted modes; plan.json names the runtime that made it."""
+"""The same plan under other CPU paths: NumPy's dispatch without AVX-512, another OpenBLAS kernel and glibc's libm
+as on a CPU without FMA give the same pairs, scenario parameters, verdicts, P values and predicted modes; plan.json
+names the runtime that made it."""
 
 from __future__ import annotations
 
@@ -20,7 +21,12 @@ SETTINGS = {
     "as installed": {},
     "no AVX-512 in NumPy": {"NPY_DISABLE_CPU_FEATURES": "X86_V4 AVX512_ICL AVX512_SPR"},
     "OpenBLAS Haswell": {"OPENBLAS_CORETYPE": "Haswell"},
+    # glibc's libm picks its exp, log, sin, pow... by CPU; without FMA and AVX2 it takes an older CPU's paths,
+    # whose last bits differ (checked below): another machine's maths, on this one
+    "libm of a CPU without FMA": {"GLIBC_TUNABLES": "glibc.cpu.hwcaps=-AVX2,-FMA,-AVX512F,-AVX512VL"},
 }
+#: Last bits of libm's results for a fixed set of inputs.
+LIBM_PROBE = "import math, hashlib; print(hashlib.sha1(repr([math.exp(x / 7.3) for x in range(-4000, 4000)]).encode()).hexdigest())"
 
 
 def _plan(out: Path, env: dict) -> dict:
@@ -35,7 +41,7 @@ def _plan(out: Path, env: dict) -> dict:
     return json.loads((out / "plan.json").read_text())
 
 
-@pytest.mark.slow  # three searches of 1,200 runs, about a minute each on 2 cores
+@pytest.mark.slow  # four searches of 1,200 runs, about a minute each on 2 cores
 def test_the_plan_is_the_same_under_other_numpy_dispatch_and_blas_kernels(tmp_path):
     plans = {name: _plan(tmp_path / f"plan{k}", env) for k, (name, env) in enumerate(SETTINGS.items())}
     reference = plans["as installed"]
@@ -45,9 +51,15 @@ def test_the_plan_is_the_same_under_other_numpy_dispatch_and_blas_kernels(tmp_pa
         assert {k: v for k, v in plan.items() if k != "runtime"} == {
             k: v for k, v in reference.items() if k != "runtime"
         }, name
-    # the settings took: NumPy reports the AVX-512 targets off
+    # the settings took: NumPy reports the AVX-512 targets off, and libm's last bits moved (on a CPU with FMA)
     off = plans["no AVX-512 in NumPy"]["runtime"]["numpy_dispatch"]
     assert "X86_V4" not in off
+    if " fma " in Path("/proc/cpuinfo").read_text():
+        probes = [
+            subprocess.run([sys.executable, "-c", LIBM_PROBE], env={**os.environ, **env}, capture_output=True).stdout
+            for env in ({}, SETTINGS["libm of a CPU without FMA"])
+        ]
+        assert probes[0] != probes[1]
 
 
 def test_the_runtime_names_the_libraries_the_blas_and_the_cpu_paths():
