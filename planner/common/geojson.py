@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from rapt.errors import InputError
-from sim.uuv.geo import LocalFrame
+from sim.uuv.geo import DEGREE_DECIMALS, LocalFrame
 from sim.uuv.mission import Mission
 from sim.uuv.scenario import Scenarios, make_scenarios
 from sim.uuv.simulate import TRAJECTORY_FIELDS
@@ -90,7 +90,10 @@ def geojson(mission: Mission, u, track=None) -> dict[str, Any]:
 
     def lonlat(xy: np.ndarray) -> list[list[float]]:
         lat, lon = frame.to_latlon(np.asarray(xy[:, 0], float), np.asarray(xy[:, 1], float))
-        return [[float(a), float(b)] for a, b in zip(np.atleast_1d(lon), np.atleast_1d(lat))]
+        return [
+            [round(float(a), DEGREE_DECIMALS), round(float(b), DEGREE_DECIMALS)]
+            for a, b in zip(np.atleast_1d(lon), np.atleast_1d(lat))
+        ]
 
     def feature(geometry: dict, kind: str, name: str, **extra) -> dict[str, Any]:
         return {"type": "Feature", "geometry": geometry, "properties": {"kind": kind, "name": name, **extra}}

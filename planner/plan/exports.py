@@ -31,7 +31,7 @@ import numpy as np
 
 from planner.common.geojson import decode_scenario, exclusions, geojson, operational_rect, oriented, rect_vertices
 from rapt.errors import InputError
-from sim.uuv.geo import LocalFrame
+from sim.uuv.geo import DEGREE_DECIMALS, LocalFrame
 from sim.uuv.interface import DEPTH_M
 from sim.uuv.mission import Mission
 from sim.uuv.scenario import Scenarios
@@ -112,7 +112,7 @@ def qgc_plan(mission: Mission, u, route=None) -> dict[str, Any]:
 
     def latlon(x, y) -> list[float]:
         lat, lon = frame.to_latlon(float(x), float(y))
-        return [lat, lon]
+        return [round(lat, DEGREE_DECIMALS), round(lon, DEGREE_DECIMALS)]
 
     items = []
     for seq, it in enumerate(_route_items(mission, scen, route), start=1):

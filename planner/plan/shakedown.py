@@ -34,7 +34,7 @@ from planner.common.jsonio import jsonable
 from planner.common.plans import PLAN_SCHEMA, embedded_mission
 from planner.plan.exports import qgc_plan, wpl
 from rapt.errors import InputError, StudyMismatchError
-from sim.uuv.geo import LocalFrame
+from sim.uuv.geo import DEGREE_DECIMALS, LocalFrame
 from sim.uuv.geometry import polygon_signed_distance, rect_signed_distance
 from sim.uuv.legs import Leg, LegAutonomy, leg_schedule
 from sim.uuv.metrics import MISSION_NODES, ROOT, SAFETY_NODES
@@ -347,7 +347,10 @@ def _picture(design: ShakedownDesign) -> dict[str, Any]:
         doc["features"].append(
             {
                 "type": "Feature",
-                "geometry": {"type": "Point", "coordinates": [float(lon), float(lat)]},
+                "geometry": {
+                    "type": "Point",
+                    "coordinates": [round(float(lon), DEGREE_DECIMALS), round(float(lat), DEGREE_DECIMALS)],
+                },
                 "properties": {"kind": "leg", "name": leg.name, "leg_kind": leg.kind},
             }
         )

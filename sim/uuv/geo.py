@@ -29,7 +29,7 @@ import numpy as np
 from rapt.errors import InputError
 from sim.uuv.angles import wrap_degrees
 
-__all__ = ["LocalFrame", "to_degE7", "from_degE7", "WGS84_A", "WGS84_F"]
+__all__ = ["LocalFrame", "to_degE7", "from_degE7", "WGS84_A", "WGS84_F", "DEGREE_DECIMALS"]
 
 #: WGS84 semi-major axis (m) and flattening.
 WGS84_A = 6_378_137.0
@@ -114,6 +114,11 @@ class LocalFrame:
         lat = np.degrees(phi)
         lon = wrap_degrees(self.origin_lon + np.degrees(dlam))
         return _out(lat, scalar), _out(lon, scalar)
+
+
+#: Decimal places of a latitude or longitude in the files a range loads: MAVLink's degE7, what the vehicle
+#: holds (about 1 cm). It also keeps another CPU's last-digit differences in the maths out of those files.
+DEGREE_DECIMALS = 7
 
 
 def to_degE7(deg) -> np.ndarray:
