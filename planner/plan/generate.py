@@ -44,7 +44,7 @@ from planner.common.plans import PLAN_SCHEMA, coordinate_sensitivity, embedded_m
 from planner.plan.analysis import Analysis, analyse, confirm_with_expert, pair_points, select_pairs
 from planner.plan.confirmation import Confirmation
 from planner.plan.dithering import DEFAULT_NOISE, DitherNoise, Outcome, dither_many, outcome_columns, robust_variants
-from planner.plan.plan_scenarios import scenario_entries, variant_entries
+from planner.plan.plan_scenarios import remove_unlisted, scenario_entries, variant_entries
 from planner.plan.planned_for import planned_for
 from planner.plan.refinement import MIN_REFINE_RUNS, refine_pairs
 from planner.plan.report import write_report
@@ -272,6 +272,7 @@ def generate(
     clock.lap("variants")
     scenarios = scenario_entries(mission, a, U, ids, chosen, stats, out_dir)
     variants = variant_entries(mission, ids, fragile, found, chosen, out_dir)
+    remove_unlisted(out_dir, [sc["id"] for sc in scenarios + variants])
     verdicts = _verdicts(cfg, pairs, stats, dict(zip(fragile, found)))
     runs = {
         "search": cfg.search_budget,

@@ -8,6 +8,7 @@ and scores, its dithering statistics and the names of its files: a QGroundContro
 
 from __future__ import annotations
 
+import re
 from pathlib import Path
 
 import numpy as np
@@ -19,7 +20,10 @@ from planner.plan.exports import write_scenario_files
 from sim.uuv.mission import Mission
 from sim.uuv.scoring import MODE_NAMES
 
-__all__ = ["scenario_entries", "variant_entries"]
+__all__ = ["scenario_entries", "variant_entries", "remove_unlisted"]
+
+#: A file this module writes for a scenario (pair<k><side>, and M for a variant): only such files are removed.
+SCENARIO_FILE = re.compile(r"pair\d+[ab]M?\.(plan|waypoints|geojson)")
 
 
 def scenario_entries(
@@ -88,3 +92,14 @@ def variant_entries(
             }
         )
     return variants
+
+
+def remove_unlisted(directory: Path, ids: list[str]) -> list[str]:
+    """Remove the scenario files in ``directory`` of scenarios the plan does not list (``ids``): a plan made again
+    in its directory must not leave an earlier plan's variant beside it for a crew to fly. The names removed."""
+    removed = []
+    for path in sorted(Path(directory).iterdir()):
+        if SCENARIO_FILE.fullmatch(path.name) and path.stem not in ids:
+            path.unlink()
+            removed.append(path.name)
+    return removed

@@ -239,3 +239,12 @@ def test_a_plan_loads_from_its_embedded_mission_anywhere_and_refuses_an_edited_o
     assert load_plan(copy).mission == loaded.mission
     half = {**data, "mission": {k: v for k, v in data["mission"].items() if k != "sha256"}}
     assert any(e.absolute_path == deque(["mission"]) for e in PLAN_VALIDATOR.iter_errors(half))
+
+
+def test_a_plan_made_again_in_its_directory_leaves_no_earlier_scenario_file(tmp_path):
+    from planner.plan.plan_scenarios import remove_unlisted
+
+    for name in ("pair1a.plan", "pair1a.geojson", "pair2bM.plan", "pair2bM.waypoints", "pair2bM.csv", "notes.txt"):
+        (tmp_path / name).write_text("x")
+    assert remove_unlisted(tmp_path, ["pair1a", "pair1b"]) == ["pair2bM.plan", "pair2bM.waypoints"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes.txt", "pair1a.geojson", "pair1a.plan", "pair2bM.csv"]
