@@ -135,7 +135,14 @@ def bridge(
     bus_keys: BusKeys = None,
     bus_role: BusRole = None,
     allow_commands: Annotated[bool, typer.Option("--allow-commands", help="Forward back-seat set-points.")] = False,
-    signing_key: Annotated[Path | None, typer.Option(help="MAVLink 2 signing key file (32 bytes).")] = None,
+    signing_key: Annotated[
+        Path | None,
+        typer.Option(
+            help="MAVLink 2 signing with this key file (32 bytes or 64 hex digits), given to the disarmed vehicle "
+            "once heard (needs --allow-commands); refused on a link where the vehicle takes unsigned commands "
+            "(its channel 0).",
+        ),
+    ] = None,
     geofence: Annotated[str | None, typer.Option(help="north_min,north_max,east_min,east_max in m.")] = None,
     max_rate: Annotated[float | None, typer.Option("--max-rate", help="Set-points per second at most.")] = None,
     arm: Annotated[
