@@ -222,14 +222,14 @@ def bridge(
                     accept_unsigned=signing_key is not None,  # until the vehicle holds the key
                 )
             )
+            if (signing_key is not None or arm) and not wait_for(lambda: link.target is not None, 30.0, poll_s=0.05):
+                fail("--mavlink: no vehicle HEARTBEAT within 30 s; check the connection string")
             if signing_key is not None:  # before anything else is asked of the vehicle
                 from planner.fly.vehicle.signing import sign_vehicle
 
-                if not wait_for(lambda: link.target is not None, 30.0, poll_s=0.05):
-                    fail("--mavlink: no vehicle HEARTBEAT within 30 s; check the connection string")
                 err.print(f"bridge: {sign_vehicle(link, mavlink)}", highlight=False, soft_wrap=True)
-            if arm and not arm_when_heard(link, timeout_s=30.0):
-                fail("--mavlink: no vehicle HEARTBEAT within 30 s; check the connection string")
+            if arm:
+                arm_when_heard(link)  # heard already; RefusedError if GUIDED or arming never takes
             wait_for_signal()
     except (RaptError, ValueError, OSError) as exc:
         fail(str(exc))

@@ -10,9 +10,9 @@ link that still answers an unsigned command is refused: signing there would prot
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from typing import Any
 
+from planner.fly.lifecycle import wait_for
 from rapt.errors import RefusedError, RunError
 
 __all__ = ["SIGNED", "sign_vehicle"]
@@ -21,14 +21,6 @@ __all__ = ["SIGNED", "sign_vehicle"]
 SIGNED = "the vehicle signs with our key and ignores unsigned commands on this link"
 #: How long the vehicle may take to sign its heartbeats once given the key.
 KEY_TAKEN_S = 5.0
-
-
-def _until(get: Callable[[], Any], timeout: float) -> Any:
-    """``get()``'s first value that is not None within ``timeout`` seconds, else None."""
-    deadline = time.monotonic() + timeout
-    while (value := get()) is None and time.monotonic() < deadline:
-        time.sleep(0.02)
-    return value
 
 
 def sign_vehicle(link: Any, connection: str) -> str:
@@ -46,11 +38,11 @@ def sign_vehicle(link: Any, connection: str) -> str:
         asked = time.monotonic()
         link.setup_signing()
 
-        def signs() -> bool | None:
+        def signs() -> bool:
             hb = link.latest("HEARTBEAT")
-            return True if hb is not None and hb[1] > asked and hb[0].get_signed() else None
+            return hb is not None and hb[1] > asked and bool(hb[0].get_signed())
 
-        if _until(signs, KEY_TAKEN_S) is None:
+        if not wait_for(signs, KEY_TAKEN_S, poll_s=0.02):
             raise RunError("--signing-key: the vehicle did not take the key (its heartbeats are still unsigned)")
     link.accept_unsigned = False
     if link.accepts_unsigned():
