@@ -148,8 +148,11 @@ def noon(work: Path, budget: int) -> dict:
 
 
 def compare(plan: Path, logs: Path, out: Path, *extra: str) -> dict | None:
-    """``rapt-plan compare`` on every log in ``logs``; its comparison.json (None when it failed)."""
+    """``rapt-plan compare`` on every log in ``logs``; its comparison.json (None when it failed, or when nothing was
+    flown there: ``--stages day`` flies no committed scenario)."""
     mcaps = sorted(str(p) for p in logs.glob("*.mcap"))
+    if not mcaps and not (out / "comparison.json").is_file():
+        return None
     if not (out / "comparison.json").is_file():
         proc = rapt_plan("compare", str(plan.parent), *mcaps, "--out", str(out), *extra)
         if proc.returncode:
