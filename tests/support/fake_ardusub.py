@@ -37,6 +37,9 @@ class Behaviour:
     denial_switches_to: int | None = None  # ... and change to this mode on each (a pilot, a failsafe)
     failsafe_after_s: float | None = None  # this long after arming a failsafe acts on its own ...
     failsafe_mode: int | None = None  # ... switching to this mode (None: it disarms the vehicle)
+    earlier_run_depth_m: float | None = None  # start armed this deep, as a killed run left it ...
+    earlier_run_mode: int = 4  # ... in this mode (GUIDED)
+    sensor_below_m: float = 0.0  # the depth sensor sits this far under the waterline (ArduSub SITL: 0.36 m)
 
 
 class FakeArduSub:
@@ -49,6 +52,9 @@ class FakeArduSub:
         self.arm_modes: list[int] = []  # the mode the vehicle was in at each arm request
         self.armed_at: float | None = None
         self.failsafe_at: int | None = None  # len(received) when the failsafe acted
+        if self.b.earlier_run_depth_m is not None:
+            self.mode, self.armed, self.depth = self.b.earlier_run_mode, True, self.b.earlier_run_depth_m
+            self.armed_at = time.monotonic()
         self._upload = 0
         self._boot = time.monotonic()
         self._stop = threading.Event()
@@ -98,7 +104,9 @@ class FakeArduSub:
             self.depth = max(0.0, self.depth + self.vz * 0.05 * 3)  # a brisk diver keeps the tests short
         elif self.mode == 9:  # SURFACE
             self.depth = max(0.0, self.depth - 0.1)
-        mm = int(-self.depth * 1000)
+            if self.armed and self.depth == 0.0:  # ArduSub hands over to ALT_HOLD there (SURFACE_COMPLETE)
+                self.mode = 2
+        mm = int(-(self.depth + self.b.sensor_below_m) * 1000)
         m.global_position_int_send(ms, round(self.lat * 1e7), round(self.lon * 1e7), mm, mm, 0, 0, 0, 0)
         m.attitude_send(ms, 0.0, 0.0, 0.3, 0.0, 0.0, 0.0)
         m.battery_status_send(0, 0, 0, 2000, [15000] + [65535] * 9, 100, 10, 36, 90)

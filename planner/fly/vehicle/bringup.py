@@ -28,7 +28,7 @@ from bridge.mavlink_bridge import MavlinkBridge  # noqa: E402
 from bridge.mission_upload import MissionItem  # noqa: E402
 from bridge.setpoint import Setpoint  # noqa: E402
 from bridge.vehicle_commands import ARDUSUB_MODES  # noqa: E402
-from planner.common.telemetry import VehicleTelemetry  # noqa: E402
+from planner.common.telemetry import SURFACE_BAND_M, VehicleTelemetry  # noqa: E402
 from planner.fly.vehicle.guard import GuardOptions  # noqa: E402
 from planner.fly.vehicle.preflight import Preflight, result_name  # noqa: E402
 from rapt.errors import InputError, LinkTimeoutError, RefusedError, RunError  # noqa: E402
@@ -63,6 +63,7 @@ DEPTH_REPORTS = 3
 
 GUIDED = ARDUSUB_MODES["GUIDED"]
 SURFACE = ARDUSUB_MODES["SURFACE"]
+ALT_HOLD = ARDUSUB_MODES["ALT_HOLD"]
 #: The vehicle starts a scenario within this many metres of its start, unless told otherwise.
 START_TOLERANCE_M = 10.0
 #: A transit leg's speed through the water at most (m/s), and the slowest it is given time for.
@@ -204,11 +205,16 @@ class BringUp(Preflight):
             )
         mode = hb.mode_label
         if hb.armed and hb.custom_mode not in (GUIDED, SURFACE):  # GUIDED or SURFACE: an earlier run's (previous())
+            whose = (
+                "a pilot's hold, or an earlier run's vehicle that SURFACE brought to the top"
+                if hb.custom_mode == ALT_HOLD
+                else "someone else is flying it"
+            )
             self._fail(
                 "heartbeat",
                 RefusedError(
-                    f"--mavlink {self.connection}: the vehicle is already armed in {mode}; "
-                    "someone else is flying it: disarm it before rapt-plan run"
+                    f"--mavlink {self.connection}: the vehicle is already armed in {mode} ({whose}): "
+                    "disarm it before rapt-plan run"
                 ),
             )
         system = self.bridge.target[0] if self.bridge.target else "?"
@@ -248,8 +254,10 @@ class BringUp(Preflight):
 
     def previous(self) -> None:
         """A vehicle still armed in GUIDED or SURFACE is an earlier run's (ours, or one whose computer died and
-        whose guard surfaced it): it is surfaced and disarmed before this run starts, so nothing of that
-        run's state (its depth, its place, its armed motors) passes for this scenario's start."""
+        whose guard is surfacing it): it is surfaced and disarmed before this run starts, so nothing of that
+        run's state (its depth, its place, its armed motors) passes for this scenario's start.  At the top
+        ArduSub leaves SURFACE for ALT_HOLD by itself; armed in ALT_HOLD before we asked, it could as well
+        be a pilot's, and :meth:`heartbeat` refuses it."""
         hb = self.bridge.autopilot
         if hb is None or not hb.armed:
             return
@@ -259,12 +267,14 @@ class BringUp(Preflight):
 
         def up() -> bool | None:
             self._feed()
-            if self._mode() not in (GUIDED, SURFACE):
+            pose, mode = self.telemetry.pose, self._mode()
+            if mode == ALT_HOLD and pose is not None and pose.depth < SURFACE_BAND_M:
+                return True  # ArduSub's SURFACE hands over to ALT_HOLD once it is at the top (SURFACE_COMPLETE)
+            if mode not in (GUIDED, SURFACE):
                 self._fail(
                     "previous",
                     RefusedError(f"bring-up previous: while surfacing, the vehicle went to {self._mode_label()}"),
                 )
-            pose = self.telemetry.pose
             return True if pose is not None and pose.surfaced else None
 
         if self._wait(up, self.timeouts.surface) is None:

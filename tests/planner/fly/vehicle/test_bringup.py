@@ -72,7 +72,8 @@ def test_every_step_in_order_and_set_points_only_in_guided(flight):
     guided = told.index(f"COMMAND_LONG {M.MAV_CMD_DO_SET_MODE}")
     assert told.index("MISSION_COUNT") < guided  # the mission is uploaded before anything moves
     assert "SET_POSITION_TARGET_LOCAL_NED" not in told[:guided]  # nothing is commanded outside GUIDED
-    assert vehicle.mode == 9 and vehicle.depth == 0.0 and not vehicle.armed  # surfaced, then disarmed
+    # surfaced, then disarmed (SURFACE, or ALT_HOLD if it reached the top armed: ArduSub's hand-over)
+    assert vehicle.mode in (9, 2) and vehicle.depth == 0.0 and not vehicle.armed
 
 
 @pytest.mark.parametrize(
@@ -107,7 +108,7 @@ def test_a_step_that_fails_stops_the_run_with_one_line(flight, behaviour, error,
     if last_step == "streams":
         assert "REQUEST_DATA_STREAM" in told  # the fallback was tried
     if last_step == "depth":  # armed by then: it is brought up and disarmed before the error is raised
-        assert vehicle.mode == 9 and not vehicle.armed and steps[-1].name == "recover"
+        assert vehicle.mode in (9, 2) and not vehicle.armed and steps[-1].name == "recover"
 
 
 def test_the_thrusters_pwm_limits_are_asked_for_so_the_log_carries_them(flight):
@@ -203,3 +204,44 @@ def test_a_pilot_who_takes_the_vehicle_during_the_dive_is_not_fought(flight):
     assert vehicle.failsafe_at is not None and vehicle.armed and vehicle.mode == 19
     assert not [m for m in after if m.get_type() == "COMMAND_LONG" and m.command != M.MAV_CMD_SET_MESSAGE_INTERVAL]
     assert steps[-1].name == "recover" and steps[-1].detail.startswith("nothing commanded: vehicle: left GUIDED")
+
+
+def test_an_earlier_runs_vehicle_handed_to_alt_hold_at_the_top_counts_as_surfaced(flight):
+    """A killed run left the vehicle armed in GUIDED at 6 m.  SURFACE brings it up and, at the top, ArduSub
+    switches itself to ALT_HOLD (SURFACE_COMPLETE) while the depth sensor, 0.36 m under the waterline,
+    still reads deeper than "surfaced" and has not yet held still: that is the surface, not a pilot."""
+    steps: list = []
+    with fake(flight.mission, earlier_run_depth_m=6.0, sensor_below_m=0.36) as (conn, vehicle):
+        result = _fly(flight, conn, steps)
+        told = _commanded(vehicle)
+    [previous] = [s for s in steps if s.name == "previous"]
+    assert previous.status == "ok" and "armed in GUIDED from an earlier run" in previous.detail
+    assert [s.name for s in steps][: len(STEPS) + 1] == STEPS[:2] + ["previous"] + STEPS[2:]
+    assert result.timeline[-1].name == "recover" and "disarmed" in result.timeline[-1].detail
+    surface, disarm = f"COMMAND_LONG {M.MAV_CMD_DO_SET_MODE}", f"COMMAND_LONG {M.MAV_CMD_COMPONENT_ARM_DISARM}"
+    assert told.index(surface) < told.index(disarm) < told.index("MISSION_COUNT")  # up, disarmed, then this run
+
+
+def test_an_earlier_runs_vehicle_put_in_alt_hold_at_depth_is_not_fought(flight):
+    """ALT_HOLD deep down is a failsafe's hold or a pilot's: the bring-up stops in one line and never disarms."""
+    steps: list = []
+    behaviour = {"earlier_run_depth_m": 20.0, "failsafe_after_s": 0.5, "failsafe_mode": 2}
+    with fake(flight.mission, **behaviour) as (conn, vehicle):
+        with pytest.raises(RefusedError, match=r"^bring-up previous: while surfacing, the vehicle went to ALT_HOLD$"):
+            _fly(flight, conn, steps)
+        told = _commanded(vehicle)
+    assert vehicle.armed and vehicle.mode == 2 and vehicle.depth > 5.0
+    assert f"COMMAND_LONG {M.MAV_CMD_COMPONENT_ARM_DISARM}" not in told
+
+
+def test_a_vehicle_already_armed_in_alt_hold_is_refused_before_anything_is_commanded(flight):
+    steps: list = []
+    with fake(flight.mission, earlier_run_depth_m=0.0, earlier_run_mode=2) as (conn, vehicle):
+        with pytest.raises(RefusedError) as refused:
+            _fly(flight, conn, steps)
+        told = _commanded(vehicle)
+    line = str(refused.value)
+    assert "already armed in ALT_HOLD (a pilot's hold, or an earlier run's vehicle that SURFACE" in line
+    assert line.endswith("disarm it before rapt-plan run") and "\n" not in line
+    assert [s.name for s in steps if s.status == "failed"] == ["heartbeat"]
+    assert not [k for k in told if k.startswith("COMMAND_LONG")] and vehicle.armed and vehicle.mode == 2
