@@ -69,7 +69,10 @@ def _nogo_scenario() -> str:
 def test_an_operators_range_day_on_a_bare_autopilot_is_accepted_by_compare(tmp_path):
     """`rapt-plan frontseat --bare` stands in for the vehicle; `rapt-plan run --mavlink --log` flies on it the
     plan's scenario where a no-go area is predicted entered: the watchdog takes over there and ends the run;
-    `rapt-plan compare` reads the log like a SIL one and finds the predicted mode."""
+    `rapt-plan compare` reads the log like a SIL one and finds the predicted mode.  The vehicle boots at the
+    launch point and drifts with the current, disarmed, for as long as the run takes to start (seconds on a
+    busy machine, a minute or more of vehicle time at speed-up 25): `--transit` brings it back to the start, as a
+    crew would."""
     sid = _nogo_scenario()
     port = free_port(socket.SOCK_DGRAM)
     env = {**os.environ, "COLUMNS": "200"}
@@ -96,6 +99,7 @@ def test_an_operators_range_day_on_a_bare_autopilot_is_accepted_by_compare(tmp_p
                 "--log",
                 str(log),
                 "--no-guard",
+                "--transit",
             ]
             + ["--timeout", "150"],
             cwd=ROOT,
@@ -122,6 +126,8 @@ def test_an_operators_range_day_on_a_bare_autopilot_is_accepted_by_compare(tmp_p
         "clock",
     ):
         assert f" {step} " in run.stderr, run.stderr  # the bring-up, step by step, as it happens
+    assert run.stderr.index(" depth ") < run.stderr.index(" clock "), run.stderr
+    assert " transit " not in run.stderr or run.stderr.index(" transit ") < run.stderr.index(" clock "), run.stderr
     assert "watchdog: nogo" in run.stdout, run.stdout
     observed = next(line for line in run.stdout.splitlines() if "observed mode" in line)
     assert "TF" in observed, run.stdout  # the plan's prediction: a no-go area entered
