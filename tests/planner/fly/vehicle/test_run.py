@@ -112,19 +112,8 @@ def test_an_operators_range_day_on_a_bare_autopilot_is_accepted_by_compare(tmp_p
         vehicle.send_signal(signal.SIGINT)
         vehicle.communicate(timeout=30)
     assert run.returncode == 0, run.stderr + run.stdout
-    for step in (
-        "heartbeat",
-        "streams",
-        "estimate",
-        "area",
-        "start",
-        "guard",
-        "mission",
-        "guided",
-        "arm",
-        "depth",
-        "clock",
-    ):
+    steps = "heartbeat streams estimate area start guard mission guided arm depth clock"
+    for step in steps.split():
         assert f" {step} " in run.stderr, run.stderr  # the bring-up, step by step, as it happens
     assert run.stderr.index(" depth ") < run.stderr.index(" clock "), run.stderr
     assert " transit " not in run.stderr or run.stderr.index(" transit ") < run.stderr.index(" clock "), run.stderr
