@@ -294,6 +294,7 @@ def test_a_plan_scenario_flown_on_ardusub_like_on_the_range(tmp_path):
     assert row["path_error_m"] is not None and row["predicted_mode"] in ("TF", "SS", "MS", "TS")
 
 
+@pytest.mark.slow  # a firmware boot and flight of about 10 s
 @needs_firmware
 @pytest.mark.sitl
 @pytest.mark.integration
@@ -375,6 +376,7 @@ def test_a_vehicle_port_another_client_holds_is_one_line_and_nothing_is_commande
     assert [e["name"] for e in run.events if e["source"] == "bringup"] == ["heartbeat"]
 
 
+@pytest.mark.slow  # a firmware boot and flight of about 10 s
 @needs_firmware
 @pytest.mark.sitl
 @pytest.mark.integration
@@ -477,7 +479,7 @@ def test_a_virtual_obstacle_in_the_way_is_seen_and_gone_round_on_ardusub():
     assert result.virtual["contacts_sent"] > 0 and result.virtual["gauge_sent"] > 0
 
 
-@needs_firmware
+@needs_firmware  # the default run's firmware flight (about 10 s)
 @pytest.mark.sitl
 @pytest.mark.integration
 def test_the_watchdog_surfaces_ardusub_when_the_vehicle_touches_a_virtual_obstacle(tmp_path):

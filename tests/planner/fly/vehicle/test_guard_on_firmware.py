@@ -26,7 +26,7 @@ SURFACE = 9
 SPEEDUP = 10.0
 
 needs_firmware = pytest.mark.skipif(sitl_binary() is None, reason=f"{ENV} is not set: no ArduSub SITL binary to fly")
-pytestmark = [needs_firmware, pytest.mark.sitl, pytest.mark.integration]
+pytestmark = [needs_firmware, pytest.mark.sitl, pytest.mark.integration, pytest.mark.slow]  # 9 s and more each
 
 
 def test_a_run_killed_mid_scenario_is_surfaced_by_the_guard_within_its_timeout(tmp_path):
@@ -83,7 +83,6 @@ def test_a_vehicle_that_cannot_take_the_guard_is_refused_in_one_line_and_flies_w
     assert guard.status == "note" and "--no-guard" in guard.detail and "nothing surfaces the vehicle" in guard.detail
 
 
-@pytest.mark.slow  # a reboot of the firmware, then a run
 def test_guard_reboot_turns_scripting_on_reboots_the_disarmed_vehicle_and_installs_the_guard():
     """With the operator's consent (--guard-reboot) a vehicle with scripting off gets SCR_ENABLE 1 and one reboot,
     comes back with it kept, runs the guard and flies; the timeline says it rebooted."""

@@ -1,7 +1,7 @@
 """Real ground-station clients against the simulated front-seat over loopback TCP: pymavlink, MAVProxy, MAVSDK.
 
 Each does what its users do on a range day, and each runs the same sequence against ArduSub
-SITL 4.7.0-dev (flavour ``sitl``, marked ``sitl``, 11-13 s each, skipped where ``ARDUSUB_SITL``
+SITL 4.7.0-dev (flavour ``sitl``, marked ``sitl`` and ``slow``, 11-13 s each, skipped where ``ARDUSUB_SITL``
 is not set), so what passes on the simulated front-seat is what the real firmware lets these
 clients do.  The bare front-seat is the vehicle a ground station meets; the lock-step one is
 checked where its clock does not matter (connect, parameters, mode, arming, missions).
@@ -51,6 +51,7 @@ SITL = pytest.param(
     "sitl",
     marks=[
         pytest.mark.sitl,
+        pytest.mark.slow,
         pytest.mark.skipif(sitl_binary() is None, reason=f"{ENV} is not set: no ArduSub SITL binary"),
     ],
 )
