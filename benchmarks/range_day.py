@@ -150,15 +150,16 @@ def noon(work: Path, budget: int) -> dict:
 def compare(plan: Path, logs: Path, out: Path, *extra: str) -> dict | None:
     """``rapt-plan compare`` on every log in ``logs``; its comparison.json (None when it failed, or when nothing was
     flown there: ``--stages day`` flies no committed scenario)."""
-    mcaps = sorted(str(p) for p in logs.glob("*.mcap"))
-    if not mcaps and not (out / "comparison.json").is_file():
-        return None
-    if not (out / "comparison.json").is_file():
+    done = out / "comparison.json"
+    if not done.is_file():
+        mcaps = sorted(str(p) for p in logs.glob("*.mcap"))
+        if not mcaps:
+            return None
         proc = rapt_plan("compare", str(plan.parent), *mcaps, "--out", str(out), *extra)
         if proc.returncode:
             print(proc.stdout + proc.stderr, file=sys.stderr)
             return None
-    return json.loads((out / "comparison.json").read_text())
+    return json.loads(done.read_text())
 
 
 def track_errors(mission, u, run, driver=None, plant=None) -> tuple[float, float]:
