@@ -20,6 +20,7 @@ from typing import Any
 
 from rapt.space import StateSpace
 from sim.uuv.bias import Bias
+from sim.uuv.missionnoise import ExecutionNoise
 
 __all__ = [
     "Rect",
@@ -250,6 +251,9 @@ class Mission:
     #: Where that bias came from: the table's ``source`` ("" when it names none), None when
     #: the file has no ``[execution_bias]`` table.
     execution_bias_source: str | None = None
+    #: The day's execution noise (``[execution_noise]``, :mod:`sim.uuv.missionnoise`): the sigmas a plan of this
+    #: mission dithers by; no simulation reads it. None without the table.
+    execution_noise: ExecutionNoise | None = None
 
     @property
     def dim(self) -> int:

@@ -46,6 +46,8 @@ centre.  Keys marked ``=value`` are optional with that default; the others are r
     [current]                     # optional overrides of sim.uuv.mission.Current fields
     [execution_bias]              # optional: the day's water and vehicle as logs showed them
                                   #   (sim.uuv.missionbias; rapt-plan calibrate --bias writes it)
+    [execution_noise]             # optional: the day's execution noise, the sigmas a plan dithers by
+                                  #   (sim.uuv.missionnoise; rapt-plan calibrate --bias writes it)
 
     [[parameters]]                # one per state-space parameter, in state-space order
     name = "nogo_x"
@@ -109,6 +111,7 @@ from typing import Any
 from sim.uuv.mission import VELOCITY_CONTROLS, Current, Mission, MissionArea, Rect, Transmission, Triangle, Vehicle
 from sim.uuv.missionbias import read_execution_bias
 from sim.uuv.missionfields import MISSING, FieldChecker, fmt, names
+from sim.uuv.missionnoise import read_execution_noise
 from sim.uuv.missionparameters import ParameterReader
 from sim.uuv.missionscoretree import ScoreTreeReader
 
@@ -130,6 +133,7 @@ _SECTIONS = (
     "vehicle",
     "current",
     "execution_bias",
+    "execution_noise",
     "parameters",
     "score_tree",
 )
@@ -225,6 +229,7 @@ class _Loader(FieldChecker):
         vehicle = self.overrides(data.get("vehicle", {}), "vehicle", Vehicle)
         current = self.overrides(data.get("current", {}), "current", Current)
         day_bias, day_source = read_execution_bias(self, data)
+        day_noise = read_execution_noise(self, data)
 
         self.elements = {
             "nogo": [z.name for z in nogo],
@@ -264,6 +269,7 @@ class _Loader(FieldChecker):
             source=self.label,
             execution_bias=day_bias,
             execution_bias_source=day_source,
+            execution_noise=day_noise,
         )
         tree = ScoreTreeReader(self.label, mission).read(data["score_tree"])
         return dataclasses.replace(mission, score_tree=tree)
