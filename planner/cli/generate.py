@@ -17,7 +17,8 @@ __all__ = ["generate", "summary_table"]
 
 
 def summary_table(plan: dict, title: str) -> Table:
-    """Per pair: its sub-boundary and modes, distance, P(predicted outcome) of each side and variant, verdict."""
+    """Per pair: its sub-boundary and modes, distance, P(predicted outcome) of each side and flown variant, verdict
+    (:func:`straddle_line` gives the chance that both flown sides show their outcomes)."""
     table = Table(title=title)
     for col in ("pair", "sub-boundary", "modes", "distance", "P a / b", "variant P", "verdict"):
         table.add_column(col, justify="left" if col in ("sub-boundary", "verdict") else "right")
@@ -38,6 +39,15 @@ def summary_table(plan: dict, title: str) -> Table:
     return table
 
 
+def straddle_line(plan: dict) -> str | None:
+    """One line: each pair's P(straddle), the chance that both flown sides show their predicted outcomes (None
+    undithered)."""
+    shown = [f"pair {p['id']} {p['p_straddle']:.0%}" for p in plan["pairs"] if p.get("p_straddle") is not None]
+    if not shown:
+        return None
+    return "P(straddle), both flown sides as predicted: " + ", ".join(shown)
+
+
 def generate(
     mission_file: Annotated[Path, typer.Argument(help="Mission file (TOML).")],
     out_dir: Annotated[Path, typer.Option("--out", help="Directory for plan.json and the per-scenario files.")],
@@ -46,14 +56,16 @@ def generate(
     global_fraction: Annotated[float, typer.Option(help="Share of the budget for the space-filling start.")] = 0.2,
     dithers: Annotated[int, typer.Option(help="Stochastic dither runs per pair.")] = 2000,
     dither_sigma: Annotated[
-        str,
+        str | None,
         typer.Option(
             "--dither-sigma",
             help="Expected execution noise the dithers model: position=M,time=S,battery=PCT "
             "(metres, seconds, percent of capacity; kinds left out keep their default) or one "
-            "unit-cube sigma for every parameter, e.g. 0.02.",
+            "unit-cube sigma for every parameter, e.g. 0.02. Default: the mission file's "
+            "[execution_noise] (the day's, as rapt-plan calibrate --bias writes it), else "
+            "position=10,time=30,battery=1.",
         ),
-    ] = "position=10,time=30,battery=1",
+    ] = None,
     seed: Annotated[int, typer.Option(help="Seed of every random choice.")] = 0,
     batch_size: Annotated[
         int | None,
@@ -100,6 +112,7 @@ def generate(
     from planner.plan.generate import GenerateConfig, make_executor
     from planner.plan.generate import generate as run_generate
     from planner.plan.planned_for import summary_lines
+    from planner.plan.unreached import unreached_line
 
     mission = load_mission(mission_file)
     store = out_dir / ("study.db" if surrogate is None else "study-surrogate.db")
@@ -120,7 +133,7 @@ def generate(
     )
     try:
         cfg.check()
-        cfg.noise().sigmas(mission)  # a noise wider than a parameter's range fails before the search
+        cfg.noise(mission).sigmas(mission)  # a noise wider than a parameter's range fails before the search
     except ValueError as exc:
         fail(str(exc))
     if surrogate is not None:
@@ -155,8 +168,14 @@ def generate(
         finally:
             close_executor()
     print_table(summary_table(plan, f"{mission.name}: field plan in {out_dir}"))
+    straddle = straddle_line(plan)
+    if straddle is not None:
+        out.print(straddle, soft_wrap=True, highlight=False)
     for line in summary_lines(plan["mission"].get("planned_for")):
         out.print(escape(line), soft_wrap=True, highlight=False)
+    cannot = unreached_line(plan["study"].get("unreached"))
+    if cannot is not None:
+        out.print(escape(cannot), soft_wrap=True, highlight=False)
     for p in plan["pairs"]:
         if p.get("reason"):
             out.print(f"pair {p['id']} is fragile: {p['reason']}", soft_wrap=True, highlight=False)

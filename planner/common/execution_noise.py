@@ -16,7 +16,36 @@ import numpy as np
 import sim.uuv
 from sim.uuv.mission import Mission, Vehicle
 
-__all__ = ["dithered_runs"]
+__all__ = ["dithered_runs", "noise_kind", "coordinate_kinds", "NOISE_KINDS"]
+
+#: The kinds of execution noise, in their units: navigation error on positions (m), start and timing slip on
+#: times (s), gauge error on the starting charge (% of capacity).
+NOISE_KINDS = {"position": "m", "time": "s", "battery": "%"}
+
+
+def noise_kind(field: str) -> str | None:
+    """Which execution noise a mission-file field takes (None: it is not noisy on the water)."""
+    if field in ("x", "y"):
+        return "position"
+    if field.endswith("_s"):
+        return "time"
+    if field == "start_battery":
+        return "battery"
+    return None
+
+
+def coordinate_kinds(mission: Mission) -> list[str | None]:
+    """The noise kind of each unit-cube coordinate of ``mission``'s study space (None: not noisy, or not continuous)."""
+    space = mission.space
+    out: list[str | None] = [None] * space.dim
+    for binding in mission.bindings:
+        param = next(p for p in space.parameters if p.name == binding.parameter)
+        if param.kind != "continuous":
+            continue
+        kind = noise_kind(binding.field)
+        for c in range(space.dim)[space.slice_of(param.name)]:
+            out[c] = kind
+    return out
 
 
 def dithered_runs(

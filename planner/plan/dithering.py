@@ -27,7 +27,7 @@ from typing import Any
 import numpy as np
 
 import sim.uuv
-from planner.common.execution_noise import dithered_runs
+from planner.common.execution_noise import NOISE_KINDS, dithered_runs, noise_kind
 from rapt.errors import InputError
 from sim.uuv.mission import Mission
 from sim.uuv.scoring import MODE_NAMES
@@ -48,7 +48,6 @@ __all__ = [
 #: position, start and timing slip (seconds) on every time, battery gauge error (percent
 #: of capacity) on the starting charge. A priority order is the plan's choice, not noise.
 DEFAULT_NOISE = "position=10,time=30,battery=1"
-NOISE_UNITS = {"position": "m", "time": "s", "battery": "%"}
 #: A sigma above this share of a parameter's range blurs the whole range: an input error.
 MAX_SIGMA_SHARE = 0.25
 
@@ -83,7 +82,7 @@ class DitherNoise:
         values: dict[str, float] = {}
         for part in filter(None, (p.strip() for p in text.split(","))):
             m = re.fullmatch(r"(position|time|battery)\s*=\s*([0-9.eE+-]+)\s*(m|s|%)?", part)
-            if m is None or (m.group(3) and m.group(3) != NOISE_UNITS[m.group(1)]):
+            if m is None or (m.group(3) and m.group(3) != NOISE_KINDS[m.group(1)]):
                 raise InputError(
                     f"--dither-sigma: cannot read {part!r}; expected a unit-cube sigma such as 0.02 or "
                     "kind=value pairs such as position=10,time=30,battery=1 (metres, seconds, percent)"
@@ -124,7 +123,7 @@ class DitherNoise:
             if self.unit is not None:
                 out[cols] = 0.0 if param.kind == "permutation" else self.unit
                 continue
-            kind = _noise_kind(binding.field)
+            kind = noise_kind(binding.field)
             if kind is None or param.kind != "continuous":
                 continue
             physical = {"position": self.position_m, "time": self.time_s, "battery": self.battery_pct / 100.0}[kind]
@@ -146,17 +145,6 @@ class DitherNoise:
         if self.unit is not None:
             return f"{self.unit:g} of each parameter's range"
         return f"position {self.position_m:g} m, time {self.time_s:g} s, battery {self.battery_pct:g} %"
-
-
-def _noise_kind(field: str) -> str | None:
-    """Which execution noise a mission-file field takes (None: it is not noisy on the water)."""
-    if field in ("x", "y"):
-        return "position"
-    if field.endswith("_s"):
-        return "time"
-    if field == "start_battery":
-        return "battery"
-    return None
 
 
 def outcome_columns(root: list[int], names: list[str], elements: list[str]) -> list[int]:
@@ -287,6 +275,8 @@ VARIANT_STEPS = tuple(step for wave in VARIANT_WAVES for step in wave)
 VARIANT_COORDINATES = 2  # the most sensitive coordinates tried as directions
 #: Variants confirmed with the full dithering per fragile scenario (screened best first).
 VARIANT_CONFIRM = 2
+#: Below the target, the best screened candidate is confirmed too when it screens at least this P.
+CLOSEST_SCREENED = 0.7
 
 
 def robust_variants(
@@ -310,10 +300,12 @@ def robust_variants(
     A candidate must show the outcome in its deterministic run, and at least ``target``
     of ``n_screen`` dithers. The smallest such moves are then re-dithered with
     ``n_confirm`` runs, as the plan's own scenarios were, and the first to hold
-    ``target`` wins. Returns an entry per scenario and the runs spent. Every entry
-    has ``found``. A found variant has ``u``, ``p_predicted``, ``p_predicted_mode``,
-    ``direction``, ``sigmas`` and ``moved``; otherwise ``reason`` says why not, and
-    ``best`` gives the best screened P.
+    ``target`` wins (the smallest passing moves, and the best screened one, are confirmed).
+    Returns an entry per scenario and the runs spent. Every entry has ``found``. A found
+    variant has ``u``, ``p_predicted``, ``p_predicted_mode``, ``direction``, ``sigmas`` and
+    ``moved``; otherwise ``reason`` says why not, ``best`` gives the best screened P, and
+    ``closest`` (when any was confirmed) is the best confirmed variant under the target, in
+    the found entries' form.
     """
     fragile = np.atleast_2d(np.asarray(fragile, dtype=float))
     sigma = np.asarray(sigma, dtype=float)
@@ -390,7 +382,14 @@ def _try_variants(mission, fragile, outcomes, V, meta, out, n_screen, n_confirm,
     for s in np.unique(owners).tolist():
         rows = np.flatnonzero((owners == s) & (p_screen >= target))
         rows = rows[np.argsort([meta[i][2] for i in rows], kind="stable")]  # smallest move first
-        confirm.extend(rows[:VARIANT_CONFIRM].tolist())
+        picked = rows[:VARIANT_CONFIRM].tolist()
+        screened = np.flatnonzero((owners == s) & np.isfinite(p_screen))
+        if len(screened) and not out[s].get("closest"):
+            # and the best screened, even under the target: a small move that screens just above it may confirm
+            # below it, and a side no move brings to the target still flies its most reliable variant
+            best = int(screened[np.argmax(p_screen[screened])])
+            picked += [best] if best not in picked and p_screen[best] >= CLOSEST_SCREENED else []
+        confirm.extend(picked)
         seen = p_screen[owners == s]
         if not np.all(np.isnan(seen)):
             out[s]["best"] = max(float(np.nanmax(seen)), out[s]["best"] or 0.0)
@@ -401,21 +400,29 @@ def _try_variants(mission, fragile, outcomes, V, meta, out, n_screen, n_confirm,
         )
         for i, p, pm in zip(confirm, p_full, p_mode):
             s, name, step = meta[i]
-            if out[s]["found"] or p < target:
+            if out[s]["found"]:
                 continue
-            u = fragile[s]
-            c = int(np.argmax(np.abs(V[i] - u)))
-            out[s] = {
-                "found": True,
-                "u": [float(x) for x in V[i]],
-                "p_predicted": float(p),
-                "p_predicted_mode": float(pm),
-                "direction": name,
-                "sigmas": step,
-                "moved": {"parameter": mission.parameter_of(c), "unit_step": float(V[i][c] - u[c])},
-                "unit_distance": float(np.linalg.norm(V[i] - u)),
-            }
+            entry = _variant_entry(mission, fragile[s], V[i], float(p), float(pm), name, step)
+            if p >= target:
+                out[s] = entry
+            elif p > (out[s].get("closest") or {}).get("p_predicted", -1.0):
+                out[s]["closest"] = entry  # the best confirmed under the target, for a caller that can use it
     return runs
+
+
+def _variant_entry(mission: Mission, u: np.ndarray, w: np.ndarray, p: float, pm: float, name: str, step: float) -> dict:
+    """A confirmed variant ``w`` of scenario ``u``: its row, confirmed P, and the move that made it."""
+    c = int(np.argmax(np.abs(w - u)))
+    return {
+        "found": True,
+        "u": [float(x) for x in w],
+        "p_predicted": p,
+        "p_predicted_mode": pm,
+        "direction": name,
+        "sigmas": step,
+        "moved": {"parameter": mission.parameter_of(c), "unit_step": float(w[c] - u[c])},
+        "unit_distance": float(np.linalg.norm(w - u)),
+    }
 
 
 def _directions(mission, u, partner, dither, sensitivity, sigma) -> list[tuple[str, np.ndarray]]:

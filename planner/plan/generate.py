@@ -43,13 +43,15 @@ import sim.uuv
 from planner.common.plans import PLAN_SCHEMA, coordinate_sensitivity, embedded_mission
 from planner.plan.analysis import Analysis, analyse, confirm_with_expert, pair_points, select_pairs
 from planner.plan.confirmation import Confirmation
-from planner.plan.dithering import DEFAULT_NOISE, DitherNoise, Outcome, dither_many, outcome_columns, robust_variants
+from planner.plan.dithering import DEFAULT_NOISE, DitherNoise
+from planner.plan.pair_choice import MAX_FLOWN_DISTANCE, Candidate, evaluate_candidates, rank_candidates
 from planner.plan.plan_scenarios import remove_unlisted, scenario_entries, variant_entries
 from planner.plan.planned_for import planned_for
 from planner.plan.refinement import MIN_REFINE_RUNS, refine_pairs
 from planner.plan.report import write_report
 from planner.plan.runtime import numerical_runtime
 from planner.plan.search_status import SearchStatus
+from planner.plan.unreached import unreached
 from rapt.errors import InputError, StudyMismatchError
 from sim.uuv.mission import Mission
 from sim.uuv.scoring import MODE_NAMES
@@ -75,13 +77,17 @@ class GenerateConfig:
     seed: int = 0
     batch_size: int | None = None  # None: auto_batch_size(budget)
     dithers: int = 2000
-    dither_sigma: str | float = DEFAULT_NOISE  # expected execution noise (planner.plan.dithering.DitherNoise)
+    # expected execution noise (planner.plan.dithering.DitherNoise); None: the mission file's [execution_noise],
+    # the noise a morning's logs measured (rapt-plan calibrate --bias writes it), else DEFAULT_NOISE
+    dither_sigma: str | float | None = None
     executor: Any = None
     store: Path | None = None
     refine: int = 0  # runs per candidate pair of the focused second search (0: off)
     refine_min_distance: float = 0.02  # refined pairs stay at least this far apart (unit cube)
     refine_max_distance: float = 0.05  # a refined pair further apart than this is not shipped
-    fragile_below: float = 0.8  # P(predicted outcome) under which a scenario gets a robust variant
+    # P(predicted outcome) under which a side gets a robust variant: two sides at 0.9 straddle at 0.81, above the
+    # 0.8 a range day wants of each pair (pair_choice ranks the pairs by that product)
+    fragile_below: float = 0.9
     surrogate: Any = None  # a sim.uuv.imitation Surrogate: search and dither with it, confirm pairs with the expert
     surrogate_file: str = ""
     confirm_runs: int = 100  # expert runs that look for the expert's boundary near the candidate pairs
@@ -105,8 +111,16 @@ class GenerateConfig:
         """The runs left for the search once the refinement's are set aside (all count in ``budget``)."""
         return self.budget - self.refine * self.refine_candidates
 
-    def noise(self) -> DitherNoise:
-        return DitherNoise.parse(self.dither_sigma)
+    def noise(self, mission: Mission | None = None) -> DitherNoise:
+        return DitherNoise.parse(self.noise_spec(mission))
+
+    def noise_spec(self, mission: Mission | None = None) -> str | float:
+        """``dither_sigma``, or without one the day's noise that ``mission`` carries, else :data:`DEFAULT_NOISE`."""
+        if self.dither_sigma is not None:
+            return self.dither_sigma
+        if mission is not None and mission.execution_noise is not None:
+            return mission.execution_noise.spec()
+        return DEFAULT_NOISE
 
     def check(self) -> None:
         if not isinstance(self.batch_size, int) or self.batch_size < 1:
@@ -229,58 +243,56 @@ def generate(
     """
     cfg.check()
     embedded = _mission_text(mission, Path(mission_path))
-    noise = cfg.noise()
+    noise = cfg.noise(mission)
     sigma = noise.sigmas(mission)  # a noise too wide for a parameter fails before the search
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     clock = _StageClock(timings)
-    a, pairs, confirmation, refinement = _choose_pairs(mission, cfg, progress, clock)
+    a, candidates, confirmation, refinement = _choose_pairs(mission, cfg, progress, clock)
     sens = coordinate_sensitivity(mission.space, a.sensitivity)
-    U = np.vstack([pair_points(a, p) for p in pairs]) if pairs else np.zeros((0, mission.dim))
-    ids = [f"pair{p}{side}" for p in range(1, len(pairs) + 1) for side in "ab"]
-    # the scenarios leave the search at the range's resolution, each side a step away from its partner
-    U = mission.space.snap(U, away_from=U[np.arange(len(U)) ^ 1])
-    for p, pair in enumerate(pairs):
-        pair["distance"] = float(np.linalg.norm(U[2 * p] - U[2 * p + 1]))
-    partners = U[np.arange(len(U)) ^ 1]  # a's partner is b and b's is a
-    chosen = sim.uuv.simulate(mission, U, trajectories=True)
-    root = list(a.tree.levels[0])
-    outcomes = []
-    for k in range(len(U)):
-        cols = outcome_columns(root, chosen.names, pairs[k // 2]["elements"])
-        outcomes.append(Outcome(int(chosen.modes[k]), tuple(cols), tuple(float(v) for v in chosen.scores[k, cols])))
-    stats, dither_runs, shown = _dither_chosen(mission, cfg, U, ids, outcomes, pairs, sigma, progress)
+    evaluated, spent = evaluate_candidates(
+        mission,
+        a.tree.levels,
+        candidates,
+        lambda pair: pair_points(a, pair),
+        dithers=cfg.dithers,
+        sigma=sigma,
+        sensitivity=sens,
+        target=cfg.fragile_below,
+        seed=cfg.seed,
+        surrogate=cfg.surrogate,
+    )
+    if progress is not None and cfg.dithers:
+        progress("dither", len(evaluated), len(candidates), f"{spent['dithering'] + spent['variants']:,} runs")
     clock.lap("dithering")
-    fragile = [k for k, st in enumerate(stats) if st.get("p_predicted", 1.0) < cfg.fragile_below]
-    found: list[dict] = []
-    variant_runs = 0
-    if fragile and cfg.dithers:
-        found, variant_runs = robust_variants(
-            mission,
-            U[fragile],
-            partners[fragile],
-            [outcomes[k] for k in fragile],
-            [(dither_runs[ids[k]][0], shown[k]) for k in fragile],
-            sens,
-            sigma,
-            min(max(cfg.dithers // 20, 40), cfg.dithers // 2),  # screening never outweighs confirming
-            cfg.dithers // 2,
-            cfg.fragile_below,
-            cfg.seed + 1,
-            cfg.surrogate,
-        )
+    ranked = rank_candidates(evaluated, cfg.pairs)
+    pairs = [c.pair for c in ranked]
+    ids = [f"pair{p}{side}" for p in range(1, len(pairs) + 1) for side in "ab"]
+    U = np.vstack([c.U for c in ranked]) if ranked else np.zeros((0, mission.dim))
+    chosen = sim.uuv.simulate(mission, U, trajectories=True)  # as evaluate_candidates: the same modes, with tracks
+    stats = [st for c in ranked for st in c.stats]
+    dither_runs = {sid: ranked[k // 2].dithers[k % 2] for k, sid in enumerate(ids) if ranked[k // 2].dithers}
+    flown = [k for k in range(len(ids)) if ranked[k // 2].flies_variant[k % 2]]
+    found = [ranked[k // 2].variant(k % 2) for k in flown]
     clock.lap("variants")
     scenarios = scenario_entries(mission, a, U, ids, chosen, stats, out_dir)
-    variants = variant_entries(mission, ids, fragile, found, chosen, out_dir)
+    variants = variant_entries(mission, ids, flown, found, chosen, out_dir)
     remove_unlisted(out_dir, [sc["id"] for sc in scenarios + variants])
-    verdicts = _verdicts(cfg, pairs, stats, dict(zip(fragile, found)))
+    verdicts = _verdicts(cfg, ranked)
     runs = {
         "search": cfg.search_budget,
         "refinement": refinement["runs"] if refinement else 0,
-        "dithering": len(U) * (cfg.dithers // 2) if cfg.dithers else 0,
-        "variants": variant_runs,
+        "dithering": spent["dithering"],
+        "variants": spent["variants"],
     }
-    dithering = {"expected": noise.as_dict(), "sigma_u": [float(v) for v in sigma], "target": cfg.fragile_below}
+    dithering = {
+        "expected": noise.as_dict(),
+        "noise_source": _noise_source(cfg, mission),
+        "sigma_u": [float(v) for v in sigma],
+        "target": cfg.fragile_below,
+        "candidates": len(candidates),
+        "candidates_written": len(evaluated),
+    }
     plan = _plan_document(
         mission,
         mission_path,
@@ -323,7 +335,7 @@ def _choose_pairs(
 ) -> tuple[Analysis, list[dict], Confirmation | None, dict | None]:
     """Stages 1-3 (with refinement, and the expert's confirmation on the surrogate workflow).
 
-    Returns the analysis, the chosen pairs, on the surrogate workflow the expert's
+    Returns the analysis, the candidate pairs (more than the plan keeps), on the surrogate workflow the expert's
     :class:`~planner.plan.confirmation.Confirmation` (None otherwise), and the refinement's
     account (None without ``--refine``).
     """
@@ -338,7 +350,9 @@ def _choose_pairs(
     a = analyse(mission, study, sur)
     clock.lap("analysis")
     wanted = cfg.pairs_wanted
-    pairs = select_pairs(a, cfg.refine_candidates if cfg.refine else wanted)
+    # more candidates than pairs: the plan keeps those the vehicle is most likely to show (pair_choice)
+    n_candidates = cfg.refine_candidates if cfg.refine else (wanted if sur is not None else 2 * wanted)
+    pairs = select_pairs(a, n_candidates)
     clock.lap("selection")
     refinement = None
     if cfg.refine:
@@ -346,7 +360,7 @@ def _choose_pairs(
             mission,
             a,
             pairs,
-            wanted,
+            wanted if sur is not None else len(pairs),  # every candidate sharpened: the ranking chooses
             runs=cfg.refine,
             min_distance=cfg.refine_min_distance,
             max_distance=cfg.refine_max_distance,
@@ -379,58 +393,47 @@ def _search_progress(
     return lambda done, total: progress("search", done, total, status.summary())
 
 
-def _dither_chosen(
-    mission: Mission,
-    cfg: GenerateConfig,
-    U: np.ndarray,
-    ids: list[str],
-    outcomes: list[Outcome],
-    pairs: list[dict],
-    sigma: np.ndarray,
-    progress: Callable[[str, int, int, str], None] | None,
-) -> tuple[list[dict], dict[str, tuple[np.ndarray, np.ndarray]], np.ndarray]:
-    """Stage 4 on the chosen scenarios: their dither statistics, the dithers by scenario, which held."""
-    elements = [pair["elements"] for pair in pairs for _ in "ab"]
-    stats: list[dict] = [{} for _ in ids]
-    dither_runs: dict[str, tuple[np.ndarray, np.ndarray]] = {}
-    shown = np.zeros((len(ids), 0), dtype=bool)
-    if cfg.dithers and len(U):
-        stats, dU, dmodes, shown = dither_many(
-            mission, U, outcomes, elements, cfg.dithers // 2, sigma, cfg.seed, cfg.surrogate
-        )
-        dither_runs = {sid: (dU[k], dmodes[k]) for k, sid in enumerate(ids)}
-        if progress is not None:
-            progress("dither", len(ids), len(ids), "")
-    return stats, dither_runs, shown
-
-
-def _verdicts(cfg: GenerateConfig, pairs: list[dict], stats: list[dict], found: dict[int, dict]) -> list[dict]:
-    """Per pair: P(predicted outcome) of each side and of its variant, and a one-word verdict.
+def _verdicts(cfg: GenerateConfig, ranked: list[Candidate]) -> list[dict]:
+    """Per pair: P(predicted outcome) of each side and of its flown variant, P(straddle) and a one-word verdict.
 
     *sharp*: refined to at most ``refine_max_distance`` and both sides hold as planned;
     *robust*: every side holds, as planned or through its variant; *fragile*: a side that
-    does not hold has no variant (``reason`` says why). No verdict without dithering.
+    does not hold has no variant the range can fly (``reason`` says why). No verdict without dithering.
     """
     out: list[dict] = []
-    for p, pair in enumerate(pairs):
-        sides = [2 * p, 2 * p + 1]
-        if not cfg.dithers or any(stats[k].get("p_predicted") is None for k in sides):
+    for cand in ranked:
+        probs = [cand.stats[s].get("p_predicted") for s in (0, 1)]
+        if not cfg.dithers or None in probs:
             out.append({})
             continue
-        probs: list[float] = [stats[k]["p_predicted"] for k in sides]
-        variant_p = [found[k]["p_predicted"] if found.get(k, {}).get("found") else None for k in sides]
-        holds = [pr >= cfg.fragile_below or vp is not None for pr, vp in zip(probs, variant_p)]
-        if all(pr >= cfg.fragile_below for pr in probs) and pair["distance"] <= cfg.refine_max_distance:
+        variant_p = [cand.p_side(s, True) if cand.flies_variant[s] else None for s in (0, 1)]
+        holds = [pr >= cfg.fragile_below or (vp or 0.0) >= cfg.fragile_below for pr, vp in zip(probs, variant_p)]
+        if all(pr >= cfg.fragile_below for pr in probs) and cand.pair["distance"] <= cfg.refine_max_distance:
             verdict = "sharp"
         else:
             verdict = "robust" if all(holds) else "fragile"
-        entry: dict[str, Any] = {"p_predicted": probs, "variant_p_predicted": variant_p, "verdict": verdict}
+        entry: dict[str, Any] = {
+            "p_predicted": probs,
+            "variant_p_predicted": variant_p,
+            "p_straddle": cand.p_straddle,
+            "flown_distance": cand.flown_distance,
+            "verdict": verdict,
+        }
         if verdict == "fragile":
             entry["reason"] = "; ".join(
-                f"side {'ab'[i]}: {found[k]['reason']}" for i, k in enumerate(sides) if not holds[i]
+                f"side {'ab'[s]}: {_no_variant_reason(cand, s, cfg.fragile_below)}" for s in (0, 1) if not holds[s]
             )
         out.append(entry)
     return out
+
+
+def _no_variant_reason(cand: Candidate, side: int, target: float) -> str:
+    v = cand.variant(side)
+    if cand.flies_variant[side] and v is not None:
+        return f"its closest variant holds {v['p_predicted']:.0%}, under the {target:.0%} target"
+    if v is not None:
+        return f"its variant lies more than {MAX_FLOWN_DISTANCE:g} from the other side"
+    return str((cand.variants[side] or {}).get("reason") or "no variant was sought")
 
 
 def _plan_document(
@@ -489,6 +492,7 @@ def _plan_document(
             "invalid_runs": int(len(a.X_invalid)),
             "modes": {MODE_NAMES[m]: int(c) for m, c in zip(*np.unique(modes, return_counts=True))},
             "boundary_types": a.boundary_types[:30],
+            "unreached": unreached(mission, a.result.scores, modes, a.result.names, a.result.output_types),
             "runs": runs,
             "dithering": {**dithering, "runs_per_scenario": cfg.dithers // 2},
             **({"refinement": refinement} if refinement is not None else {}),
@@ -501,6 +505,15 @@ def _plan_document(
         "variants": variants,
         "run_order": [s["id"] for s in scenarios] + [v["id"] for v in variants],
     }
+
+
+def _noise_source(cfg: GenerateConfig, mission: Mission) -> str:
+    """Where the plan's execution noise came from, for ``study.dithering.noise_source``."""
+    if cfg.dither_sigma is not None:
+        return "--dither-sigma"
+    if mission.execution_noise is not None:
+        return f"[execution_noise] of the mission file ({mission.execution_noise.source or 'no source given'})"
+    return "the default assumption"
 
 
 def _planned_for(mission: Mission, embedded: dict[str, str]) -> dict:

@@ -45,6 +45,7 @@ from planner.plan.report_figures import (
     parallel_figure,
     sensitivity_figure,
 )
+from planner.plan.unreached import unreached_line
 from rapt.errors import InputError
 
 __all__ = ["write_report", "REPORT_NAME", "FIGURES_DIR"]
@@ -202,11 +203,14 @@ def _header(plan: dict) -> str:
     ]
     dl = "".join(f'<div class="item"><dt>{escape(k)}</dt><dd>{escape(v)}</dd></div>' for k, v in items)
     day = "".join(f"<p>{escape(line)}</p>" for line in summary_lines(m.get("planned_for")))
+    cannot = unreached_line(st.get("unreached"))
+    if cannot is not None:
+        day += f'<p class="unreached">{escape(cannot)}</p>'
     return f"<header><h1>Field-test plan: {escape(m.get('name', '?'))}</h1><dl>{dl}</dl>{day}</header>"
 
 
 def _summary_table(plan: dict) -> str:
-    """Per pair: distance, P(predicted outcome) of each side and of its variant, and the verdict."""
+    """Per pair: distance, P(predicted outcome) of each side and of its flown variant, P(straddle), the verdict."""
     dith = (plan.get("study") or {}).get("dithering") or {}
     noise = (
         ", ".join(f"{escape(k)} {decimal(v, missing=MISSING)}" for k, v in (dith.get("expected") or {}).items())
@@ -214,7 +218,7 @@ def _summary_table(plan: dict) -> str:
     )
     head = (
         "<tr><th>pair</th><th>sub-boundary</th><th>modes</th><th>distance</th><th>P a / b</th>"
-        "<th>variant P a / b</th><th>verdict</th></tr>"
+        "<th>variant P a / b</th><th>P straddle</th><th>verdict</th></tr>"
     )
     rows = []
     for p in plan["pairs"]:
@@ -226,11 +230,14 @@ def _summary_table(plan: dict) -> str:
             f"<tr><td class='num'>{escape(p['id'])}</td><td>{escape(', '.join(p['elements']))}</td>"
             f"<td>{' / '.join(_mode_badge(m) for m in p['modes'])}</td><td class='num'>{decimal(p['distance'], 3, missing=MISSING)}</td>"
             f"<td class='num'>{percent(probs[0], missing=MISSING)} / {percent(probs[1], missing=MISSING)}</td>"
-            f"<td class='num'>{percent(var[0], missing=MISSING)} / {percent(var[1], missing=MISSING)}</td><td>{escape(verdict)}{reason}</td></tr>"
+            f"<td class='num'>{percent(var[0], missing=MISSING)} / {percent(var[1], missing=MISSING)}</td>"
+            f"<td class='num'>{percent(p.get('p_straddle'), missing=MISSING)}</td><td>{escape(verdict)}{reason}</td></tr>"
         )
     note = (
         f"<p class=\"muted\">P: share of dithers that show the side's predicted outcome (mode and the pair's "
-        f"elements) under the expected execution noise ({noise}); a side needs {percent(dith.get('target'), missing=MISSING)}.</p>"
+        f"elements) under the expected execution noise ({noise}); a side needs {percent(dith.get('target'), missing=MISSING)}. "
+        "P straddle: the chance that both flown sides (each its variant where one is flown) show their outcomes, "
+        "each its own run: the product of their P. The plan keeps the pairs most likely to show.</p>"
     )
     return f"<table>{head}{''.join(rows)}</table>{note}"
 
