@@ -191,7 +191,25 @@ def report_case(label: str, text: str, noisy: bool, c: dict, timing: str) -> tup
         f"end conditions: {ends.get('logs_with_end', 0)} logged ends, chosen bias: {ends.get('chosen')} "
         f"(reproduces {ends.get('ends_reproduced_by_chosen', '-')} of them)"
     )
-    return (label, params_ok, held, path, c["correction"]["used"], cv_ok)
+    brier = brier_held(c)
+    noise = (c["forecast"].get("day_noise") or {}).get("note", "")
+    print(
+        f"Brier score for held: corrected forecast (day's noise) {_b(brier[0])}, under the plan's assumed noise "
+        f"{_b(brier[1])}, deterministic correction {_b(brier[2])}; day's noise: {noise}"
+    )
+    return (label, params_ok, held, path, c["correction"]["used"], cv_ok, brier)
+
+
+def brier_held(c: dict) -> tuple[float | None, float | None, float | None]:
+    """A comparison's Brier scores for "the predicted mode held": the corrected forecast (drawn with the day's
+    fitted noise), the same under the plan's assumed noise, and the deterministic corrected prediction."""
+    b = c["forecast"]["brier"]
+    assumed = b.get("corrected_assumed_noise", b["corrected"])
+    return b["corrected"]["held"], assumed["held"], b["deterministic_corrected"]["held"]
+
+
+def _b(v: float | None) -> str:
+    return "-" if v is None else f"{v:.3f}"
 
 
 def print_summary(summary: list[tuple]) -> None:
@@ -199,14 +217,15 @@ def print_summary(summary: list[tuple]) -> None:
     print("\n## Summary")
     print(
         "| case | parameters within 20 % of shift, others neutral | held-out agreement uncorrected -> corrected "
-        "| held-out path error (m) | correction used | >= 90 % and never below |"
+        "| held-out path error (m) | correction used | >= 90 % and never below "
+        "| Brier held: forecast (day's noise) / assumed noise / deterministic |"
     )
-    print("|---|:---:|---:|---:|:---:|:---:|")
-    for label, params_ok, held, path, used, cv_ok in summary:
+    print("|---|:---:|---:|---:|:---:|:---:|---:|")
+    for label, params_ok, held, path, used, cv_ok, brier in summary:
         print(
             f"| {label} | {'yes' if params_ok else 'NO'} | {held['uncorrected']:.0%} -> {held['corrected']:.0%} "
             f"| {path['uncorrected']:.1f} -> {path['corrected']:.1f} | {'yes' if used else 'no'} "
-            f"| {'yes' if cv_ok else 'NO'} |"
+            f"| {'yes' if cv_ok else 'NO'} | {' / '.join(_b(v) for v in brier)} |"
         )
 
 

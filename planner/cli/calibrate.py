@@ -89,6 +89,17 @@ def calibrate(
     )
     if result.water is not None:
         _print_water(result.water)
+    if bias is not None:
+        from sim.uuv.missionfile import load_mission as load_written
+
+        noise = load_written(out_path).execution_noise
+        line = (
+            f"[execution_noise] the day's, for the re-plan's dithering: position {noise.position:.3g} m, time "
+            f"{noise.time:.3g} s, battery {noise.battery:.3g} % ({noise.source})"
+            if noise is not None
+            else "[execution_noise] not written: the comparison fitted no execution noise (rerun rapt-plan compare)"
+        )
+        out.print(escape(line), highlight=False, soft_wrap=True)
     out.print(f"{out_path} and {sidecar_path(out_path)} written", highlight=False, soft_wrap=True)
 
 

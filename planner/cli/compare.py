@@ -92,6 +92,10 @@ def compare(
     _print_agreement(result)
     print_table(_forecast_table(result))
     print_table(_brier_table(result))
+    print_table(_reliability_table(result))
+    noise = result["forecast"].get("day_noise") or {}
+    if noise.get("note"):
+        out.print(f"day's execution noise: {noise['note']}", highlight=False, soft_wrap=True)
     _print_flagged(result)
     overlays = len(result.get("overlays", {}))
     out.print(
@@ -267,8 +271,23 @@ def _brier_table(result: dict) -> Table:
         ("noise", "noise"),
         ("bias_noise", "bias+noise"),
     ]
+    if "corrected_assumed_noise" in b:
+        rows.append(("corrected_assumed_noise", "corrected, plan's assumed noise"))
     for key, label in rows:
         table.add_row(label + (" (used)" if key == used else ""), _prob(b[key]["mode"]), _prob(b[key]["held"]))
+    return table
+
+
+def _reliability_table(result: dict) -> Table:
+    """The corrected forecast's reliability: per bin of P(the predicted mode held), the runs and the share held."""
+    fc = result["forecast"]
+    table = Table(title="Reliability of the corrected forecast (P held against the share held)")
+    for col in ("P held", "runs", "mean P", "held"):
+        table.add_column(col, justify="right")
+    for row in fc.get("reliability", []):
+        table.add_row(
+            f"{row['p_low']:.1f}-{row['p_high']:.1f}", str(row["runs"]), _prob(row["mean_p"]), _prob(row["held"])
+        )
     return table
 
 

@@ -30,6 +30,7 @@ from planner.review.calibration_legs import (
     is_calibration_log,
 )
 from planner.review.calibration_terms import water_field
+from planner.review.day_noise import noise_from_comparison, with_execution_noise
 from planner.review.daybias import DayWater, header_lines, water_from_comparison, water_with_run, with_execution_bias
 from planner.review.logs import LogError, read_run
 from planner.review.pack import PACK_CRITICAL_PERCENT, read_pack
@@ -123,7 +124,9 @@ def calibrate(
 
     ``bias``, a ``comparison.json`` of ``rapt-plan compare``, adds the day's water it
     established (:func:`planner.review.daybias.water_from_comparison`): the vehicle is then
-    fitted in that water and the file gets an ``[execution_bias]`` table beside it.
+    fitted in that water and the file gets an ``[execution_bias]`` table beside it, and an ``[execution_noise]``
+    table with the execution noise the comparison fitted to the day (:mod:`planner.review.day_noise`), which the
+    re-plan then dithers by.
 
     Refused with a one-line error before anything is written: fewer than :data:`MIN_LOGS`
     logs unless one is a calibration run's (its record lists legs), a log given twice, an ``out_path`` that is not ``.toml`` or would overwrite an
@@ -187,6 +190,9 @@ def calibrate(
     written = calibrated_text(text, result)
     if result.water is not None:
         written = with_execution_bias(written, result.water)
+    noise = None if bias is None else noise_from_comparison(json.loads(Path(bias).read_text(encoding="utf-8")))
+    if noise is not None:  # the re-plan dithers by the noise the day's runs showed
+        written = with_execution_noise(written, noise)
     sidecar = json.dumps(result.to_dict(), indent=2, sort_keys=False, allow_nan=False) + "\n"
     _write_checked(out_path, written, sidecar)
     return result

@@ -23,7 +23,8 @@ to identify and apply this bias to our predictions").  :func:`compare`
    mode and better in mode or path; otherwise the report says "the logs do not support a
    correction; plan unchanged" and the corrected predictions are the uncorrected ones;
 5. re-predicts every run and every plan scenario under the bias used — the corrected
-   predictions — and forecasts each as mode probabilities under the plan's execution noise,
+   predictions — and forecasts each as mode probabilities under the execution noise fitted to
+   the day's runs (:mod:`planner.review.day_noise`, the plan's assumed noise as its prior),
    alone and with the fitted bias's uncertainty, scoring the day by its Brier score
    (:mod:`planner.review.forecast`); flags the pairs that straddle their boundary with a
    probability below one half under the corrected forecast, with an adjusted "M" scenario
@@ -46,8 +47,9 @@ import sim.uuv
 from planner.common.jsonio import json_value, jsonable
 from planner.common.plans import Plan, load_plan
 from planner.review.correction import cross_validate, fit_observed, path_error, rms_path_error
+from planner.review.day_noise import fit_day_noise
 from planner.review.daybias import day_bias_record
-from planner.review.forecast import STRADDLE_BELOW, DayForecast, forecast_day, run_forecast
+from planner.review.forecast import STRADDLE_BELOW, DayForecast, forecast_day, plan_noise, run_forecast
 from planner.review.logs import read_run
 from planner.review.replan import adjust_for_bias
 from planner.review.run_checks import summary_line, verdict_of
@@ -128,8 +130,10 @@ def compare(
         else baseline
     )
     plan_runs = PlanRuns(ids, U_plan, pred, corr, calib)
-    say("forecasting under the execution noise and the bias's uncertainty")
-    fc = forecast_day(plan, obs, plan_runs, fit, cv["correction_used"], cfg)
+    say("fitting the day's execution noise")
+    noise = fit_day_noise(plan, counted, plan_runs, plan_noise(plan), cfg.plant)
+    say("forecasting under the day's execution noise and the bias's uncertainty")
+    fc = forecast_day(plan, obs, plan_runs, fit, cv["correction_used"], cfg, day_noise=noise)
     scen_rows = _scenario_rows(m, obs, plan_runs, fc, counted)
     agreement = _mode_agreement(scen_rows)
     say("re-planning")

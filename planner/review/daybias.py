@@ -36,6 +36,7 @@ __all__ = [
     "water_from_comparison",
     "execution_bias_table",
     "with_execution_bias",
+    "with_table",
     "header_lines",
     "water_record",
     "water_with_run",
@@ -196,14 +197,19 @@ _HEADER = re.compile(r"^\s*\[\[?\s*([A-Za-z0-9_.\" -]+?)\s*\]\]?\s*(#.*)?$")
 
 def with_execution_bias(text: str, water: DayWater) -> str:
     """Mission-file ``text`` with its ``[execution_bias]`` table (if any) replaced by ``water``'s, at the end."""
+    return with_table(text, "execution_bias", execution_bias_table(water))
+
+
+def with_table(text: str, section: str, table: list[str]) -> str:
+    """Mission-file ``text`` with its ``[section]`` table (if any) replaced by the lines ``table``, at the end."""
     lines = text.splitlines()
-    start = next((i for i, ln in enumerate(lines) if (m := _HEADER.match(ln)) and m.group(1) == "execution_bias"), None)
+    start = next((i for i, ln in enumerate(lines) if (m := _HEADER.match(ln)) and m.group(1) == section), None)
     if start is not None:
         end = next((i for i in range(start + 1, len(lines)) if _HEADER.match(lines[i])), len(lines))
         lines = lines[:start] + lines[end:]
     while lines and not lines[-1].strip():
         lines.pop()
-    return "\n".join([*lines, "", *execution_bias_table(water)]) + "\n"
+    return "\n".join([*lines, "", *table]) + "\n"
 
 
 def header_lines(water: DayWater) -> list[str]:

@@ -6,10 +6,13 @@ a few metres or seconds off plan back to its side.  So ``rapt-plan compare`` als
 each plan scenario as a distribution over the four modes (TF, SS, MS, TS), from seeded
 Monte-Carlo runs (:func:`ensemble`):
 
-* ``noise``: the plan's own execution noise alone (uncorrected): the Gaussian unit-cube
-  dithers of ``plan.json``'s ``study.dithering.sigma_u`` flown with the simulator's stochastic
-  effects on, exactly as the plan's dithering draws them
-  (:func:`planner.common.execution_noise.dithered_runs`);
+* ``noise``: the execution noise alone (uncorrected): Gaussian unit-cube dithers flown with
+  the simulator's stochastic effects on, exactly as the plan's dithering draws them
+  (:func:`planner.common.execution_noise.dithered_runs`). Their sigma is the noise fitted to the
+  day's runs (:mod:`planner.review.day_noise`: the spread of the logged tracks, timings and
+  energy about the corrected replay, with ``plan.json``'s assumed ``study.dithering.sigma_u``
+  as the prior); the corrected forecast under the assumed noise is drawn beside it, so the
+  Brier scores show what fitting the noise changed (``corrected_assumed_noise``);
 * ``bias_noise``: the same noise, each run also under a draw of the fitted execution bias
   (:func:`bias_draws`: the bias used at its centre, the parameters the logs identify drawn from
   the fit's posterior covariance, the others fixed, clipped to
@@ -24,7 +27,8 @@ The day is scored by the Brier score (:func:`brier`): over every logged run with
 the mean of ``sum_mode (p_mode - observed_mode)^2`` (0 is perfect, 2 is confidently wrong;
 a one-hot deterministic prediction scores 0 when right and 2 when wrong), and the binary
 one for "the plan's predicted mode held" (:func:`brier_held`: the mean of ``(p - held)^2``,
-``p`` the forecast's probability of the mode the plan predicted).
+``p`` the forecast's probability of the mode the plan predicted).  The reliability table
+(:func:`reliability`) bins the corrected forecast's P(held) against the share that held.
 
 A pair straddles with probability P(side a shows its outcome AND side b shows its) under the
 corrected forecast, an outcome being the scenario's predicted mode and the values of its
@@ -61,7 +65,12 @@ __all__ = [
     "day_brier",
     "DayForecast",
     "forecast_day",
+    "reliability",
+    "RELIABILITY_BINS",
 ]
+
+#: Forecast probabilities are binned this many ways for the reliability table (0-0.2, ..., 0.8-1).
+RELIABILITY_BINS = 5
 
 #: A pair whose probability of straddling (both sides showing their outcome) under the corrected
 #: forecast is below this no longer straddles: an even chance is the least a run on the water is worth.
@@ -182,6 +191,28 @@ def brier_held(p_held: Sequence[float], held: Sequence[bool]) -> float | None:
     return float(np.mean((np.asarray(p_held, dtype=float) - np.asarray(held, dtype=float)) ** 2))
 
 
+def reliability(p_held: Sequence[float], held: Sequence[bool], bins: int = RELIABILITY_BINS) -> list[dict]:
+    """Forecast P against observed frequency: per bin of P(the predicted mode held), the runs in it, their mean
+    forecast and the share that held. A reliable forecast's rows lie on the diagonal (mean P = share held)."""
+    p = np.asarray(p_held, dtype=float)
+    h = np.asarray(held, dtype=bool)
+    edges = np.linspace(0.0, 1.0, bins + 1)
+    which = np.clip(np.digitize(p, edges[1:-1], right=False), 0, bins - 1)
+    rows = []
+    for b in range(bins):
+        sel = which == b
+        rows.append(
+            {
+                "p_low": float(edges[b]),
+                "p_high": float(edges[b + 1]),
+                "runs": int(sel.sum()),
+                "mean_p": float(p[sel].mean()) if sel.any() else None,
+                "held": float(h[sel].mean()) if sel.any() else None,
+            }
+        )
+    return rows
+
+
 def _mode_dict(p: np.ndarray | None) -> dict[str, float] | None:
     return None if p is None else {name: float(v) for name, v in zip(MODE_NAMES, p)}
 
@@ -211,12 +242,7 @@ def day_brier(rows: list[dict], corrected_used: bool) -> dict:
     """The day's Brier scores (multi-class ``mode`` and binary ``held``) of each forecast, over the scenario
     rows with an observed mode and a forecast: ``deterministic_uncorrected`` (one-hot, as planned or on the
     calibrated vehicle), ``deterministic_corrected``, ``noise``, ``bias_noise`` and ``corrected`` (the one used)."""
-    scored = [
-        r
-        for r in rows
-        if r["observed_mode"] is not None
-        and None not in (r["forecast"]["modes"]["noise"], r["forecast"]["modes"]["bias_noise"])
-    ]
+    scored = _scored(rows)
     observed = [r["observed_mode"] for r in scored]
     held = [r["observed_mode"] == r["predicted_mode"] for r in scored]
     out: dict[str, dict] = {}
@@ -229,6 +255,16 @@ def day_brier(rows: list[dict], corrected_used: bool) -> dict:
         out[name] = _scores(fc, observed, [r["forecast"]["p_predicted_mode"][name] for r in scored], held)
     out["corrected"] = dict(out["bias_noise" if corrected_used else "noise"])
     return {"runs": len(scored), **out}
+
+
+def _scored(rows: list[dict]) -> list[dict]:
+    """The scenario rows the day is scored on: an observed mode, and a forecast of both kinds."""
+    return [
+        r
+        for r in rows
+        if r["observed_mode"] is not None
+        and None not in (r["forecast"]["modes"]["noise"], r["forecast"]["modes"]["bias_noise"])
+    ]
 
 
 def _scores(fc: list[np.ndarray], observed: list[str], p_held: Sequence[float], held: list[bool]) -> dict:
@@ -247,39 +283,75 @@ class DayForecast:
     sigma: np.ndarray
     varied: list[str]  # bias parameters drawn (the identified ones)
     centre: Bias
+    #: the corrected forecast drawn with the plan's assumed noise instead of the day's (None: they are the same)
+    assumed: Ensemble | None = None
+    day_noise: dict | None = None  # planner.review.day_noise.DayNoise.to_dict()
 
     @property
     def corrected(self) -> Ensemble:
         return self.biased if self.used else self.noise
 
     def summary(self, rows: list[dict]) -> dict:
-        """What ``comparison.json``'s ``forecast`` holds: how it was drawn and the day's Brier scores."""
+        """What ``comparison.json``'s ``forecast`` holds: how it was drawn, the noise fitted to the day, the day's
+        Brier scores (the corrected forecast under the plan's assumed noise beside it) and the reliability table."""
+        brier_rows = day_brier(rows, self.used)
+        scored = _scored(rows)
+        held = [r["observed_mode"] == r["predicted_mode"] for r in scored]
+        p_corrected = [r["forecast"]["p_predicted_mode"]["corrected"] for r in scored]
+        if self.assumed is not None:
+            p_assumed = [_p(self.assumed.distribution(r["id"]), r["predicted_mode"]) for r in scored]
+            fc = [self.assumed.distribution(r["id"]) for r in scored]
+            ok = [f is not None for f in fc]
+            brier_rows["corrected_assumed_noise"] = _scores(
+                [f for f, k in zip(fc, ok) if k],
+                [r["observed_mode"] for r, k in zip(scored, ok) if k],
+                [p for p, k in zip(p_assumed, ok) if k],
+                [h for h, k in zip(held, ok) if k],
+            )
         return {
             "draws": self.draws,
             "seed": self.seed,
             "noise_sigma_u": [float(v) for v in self.sigma],
+            "day_noise": self.day_noise,
             "bias_centre": self.centre.to_dict(),
             "bias_varied": self.varied,
             "corrected_is": "bias_noise" if self.used else "noise",
             "straddle_below": STRADDLE_BELOW,
-            "brier": day_brier(rows, self.used),
+            "brier": brier_rows,
+            "reliability": reliability(p_corrected, held),
         }
 
 
 def forecast_day(
-    plan: Plan, obs: list[Observation], runs: PlanRuns, fit: BiasFit, used: bool, cfg: CompareConfig
+    plan: Plan,
+    obs: list[Observation],
+    runs: PlanRuns,
+    fit: BiasFit,
+    used: bool,
+    cfg: CompareConfig,
+    day_noise=None,
 ) -> DayForecast:
     """Both forecasts (module docstring) of every scenario flown or in a pair, ``cfg.draws`` runs each,
-    seeded by ``cfg.seed``, with the calibrated vehicle when there is one."""
+    seeded by ``cfg.seed``, with the calibrated vehicle when there is one.
+
+    ``day_noise`` (:class:`planner.review.day_noise.DayNoise`): the noise fitted to the day's runs, which the
+    forecasts are then drawn with; the corrected forecast under the plan's assumed noise is drawn beside them
+    (``assumed``), so the day's Brier scores show what fitting the noise changed. None: the plan's noise.
+    """
     if cfg.draws < 1:
         raise InputError(f"--draws: expected a number of runs >= 1, got {cfg.draws}")
     wanted = {o.sid for o in obs} | {s for pair in plan.pairs for s in pair["scenarios"]}
     ids = [sid for sid in runs.ids if sid in wanted]
     U = runs.U[[runs.row_of[sid] for sid in ids]]
-    sigma = plan_noise(plan)
+    assumed_sigma = plan_noise(plan)
+    sigma = assumed_sigma if day_noise is None else np.asarray(day_noise.sigma_u, dtype=float)
     m = plan.mission
     noise = ensemble(m, ids, U, sigma, cfg.draws, cfg.seed, plant=cfg.plant)
     draws = bias_draws(fit, fit.bias, cfg.draws, cfg.seed)
     biased = ensemble(m, ids, U, sigma, cfg.draws, cfg.seed, bias=draws, plant=cfg.plant)
     varied = [n for n in BIAS_NAMES if np.ptp(draws[n]) > 0]
-    return DayForecast(noise, biased, used, cfg.draws, cfg.seed, sigma, varied, fit.bias)
+    assumed = None
+    if not np.array_equal(sigma, assumed_sigma):
+        assumed = ensemble(m, ids, U, assumed_sigma, cfg.draws, cfg.seed, bias=draws if used else None, plant=cfg.plant)
+    record = None if day_noise is None else day_noise.to_dict()
+    return DayForecast(noise, biased, used, cfg.draws, cfg.seed, sigma, varied, fit.bias, assumed, record)

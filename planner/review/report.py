@@ -279,7 +279,7 @@ def _forecast_section(result: dict) -> list[str]:
     used = "bias + noise" if fc["corrected_is"] == "bias_noise" else "noise only"
     parts = [
         "<h2>How sure were the predictions?</h2><p>Each scenario forecast from "
-        f"{fc['draws']} seeded runs (seed {fc['seed']}) under the plan's execution noise alone, and with each run "
+        f"{fc['draws']} seeded runs (seed {fc['seed']}) under the execution noise fitted to the day's runs alone, and with each run "
         f"also under a draw of the fitted bias (varied: {_e(', '.join(fc['bias_varied']) or 'none identified')}). "
         f"The corrected forecast is <b>{used}</b>.</p>",
         "<table><tr><th class='l'>scenario</th><th class='l'>log</th><th>observed</th><th>deterministic</th>"
@@ -308,9 +308,24 @@ def _forecast_section(result: dict) -> list[str]:
         ("deterministic_corrected", "deterministic, corrected"),
         ("noise", "execution noise only"),
         ("bias_noise", "fitted bias's uncertainty + execution noise"),
+        ("corrected_assumed_noise", "corrected, under the plan's assumed noise"),
     ):
+        if key in b:
+            parts.append(
+                f"<tr><td class='l'>{label}</td><td>{_num(b[key]['mode'])}</td><td>{_num(b[key]['held'])}</td></tr>"
+            )
+    parts.append("</table>")
+    noise = fc.get("day_noise") or {}
+    if noise.get("note"):
+        parts.append(f"<p>The day's execution noise (the plan's assumption as the prior): {_e(noise['note'])}.</p>")
+    parts.append(
+        "<p>Reliability of the corrected forecast: runs binned by their forecast P(the predicted mode held), "
+        "against the share that held.</p><table><tr><th>P held</th><th>runs</th><th>mean P</th><th>held</th></tr>"
+    )
+    for row in fc.get("reliability", []):
         parts.append(
-            f"<tr><td class='l'>{label}</td><td>{_num(b[key]['mode'])}</td><td>{_num(b[key]['held'])}</td></tr>"
+            f"<tr><td>{row['p_low']:.1f}–{row['p_high']:.1f}</td><td>{row['runs']}</td>"
+            f"<td>{_num(row['mean_p'])}</td><td>{_num(row['held'])}</td></tr>"
         )
     parts.append("</table>")
     return parts

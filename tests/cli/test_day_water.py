@@ -87,3 +87,17 @@ def test_calibrate_bias_writes_the_day_water_and_the_file_loads(day):
     assert side["execution_bias"]["bias"] == m.execution_bias.to_dict()
     assert "[execution_bias] from rapt-plan compare" in " ".join(day["calibrate_output"].split())
     assert digests(day["inputs"]) == day["before"]  # inputs only read
+
+
+def test_calibrate_bias_writes_the_noise_the_day_showed_and_the_re_plan_dithers_by_it(day):
+    from planner.plan.generate import GenerateConfig
+
+    m = sim.uuv.load_mission(day["out"])
+    fitted = day["comparison"]["forecast"]["day_noise"]["fitted"]
+    assert m.execution_noise is not None
+    assert (m.execution_noise.position, m.execution_noise.time, m.execution_noise.battery) == pytest.approx(
+        (fitted["position"], fitted["time"], fitted["battery"]), rel=1e-5
+    )
+    # lock-step SIL in the water the plan assumed strays less than the assumed 10 m
+    assert m.execution_noise.position < 10.0 and "rapt-plan compare of plan" in m.execution_noise.source
+    assert GenerateConfig().noise(m).position_m == pytest.approx(fitted["position"], rel=1e-5)
