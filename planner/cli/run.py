@@ -122,6 +122,14 @@ def run(
         float,
         typer.Option("--start-tolerance", help="With --mavlink: metres from the scenario's start the vehicle may be."),
     ] = 10.0,
+    drift_transit: Annotated[
+        float,
+        typer.Option(
+            "--drift-transit",
+            help="With --mavlink: a disarmed vehicle up to this many metres from the scenario's start (as a current "
+            "carries it during bring-up) is flown there at depth first (logged, not scored); 0: refuse it instead.",
+        ),
+    ] = 50.0,
 ) -> None:
     """Fly one scenario software-in-the-loop: front-seat, bridge, autonomy (and logger).
 
@@ -145,6 +153,8 @@ def run(
     if mavlink is not None:
         if not start_tolerance > 0:
             fail(f"--start-tolerance: expected metres > 0, got {start_tolerance}")
+        if not drift_transit >= 0:
+            fail(f"--drift-transit: expected metres >= 0 (0: refuse a drifted vehicle), got {drift_transit}")
         _check_not_with_mavlink(speedup is not None, bias is not None, stochastic, surrogate is not None)
         from planner.cli.vehicle import run_on_vehicle
 
@@ -163,6 +173,7 @@ def run(
             start_tolerance_m=start_tolerance,
             transit=transit,
             signing_key=signing_key,
+            drift_transit_m=drift_transit,
         )
         return
     if speedup is not None and speedup <= 0:

@@ -27,6 +27,7 @@ def run_on_vehicle(
     start_tolerance_m: float,
     transit: bool,
     signing_key: Path | None,
+    drift_transit_m: float,
 ) -> None:
     """Fly ``flight`` at ``connection``; print the bring-up timeline, the end, the mode and the decisions' figures."""
     from planner.fly.flight import is_plan
@@ -66,6 +67,7 @@ def run_on_vehicle(
             start_tolerance_m=start_tolerance_m,
             transit=transit,
             signing_key=signing_key,
+            drift_transit_m=drift_transit_m,
         )
     except KeyboardInterrupt:
         fail("stopped by the operator: the vehicle was told to surface and disarm")

@@ -66,6 +66,10 @@ SURFACE = ARDUSUB_MODES["SURFACE"]
 ALT_HOLD = ARDUSUB_MODES["ALT_HOLD"]
 #: The vehicle starts a scenario within this many metres of its start, unless told otherwise.
 START_TOLERANCE_M = 10.0
+#: A disarmed vehicle at most this far from its start is flown back to it by default (a transit leg after the
+#: dive, logged, not scored): at the surface a current carries a disarmed vehicle off its start in the minute or
+#: two that bring-up takes (0.3 m/s for two minutes is 36 m). Farther, it was put in the wrong place: refused.
+DRIFT_TRANSIT_M = 50.0
 #: A transit leg's speed through the water at most (m/s), and the slowest it is given time for.
 TRANSIT_MPS, TRANSIT_SLOWEST_MPS = 1.0, 0.25
 _EKF_ABS = mavlink.EKF_POS_HORIZ_ABS
@@ -138,6 +142,8 @@ class BringUp(Preflight):
     #: how far from the scenario's start the vehicle may be; farther, it is refused, or flown there with ``transit``
     start_tolerance_m: float = START_TOLERANCE_M
     transit: bool = False
+    #: a disarmed vehicle this far off its start (beyond the tolerance) is flown back without ``transit``; 0: never
+    drift_transit_m: float = DRIFT_TRANSIT_M
 
     def __post_init__(self) -> None:
         #: GUIDED was accepted: from here on the vehicle is ours to bring back (never before:
@@ -337,8 +343,13 @@ class BringUp(Preflight):
         )
 
     def start(self) -> None:
-        """The vehicle at the scenario's start, within :attr:`start_tolerance_m`; farther, refused with the
-        distance, or (``transit``) flown there by :meth:`transit_leg` before the clock starts."""
+        """The vehicle at the scenario's start, within :attr:`start_tolerance_m`. Farther, and the vehicle disarmed
+        within :attr:`drift_transit_m` (a current moved it during bring-up), or with ``transit``: flown there by
+        :meth:`transit_leg` before the clock starts. Otherwise refused with the distance.
+
+        The vehicle is disarmed here: :meth:`previous` has surfaced and disarmed an earlier run's vehicle, and
+        refused any other that is armed, before this step.
+        """
         pose = self.telemetry.pose
         assert pose is not None, "estimate() found a pose"
         sx, sy = self._start_point()
@@ -347,16 +358,21 @@ class BringUp(Preflight):
         if d <= tol:
             self._ok("start", f"{d:.1f} m from the scenario's start (tolerance {tol:g} m)")
             return
-        if not self.transit:
+        drifted = d <= self.drift_transit_m
+        if not (self.transit or drifted):
             self._fail(
                 "start",
                 InputError(
                     f"--start-tolerance: the vehicle is {d:.0f} m from the scenario's start ({sx:g}, {sy:g}) m, more "
-                    f"than {tol:g} m; put it there, or add --transit to fly there first (logged, not scored)"
+                    f"than {tol:g} m and beyond the {self.drift_transit_m:g} m of drift flown back by default; put it "
+                    "there, or add --transit to fly there first (logged, not scored)"
                 ),
             )
         self._transit_m = d
-        self.note("start", "note", f"{d:.0f} m from the scenario's start: a transit leg after the dive (not scored)")
+        why = "" if self.transit else f" (within --drift-transit {self.drift_transit_m:g} m: drifted while disarmed)"
+        self.note(
+            "start", "note", f"{d:.0f} m from the scenario's start{why}: a transit leg after the dive (not scored)"
+        )
 
     def _start_point(self) -> tuple[float, float]:
         return self.route[0] if self.route else self.mission.launch

@@ -28,7 +28,7 @@ from planner.fly.backseat import BackSeat
 from planner.fly.live import start_live_view
 from planner.fly.run_bus import PART_ROLES, RunBus
 from planner.fly.scenario_map import ScenarioMap
-from planner.fly.vehicle.bringup import GUIDED, START_TOLERANCE_M, BringUp, BringUpTimeouts, Step
+from planner.fly.vehicle.bringup import DRIFT_TRANSIT_M, GUIDED, START_TOLERANCE_M, BringUp, BringUpTimeouts, Step
 from planner.fly.vehicle.guard import DEFAULT_GUARD, GuardOptions
 from planner.fly.vehicle.referee import Referee
 from planner.fly.vehicle.virtual_range import VirtualRange
@@ -79,6 +79,7 @@ def run_vehicle(
     start_tolerance_m: float = START_TOLERANCE_M,
     transit: bool = False,
     signing_key: bytes | str | Path | None = None,
+    drift_transit_m: float = DRIFT_TRANSIT_M,
 ) -> VehicleRunResult:
     """Fly ``flight`` (:class:`planner.fly.flight.Flight`) on the vehicle at ``connection`` (a pymavlink string).
 
@@ -91,8 +92,8 @@ def run_vehicle(
     (:data:`planner.fly.run_bus.PART_ROLES`), the bridge's session being the hub. ``live``: ``(host, port)``
     of a Foxglove live view of the run (:class:`bridge.live_process.LiveViewProcess`). ``guard``: the onboard
     guard bring-up installs (:mod:`planner.fly.vehicle.guard`); None flies without one, and the timeline says so.
-    A vehicle farther than ``start_tolerance_m`` from the scenario's start is refused, or with ``transit`` flown
-    there before the scenario clock starts; one still armed from an earlier run is surfaced and disarmed first.
+    A vehicle farther than ``start_tolerance_m`` from the scenario's start is flown there before the scenario
+    clock starts when it is within ``drift_transit_m`` (a current moved it) or with ``transit``, and refused otherwise; one still armed from an earlier run is surfaced and disarmed first.
     ``signing_key`` (32 bytes, or a key file): MAVLink 2 signing, the key given to the vehicle at bring-up.
     """
     _check_options(action, record_only, connection)
@@ -135,6 +136,7 @@ def run_vehicle(
             guard_options=guard,
             start_tolerance_m=start_tolerance_m,
             transit=transit,
+            drift_transit_m=drift_transit_m,
         )
         try:
             start_ms = bringup.run()

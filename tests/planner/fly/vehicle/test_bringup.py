@@ -16,6 +16,7 @@ from planner.fly.flight import Flight, flight_from_plan  # noqa: E402
 from planner.fly.vehicle.bringup import BringUpTimeouts  # noqa: E402
 from planner.fly.vehicle.run import run_vehicle  # noqa: E402
 from rapt.errors import InputError, LinkTimeoutError, RefusedError, RunError  # noqa: E402
+from sim.uuv.geo import LocalFrame  # noqa: E402
 from sim.uuv.missionfile import load_mission  # noqa: E402
 from tests.support.fake_ardusub import Behaviour, FakeArduSub  # noqa: E402
 from tests.support.loopback import free_port, no_new_threads  # noqa: E402
@@ -251,3 +252,36 @@ def test_a_vehicle_already_armed_in_alt_hold_is_refused_before_anything_is_comma
     assert line.endswith("disarm it before rapt-plan run") and "\n" not in line
     assert [s.name for s in steps if s.status == "failed"] == ["heartbeat"]
     assert not [k for k in told if k.startswith("COMMAND_LONG")] and vehicle.armed and vehicle.mode == 2
+
+
+def _moved_off_start(vehicle, mission, east_m: float) -> None:
+    """The fake vehicle, disarmed at the surface, ``east_m`` east of the launch point (as a current carries it)."""
+    lx, ly = mission.launch
+    vehicle.lat, vehicle.lon = LocalFrame(mission.origin_lat, mission.origin_lon).to_latlon(lx + east_m, ly)
+
+
+def test_a_disarmed_vehicle_that_drifted_off_its_start_is_flown_back_by_default(flight):
+    steps: list = []
+    with fake(flight.mission) as (conn, vehicle):
+        _moved_off_start(vehicle, flight.mission, 20.0)
+        with contextlib.suppress(RunError, LinkTimeoutError, RefusedError):
+            _fly(
+                flight, conn, steps
+            )  # the scripted vehicle may not fly the transit leg itself: the decision is the test
+    [start] = [s for s in steps if s.name == "start"]
+    assert start.status == "note" and "drifted while disarmed" in start.detail and "transit leg" in start.detail
+    names = [s.name for s in steps]
+    assert names.index("start") < names.index("arm"), names  # not refused: bring-up went on to arm and dive
+
+
+@pytest.mark.parametrize(("east_m", "drift_m"), [(60.0, 50.0), (20.0, 0.0)])
+def test_a_vehicle_beyond_the_drift_allowance_is_refused_before_anything_is_commanded(flight, east_m, drift_m):
+    steps: list = []
+    with fake(flight.mission) as (conn, vehicle):
+        _moved_off_start(vehicle, flight.mission, east_m)
+        with pytest.raises(InputError) as refused:
+            _fly(flight, conn, steps, drift_transit_m=drift_m)
+    line = str(refused.value)
+    assert "\n" not in line and line.startswith(f"--start-tolerance: the vehicle is {east_m:.0f} m from")
+    assert f"beyond the {drift_m:g} m of drift" in line and "--transit" in line
+    assert steps[-1].name == "start" and _commanded(vehicle) == []
