@@ -120,8 +120,30 @@ class SegmentSolver:
         rest = tuple(n for n in names if n not in TURN_TERMS)
         a = self.solve_kinds(rest, vehicle, bootstrap, start, ("position", "energy"))
         # a heading moves only in turns: its information is in the few large residuals a robust fit discards
-        b = self.solve_kinds(turn, vehicle, bootstrap, start, ("heading",), robust=False)
+        b = self.solve_kinds(
+            turn, vehicle, bootstrap, self.turn_start(turn, vehicle, start), ("heading",), robust=False
+        )
         return merged(a, b) if rest else b
+
+    def turn_start(self, turn: tuple[str, ...], vehicle: Vehicle, start) -> dict | None:
+        """Where the turn terms' fit to the headings starts: from ``start`` or from the file's values, whichever
+        optimum leaves the lower heading residual.
+
+        Fitted to the headings alone a log can hold two optima, the turn rate against the yaw lag and the
+        heading time trading off. From where the loop's fit ended, a vehicle that turns otherwise than its
+        file may land on the one where the terms confound each other and none is identified; from the file's
+        values it may find the other. Both are found without the bootstrap; the full fit starts at the winner.
+        """
+        if not start or not any(n in start for n in turn):
+            return start
+        found = []
+        for origin in (start, {k: v for k, v in start.items() if k not in turn}):
+            est = self.solve_kinds(turn, vehicle, 0, origin or None, ("heading",), robust=False)
+            values = {n: float(est.map_value[n]) for n in est.names}
+            rms = rms_of(residual_parts(self.mission, self.seg, *with_terms(vehicle, values)))["heading_deg"]
+            found.append((rms, values))
+        best = min(found, key=lambda f: f[0])[1]
+        return {**start, **best}
 
 
 def choose_loop(
