@@ -48,6 +48,18 @@ def straddle_line(plan: dict) -> str | None:
     return "P(straddle), both flown sides as predicted: " + ", ".join(shown)
 
 
+def _print_lines(plan: dict) -> None:
+    """Below the table: each pair's P(straddle), the day the plan was made for, what no run reaches."""
+    from planner.plan.planned_for import summary_lines
+    from planner.plan.unreached import unreached_line
+
+    lines = [straddle_line(plan), *summary_lines(plan["mission"].get("planned_for"))]
+    lines.append(unreached_line(plan["study"].get("unreached")))
+    for line in lines:
+        if line is not None:
+            out.print(escape(line), soft_wrap=True, highlight=False)
+
+
 def generate(
     mission_file: Annotated[Path, typer.Argument(help="Mission file (TOML).")],
     out_dir: Annotated[Path, typer.Option("--out", help="Directory for plan.json and the per-scenario files.")],
@@ -111,8 +123,6 @@ def generate(
     """Search a mission, choose boundary pairs, dither them and write a field plan."""
     from planner.plan.generate import GenerateConfig, make_executor
     from planner.plan.generate import generate as run_generate
-    from planner.plan.planned_for import summary_lines
-    from planner.plan.unreached import unreached_line
 
     mission = load_mission(mission_file)
     store = out_dir / ("study.db" if surrogate is None else "study-surrogate.db")
@@ -168,14 +178,7 @@ def generate(
         finally:
             close_executor()
     print_table(summary_table(plan, f"{mission.name}: field plan in {out_dir}"))
-    straddle = straddle_line(plan)
-    if straddle is not None:
-        out.print(straddle, soft_wrap=True, highlight=False)
-    for line in summary_lines(plan["mission"].get("planned_for")):
-        out.print(escape(line), soft_wrap=True, highlight=False)
-    cannot = unreached_line(plan["study"].get("unreached"))
-    if cannot is not None:
-        out.print(escape(cannot), soft_wrap=True, highlight=False)
+    _print_lines(plan)
     for p in plan["pairs"]:
         if p.get("reason"):
             out.print(f"pair {p['id']} is fragile: {p['reason']}", soft_wrap=True, highlight=False)

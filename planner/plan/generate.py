@@ -273,7 +273,7 @@ def generate(
     stats = [st for c in ranked for st in c.stats]
     dither_runs = {sid: ranked[k // 2].dithers[k % 2] for k, sid in enumerate(ids) if ranked[k // 2].dithers}
     flown = [k for k in range(len(ids)) if ranked[k // 2].flies_variant[k % 2]]
-    found = [ranked[k // 2].variant(k % 2) for k in flown]
+    found = [v for k in flown if (v := ranked[k // 2].variant(k % 2)) is not None]  # a flown variant exists
     clock.lap("variants")
     scenarios = scenario_entries(mission, a, U, ids, chosen, stats, out_dir)
     variants = variant_entries(mission, ids, flown, found, chosen, out_dir)
@@ -402,10 +402,11 @@ def _verdicts(cfg: GenerateConfig, ranked: list[Candidate]) -> list[dict]:
     """
     out: list[dict] = []
     for cand in ranked:
-        probs = [cand.stats[s].get("p_predicted") for s in (0, 1)]
-        if not cfg.dithers or None in probs:
+        given = [cand.stats[s].get("p_predicted") for s in (0, 1)]
+        if not cfg.dithers or None in given:
             out.append({})
             continue
+        probs = [float(p) for p in given if p is not None]
         variant_p = [cand.p_side(s, True) if cand.flies_variant[s] else None for s in (0, 1)]
         holds = [pr >= cfg.fragile_below or (vp or 0.0) >= cfg.fragile_below for pr, vp in zip(probs, variant_p)]
         if all(pr >= cfg.fragile_below for pr in probs) and cand.pair["distance"] <= cfg.refine_max_distance:

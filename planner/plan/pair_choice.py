@@ -80,7 +80,7 @@ class Candidate:
     def choose_flown(self, target: float) -> None:
         """Per side, the scenario or its variant: the combination most likely to straddle, the flown sides within
         :data:`MAX_FLOWN_DISTANCE` (or the written pair's own length, when longer); a side already at ``target`` keeps its scenario (the shorter pair)."""
-        best: tuple[float, float, tuple[bool, bool]] | None = None
+        best: tuple[float, float, tuple[bool, ...]] | None = None
         for use in product((False, True), repeat=2):
             p = [self.p_side(s, use[s]) for s in (0, 1)]
             own = [self.stats[s].get("p_predicted") or 0.0 for s in (0, 1)]
@@ -144,9 +144,9 @@ def evaluate_candidates(
         return kept, runs
     n = dithers // 2
     centres = np.vstack([c.U for c in kept])
-    outcomes = [o for c in kept for o in c.outcomes]
-    elements = [c.pair["elements"] for c in kept for _ in (0, 1)]
-    stats, dU, dmodes, shown = dither_many(mission, centres, outcomes, elements, n, sigma, seed, surrogate)
+    side_outcomes = [o for c in kept for o in c.outcomes]
+    side_elements = [c.pair["elements"] for c in kept for _ in (0, 1)]
+    stats, dU, dmodes, shown = dither_many(mission, centres, side_outcomes, side_elements, n, sigma, seed, surrogate)
     runs["dithering"] = len(centres) * n
     for c, cand in enumerate(kept):
         cand.stats = [stats[2 * c], stats[2 * c + 1]]
@@ -157,7 +157,7 @@ def evaluate_candidates(
             mission,
             centres[fragile],
             centres[np.asarray(fragile) ^ 1],
-            [outcomes[k] for k in fragile],
+            [side_outcomes[k] for k in fragile],
             [(dU[k], shown[k]) for k in fragile],
             sensitivity,
             sigma,
@@ -181,10 +181,12 @@ def rank_candidates(candidates: list[Candidate], k: int) -> list[Candidate]:
     names the plan's pairs, so a plan whose choice did not change keeps its pair names. Ties in
     P(straddle), and undithered plans, also go by that order.
     """
-    order = sorted(
-        range(len(candidates)),
-        key=lambda i: (-(candidates[i].p_straddle if candidates[i].p_straddle is not None else -1.0), i),
-    )
+
+    def likely(i: int) -> float:
+        p = candidates[i].p_straddle
+        return -1.0 if p is None else p
+
+    order = sorted(range(len(candidates)), key=lambda i: (-likely(i), i))
     chosen: list[int] = []
     seen: set[tuple] = set()
     for i in order:

@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 
+from rapt.space import Continuous
 from sim.uuv.mission import Mission
 from sim.uuv.scoring import MODE_NAMES
 
@@ -40,7 +41,8 @@ def _best_charge(mission: Mission) -> float:
     for binding in mission.bindings:
         if binding.field == "start_battery":
             param = next(p for p in mission.space.parameters if p.name == binding.parameter)
-            return float(param.high)  # type: ignore[arg-type]
+            if isinstance(param, Continuous):
+                return float(param.high)
     return float(mission.vehicle.start_battery)
 
 

@@ -127,7 +127,7 @@ def fit_day_noise(
     expected = dict(plan.data.get("study", {}).get("dithering", {}).get("expected") or {})
     prior_sigma_u = np.asarray(prior_sigma_u, dtype=float)
     if "unit" in expected or not all(k in expected for k in NOISE_KINDS):
-        empty = {k: None for k in NOISE_KINDS}
+        empty: dict[str, float | None] = {k: None for k in NOISE_KINDS}
         return DayNoise(
             {}, {}, {k: 0 for k in NOISE_KINDS}, empty, prior_sigma_u.copy(), prior_sigma_u,
             note="the plan's noise is one unit-cube sigma, with no physical prior to fit: kept as planned",
@@ -143,9 +143,10 @@ def fit_day_noise(
         fitted[kind] = float(math.sqrt((prior_weight * s0**2 + sum(v)) / (prior_weight + len(v))))
     kinds = coordinate_kinds(m)
     sigma = prior_sigma_u.copy()
-    for c, kind in enumerate(kinds):
-        if kind is not None and expected[kind] > 0:
-            sigma[c] = min(prior_sigma_u[c] * fitted[kind] / float(expected[kind]), MAX_SIGMA_SHARE)
+    for c, coord_kind in enumerate(kinds):
+        if coord_kind is not None and expected[coord_kind] > 0:
+            scale = fitted[coord_kind] / float(expected[coord_kind])
+            sigma[c] = min(prior_sigma_u[c] * scale, MAX_SIGMA_SHARE)
     note = "; ".join(
         f"{kind} {expected[kind]:g} -> {fitted[kind]:.3g} {unit} from {counts[kind]} run(s)"
         for kind, unit in NOISE_KINDS.items()

@@ -299,15 +299,16 @@ class DayForecast:
         held = [r["observed_mode"] == r["predicted_mode"] for r in scored]
         p_corrected = [r["forecast"]["p_predicted_mode"]["corrected"] for r in scored]
         if self.assumed is not None:
-            p_assumed = [_p(self.assumed.distribution(r["id"]), r["predicted_mode"]) for r in scored]
-            fc = [self.assumed.distribution(r["id"]) for r in scored]
-            ok = [f is not None for f in fc]
-            brier_rows["corrected_assumed_noise"] = _scores(
-                [f for f, k in zip(fc, ok) if k],
-                [r["observed_mode"] for r, k in zip(scored, ok) if k],
-                [p for p, k in zip(p_assumed, ok) if k],
-                [h for h, k in zip(held, ok) if k],
-            )
+            fc, observed, p_assumed, held_assumed = [], [], [], []
+            for r, h in zip(scored, held):
+                dist = self.assumed.distribution(r["id"])
+                if dist is None:
+                    continue
+                fc.append(dist)
+                observed.append(r["observed_mode"])
+                p_assumed.append(float(dist[MODE_NAMES.index(r["predicted_mode"])]))
+                held_assumed.append(h)
+            brier_rows["corrected_assumed_noise"] = _scores(fc, observed, p_assumed, held_assumed)
         return {
             "draws": self.draws,
             "seed": self.seed,
