@@ -9,6 +9,7 @@ P >= 0.8 (variants included), the runs spent on refinement, dithering and varian
 the seconds per stage.
 
 Run:  python benchmarks/generate.py [--budget 20000] [--baseline REV] [--missions ...] [--quick]
+      python benchmarks/generate.py --straddle [--seeds 0,3] [--baseline REV]  (issue 48: P(straddle) as flown)
       python benchmarks/generate.py --stages [--budget 100000] [--executor ...]  (issue 6's stage table)
 
 ``--quick`` runs range2017 alone with 5,000 runs and 200 dithers per pair (under 2 minutes).
@@ -223,8 +224,78 @@ def compare() -> None:
         )
 
 
+# -- issue 48: pairs chosen by the chance they show, against the revision before ---------------
+STRADDLE_BASELINE = "c694fb9"  # main before pairs were chosen by P(straddle)
+
+#: Per pair, P(straddle) of the sides a range flies (the variant where the plan names one), on either revision.
+STRADDLE_DRIVER = r"""
+import json, sys, time
+from pathlib import Path
+import numpy as np
+import sim.uuv
+from planner.plan.generate import GenerateConfig, generate
+mission_file, out, budget, seed = sys.argv[1], Path(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4])
+mission = sim.uuv.load_mission(mission_file)
+cfg = GenerateConfig(budget=budget, pairs=5, seed=seed, refine=160, store=out / "study.db")
+t0 = time.perf_counter()
+plan = generate(mission, Path(mission_file), out / "plan", cfg)
+total = time.perf_counter() - t0
+rows = {s["id"]: s for s in plan["scenarios"] + plan["variants"]}
+pairs = []
+for pr in plan["pairs"]:
+    flown = [v or s for s, v in zip(pr["scenarios"], pr.get("variants") or [None, None])]
+    p = [rows[f].get("p_predicted", rows[f].get("dithering", {}).get("p_predicted")) for f in flown]
+    u = [np.array(rows[f]["u"]) for f in flown]
+    pairs.append({"elements": pr["elements"], "modes": pr["modes"], "p_sides": p,
+                  "p_straddle": None if None in p else p[0] * p[1], "flown_distance": float(np.linalg.norm(u[0] - u[1]))})
+print(json.dumps({"pairs": pairs, "total": total, "unreached": plan["study"].get("unreached")}))
+"""
+
+
+def _straddle_run(code_root: Path, tmp: Path, budget: int, seed: int) -> dict:
+    out = tmp / f"{code_root.name}-seed{seed}"
+    out.mkdir(parents=True)
+    args = [sys.executable, "-c", STRADDLE_DRIVER, str(MISSION), str(out), str(budget), str(seed)]
+    env = {**os.environ, "PYTHONPATH": str(code_root)}
+    done = subprocess.run(args, env=env, cwd=code_root, capture_output=True, text=True, check=True)
+    return json.loads(done.stdout.strip().splitlines()[-1])
+
+
+def straddle() -> None:
+    """range2017 at the README's settings, per seed, before and now: P(straddle) of each pair as flown."""
+    ap = argparse.ArgumentParser(description="Pairs chosen by the chance they show, against the revision before")
+    ap.add_argument("--straddle", action="store_true")
+    ap.add_argument("--budget", type=int, default=20_000)
+    ap.add_argument("--seeds", default="0,3")
+    ap.add_argument("--baseline", default=STRADDLE_BASELINE)
+    args = ap.parse_args()
+    seeds = [int(s) for s in args.seeds.split(",")]
+    with tempfile.TemporaryDirectory() as tmp_name:
+        tmp = Path(tmp_name)
+        base_root = tmp / "baseline"
+        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(base_root), args.baseline],
+                       check=True, capture_output=True)  # fmt: skip
+        try:
+            rows = [(seed, _straddle_run(base_root, tmp, args.budget, seed), _straddle_run(ROOT, tmp, args.budget, seed))
+                    for seed in seeds]  # fmt: skip
+        finally:
+            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(base_root)], check=False)
+    print(f"rapt-plan generate range2017.toml --budget {args.budget:,} --refine --seed S; baseline {args.baseline}")
+    print("| seed | code | P(straddle) per pair, as flown | pairs >= 0.8 | sides >= 0.8 | flown sides apart, max | s |")
+    print("|---:|---|---|---:|---:|---:|---:|")
+    for seed, *codes in rows:
+        for name, r in zip(("baseline", "now"), codes):
+            ps = [p["p_straddle"] for p in r["pairs"]]
+            sides = sum(1 for p in r["pairs"] for v in p["p_sides"] if v is not None and v >= 0.8)
+            print(f"| {seed} | {name} | {', '.join('-' if v is None else f'{v:.2f}' for v in ps)} "
+                  f"| {sum(1 for v in ps if v is not None and v >= 0.8)} / {len(ps)} | {sides} / {2 * len(ps)} "
+                  f"| {max(p['flown_distance'] for p in r['pairs']):.3f} | {r['total']:.0f} |")  # fmt: skip
+
+
 if __name__ == "__main__":
     if "--stages" in sys.argv:
         stages()
+    elif "--straddle" in sys.argv:
+        straddle()
     else:
         compare()

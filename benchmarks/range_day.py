@@ -18,7 +18,7 @@ energy); pairs observed as predicted and predicted modes held, for the re-plan a
 committed plan; the day's Brier score; the noon step's wall time.
 
 Run:  ARDUSUB_SITL=../shared/ardusub/ardusub python benchmarks/range_day.py
-      [--configs bluerov2,limited] [--speedup 40] [--budget 20000] [--work DIR] [--stages ...] [--quick]
+      [--configs bluerov2,limited,current] [--speedup 40] [--budget 20000] [--work DIR] [--stages ...] [--quick]
 
 ``--work`` keeps every log and row; run again with it and only what is missing is flown or
 computed.  ``--quick``: one configuration, a 2,000-run re-plan and its first four scenarios.
@@ -44,16 +44,26 @@ MISSION = ROOT / "examples" / "range2017.toml"
 COMMITTED = ROOT / "field_plans" / "range2017" / "plan.json"
 #: A BlueROV2's pack (Ah): what the vehicle on the range carries (SITL's default is 3.3 Ah).
 PACK_AH = 18.0
-#: The vehicles flown: name -> (what it is, SITL parameters beyond the pack).  ArduPilot's
+#: The vehicles flown: name -> (what it is, SITL parameters beyond the pack, the pack in Ah).  ArduPilot's
 #: libraries/SITL/SIM_Submarine.cpp maps each thruster's PWM to thrust and current; limiting the
 #: motors' PWM range (as a range does to protect ESCs or save the pack) makes a slower vehicle
-#: that draws less.  A current (SIM_WIND_*) is not used: the firmware's velocity controller
-#: holds ground velocity against it, so it changes nothing a plan sees.
-CONFIGS: dict[str, tuple[str, dict[str, float]]] = {
-    "bluerov2": ("BlueROV2, 18 Ah pack", {}),
+#: that draws less.  SITL's default wind profile (SIM_WIND_T 0, scaled by the square root of the
+#: altitude) is zero below the surface; with SIM_WIND_T 1 (no altitude limit) SIM_WIND_SPD acts at
+#: every depth, and SIM_Submarine.cpp drags the hull on its water-relative velocity: the disarmed
+#: vehicle drifts off its start, the velocity loop works up-current and the speed made good falls.
+#: SIM_WIND_DIR is where the current comes from (225: it sets to the north-east, as the 2017 range's
+#: flood tide did).
+CONFIGS: dict[str, tuple[str, dict[str, float], float]] = {
+    "bluerov2": ("BlueROV2, 18 Ah pack", {}, PACK_AH),
     "limited": (
         "BlueROV2, 18 Ah pack, thrusters limited to 1250-1750 us",
         {"MOT_PWM_MIN": 1250.0, "MOT_PWM_MAX": 1750.0},
+        PACK_AH,
+    ),
+    "current": (
+        "BlueROV2, 12 Ah pack, in a 0.3 m/s current from the south-west at every depth",
+        {"SIM_WIND_T": 1.0, "SIM_WIND_SPD": 0.3, "SIM_WIND_DIR": 225.0, "SIM_WIND_TURB": 0.0},
+        12.0,
     ),
 }
 
@@ -75,7 +85,9 @@ def cached(path: Path, make) -> dict:
     return row
 
 
-def fly_plan(plan: Path, ids: list[str], out: Path, speedup: float, params: dict[str, float]) -> list[dict]:
+def fly_plan(
+    plan: Path, ids: list[str], out: Path, speedup: float, params: dict[str, float], pack_ah: float = PACK_AH
+) -> list[dict]:
     """Every scenario ``ids`` of ``plan`` from a cold boot, logs in ``out``; rows cached beside them."""
     rows = []
     for sid in ids:
@@ -83,7 +95,7 @@ def fly_plan(plan: Path, ids: list[str], out: Path, speedup: float, params: dict
 
         def make(sid=sid, log=log) -> dict:
             log.parent.mkdir(parents=True, exist_ok=True)
-            return fly(sid, speedup, log, None, PACK_AH, plan=plan, parameters=params)
+            return fly(sid, speedup, log, None, pack_ah, plan=plan, parameters=params)
 
         rows.append(cached(out / f"{sid}.json", make))
         print(
@@ -117,32 +129,55 @@ def refly_rig_failures(out: Path) -> None:
             path.unlink()
 
 
-def morning(work: Path, speedup: float, params: dict[str, float]) -> dict:
+def morning(work: Path, speedup: float, params: dict[str, float], pack_ah: float = PACK_AH) -> dict:
     """The calibration run designed for the mission and flown on the vehicle."""
     design = work / "shakedown"
     if not (design / "plan.json").is_file():
         proc = rapt_plan("shakedown", str(MISSION), "--out", str(design))
         if proc.returncode:
             return {"error": proc.stdout + proc.stderr}
-    (row,) = fly_plan(design / "plan.json", ["shakedown"], work / "morning", speedup, params)
+    (row,) = fly_plan(design / "plan.json", ["shakedown"], work / "morning", speedup, params, pack_ah)
     return row
 
 
 def noon(work: Path, budget: int) -> dict:
-    """Calibrate on the calibration run's log, then re-plan on the calibrated mission; both timed together."""
+    """The noon step, timed as a whole: calibrate the vehicle on the calibration run's log; where the morning also
+    flew the committed plan, compare those flights with the calibrated vehicle and calibrate again with that
+    comparison (``--bias``: the day's water and the execution noise its runs showed, which the re-plan dithers
+    by); then re-plan on the calibrated mission."""
 
     def make() -> dict:
         started = time.perf_counter()
-        cal = rapt_plan("calibrate", str(MISSION), str(work / "morning" / "shakedown.mcap"), "--out",
-                        str(work / "calibrated.toml"))  # fmt: skip
+        shakedown = str(work / "morning" / "shakedown.mcap")
+        out = work / "calibrated.toml"
+        cal = rapt_plan("calibrate", str(MISSION), shakedown, "--out", str(out))
         if cal.returncode:
             return {"error": cal.stdout + cal.stderr}
-        calibrated_s = time.perf_counter() - started
-        gen = rapt_plan("generate", str(work / "calibrated.toml"), "--out", str(work / "plan"), "--budget",
-                        str(budget), "--refine")  # fmt: skip
+        row: dict = {"calibrate_s": time.perf_counter() - started, "calibrate_out": cal.stdout}
+        morning_logs = sorted(str(p) for p in (work / "committed").glob("*.mcap"))
+        if morning_logs:
+            t0 = time.perf_counter()
+            cmp_dir = work / "morning_comparison"
+            cmp = rapt_plan("compare", str(COMMITTED.parent), *morning_logs, "--calibrated", str(out), "--out",
+                            str(cmp_dir), "--dithers", "0")  # fmt: skip
+            if cmp.returncode:
+                return {"error": cmp.stdout + cmp.stderr}
+            row["compare_s"] = time.perf_counter() - t0
+            t0 = time.perf_counter()
+            cal = rapt_plan("calibrate", str(MISSION), shakedown, "--bias", str(cmp_dir / "comparison.json"), "--out",
+                            str(out))  # fmt: skip
+            if cal.returncode:
+                return {"error": cal.stdout + cal.stderr}
+            row["calibrate_bias_s"] = time.perf_counter() - t0
+            row["calibrate_out"] = cal.stdout
+        t0 = time.perf_counter()
+        gen = rapt_plan("generate", str(out), "--out", str(work / "plan"), "--budget", str(budget), "--refine")
         if gen.returncode:
             return {"error": gen.stdout + gen.stderr}
-        return {"calibrate_s": calibrated_s, "noon_s": time.perf_counter() - started, "calibrate_out": cal.stdout}
+        row["generate_s"] = time.perf_counter() - t0
+        row["generate_out"] = gen.stdout
+        row["noon_s"] = time.perf_counter() - started
+        return row
 
     return cached(work / "noon.json", make)
 
@@ -270,16 +305,34 @@ def report(name: str, here: Path, timing: dict | None, rep: dict | None, day: di
         out += ["", f"Median path RMS with the calibrated vehicle: {num(rep['median_path_after_m'], '.1f')} m; "
                 f"median |energy error| {pct(rep['median_abs_energy_after'])}.", ""]  # fmt: skip
     if timing is not None:
-        out += [f"Noon step (calibrate + {timing.get('budget', '?')}-run re-plan): {timing['noon_s']:.0f} s "
-                f"(calibrate {timing['calibrate_s']:.0f} s).", ""]  # fmt: skip
+        parts = [f"calibrate {timing['calibrate_s']:.0f} s"]
+        if "compare_s" in timing:
+            parts += [f"compare of the morning {timing['compare_s']:.0f} s",
+                      f"calibrate --bias {timing['calibrate_bias_s']:.0f} s"]  # fmt: skip
+        parts.append(f"generate {timing.get('generate_s', 0):.0f} s")
+        out += [f"Noon step ({timing.get('budget', '?')}-run re-plan): {timing['noon_s']:.0f} s ({', '.join(parts)}).",
+                ""]  # fmt: skip
     for label, comp in (("re-plan", day), ("committed plan", base)):
         if comp is None:
             continue
         m, n = modes_held(comp)
         p, q = pairs_held(comp)
-        brier = comp.get("forecast", {}).get("brier", {}).get("corrected", {})
+        scores = comp.get("forecast", {}).get("brier", {})
+        brier, det = scores.get("corrected", {}), scores.get("deterministic_corrected", {})
+        assumed = scores.get("corrected_assumed_noise", {})
         out.append(f"- {label}: pairs observed as predicted {p}/{q}; predicted mode held {m}/{n}; "
-                   f"Brier (corrected forecast) modes {num(brier.get('mode'), '.2f')}, held {num(brier.get('held'), '.2f')}")  # fmt: skip
+                   f"Brier (corrected forecast) modes {num(brier.get('mode'), '.2f')}, held {num(brier.get('held'), '.2f')} "
+                   f"(plan's assumed noise: held {num(assumed.get('held'), '.2f')}; deterministic correction: held "
+                   f"{num(det.get('held'), '.2f')})")  # fmt: skip
+    planned = here / "plan" / "plan.json"
+    if planned.is_file():
+        doc = json.loads(planned.read_text())
+        ps = [pr.get("p_straddle") for pr in doc["pairs"]]
+        high = sum(1 for v in ps if v is not None and v >= 0.8)
+        cannot = doc["study"].get("unreached") or {}
+        out.append(f"- re-plan: P(straddle) planned {', '.join(num(v, '.2f') for v in ps)} ({high} of {len(ps)} "
+                   f">= 0.8); flown sides at most {num(max(pr.get('flown_distance', 0) for pr in doc['pairs']), '.3f')} "
+                   f"apart; unreached: {', '.join(cannot.get('modes', [])) or 'none'}")  # fmt: skip
     out.append("")
     return "\n".join(out)
 
@@ -309,17 +362,22 @@ def main(argv: list[str] | None = None) -> int:
     stages = set(args.stages.split(","))
     committed_ids = [s["id"] for s in json.loads(COMMITTED.read_text())["scenarios"]]
     for name in configs[:1] if args.quick else configs:
-        params = CONFIGS[name][1]
+        _, params, pack_ah = CONFIGS[name]
         print(f"  {name}: {CONFIGS[name][0]}", file=sys.stderr, flush=True)
         here = work / name
         if "committed" in stages:
             refly_rig_failures(here / "committed")
             fly_plan(
-                COMMITTED, committed_ids[:4] if args.quick else committed_ids, here / "committed", args.speedup, params
+                COMMITTED,
+                committed_ids[:4] if args.quick else committed_ids,
+                here / "committed",
+                args.speedup,
+                params,
+                pack_ah,
             )
         if "day" in stages:
             refly_rig_failures(here / "morning")
-            row = morning(here, args.speedup, params)
+            row = morning(here, args.speedup, params, pack_ah)
             if "error" in row or not ended_by_scenario(row):
                 print(
                     f"  {name}: the calibration run did not finish: {row.get('error') or row['ended']}", file=sys.stderr
@@ -332,7 +390,12 @@ def main(argv: list[str] | None = None) -> int:
             ids = flown_ids(here / "plan" / "plan.json")
             refly_rig_failures(here / "afternoon")
             fly_plan(
-                here / "plan" / "plan.json", ids[:4] if args.quick else ids, here / "afternoon", args.speedup, params
+                here / "plan" / "plan.json",
+                ids[:4] if args.quick else ids,
+                here / "afternoon",
+                args.speedup,
+                params,
+                pack_ah,
             )
             timing["budget"] = 2000 if args.quick else args.budget
             day = compare(here / "plan" / "plan.json", here / "afternoon", here / "comparison")
