@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from planner.common.atomic import write_text_atomic
 from planner.common.geojson import decode_scenario, exclusions, geojson, operational_rect, oriented, rect_vertices
 from rapt.errors import InputError
 from sim.uuv.geo import DEGREE_DECIMALS, LocalFrame
@@ -192,5 +193,5 @@ def write_scenario_files(mission: Mission, u, directory, stem: str, track=None) 
     paths = {}
     for suffix, text in texts.items():
         paths[suffix] = out / f"{stem}.{suffix}"
-        paths[suffix].write_text(text, encoding="utf-8")
+        write_text_atomic(paths[suffix], text)
     return paths

@@ -40,6 +40,7 @@ import numpy as np
 
 import rapt
 import sim.uuv
+from planner.common.atomic import write_text_atomic
 from planner.common.plans import PLAN_SCHEMA, coordinate_sensitivity, embedded_mission
 from planner.plan.analysis import Analysis, analyse, confirm_with_expert, pair_points, select_pairs
 from planner.plan.confirmation import Confirmation
@@ -308,7 +309,7 @@ def generate(
         scenarios,
         variants,
     )
-    (out_dir / "plan.json").write_text(json.dumps(plan, indent=2))
+    write_text_atomic(out_dir / "plan.json", json.dumps(plan, indent=2))
     write_report(plan, out_dir, dither_runs)
     clock.lap("files")
     return plan

@@ -32,6 +32,7 @@ from urllib.parse import quote
 
 import numpy as np
 
+from planner.common.atomic import write_text_atomic
 from planner.common.html.text import EM_DASH, decimal, escape, percent
 from planner.common.plans import PLAN_SCHEMA
 from planner.plan.planned_for import summary_lines
@@ -472,5 +473,5 @@ def write_report(plan: dict, out_dir: Path, dithers: dict[str, tuple[np.ndarray,
         f"<style>{_CSS}</style></head><body>\n" + "\n".join(body) + "\n</body></html>\n"
     )
     path = out_dir / REPORT_NAME
-    path.write_text(page, encoding="utf-8")
+    write_text_atomic(path, page)
     return path

@@ -44,6 +44,7 @@ from pathlib import Path
 import numpy as np
 
 import sim.uuv
+from planner.common.atomic import write_text_atomic
 from planner.common.jsonio import json_value, jsonable
 from planner.common.plans import Plan, load_plan
 from planner.review.correction import cross_validate, fit_observed, path_error, rms_path_error
@@ -478,7 +479,7 @@ def _write(result: dict, plan: Plan, obs: list[Observation], runs: PlanRuns, out
     (``overlay_<scenario>.mcap``, listed in ``result["overlays"]``) into ``out_dir``."""
     out_dir.mkdir(parents=True, exist_ok=True)
     result["overlays"] = _write_overlays(result, plan, obs, runs, out_dir)
-    (out_dir / RESULT_NAME).write_text(json.dumps(result, indent=2))
+    write_text_atomic(out_dir / RESULT_NAME, json.dumps(result, indent=2))
     from planner.review.report import write_comparison_report
 
     traj = {o.sid: (*runs.trajectories(o.sid), runs.calibrated_trajectory(o.sid)) for o in obs}

@@ -24,6 +24,7 @@ from typing import Any
 import matplotlib.pyplot as plt
 import numpy as np
 
+from planner.common.atomic import write_text_atomic
 from planner.common.html.figures import draw_area, label_map_axes, rectangle_corners, save_figure
 from planner.common.html.text import EN_DASH, escape, percent, significant
 from sim.uuv.scenario import make_scenarios
@@ -424,5 +425,5 @@ def write_comparison_report(
     parts += _replan_section(result)
     parts.append("</body></html>")
     page = out_dir / REPORT_NAME
-    page.write_text("\n".join(parts))
+    write_text_atomic(page, "\n".join(parts))
     return page
