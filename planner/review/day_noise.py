@@ -11,7 +11,8 @@ each kind of noise from the day's counted runs against their corrected replays:
   corrected replay at the same times; for a per-axis sigma ``s`` the mean squared distance is
   ``2 s^2``, so each run gives ``mean(d^2) / 2``;
 - **time** (s): the difference between the run's logged end and its replay's, over runs that
-  end the way the replay does (same mode: the same kind of ending);
+  both end at the recovery point (a run the pack's limit or a collision ends, ends when the
+  model runs out, not on the schedule);
 - **battery** (% of the pack): the energy drawn by the common end of the two tracks, logged
   against replayed, as a share of the pack.
 
@@ -37,7 +38,6 @@ from planner.review.runs import Observation, PlanRuns
 from sim.uuv.interface import HJ_PER_WH
 from sim.uuv.mission import Vehicle
 from sim.uuv.missionnoise import SECTION, ExecutionNoise, execution_noise_table
-from sim.uuv.scoring import MODE_NAMES
 
 __all__ = [
     "PRIOR_WEIGHT",
@@ -101,8 +101,7 @@ def _residuals(obs: list[Observation], runs: PlanRuns, capacity_wh: float) -> tu
         if np.isfinite(drawn):
             out["battery"].append(float(drawn**2))
             row["battery_pct"] = float(drawn)
-        replay_mode = runs.corr.modes[runs.row_of[o.sid]]
-        if o.mode is not None and o.run.has_end and o.mode == _mode_name(replay_mode):
+        if _recovered_in_both(o, runs):
             late = float(track[-1, 0] - replay[-1, 0])
             out["time"].append(late**2)
             row["time_s"] = late
@@ -110,8 +109,14 @@ def _residuals(obs: list[Observation], runs: PlanRuns, capacity_wh: float) -> tu
     return out, per_run
 
 
-def _mode_name(code: int) -> str | None:
-    return MODE_NAMES[int(code)] if code >= 0 else None
+def _recovered_in_both(o: Observation, runs: PlanRuns) -> bool:
+    """The run and its replay both ended at the recovery point: then the end times differ by the schedule's slip.
+    A run that ends otherwise (the pack's limit, a collision) ends when the model runs out, not on a timing."""
+    names = runs.corr.names
+    if o.scores is None or not o.run.has_end or "recovery" not in names:
+        return False
+    c = names.index("recovery")
+    return bool(o.scores[c] == 1 and runs.corr.scores[runs.row_of[o.sid], c] == 1)
 
 
 def fit_day_noise(

@@ -28,8 +28,13 @@ def day():
     return plan, PlanRuns(ids, U, pred, pred)
 
 
-def _logged(plan, runs, sid, rng, position_m, late_s, battery_pct, same_mode=True):
-    """A log of scenario ``sid`` that strays from its replay by the given noise."""
+def _recovered(runs, sid) -> bool:
+    return runs.corr.scores[runs.row_of[sid], runs.corr.names.index("recovery")] == 1
+
+
+def _logged(plan, runs, sid, rng, position_m, late_s, battery_pct, recovered=True):
+    """A log of scenario ``sid`` that strays from its replay by the given noise (and, unless ``recovered``,
+    ends elsewhere than the recovery point)."""
     k = runs.row_of[sid]
     traj = runs.corr.trajectory(k)
     n = traj.shape[0]
@@ -39,8 +44,10 @@ def _logged(plan, runs, sid, rng, position_m, late_s, battery_pct, same_mode=Tru
     steps[:, 3] = traj[:, 3]
     steps[:, 4] = traj[:, 4] + battery_pct / 100 * plan.mission.vehicle.battery_wh * HJ_PER_WH
     run = LoggedRun(Path(f"{sid}.mcap"), {}, steps, np.full((n, 3), np.nan), "recovered", [], 0, True)
-    mode = MODE_NAMES[runs.corr.modes[k]] if same_mode else "TF" if MODE_NAMES[runs.corr.modes[k]] != "TF" else "SS"
-    return Observation(run, sid, runs.U[k], runs.corr.scores[k], mode)
+    scores = runs.corr.scores[k].copy()
+    if not recovered:
+        scores[runs.corr.names.index("recovery")] = 0.0
+    return Observation(run, sid, runs.U[k], scores, MODE_NAMES[runs.corr.modes[k]])
 
 
 def test_a_calm_day_fits_below_the_assumed_noise_and_the_prior_weighs_as_two_runs(day):
@@ -49,11 +56,13 @@ def test_a_calm_day_fits_below_the_assumed_noise_and_the_prior_weighs_as_two_run
     obs = [_logged(plan, runs, sid, rng, 3.0, 6.0, 0.2) for sid in runs.ids[:8]]
     noise = fit_day_noise(plan, obs, runs, plan_noise(plan))
     assert noise.prior == {"position": 10.0, "time": 30.0, "battery": 1.0}
-    assert noise.runs == {"position": 8, "time": 8, "battery": 8}
+    timed = sum(_recovered(runs, sid) for sid in runs.ids[:8])  # only runs recovered in the replay count for timing
+    assert 0 < timed <= 8
+    assert noise.runs == {"position": 8, "time": timed, "battery": 8}
     assert noise.observed_rms["position"] == pytest.approx(3.0, rel=0.1)
     assert noise.observed_rms["time"] == pytest.approx(6.0, rel=1e-6)
     assert noise.observed_rms["battery"] == pytest.approx(0.2, rel=1e-3)
-    w, n = PRIOR_WEIGHT, 8
+    w, n = PRIOR_WEIGHT, timed
     assert noise.fitted["time"] == pytest.approx(math.sqrt((w * 30**2 + n * 6**2) / (w + n)), rel=1e-6)
     assert noise.fitted["position"] < 6.0
     kinds = coordinate_kinds(plan.mission)
@@ -63,7 +72,7 @@ def test_a_calm_day_fits_below_the_assumed_noise_and_the_prior_weighs_as_two_run
             assert noise.sigma_u[c] == prior[c]
         else:
             assert noise.sigma_u[c] == pytest.approx(prior[c] * noise.fitted[kind] / noise.prior[kind])
-    assert "position 10 ->" in noise.note and "from 8 run(s)" in noise.note
+    assert "position 10 ->" in noise.note and "from 8 run(s)" in noise.note and f"from {timed} run(s)" in noise.note
 
 
 def test_a_rough_day_fits_above_it_within_the_plans_limit(day):
@@ -75,10 +84,11 @@ def test_a_rough_day_fits_above_it_within_the_plans_limit(day):
     assert np.all(noise.sigma_u <= MAX_SIGMA_SHARE) and np.all(noise.sigma_u >= plan_noise(plan))
 
 
-def test_a_run_that_ended_another_way_does_not_count_for_timing_and_no_run_leaves_the_prior(day):
+def test_a_run_that_did_not_end_at_recovery_does_not_count_for_timing_and_no_run_leaves_the_prior(day):
     plan, runs = day
     rng = np.random.default_rng(2)
-    obs = [_logged(plan, runs, runs.ids[0], rng, 3.0, 500.0, 0.2, same_mode=False)]
+    sid = next(s for s in runs.ids if _recovered(runs, s))
+    obs = [_logged(plan, runs, sid, rng, 3.0, 500.0, 0.2, recovered=False)]
     noise = fit_day_noise(plan, obs, runs, plan_noise(plan))
     assert noise.runs["time"] == 0 and noise.fitted["time"] == 30.0
     assert fit_day_noise(plan, [], runs, plan_noise(plan)).fitted == noise.prior
