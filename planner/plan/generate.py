@@ -431,11 +431,14 @@ def _verdicts(cfg: GenerateConfig, ranked: list[Candidate]) -> list[dict]:
 
 def _no_variant_reason(cand: Candidate, side: int, target: float) -> str:
     v = cand.variant(side)
-    if cand.flies_variant[side] and v is not None:
-        return f"its closest variant holds {v['p_predicted']:.0%}, under the {target:.0%} target"
-    if v is not None:
-        return f"its variant lies more than {MAX_FLOWN_DISTANCE:g} from the other side"
-    return str((cand.variants[side] or {}).get("reason") or "no variant was sought")
+    if v is None:
+        return str((cand.variants[side] or {}).get("reason") or "no variant was sought")
+    held = f"its closest variant holds {v['p_predicted']:.0%}, under the {target:.0%} target"
+    if cand.flies_variant[side]:
+        return held
+    if v["p_predicted"] <= (cand.p_side(side, False) or 0.0):
+        return f"{held}, and no more often than the side itself"
+    return f"its variant lies more than {MAX_FLOWN_DISTANCE:g} from the other side"
 
 
 def _plan_document(
