@@ -39,6 +39,9 @@ HJ_PER_WH = 36.0
 #: Vertical speed in a set-point that says "surface" (negative, NED) or "stay down" (positive).
 SURFACE_VZ = -0.5
 DIVE_VZ = 0.5
+#: A set-point says "surface" when its ``vz`` is at or above this rate upward: well past the depth-holding rate's
+#: upward limit (:data:`MAX_UP_VZ`), so a vehicle held to its depth from below is never read as surfacing.
+SURFACE_BELOW_VZ = 0.9 * SURFACE_VZ
 
 
 def report_position(v: np.ndarray) -> np.ndarray:
@@ -79,12 +82,14 @@ def decode_command(vx, vy, vz, yaw) -> tuple[np.ndarray, np.ndarray, np.ndarray]
     vx = np.asarray(vx, dtype=np.float32).astype(np.float64)
     vy = np.asarray(vy, dtype=np.float32).astype(np.float64)
     heading = np.asarray(yaw, dtype=np.float32).astype(np.float64)
-    return heading, np.hypot(vx, vy), np.asarray(vz, dtype=np.float32) < 0
+    return heading, np.hypot(vx, vy), np.asarray(vz, dtype=np.float32) <= np.float32(SURFACE_BELOW_VZ)
 
 
-#: Depth-holding gain (1/s) and vertical speed limit (m/s) for a vehicle whose depth is a real state.
+#: Depth-holding gain (1/s) and vertical speed limit (m/s) for a vehicle whose depth is a real state; upward it
+#: stops short of the surfacing rate, so that a set-point's ``vz`` alone tells holding from surfacing.
 DEPTH_GAIN = 0.25
 MAX_VZ = 0.5
+MAX_UP_VZ = 0.8 * -SURFACE_VZ
 
 
 def depth_rate(depth: float, surface: bool, target_m: float = DEPTH_M) -> float:
@@ -92,8 +97,8 @@ def depth_rate(depth: float, surface: bool, target_m: float = DEPTH_M) -> float:
 
     A real autopilot in GUIDED integrates ``vz``: a constant "stay down" would drive it to the
     bottom.  So a back-seat flying a vehicle at its own pace holds depth with a proportional
-    rate, limited to :data:`MAX_VZ`, and rises at :data:`SURFACE_VZ` to surface.
+    rate, limited to :data:`MAX_VZ` down and :data:`MAX_UP_VZ` up, and rises at :data:`SURFACE_VZ` to surface.
     """
     if surface:
         return SURFACE_VZ
-    return float(np.clip(DEPTH_GAIN * (target_m - depth), -MAX_VZ, MAX_VZ))
+    return float(np.clip(DEPTH_GAIN * (target_m - depth), -MAX_UP_VZ, MAX_VZ))
