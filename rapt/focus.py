@@ -24,6 +24,7 @@ are returned.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
@@ -92,7 +93,7 @@ class PairFocus:
         self.dim = a.shape[0]
         self.runs, self.batch, self.min_distance = int(runs), int(batch), float(min_distance)
         self.spent = 0
-        self.start_distance = float(np.linalg.norm(a - b))
+        self.start_distance = math.dist(a, b)
         self._X = [a[None, :], b[None, :]]
         self._labels = [np.array([SIDE_A, SIDE_B])]
         self._asked: set[bytes] = set()
@@ -124,7 +125,7 @@ class PairFocus:
 
     @property
     def distance(self) -> float:
-        return float(np.linalg.norm(self.a - self.b))
+        return math.dist(self.a, self.b)
 
     @property
     def done(self) -> bool:
@@ -182,7 +183,7 @@ class PairFocus:
         # matter (the way round a third combination) keeps being explored.
         w = self.sampler.weights_
         scale = np.ones(self.dim) if w is None else np.maximum(w.max(axis=0), IMPORTANCE_FLOOR)
-        scale *= SPREAD * length / np.linalg.norm(scale)
+        scale *= SPREAD * length / math.hypot(*scale)
         iso = np.full(self.dim, SPREAD * length / np.sqrt(self.dim))
         offset = rng.standard_normal((n, self.dim)) * np.where(np.arange(n)[:, None] % 2 == 0, scale, iso)
         P = self.a + t * (self.b - self.a) + offset

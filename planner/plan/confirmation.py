@@ -17,6 +17,7 @@ at the root level that is the mode (mission and safety success).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -221,7 +222,7 @@ def confirm_pairs(
 
 def _start(index: int, pair: dict, cols: list[int], radius: float, min_length: float) -> _Bracketing:
     a, b = (np.asarray(u, dtype=float) for u in pair["u"])
-    length = float(np.linalg.norm(b - a))
+    length = math.dist(b, a)
     if length <= 0:
         raise InputError(f"confirm_pairs: candidate {index + 1} has two equal scenarios")
     direction = (b - a) / length

@@ -352,7 +352,7 @@ def _moves(mission, u, partner, dither, sensitivity, sigma) -> list[tuple[str, f
         z = np.where(noisy, v / np.where(noisy, sigma, 1.0), 0.0)  # the direction in noise sigmas
         if not np.any(z):
             continue
-        unit_move = sigma * z / np.linalg.norm(z)  # one sigma of noise along v
+        unit_move = sigma * z / math.hypot(*z)  # one sigma of noise along v
         previous = u
         for step in VARIANT_STEPS:
             w = mission.space.snap(np.clip(u + step * unit_move, 0.0, 1.0)[None, :])[0]  # as the range sets it
@@ -421,7 +421,7 @@ def _variant_entry(mission: Mission, u: np.ndarray, w: np.ndarray, p: float, pm:
         "direction": name,
         "sigmas": step,
         "moved": {"parameter": mission.parameter_of(c), "unit_step": float(w[c] - u[c])},
-        "unit_distance": float(np.linalg.norm(w - u)),
+        "unit_distance": math.dist(w, u),
     }
 
 

@@ -19,6 +19,7 @@ show, one per sub-boundary, with the flown sides no farther apart than
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from itertools import product
@@ -75,7 +76,7 @@ class Candidate:
 
     @property
     def flown_distance(self) -> float:
-        return float(np.linalg.norm(self.flown_u(0) - self.flown_u(1)))
+        return math.dist(self.flown_u(0), self.flown_u(1))
 
     def choose_flown(self, target: float) -> None:
         """Per side, the scenario or its variant: the combination most likely to straddle, the flown sides within
@@ -86,7 +87,7 @@ class Candidate:
             own = [self.stats[s].get("p_predicted") or 0.0 for s in (0, 1)]
             if None in p or any(use[s] and (own[s] >= target or p[s] <= own[s]) for s in (0, 1)):  # type: ignore[operator]
                 continue  # a variant flies only for a fragile side, and only where it holds more often
-            d = float(np.linalg.norm(self.flown_u(0, use[0]) - self.flown_u(1, use[1])))
+            d = math.dist(self.flown_u(0, use[0]), self.flown_u(1, use[1]))
             if any(use) and d > max(MAX_FLOWN_DISTANCE, self.pair["distance"]):
                 continue
             key = (float(p[0] * p[1]), -d, use)  # type: ignore[operator]
@@ -137,7 +138,7 @@ def evaluate_candidates(
             Outcome(int(written.modes[k]), tuple(cols), tuple(float(v) for v in written.scores[k, cols])) for k in rows
         ]
         modes = [MODE_NAMES[int(written.modes[k])] for k in rows]
-        distance = float(np.linalg.norm(U[rows[0]] - U[rows[1]]))
+        distance = math.dist(U[rows[0]], U[rows[1]])
         kept.append(Candidate({**pair, "elements": elements, "modes": modes, "distance": distance}, U[rows], outcomes))
     runs = {"written": len(U), "dithering": 0, "variants": 0}
     if not dithers or not kept:

@@ -67,3 +67,34 @@ def test_the_runtime_names_the_libraries_the_blas_and_the_cpu_paths():
     assert {"python", "numpy", "scipy", "scikit-learn", "blas", "numpy_dispatch"} <= set(runtime)
     assert runtime["blas"] and all(b["internal_api"] for b in runtime["blas"])
     assert json.loads(json.dumps(runtime)) == runtime  # plain JSON, as plan.json stores it
+
+
+#: The packages whose numbers reach plan.json.
+PLAN_PACKAGES = ("rapt", "planner/plan", "planner/common")
+
+
+def _vector_norms(source: str) -> list[int]:
+    """Lines of ``np.linalg.norm`` calls without ``axis``: on a vector that is BLAS's nrm2, whose last bit
+    depends on the kernel OpenBLAS picks for the CPU (a plan's pair distances differed by one ulp under
+    OPENBLAS_CORETYPE=Haswell). ``math.dist`` and ``math.hypot`` are the same on every machine."""
+    import ast
+
+    out = []
+    for node in ast.walk(ast.parse(source)):
+        if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "norm":
+            owner = node.func.value
+            if isinstance(owner, ast.Attribute) and owner.attr == "linalg":
+                if not any(k.arg == "axis" for k in node.keywords):
+                    out.append(node.lineno)
+    return out
+
+
+def test_no_blas_vector_norm_reaches_the_plan():
+    found = [
+        f"{path.relative_to(ROOT)}:{line}"
+        for package in PLAN_PACKAGES
+        for path in sorted((ROOT / package).rglob("*.py"))
+        for line in _vector_norms(path.read_text(encoding="utf-8"))
+    ]
+    assert not found, f"np.linalg.norm of a vector (BLAS nrm2) in the plan's numbers; use math.dist: {found}"
+    assert _vector_norms("import numpy as np\nd = np.linalg.norm(a - b)\nr = np.linalg.norm(X, axis=1)\n") == [2]
