@@ -56,6 +56,7 @@ from sim.uuv.mission import Mission, Vehicle
 from sim.uuv.vehicle import propulsion_power, reached_speed
 
 __all__ = [
+    "monotone_curve",
     "CURVE_MIN_SPEEDS",
     "TIDE_FOR_SCALE_MPS",
     "knot_name",
@@ -490,3 +491,27 @@ def with_surface(
                 value, source = file_value, "surface steps (the file's value, within the error)"
             est = with_independent(est, f.prior, value, f.map_value, f.stderr, f.identified, source)
     return est
+
+
+def monotone_curve(est: MapEstimate) -> MapEstimate:
+    """``est`` with its speed-curve knots made non-decreasing in the command.
+
+    A vehicle never goes slower for being asked to go faster; a saturated speed loop measured leg by leg can read
+    a little lower at a higher command (a leg flown after a turn, a gust of current), and a mission file refuses
+    a curve that falls. Adjacent knots that fall are pooled to their mean weighted by 1/s.e.^2 (the
+    pool-adjacent-violators fit of an increasing curve), and the pool's s.e. is that of the weighted mean.
+    """
+    knots = sorted((c, n) for n in est.names if (c := knot_command(n)) is not None)
+    blocks: list[list] = []  # [value, weight, names]
+    for _, n in knots:
+        se = est.stderr.get(n) or 0.0
+        blocks.append([float(est.value[n]), 1.0 / se**2 if se > 0 else 1.0, [n]])
+        while len(blocks) > 1 and blocks[-2][0] > blocks[-1][0]:
+            v2, w2, n2 = blocks.pop()
+            v1, w1, n1 = blocks.pop()
+            blocks.append([(v1 * w1 + v2 * w2) / (w1 + w2), w1 + w2, n1 + n2])
+    value, stderr = dict(est.value), dict(est.stderr)
+    for v, w, names in (b for b in blocks if len(b[2]) > 1):
+        for n in names:
+            value[n], stderr[n] = v, max(stderr[n], float(w**-0.5))
+    return dataclasses.replace(est, value=value, stderr=stderr)

@@ -78,6 +78,7 @@ from planner.review.calibration_terms import (
     knot_command,
     knot_name,
     leg_power_points,
+    monotone_curve,
     power_curve_fits,
     surface_prior,
     surface_values,
@@ -462,6 +463,7 @@ def fit_vehicle(
         source = "settled legs" if k.identified else "not identified"
         est = with_independent(est, k.prior, k.value, k.map_value, k.stderr, k.identified, source)
     est = with_surface(mission, runs, start_times, fit, base, est)
+    est = monotone_curve(est)  # a file refuses a curve that falls; a saturated loop may read so
     ascent = fit_ascent(mission, runs, base.ascent_rate_mps) if "ascent_rate_mps" in fit else None
     if ascent is not None:
         est = with_ascent(est, ascent)

@@ -454,7 +454,8 @@ class _Loader(FieldChecker):
 
     # ------------------------------------------------------------------ vehicle and current
     def speed_curve(self, raw: Any) -> tuple[tuple[float, float], ...]:
-        """``vehicle.speed_curve``: (commanded, reached) m/s pairs, commands > 0 and increasing, speeds >= 0."""
+        """``vehicle.speed_curve``: (commanded, reached) m/s pairs, commands > 0 and increasing, speeds >= 0 and
+        non-decreasing."""
         where, fix = "vehicle.speed_curve", "write [[commanded, reached], ...] in m/s, commands increasing"
         if raw == ():
             return ()
@@ -467,6 +468,12 @@ class _Loader(FieldChecker):
             cmd, got = (float(self.check_number(v, f"{where}[{i}]")) for v in pair)
             if cmd <= (knots[-1][0] if knots else 0.0) or got < 0:
                 self.fail(f"{where}[{i}]", f"{pair!r}: commands must be > 0 and increasing, speeds >= 0; {fix}")
+            if knots and got < knots[-1][1]:
+                self.fail(
+                    f"{where}[{i}]",
+                    f"{pair!r}: the reached speed falls below {fmt(knots[-1][1])} m/s at a higher command; a vehicle "
+                    "is never slower for being asked more: give a non-decreasing curve (a saturated one stays level)",
+                )
             knots.append((cmd, got))
         return tuple(knots)
 
@@ -519,6 +526,9 @@ class _Loader(FieldChecker):
         for key in positive:
             if getattr(obj, key) <= 0:
                 self.fail(f"vehicle.{key}", f"{fmt(getattr(obj, key))} must be > 0; give a positive number")
+        for key in ("hotel_w", "drag_w"):  # a negative draw would charge the battery by running
+            if not getattr(obj, key) >= 0:
+                self.fail(f"vehicle.{key}", f"{fmt(getattr(obj, key))} W is a negative power; give the W drawn, >= 0")
         for key in ("start_battery", "critical_battery"):
             if not 0.0 <= getattr(obj, key) <= 1.0:
                 self.fail(

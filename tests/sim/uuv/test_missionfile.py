@@ -337,6 +337,14 @@ BAD = {
         "[transmission]",
     ),
     "element outside": (mutate("x = 300\ny = -300", "x = 3000\ny = -300"), "nogo[0]", "outside the operational area"),
+    # a calibrated vehicle block that no vehicle could have: a negative draw, a curve that falls
+    "negative drag": (BASE + "\n[vehicle]\ndrag_w = -5.0\n", "vehicle.drag_w", "negative power"),
+    "negative hotel": (BASE + "\n[vehicle]\nhotel_w = -1.0\n", "vehicle.hotel_w", "negative power"),
+    "falling speed curve": (
+        BASE + "\n[vehicle]\nspeed_curve = [[1.0, 1.0], [2.0, 1.9], [3.0, 1.7]]\n",
+        "vehicle.speed_curve[2]",
+        "non-decreasing",
+    ),
 }
 
 
