@@ -503,7 +503,9 @@ def _legs_measured(
     track = tuple(n for n in names if n not in POWER_TERMS)
     first = solver.solve_kinds(track, mission.vehicle, 0, None, ("position", "heading"))
     found = {n: float(first.map_value[n]) for n in first.names}
-    water = with_terms(mission.vehicle, {n: float(first.value[n]) for n in first.names})[1]
+    # the knots are measured in the water the track fits best (its MAP), identified or not: a water left at its
+    # prior would be the file's tide, which a vehicle that felt none would read as a slower speed through it
+    water = with_terms(mission.vehicle, {n: float(first.map_value[n]) for n in first.names})[1]
     knots = fit_curve(mission, cal_runs, cal_starts, water)
     if sum(k.identified for k in knots) < CURVE_MIN_SPEEDS:
         return [], [], found

@@ -83,7 +83,8 @@ def test_one_calibration_run_on_the_firmware_calibrates_the_thruster_vehicle(tmp
     # ArduSub's GUIDED flies an earth-frame velocity with an integrator: the fit takes the vector loop, slow part
     # and all, and at the surface the vehicle makes a fraction of what it is asked and draws more
     assert v.velocity_control == "vector", cal.control
-    assert cal.control["position_rms_m"]["vector"] < 0.5 * cal.control["position_rms_m"]["surge"]
+    # clearly better than a torpedo's loop, not merely within the choice's margin
+    assert cal.control["position_rms_m"]["vector"] < 0.7 * cal.control["position_rms_m"]["surge"]
     assert all(cal.estimate.identified[n] for n in ("surface_max_speed", "surface_power_w")), side["unidentified"]
     assert 0 < v.surface_max_speed < 0.5 * mission.vehicle.cruise_speed and v.surface_power_w > 50
     assert cal.rms_after["position_m"] < cal.rms_before["position_m"]
