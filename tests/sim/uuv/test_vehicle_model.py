@@ -110,16 +110,16 @@ def test_bad_exponent_or_ascent_rate_is_a_one_line_error_naming_the_field(tmp_pa
 
 
 # -- a measured speed curve -----------------------------------------------------------------------
-CURVE = "speed_curve = [[1.0, 0.87], [2.0, 1.95], [3.0, 1.6]]"
+CURVE = "speed_curve = [[1.0, 0.87], [2.0, 1.95], [3.0, 2.05]]"
 
 
 def test_a_speed_curve_sets_the_speed_each_command_settles_at(mission, tmp_path):
-    """Knots interpolate from (0, 0), hold beyond the last and may fall (a controller that saturates
-    and then loses speed): no speed_gain x command capped at max_speed says that."""
+    """Knots interpolate from (0, 0) and hold beyond the last (a controller that saturates gradually): no
+    speed_gain x command capped at max_speed says that. A curve never falls (the mission file refuses one)."""
     curved = sim.uuv.load_mission(_with_vehicle_lines(tmp_path, CURVE)).vehicle
-    assert curved.speed_curve == ((1.0, 0.87), (2.0, 1.95), (3.0, 1.6))
+    assert curved.speed_curve == ((1.0, 0.87), (2.0, 1.95), (3.0, 2.05))
     got = reached_speed(curved, np.array([-1.0, 0.5, 1.0, 1.5, 2.0, 2.5, 3.0, 5.0]))
-    assert got == pytest.approx([0.0, 0.435, 0.87, 1.41, 1.95, 1.775, 1.6, 1.6])
+    assert got == pytest.approx([0.0, 0.435, 0.87, 1.41, 1.95, 2.0, 2.05, 2.05])
     # without a curve: speed_gain x the command, at most max_speed
     plain = dataclasses.replace(mission.vehicle, speed_gain=0.8, max_speed=1.5)
     assert reached_speed(plain, np.array([1.0, 3.0])) == pytest.approx([0.8, 1.5])
@@ -132,7 +132,7 @@ def test_a_vehicle_with_a_curve_settles_where_the_curve_says(mission, tmp_path):
     speeds = np.array([1.0, 2.0, 3.0])
     for k in range(60):  # 120 s: 30 surge time constants
         world.advance(k * curved.dt, world.state.heading.copy(), speeds, np.zeros(3, dtype=bool), np.ones(3, bool))
-    assert world.state.surge == pytest.approx([0.87, 1.95, 1.6], rel=1e-6)
+    assert world.state.surge == pytest.approx([0.87, 1.95, 2.05], rel=1e-6)
 
 
 @pytest.mark.parametrize(
