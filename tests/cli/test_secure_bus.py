@@ -35,6 +35,7 @@ def _channel_roles(log: Path) -> dict[str, str]:
     return {c.topic: c.metadata.get("rapt.role", "") for c in channels}
 
 
+@pytest.mark.slow  # a whole run over TLS and its comparison, about 18 s
 @pytest.mark.integration
 def test_a_run_flies_on_the_secure_bus_and_compare_accepts_its_log(range_dir, tmp_path):
     log = tmp_path / "pair2b.mcap"

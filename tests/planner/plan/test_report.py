@@ -93,6 +93,7 @@ def _run_chromium(exe: str, profile: Path, *args: str) -> subprocess.CompletedPr
     return subprocess.run(cmd, capture_output=True, text=True, timeout=60)
 
 
+@pytest.mark.slow  # the module's plan and report, about 40 s together
 def test_every_figure_is_a_png_on_disk_and_the_page_is_self_contained(planned):
     plan, out, path = planned
     assert path == out / "report.html"
@@ -124,6 +125,7 @@ def test_every_figure_is_a_png_on_disk_and_the_page_is_self_contained(planned):
         assert s["id"] in page and f"{100 * s['dithering']['p_predicted_mode']:.0f}%" in page
 
 
+@pytest.mark.slow  # the module's plan and report, about 40 s together
 def test_report_renders_in_headless_chromium_with_every_figure_loaded(planned, tmp_path):
     _, out, path = planned
     exe = _chromium()
@@ -165,6 +167,7 @@ def test_report_renders_in_headless_chromium_with_every_figure_loaded(planned, t
     assert int(m.group(1)) == n_img, f"only {m.group(1)} of {n_img} figures loaded in Chromium"
 
 
+@pytest.mark.slow  # the module's plan and report, about 40 s together
 def test_text_from_the_plan_is_escaped_and_missing_inputs_degrade(planned, tmp_path):
     plan, out, _ = planned
     bad = copy.deepcopy(plan)
@@ -180,6 +183,7 @@ def test_text_from_the_plan_is_escaped_and_missing_inputs_degrade(planned, tmp_p
     assert len(srcs) == 3 + 1 and all((target / s).is_file() for s in srcs)  # no map, no dithers
 
 
+@pytest.mark.slow  # the module's plan and report, about 40 s together
 def test_wrong_schema_and_bad_dithers_are_one_line_errors(planned, tmp_path):
     plan, _, _ = planned
     with pytest.raises(ValueError, match=r"^plan: expected schema 'rapt.plan/1', got 'rapt.plan/0'$"):

@@ -243,6 +243,7 @@ def _digest(p: Path) -> str:
     return hashlib.sha256(p.read_bytes()).hexdigest()
 
 
+@pytest.mark.slow  # a whole calibration, about 14 s
 def test_calibrate_accepts_the_calibration_log_alone(missions, flown, tmp_path, monkeypatch):
     file_path, _, _ = missions
     run, _, _ = flown
@@ -299,6 +300,7 @@ def test_legs_cut_short_by_the_watchdog_write_nothing_and_say_which(missions, fl
     assert {c["name"] for c in side["cut_short_legs"]} >= {"speed-1.8", "ascent", "dive"}
 
 
+@pytest.mark.slow  # a whole calibration, about 15 s
 def test_a_log_that_ends_early_names_the_end_and_complete_legs_are_not_refused(missions, flown, tmp_path, monkeypatch):
     file_path, _, _ = missions
     run, _, _ = flown
@@ -319,6 +321,7 @@ TURNS = {
 }
 
 
+@pytest.mark.slow  # two calibrations of a turning vehicle, about 15 s each
 @pytest.mark.parametrize("turns", list(TURNS))
 def test_a_vehicle_that_turns_otherwise_than_its_file_has_its_turn_identified(tmp_path, turns):
     block = {**TRUE_BLOCK, **TURNS[turns]}

@@ -209,7 +209,10 @@ def test_bad_input_names_the_field():
         sim.uuv.simulate(m, np.full((1, 1), 1.5))
 
 
-@pytest.mark.parametrize("name", ["range2017", "uuv18", "imitation7"])
+@pytest.mark.parametrize(
+    "name",
+    ["range2017", pytest.param("uuv18", marks=pytest.mark.slow), "imitation7"],  # uuv18: about 16 s
+)
 def test_a_scenario_scores_the_same_alone_as_in_a_batch(name):
     m = sim.uuv.load_mission(EXAMPLES / f"{name}.toml")
     X = np.random.default_rng(1).random((200, m.dim))
