@@ -94,6 +94,7 @@ def test_the_wrong_file_is_what_the_test_says(wrong, true_mission):
     assert v.max_speed == true_mission.vehicle.max_speed
 
 
+@pytest.mark.slow  # the module's fit of three runs, about 22 s
 def test_the_fit_recovers_the_true_block_within_10_percent(fitted, true_mission):
     est = fitted.estimate
     # a torpedo's speed loop drives its surge: the simpler loop stands, and its slow part is not fitted
@@ -121,6 +122,7 @@ def test_the_fit_recovers_the_true_block_within_10_percent(fitted, true_mission)
     assert all(getattr(fitted.vehicle, n) == getattr(fitted.original, n) for n in rest)
 
 
+@pytest.mark.slow  # the module's fit of three runs, about 22 s
 def test_the_calibrated_file_loads_changes_only_vehicle_values_and_predicts_the_true_runs(
     fitted, wrong, flown, true_mission, tmp_path
 ):
