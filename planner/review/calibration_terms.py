@@ -499,7 +499,7 @@ def monotone_curve(est: MapEstimate) -> MapEstimate:
     A vehicle never goes slower for being asked to go faster; a saturated speed loop measured leg by leg can read
     a little lower at a higher command (a leg flown after a turn, a gust of current), and a mission file refuses
     a curve that falls. Adjacent knots that fall are pooled to their mean weighted by 1/s.e.^2 (the
-    pool-adjacent-violators fit of an increasing curve), and the pool's s.e. is that of the weighted mean.
+    pool-adjacent-violators fit of an increasing curve); each keeps its own s.e.
     """
     knots = sorted((c, n) for n in est.names if (c := knot_command(n)) is not None)
     blocks: list[list] = []  # [value, weight, names]
@@ -510,8 +510,7 @@ def monotone_curve(est: MapEstimate) -> MapEstimate:
             v2, w2, n2 = blocks.pop()
             v1, w1, n1 = blocks.pop()
             blocks.append([(v1 * w1 + v2 * w2) / (w1 + w2), w1 + w2, n1 + n2])
-    value, stderr = dict(est.value), dict(est.stderr)
-    for v, w, names in (b for b in blocks if len(b[2]) > 1):
-        for n in names:
-            value[n], stderr[n] = v, max(stderr[n], float(w**-0.5))
-    return dataclasses.replace(est, value=value, stderr=stderr)
+    value = dict(est.value)
+    for v, _, names in blocks:
+        value.update(dict.fromkeys(names, v))
+    return dataclasses.replace(est, value=value)

@@ -37,7 +37,7 @@ from planner.fly.vehicle.virtual_range import scenario_of, sense_at  # noqa: E40
 from rapt.errors import InputError, LinkError, LinkTimeoutError, RaptError  # noqa: E402
 from sim.uuv.geo import LocalFrame  # noqa: E402
 from sim.uuv.geometry import rect_signed_distance  # noqa: E402
-from sim.uuv.interface import HJ_PER_WH  # noqa: E402
+from sim.uuv.interface import HJ_PER_WH, SURFACE_VZ  # noqa: E402
 from sim.uuv.mission import Mission  # noqa: E402
 from sim.uuv.scenario import Scenarios  # noqa: E402
 
@@ -72,8 +72,6 @@ _EKF_POS_HORIZ_ABS = 16
 _EKF_CONST_POS_MODE = 128
 #: What the watchdog does when it takes over.
 ACTIONS = ("surface", "hold")
-#: Vertical speed of the rising set-points (m/s, NED: negative rises).
-SURFACE_VZ = -0.5
 
 
 @dataclass(frozen=True)

@@ -4,6 +4,7 @@ names the runtime that made it."""
 
 from __future__ import annotations
 
+import ast
 import json
 import os
 import subprocess
@@ -77,8 +78,6 @@ def _vector_norms(source: str) -> list[int]:
     """Lines of ``np.linalg.norm`` calls without ``axis``: on a vector that is BLAS's nrm2, whose last bit
     depends on the kernel OpenBLAS picks for the CPU (a plan's pair distances differed by one ulp under
     OPENBLAS_CORETYPE=Haswell). ``math.dist`` and ``math.hypot`` are the same on every machine."""
-    import ast
-
     out = []
     for node in ast.walk(ast.parse(source)):
         if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) and node.func.attr == "norm":
