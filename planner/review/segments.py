@@ -44,6 +44,7 @@ Used by the execution-bias fit (:mod:`planner.review.biasfit`) and the vehicle c
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np
@@ -107,6 +108,19 @@ class Segments:
     surfaced: np.ndarray | None = None  # (N, L) bool: the vehicle reported itself surfaced at the step's end
     # the HISTORY_STEPS set-points flown before each segment (oldest first; invalid: no set-point, or padding)
     history: dict | None = None  # heading_cmd, speed_cmd, step_dt, surfaced, valid: (N, H)
+
+    def repeated(self, p: int) -> Segments:
+        """These segments ``p`` times over, copy after copy: one copy per trial of a batched replay."""
+        n = self.valid.shape[0]
+
+        def rep(v):
+            if isinstance(v, np.ndarray) and v.ndim and v.shape[0] == n:
+                return np.concatenate([v] * p, axis=0)
+            if isinstance(v, dict):
+                return {key: rep(x) for key, x in v.items()}
+            return v
+
+        return Segments(**{f.name: rep(getattr(self, f.name)) for f in dataclasses.fields(self)})
 
 
 def substeps_of(run) -> int:
@@ -346,7 +360,7 @@ def _slow_part(spec: Vehicle, seg: Segments, speed_scale: float, course: float) 
     (``seg.history``); None without a history.  It follows the commands alone, so the log's
     commands say where it stands where its positions cannot."""
     h = seg.history
-    if h is None or spec.slow_share == 0:
+    if h is None or np.all(np.asarray(spec.slow_share) == 0):
         return None
     n, H = h["speed_cmd"].shape
     se, sn = np.zeros(n), np.zeros(n)

@@ -88,20 +88,35 @@ def reached_speed(spec: Vehicle, speed_cmd: np.ndarray | float) -> np.ndarray:
     """The through-water speed the speed loop settles at for a commanded speed (negative: 0).
 
     ``spec.speed_curve`` when the vehicle has one (interpolated from (0, 0), flat beyond its
-    last knot), else ``speed_gain`` times the command, at most ``max_speed``.
+    last knot), else ``speed_gain`` times the command, at most ``max_speed``.  A curve given as
+    an (N, K, 2) array is one curve per vehicle on shared commands (a batched replay's trials).
     """
     cmd = np.maximum(np.asarray(speed_cmd, dtype=float), 0.0)
-    if spec.speed_curve:
+    if len(spec.speed_curve):
         knots = np.asarray(spec.speed_curve, dtype=float)
+        if knots.ndim == 3:
+            return _interp_rows(cmd, knots[0, :, 0], knots[:, :, 1])
         return np.interp(cmd, np.concatenate([[0.0], knots[:, 0]]), np.concatenate([[0.0], knots[:, 1]]))
     return np.minimum(spec.speed_gain * cmd, spec.max_speed)
 
 
+def _interp_rows(cmd: np.ndarray, commands: np.ndarray, speeds: np.ndarray) -> np.ndarray:
+    """Each vehicle's own curve (``speeds`` (N, K) on ``commands`` (K,)) at its command, from (0, 0), flat beyond."""
+    xp = np.concatenate([[0.0], commands])
+    fp = np.concatenate([np.zeros((speeds.shape[0], 1)), speeds], axis=1)
+    cmd = np.broadcast_to(cmd, (speeds.shape[0],))
+    i = np.clip(np.searchsorted(xp, cmd, side="right"), 1, xp.size - 1)
+    w = np.clip((cmd - xp[i - 1]) / (xp[i] - xp[i - 1]), 0.0, 1.0)
+    rows = np.arange(speeds.shape[0])
+    return fp[rows, i - 1] + w * (fp[rows, i] - fp[rows, i - 1])
+
+
 def surface_limited(spec: Vehicle, target: np.ndarray, surfaced: np.ndarray | None) -> np.ndarray:
     """``target`` speeds held to ``spec.surface_max_speed`` where ``surfaced`` (no limit when it is 0 or None)."""
-    if surfaced is None or spec.surface_max_speed <= 0:
+    limit = np.asarray(spec.surface_max_speed)
+    if surfaced is None or np.all(limit <= 0):
         return target
-    return np.where(surfaced, np.minimum(target, spec.surface_max_speed), target)
+    return np.where(surfaced & (limit > 0), np.minimum(target, limit), target)
 
 
 def step_vehicle(
@@ -150,7 +165,7 @@ def step_vehicle(
         vn = u * cos - v * sin + current_n
         water = u
     power = propulsion_power(spec, water)
-    if surfaced is not None and spec.surface_power_w != 0:
+    if surfaced is not None and np.any(np.asarray(spec.surface_power_w) != 0):
         power = power + np.where(surfaced, spec.surface_power_w, 0.0)
     m = moving
     s.x = np.where(m, s.x + ve * dt, s.x)
