@@ -19,7 +19,6 @@ optimistic); with fewer, a block bootstrap over consecutive segments.
 
 from __future__ import annotations
 
-import dataclasses
 from dataclasses import dataclass, field
 from types import SimpleNamespace
 
@@ -139,19 +138,6 @@ def _residuals(mission: Mission, seg: Segments, bias: Bias, vehicle: Vehicle | N
     return np.concatenate([dx, dy, de])
 
 
-def _tile(seg: Segments, p: int) -> Segments:
-    """``seg`` repeated ``p`` times along its segments (one copy per bias of a batched replay)."""
-
-    def rep(v):
-        if isinstance(v, np.ndarray) and v.ndim and v.shape[0] == seg.valid.shape[0]:
-            return np.concatenate([v] * p, axis=0)
-        if isinstance(v, dict):
-            return {key: rep(x) for key, x in v.items()}
-        return v
-
-    return Segments(**{f.name: rep(getattr(seg, f.name)) for f in dataclasses.fields(seg)})
-
-
 def bootstrap_blocks(seg: Segments) -> np.ndarray:
     """The bootstrap block of every segment: its run when there are :data:`BOOTSTRAP_BY_RUN_FROM` runs
     or more, else runs of :data:`SEGMENTS_PER_BLOCK` consecutive segments of one run."""
@@ -203,7 +189,7 @@ def fit_bias(
         """Residuals of several biases in one replay: the segments repeated once per bias."""
         p, n = thetas.shape[0], seg.valid.shape[0]
         if p not in tiled:
-            tiled[p] = _tile(seg, p)
+            tiled[p] = seg.repeated(p)
         values = {name: np.full(n * p, NEUTRAL[name]) for name in BIAS_NAMES}
         for i, name in enumerate(names):
             values[name] = np.repeat(thetas[:, i], n)

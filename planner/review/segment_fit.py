@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 from collections.abc import Callable, Sequence
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -20,7 +21,7 @@ from planner.review.calibration_terms import with_terms
 from planner.review.segments import Segments, replay
 from rapt.mapfit import MapEstimate, Prior, fit_map
 from sim.uuv.angles import wrap_angle
-from sim.uuv.bias import Bias
+from sim.uuv.bias import BIAS_NAMES, Bias
 from sim.uuv.mission import Mission, Vehicle
 
 __all__ = [
@@ -56,6 +57,29 @@ def residual_parts(
     v = seg.valid
     dh = np.rad2deg(wrap_angle(ph - seg.obs_heading))
     return (px - seg.obs_x)[v], (py - seg.obs_y)[v], dh[v], (pe - seg.obs_energy_wh)[v]
+
+
+def stacked_trials(trials: Sequence[tuple[Vehicle, Bias]], n: int) -> tuple[SimpleNamespace, SimpleNamespace | Bias]:
+    """Trial vehicles and waters as one vehicle and one water for a replay of ``n`` segments repeated once
+    per trial (:meth:`planner.review.segments.Segments.repeated`): a field the trials share stays as it is,
+    one they differ in becomes a value per segment, and differing speed curves an (N, K, 2) array."""
+    vehicles = [v for v, _ in trials]
+    first = vehicles[0]
+    fields = {}
+    for f in dataclasses.fields(first):
+        values = [getattr(v, f.name) for v in vehicles]
+        if all(x == values[0] for x in values[1:]):
+            fields[f.name] = values[0]
+        elif f.name == "speed_curve":
+            curves = np.array(values, dtype=float)  # (p, K, 2): the knots' commands are the fit's, shared
+            fields[f.name] = np.repeat(curves, n, axis=0)
+        else:
+            fields[f.name] = np.repeat(np.array(values, dtype=float), n)
+    waters = [w for _, w in trials]
+    if all(w == waters[0] for w in waters[1:]):
+        return SimpleNamespace(**fields), waters[0]
+    water = SimpleNamespace(**{b: np.repeat(np.array([getattr(w, b) for w in waters]), n) for b in BIAS_NAMES})
+    return SimpleNamespace(**fields), water
 
 
 def rms_of(parts: tuple[np.ndarray, ...]) -> dict[str, float]:
@@ -102,12 +126,28 @@ class SegmentSolver:
             }
             return np.concatenate([r for k in used for r in parts[k]])
 
+        def residuals_many(thetas: np.ndarray) -> np.ndarray:
+            """Every trial's residuals from one replay of the segments repeated once per trial."""
+            p, n = thetas.shape[0], seg.valid.shape[0]
+            if p not in tiled:
+                tiled[p] = seg.repeated(p)
+            spec, water = stacked_trials([with_terms(vehicle, dict(zip(names, th))) for th in thetas], n)
+            dx, dy, dh, de = (r.reshape(p, -1) for r in residual_parts(mission, tiled[p], spec, water))
+            parts = {
+                "position": (dx / SIGMA_POSITION_M, dy / SIGMA_POSITION_M),
+                "heading": (dh / SIGMA_HEADING_DEG,),
+                "energy": (de / SIGMA_ENERGY_WH,),
+            }
+            return np.concatenate([r for k in used for r in parts[k]], axis=1)
+
         if not names:
             return empty_estimate()
+        tiled: dict[int, Segments] = {}
         width = {"position": 2, "heading": 1, "energy": 1}
         kinds = np.repeat(np.array([k for k in used for _ in range(width[k])]), self.blocks.size)
         groups = np.concatenate([self.blocks] * sum(width[k] for k in used))
         kw = {"groups": groups, "kinds": kinds, "bootstrap": bootstrap, "seed": self.seed, "start": start}
+        kw["residuals_many"] = residuals_many
         return fit_map(residuals, self.priors(vehicle, names), significant=0.0, robust=robust, **kw)
 
     def solve(self, names: tuple[str, ...], vehicle: Vehicle, bootstrap: int, start=None) -> MapEstimate:
