@@ -132,7 +132,9 @@ class SegmentSolver:
             if p not in tiled:
                 tiled[p] = seg.repeated(p)
             spec, water = stacked_trials([with_terms(vehicle, dict(zip(names, th))) for th in thetas], n)
-            dx, dy, dh, de = (r.reshape(p, -1) for r in residual_parts(mission, tiled[p], spec, water))
+            # the stacked trials carry the Vehicle's and Bias's fields as per-segment arrays
+            batched = residual_parts(mission, tiled[p], spec, water)  # type: ignore[arg-type]
+            dx, dy, dh, de = (r.reshape(p, -1) for r in batched)
             parts = {
                 "position": (dx / SIGMA_POSITION_M, dy / SIGMA_POSITION_M),
                 "heading": (dh / SIGMA_HEADING_DEG,),
