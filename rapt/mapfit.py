@@ -217,6 +217,7 @@ def fit_map(
     residuals_many: Callable[[np.ndarray], np.ndarray] | None = None,
     start: Mapping[str, float] | None = None,
     robust: bool = True,
+    departed: bool = False,
 ) -> MapEstimate:
     """MAP estimate of ``priors``' parameters from ``residuals(theta) -> (m,)`` (see the module docstring).
 
@@ -236,6 +237,11 @@ def fit_map(
     the robust loss and median scale would treat as outliers.
     ``significant`` is the survivor rule's threshold (:data:`SIGNIFICANT`); 0 drops the rule,
     so that *identified* means exactly "posterior s.d. below ``identify_below`` of the prior's".
+    ``departed=True`` also counts as identified a parameter whose s.d. is below ``identify_below`` of
+    the distance the data moved it from its prior's centre: for a prior that may be far off (a
+    datasheet's value for a vehicle of another kind), the data that move an estimate many prior
+    widths away and pin it to a fraction of that move have identified it, though the prior's own
+    width is no yardstick for them.
     """
     priors = tuple(priors)
     names = [p.name for p in priors]
@@ -267,7 +273,12 @@ def fit_map(
     sol = solve(every, sol.x, scale)
     map_value = theta_of(sol.x, every)
     stderr_z = np.ones(len(priors))
-    own = _covariances(sol, m, groups)[0] < identify_below  # identified with every parameter free
+
+    def limit(z: np.ndarray) -> np.ndarray:
+        """The s.d. (prior units) below which each parameter at ``z`` is identified."""
+        return identify_below * (np.maximum(1.0, np.abs(z)) if departed else np.ones(z.size))
+
+    own = _covariances(sol, m, groups)[0] < limit(sol.x)  # identified with every parameter free
     sources = {n: "laplace" for n in names}
     free = every.copy()
     final, cov_f, n_boot = sol, np.zeros((0, 0)), 0
@@ -277,15 +288,16 @@ def fit_map(
         if not free.all():
             final = solve(free, sol.x[free], scale)
         sd_f, cov_f, source = _covariances(final, m, groups)
-        if sd_f.max() < identify_below and (bootstrap > 0 or jackknife) and groups is not None:
+        below = limit(final.x)
+        if np.all(sd_f < below) and (bootstrap > 0 or jackknife) and groups is not None:
             sd_f, cov_f, source, n_boot = _resampled(
                 solve, free, final.x, scale, groups, sd_f, cov_f, source, bootstrap, jackknife, seed
             )
         stderr_z[free] = sd_f
         for n, src in zip([n for n, f in zip(names, free) if f], source):
             sources[n] = src
-        if sd_f.max() >= identify_below:
-            free = _drop_one(solve, free, sol.x, scale, np.flatnonzero(free)[sd_f >= identify_below])
+        if np.any(sd_f >= below):
+            free = _drop_one(solve, free, sol.x, scale, np.flatnonzero(free)[sd_f >= below])
             continue
         # a parameter identified only once its confounders were fixed stands for all of them:
         # keep it only if the data need it (its estimate significantly off its centre)

@@ -11,6 +11,7 @@ earth-frame velocity with a slow part) and keeps the one the positions bear out.
 from __future__ import annotations
 
 import dataclasses
+import itertools
 from collections.abc import Callable, Sequence
 from types import SimpleNamespace
 
@@ -35,6 +36,7 @@ __all__ = [
     "TURN_TERMS",
     "SLOW_TERMS",
     "CONTROL_MARGIN",
+    "TURN_GRID",
 ]
 
 #: Residual units: metres of position, degrees of heading, watt-hours of energy used.
@@ -45,6 +47,14 @@ SIGMA_ENERGY_WH = 0.05
 TURN_TERMS = ("max_turn_rate_dps", "yaw_time_constant_s", "heading_time_s")
 #: The terms of a vector speed loop's slow part: fitted only when the logs choose that loop.
 SLOW_TERMS = ("slow_share", "slow_time_constant_s")
+#: Where the turn terms' fit to the headings may start, as shares of the file's values: a thruster vehicle
+#: turns several times faster than a torpedo and closes a heading error in a fraction of its time.  Every
+#: point is replayed (in one batch) and the fit starts from the one whose headings fit best.
+TURN_GRID = {
+    "max_turn_rate_dps": (0.5, 1.0, 2.0, 4.0),
+    "yaw_time_constant_s": (0.05, 0.15, 0.5, 1.0),
+    "heading_time_s": (0.05, 0.15, 0.5, 1.0),
+}
 #: The vector loop is chosen when its segment position residual is at least this share below the surge loop's.
 CONTROL_MARGIN = 0.1
 
@@ -104,6 +114,7 @@ class SegmentSolver:
         seed: int = 0,
     ):
         self.mission, self.seg, self.priors, self.blocks, self.seed = mission, seg, priors, blocks, seed
+        self._tiled: dict[int, Segments] = {}  # the segments repeated p times, per trial count p
 
     def solve_kinds(
         self,
@@ -113,8 +124,10 @@ class SegmentSolver:
         start,
         used: tuple[str, ...],
         robust: bool = True,
+        departed: bool = False,
     ) -> MapEstimate:
-        """The MAP fit of ``names`` to the residual kinds ``used`` (of position, heading, energy)."""
+        """The MAP fit of ``names`` to the residual kinds ``used`` (of position, heading, energy);
+        ``departed`` as :func:`rapt.mapfit.fit_map`'s."""
         mission, seg = self.mission, self.seg
 
         def residuals(theta: np.ndarray) -> np.ndarray:
@@ -128,13 +141,7 @@ class SegmentSolver:
 
         def residuals_many(thetas: np.ndarray) -> np.ndarray:
             """Every trial's residuals from one replay of the segments repeated once per trial."""
-            p, n = thetas.shape[0], seg.valid.shape[0]
-            if p not in tiled:
-                tiled[p] = seg.repeated(p)
-            spec, water = stacked_trials([with_terms(vehicle, dict(zip(names, th))) for th in thetas], n)
-            # the stacked trials carry the Vehicle's and Bias's fields as per-segment arrays
-            batched = residual_parts(mission, tiled[p], spec, water)  # type: ignore[arg-type]
-            dx, dy, dh, de = (r.reshape(p, -1) for r in batched)
+            dx, dy, dh, de = self.trial_parts(vehicle, [dict(zip(names, th)) for th in thetas])
             parts = {
                 "position": (dx / SIGMA_POSITION_M, dy / SIGMA_POSITION_M),
                 "heading": (dh / SIGMA_HEADING_DEG,),
@@ -144,13 +151,24 @@ class SegmentSolver:
 
         if not names:
             return empty_estimate()
-        tiled: dict[int, Segments] = {}
         width = {"position": 2, "heading": 1, "energy": 1}
         kinds = np.repeat(np.array([k for k in used for _ in range(width[k])]), self.blocks.size)
         groups = np.concatenate([self.blocks] * sum(width[k] for k in used))
         kw = {"groups": groups, "kinds": kinds, "bootstrap": bootstrap, "seed": self.seed, "start": start}
         kw["residuals_many"] = residuals_many
-        return fit_map(residuals, self.priors(vehicle, names), significant=0.0, robust=robust, **kw)
+        return fit_map(residuals, self.priors(vehicle, names), significant=0.0, robust=robust, departed=departed, **kw)
+
+    def trial_parts(self, vehicle: Vehicle, trials: Sequence[dict[str, float]]) -> tuple[np.ndarray, ...]:
+        """:func:`residual_parts` of ``vehicle`` under each of ``trials`` (name -> value), as (trials, steps)
+        arrays, from one replay of the segments repeated once per trial."""
+        p, n = len(trials), self.seg.valid.shape[0]
+        tiled = self._tiled.get(p)
+        if tiled is None:
+            tiled = self._tiled[p] = self.seg.repeated(p)
+        spec, water = stacked_trials([with_terms(vehicle, t) for t in trials], n)
+        # the stacked trials carry the Vehicle's and Bias's fields as per-segment arrays
+        batched = residual_parts(self.mission, tiled, spec, water)  # type: ignore[arg-type]
+        return tuple(r.reshape(p, -1) for r in batched)
 
     def solve(self, names: tuple[str, ...], vehicle: Vehicle, bootstrap: int, start=None) -> MapEstimate:
         """The MAP fit of ``names``.  A vector loop's track does not depend on its heading, so its
@@ -162,30 +180,43 @@ class SegmentSolver:
         rest = tuple(n for n in names if n not in TURN_TERMS)
         a = self.solve_kinds(rest, vehicle, bootstrap, start, ("position", "energy"))
         # a heading moves only in turns: its information is in the few large residuals a robust fit discards
+        # a torpedo's file is no yardstick for a thruster's turn: the headings identify what they move far
         b = self.solve_kinds(
-            turn, vehicle, bootstrap, self.turn_start(turn, vehicle, start), ("heading",), robust=False
+            turn, vehicle, bootstrap, self.turn_start(turn, vehicle, start), ("heading",), robust=False, departed=True
         )
         return merged(a, b) if rest else b
 
-    def turn_start(self, turn: tuple[str, ...], vehicle: Vehicle, start) -> dict | None:
-        """Where the turn terms' fit to the headings starts: from ``start`` or from the file's values, whichever
-        optimum leaves the lower heading residual.
+    def turn_start(self, turn: tuple[str, ...], vehicle: Vehicle, start) -> dict:
+        """Where the turn terms' fit to the headings starts: from ``start``, from the file's values or from
+        the best point of :data:`TURN_GRID`, whichever optimum leaves the lowest heading residual.
 
-        Fitted to the headings alone a log can hold two optima, the turn rate against the yaw lag and the
-        heading time trading off. From where the loop's fit ended, a vehicle that turns otherwise than its
-        file may land on the one where the terms confound each other and none is identified; from the file's
-        values it may find the other. Both are found without the bootstrap; the full fit starts at the winner.
+        Fitted to the headings alone a log can hold several optima, the turn rate against the yaw lag and
+        the heading time trading off, and a vehicle that turns unlike its file lies many prior widths
+        from it: from the file's values, or from where the loop's fit ended, the fit may stall on a
+        ridge where the terms confound each other and none is identified.  The grid's points are replayed
+        in one batch; each origin's optimum is found without the bootstrap; the full fit starts at the best.
         """
-        if not start or not any(n in start for n in turn):
-            return start
+        start = dict(start or {})
+        bounds = {p.name: (p.low, p.high) for p in self.priors(vehicle, turn)}
+        base = {n: float(start.get(n, getattr(vehicle, n))) for n in turn}
+        grid = [
+            {n: float(np.clip(getattr(vehicle, n) * share, *bounds[n])) for n, share in zip(turn, shares)}
+            for shares in itertools.product(*(TURN_GRID[n] for n in turn))
+        ]
+        heading = self.trial_parts(vehicle, [{**start, **point} for point in grid])[2]
+        file = {n: float(getattr(vehicle, n)) for n in turn}
+        origins = [base, file, grid[int(np.argmin(np.mean(heading**2, axis=1)))]]
+        origins = [o for i, o in enumerate(origins) if o not in origins[:i]]
         found = []
-        for origin in (start, {k: v for k, v in start.items() if k not in turn}):
-            est = self.solve_kinds(turn, vehicle, 0, origin or None, ("heading",), robust=False)
+        for origin in origins:
+            est = self.solve_kinds(turn, vehicle, 0, {**start, **origin}, ("heading",), robust=False)
             values = {n: float(est.map_value[n]) for n in est.names}
-            rms = rms_of(residual_parts(self.mission, self.seg, *with_terms(vehicle, values)))["heading_deg"]
-            found.append((rms, values))
-        best = min(found, key=lambda f: f[0])[1]
-        return {**start, **best}
+            found.append((self.heading_rms(vehicle, {**start, **values}), values))
+        return {**start, **min(found, key=lambda f: f[0])[1]}
+
+    def heading_rms(self, vehicle: Vehicle, values: dict[str, float]) -> float:
+        """The segments' heading residual RMS (deg) of ``vehicle`` with ``values``."""
+        return rms_of(residual_parts(self.mission, self.seg, *with_terms(vehicle, values)))["heading_deg"]
 
 
 def choose_loop(

@@ -117,3 +117,28 @@ def test_a_prior_without_width_or_with_its_centre_outside_its_bounds_is_refused(
         Prior("a", 0.0, 0.0)
     with pytest.raises(ValueError, match="outside"):
         Prior("a", 5.0, 1.0, 0.0, 1.0)
+
+
+@pytest.mark.parametrize("offset", [0.0, 10.0])
+def test_departed_identifies_what_the_data_move_many_prior_widths_and_nothing_else(offset):
+    """Data as precise as the prior (posterior s.d. 0.7 of the prior's: not identified by the prior's yardstick)
+    that put the parameter ``offset`` prior widths from the file's value: moved far, it is identified and
+    kept nearer the truth than the file's value; where the data agree with the file, nothing changes."""
+    noise = 0.3 * np.sqrt(np.sum(X**2))  # the data know ``a`` as well as its prior (s.d. 0.3) does
+    y = (1.0 + 0.3 * offset) * X + np.random.default_rng(3).normal(0, noise, X.size)
+    priors = [Prior("a", 1.0, 0.3, 0.0, 10.0), Prior("b", 0.0, 1.0, -5.0, 5.0)]
+
+    def res(theta: np.ndarray) -> np.ndarray:
+        a, _ = theta
+        return a * X - y  # in nominal units: the fit estimates the noise's scale
+
+    kw = {"robust": False, "significant": 0.0}
+    plain, departed = fit_map(res, priors, **kw), fit_map(res, priors, departed=True, **kw)
+    assert not plain.identified["a"] and not plain.identified["b"]
+    assert plain.stderr["a"] > IDENTIFIED_BELOW * 0.3
+    if offset:
+        assert departed.identified["a"] and not departed.identified["b"]
+        truth = 1.0 + 0.3 * offset
+        assert abs(departed.value["a"] - truth) < abs(plain.value["a"] - truth)
+    else:
+        assert departed.identified == plain.identified
