@@ -30,6 +30,7 @@ Knows nothing of vehicles: the caller's ``residuals(theta)`` does the physics.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
@@ -237,11 +238,8 @@ def fit_map(
     the robust loss and median scale would treat as outliers.
     ``significant`` is the survivor rule's threshold (:data:`SIGNIFICANT`); 0 drops the rule,
     so that *identified* means exactly "posterior s.d. below ``identify_below`` of the prior's".
-    ``departed=True`` also counts as identified a parameter whose s.d. is below ``identify_below`` of
-    the distance the data moved it from its prior's centre: for a prior that may be far off (a
-    datasheet's value for a vehicle of another kind), the data that move an estimate many prior
-    widths away and pin it to a fraction of that move have identified it, though the prior's own
-    width is no yardstick for them.
+    ``departed=True`` also identifies a parameter whose s.d. is below ``identify_below`` of its move off
+    the prior's centre (a far-off prior, another vehicle's datasheet, is no yardstick for such data).
     """
     priors = tuple(priors)
     names = [p.name for p in priors]
@@ -273,17 +271,12 @@ def fit_map(
     sol = solve(every, sol.x, scale)
     map_value = theta_of(sol.x, every)
     stderr_z = np.ones(len(priors))
-
-    def limit(z: np.ndarray) -> np.ndarray:
-        """The s.d. (prior units) below which each parameter at ``z`` is identified."""
-        return identify_below * (np.maximum(1.0, np.abs(z)) if departed else np.ones(z.size))
-
+    limit = functools.partial(_identified_below, share=identify_below, departed=departed)
     own = _covariances(sol, m, groups)[0] < limit(sol.x)  # identified with every parameter free
     sources = {n: "laplace" for n in names}
     free = every.copy()
     final, cov_f, n_boot = sol, np.zeros((0, 0)), 0
-    # backward elimination: while some free parameter is not identified, fix at its centre
-    # the one whose loss costs the fit least (:func:`_drop_one`) and refit
+    # backward elimination: while one is not identified, fix the cheapest at its centre (_drop_one), refit
     while free.any():
         if not free.all():
             final = solve(free, sol.x[free], scale)
@@ -328,6 +321,11 @@ def fit_map(
         n_boot,
         sources,
     )
+
+
+def _identified_below(z: np.ndarray, share: float, departed: bool) -> np.ndarray:
+    """The s.d. (prior units) below which each parameter at ``z`` is identified (see :func:`fit_map`)."""
+    return share * (np.maximum(1.0, np.abs(z)) if departed else np.ones(z.size))
 
 
 def _resampled(
