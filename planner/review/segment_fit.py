@@ -115,6 +115,7 @@ class SegmentSolver:
     ):
         self.mission, self.seg, self.priors, self.blocks, self.seed = mission, seg, priors, blocks, seed
         self._tiled: dict[int, Segments] = {}  # the segments repeated p times, per trial count p
+        self._turn_found: dict[tuple, dict[str, float]] = {}  # turn_start's optimum per (terms, vehicle)
 
     def solve_kinds(
         self,
@@ -195,8 +196,14 @@ class SegmentSolver:
         from it: from the file's values, or from where the loop's fit ended, the fit may stall on a
         ridge where the terms confound each other and none is identified.  The grid's points are replayed
         in one batch; each origin's optimum is found without the bootstrap; the full fit starts at the best.
+
+        A vector loop's headings do not move with its speed terms, so the optimum found for the loop's
+        choice is where the final fit of the same vehicle starts too, not searched for again.
         """
         start = dict(start or {})
+        key = (turn, vehicle)
+        if key in self._turn_found:
+            return {**start, **self._turn_found[key]}
         bounds = {p.name: (p.low, p.high) for p in self.priors(vehicle, turn)}
         base = {n: float(start.get(n, getattr(vehicle, n))) for n in turn}
         grid = [
@@ -212,7 +219,8 @@ class SegmentSolver:
             est = self.solve_kinds(turn, vehicle, 0, {**start, **origin}, ("heading",), robust=False)
             values = {n: float(est.map_value[n]) for n in est.names}
             found.append((self.heading_rms(vehicle, {**start, **values}), values))
-        return {**start, **min(found, key=lambda f: f[0])[1]}
+        self._turn_found[key] = min(found, key=lambda f: f[0])[1]
+        return {**start, **self._turn_found[key]}
 
     def heading_rms(self, vehicle: Vehicle, values: dict[str, float]) -> float:
         """The segments' heading residual RMS (deg) of ``vehicle`` with ``values``."""
