@@ -12,7 +12,9 @@ metre of navigation error, while a slightly longer one elsewhere holds.
 its sides at the range's resolution, simulates them, keeps only those whose written sides
 still differ on the pair's elements (the pair's modes and elements are then those of its
 written scenarios, so the plan agrees with itself), dithers them, and looks for robust
-variants of the fragile sides. :func:`rank_candidates` then keeps the ``k`` most likely to
+variants of the fragile sides (:func:`write_candidates`, then :func:`dither_candidates`; pairs
+moved as a whole, :mod:`planner.plan.pair_shifts`, go through the same two steps).
+:func:`rank_candidates` then keeps the ``k`` most likely to
 show, one per sub-boundary, with the flown sides no farther apart than
 :data:`MAX_FLOWN_DISTANCE`.
 """
@@ -31,7 +33,14 @@ from planner.plan.dithering import Outcome, dither_many, outcome_columns, robust
 from sim.uuv.mission import Mission
 from sim.uuv.scoring import MODE_NAMES
 
-__all__ = ["MAX_FLOWN_DISTANCE", "Candidate", "evaluate_candidates", "rank_candidates"]
+__all__ = [
+    "MAX_FLOWN_DISTANCE",
+    "Candidate",
+    "dither_candidates",
+    "evaluate_candidates",
+    "rank_candidates",
+    "write_candidates",
+]
 
 #: A flown variant keeps its pair's sides at most this far apart in the unit cube (or no farther than
 #: the written pair): farther, the switch between them is no longer one boundary's.
@@ -114,11 +123,32 @@ def evaluate_candidates(
     seed: int,
     surrogate=None,
 ) -> tuple[list[Candidate], dict[str, int]]:
-    """Every candidate written, simulated, dithered and given variants; the runs each stage spent.
+    """Every candidate written (:func:`write_candidates`), dithered and given variants (:func:`dither_candidates`);
+    the runs each stage spent."""
+    kept = write_candidates(mission, tree_levels, candidates, points)
+    runs = {"written": 2 * len(candidates)}
+    runs |= dither_candidates(
+        mission,
+        kept,
+        dithers=dithers,
+        sigma=sigma,
+        sensitivity=sensitivity,
+        target=target,
+        seed=seed,
+        surrogate=surrogate,
+    )
+    return kept, runs
+
+
+def write_candidates(
+    mission: Mission, tree_levels: list, candidates: list[dict], points: Callable[[dict], np.ndarray]
+) -> list[Candidate]:
+    """The candidates whose sides, written at the range's resolution, still differ on their level's elements.
 
     ``points(pair)`` gives a candidate's two unit-cube scenarios. Each is snapped to the
-    range's resolution a step away from its partner, so the boundary stays between them; a
-    candidate whose written sides no longer differ on any element of its level is dropped.
+    range's resolution a step away from its partner, so the boundary stays between them, and
+    simulated once (two runs per candidate); a candidate whose written sides no longer differ
+    on any element of its level is dropped.
     """
     U = np.vstack([points(p) for p in candidates]) if candidates else np.zeros((0, mission.dim))
     U = mission.space.snap(U, away_from=U[np.arange(len(U)) ^ 1])
@@ -140,9 +170,31 @@ def evaluate_candidates(
         modes = [MODE_NAMES[int(written.modes[k])] for k in rows]
         distance = math.dist(U[rows[0]], U[rows[1]])
         kept.append(Candidate({**pair, "elements": elements, "modes": modes, "distance": distance}, U[rows], outcomes))
-    runs = {"written": len(U), "dithering": 0, "variants": 0}
+    return kept
+
+
+def dither_candidates(
+    mission: Mission,
+    kept: list[Candidate],
+    *,
+    dithers: int,
+    sigma: np.ndarray,
+    sensitivity: np.ndarray,
+    target: float,
+    seed: int,
+    surrogate=None,
+    variants: bool = True,
+) -> dict[str, int]:
+    """Dither each written candidate's sides (``dithers`` runs a pair) and, with ``variants``, look for robust
+    variants of the fragile ones; each candidate's stats, dithers, variants and flown sides are set in place.
+
+    Returns the runs each stage spent. Dithering again (more runs, another seed) replaces a
+    candidate's stats: a screened estimate is not pooled with its confirmation, as the screen
+    chose the candidates on its own dithers and would carry their luck into the estimate.
+    """
+    runs = {"dithering": 0, "variants": 0}
     if not dithers or not kept:
-        return kept, runs
+        return runs
     n = dithers // 2
     centres = np.vstack([c.U for c in kept])
     side_outcomes = [o for c in kept for o in c.outcomes]
@@ -152,7 +204,8 @@ def evaluate_candidates(
     for c, cand in enumerate(kept):
         cand.stats = [stats[2 * c], stats[2 * c + 1]]
         cand.dithers = [(dU[2 * c + s], dmodes[2 * c + s]) for s in (0, 1)]
-    fragile = [k for k, st in enumerate(stats) if st.get("p_predicted", 1.0) < target]
+        cand.variants = [None, None]
+    fragile = [k for k, st in enumerate(stats) if st.get("p_predicted", 1.0) < target] if variants else []
     if fragile:
         found, runs["variants"] = robust_variants(
             mission,
@@ -172,7 +225,7 @@ def evaluate_candidates(
             kept[k // 2].variants[k % 2] = v
     for cand in kept:
         cand.choose_flown(target)
-    return kept, runs
+    return runs
 
 
 def rank_candidates(candidates: list[Candidate], k: int) -> list[Candidate]:
