@@ -46,6 +46,7 @@ from planner.plan.analysis import Analysis, analyse, confirm_with_expert, pair_p
 from planner.plan.confirmation import Confirmation
 from planner.plan.dithering import DEFAULT_NOISE, DitherNoise
 from planner.plan.pair_choice import MAX_FLOWN_DISTANCE, Candidate, evaluate_candidates, rank_candidates
+from planner.plan.pair_shifts import with_shifted_pairs
 from planner.plan.plan_scenarios import remove_unlisted, scenario_entries, variant_entries
 from planner.plan.planned_for import planned_for
 from planner.plan.refinement import MIN_REFINE_RUNS, refine_pairs
@@ -251,20 +252,10 @@ def generate(
     clock = _StageClock(timings)
     a, candidates, confirmation, refinement = _choose_pairs(mission, cfg, progress, clock)
     sens = coordinate_sensitivity(mission.space, a.sensitivity)
-    evaluated, spent = evaluate_candidates(
-        mission,
-        a.tree.levels,
-        candidates,
-        lambda pair: pair_points(a, pair),
-        dithers=cfg.dithers,
-        sigma=sigma,
-        sensitivity=sens,
-        target=cfg.fragile_below,
-        seed=cfg.seed,
-        surrogate=cfg.surrogate,
-    )
+    evaluated, spent = _evaluate(mission, cfg, a, candidates, sigma, sens)
     if progress is not None and cfg.dithers:
-        progress("dither", len(evaluated), len(candidates), f"{spent['dithering'] + spent['variants']:,} runs")
+        done = spent["dithering"] + spent["variants"] + spent["shifts"]
+        progress("dither", len(evaluated), len(candidates), f"{done:,} runs")
     clock.lap("dithering")
     ranked = rank_candidates(evaluated, cfg.pairs)
     pairs = [c.pair for c in ranked]
@@ -285,6 +276,7 @@ def generate(
         "refinement": refinement["runs"] if refinement else 0,
         "dithering": spent["dithering"],
         "variants": spent["variants"],
+        "shifts": spent["shifts"],
     }
     dithering = {
         "expected": noise.as_dict(),
@@ -394,6 +386,22 @@ def _search_progress(
     return lambda done, total: progress("search", done, total, status.summary())
 
 
+def _evaluate(
+    mission: Mission, cfg: GenerateConfig, a: Analysis, candidates: list[dict], sigma, sens
+) -> tuple[list[Candidate], dict[str, int]]:
+    """The candidates written, dithered and given variants, then their fragile pairs moved as a whole
+    (:func:`~planner.plan.pair_shifts.with_shifted_pairs`); the runs each stage spent."""
+    kw = {"dithers": cfg.dithers, "sigma": sigma, "sensitivity": sens, "target": cfg.fragile_below, "seed": cfg.seed}
+    kw["surrogate"] = cfg.surrogate
+    points = lambda pair: pair_points(a, pair)  # noqa: E731
+    evaluated, spent = evaluate_candidates(mission, a.tree.levels, candidates, points, **kw)
+    budget = spent["dithering"] + spent["variants"]
+    evaluated, spent["shifts"] = with_shifted_pairs(
+        mission, a.tree.levels, evaluated, pairs=cfg.pairs, budget=budget, **kw
+    )
+    return evaluated, spent
+
+
 def _verdicts(cfg: GenerateConfig, ranked: list[Candidate]) -> list[dict]:
     """Per pair: P(predicted outcome) of each side and of its flown variant, P(straddle) and a one-word verdict.
 
@@ -474,6 +482,8 @@ def _plan_document(
         }
         if pair.get("refined"):
             entry["refinement"] = {"start_distance": pair["start_distance"], "runs": pair["refine_runs"]}
+        if pair.get("shifted"):
+            entry["shifted"] = pair["shifted"]
         if verdict:
             entry.update(verdict)
             entry["variants"] = [f"{sid}M" if f"{sid}M" in variant_ids else None for sid in sides]
