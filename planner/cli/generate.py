@@ -42,10 +42,13 @@ def summary_table(plan: dict, title: str) -> Table:
 def straddle_line(plan: dict) -> str | None:
     """One line: each pair's P(straddle), the chance that both flown sides show their predicted outcomes (None
     undithered)."""
+    from planner.plan.pair_shifts import shift_note
+
     shown = [f"pair {p['id']} {p['p_straddle']:.0%}" for p in plan["pairs"] if p.get("p_straddle") is not None]
     if not shown:
         return None
-    return "P(straddle), both flown sides as predicted: " + ", ".join(shown)
+    moved = [f"pair {p['id']} {shift_note(p['shifted'])}" for p in plan["pairs"] if p.get("shifted")]
+    return "P(straddle), both flown sides as predicted: " + ", ".join(shown) + "".join(f"; {m}" for m in moved)
 
 
 def _print_lines(plan: dict) -> None:

@@ -35,6 +35,7 @@ import numpy as np
 from planner.common.atomic import write_text_atomic
 from planner.common.html.text import EM_DASH, decimal, escape, percent
 from planner.common.plans import PLAN_SCHEMA
+from planner.plan.pair_shifts import shift_note
 from planner.plan.planned_for import summary_lines
 from planner.plan.report_figures import (
     MODE_COLOURS,
@@ -226,7 +227,9 @@ def _summary_table(plan: dict) -> str:
         probs = p.get("p_predicted") or [None, None]
         var = p.get("variant_p_predicted") or [None, None]
         verdict = p.get("verdict", MISSING)
-        reason = f'<br><span class="note">{escape(p["reason"])}</span>' if p.get("reason") else ""
+        notes = [p["reason"]] if p.get("reason") else []
+        notes += [shift_note(p["shifted"])] if p.get("shifted") else []
+        reason = "".join(f'<br><span class="note">{escape(n)}</span>' for n in notes)
         rows.append(
             f"<tr><td class='num'>{escape(p['id'])}</td><td>{escape(', '.join(p['elements']))}</td>"
             f"<td>{' / '.join(_mode_badge(m) for m in p['modes'])}</td><td class='num'>{decimal(p['distance'], 3, missing=MISSING)}</td>"

@@ -1,5 +1,6 @@
 """``rapt-plan generate``: resume, refusal to overwrite, one-line errors, and a study killed mid-search."""
 
+import json
 import re
 from pathlib import Path
 
@@ -7,6 +8,7 @@ import pytest
 from typer.testing import CliRunner
 
 from planner.cli import app
+from planner.cli.generate import straddle_line
 
 EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 runner = CliRunner()
@@ -133,3 +135,15 @@ def test_generate_killed_mid_search_resumes_to_the_uninterrupted_plan(tmp_path):
     whole = runner.invoke(app, args + ["--out", str(tmp_path / "whole")])
     assert whole.exit_code == 0, whole.output
     assert (killed / "plan.json").read_text() == (tmp_path / "whole" / "plan.json").read_text()
+
+
+def test_the_summary_names_each_pair_moved_as_a_whole_after_its_p_straddle():
+    plan = json.loads((EXAMPLES.parent / "field_plans" / "range2017" / "plan.json").read_text())
+    plan["pairs"][1]["shifted"] = {"along": "normal", "sigmas": 1.0, "by": 0.018}
+    line = straddle_line(plan)
+    assert line is not None and line.startswith("P(straddle), both flown sides as predicted: pair 1 ")
+    assert line.endswith(
+        "; pair 2 moved as a whole 1 noise sigma across its boundary, away from its fragile side (0.018 in the unit cube)"
+    )
+    del plan["pairs"][1]["shifted"]
+    assert "moved" not in (straddle_line(plan) or "")
