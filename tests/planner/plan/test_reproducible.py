@@ -32,7 +32,19 @@ LIBM_PROBE = "import math, hashlib; print(hashlib.sha1(repr([math.exp(x / 7.3) f
 
 def _plan(out: Path, env: dict) -> dict:
     done = subprocess.run(
-        [sys.executable, "-m", "planner.cli", "generate", str(MISSION), "--out", str(out), "--budget", "1200"],
+        [
+            sys.executable,
+            "-m",
+            "planner.cli",
+            "generate",
+            str(MISSION),
+            "--out",
+            str(out),
+            "--budget",
+            "1200",
+            "--dithers",
+            "400",
+        ],
         env={**os.environ, **env},
         capture_output=True,
         text=True,
