@@ -45,7 +45,7 @@ from planner.common.plans import PLAN_SCHEMA, coordinate_sensitivity, embedded_m
 from planner.plan.analysis import Analysis, analyse, confirm_with_expert, pair_points, select_pairs
 from planner.plan.confirmation import Confirmation
 from planner.plan.dithering import DEFAULT_NOISE, DitherNoise
-from planner.plan.pair_choice import MAX_FLOWN_DISTANCE, Candidate, evaluate_candidates, rank_candidates
+from planner.plan.pair_choice import MAX_FLOWN_DISTANCE, Candidate, Dithering, evaluate_candidates, rank_candidates
 from planner.plan.pair_shifts import with_shifted_pairs
 from planner.plan.plan_scenarios import remove_unlisted, scenario_entries, variant_entries
 from planner.plan.planned_for import planned_for
@@ -391,13 +391,12 @@ def _evaluate(
 ) -> tuple[list[Candidate], dict[str, int]]:
     """The candidates written, dithered and given variants, then their fragile pairs moved as a whole
     (:func:`~planner.plan.pair_shifts.with_shifted_pairs`); the runs each stage spent."""
-    kw = {"dithers": cfg.dithers, "sigma": sigma, "sensitivity": sens, "target": cfg.fragile_below, "seed": cfg.seed}
-    kw["surrogate"] = cfg.surrogate
+    how = Dithering(cfg.dithers, sigma, sens, cfg.fragile_below, cfg.seed, cfg.surrogate)
     points = lambda pair: pair_points(a, pair)  # noqa: E731
-    evaluated, spent = evaluate_candidates(mission, a.tree.levels, candidates, points, **kw)
+    evaluated, spent = evaluate_candidates(mission, a.tree.levels, candidates, points, how)
     budget = spent["dithering"] + spent["variants"]
     evaluated, spent["shifts"] = with_shifted_pairs(
-        mission, a.tree.levels, evaluated, pairs=cfg.pairs, budget=budget, **kw
+        mission, a.tree.levels, evaluated, how, pairs=cfg.pairs, budget=budget
     )
     return evaluated, spent
 

@@ -25,6 +25,7 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from itertools import product
+from typing import Any
 
 import numpy as np
 
@@ -36,6 +37,7 @@ from sim.uuv.scoring import MODE_NAMES
 __all__ = [
     "MAX_FLOWN_DISTANCE",
     "Candidate",
+    "Dithering",
     "dither_candidates",
     "evaluate_candidates",
     "rank_candidates",
@@ -110,34 +112,27 @@ def _written_elements(tree_levels: list, names: list[str], types, scores: np.nda
     return [names[c] for c in tree_levels[level] if types[c] != "continuous" and scores[0, c] != scores[1, c]]
 
 
+@dataclass(frozen=True)
+class Dithering:
+    """How candidate pairs are dithered: ``dithers`` runs a pair under the per-coordinate noise ``sigma``
+    (unit cube), each side needing ``target``; ``sensitivity`` steers the variant search, ``seed`` its
+    draws, and ``surrogate`` (when given) flies the dithers in place of the expert."""
+
+    dithers: int
+    sigma: np.ndarray
+    sensitivity: np.ndarray
+    target: float
+    seed: int
+    surrogate: Any = None
+
+
 def evaluate_candidates(
-    mission: Mission,
-    tree_levels: list,
-    candidates: list[dict],
-    points: Callable[[dict], np.ndarray],
-    *,
-    dithers: int,
-    sigma: np.ndarray,
-    sensitivity: np.ndarray,
-    target: float,
-    seed: int,
-    surrogate=None,
+    mission: Mission, tree_levels: list, candidates: list[dict], points: Callable[[dict], np.ndarray], how: Dithering
 ) -> tuple[list[Candidate], dict[str, int]]:
     """Every candidate written (:func:`write_candidates`), dithered and given variants (:func:`dither_candidates`);
     the runs each stage spent."""
     kept = write_candidates(mission, tree_levels, candidates, points)
-    runs = {"written": 2 * len(candidates)}
-    runs |= dither_candidates(
-        mission,
-        kept,
-        dithers=dithers,
-        sigma=sigma,
-        sensitivity=sensitivity,
-        target=target,
-        seed=seed,
-        surrogate=surrogate,
-    )
-    return kept, runs
+    return kept, {"written": 2 * len(candidates)} | dither_candidates(mission, kept, how)
 
 
 def write_candidates(
@@ -173,18 +168,7 @@ def write_candidates(
     return kept
 
 
-def dither_candidates(
-    mission: Mission,
-    kept: list[Candidate],
-    *,
-    dithers: int,
-    sigma: np.ndarray,
-    sensitivity: np.ndarray,
-    target: float,
-    seed: int,
-    surrogate=None,
-    variants: bool = True,
-) -> dict[str, int]:
+def dither_candidates(mission: Mission, kept: list[Candidate], how: Dithering, variants: bool = True) -> dict[str, int]:
     """Dither each written candidate's sides (``dithers`` runs a pair) and, with ``variants``, look for robust
     variants of the fragile ones; each candidate's stats, dithers, variants and flown sides are set in place.
 
@@ -193,13 +177,16 @@ def dither_candidates(
     chose the candidates on its own dithers and would carry their luck into the estimate.
     """
     runs = {"dithering": 0, "variants": 0}
+    dithers, sigma, target, seed = how.dithers, how.sigma, how.target, how.seed
     if not dithers or not kept:
         return runs
     n = dithers // 2
     centres = np.vstack([c.U for c in kept])
     side_outcomes = [o for c in kept for o in c.outcomes]
     side_elements = [c.pair["elements"] for c in kept for _ in (0, 1)]
-    stats, dU, dmodes, shown = dither_many(mission, centres, side_outcomes, side_elements, n, sigma, seed, surrogate)
+    stats, dU, dmodes, shown = dither_many(
+        mission, centres, side_outcomes, side_elements, n, sigma, seed, how.surrogate
+    )
     runs["dithering"] = len(centres) * n
     for c, cand in enumerate(kept):
         cand.stats = [stats[2 * c], stats[2 * c + 1]]
@@ -213,13 +200,13 @@ def dither_candidates(
             centres[np.asarray(fragile) ^ 1],
             [side_outcomes[k] for k in fragile],
             [(dU[k], shown[k]) for k in fragile],
-            sensitivity,
+            how.sensitivity,
             sigma,
             min(max(dithers // 20, 40), n),  # screening never outweighs confirming
             n,
             target,
             seed + 1,
-            surrogate,
+            how.surrogate,
         )
         for k, v in zip(fragile, found):
             kept[k // 2].variants[k % 2] = v

@@ -12,12 +12,13 @@ were confirmed, and sets them beside their origins to compete in the pair choice
 
 from __future__ import annotations
 
+import dataclasses
 import itertools
 import math
 
 import numpy as np
 
-from planner.plan.pair_choice import Candidate, dither_candidates, write_candidates
+from planner.plan.pair_choice import Candidate, Dithering, dither_candidates, write_candidates
 from sim.uuv.mission import Mission
 
 __all__ = [
@@ -108,41 +109,27 @@ def _moves(U: np.ndarray, fragile: list[bool], sigma: np.ndarray) -> list[tuple[
 
 
 def with_shifted_pairs(
-    mission: Mission,
-    tree_levels: list,
-    evaluated: list[Candidate],
-    *,
-    pairs: int,
-    budget: int,
-    dithers: int,
-    sigma: np.ndarray,
-    sensitivity: np.ndarray,
-    target: float,
-    seed: int,
-    surrogate=None,
+    mission: Mission, tree_levels: list, evaluated: list[Candidate], how: Dithering, *, pairs: int, budget: int
 ) -> tuple[list[Candidate], int]:
     """The candidates with, after each, its best moves as a whole where they straddle more often; the runs spent.
 
     Every shift of :func:`shifted_pairs` (for :data:`SHIFTED_PER_PAIR` times ``pairs`` sub-boundaries)
-    is written once and screened as written with ``dithers``/20 dithers per side (as a variant is).
+    is written once and screened as written with ``how.dithers``/20 dithers per side (as a variant is).
     Those that straddle more often than their candidate as written are confirmed in rounds, each
     candidate's best in the first, its second best in the next, up to :data:`SHIFTS_CONFIRMED`: dithered
-    again with ``dithers`` and a fresh seed, and given variants as the candidates were, so their P
+    again with ``how.dithers`` and a fresh seed, and given variants as the candidates were, so their P
     comes from the confirmation alone, not from the screen that chose them. A round starts only
     while the shifts have spent under ``budget`` runs (the candidates' own dithering and variants):
     moving pairs refines the plan at about the cost of choosing them.
     """
-    if not dithers:
+    if not how.dithers:
         return evaluated, 0
-    shifted = shifted_pairs(evaluated, sigma, target, SHIFTED_PER_PAIR * pairs)
+    shifted = shifted_pairs(evaluated, how.sigma, how.target, SHIFTED_PER_PAIR * pairs)
     if not shifted:
         return evaluated, 0
-    kw = {"sigma": sigma, "sensitivity": sensitivity, "target": target, "surrogate": surrogate}
     moved = write_candidates(mission, tree_levels, shifted, lambda pair: np.asarray(pair["u_override"], dtype=float))
-    screen = 2 * min(max(dithers // 20, 40), dithers // 2)
-    runs = 2 * len(shifted) + sum(
-        dither_candidates(mission, moved, dithers=screen, seed=seed + 2, variants=False, **kw).values()
-    )
+    screen = dataclasses.replace(how, dithers=2 * min(max(how.dithers // 20, 40), how.dithers // 2), seed=how.seed + 2)
+    runs = 2 * len(shifted) + sum(dither_candidates(mission, moved, screen, variants=False).values())
 
     def written(c: Candidate) -> float:
         """P(straddle) of the pair as written, neither side's variant flown."""
@@ -156,7 +143,7 @@ def with_shifted_pairs(
         batch = [shifts[r] for shifts in ranked if len(shifts) > r]
         if not batch or runs >= budget:
             break
-        runs += sum(dither_candidates(mission, batch, dithers=dithers, seed=seed + 3 + r, **kw).values())
+        runs += sum(dither_candidates(mission, batch, dataclasses.replace(how, seed=how.seed + 3 + r)).values())
         best += batch
     out: list[Candidate] = []
     for i, cand in enumerate(evaluated):

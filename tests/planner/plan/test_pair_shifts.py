@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import sim.uuv
-from planner.plan.pair_choice import dither_candidates, write_candidates
+from planner.plan.pair_choice import Dithering, dither_candidates, write_candidates
 from planner.plan.pair_shifts import SHIFT_SIGMAS, shifted_pairs, with_shifted_pairs
 from tests.planner.plan.test_pair_choice import _cand
 
@@ -71,12 +71,12 @@ def test_a_fragile_pair_of_the_range_mission_is_moved_screened_and_confirmed_bes
     u = {sc["id"]: sc["u"] for sc in plan["scenarios"]}
     U = np.asarray([u[sid] for sid in pair["scenarios"]], dtype=float)
     sigma = np.asarray(plan["study"]["dithering"]["sigma_u"], dtype=float)
-    kw = {"sigma": sigma, "sensitivity": np.ones(mission.dim), "target": 0.9, "seed": 5}
+    how = Dithering(400, sigma, np.ones(mission.dim), 0.9, 5)
     levels = [[0, 1]]
     origin = write_candidates(mission, levels, [{"level": 0}], lambda p: U)
-    dither_candidates(mission, origin, dithers=400, variants=False, **kw)  # as written: no variant to fly
+    dither_candidates(mission, origin, how, variants=False)  # as written: no variant to fly
     assert len(origin) == 1 and min(origin[0].stats[s]["p_predicted"] for s in (0, 1)) < 0.9
-    out, runs = with_shifted_pairs(mission, levels, origin, pairs=1, budget=10**6, dithers=400, **kw)
+    out, runs = with_shifted_pairs(mission, levels, origin, how, pairs=1, budget=10**6)
     assert out[0] is origin[0]  # the origin keeps its place; its moves follow it
     moved = out[1:]
     proposed = shifted_pairs(origin, sigma, 0.9, 2)
@@ -90,7 +90,7 @@ def test_a_fragile_pair_of_the_range_mission_is_moved_screened_and_confirmed_bes
         assert [len(m.dithers[s][1]) for s in (0, 1)] == [200, 200]  # confirmed in full, not by the screen
         assert m.p_straddle is not None
     # a budget the screen alone spends: no round of confirmation starts, the origin stands alone
-    alone, screened = with_shifted_pairs(mission, levels, origin, pairs=1, budget=1, dithers=400, **kw)
+    alone, screened = with_shifted_pairs(mission, levels, origin, how, pairs=1, budget=1)
     assert alone == origin and 0 < screened < runs
 
 
