@@ -53,7 +53,7 @@ from planner.plan.refinement import MIN_REFINE_RUNS, refine_pairs
 from planner.plan.report import write_report
 from planner.plan.runtime import numerical_runtime
 from planner.plan.search_status import SearchStatus
-from planner.plan.unreached import unreached
+from planner.plan.unreached import no_boundary, unreached
 from rapt.errors import InputError, StudyMismatchError
 from sim.uuv.mission import Mission
 from sim.uuv.scoring import MODE_NAMES
@@ -251,8 +251,12 @@ def generate(
     out_dir.mkdir(parents=True, exist_ok=True)
     clock = _StageClock(timings)
     a, candidates, confirmation, refinement = _choose_pairs(mission, cfg, progress, clock)
+    if not candidates:
+        raise InputError(no_boundary(mission, a.result.modes))
     sens = coordinate_sensitivity(mission.space, a.sensitivity)
     evaluated, spent = _evaluate(mission, cfg, a, candidates, sigma, sens)
+    if not evaluated:
+        raise InputError(no_boundary(mission, a.result.modes, written_away=len(candidates)))
     if progress is not None and cfg.dithers:
         done = spent["dithering"] + spent["variants"] + spent["shifts"]
         progress("dither", len(evaluated), len(candidates), f"{done:,} runs")

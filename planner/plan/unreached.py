@@ -18,7 +18,7 @@ from rapt.space import Continuous
 from sim.uuv.mission import Mission
 from sim.uuv.scoring import MODE_NAMES
 
-__all__ = ["unreached", "unreached_line", "route_length_m"]
+__all__ = ["no_boundary", "unreached", "unreached_line", "route_length_m"]
 
 
 def route_length_m(mission: Mission) -> float:
@@ -101,3 +101,24 @@ def unreached_line(record: dict | None) -> str | None:
         more = len(record["elements"]) - len(shown)
         what.append(f"none passes {', '.join(shown)}" + (f" (+{more} more)" if more > 0 else ""))
     return f"unreached: {'; '.join(what)}: {record.get('reason', '')}"
+
+
+def no_boundary(mission: Mission, modes: np.ndarray, written_away: int = 0) -> str:
+    """The one line refusing a plan with no boundary pair: what the study's valid runs show, and what to change.
+
+    ``written_away``: candidate pairs there were, whose sides all showed one outcome once written at
+    the range's resolution (0: the study offered no candidate at all).
+    """
+    counts = {MODE_NAMES[m]: int(n) for m, n in zip(*np.unique(modes[modes >= 0], return_counts=True))}
+    shown = ", ".join(f"{name} {n:,}" for name, n in counts.items()) or "none"
+    if written_away:
+        why = (
+            f"each of the {written_away} candidate pairs shows one outcome on both sides once written at the "
+            f"range's resolution; give the parameters a finer resolution or raise --budget for sharper pairs"
+        )
+    else:
+        why = "no two neighbouring runs differ on a scored element; widen the parameters' ranges or raise --budget"
+    return (
+        f"MISSION_FILE: no boundary to plan in {mission.name} (valid runs by mode: {shown}): {why}; "
+        "no plan was written (the study stays in the --out directory for --resume)"
+    )

@@ -147,3 +147,22 @@ def test_the_summary_names_each_pair_moved_as_a_whole_after_its_p_straddle():
     )
     del plan["pairs"][1]["shifted"]
     assert "moved" not in (straddle_line(plan) or "")
+
+
+def test_a_mission_with_no_boundary_is_refused_in_one_line_and_no_plan_is_written(tmp_path):
+    text = (EXAMPLES / "imitation7.toml").read_text()
+    # the obstacles kept off the route and the pack always full: every run succeeds the same way
+    flat = text.replace('name = "imitation7"', 'name = "flatland"').replace(
+        "low = -300.0\nhigh = 300.0", "low = 350.0\nhigh = 420.0"
+    )
+    flat = flat.replace("low = 0.05\nhigh = 0.4", "low = 0.9\nhigh = 1.0")
+    assert flat.count("low = 350.0") == 3
+    mission = tmp_path / "flatland.toml"
+    mission.write_text(flat)
+    out = tmp_path / "plan"
+    result = runner.invoke(app, ["generate", str(mission), "--out", str(out), "--budget", "500"])
+    assert result.exit_code == 2, result.output
+    lines = [line for line in result.output.splitlines() if line.strip()]
+    assert len(lines) == 1 and "MISSION_FILE: no boundary to plan in flatland (valid runs by mode: TS 500)" in lines[0]
+    assert sorted(p.name for p in out.iterdir()) == ["study.db"]  # no plan, no report, no scenario file
+    assert mission.read_text() == flat
