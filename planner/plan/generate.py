@@ -251,11 +251,9 @@ def generate(
     out_dir.mkdir(parents=True, exist_ok=True)
     clock = _StageClock(timings)
     a, candidates, confirmation, refinement = _choose_pairs(mission, cfg, progress, clock)
-    if not candidates:
-        raise InputError(no_boundary(mission, a.result.modes))
     sens = coordinate_sensitivity(mission.space, a.sensitivity)
     evaluated, spent = _evaluate(mission, cfg, a, candidates, sigma, sens)
-    if not evaluated:
+    if candidates and not evaluated:  # the expert may confirm none on the surrogate workflow: that plan stands
         raise InputError(no_boundary(mission, a.result.modes, written_away=len(candidates)))
     if progress is not None and cfg.dithers:
         done = spent["dithering"] + spent["variants"] + spent["shifts"]
@@ -350,6 +348,8 @@ def _choose_pairs(
     # more candidates than pairs: the plan keeps those the vehicle is most likely to show (pair_choice)
     n_candidates = cfg.refine_candidates if cfg.refine else (wanted if sur is not None else 2 * wanted)
     pairs = select_pairs(a, n_candidates)
+    if not pairs:
+        raise InputError(no_boundary(mission, a.result.modes))
     clock.lap("selection")
     refinement = None
     if cfg.refine:
