@@ -38,9 +38,10 @@ def test_a_client_gets_the_foxglove_channels_and_the_status_as_they_happen(bus):
         with FoxgloveClient(view.url) as client:
             client.wait_for(lambda: client.server_info, what="serverInfo")
             assert SUBPROTOCOL == client.ws.subprotocol
-            # the map was put before the client came: it is sent again when the client subscribes
-            [doc] = client.wait_for(lambda: client.received("/map/scenario"), what="the scenario map")
-            assert json.loads(doc["geojson"]) == DOCUMENT
+            # the map was put before the client came: it is sent again when the client subscribes (and every
+            # MAP_EVERY_S, so on a loaded machine a second copy may arrive with the first: each is the document)
+            docs = client.wait_for(lambda: client.received("/map/scenario"), what="the scenario map")
+            assert docs and all(json.loads(doc["geojson"]) == DOCUMENT for doc in docs)
             assert client.topics["/map/scenario"]["schemaName"] == "foxglove.GeoJSON"
             client.wait_for(lambda: client.subscribed(foxglove.FIX_TOPIC), what="a subscription to the fixes")
             time.sleep(0.2)  # the subscription on its way to the server
