@@ -14,6 +14,7 @@ EXAMPLES = Path(__file__).resolve().parents[2] / "examples"
 runner = CliRunner()
 
 
+@pytest.mark.slow  # a plan, its resume and ten refusals: about 30 s on 2 cores
 def test_cli_generate_resume_and_errors(tmp_path):
     out = tmp_path / "plan"
     args = [

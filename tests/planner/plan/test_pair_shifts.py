@@ -64,6 +64,7 @@ def test_only_the_likeliest_pair_of_a_sub_boundary_no_candidate_holds_on_is_move
     assert {m["shift_of"] for m in shifted_pairs([less, likelier, other], SIGMA, 0.9, 1)} == {1}
 
 
+@pytest.mark.slow  # dithers and confirms shifts of a range2017 pair: about 20 s on 2 cores
 def test_a_fragile_pair_of_the_range_mission_is_moved_screened_and_confirmed_beside_its_origin():
     mission = sim.uuv.load_mission(ROOT / "examples" / "range2017.toml")
     plan = json.loads((ROOT / "field_plans" / "range2017" / "plan.json").read_text())
