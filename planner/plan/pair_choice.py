@@ -80,10 +80,20 @@ class Candidate:
         return np.asarray(v["u"], dtype=float) if use and v is not None else self.U[side]
 
     @property
+    def flown_p(self) -> list[float | None]:
+        """Each flown side's dithered P (its variant's where one is flown; None undithered)."""
+        return [self.p_side(s, self.flies_variant[s]) for s in (0, 1)]
+
+    @property
     def p_straddle(self) -> float | None:
         """P(both flown sides show their outcomes): the product of the flown sides' dithered P (None undithered)."""
-        p = [self.p_side(s, self.flies_variant[s]) for s in (0, 1)]
+        p = self.flown_p
         return None if None in p else float(p[0] * p[1])  # type: ignore[operator]
+
+    @property
+    def sub_boundary(self) -> tuple:
+        """The sub-boundary the pair straddles (its level and elements): the plan keeps one pair per sub-boundary."""
+        return (self.pair["level"], tuple(self.pair["elements"]))
 
     @property
     def flown_distance(self) -> float:
@@ -231,8 +241,7 @@ def rank_candidates(candidates: list[Candidate], k: int) -> list[Candidate]:
     chosen: list[int] = []
     seen: set[tuple] = set()
     for i in order:
-        cand = candidates[i]
-        key = (cand.pair["level"], tuple(cand.pair["elements"]))
+        key = candidates[i].sub_boundary
         if key in seen:
             continue
         seen.add(key)

@@ -54,12 +54,12 @@ def shifted_pairs(candidates: list[Candidate], sigma: np.ndarray, target: float,
     """
     sigma = np.asarray(sigma, dtype=float)
     order = sorted(range(len(candidates)), key=lambda i: -(candidates[i].p_straddle or 0.0))
-    flown = {i: _flown_p(candidates[i]) for i in order}
-    held = {_boundary(candidates[i]) for i in order if len(flown[i]) == 2 and min(flown[i]) >= target}
+    flown = {i: [float(p) for p in candidates[i].flown_p if p is not None] for i in order}
+    held = {candidates[i].sub_boundary for i in order if len(flown[i]) == 2 and min(flown[i]) >= target}
     out: list[dict] = []
     seen: set[tuple] = set()
     for i in order:
-        cand, key = candidates[i], _boundary(candidates[i])
+        cand, key = candidates[i], candidates[i].sub_boundary
         if len(flown[i]) < 2 or key in held or key in seen:
             continue
         seen.add(key)
@@ -75,17 +75,6 @@ def shifted_pairs(candidates: list[Candidate], sigma: np.ndarray, target: float,
                 shifted = {"along": along, "sigmas": k, "by": math.hypot(*shift)}
                 out.append({**cand.pair, "u_override": U, "shifted": shifted, "shift_of": i})
     return out
-
-
-def _flown_p(cand: Candidate) -> list[float]:
-    """P of each flown side (its variant where one is flown); fewer than two when undithered."""
-    given = [cand.p_side(s, cand.flies_variant[s]) for s in (0, 1)]
-    return [float(p) for p in given if p is not None]
-
-
-def _boundary(cand: Candidate) -> tuple:
-    """The sub-boundary a candidate straddles: its level and elements (as :func:`rank_candidates` keys it)."""
-    return (cand.pair["level"], tuple(cand.pair["elements"]))
 
 
 def _moves(U: np.ndarray, fragile: list[bool], sigma: np.ndarray) -> list[tuple[str, np.ndarray]]:
