@@ -47,7 +47,7 @@ def compare(
         str | None,
         typer.Option(
             help="Bias parameters to fit, comma-separated (default: all of "
-            "speed, current_scale, current_offset, heading, battery, "
+            "speed, current_scale, current_offset, current_cross, heading, battery, "
             "start_time)."
         ),
     ] = None,

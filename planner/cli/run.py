@@ -41,7 +41,7 @@ def run(
         typer.Option(
             "--inject-bias",
             help="Fly a biased vehicle for rehearsal, e.g. speed=1.15,current_offset=0.3 "
-            "(speed, current_scale, current_offset, heading, battery, start_time; see sim.uuv.bias). "
+            "(speed, current_scale, current_offset, current_cross, heading, battery, start_time; see sim.uuv.bias). "
             "Not written to the log.",
         ),
     ] = None,

@@ -44,6 +44,7 @@ PRIOR_SD = {
     "speed": 0.15,
     "current_scale": 0.3,
     "current_offset": 0.3,
+    "current_cross": 0.3,
     "heading": 5.0,
     "battery": 0.15,
     "start_time": 1800.0,

@@ -21,7 +21,9 @@ speed cannot give:
   the current from the vehicle, so the current is fitted beside it: as ``current_scale``
   (the true tide over the table's) when the table's current during the run is at least
   :data:`TIDE_FOR_SCALE_MPS`, else as ``current_offset`` (m/s along the flood direction),
-  the one a current the table says is slack can show.  ``rapt-plan calibrate`` writes it
+  the one a current the table says is slack can show; and always with ``current_cross``
+  (m/s across the flood direction), which no scale of the table can give: with the two, a
+  steady current from any direction (ArduSub SITL's, which knows no tide table).  ``rapt-plan calibrate`` writes it
   into the calibrated file's ``[execution_bias]``.
 
 - **The vehicle at the surface.**  A thruster vehicle told to surface pushes itself against
@@ -50,7 +52,7 @@ import numpy as np
 from planner.review.calibration_legs import legs_of, with_independent
 from rapt.mapfit import IDENTIFIED_BELOW, MapEstimate, Prior, fit_map
 from sim.uuv.bias import Bias, compose
-from sim.uuv.environment import tidal_current
+from sim.uuv.environment import biased_tide
 from sim.uuv.interface import HJ_PER_WH
 from sim.uuv.mission import Mission, Vehicle
 from sim.uuv.vehicle import propulsion_power, reached_speed
@@ -64,7 +66,7 @@ __all__ = [
     "water_name",
     "is_water",
     "water_field",
-    "water_term",
+    "water_terms",
     "term_value",
     "with_terms",
     "term_prior",
@@ -94,7 +96,11 @@ TIDE_FOR_SCALE_MPS = 0.1
 KNOT_SHARE, KNOT_SD_FLOOR = 0.3, 0.1
 #: Priors of the water terms: (centre, s.d., low, high).  A tide table off by half its
 #: amplitude, or a quarter-knot current it does not list, is what a range expects.
-WATER_PRIORS = {"current_scale": (1.0, 0.5, 0.0, 3.0), "current_offset": (0.0, 0.3, -2.0, 2.0)}
+WATER_PRIORS = {
+    "current_scale": (1.0, 0.5, 0.0, 3.0),
+    "current_offset": (0.0, 0.3, -2.0, 2.0),
+    "current_cross": (0.0, 0.3, -2.0, 2.0),
+}
 #: The share of a straight leg, at its end, over which its speed counts as settled.
 SETTLED_SHARE = 0.5
 #: Consecutive steps per block of the settled speeds' standard error (neighbouring steps share
@@ -149,9 +155,9 @@ def water_field(name: str) -> str:
     return name[len(_WATER) :]
 
 
-def water_term(mission: Mission, runs: Sequence, start_times: Sequence[float]) -> str:
+def water_terms(mission: Mission, runs: Sequence, start_times: Sequence[float]) -> tuple[str, str]:
     """``water.current_scale`` when the table's current over the calibration legs averages
-    :data:`TIDE_FOR_SCALE_MPS` or more, else ``water.current_offset``."""
+    :data:`TIDE_FOR_SCALE_MPS` or more, else ``water.current_offset``; and ``water.current_cross``."""
     speeds = []
     b = mission.execution_bias
     for run, t0 in zip(runs, start_times):
@@ -159,10 +165,10 @@ def water_term(mission: Mission, runs: Sequence, start_times: Sequence[float]) -
         if not legs:
             continue
         t = np.linspace(min(leg["t0_s"] for leg in legs), max(leg["t1_s"] for leg in legs), 50)
-        ce, cn = tidal_current(mission.current, t0 + b.start_time + t, b.current_scale, b.current_offset)
+        ce, cn = biased_tide(mission.current, t0 + b.start_time + t, b)
         speeds.append(np.hypot(ce, cn))
     strong = bool(speeds) and float(np.mean(np.concatenate(speeds))) >= TIDE_FOR_SCALE_MPS
-    return water_name("current_scale" if strong else "current_offset")
+    return water_name("current_scale" if strong else "current_offset"), water_name("current_cross")
 
 
 def term_value(vehicle: Vehicle, water: Bias, name: str) -> float:
@@ -246,7 +252,7 @@ def _settled(mission: Mission, run, t0: float, water: Bias, leg: dict) -> tuple[
         return math.nan, np.zeros(0), math.nan
     b = compose(mission.execution_bias, water)
     ve, vn = np.gradient(s[:, 1], t), np.gradient(s[:, 2], t)
-    ce, cn = tidal_current(mission.current, t0 + b.start_time + t, b.current_scale, b.current_offset)
+    ce, cn = biased_tide(mission.current, t0 + b.start_time + t, b)
     course = s[:, 3] + np.deg2rad(b.heading)
     surge = (ve - ce) * np.sin(course) + (vn - cn) * np.cos(course)
     first, last = np.flatnonzero(keep)[[0, -1]]
@@ -399,7 +405,7 @@ def _surface_steps(mission: Mission, run, t0: float, water: Bias) -> tuple[np.nd
     ok[:-1] = up[:-1] & up[1:] & (t[:-1] - since[:-1] >= SURFACE_SETTLE_S)
     ok[:-1] &= np.abs(np.diff(t) - mission.dt) <= 0.5 * mission.dt
     b = compose(mission.execution_bias, water)
-    ce, cn = tidal_current(mission.current, t0 + b.start_time + t, b.current_scale, b.current_offset)
+    ce, cn = biased_tide(mission.current, t0 + b.start_time + t, b)
     h = np.diff(t)
     k = np.flatnonzero(ok)
     speed = np.hypot(np.diff(s[:, 1])[k] / h[k] - ce[k], np.diff(s[:, 2])[k] / h[k] - cn[k])

@@ -42,9 +42,9 @@ __all__ = [
     "water_with_run",
 ]
 
-#: The bias fields a calibrated file carries: the water (tide scale and offset, the tide's
-#: clock) and the crab angle no [vehicle] field describes.
-WATER_FIELDS: tuple[str, ...] = ("current_scale", "current_offset", "start_time", "heading")
+#: The bias fields a calibrated file carries: the water (tide scale, a steady current along and
+#: across the flood, the tide's clock) and the crab angle no [vehicle] field describes.
+WATER_FIELDS: tuple[str, ...] = ("current_scale", "current_offset", "current_cross", "start_time", "heading")
 
 
 def day_bias_record(mission: Mission, fitted: Bias, used: Bias) -> dict:

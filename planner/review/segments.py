@@ -50,7 +50,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sim.uuv.bias import Bias, compose
-from sim.uuv.environment import tidal_current
+from sim.uuv.environment import biased_tide, tidal_current
 from sim.uuv.mission import Mission, Vehicle
 from sim.uuv.vehicle import SWAY_COUPLING, VehicleState, reached_speed, step_vehicle, surface_limited
 
@@ -304,9 +304,7 @@ def replay(
     course = np.deg2rad(bias.heading)
 
     def tide(t: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        return tidal_current(
-            mission.current, seg.start_time + bias.start_time + t, bias.current_scale, bias.current_offset
-        )
+        return biased_tide(mission.current, seg.start_time + bias.start_time + t, bias)
 
     surge = seg.start["surge"].copy()
     h0 = seg.start["heading"] + course

@@ -86,7 +86,7 @@ from planner.review.calibration_terms import (
     term_prior,
     term_unit,
     term_value,
-    water_term,
+    water_terms,
     with_surface,
     with_terms,
 )
@@ -293,7 +293,7 @@ class Calibration:
 
     @property
     def water_identified(self) -> list[str]:
-        """The water terms the run identified (``water.current_scale`` or ``water.current_offset``)."""
+        """The water terms the run identified (``water.current_scale`` or ``water.current_offset``, ``water.current_cross``)."""
         return [n for n in self.fitted if is_water(n) and self.estimate.identified[n]]
 
     @property
@@ -399,7 +399,7 @@ def fit_vehicle(
     """MAP fit of the ``[vehicle]`` fields ``fit`` to ``runs`` (:class:`planner.review.logs.LoggedRun`-like)
     flown from scenario start times ``start_times``; priors centred on ``mission.vehicle``.
 
-    A calibration run's log adds its water (:func:`planner.review.calibration_terms.water_term`) and
+    A calibration run's log adds its water (:func:`planner.review.calibration_terms.water_terms`) and
     speed curve and power (:func:`_legs_measured`).  Every term is *identified* when its posterior s.d. is below half its prior's
     (:data:`rapt.mapfit.IDENTIFIED_BELOW`, without :func:`rapt.mapfit.fit_map`'s survivor
     rule); the ascent rate is timed on its own (:func:`planner.review.calibration_legs.fit_ascent`).
@@ -419,7 +419,7 @@ def fit_vehicle(
     slow = tuple(n for n in names if n in SLOW_TERMS)  # fitted only if the logs choose a vector loop
     names = tuple(n for n in names if n not in SLOW_TERMS)
     if cal_runs:  # the current the calibration run flew in, fitted beside the vehicle
-        names = (*names, water_term(mission, cal_runs, cal_starts))
+        names = (*names, *water_terms(mission, cal_runs, cal_starts))
     solver = SegmentSolver(mission, seg, vehicle_priors, bootstrap_blocks(seg)[np.nonzero(seg.valid)[0]], seed)
     solve = solver.solve
 

@@ -16,6 +16,8 @@ name                neutral  meaning
 ``current_scale``   1.0      true tidal current / the tide table's
 ``current_offset``  0.0      m/s added to the tide along the mission's flood direction
                              (``[current] direction_deg``; negative: towards the ebb)
+``current_cross``   0.0      m/s added across it, towards ``direction_deg + 90``: with
+                             ``current_offset``, a steady current from any direction
 ``heading``         0.0      degrees the track through water runs clockwise of the bow
                              (fin trim, a misaligned compass or DVL): a crab the
                              autonomy does not know about
@@ -35,9 +37,9 @@ are bit-identical to a run without one.
 given on top of it (``simulate(..., bias=)``, ``rapt-plan run --inject-bias``, a bias
 fit in ``rapt-plan compare``) is *relative* to it, and the two compose field by field
 (:func:`compose`): the scales multiply (``speed``, ``current_scale``, ``battery``), the
-offsets add (``current_offset``, ``heading``, ``start_time``).  The world then flies
-``current = scale1*scale2 * tide(t + start1 + start2) + (offset1 + offset2)`` along the
-flood direction, a course ``heading1 + heading2`` clockwise of the bow, and so on: the
+offsets add (``current_offset``, ``current_cross``, ``heading``, ``start_time``).  The world
+then flies ``current = scale1*scale2 * tide(t + start1 + start2) + (offset1 + offset2)`` along
+the flood direction and ``cross1 + cross2`` across it, a course ``heading1 + heading2`` clockwise of the bow, and so on: the
 composition is exactly the bias a single argument would give, and composing with the
 neutral bias returns the other bias's values unchanged (bit for bit).
 """
@@ -74,6 +76,7 @@ class Bias:
     speed: float = 1.0
     current_scale: float = 1.0
     current_offset: float = 0.0
+    current_cross: float = 0.0
     heading: float = 0.0
     battery: float = 1.0
     start_time: float = 0.0
@@ -107,6 +110,7 @@ BIAS_UNITS: dict[str, str] = {
     "speed": "x",
     "current_scale": "x",
     "current_offset": "m/s",
+    "current_cross": "m/s",
     "heading": "deg",
     "battery": "x",
     "start_time": "s",
@@ -117,6 +121,7 @@ BIAS_LIMITS: dict[str, tuple[float, float]] = {
     "speed": (0.5, 2.0),
     "current_scale": (0.0, 3.0),
     "current_offset": (-2.0, 2.0),
+    "current_cross": (-2.0, 2.0),
     "heading": (-45.0, 45.0),
     "battery": (0.25, 4.0),
     "start_time": (-43200.0, 43200.0),
@@ -174,6 +179,7 @@ class BiasArrays:
     speed: np.ndarray
     current_scale: np.ndarray
     current_offset: np.ndarray
+    current_cross: np.ndarray
     heading_rad: np.ndarray
     battery: np.ndarray
     start_time: np.ndarray
@@ -206,6 +212,7 @@ def bias_arrays(bias: Bias | BiasArrays | Sequence[Bias] | Mapping[str, np.ndarr
         cols["speed"],
         cols["current_scale"],
         cols["current_offset"],
+        cols["current_cross"],
         np.deg2rad(cols["heading"]),
         cols["battery"],
         cols["start_time"],
@@ -250,6 +257,7 @@ def compose_arrays(relative: BiasArrays, base: Bias) -> BiasArrays:
         relative.speed * base.speed,
         relative.current_scale * base.current_scale,
         relative.current_offset + base.current_offset,
+        relative.current_cross + base.current_cross,
         relative.heading_rad + np.deg2rad(base.heading),
         relative.battery * base.battery,
         relative.start_time + base.start_time,

@@ -12,6 +12,7 @@ must be made for that water, not the table's.  The table says so:
     [execution_bias]              # optional; every key optional, neutral by default
     current_scale = 0.34          # true tidal current / the tide table's          (x, 0..3)
     current_offset = 0.0          # m/s added along [current] direction_deg        (-2..2)
+    current_cross = 0.0           # m/s added towards direction_deg + 90           (-2..2)
     start_time = 0.0              # s the true tide runs ahead of the table        (-43200..43200)
     heading = 0.0                 # deg the track runs clockwise of the bow        (-45..45)
     speed = 1.0                   # through-water speed per commanded              (x, 0.5..2)

@@ -15,7 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from sim.uuv.bias import bias_arrays, compose_arrays
-from sim.uuv.environment import tidal_current
+from sim.uuv.environment import biased_tide
 from sim.uuv.interface import DEPTH_M, battery_fraction, energy_consumed_hj, report_heading, report_position
 from sim.uuv.mission import Vehicle
 from sim.uuv.navigation import Navigation
@@ -200,7 +200,7 @@ class World:
             self.surfaced = np.asarray(surface, dtype=bool) & moving
             self.depth = np.where(self.surfaced, 0.0, DEPTH_M)
         b = self.bias
-        ce, cn = tidal_current(m.current, self.scen.start_time + b.start_time + t, b.current_scale, b.current_offset)
+        ce, cn = biased_tide(m.current, self.scen.start_time + b.start_time + t, b)
         z = self.noise.next() if self.noise is not None else None
         if z is not None:
             # slowly varying unpredicted current: first-order Gauss-Markov, 10-minute correlation

@@ -88,14 +88,25 @@ def test_a_table_flies_exactly_as_the_same_bias_argument_and_composes_with_one(r
 
 
 def test_compose_multiplies_scales_and_adds_offsets():
-    a = Bias(speed=1.2, current_scale=0.5, current_offset=0.2, heading=2.0, battery=0.8, start_time=100.0)
-    b = Bias(speed=1.5, current_scale=0.5, current_offset=-0.5, heading=-3.0, battery=2.0, start_time=-400.0)
+    a = Bias(
+        speed=1.2, current_scale=0.5, current_offset=0.2, current_cross=0.1, heading=2.0, battery=0.8, start_time=100.0
+    )
+    b = Bias(
+        speed=1.5,
+        current_scale=0.5,
+        current_offset=-0.5,
+        current_cross=0.3,
+        heading=-3.0,
+        battery=2.0,
+        start_time=-400.0,
+    )
     c = compose(a, b)
     assert c.to_dict() == pytest.approx(
         {
             "speed": 1.8,
             "current_scale": 0.25,
             "current_offset": -0.3,
+            "current_cross": 0.4,
             "heading": -1.0,
             "battery": 1.6,
             "start_time": -300.0,
