@@ -41,6 +41,7 @@ CASES = {  # label: (--inject-bias, stochastic effects on, runs per scenario)
     "speed +15 %": ("speed=1.15", False, 1),
     "current offset +0.3 m/s": ("current_offset=0.3", False, 1),
     "start time +900 s": ("start_time=900", False, 1),
+    "steady current across the flood 0.3 m/s": ("current_cross=0.3", False, 1),
     "combined": ("speed=1.15,current_offset=0.3,start_time=900", False, 1),
     # noisy runs are flown twice each (other seeds), as a range team repeats a run it cannot trust
     "stochastic: speed +15 %, offset +0.3 m/s, drift and unmodelled current": (

@@ -31,7 +31,14 @@ from planner.review.calibration_legs import (
 )
 from planner.review.calibration_terms import water_field
 from planner.review.day_noise import noise_from_comparison, with_execution_noise
-from planner.review.daybias import DayWater, header_lines, water_from_comparison, water_with_run, with_execution_bias
+from planner.review.daybias import (
+    DayWater,
+    header_lines,
+    loop_compared,
+    water_from_comparison,
+    water_with_run,
+    with_execution_bias,
+)
 from planner.review.logs import LogError, read_run
 from planner.review.pack import PACK_CRITICAL_PERCENT, read_pack
 from planner.review.segments import MAX_STEP_SHARE, replayable_steps
@@ -142,9 +149,10 @@ def calibrate(
     if bias is not None and Path(bias).resolve() in {out_path.resolve(), sidecar_path(out_path).resolve()}:
         raise InputError(f"--out: writing {out_path} would overwrite the --bias input {bias}; choose another file name")
     mission = load_mission(mission_path)
-    water = None
+    water, loop = None, None
     if bias is not None:
         water = water_from_comparison(bias, mission)
+        loop = loop_compared(bias)
         mission = dataclasses.replace(mission, execution_bias=water.bias, execution_bias_source=water.source)
     runs, start_times, info = [], [], []
     for p in logs:
@@ -173,7 +181,7 @@ def calibrate(
         )
     if len(runs) < MIN_LOGS and not any(is_calibration_log(r) for r in runs):
         _too_few(len(runs))
-    result = fit_vehicle(mission, runs, start_times, fit, bootstrap=bootstrap, seed=seed)
+    result = fit_vehicle(mission, runs, start_times, fit, bootstrap=bootstrap, seed=seed, loop=loop)
     result.logs = info
     result.water = _day_water(mission, water, result, [p.name for p, r in zip(logs, runs) if is_calibration_log(r)])
     _limit_battery_to_pack(result, logs)
@@ -306,7 +314,9 @@ def _header_comment(cal: Calibration) -> list[str]:
             out.append(f"#   {n:<22} {old:.5g} {unit} kept: not identified by these logs")
     for n, need in cal.unidentified.items():
         out.append(f"#   to identify {n}: {need}")
-    if cal.control:
+    if cal.control.get("kept"):
+        out.append(f"#   velocity_control       {cal.control['file']} -> {cal.control['chosen']}: {cal.control['kept']}")
+    elif cal.control:
         rms = cal.control["position_rms_m"]
         out.append(
             f"#   velocity_control       {cal.control['file']} -> {cal.control['chosen']}: segment position RMS "

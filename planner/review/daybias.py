@@ -34,6 +34,7 @@ __all__ = [
     "DayWater",
     "day_bias_record",
     "water_from_comparison",
+    "loop_compared",
     "execution_bias_table",
     "with_execution_bias",
     "with_table",
@@ -102,6 +103,17 @@ def _read(path: Path) -> dict:
             raise InputError(f"--bias: {path} has no {key!r} record; give a comparison.json of this version")
     data["_sha256"] = hashlib.sha256(raw).hexdigest()
     return data
+
+
+def loop_compared(path: str | Path) -> str | None:
+    """The speed loop of the calibrated vehicle the comparison ``path`` predicted with (None: it used none).
+
+    That loop was chosen on the calibration run; a calibration that adds the day's water to the same
+    vehicle keeps it rather than fitting both loops again, which is most of a calibration's time.
+    """
+    vehicle = _read(Path(path)).get("calibrated_vehicle") or {}
+    loop = vehicle.get("velocity_control") if isinstance(vehicle, dict) else None
+    return loop if loop in ("surge", "vector") else None
 
 
 def water_from_comparison(path: str | Path, mission: Mission) -> DayWater:

@@ -235,6 +235,7 @@ def choose_loop(
     base: Vehicle,
     solve,
     start: dict[str, float],
+    known: str | None = None,
 ) -> tuple[Vehicle, tuple[str, ...], dict, dict[str, float]]:
     """The speed loop the segments say the vehicle has, the names to fit with it, the account, and
     where its fit ended (the full fit starts there).
@@ -243,10 +244,19 @@ def choose_loop(
     ``names``, the vector loop with its slow part (``slow``) as well.  The vector loop is
     taken when its position residual RMS is at least :data:`CONTROL_MARGIN` below the surge
     loop's; otherwise the simpler surge loop stands.  No ``slow`` terms asked for: the
-    file's loop, unexamined.
+    file's loop, unexamined.  A ``known`` loop (an earlier calibration's choice on the same
+    vehicle) is kept without fitting the other: the fit starts from ``start``.
     """
     if not slow:
         return base, names, {}, start
+    if known is not None:
+        account = {"chosen": known, "file": base.velocity_control, "kept": "chosen by the calibration compared"}
+        return (
+            dataclasses.replace(base, velocity_control=known),
+            names + slow if known == "vector" else names,
+            account,
+            start,
+        )
     rms: dict[str, float] = {}
     found: dict[str, dict[str, float]] = {}
     for control, fitted in (("surge", names), ("vector", names + slow)):

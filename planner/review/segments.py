@@ -328,13 +328,16 @@ def replay(
     px, py, pe, ph = np.zeros((n, L)), np.zeros((n, L)), np.zeros((n, L)), np.zeros((n, L))
     nsub = np.ones(n, dtype=np.int64) if seg.substeps is None else seg.substeps
     most = int(nsub.max()) if n else 1
+    # the water at every (sub)step, computed whole (steps by segments: a bias may be one per segment)
+    step_len = dt if seg.step_dt is None else seg.step_dt.T
+    water = [tide(seg.t.T + q * (step_len / nsub)) for q in range(most)]
     for j in range(L):
         # each step over its own logged length (mission.dt itself, a scalar, wherever it is that)
         h = dt if seg.step_dt is None or bool(np.all(seg.step_dt[:, j] == dt)) else seg.step_dt[:, j].copy()
         sub_dt = h / nsub
         for q in range(most):
             moving = seg.valid[:, j] & (q < nsub)
-            ce, cn = tide(seg.t[:, j] + q * sub_dt)
+            ce, cn = water[q][0][j], water[q][1][j]
             step_vehicle(
                 s,
                 spec,

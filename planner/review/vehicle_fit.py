@@ -395,6 +395,7 @@ def fit_vehicle(
     bootstrap: int = BOOTSTRAP,
     seed: int = 0,
     length: int = SEGMENT_STEPS,
+    loop: str | None = None,
 ) -> Calibration:
     """MAP fit of the ``[vehicle]`` fields ``fit`` to ``runs`` (:class:`planner.review.logs.LoggedRun`-like)
     flown from scenario start times ``start_times``; priors centred on ``mission.vehicle``.
@@ -403,6 +404,8 @@ def fit_vehicle(
     speed curve and power (:func:`_legs_measured`).  Every term is *identified* when its posterior s.d. is below half its prior's
     (:data:`rapt.mapfit.IDENTIFIED_BELOW`, without :func:`rapt.mapfit.fit_map`'s survivor
     rule); the ascent rate is timed on its own (:func:`planner.review.calibration_legs.fit_ascent`).
+    ``loop`` (``"surge"`` or ``"vector"``) is a speed loop an earlier calibration of this vehicle chose:
+    it is kept, not chosen again.
     """
     unknown = [n for n in fit if n not in FITTED]
     if unknown or not fit:
@@ -443,7 +446,7 @@ def fit_vehicle(
     # a vector loop's slow part and the water trade against a settled speed measured on a leg's end:
     # under that loop the knots are refined on the segments with the rest, from their measurement
     vector_extra = slow + (tuple(knot_name(c) for c, _ in base.speed_curve) if knots else ())
-    base, names, control, start = choose_loop(mission, seg, names, vector_extra, base, solve, start)
+    base, names, control, start = choose_loop(mission, seg, names, vector_extra, base, solve, start, loop)
     est = solve(names, base, bootstrap, start)
     # a knot the segments refine but cannot pin keeps its settled legs' measurement
     est = without_terms(

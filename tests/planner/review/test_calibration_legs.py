@@ -252,6 +252,35 @@ def test_a_steady_current_across_the_flood_is_fitted_and_written(missions, tmp_p
     assert result.rms_after["position_m"] < 0.2 * result.rms_before["position_m"]
 
 
+def test_a_recalibration_with_the_days_water_keeps_the_loop_the_compared_calibration_chose(
+    missions, flown, fitted, tmp_path, monkeypatch
+):
+    """``calibrate --bias``: the comparison predicted with a calibrated vehicle whose loop the calibration
+    run chose; adding the day's water keeps that loop instead of fitting both again (the noon step's time)."""
+    file_path, _, _ = missions
+    run, _, _ = flown
+    cmp = tmp_path / "comparison.json"
+    cmp.write_text(
+        json.dumps(
+            {
+                "schema": "rapt.comparison/2",
+                "plan": {"id": "p1", "mission": "range2017"},
+                "bias": {"current_scale": {"estimate": 1.0, "stderr": 0.01, "identified": True}},
+                "correction": {"used": True},
+                "calibrated_vehicle": {"velocity_control": "vector"},
+            }
+        )
+    )
+    result = calibrate(file_path, [fake_log(tmp_path, monkeypatch, run)], tmp_path / "day.toml", bias=cmp, bootstrap=0)
+    assert result.vehicle.velocity_control == "vector" and "kept" in result.control
+    assert "position_rms_m" not in result.control  # the surge loop was not fitted
+    for n in fitted.estimate.names:
+        if n in result.estimate.names and knot_command(n) is not None:
+            assert result.value(n) == pytest.approx(fitted.value(n), abs=0.02), n
+    assert result.rms_after["position_m"] < 1.5 * fitted.rms_after["position_m"] + 0.05
+    assert "chosen by the calibration compared" in (tmp_path / "day.toml").read_text()
+
+
 # -- the command: one log is enough; legs cut short write nothing ---------------------------------
 def fake_log(tmp_path, monkeypatch, run) -> Path:
     p = tmp_path / "calibration.mcap"
