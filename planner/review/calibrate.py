@@ -315,7 +315,9 @@ def _header_comment(cal: Calibration) -> list[str]:
     for n, need in cal.unidentified.items():
         out.append(f"#   to identify {n}: {need}")
     if cal.control.get("kept"):
-        out.append(f"#   velocity_control       {cal.control['file']} -> {cal.control['chosen']}: {cal.control['kept']}")
+        out.append(
+            f"#   velocity_control       {cal.control['file']} -> {cal.control['chosen']}: {cal.control['kept']}"
+        )
     elif cal.control:
         rms = cal.control["position_rms_m"]
         out.append(
