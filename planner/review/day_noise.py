@@ -7,9 +7,14 @@ it. A forecast spread by the assumption alone is under-confident on a day that w
 calmer than assumed and over-confident on a rougher one. :func:`fit_day_noise` estimates
 each kind of noise from the day's counted runs against their corrected replays:
 
-- **position** (m, per coordinate): the horizontal distance between the logged track and the
-  corrected replay at the same times; for a per-axis sigma ``s`` the mean squared distance is
-  ``2 s^2``, so each run gives ``mean(d^2) / 2``;
+- **position** (m, per coordinate): the horizontal distance from each logged position to the
+  corrected replay's *path* (its nearest point, whenever the replay passed there): the
+  across-path component of a deviation, one coordinate's worth, so for a per-axis sigma
+  ``s`` each run gives ``mean(d^2)``.  The path, not the replay's position at the same time: a vehicle that
+  flies the predicted path a minute late is off in time, not in position, and the position
+  noise the plan dithers by moves the scenario's places (starts, no-go areas), which only a
+  departure from the path can cross; a time-matched distance counts every along-track slip
+  as position and made the day's forecasts under-confident;
 - **time** (s): the difference between the run's logged end and its replay's, over runs that
   both end at the recovery point (a run the pack's limit or a collision ends, ends when the
   model runs out, not on the schedule);
@@ -30,6 +35,7 @@ import math
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy.spatial import cKDTree
 
 from planner.common.execution_noise import NOISE_KINDS, coordinate_kinds
 from planner.common.plans import Plan
@@ -83,6 +89,21 @@ class DayNoise:
         }
 
 
+#: Spacing (m) at which a replayed path is sampled for the nearest-point distance (error at most half of it).
+PATH_SPACING_M = 1.0
+
+
+def path_distance(points: np.ndarray, path: np.ndarray) -> np.ndarray:
+    """Each of ``points`` (k, 2)'s distance (m) to the polyline ``path`` (m, 2), sampled every :data:`PATH_SPACING_M`."""
+    legs = np.diff(path, axis=0)
+    counts = np.ceil(np.hypot(legs[:, 0], legs[:, 1]) / PATH_SPACING_M).astype(np.int64)
+    leg = np.repeat(np.arange(legs.shape[0]), counts)
+    within = np.arange(leg.size) - np.repeat(np.cumsum(counts) - counts, counts)  # 0 .. count - 1 along each leg
+    samples = path[leg] + ((within + 1) / counts[leg])[:, None] * legs[leg]
+    distance, _ = cKDTree(np.concatenate([path[:1], samples])).query(points)
+    return np.asarray(distance, dtype=float)
+
+
 def _residuals(obs: list[Observation], runs: PlanRuns, capacity_wh: float) -> tuple[dict[str, list[float]], list[dict]]:
     """Per kind, each run's squared residual against its corrected replay (position per axis); and per run, the
     residuals themselves for the record."""
@@ -94,9 +115,9 @@ def _residuals(obs: list[Observation], runs: PlanRuns, capacity_wh: float) -> tu
         if replay is None or track.shape[0] < 2:
             continue
         n = min(track.shape[0], replay.shape[0])
-        d2 = (track[:n, 1] - replay[:n, 1]) ** 2 + (track[:n, 2] - replay[:n, 2]) ** 2
-        row: dict = {"log": o.run.path.name, "scenario": o.sid, "position_m": float(math.sqrt(np.mean(d2) / 2))}
-        out["position"].append(float(np.mean(d2) / 2))
+        d2 = path_distance(track[:, 1:3], replay[:, 1:3]) ** 2
+        row: dict = {"log": o.run.path.name, "scenario": o.sid, "position_m": float(math.sqrt(np.mean(d2)))}
+        out["position"].append(float(np.mean(d2)))
         drawn = (track[n - 1, 4] - replay[n - 1, 4]) / HJ_PER_WH / capacity_wh * 100.0
         if np.isfinite(drawn):
             out["battery"].append(float(drawn**2))

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
 from pathlib import Path
 
@@ -108,3 +109,27 @@ def test_the_reliability_table_by_hand():
     assert [r["runs"] for r in rows] == [2, 0, 1, 0, 3]
     assert rows[0]["mean_p"] == pytest.approx(0.075) and rows[0]["held"] == pytest.approx(0.5)
     assert rows[1]["mean_p"] is None and rows[4]["held"] == pytest.approx(2 / 3)
+
+
+def test_a_run_late_along_its_path_is_off_in_time_not_in_position_and_one_beside_it_is(day):
+    """Position noise is the distance from the predicted *path*: a vehicle a minute behind on it crosses no
+    place the plan dithers (a start, a no-go area), one 20 m beside it does."""
+    plan, runs = day
+    rng = np.random.default_rng(3)
+    late, beside = [], []
+    for sid in runs.ids[:6]:
+        o = _logged(plan, runs, sid, rng, 0.0, 0.0, 0.0)
+        traj = runs.corr.trajectory(runs.row_of[sid])
+        t = o.run.steps[:, 0]
+        behind = o.run.steps.copy()
+        behind[:, 1] = np.interp(t - 60.0, traj[:, 0], traj[:, 1])
+        behind[:, 2] = np.interp(t - 60.0, traj[:, 0], traj[:, 2])
+        late.append(dataclasses.replace(o, run=dataclasses.replace(o.run, steps=behind)))
+        moved = o.run.steps.copy()
+        moved[:, 1] += 20.0 * np.cos(np.deg2rad(30.0))
+        moved[:, 2] += 20.0 * np.sin(np.deg2rad(30.0))
+        beside.append(dataclasses.replace(o, run=dataclasses.replace(o.run, steps=moved)))
+    behind_fit = fit_day_noise(plan, late, runs, plan_noise(plan), prior_weight=0.0)
+    assert behind_fit.observed_rms["position"] < 2.0  # a time-matched distance: about 60 s x 1 m/s
+    beside_fit = fit_day_noise(plan, beside, runs, plan_noise(plan), prior_weight=0.0)
+    assert 5.0 < beside_fit.observed_rms["position"] <= 20.0
