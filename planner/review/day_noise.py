@@ -115,7 +115,8 @@ def _residuals(obs: list[Observation], runs: PlanRuns, capacity_wh: float) -> tu
         if replay is None or track.shape[0] < 2:
             continue
         n = min(track.shape[0], replay.shape[0])
-        d2 = path_distance(track[:, 1:3], replay[:, 1:3]) ** 2
+        predicted = track[:, 0] <= replay[-1, 0]  # a log that outlasts its replay is not predicted past its end
+        d2 = path_distance(track[predicted, 1:3], replay[:, 1:3]) ** 2
         row: dict = {"log": o.run.path.name, "scenario": o.sid, "position_m": float(math.sqrt(np.mean(d2)))}
         out["position"].append(float(np.mean(d2)))
         drawn = (track[n - 1, 4] - replay[n - 1, 4]) / HJ_PER_WH / capacity_wh * 100.0
