@@ -45,6 +45,7 @@ import signal
 import sys
 import threading
 import time
+from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
@@ -452,24 +453,28 @@ def _decode(channel: Any, data: bytes) -> Any:
     return json.loads(data) if channel.message_encoding == "json" else bytes(data)
 
 
-def read_log(path: str | Path) -> list[tuple[str, int, Any]]:
+def read_log(path: str | Path, topics: Sequence[str] | None = None) -> list[tuple[str, int, Any]]:
     """``[(topic, log_time_ns, payload)]`` in file order; JSON as dicts, raw frames as bytes.
 
-    A file without a footer (the logger was killed) is read linearly up to its last complete
-    chunk.
+    ``topics`` keeps only those topics, and decodes nothing else (a range day's log holds
+    millions of messages; the pack's reports are a few thousand of them).  A file without a
+    footer (the logger was killed) is read linearly up to its last complete chunk.
     """
     path = Path(path)
+    wanted = None if topics is None else set(topics)
     with open(path, "rb") as f:
         try:
             reader = make_reader(f)
             reader.get_summary()
-            return [(c.topic, m.log_time, _decode(c, m.data)) for _, c, m in reader.iter_messages(log_time_order=False)]
+            found = reader.iter_messages(topics=None if wanted is None else list(wanted), log_time_order=False)
+            return [(c.topic, m.log_time, _decode(c, m.data)) for _, c, m in found]
         except McapError:
             f.seek(0)
         out = []
         try:
             for _, c, m in NonSeekingReader(f).iter_messages(log_time_order=False):
-                out.append((c.topic, m.log_time, _decode(c, m.data)))
+                if wanted is None or c.topic in wanted:
+                    out.append((c.topic, m.log_time, _decode(c, m.data)))
         except EndOfFile:
             pass
         return out

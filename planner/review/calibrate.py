@@ -34,7 +34,7 @@ from planner.review.day_noise import noise_from_comparison, with_execution_noise
 from planner.review.daybias import (
     DayWater,
     header_lines,
-    loop_compared,
+    vehicle_compared,
     water_from_comparison,
     water_with_run,
     with_execution_bias,
@@ -149,10 +149,10 @@ def calibrate(
     if bias is not None and Path(bias).resolve() in {out_path.resolve(), sidecar_path(out_path).resolve()}:
         raise InputError(f"--out: writing {out_path} would overwrite the --bias input {bias}; choose another file name")
     mission = load_mission(mission_path)
-    water, loop = None, None
+    water, compared = None, None
     if bias is not None:
         water = water_from_comparison(bias, mission)
-        loop = loop_compared(bias)
+        compared = vehicle_compared(bias)
         mission = dataclasses.replace(mission, execution_bias=water.bias, execution_bias_source=water.source)
     runs, start_times, info = [], [], []
     for p in logs:
@@ -181,7 +181,7 @@ def calibrate(
         )
     if len(runs) < MIN_LOGS and not any(is_calibration_log(r) for r in runs):
         _too_few(len(runs))
-    result = fit_vehicle(mission, runs, start_times, fit, bootstrap=bootstrap, seed=seed, loop=loop)
+    result = fit_vehicle(mission, runs, start_times, fit, bootstrap=bootstrap, seed=seed, compared=compared)
     result.logs = info
     result.water = _day_water(mission, water, result, [p.name for p, r in zip(logs, runs) if is_calibration_log(r)])
     _limit_battery_to_pack(result, logs)

@@ -34,7 +34,7 @@ __all__ = [
     "DayWater",
     "day_bias_record",
     "water_from_comparison",
-    "loop_compared",
+    "vehicle_compared",
     "execution_bias_table",
     "with_execution_bias",
     "with_table",
@@ -105,15 +105,15 @@ def _read(path: Path) -> dict:
     return data
 
 
-def loop_compared(path: str | Path) -> str | None:
-    """The speed loop of the calibrated vehicle the comparison ``path`` predicted with (None: it used none).
+def vehicle_compared(path: str | Path) -> dict | None:
+    """The calibrated vehicle's fields the comparison ``path`` predicted with (None: it used none).
 
-    That loop was chosen on the calibration run; a calibration that adds the day's water to the same
-    vehicle keeps it rather than fitting both loops again, which is most of a calibration's time.
+    Its speed loop was chosen, and its turn found, on the calibration run; a calibration that adds the
+    day's water to the same vehicle keeps the loop and starts the turn there rather than searching both
+    again, which is most of a calibration's time.
     """
-    vehicle = _read(Path(path)).get("calibrated_vehicle") or {}
-    loop = vehicle.get("velocity_control") if isinstance(vehicle, dict) else None
-    return loop if loop in ("surge", "vector") else None
+    vehicle = _read(Path(path)).get("calibrated_vehicle")
+    return vehicle if isinstance(vehicle, dict) else None
 
 
 def water_from_comparison(path: str | Path, mission: Mission) -> DayWater:

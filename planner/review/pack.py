@@ -67,8 +67,8 @@ def _pack_reports(path: Path, vehicle: str) -> list[tuple[float, float]]:
 
 def _reports(path: Path, topic: str) -> list[tuple[float, float]]:
     out = []
-    for t, _, msg in read_log(path):
-        if t != topic or not isinstance(msg, dict) or int(msg.get("id", -1)) != 0:
+    for _, _, msg in read_log(path, topics=[topic]):
+        if not isinstance(msg, dict) or int(msg.get("id", -1)) != 0:
             continue
         remaining = float(msg.get("battery_remaining", -1))
         energy_hj = float(msg.get("energy_consumed", -1))

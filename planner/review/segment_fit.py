@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import dataclasses
 import itertools
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from types import SimpleNamespace
 
 import numpy as np
@@ -112,8 +112,10 @@ class SegmentSolver:
         priors: Callable[[Vehicle, Sequence[str]], list[Prior]],
         blocks: np.ndarray,
         seed: int = 0,
+        turn_known: Mapping[str, float] | None = None,
     ):
         self.mission, self.seg, self.priors, self.blocks, self.seed = mission, seg, priors, blocks, seed
+        self.turn_known = dict(turn_known or {})  # an earlier calibration's turn of this vehicle
         self._tiled: dict[int, Segments] = {}  # the segments repeated p times, per trial count p
         self._turn_found: dict[tuple, dict[str, float]] = {}  # turn_start's optimum per (terms, vehicle)
 
@@ -198,10 +200,15 @@ class SegmentSolver:
         in one batch; each origin's optimum is found without the bootstrap; the full fit starts at the best.
 
         A vector loop's headings do not move with its speed terms, so the optimum found for the loop's
-        choice is where the final fit of the same vehicle starts too, not searched for again.
+        choice is where the final fit of the same vehicle starts too, not searched for again.  Where an
+        earlier calibration of the vehicle found its turn (``turn_known``: the day's water added to it), the
+        fit starts there alone: the water does not change how the vehicle turns.
         """
         start = dict(start or {})
         key = (turn, vehicle)
+        if key not in self._turn_found and all(n in self.turn_known for n in turn):
+            est = self.solve_kinds(turn, vehicle, 0, {**start, **self.turn_known}, ("heading",), robust=False)
+            self._turn_found[key] = {n: float(est.map_value[n]) for n in est.names}
         if key in self._turn_found:
             return {**start, **self._turn_found[key]}
         bounds = {p.name: (p.low, p.high) for p in self.priors(vehicle, turn)}
@@ -250,7 +257,7 @@ def choose_loop(
     if not slow:
         return base, names, {}, start
     if known is not None:
-        account = {"chosen": known, "file": base.velocity_control, "kept": "chosen by the calibration compared"}
+        account: dict = {"chosen": known, "file": base.velocity_control, "kept": "chosen by the calibration compared"}
         return (
             dataclasses.replace(base, velocity_control=known),
             names + slow if known == "vector" else names,

@@ -50,8 +50,9 @@ The command that reads the logs and writes the calibrated file is :mod:`planner.
 from __future__ import annotations
 
 import dataclasses
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -97,6 +98,7 @@ from planner.review.segment_fit import (
     SIGMA_HEADING_DEG,
     SIGMA_POSITION_M,
     SLOW_TERMS,
+    TURN_TERMS,
     SegmentSolver,
     choose_loop,
     residual_parts,
@@ -395,7 +397,7 @@ def fit_vehicle(
     bootstrap: int = BOOTSTRAP,
     seed: int = 0,
     length: int = SEGMENT_STEPS,
-    loop: str | None = None,
+    compared: Mapping[str, Any] | None = None,
 ) -> Calibration:
     """MAP fit of the ``[vehicle]`` fields ``fit`` to ``runs`` (:class:`planner.review.logs.LoggedRun`-like)
     flown from scenario start times ``start_times``; priors centred on ``mission.vehicle``.
@@ -404,8 +406,9 @@ def fit_vehicle(
     speed curve and power (:func:`_legs_measured`).  Every term is *identified* when its posterior s.d. is below half its prior's
     (:data:`rapt.mapfit.IDENTIFIED_BELOW`, without :func:`rapt.mapfit.fit_map`'s survivor
     rule); the ascent rate is timed on its own (:func:`planner.review.calibration_legs.fit_ascent`).
-    ``loop`` (``"surge"`` or ``"vector"``) is a speed loop an earlier calibration of this vehicle chose:
-    it is kept, not chosen again.
+    ``compared`` is the vehicle an earlier calibration of this vehicle found (``calibrate --bias``: the
+    one the comparison predicted with): its speed loop is kept, not chosen again, and its turn is where
+    the turn's fit starts.
     """
     unknown = [n for n in fit if n not in FITTED]
     if unknown or not fit:
@@ -423,7 +426,8 @@ def fit_vehicle(
     names = tuple(n for n in names if n not in SLOW_TERMS)
     if cal_runs:  # the current the calibration run flew in, fitted beside the vehicle
         names = (*names, *water_terms(mission, cal_runs, cal_starts))
-    solver = SegmentSolver(mission, seg, vehicle_priors, bootstrap_blocks(seg)[np.nonzero(seg.valid)[0]], seed)
+    loop, turn = _compared(compared)
+    solver = SegmentSolver(mission, seg, vehicle_priors, bootstrap_blocks(seg)[np.nonzero(seg.valid)[0]], seed, turn)
     solve = solver.solve
 
     knots, power, first = _legs_measured(mission, cal_runs, cal_starts, names, solver)
@@ -485,6 +489,14 @@ def fit_vehicle(
         run_water=water,
         control=control,
     )
+
+
+def _compared(compared: Mapping[str, Any] | None) -> tuple[str | None, dict[str, float]]:
+    """The speed loop and turn terms of an earlier calibration's vehicle (``fit_vehicle``'s ``compared``)."""
+    c = compared or {}
+    loop = c.get("velocity_control")
+    turn = {n: float(c[n]) for n in TURN_TERMS if isinstance(c.get(n), (int, float))}
+    return (loop if loop in ("surge", "vector") else None), turn
 
 
 def _legs_measured(

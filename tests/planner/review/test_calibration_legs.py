@@ -24,6 +24,7 @@ import sim.uuv
 from planner.review.calibrate import calibrate
 from planner.review.calibration_legs import cut_legs, is_calibration_log
 from planner.review.calibration_terms import is_water, knot_command, knot_name, term_need
+from planner.review.segment_fit import TURN_TERMS
 from planner.review.vehicle_fit import FITTED, SLOW_TERMS, fit_vehicle
 from rapt.errors import InputError
 from sim.uuv.bias import Bias
@@ -255,8 +256,9 @@ def test_a_steady_current_across_the_flood_is_fitted_and_written(missions, tmp_p
 def test_a_recalibration_with_the_days_water_keeps_the_loop_the_compared_calibration_chose(
     missions, flown, fitted, tmp_path, monkeypatch
 ):
-    """``calibrate --bias``: the comparison predicted with a calibrated vehicle whose loop the calibration
-    run chose; adding the day's water keeps that loop instead of fitting both again (the noon step's time)."""
+    """``calibrate --bias``: the comparison predicted with a calibrated vehicle whose loop and turn the
+    calibration run found; adding the day's water keeps that loop instead of fitting both again, and fits
+    the turn from where it was found (the noon step's time)."""
     file_path, _, _ = missions
     run, _, _ = flown
     cmp = tmp_path / "comparison.json"
@@ -267,7 +269,7 @@ def test_a_recalibration_with_the_days_water_keeps_the_loop_the_compared_calibra
                 "plan": {"id": "p1", "mission": "range2017"},
                 "bias": {"current_scale": {"estimate": 1.0, "stderr": 0.01, "identified": True}},
                 "correction": {"used": True},
-                "calibrated_vehicle": {"velocity_control": "vector"},
+                "calibrated_vehicle": {"velocity_control": "vector", **{n: fitted.value(n) for n in TURN_TERMS}},
             }
         )
     )
@@ -278,6 +280,8 @@ def test_a_recalibration_with_the_days_water_keeps_the_loop_the_compared_calibra
         if n in result.estimate.names and knot_command(n) is not None:
             assert result.value(n) == pytest.approx(fitted.value(n), abs=0.02), n
     assert result.rms_after["position_m"] < 1.5 * fitted.rms_after["position_m"] + 0.05
+    for n in TURN_TERMS:
+        assert result.estimate.identified[n] and result.value(n) == pytest.approx(truth_of(n), rel=0.05), n
     assert "chosen by the calibration compared" in (tmp_path / "day.toml").read_text()
 
 
