@@ -14,7 +14,7 @@ each kind of noise from the day's counted runs against their corrected replays:
   flies the predicted path a minute late is off in time, not in position, and the position
   noise the plan dithers by moves the scenario's places (starts, no-go areas), which only a
   departure from the path can cross; a time-matched distance counts every along-track slip
-  as position and made the day's forecasts under-confident;
+  as position;
 - **time** (s): the difference between the run's logged end and its replay's, over runs that
   both end at the recovery point (a run the pack's limit or a collision ends, ends when the
   model runs out, not on the schedule);
