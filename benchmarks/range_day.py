@@ -10,7 +10,9 @@ flown from cold boots at ``--speedup`` as a range would:
    ``rapt-plan calibrate MISSION shakedown.mcap FIVE_PLAN_LOGS --bias comparison.json --out calibrated.toml``,
    then ``rapt-plan generate calibrated.toml --budget 20000 --refine``.
 3. **Afternoon.**  Every scenario of the new plan flown, each side as its robust "M" variant
-   where the plan made one (the scenarios a range flies); then ``rapt-plan compare``.
+   where the plan made one (the scenarios a range flies); then ``rapt-plan compare``.  Beside it, on
+   its own copy of the plan, the afternoon conducted run by run (``--stages conducted``): ``rapt-plan
+   next`` after every run names the next one, for at most :data:`CONDUCTED_RUNS` runs.
 4. **Side by side.**  The committed plan (``field_plans/range2017``) flown on the same vehicle
    and compared: with the plan's vehicle, and re-predicted with the calibrated one.
 
@@ -20,7 +22,8 @@ energy); pairs observed as predicted and predicted modes held, for the re-plan a
 committed plan; the day's Brier score; the noon step's wall time.
 
 Run:  ARDUSUB_SITL=../shared/ardusub/ardusub python benchmarks/range_day.py
-      [--configs bluerov2,limited,current] [--speedup 40] [--budget 20000] [--work DIR] [--stages ...] [--quick]
+      [--configs bluerov2,limited,current] [--speedup 40] [--budget 20000] [--work DIR]
+      [--stages committed,day,conducted] [--quick]
 
 ``--work`` keeps every log and row; run again with it and only what is missing is flown or
 computed.  ``--quick``: one configuration, a 2,000-run re-plan and its first four scenarios.
@@ -30,6 +33,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -202,6 +206,73 @@ def noon(work: Path, budget: int) -> dict:
     return cached(work / "noon.json", make)
 
 
+#: Runs the conducted afternoon may spend (the issue's range day: at most 14).
+CONDUCTED_RUNS = 14
+
+
+def next_answer(plan_dir: Path, logs: list[str], runs_left: int) -> tuple[dict, float]:
+    """``rapt-plan next --json``'s answer, and the call's wall time."""
+    t0 = time.perf_counter()
+    proc = rapt_plan("next", str(plan_dir), *logs, "--runs-left", str(runs_left), "--json")
+    took = time.perf_counter() - t0
+    if proc.returncode:
+        return {"error": proc.stdout + proc.stderr}, took
+    return json.loads(proc.stdout.strip().splitlines()[-1]), took
+
+
+def conducted(here: Path, speedup: float, params: dict[str, float], pack_ah: float, runs: int = CONDUCTED_RUNS) -> dict:
+    """The afternoon conducted by ``rapt-plan next`` on its own copy of the noon plan (its moves are added there):
+    fly what it names until it stops or :data:`CONDUCTED_RUNS` are spent.  Flights are cached; a rerun replays
+    the same answers (the same seed and logs), flying only what is missing."""
+    plan_dir = here / "conducted_plan"
+    if not plan_dir.is_dir():
+        shutil.copytree(here / "plan", plan_dir, ignore=shutil.ignore_patterns("afternoon.json"))
+    out = here / "conducted"
+    out.mkdir(parents=True, exist_ok=True)
+    logs: list[str] = []
+    row: dict = {"calls_s": [], "reasons": [], "flown": []}
+    for k in range(1, runs + 1):
+        answer, took = next_answer(plan_dir, logs, runs - k + 1)
+        row["calls_s"].append(took)
+        if "error" in answer:
+            return {**row, "error": answer["error"]}
+        row["reasons"].append(answer["reason"])
+        if answer["next"] is None:
+            break
+        sid = answer["next"]["scenario"]
+        stem = out / f"run{k:02d}_{sid}"
+        for _ in range(2):  # a flight our rig lost is flown again, once
+            flown = cached(stem.with_suffix(".json"), lambda sid=sid, stem=stem: fly(sid, speedup,
+                           stem.with_suffix(".mcap"), None, pack_ah, plan=plan_dir / "plan.json",
+                           parameters=params))  # fmt: skip
+            if "error" not in flown and not flown["ended"].startswith(RIG_FAILURES):
+                break
+            stem.with_suffix(".json").unlink(missing_ok=True)
+        print(f"    conducted run {k}: {sid}: {flown.get('ended') or flown.get('error')}", file=sys.stderr, flush=True)
+        row["flown"].append(sid)
+        logs.append(str(stem.with_suffix(".mcap")))
+    final, took = next_answer(plan_dir, logs, 0)
+    fixed, _ = next_answer(here / "plan", sorted(str(p) for p in (here / "afternoon").glob("*.mcap")), 0)
+    row.update(final=final, fixed=fixed, runs=len(logs), fixed_runs=len(list((here / "afternoon").glob("*.mcap"))))
+    return row
+
+
+def confirmed(answer: dict) -> str:
+    pairs = answer.get("pairs", [])
+    return f"{sum(p['status'] == 'confirmed' for p in pairs)} of {len(pairs)}"
+
+
+def conducted_report(row: dict) -> list[str]:
+    """The conducted afternoon beside the fixed one, as markdown lines."""
+    calls = sorted(row["calls_s"])
+    out = [f"- afternoon, each side once ({row['fixed_runs']} runs): boundaries confirmed {confirmed(row['fixed'])}",
+           f"- afternoon conducted by `next` ({row['runs']} runs): boundaries confirmed {confirmed(row['final'])}; "
+           f"`next` per call: median {calls[len(calls) // 2]:.1f} s, max {calls[-1]:.1f} s",
+           "", "  Its answers, in order:", ""]  # fmt: skip
+    out += [f"  {i + 1}. {reason}" for i, reason in enumerate(row["reasons"])]
+    return out + [""]
+
+
 def compare(plan: Path, logs: Path, out: Path, *extra: str) -> dict | None:
     """``rapt-plan compare`` on every log in ``logs``; its comparison.json (None when it failed, or when nothing was
     flown there: ``--stages day`` flies no committed scenario)."""
@@ -368,7 +439,11 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--configs", default=",".join(CONFIGS), help=f"Vehicles to fly ({', '.join(CONFIGS)}).")
     ap.add_argument("--speedup", type=float, default=40.0)
     ap.add_argument("--budget", type=int, default=20000, help="Runs in the re-plan's search.")
-    ap.add_argument("--stages", default="committed,day", help="committed (the committed plan), day (the loop).")
+    ap.add_argument(
+        "--stages",
+        default="committed,day,conducted",
+        help="committed (the committed plan), day (the loop), conducted (the afternoon run by run by next).",
+    )
     ap.add_argument("--work", type=Path, default=None, help="Directory for logs, plans and rows (resumable).")
     ap.add_argument("--quick", action="store_true")
     args = ap.parse_args(argv)
@@ -430,6 +505,12 @@ def main(argv: list[str] | None = None) -> int:
             base = compare(COMMITTED, here / "committed", here / "committed_comparison")
             rep = repredictions(here) if (here / "committed").is_dir() else None
             print(report(name, here, fit, timing, rep, day, base), flush=True)
+        if "conducted" in stages and (here / "plan" / "plan.json").is_file():
+            row = conducted(here, args.speedup, params, pack_ah)
+            if "error" in row:
+                print(f"  {name}: the conducted afternoon failed: {row['error']}", file=sys.stderr)
+                continue
+            print("\n".join([f"## {name}: the afternoon conducted", ""] + conducted_report(row)), flush=True)
     return 0
 
 

@@ -19,6 +19,7 @@ from planner.cli import (
     check,
     compare,
     generate,
+    next_run,
     processes,
     run,
     search,
@@ -55,6 +56,7 @@ app.command("generate", cls=RaptCommand)(generate.generate)
 app.command("shakedown", cls=RaptCommand)(shakedown.shakedown)
 app.command("surrogate", cls=RaptCommand)(surrogate.surrogate)
 app.command("compare", cls=RaptCommand)(compare.compare)
+app.command("next", cls=RaptCommand)(next_run.next_run)
 app.command("calibrate", cls=RaptCommand)(calibrate.calibrate)
 app.command("check", cls=RaptCommand)(check.check)
 app.command("frontseat", cls=RaptCommand)(processes.frontseat)

@@ -10,6 +10,7 @@ import typer
 from rich.table import Table
 
 from planner.cli.check import checks_table
+from planner.cli.confirmation_table import confirmation_rich_table
 from planner.cli.console import err, fail, out, print_table
 
 __all__ = ["compare"]
@@ -96,6 +97,7 @@ def compare(
     noise = result["forecast"].get("day_noise") or {}
     if noise.get("note"):
         out.print(f"day's execution noise: {noise['note']}", highlight=False, soft_wrap=True)
+    print_table(confirmation_rich_table(result["confirmation"]))
     _print_flagged(result)
     overlays = len(result.get("overlays", {}))
     out.print(

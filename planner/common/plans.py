@@ -35,10 +35,15 @@ PLAN_SCHEMA = "rapt.plan/1"
 
 
 def plan_id(plan: dict) -> str:
-    """12 hex digits naming the plan's mission and scenarios (not its file or timestamps)."""
+    """12 hex digits naming the plan's mission and scenarios (not its file or timestamps).
+
+    Variants added during the range day (with an ``origin``: ``rapt-plan next``'s moves) are left out, so the
+    logs flown before them still belong to the plan.
+    """
     rows = [
         (s["id"], [round(float(v), 12) for v in s["u"]])
         for s in list(plan.get("scenarios", [])) + list(plan.get("variants", []))
+        if "origin" not in s
     ]
     text = json.dumps({"mission": plan.get("mission", {}).get("name"), "scenarios": rows}, sort_keys=True)
     return hashlib.sha256(text.encode()).hexdigest()[:12]

@@ -164,11 +164,14 @@ def fit_bias(
     bootstrap: int = BOOTSTRAP,
     seed: int = 0,
     vehicle: Vehicle | None = None,
+    priors: dict[str, tuple[float, float]] | None = None,
 ) -> BiasFit:
     """MAP fit of the parameters ``fit`` (the others stay neutral) to all ``runs`` jointly.
 
     ``vehicle`` (default the mission's) is the vehicle model the segments are replayed with:
     a calibrated one (:mod:`planner.review.calibrate`) leaves the bias only what calibration did not explain.
+    ``priors`` (centre, sd by name) replace :data:`PRIORS` where given: the posterior of earlier logs, so a
+    day's fit is updated log by log (``rapt-plan next``).
     """
     seg = segment_batch(mission, runs, start_times, length)
     if not seg.valid.any():
@@ -199,9 +202,12 @@ def fit_bias(
         parts = r.reshape(3, p, k)  # dx, dy, de, each in segment order within each copy
         return parts.transpose(1, 0, 2).reshape(p, 3 * k)
 
+    chosen = [
+        Prior(p.name, *priors[p.name], p.low, p.high) if priors and p.name in priors else p for p in bias_priors(names)
+    ]
     est = fit_map(
         lambda th: _residuals(mission, seg, bias_of(th), vehicle),
-        bias_priors(names),
+        chosen,
         residuals_many=residuals_many,
         groups=groups,
         jackknife=by_run and bootstrap > 0,

@@ -28,7 +28,9 @@ to identify and apply this bias to our predictions").  :func:`compare`
    alone and with the fitted bias's uncertainty, scoring the day by its Brier score
    (:mod:`planner.review.forecast`); flags the pairs that straddle their boundary with a
    probability below one half under the corrected forecast, with an adjusted "M" scenario
-   for each side to move (:mod:`planner.review.replan`);
+   for each side to move (:mod:`planner.review.replan`); and judges each pair confirmed or
+   not by the day's runs, repeats of a scenario included (:mod:`planner.review.confirmations`,
+   the rule ``rapt-plan next`` conducts the afternoon by);
 6. writes ``comparison.json`` and ``comparison.html`` (:mod:`planner.review.report`), and per
    flown scenario an MCAP for Foxglove overlaying observed, predicted and corrected tracks
    and the runs' checks that warned or failed as Log events (:mod:`planner.review.overlay`).
@@ -47,6 +49,7 @@ import sim.uuv
 from planner.common.atomic import write_text_atomic
 from planner.common.jsonio import json_value, jsonable
 from planner.common.plans import Plan, load_plan
+from planner.review.confirmations import RunOutcome, confirmation_table
 from planner.review.correction import cross_validate, fit_observed, path_error, rms_path_error
 from planner.review.day_noise import fit_day_noise
 from planner.review.daybias import day_bias_record
@@ -161,6 +164,7 @@ def compare(
         "mode_agreement": agreement,
         "forecast": fc.summary(scen_rows),
         "pairs": pair_rows,
+        "confirmation": day_confirmations(plan, counted, plan_runs),
         "remaining": _remaining(plan, obs, plan_runs),
         "proposals": proposals,
     }
@@ -168,6 +172,13 @@ def compare(
         say("writing the report")
         _write(result, plan, obs, plan_runs, Path(out_dir))
     return result
+
+
+def day_confirmations(plan: Plan, counted: list[Observation], runs: PlanRuns) -> list[dict]:
+    """Each pair's confirmation by the day's counted runs, repeats included (:mod:`planner.review.confirmations`)."""
+    predicted = {sid: runs.pred.scores[runs.row_of[sid]] for pair in plan.pairs for sid in pair["scenarios"]}
+    outcomes = [RunOutcome(o.sid, o.scores if o.mode is not None else None, o.run.path.name) for o in counted]
+    return confirmation_table(plan, runs.pred.names, predicted, outcomes)
 
 
 def _check_out_dir(plan_path: str | Path, log_paths: Sequence[str | Path], out_dir: str | Path) -> None:

@@ -1,0 +1,28 @@
+"""The day's confirmation table, as ``rapt-plan compare`` and ``rapt-plan next`` print it."""
+
+from __future__ import annotations
+
+from rich.table import Table
+
+__all__ = ["confirmation_rich_table", "side_cell"]
+
+
+def side_cell(side: dict) -> str:
+    """One side: its status, and per scenario flown the runs that showed its outcome, e.g. ``shown (pair3bA1 2/3)``."""
+    flown = ", ".join(f"{f['scenario']} {f['showed']}/{f['runs']}" for f in side["flown"])
+    return f"{side['status']} ({flown})" if flown else side["status"]
+
+
+def confirmation_rich_table(pairs: list[dict], p_confirm: dict[int, float] | None = None) -> Table:
+    """Per pair: its elements, each side's record and status, the pair's status (and P(confirmed) when given)."""
+    table = Table(title="Boundaries confirmed by the day's runs (a side shows at P(q > 1/2) >= 0.75)")
+    cols = ["pair", "elements", "side a", "side b", "status"] + (["P(confirmed)"] if p_confirm is not None else [])
+    for col in cols:
+        table.add_column(col, justify="right" if col in ("pair", "P(confirmed)") else "left")
+    for pair in pairs:
+        row = [str(pair["id"]), ", ".join(pair["elements"]), side_cell(pair["sides"][0]), side_cell(pair["sides"][1])]
+        row.append(pair["status"])
+        if p_confirm is not None:
+            row.append(f"{p_confirm.get(pair['id'], 0.0):.2f}")
+        table.add_row(*row)
+    return table
