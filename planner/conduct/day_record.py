@@ -10,7 +10,7 @@ The bias is updated as a sequential Bayesian fit (:func:`update_bias`): the prev
 (centre and s.d. per parameter, neutral and :data:`planner.review.biasfit.PRIOR_SD` at the start
 of the afternoon; the plan's mission already carries the noon's bias) is the prior of a MAP fit
 (:func:`planner.review.biasfit.fit_bias`) to the new logs only.  A parameter the new logs identify
-takes their estimate and s.e.; the others keep their posterior.  Correlations between parameters
+takes their estimate and s.e. (never under :data:`SD_FLOOR` of the prior's); the others keep their posterior.  Correlations between parameters
 are dropped from one update to the next: each is carried as its own Gaussian.
 """
 
@@ -34,6 +34,9 @@ from sim.uuv.scenario import make_scenarios
 __all__ = ["RECORD_NAME", "LogRecord", "DayRecord", "load_record", "read_logs", "update_bias", "log_key"]
 
 RECORD_NAME = "afternoon.json"
+#: The posterior s.d. never falls below this share of the prior's: a log's Laplace s.e. is optimistic
+#: (its residuals move together), and a later log must still be able to move the estimate.
+SD_FLOOR = 0.1
 #: The afternoon bias is used where its posterior s.d. is below this share of its prior's (identified).
 IDENTIFIED_BELOW = 0.5
 
@@ -71,6 +74,10 @@ class DayRecord:
     bias_logs: list[str] = field(default_factory=list)  # keys of the logs the posterior has seen
     centre: dict[str, float] = field(default_factory=lambda: dict(NEUTRAL))
     sd: dict[str, float] = field(default_factory=lambda: dict(PRIOR_SD))
+    #: the forecasts in the plan's water (no afternoon bias), by scenario: P(shows) per noise scale; they depend
+    #: on the plan and the seed only, so they are drawn once an afternoon (``forecast_seed`` says for which seed)
+    forecasts: dict[str, tuple] = field(default_factory=dict)
+    forecast_seed: int | None = None
 
     def bias(self) -> Bias:
         """The afternoon's bias: each identified parameter's posterior centre, the others neutral."""
@@ -84,6 +91,10 @@ class DayRecord:
             "plan_id": self.plan_id,
             "logs": {k: r.to_dict() for k, r in self.logs.items()},
             "bias": {"logs": self.bias_logs, "centre": self.centre, "sd": self.sd},
+            "forecasts": {
+                "seed": self.forecast_seed,
+                "p_by_scale": {s: [float(x) for x in v[0]] for s, v in self.forecasts.items()},
+            },
         }
 
     def save(self, directory: Path) -> None:
@@ -99,7 +110,11 @@ def load_record(directory: Path, plan: Plan) -> DayRecord:
             return DayRecord(plan.id)
         logs = {k: LogRecord(**v) for k, v in data["logs"].items()}
         b = data["bias"]
-        return DayRecord(plan.id, logs, list(b["logs"]), {**NEUTRAL, **b["centre"]}, {**PRIOR_SD, **b["sd"]})
+        f = data.get("forecasts") or {}
+        drawn = {sid: (np.asarray(p, dtype=float), None) for sid, p in (f.get("p_by_scale") or {}).items()}
+        return DayRecord(
+            plan.id, logs, list(b["logs"]), {**NEUTRAL, **b["centre"]}, {**PRIOR_SD, **b["sd"]}, drawn, f.get("seed")
+        )
     except (OSError, ValueError, KeyError, TypeError):
         return DayRecord(plan.id)
 
@@ -151,6 +166,7 @@ def update_bias(plan: Plan, record: DayRecord, keys: list[str], runs: dict[str, 
             for n in fit.fitted:
                 if fit.estimate.identified[n]:
                     record.centre[n] = float(fit.estimate.value[n])
-                    record.sd[n] = float(min(fit.estimate.stderr[n], record.sd[n]))
+                    floor = SD_FLOOR * PRIOR_SD[n]
+                    record.sd[n] = float(max(min(fit.estimate.stderr[n], record.sd[n]), floor))
     record.bias_logs += todo
     return todo

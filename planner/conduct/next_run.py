@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+import sim.uuv
 from planner.common.plans import Plan, load_plan
 from planner.conduct.day_record import DayRecord, load_record, read_logs, update_bias
 from planner.conduct.side_forecast import SideForecasts, Target, forecast_sides
@@ -37,10 +38,10 @@ from planner.review.forecast import plan_noise
 from planner.review.runs import predict_plan
 from rapt.confirmation import Option, Pair, Side, next_run
 from rapt.errors import InputError
-from sim.uuv.bias import compose
+from sim.uuv.bias import NEUTRAL, compose
 from sim.uuv.scoring import mode_name
 
-__all__ = ["conduct", "MOVE_BELOW"]
+__all__ = ["conduct", "afternoon", "decide", "Afternoon", "MOVE_BELOW"]
 
 #: A side that missed is moved when none of its scenarios' next runs shows with at least this chance.
 MOVE_BELOW = 0.8
@@ -48,28 +49,39 @@ SIDE_NAMES = ("a", "b")
 
 
 @dataclass
-class _Day:
+class Afternoon:
     """Everything one call knows: the plan, its predictions, the runs, the forecasts and the candidate moves."""
 
     plan: Plan
     record: DayRecord
-    keys: list[str]
     names: list[str]
     predicted: dict[str, np.ndarray]
     runs: list[RunOutcome]
     forecasts: SideForecasts | None = None
     moves: dict[str, Move] | None = None
+    bias_used: bool = False  # the forecasts and moves carry the afternoon's bias
 
 
 def check_writable(plan_path: Path) -> Path:
-    """The plan file; InputError (one line) when its directory or file cannot be written, before anything else."""
+    """The plan file; InputError (one line) when its directory or file cannot be written, before anything else.
+
+    Tried, not inferred from permission bits: a read-only mount or an immutable file stops root as well.
+    """
     plan_file = plan_path / "plan.json" if plan_path.is_dir() else plan_path
     directory = plan_file.parent
-    if plan_file.is_file() and not (os.access(directory, os.W_OK) and os.access(plan_file, os.W_OK)):
+    if not plan_file.is_file():
+        return plan_file  # load_plan says what is missing
+    probe = directory / f".next-probe-{os.getpid()}"
+    try:
+        probe.touch()
+        probe.unlink()
+        with open(plan_file, "a"):
+            pass
+    except OSError as exc:
         raise InputError(
-            f"PLAN: {directory} cannot be written; next adds the day's moved scenarios and its record there: "
-            "copy the plan directory somewhere writable"
-        )
+            f"PLAN: {directory} cannot be written ({exc.strerror}); next adds the day's moved scenarios and its "
+            "record there: copy the plan directory somewhere writable"
+        ) from None
     return plan_file
 
 
@@ -94,27 +106,59 @@ def conduct(
     record = load_record(plan_file.parent, plan)
     say("reading new logs")
     keys, fresh = read_logs(plan, paths, record)
-    ids, _, pred = predict_plan(plan)
-    row = {sid: k for k, sid in enumerate(ids)}
+    if runs_left > 0:
+        say("updating the day's bias")
+        update_bias(plan, record, keys, fresh)
     runs = [
         RunOutcome(r.scenario, None if r.scores is None else np.asarray(r.scores), Path(r.path).name)
         for r in (record.logs[k] for k in keys)
         if r.checks_passed
     ]
-    day = _Day(plan, record, keys, list(pred.names), {s: pred.scores[row[s]] for s in ids}, runs)
-    table = confirmation_table(plan, day.names, day.predicted, runs)
+    say("forecasting the sides in the day's water")
+    if record.forecast_seed != seed:
+        record.forecasts, record.forecast_seed = {}, seed
+    result = decide(afternoon(plan, runs, record), runs_left, seed, cache=record.forecasts)
+    record.save(plan_file.parent)
+    result["seconds"] = round(time.perf_counter() - t0, 2)
+    return result
+
+
+def afternoon(
+    plan: Plan, runs: list[RunOutcome], record: DayRecord | None = None, known: Afternoon | None = None
+) -> Afternoon:
+    """The afternoon so far: ``runs`` (the day's runs of the plan, repeats included) and the bias ``record``
+    (the plan's own day bias when None: an afternoon simulated without logs).  ``known``: an earlier afternoon
+    of the same plan whose predictions are kept, only scenarios added since simulated (a simulated day)."""
+    if known is None:
+        ids, _, pred = predict_plan(plan)
+        row = {sid: k for k, sid in enumerate(ids)}
+        predicted = {s: pred.scores[row[s]] for s in ids}
+        names = list(pred.names)
+    else:
+        predicted, names = dict(known.predicted), known.names
+        new = [s["id"] for s in plan.variants if s["id"] not in predicted]
+        if new:
+            r = sim.uuv.simulate(plan.mission, np.array([plan.u(s) for s in new]))
+            predicted.update({s: r.scores[k] for k, s in enumerate(new)})
+    return Afternoon(plan, record or DayRecord(plan.id), names, predicted, list(runs))
+
+
+def decide(
+    day: Afternoon, runs_left: int, seed: int = 0, cache: dict | None = None, move_cache: dict | None = None
+) -> dict:
+    """The next run (or stop, or done at ``runs_left`` 0) and each pair's status: what ``--json`` prints, with the
+    confirmation table, the forecasts and the bias.  ``cache`` (scenario -> forecast) spares the forecasts of
+    scenarios already drawn under the same bias (:func:`planner.conduct.side_forecast.forecast_sides`);
+    ``move_cache`` the moves already searched from the same scenario at the same noise (a simulated afternoon)."""
+    plan = day.plan
+    table = confirmation_table(plan, day.names, day.predicted, day.runs)
     if runs_left == 0:
-        record.save(plan_file.parent)
         confirmed = sum(p["status"] == "confirmed" for p in table)
         reason = f"done: no runs left; {confirmed} of {len(table)} boundaries confirmed"
-        return _result(day, None, reason, table, [1.0 if p["status"] == "confirmed" else 0.0 for p in table], t0)
-    say("updating the day's bias")
-    update_bias(plan, record, keys, fresh)
-    say("forecasting the sides in the day's water")
+        return _result(day, None, reason, table, [1.0 if p["status"] == "confirmed" else 0.0 for p in table])
     targets = _targets(day)
-    day.forecasts = forecast_sides(plan.mission, targets, _flown(day, targets), plan_noise(plan), _bias(record), seed)
-    say("moving sides that came out against their prediction")
-    day.moves = _moves(day, targets, seed)
+    day.forecasts = _forecasts(day, targets, seed, cache)
+    day.moves = _moves(day, targets, seed, {} if move_cache is None else move_cache)
     pairs, options = _pairs(day)
     choice = next_run(pairs, runs_left)
     p_confirm = [1.0 if p.confirmed else q for p, q in zip(pairs, choice.p_confirm)]
@@ -122,25 +166,36 @@ def conduct(
     if choice.pair is None:
         done = sum(p.confirmed for p in pairs)
         reason = f"stop: no run raises the boundaries expected confirmed ({done} of {len(pairs)} confirmed)"
-        record.save(plan_file.parent)
-        return _result(day, None, reason, table, p_confirm, t0, status)
+        return _result(day, None, reason, table, p_confirm, status)
     assert choice.side is not None and choice.option is not None
-    sid, reason = _chosen(day, choice.pair, choice.side, options[choice.pair][choice.side][choice.option], keys)
-    record.save(plan_file.parent)
-    return _result(day, sid, reason, table, p_confirm, t0, status)
+    sid, reason = _chosen(day, choice.pair, choice.side, options[choice.pair][choice.side][choice.option])
+    return _result(day, sid, reason, table, p_confirm, status)
 
 
-def _bias(record: DayRecord) -> tuple[dict[str, float], dict[str, float], list[str]]:
+def _forecasts(day: Afternoon, targets: dict[str, Target], seed: int, cache: dict | None) -> SideForecasts:
+    """The sides' forecasts in the plan's water, or with the afternoon's bias on top when the logs identify one
+    and it foresaw the day's outcomes at least as well (:attr:`SideForecasts.evidence`)."""
+    plan, record = day.plan, day.record
+    flown = _flown(day, targets)
+    sigma = plan_noise(plan)
+    neutral = forecast_sides(plan.mission, targets, flown, sigma, (dict(NEUTRAL), record.sd, []), seed, cache)
     varied = [n for n in record.centre if record.identified(n)]
-    return record.bias().to_dict(), record.sd, varied
+    day.bias_used = False
+    if not varied or not flown:
+        return neutral
+    biased = forecast_sides(plan.mission, targets, flown, sigma, (record.bias().to_dict(), record.sd, varied), seed)
+    if biased.evidence < neutral.evidence:
+        return neutral
+    day.bias_used = True
+    return biased
 
 
-def _side_target(day: _Day, pair: dict, sid: str) -> tuple[tuple[int, ...], tuple[float, ...]]:
+def _side_target(day: Afternoon, pair: dict, sid: str) -> tuple[tuple[int, ...], tuple[float, ...]]:
     cols = outcome_columns(pair, day.names)
     return tuple(cols), tuple(float(v) for v in day.predicted[sid][cols])
 
 
-def _targets(day: _Day) -> dict[str, Target]:
+def _targets(day: Afternoon) -> dict[str, Target]:
     """Every scenario flown for a pair side, with the side's outcome."""
     out = {}
     for pair in day.plan.pairs:
@@ -155,21 +210,23 @@ def _showed(run: RunOutcome, t: Target) -> bool:
     return run.scores is not None and bool(np.array_equal(run.scores[list(t.columns)], np.asarray(t.values)))
 
 
-def _flown(day: _Day, targets: dict[str, Target]) -> list[tuple[str, bool]]:
+def _flown(day: Afternoon, targets: dict[str, Target]) -> list[tuple[str, bool]]:
     return [(r.sid, _showed(r, targets[r.sid])) for r in day.runs if r.sid in targets and r.scores is not None]
 
 
-def _record(day: _Day, scen: str, t: Target) -> tuple[int, int]:
+def _record(day: Afternoon, scen: str, t: Target) -> tuple[int, int]:
     ended = [r for r in day.runs if r.sid == scen and r.scores is not None]
     shown = sum(_showed(r, t) for r in ended)
     return shown, len(ended) - shown
 
 
-def _moves(day: _Day, targets: dict[str, Target], seed: int) -> dict[str, Move]:
+def _moves(day: Afternoon, targets: dict[str, Target], seed: int, cache: dict) -> dict[str, Move]:
     """A candidate move for each side that missed and has no scenario likely to show on its next run."""
     assert day.forecasts is not None
     plan, fc = day.plan, day.forecasts
-    mission = replace(plan.mission, execution_bias=compose(plan.mission.execution_bias, day.record.bias()))
+    mission = plan.mission
+    if day.bias_used:
+        mission = replace(mission, execution_bias=compose(mission.execution_bias, day.record.bias()))
     sigma = plan_noise(plan) * fc.scale
     out = {}
     for pair in plan.pairs:
@@ -182,7 +239,17 @@ def _moves(day: _Day, targets: dict[str, Target], seed: int) -> dict[str, Move]:
             if best >= MOVE_BELOW:
                 continue
             last = next(r.sid for r in reversed(day.runs) if r.sid in scen)
+            key = (sid, last, round(fc.scale, 1), day.bias_used)
+            if key in cache:
+                if cache[key] is not None:
+                    out[sid] = cache[key]
+                continue
             t = targets[last]
+            dithers = fc.dithers.get(last)
+            if dithers is None:  # a forecast kept in the day's record keeps no dithers: draw its own again
+                drawn = forecast_sides(plan.mission, {last: t}, [], plan_noise(plan), (dict(NEUTRAL), {}, []), seed)
+                dithers = drawn.dithers[last]
+            assert dithers is not None
             outcome = Outcome(int(2 * t.values[0] + t.values[1]), t.columns, t.values)
             partner = plan.u(pair["scenarios"][1 - j])
             move = find_move(
@@ -192,17 +259,18 @@ def _moves(day: _Day, targets: dict[str, Target], seed: int) -> dict[str, Move]:
                 (last, plan.u(last)),
                 partner,
                 outcome,
-                fc.dithers[last],
+                dithers,
                 plan.sensitivity(),
                 sigma,
                 seed,
             )
+            cache[key] = move
             if move is not None:
                 out[sid] = move
     return out
 
 
-def _pairs(day: _Day) -> tuple[list[Pair], list[list[list[str | Move]]]]:
+def _pairs(day: Afternoon) -> tuple[list[Pair], list[list[list[str | Move]]]]:
     """The pairs as :mod:`rapt.confirmation` plans them, and per pair and side the options (scenario ids or a move)."""
     assert day.forecasts is not None and day.moves is not None
     targets = _targets(day)
@@ -223,7 +291,7 @@ def _pairs(day: _Day) -> tuple[list[Pair], list[list[list[str | Move]]]]:
     return pairs, options
 
 
-def _chosen(day: _Day, i: int, j: int, option: str | Move, keys: list[str]) -> tuple[str, str]:
+def _chosen(day: Afternoon, i: int, j: int, option: str | Move) -> tuple[str, str]:
     """The scenario to fly (a move written into the plan first) and the one-line reason."""
     plan, fc = day.plan, day.forecasts
     assert fc is not None
@@ -234,28 +302,33 @@ def _chosen(day: _Day, i: int, j: int, option: str | Move, keys: list[str]) -> t
     who = f"pair {pair['id']}'s {SIDE_NAMES[j]} side"
     side_runs = [r for r in day.runs if r.sid in side_scenarios(plan, sid) and r.scores is not None]
     if isinstance(option, Move):
-        last = side_runs[-1]
-        logs = [Path(day.record.logs[k].path).name for k in keys]
         vid = variant_id(plan, sid)
         reason = (
-            f"{who} came out {mode_name(_scores(last))}, predicted {want}; moved {option.sigmas:g}σ in "
+            f"{who} {_came_out(day, side_runs[-1], cols, values)}; moved {option.sigmas:g}σ in "
             f"{option.parameter} as {vid} (P(shows {want}) {option.p:.2f})"
         )
-        add_variant(plan, option, vid, reason, logs, day.record.bias().to_dict())
+        add_variant(plan, option, vid, reason, [r.log for r in day.runs], day.record.bias().to_dict())
         return vid, reason
     scen = option
-    t = Target(plan.u(scen), cols, values)
-    shown, missed = _record(day, scen, t)
+    shown, missed = _record(day, scen, Target(plan.u(scen), cols, values))
     p = Option(fc.p[scen], shown, missed).p_next
     if not side_runs:
         return scen, f"{who} not flown yet: fly {scen} (P(shows {want}) {p:.2f})"
-    last = side_runs[-1]
-    got = mode_name(_scores(last))
+    came_out = _came_out(day, side_runs[-1], cols, values)
     if shown + missed == 0:
-        return scen, f"{who} came out {got}, predicted {want}; fly its variant {scen} (P(shows {want}) {p:.2f})"
-    return scen, (
-        f"{who}: {shown} of {shown + missed} runs of {scen} showed {want} (last {got}); fly it again (P(shows) {p:.2f})"
-    )
+        return scen, f"{who} {came_out}; fly its variant {scen} (P(shows {want}) {p:.2f})"
+    return scen, f"{who}: {shown} of {shown + missed} runs of {scen} showed {want}; fly it again (P(shows) {p:.2f})"
+
+
+def _came_out(day: Afternoon, run: RunOutcome, cols: tuple[int, ...], values: tuple[float, ...]) -> str:
+    """How the side's last run differed from its outcome: its mode, else the first element that differed."""
+    got, want = _scores(run), mode_name(_row(cols, values))
+    if mode_name(got) != want:
+        return f"came out {mode_name(got)}, predicted {want}"
+    for c, v in zip(cols, values):
+        if got[c] != v:
+            return f"came out {want} but {day.names[c]} {got[c]:g}, predicted {v:g}"
+    return f"came out {want} as predicted"
 
 
 def _scores(run: RunOutcome) -> np.ndarray:
@@ -270,12 +343,11 @@ def _row(cols: tuple[int, ...], values: tuple[float, ...]) -> np.ndarray:
 
 
 def _result(
-    day: _Day,
+    day: Afternoon,
     sid: str | None,
     reason: str,
     table: list[dict],
     p_confirm: list[float],
-    t0: float,
     status: list[str] | None = None,
 ) -> dict:
     status = status or [p["status"] for p in table]
@@ -293,6 +365,5 @@ def _result(
             "centre": day.record.bias().to_dict(),
             "identified": [n for n in day.record.sd if day.record.identified(n)],
         },
-        "logs": len(day.keys),
-        "seconds": round(time.perf_counter() - t0, 2),
+        "logs": len(day.runs),
     }

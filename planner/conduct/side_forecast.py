@@ -1,5 +1,10 @@
 """The chance each side's scenario shows its outcome on its next run, with the noise fitted to what the day showed.
 
+The forecasts also say how well they foresaw the runs so far (:attr:`SideForecasts.evidence`, the scale
+integrated out): ``rapt-plan next`` forecasts with the afternoon's bias only when that foresaw the day's
+outcomes at least as well as the plan's water did, the outcome-level counterpart of ``compare``'s
+held-out check of a correction.
+
 The plan dithers each scenario by the execution noise it was made with (``study.dithering.sigma_u``,
 the morning's spread of tracks about their replays where the noon step fitted it).  That spread is
 one number per kind for the whole day, while what decides a side is whether its runs show its
@@ -56,10 +61,13 @@ class SideForecasts:
     p: dict[str, float]
     weights: np.ndarray
     scale: float
-    dithers: dict[str, tuple[np.ndarray, np.ndarray]]  # at scale 1: unit-cube rows and which showed
+    dithers: dict[str, tuple[np.ndarray, np.ndarray] | None]  # at scale 1: rows and which showed (None: not kept)
+    #: log P(the runs' outcomes | this forecast), the scale integrated out: how well it foresaw the day so far
+    evidence: float = 0.0
 
     def to_dict(self) -> dict:
         return {
+            "log_evidence": round(self.evidence, 3),
             "scales": list(SCALES),
             "weights": [round(float(w), 4) for w in self.weights],
             "scale": round(self.scale, 3),
@@ -84,9 +92,48 @@ def forecast_sides(
     sigma: np.ndarray,
     bias: tuple[dict[str, float], dict[str, float], list[str]],
     seed: int = 0,
+    cache: dict | None = None,
 ) -> SideForecasts:
     """Each target scenario's P(shows its outcome), the noise's scale weighed by the runs ``flown`` so far
-    (scenario, showed), each dithered run under a draw of ``bias`` (centre, s.d., the names drawn)."""
+    (scenario, showed), each dithered run under a draw of ``bias`` (centre, s.d., the names drawn).
+
+    ``cache`` (scenario -> its P per scale and dithers, or None for them; filled here) spares scenarios already
+    drawn: the caller keeps one only while the mission, bias, noise and seed stay the same (the plan's water
+    all afternoon: ``rapt-plan next`` keeps it in the day's record).
+    """
+    cache = {} if cache is None else cache
+    todo = [s for s in targets if s not in cache]
+    if todo:
+        cache.update(_drawn(mission, {s: targets[s] for s in todo}, sigma, bias, seed))
+    ids = list(targets)
+    P = np.array([cache[s][0] for s in ids]).reshape(len(ids), len(SCALES))
+    loglik = -0.5 * (np.log(SCALES) / SCALE_PRIOR_SD) ** 2
+    row = {sid: i for i, sid in enumerate(ids)}
+    for sid, showed in flown:
+        if sid in row:
+            p = P[row[sid]] if showed else 1.0 - P[row[sid]]
+            loglik = loglik + np.log((1.0 - CONTAMINATION) * p + CONTAMINATION / 2)
+    prior = -0.5 * (np.log(SCALES) / SCALE_PRIOR_SD) ** 2
+    w = np.exp(loglik - loglik.max())
+    evidence = float(loglik.max() + np.log(w.sum()) - (prior.max() + np.log(np.exp(prior - prior.max()).sum())))
+    w /= w.sum()
+    return SideForecasts(
+        {sid: float(P[i] @ w) for i, sid in enumerate(ids)},
+        w,
+        float(np.exp(np.log(SCALES) @ w)),
+        {s: cache[s][1] for s in ids},
+        evidence,
+    )
+
+
+def _drawn(
+    mission: Mission,
+    targets: dict[str, Target],
+    sigma: np.ndarray,
+    bias: tuple[dict[str, float], dict[str, float], list[str]],
+    seed: int,
+) -> dict[str, tuple[np.ndarray, tuple[np.ndarray, np.ndarray]]]:
+    """Per scenario: P(shows) at each of :data:`SCALES` and its dithers at scale 1, all in a batch per scale."""
     ids = list(targets)
     U = np.array([targets[s].u for s in ids]).reshape(len(ids), -1)
     k = len(ids)
@@ -103,17 +150,4 @@ def forecast_sides(
             P[i, g] = float(shows[valid[i]].mean()) if valid[i].any() else 0.0
             if scale == 1.0:
                 dithers[sid] = (rows[i], shows)
-    loglik = -0.5 * (np.log(SCALES) / SCALE_PRIOR_SD) ** 2
-    row = {sid: i for i, sid in enumerate(ids)}
-    for sid, showed in flown:
-        if sid in row:
-            p = P[row[sid]] if showed else 1.0 - P[row[sid]]
-            loglik = loglik + np.log((1.0 - CONTAMINATION) * p + CONTAMINATION / 2)
-    w = np.exp(loglik - loglik.max())
-    w /= w.sum()
-    return SideForecasts(
-        {sid: float(P[i] @ w) for i, sid in enumerate(ids)},
-        w,
-        float(np.exp(np.log(SCALES) @ w)),
-        dithers,
-    )
+    return {sid: (P[i], dithers[sid]) for i, sid in enumerate(ids)}
