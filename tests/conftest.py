@@ -44,3 +44,12 @@ def _plans_agree_with_themselves(tmp_path_factory):
             continue
         problems = plan_contradictions(plan)
         assert not problems, f"{path} contradicts itself: " + "; ".join(problems)
+
+
+@pytest.fixture(scope="session")
+def small_plan_dir(tmp_path_factory):
+    """A 2-pair plan of range2017 with its execution noise (:mod:`tests.support.small_plan`), made once a session;
+    tests that write into a plan take a copy (:func:`tests.support.small_plan.plan_copy`)."""
+    from tests.support.small_plan import small_plan
+
+    return small_plan(tmp_path_factory.mktemp("small_plan") / "plan")

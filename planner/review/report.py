@@ -358,6 +358,29 @@ def _pair_section(result: dict) -> list[str]:
     return parts
 
 
+def _confirmation_section(result: dict) -> list[str]:
+    """Per pair: each side's runs that showed its outcome, by scenario flown, and whether the boundary is confirmed."""
+    parts = [
+        "<h2>Boundaries confirmed</h2><p>A side has shown its boundary when its runs say so at 3:1 odds "
+        "(P(q &gt; 1/2) &ge; 0.75 under a uniform prior: one run that shows; 3 of 4 after a miss); a pair is "
+        "confirmed when both sides have.</p><table><tr><th>pair</th><th class='l'>side a</th>"
+        "<th class='l'>side b</th><th>status</th></tr>"
+    ]
+
+    def side(s: dict) -> str:
+        runs = ", ".join(f"{f['scenario']} {f['showed']}/{f['runs']}" for f in s["flown"])
+        return _e(f"{s['status']} ({runs})" if runs else s["status"])
+
+    for p in result.get("confirmation", []):
+        status = p["status"] if p["status"] == "confirmed" else f"<span class='bad'>{_e(p['status'])}</span>"
+        parts.append(
+            f"<tr><td>{_e(p['id'])}</td><td class='l'>{side(p['sides'][0])}</td>"
+            f"<td class='l'>{side(p['sides'][1])}</td><td>{status}</td></tr>"
+        )
+    parts.append("</table>")
+    return parts
+
+
 def _replan_section(result: dict) -> list[str]:
     """The adjusted scenarios proposed for the next runs, and the unflown ones re-predicted."""
     parts = ["<h2>Re-plan: adjusted scenarios for the next runs</h2>"]
@@ -422,6 +445,7 @@ def write_comparison_report(
     parts += _scenario_section(result, plan, tracks, traj, fig_dir)
     parts += _forecast_section(result)
     parts += _pair_section(result)
+    parts += _confirmation_section(result)
     parts += _replan_section(result)
     parts.append("</body></html>")
     page = out_dir / REPORT_NAME
