@@ -1,6 +1,7 @@
 """The afternoon conducted run by run against fixed afternoons, on a simulated range day (issue 49).
 
-    python benchmarks/afternoon.py [--days 20] [--budgets 10,14,20] [--noise 1.5] [--bias speed=0.95,...] [--quick]
+    python benchmarks/afternoon.py [--days 12] [--budgets 10,14,20] [--noise 1.5] [--bias speed=0.95,...]
+                                   [--work DIR] [--quick]
 
 The vehicle is the batch simulator flown as the water flies it, not as the plan predicts: every
 run is one stochastic run (the simulator's in-run effects on) of the scenario moved by Gaussian
@@ -8,8 +9,9 @@ execution noise ``--noise`` times the plan's (``study.dithering.sigma_u``), unde
 the plan does not know (``--bias``).  So a side shows its outcome with its own per-run chance q,
 which the table prints (1 - q is its flip probability, measured on 400 such runs).
 
-The plan is the committed ``field_plans/range2017`` plan.  Each simulated day flies, with the same
-vehicle and seeds:
+The plan is range2017's, generated as ``rapt-plan generate examples/range2017.toml --budget 4000
+--pairs 5`` does (into ``--work``, kept: its study store is where ``next`` finds new pairs for a
+boundary that fell through).  Each simulated day flies, with the same vehicle and seeds:
 
 * ``each side once``: every pair side as the range flies it (its robust variant where the plan made
   one), 10 runs;
@@ -40,12 +42,33 @@ sys.path.insert(0, str(ROOT))
 
 import sim.uuv  # noqa: E402
 from planner.common.plans import Plan, load_plan  # noqa: E402
+from planner.conduct.day_record import DayRecord  # noqa: E402
+from planner.conduct.new_pairs import study_alternatives  # noqa: E402
 from planner.conduct.next_run import afternoon, decide  # noqa: E402
-from planner.review.confirmations import RunOutcome, confirmation_table, outcome_columns  # noqa: E402
+from planner.review.confirmations import (  # noqa: E402
+    RunOutcome,
+    boundaries_confirmed,
+    confirmation_table,
+    outcome_columns,
+)
 from planner.review.forecast import plan_noise  # noqa: E402
 from sim.uuv.bias import Bias, parse_bias  # noqa: E402
 
-PLAN = ROOT / "field_plans" / "range2017" / "plan.json"
+MISSION = ROOT / "examples" / "range2017.toml"
+#: The plan's search budget and pairs.
+BUDGET, PAIRS = 4000, 5
+
+
+def make_plan(work: Path) -> Path:
+    """range2017's plan in ``work/plan`` with its study store, as ``rapt-plan generate`` writes it (made once)."""
+    from planner.plan.generate import GenerateConfig, generate
+
+    out = work / "plan"
+    if not (out / "plan.json").is_file():
+        out.mkdir(parents=True, exist_ok=True)
+        cfg = GenerateConfig(budget=BUDGET, pairs=PAIRS, seed=0, store=out / "study.db")
+        generate(sim.uuv.load_mission(MISSION), MISSION, out, cfg)
+    return out / "plan.json"
 
 
 class Vehicle:
@@ -70,9 +93,9 @@ def flown_list(plan: Plan) -> list[str]:
 
 
 def confirmed(plan: Plan, runs: list[RunOutcome]) -> int:
+    """Boundaries confirmed by ``runs`` (by a pair of the plan, or a new pair next wrote across the boundary)."""
     day = afternoon(plan, [])
-    table = confirmation_table(plan, day.names, day.predicted, runs)
-    return sum(p["status"] == "confirmed" for p in table)
+    return boundaries_confirmed(plan, confirmation_table(plan, day.names, day.predicted, runs))
 
 
 def outcome(scores: np.ndarray) -> np.ndarray | None:
@@ -88,24 +111,27 @@ def fixed_day(plan: Plan, vehicle: Vehicle, repeats: int, seed: int) -> tuple[in
     return confirmed(plan, runs), len(runs)
 
 
-def conducted_day(plan_file: Path, vehicle: Vehicle, budget: int, seed: int, cache: dict) -> tuple[int, int]:
-    """One conducted afternoon; ``cache`` keeps the forecasts in the plan's water (and the moves searched)
-    from day to day: they depend on the plan, not on the runs."""
+def conducted_day(
+    plan_file: Path, vehicle: Vehicle, budget: int, seed: int, cache: dict, alternatives: dict
+) -> tuple[int, int]:
+    """One conducted afternoon on its own copy of the plan.  ``cache`` keeps, from day to day, the forecasts of
+    the plan's own scenarios in its water and the moves searched: they depend on the plan, not on the runs."""
     rng = np.random.default_rng(seed)
-    planned = {s["id"] for s in load_plan(plan_file).scenarios + load_plan(plan_file).variants}
-    drawn = {k: v for k, v in cache.items() if k in planned}  # a day's moves are its own: drawn for it alone
+    planned = {s["id"] for s in (lambda p: p.scenarios + p.variants)(load_plan(plan_file))}
+    drawn = {k: v for k, v in cache.items() if k in planned}  # a day's moves and new pairs are its own
     with tempfile.TemporaryDirectory(prefix="rapt_afternoon_") as tmp:
         shutil.copytree(plan_file.parent, tmp, dirs_exist_ok=True)
         plan = load_plan(Path(tmp) / "plan.json")
+        record = DayRecord(plan.id, alternatives=alternatives)
         runs: list[RunOutcome] = []
+        known = afternoon(plan, [], record)
         for k in range(budget):
-            answer = decide(
-                afternoon(plan, runs), budget - k, seed=0, cache=cache, move_cache=cache.setdefault("moves", {})
-            )
+            known = afternoon(plan, runs, record, known=known)
+            answer = decide(known, budget - k, seed=0, cache=drawn, move_cache=cache.setdefault("moves", {}))
             if answer["next"] is None:
                 break
             sid = answer["next"]["scenario"]
-            plan = load_plan(plan.path)  # a move is written into the plan
+            plan = load_plan(plan.path)  # a move or a new pair is written into the plan
             runs.append(RunOutcome(sid, outcome(vehicle.fly(plan.u(sid), rng)[0])))
         cache.update({k: v for k, v in drawn.items() if k in planned})
         return confirmed(plan, runs), len(runs)
@@ -130,18 +156,23 @@ def side_flips(plan: Plan, vehicle: Vehicle) -> list[tuple[str, float]]:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--days", type=int, default=20, help="Simulated days per policy (seeds 0..days-1).")
+    ap.add_argument("--days", type=int, default=12, help="Simulated days per policy (seeds 0..days-1).")
     ap.add_argument("--budgets", default="10,14,20", help="Run budgets of the conducted afternoon.")
     ap.add_argument("--noise", type=float, default=1.5, help="The vehicle's execution noise, in the plan's.")
     ap.add_argument("--bias", default="speed=0.95,current_offset=0.1", help="The day's bias the plan does not know.")
+    ap.add_argument("--work", type=Path, default=None, help="Directory for the plan (kept: made once).")
     ap.add_argument("--quick", action="store_true", help="3 days, budget 14.")
     args = ap.parse_args(argv)
     days = 3 if args.quick else args.days
     budgets = [14] if args.quick else [int(b) for b in args.budgets.split(",")]
-    plan = load_plan(PLAN)
+    plan_file = make_plan(args.work or Path(tempfile.mkdtemp(prefix="rapt_afternoon_plan_")))
+    plan = load_plan(plan_file)
+    alternatives = study_alternatives(plan)
     vehicle = Vehicle(plan, args.noise, parse_bias(args.bias))
     flips = side_flips(plan, vehicle)
-    print(f"plan {PLAN.relative_to(ROOT)}; vehicle: noise {args.noise:g}x the plan's, bias {args.bias}; {days} days")
+    print(
+        f"plan of {MISSION.relative_to(ROOT)} (budget {BUDGET}, {PAIRS} pairs); vehicle: noise {args.noise:g}x the plan's, bias {args.bias}; {days} days"
+    )
     print("side flip probabilities: " + ", ".join(f"{s} {p:.2f}" for s, p in flips))
     print(f"sides flipping with P >= 0.1: {sum(p >= 0.1 for _, p in flips)} of {len(flips)}")
     rows = []
@@ -152,7 +183,8 @@ def main(argv: list[str] | None = None) -> int:
     cache: dict = {"moves": {}}
     for b in budgets:
         t0 = time.perf_counter()
-        rows.append((f"next, budget {b}", [conducted_day(PLAN, vehicle, b, s, cache) for s in range(days)],
+        rows.append((f"next, budget {b}", [conducted_day(plan_file, vehicle, b, s, cache, alternatives)
+                                           for s in range(days)],
                      time.perf_counter() - t0))  # fmt: skip
     twice = next(np.mean([c for c, _ in r]) / np.mean([n for _, n in r]) for label, r, _ in rows if "twice" in label)
     print()

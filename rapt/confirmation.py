@@ -113,11 +113,23 @@ class Side:
 
 @dataclass(frozen=True)
 class Pair:
+    """A boundary's pair: two sides, and any replacement pairs across the same boundary (one confirmed is enough)."""
+
     sides: tuple[Side, Side]
+    replacements: tuple[Pair, ...] = ()
+
+    @property
+    def own_confirmed(self) -> bool:
+        return self.sides[0].shown and self.sides[1].shown
 
     @property
     def confirmed(self) -> bool:
-        return self.sides[0].shown and self.sides[1].shown
+        return self.own_confirmed or any(r.confirmed for r in self.replacements)
+
+    @property
+    def alternatives(self) -> tuple[Pair, ...]:
+        """The pair itself, then its replacements (the ``alternative`` index of a :class:`Choice`)."""
+        return (self, *self.replacements)
 
 
 @lru_cache(maxsize=65536)
@@ -155,9 +167,11 @@ def _side_curve(side: Side, runs: int) -> np.ndarray:
 
 
 def pair_curve(pair: Pair, runs: int) -> np.ndarray:
-    """P(the pair is confirmed within r more runs), r = 0..``runs``: the best split between its sides."""
+    """P(the pair is confirmed within r more runs), r = 0..``runs``: the best split between its sides, or the best
+    of its replacements' (the runs go to one of them)."""
     a, b = (_side_curve(s, runs) for s in pair.sides)
-    return np.array([max(a[i] * b[r - i] for i in range(r + 1)) for r in range(runs + 1)])
+    own = np.array([max(a[i] * b[r - i] for i in range(r + 1)) for r in range(runs + 1)])
+    return np.max([own, *(pair_curve(r, runs) for r in pair.replacements)], axis=0)
 
 
 def allocate(curves: Sequence[np.ndarray], runs: int) -> tuple[float, list[int]]:
@@ -196,16 +210,19 @@ class Choice:
     now: float  # pairs confirmed now
     p_confirm: list[float]  # per pair: its chance of confirmation under the day's best split of the runs left
     lost: list[bool]
+    alternative: int = 0  # which of the pair's :attr:`Pair.alternatives` the run is of (0: the pair itself)
 
 
-def _with(pairs: Sequence[Pair], i: int, j: int, k: int, showed: bool) -> list[Pair]:
-    side = pairs[i].sides[j]
+def _with(pairs: Sequence[Pair], i: int, a: int, j: int, k: int, showed: bool) -> list[Pair]:
+    alts = list(pairs[i].alternatives)
+    side = alts[a].sides[j]
     opts = list(side.options)
     opts[k] = opts[k].after(showed)
-    sides = list(pairs[i].sides)
+    sides = list(alts[a].sides)
     sides[j] = Side(tuple(opts))
+    alts[a] = replace(alts[a], sides=(sides[0], sides[1]))
     out = list(pairs)
-    out[i] = Pair((sides[0], sides[1]))
+    out[i] = replace(alts[0], replacements=tuple(alts[1:]))
     return out
 
 
@@ -216,23 +233,28 @@ def next_run(pairs: Sequence[Pair], runs_left: int) -> Choice:
     _, split = allocate(curves, max(runs_left, 0))
     p_confirm = [float(c[r]) for c, r in zip(curves, split)]
     lost = [not p.confirmed and float(c[-1]) < LOST_BELOW for p, c in zip(pairs, curves)]
-    best: tuple[float, float, int, int, int] | None = None
-    if runs_left > 0:
-        for i, pair in enumerate(pairs):
-            if pair.confirmed:
-                continue
-            for j, side in enumerate(pair.sides):
-                if side.shown:
-                    continue
-                for k, opt in enumerate(side.options):
-                    q = opt.p_next
-                    v = q * _value(_with(pairs, i, j, k, True), runs_left - 1)
-                    v += (1 - q) * _value(_with(pairs, i, j, k, False), runs_left - 1)
-                    # equal values: the run most likely to settle its side at once (fewer runs spent)
-                    settles = q if opt.after(True).status == "shown" else 0.0
-                    if best is None or v > best[0] + 1e-9 or (v > best[0] - 1e-9 and settles > best[1] + 1e-9):
-                        best = (v, settles, i, j, k)
+    best: tuple[float, float, int, int, int, int] | None = None
+    for i, a, j, k, opt in _runs(pairs) if runs_left > 0 else ():
+        q = opt.p_next
+        v = q * _value(_with(pairs, i, a, j, k, True), runs_left - 1)
+        v += (1 - q) * _value(_with(pairs, i, a, j, k, False), runs_left - 1)
+        # equal values: the run most likely to settle its side at once (fewer runs spent)
+        settles = q if opt.after(True).status == "shown" else 0.0
+        if best is None or v > best[0] + 1e-9 or (v > best[0] - 1e-9 and settles > best[1] + 1e-9):
+            best = (v, settles, i, a, j, k)
     if best is None or best[0] < now + STOP_GAIN:
         return Choice(None, None, None, now, now, p_confirm, lost)
-    v, _, i, j, k = best
-    return Choice(i, j, k, v, now, p_confirm, lost)
+    v, _, i, a, j, k = best
+    return Choice(i, j, k, v, now, p_confirm, lost, a)
+
+
+def _runs(pairs: Sequence[Pair]):
+    """Every run that could be flown: (pair, alternative, side, option, the option) of each unconfirmed pair."""
+    for i, pair in enumerate(pairs):
+        if pair.confirmed:
+            continue
+        for a, alt in enumerate(pair.alternatives):
+            for j, side in enumerate(alt.sides):
+                if not side.shown:
+                    for k, opt in enumerate(side.options):
+                        yield i, a, j, k, opt

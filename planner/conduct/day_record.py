@@ -78,6 +78,8 @@ class DayRecord:
     #: on the plan and the seed only, so they are drawn once an afternoon (``forecast_seed`` says for which seed)
     forecasts: dict[str, tuple] = field(default_factory=dict)
     forecast_seed: int | None = None
+    #: per plan pair id, the noon study's other pairs across its boundary (unit rows; None: not read yet)
+    alternatives: dict[str, list] | None = None
 
     def bias(self) -> Bias:
         """The afternoon's bias: each identified parameter's posterior centre, the others neutral."""
@@ -95,6 +97,7 @@ class DayRecord:
                 "seed": self.forecast_seed,
                 "p_by_scale": {s: [float(x) for x in v[0]] for s, v in self.forecasts.items()},
             },
+            "alternatives": self.alternatives,
         }
 
     def save(self, directory: Path) -> None:
@@ -113,7 +116,14 @@ def load_record(directory: Path, plan: Plan) -> DayRecord:
         f = data.get("forecasts") or {}
         drawn = {sid: (np.asarray(p, dtype=float), None) for sid, p in (f.get("p_by_scale") or {}).items()}
         return DayRecord(
-            plan.id, logs, list(b["logs"]), {**NEUTRAL, **b["centre"]}, {**PRIOR_SD, **b["sd"]}, drawn, f.get("seed")
+            plan.id,
+            logs,
+            list(b["logs"]),
+            {**NEUTRAL, **b["centre"]},
+            {**PRIOR_SD, **b["sd"]},
+            drawn,
+            f.get("seed"),
+            data.get("alternatives"),
         )
     except (OSError, ValueError, KeyError, TypeError):
         return DayRecord(plan.id)

@@ -30,10 +30,17 @@ import numpy as np
 import sim.uuv
 from planner.common.plans import Plan, load_plan
 from planner.conduct.day_record import DayRecord, load_record, read_logs, update_bias
+from planner.conduct.new_pairs import NewPair, add_pair, candidate, study_alternatives
 from planner.conduct.side_forecast import SideForecasts, Target, forecast_sides
 from planner.conduct.side_moves import Move, add_variant, find_move, variant_id
 from planner.plan.dithering import Outcome
-from planner.review.confirmations import RunOutcome, confirmation_table, outcome_columns, side_scenarios
+from planner.review.confirmations import (
+    RunOutcome,
+    boundaries_confirmed,
+    confirmation_table,
+    outcome_columns,
+    side_scenarios,
+)
 from planner.review.forecast import plan_noise
 from planner.review.runs import predict_plan
 from rapt.confirmation import Option, Pair, Side, next_run
@@ -114,6 +121,9 @@ def conduct(
         for r in (record.logs[k] for k in keys)
         if r.checks_passed
     ]
+    if record.alternatives is None:
+        say("reading the noon study's other pairs across each boundary")
+        record.alternatives = study_alternatives(plan)
     say("forecasting the sides in the day's water")
     if record.forecast_seed != seed:
         record.forecasts, record.forecast_seed = {}, seed
@@ -136,7 +146,7 @@ def afternoon(
         names = list(pred.names)
     else:
         predicted, names = dict(known.predicted), known.names
-        new = [s["id"] for s in plan.variants if s["id"] not in predicted]
+        new = [s["id"] for s in plan.scenarios + plan.variants if s["id"] not in predicted]
         if new:
             r = sim.uuv.simulate(plan.mission, np.array([plan.u(s) for s in new]))
             predicted.update({s: r.scores[k] for k, s in enumerate(new)})
@@ -153,23 +163,52 @@ def decide(
     plan = day.plan
     table = confirmation_table(plan, day.names, day.predicted, day.runs)
     if runs_left == 0:
-        confirmed = sum(p["status"] == "confirmed" for p in table)
-        reason = f"done: no runs left; {confirmed} of {len(table)} boundaries confirmed"
-        return _result(day, None, reason, table, [1.0 if p["status"] == "confirmed" else 0.0 for p in table])
+        confirmed = boundaries_confirmed(plan, table)
+        reason = f"done: no runs left; {confirmed} of {len(_originals(plan))} boundaries confirmed"
+        status = {int(p["id"]): p["status"] for p in table}
+        return _result(day, None, reason, table, {k: float(v == "confirmed") for k, v in status.items()}, status)
     targets = _targets(day)
     day.forecasts = _forecasts(day, targets, seed, cache)
     day.moves = _moves(day, targets, seed, {} if move_cache is None else move_cache)
-    pairs, options = _pairs(day)
+    pairs, alts = _boundaries(day, targets, {})
     choice = next_run(pairs, runs_left)
-    p_confirm = [1.0 if p.confirmed else q for p, q in zip(pairs, choice.p_confirm)]
-    status = ["confirmed" if p.confirmed else "lost" if lost else "open" for p, lost in zip(pairs, choice.lost)]
+    originals = _originals(plan)
+    lost = [int(p["id"]) for p, gone in zip(originals, choice.lost) if gone and not _replacements(plan, p)]
+    candidates = _candidates(day, lost)
+    if candidates:  # a boundary fell through: new pairs across it, forecast with the others
+        targets.update(_candidate_targets(day, candidates))
+        day.forecasts = _forecasts(day, targets, seed, cache)
+        pairs, alts = _boundaries(day, targets, candidates)
+        choice = next_run(pairs, runs_left)
+    statuses, p_confirm = _statuses(plan, pairs, choice)
+    done = sum(p.confirmed for p in pairs)
     if choice.pair is None:
-        done = sum(p.confirmed for p in pairs)
         reason = f"stop: no run raises the boundaries expected confirmed ({done} of {len(pairs)} confirmed)"
-        return _result(day, None, reason, table, p_confirm, status)
+        return _result(day, None, reason, table, p_confirm, statuses)
     assert choice.side is not None and choice.option is not None
-    sid, reason = _chosen(day, choice.pair, choice.side, options[choice.pair][choice.side][choice.option])
-    return _result(day, sid, reason, table, p_confirm, status)
+    alt = alts[choice.pair][choice.alternative]
+    option = alt.options[choice.side][choice.option]
+    if alt.new is not None:
+        sid, reason = _new_pair_chosen(day, alt, choice.side, table)
+        table = confirmation_table(plan, day.names, {**day.predicted, **_new_predictions(plan, alt)}, day.runs)
+        statuses, p_confirm = _statuses(plan, pairs, choice)
+    else:
+        sid, reason = _chosen(day, alt.pair, choice.side, option)
+    return _result(day, sid, reason, table, p_confirm, statuses)
+
+
+def _statuses(plan: Plan, pairs: list[Pair], choice) -> tuple[dict[int, str], dict[int, float]]:
+    """Per plan pair id: confirmed, open or lost, and its chance of confirmation by the day's end.  A boundary's
+    pairs share its chance; a pair another replaced is lost, and a pair confirmed is certain."""
+    status, p = {}, {}
+    for b, pair in enumerate(_originals(plan)):
+        members = [pair, *_replacements(plan, pair)]
+        for k, q in enumerate(members):
+            own = (pairs[b].alternatives[k] if k < len(pairs[b].alternatives) else pairs[b]).own_confirmed
+            gone = choice.lost[b] or (k == 0 and len(members) > 1)
+            status[int(q["id"])] = "confirmed" if own else "lost" if gone else "open"
+            p[int(q["id"])] = 1.0 if own else 0.0 if gone else float(choice.p_confirm[b])
+    return status, p
 
 
 def _forecasts(day: Afternoon, targets: dict[str, Target], seed: int, cache: dict | None) -> SideForecasts:
@@ -270,32 +309,99 @@ def _moves(day: Afternoon, targets: dict[str, Target], seed: int, cache: dict) -
     return out
 
 
-def _pairs(day: Afternoon) -> tuple[list[Pair], list[list[list[str | Move]]]]:
-    """The pairs as :mod:`rapt.confirmation` plans them, and per pair and side the options (scenario ids or a move)."""
+@dataclass
+class Alternative:
+    """One pair across a boundary as the plan flies it: a plan pair, or a new pair not yet written (``new``);
+    per side the options, each a scenario id or a move."""
+
+    pair: dict
+    options: list[list[str | Move]]
+    new: NewPair | None = None
+
+
+def _plan_alternative(day: Afternoon, pair: dict, targets: dict[str, Target]) -> tuple[Pair, Alternative]:
     assert day.forecasts is not None and day.moves is not None
-    targets = _targets(day)
-    pairs, options = [], []
-    for pair in day.plan.pairs:
-        sides, opts = [], []
-        for sid in pair["scenarios"]:
-            ids = side_scenarios(day.plan, sid)
-            side = [Option(day.forecasts.p[s], *_record(day, s, targets[s])) for s in ids]
-            scen: list[str | Move] = list(ids)
-            if sid in day.moves:
-                scen.append(day.moves[sid])
-                side.append(Option(day.moves[sid].p))
-            sides.append(Side(tuple(side)))
-            opts.append(scen)
-        pairs.append(Pair((sides[0], sides[1])))
-        options.append(opts)
-    return pairs, options
+    sides, opts = [], []
+    for sid in pair["scenarios"]:
+        ids = side_scenarios(day.plan, sid)
+        side = [Option(day.forecasts.p[s], *_record(day, s, targets[s])) for s in ids]
+        scen: list[str | Move] = list(ids)
+        if sid in day.moves:
+            scen.append(day.moves[sid])
+            side.append(Option(day.moves[sid].p))
+        sides.append(Side(tuple(side)))
+        opts.append(scen)
+    return Pair((sides[0], sides[1])), Alternative(pair, opts)
 
 
-def _chosen(day: Afternoon, i: int, j: int, option: str | Move) -> tuple[str, str]:
+def _boundaries(
+    day: Afternoon, targets: dict[str, Target], candidates: dict[int, list[NewPair]]
+) -> tuple[list[Pair], list[list[Alternative]]]:
+    """Per boundary (a plan pair generate chose): the pair as :mod:`rapt.confirmation` plans it, its replacements
+    (the new pairs written for it today, then ``candidates``), and each alternative's options."""
+    assert day.forecasts is not None
+    plan = day.plan
+    model: list[Pair] = []
+    alternatives: list[list[Alternative]] = []
+    for pair in _originals(plan):
+        built = [_plan_alternative(day, q, targets) for q in [pair, *_replacements(plan, pair)]]
+        pairs: list[Pair] = [b[0] for b in built]
+        alts: list[Alternative] = [b[1] for b in built]
+        for k, new in enumerate(candidates.get(int(pair["id"]), [])):
+            ids = [_candidate_id(new, k, side) for side in "ab"]
+            pairs.append(Pair((Side((Option(day.forecasts.p[ids[0]]),)), Side((Option(day.forecasts.p[ids[1]]),)))))
+            alts.append(Alternative(pair, [[ids[0]], [ids[1]]], new))
+        model.append(replace(pairs[0], replacements=tuple(pairs[1:])))
+        alternatives.append(alts)
+    return model, alternatives
+
+
+def _originals(plan: Plan) -> list[dict]:
+    """The plan's boundaries: the pairs generate chose (not the new ones next wrote)."""
+    return [p for p in plan.pairs if "origin" not in p]
+
+
+def _replacements(plan: Plan, pair: dict) -> list[dict]:
+    return [p for p in plan.pairs if p.get("origin", {}).get("replaces") == pair["id"]]
+
+
+def _candidate_id(new: NewPair, k: int, side: str) -> str:
+    """A forecast's name for side ``side`` of the ``k``-th new pair offered for pair ``new.replaces``."""
+    return f"new{new.replaces}.{k}{side}"
+
+
+def _candidates(day: Afternoon, lost: list[int]) -> dict[int, list[NewPair]]:
+    """For each lost boundary, the noon study's other pairs across it not yet written into the plan."""
+    plan, out = day.plan, {}
+    written = [plan.u(s) for p in plan.pairs for s in p["scenarios"]]
+    for pid in lost:
+        pair = next(p for p in plan.pairs if int(p["id"]) == pid)
+        found = []
+        for rows in (day.record.alternatives or {}).get(str(pid), []):
+            new = candidate(plan, pair, rows, day.names)
+            if new is not None and not any(np.allclose(new.U[0], w) for w in written):
+                found.append(new)
+        if found:
+            out[pid] = found
+    return out
+
+
+def _candidate_targets(day: Afternoon, candidates: dict[int, list[NewPair]]) -> dict[str, Target]:
+    plan, out = day.plan, {}
+    for pid, news in candidates.items():
+        cols = outcome_columns(next(p for p in plan.pairs if int(p["id"]) == pid), day.names)
+        for k, new in enumerate(news):
+            for s, side in enumerate("ab"):
+                out[_candidate_id(new, k, side)] = Target(
+                    new.U[s], tuple(cols), tuple(float(v) for v in new.scores[s][cols])
+                )
+    return out
+
+
+def _chosen(day: Afternoon, pair: dict, j: int, option: str | Move) -> tuple[str, str]:
     """The scenario to fly (a move written into the plan first) and the one-line reason."""
     plan, fc = day.plan, day.forecasts
     assert fc is not None
-    pair = plan.pairs[i]
     sid = pair["scenarios"][j]
     cols, values = _side_target(day, pair, sid)
     want = mode_name(_row(cols, values))
@@ -318,6 +424,30 @@ def _chosen(day: Afternoon, i: int, j: int, option: str | Move) -> tuple[str, st
     if shown + missed == 0:
         return scen, f"{who} {came_out}; fly its variant {scen} (P(shows {want}) {p:.2f})"
     return scen, f"{who}: {shown} of {shown + missed} runs of {scen} showed {want}; fly it again (P(shows) {p:.2f})"
+
+
+def _new_pair_chosen(day: Afternoon, alt: Alternative, j: int, table: list[dict]) -> tuple[str, str]:
+    """A new pair written into the plan for a boundary that fell through; its side ``j`` to fly, and the reason."""
+    assert alt.new is not None and day.forecasts is not None
+    old = alt.pair
+    p_sides = [day.forecasts.p[_candidate_id(alt.new, 0, side)] for side in "ab"]
+    row = next(r for r in table if r["id"] == old["id"])
+    why = "; ".join(f"its {side} side {r['status']}" for side, r in zip("ab", row["sides"]))
+    n = max(int(p["id"]) for p in day.plan.pairs) + 1
+    sid = f"pair{n}{'ab'[j]}"
+    reason = (
+        f"pair {old['id']}'s boundary ({', '.join(old.get('elements', []))}) fell through ({why}, no move holds "
+        f"with the runs left); new pair {n} across it from the noon study, {alt.new.distance:.3f} apart: "
+        f"fly {sid} (P(shows) {p_sides[j]:.2f})"
+    )
+    add_pair(day.plan, alt.new, day.names, reason, [r.log for r in day.runs], p_sides)
+    return sid, reason
+
+
+def _new_predictions(plan: Plan, alt: Alternative) -> dict[str, np.ndarray]:
+    """The predicted scores of the new pair just written (the plan's last pair)."""
+    assert alt.new is not None
+    return dict(zip(plan.pairs[-1]["scenarios"], alt.new.scores))
 
 
 def _came_out(day: Afternoon, run: RunOutcome, cols: tuple[int, ...], values: tuple[float, ...]) -> str:
@@ -343,27 +473,25 @@ def _row(cols: tuple[int, ...], values: tuple[float, ...]) -> np.ndarray:
 
 
 def _result(
-    day: Afternoon,
-    sid: str | None,
-    reason: str,
-    table: list[dict],
-    p_confirm: list[float],
-    status: list[str] | None = None,
+    day: Afternoon, sid: str | None, reason: str, table: list[dict], p_confirm: dict[int, float], status: dict[int, str]
 ) -> dict:
-    status = status or [p["status"] for p in table]
+    pairs = []
+    for p in table:
+        row = {"id": p["id"], "status": status[int(p["id"])], "p_confirm": round(float(p_confirm[int(p["id"])]), 4)}
+        if "replaces" in p:
+            row["replaces"] = p["replaces"]
+        pairs.append(row)
+    fc = day.forecasts
     return {
         "next": None if sid is None else {"scenario": sid, "plan": str(day.plan.path)},
         "reason": reason,
-        "pairs": [
-            {"id": p["id"], "status": s, "p_confirm": round(float(q), 4)} for p, s, q in zip(table, status, p_confirm)
-        ],
+        "pairs": pairs,
         "confirmation": table,
-        "forecast": None
-        if day.forecasts is None
-        else {**day.forecasts.to_dict(), "p_shows": {k: round(v, 4) for k, v in day.forecasts.p.items()}},
+        "forecast": None if fc is None else {**fc.to_dict(), "p_shows": {k: round(v, 4) for k, v in fc.p.items()}},
         "bias": {
             "centre": day.record.bias().to_dict(),
             "identified": [n for n in day.record.sd if day.record.identified(n)],
+            "used": day.bias_used,
         },
         "logs": len(day.runs),
     }

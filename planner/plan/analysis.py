@@ -28,7 +28,7 @@ from sim.uuv.metrics import metric_names, metric_types
 from sim.uuv.mission import Mission
 from sim.uuv.scoring import MODE_NAMES, modes_from_scores
 
-__all__ = ["Analysis", "analyse", "select_pairs", "confirm_with_expert", "pair_points"]
+__all__ = ["Analysis", "analyse", "select_pairs", "confirm_with_expert", "pair_points", "pairs_across"]
 
 SPOT_CHECK_RUNS = 8  # stored runs simulated again before an analysis trusts the store
 
@@ -148,3 +148,16 @@ def confirm_with_expert(mission: Mission, a: Analysis, candidates: list[dict], k
 def pair_points(a: Analysis, pair: dict) -> np.ndarray:
     """A pair's two unit-cube scenarios: moved ones (refined or confirmed) or the study's rows."""
     return np.asarray(pair["u_override"] if "u_override" in pair else a.X[pair["rows"]], dtype=float)
+
+
+def pairs_across(a: Analysis, level: int, elements: list[str]) -> list[tuple[int, int, float]]:
+    """The study's boundary pairs of one type (its level, and the elements that differ across it), shortest first:
+    (row, row, unit-cube distance)."""
+    i, j, d, lv = a.tree.pairs()
+    want = list(elements)
+    out = [
+        (ii, jj, dd)
+        for ii, jj, dd, ll in zip(i.tolist(), j.tolist(), d.tolist(), lv.tolist())
+        if ll == level and _pair_elements(a, ii, jj, ll) == want
+    ]
+    return sorted(out, key=lambda p: p[2])

@@ -22,8 +22,8 @@ from sim.uuv.scoring import MODE_NAMES
 
 __all__ = ["scenario_entries", "variant_entries", "remove_unlisted"]
 
-#: A file this module writes for a scenario (pair<k><side>, and M for a variant): only such files are removed.
-SCENARIO_FILE = re.compile(r"pair\d+[ab]M?\.(plan|waypoints|geojson)")
+#: A file of a plan scenario (pair<k><side>; M for a variant, A<n> for a move rapt-plan next made): only such are removed.
+SCENARIO_FILE = re.compile(r"pair\d+[ab](M|A\d+)?\.(plan|waypoints|geojson)")
 
 
 def scenario_entries(

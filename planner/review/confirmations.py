@@ -25,7 +25,15 @@ from planner.common.plans import Plan
 from rapt.confirmation import evidence, side_status
 from sim.uuv.scoring import mode_name
 
-__all__ = ["RunOutcome", "pair_elements", "outcome_columns", "side_scenarios", "confirmation_table", "SIDE_ORDER"]
+__all__ = [
+    "RunOutcome",
+    "pair_elements",
+    "outcome_columns",
+    "side_scenarios",
+    "confirmation_table",
+    "boundaries_confirmed",
+    "SIDE_ORDER",
+]
 
 #: A side's status from its scenarios' statuses: the first of these any of them has.
 SIDE_ORDER = ("shown", "open", "against")
@@ -122,12 +130,21 @@ def confirmation_table(
         a, b = (np.asarray(predicted[s], dtype=float) for s in pair["scenarios"])
         differ = bool(np.any(a[elements] != b[elements]))
         confirmed = differ and all(s["status"] == "shown" for s in sides)
-        table.append(
-            {
-                "id": pair["id"],
-                "elements": [names[c] for c in elements],
-                "status": "confirmed" if confirmed else "open",
-                "sides": sides,
-            }
-        )
+        row = {
+            "id": pair["id"],
+            "elements": [names[c] for c in elements],
+            "status": "confirmed" if confirmed else "open",
+            "sides": sides,
+        }
+        if "replaces" in pair.get("origin", {}):
+            row["replaces"] = pair["origin"]["replaces"]
+        table.append(row)
     return table
+
+
+def boundaries_confirmed(plan: Plan, table: list[dict]) -> int:
+    """Boundaries confirmed: the plan's pairs (not those a range day added) confirmed themselves or by a new pair
+    ``rapt-plan next`` wrote across the same boundary (``replaces``)."""
+    done = {p["id"] for p in table if p["status"] == "confirmed"}
+    done |= {p["replaces"] for p in table if p["status"] == "confirmed" and "replaces" in p}
+    return sum(p["id"] in done for p in plan.pairs if "origin" not in p)

@@ -91,3 +91,15 @@ def test_a_short_day_spends_its_runs_on_the_likeliest_pairs():
     choice = next_run([weak, sure], 2)
     assert choice.pair == 1
     assert choice.p_confirm[1] == pytest.approx(0.95**2) and choice.p_confirm[0] == 0.0
+
+
+def test_a_lost_pair_is_confirmed_through_a_replacement_across_its_boundary():
+    lost = Pair((Side((Option(0.05, missed=4),)), Side((Option(0.05, missed=4),))))
+    assert next_run([lost], 3).lost == [True]
+    fresh = Pair((Side((Option(0.9),)), Side((Option(0.85),))))
+    with_new = Pair(lost.sides, replacements=(fresh,))
+    choice = next_run([with_new], 3)
+    assert choice.alternative == 1 and choice.pair == 0 and choice.lost == [False]
+    assert choice.p_confirm[0] > 0.7
+    shown = Pair(lost.sides, replacements=(Pair((Side((Option(0.9, shown=1),)), Side((Option(0.85, shown=1),))),),))
+    assert shown.confirmed and not shown.own_confirmed

@@ -11,10 +11,10 @@ from tests.support.sil_day import MISSION
 
 
 def small_plan(out: Path) -> Path:
-    """Generate the plan into ``out``; returns ``out``."""
-    generate(
-        sim.uuv.load_mission(MISSION), MISSION, out, GenerateConfig(budget=500, batch_size=250, dithers=20, pairs=2)
-    )
+    """Generate the plan into ``out``, its study store beside it as the command line keeps it; returns ``out``."""
+    out.mkdir(parents=True, exist_ok=True)
+    cfg = GenerateConfig(budget=500, batch_size=250, dithers=20, pairs=2, store=out / "study.db")
+    generate(sim.uuv.load_mission(MISSION), MISSION, out, cfg)
     return out
 
 
