@@ -22,7 +22,7 @@ energy); pairs observed as predicted and predicted modes held, for the re-plan a
 committed plan; the day's Brier score; the noon step's wall time.
 
 Run:  ARDUSUB_SITL=../shared/ardusub/ardusub python benchmarks/range_day.py
-      [--configs bluerov2,limited,current] [--speedup 40] [--budget 20000] [--work DIR]
+      [--configs bluerov2,limited,current,cross] [--speedup 40] [--budget 20000] [--work DIR]
       [--stages committed,day,conducted] [--quick]
 
 ``--work`` keeps every log and row; run again with it and only what is missing is flown or
@@ -71,6 +71,19 @@ CONFIGS: dict[str, tuple[str, dict[str, float], float]] = {
         {"SIM_WIND_T": 1.0, "SIM_WIND_SPD": 0.3, "SIM_WIND_DIR": 225.0, "SIM_WIND_TURB": 0.0},
         12.0,
     ),
+    # a vehicle and water none of the others is: slower thrusters, a mid-size pack, a current across the flood
+    "cross": (
+        "BlueROV2, 15 Ah pack, thrusters limited to 1300-1700 us, in a 0.25 m/s current from the south-east",
+        {
+            "MOT_PWM_MIN": 1300.0,
+            "MOT_PWM_MAX": 1700.0,
+            "SIM_WIND_T": 1.0,
+            "SIM_WIND_SPD": 0.25,
+            "SIM_WIND_DIR": 135.0,
+            "SIM_WIND_TURB": 0.0,
+        },
+        15.0,
+    ),  # fmt: skip
 }
 
 

@@ -20,7 +20,8 @@ def confirmation_rich_table(pairs: list[dict], p_confirm: dict[int, float] | Non
     for col in cols:
         table.add_column(col, justify="right" if col in ("pair", "P(confirmed)") else "left")
     for pair in pairs:
-        row = [str(pair["id"]), ", ".join(pair["elements"]), side_cell(pair["sides"][0]), side_cell(pair["sides"][1])]
+        name = f"{pair['id']} (for {pair['replaces']})" if "replaces" in pair else str(pair["id"])
+        row = [name, ", ".join(pair["elements"]), side_cell(pair["sides"][0]), side_cell(pair["sides"][1])]
         row.append(pair["status"])
         if p_confirm is not None:
             row.append(f"{p_confirm.get(pair['id'], 0.0):.2f}")
