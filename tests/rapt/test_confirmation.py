@@ -101,5 +101,6 @@ def test_a_lost_pair_is_confirmed_through_a_replacement_across_its_boundary():
     choice = next_run([with_new], 3)
     assert choice.alternative == 1 and choice.pair == 0 and choice.lost == [False]
     assert choice.p_confirm[0] > 0.7
-    shown = Pair(lost.sides, replacements=(Pair((Side((Option(0.9, shown=1),)), Side((Option(0.85, shown=1),))),),))
+    done = Pair((Side((Option(0.9, shown=1),)), Side((Option(0.85, shown=1),))))
+    shown = Pair(lost.sides, replacements=(done,))
     assert shown.confirmed and not shown.own_confirmed
