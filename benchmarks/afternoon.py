@@ -10,7 +10,7 @@ the plan does not know (``--bias``).  So a side shows its outcome with its own p
 which the table prints (1 - q is its flip probability, measured on 400 such runs).
 
 The plan is range2017's, generated as ``rapt-plan generate examples/range2017.toml --budget 4000
---pairs 5`` does (into ``--work``, kept: its study store is where ``next`` finds new pairs for a
+--pairs 5`` does (``--quick``: 1,500 runs; into ``--work``, kept: its study store is where ``next`` finds new pairs for a
 boundary that fell through).  Each simulated day flies, with the same vehicle and seeds:
 
 * ``each side once``: every pair side as the range flies it (its robust variant where the plan made
@@ -55,18 +55,19 @@ from planner.review.forecast import plan_noise  # noqa: E402
 from sim.uuv.bias import Bias, parse_bias  # noqa: E402
 
 MISSION = ROOT / "examples" / "range2017.toml"
-#: The plan's search budget and pairs.
-BUDGET, PAIRS = 4000, 5
+#: The plan's search budget (``--quick``: the smaller) and pairs.
+BUDGET, QUICK_BUDGET, PAIRS = 4000, 1500, 5
 
 
-def make_plan(work: Path) -> Path:
-    """range2017's plan in ``work/plan`` with its study store, as ``rapt-plan generate`` writes it (made once)."""
+def make_plan(work: Path, budget: int) -> Path:
+    """range2017's plan in ``work/plan<budget>`` with its study store, as ``rapt-plan generate`` writes it (made
+    once per work directory)."""
     from planner.plan.generate import GenerateConfig, generate
 
-    out = work / "plan"
+    out = work / f"plan{budget}"
     if not (out / "plan.json").is_file():
         out.mkdir(parents=True, exist_ok=True)
-        cfg = GenerateConfig(budget=BUDGET, pairs=PAIRS, seed=0, store=out / "study.db")
+        cfg = GenerateConfig(budget=budget, pairs=PAIRS, seed=0, store=out / "study.db")
         generate(sim.uuv.load_mission(MISSION), MISSION, out, cfg)
     return out / "plan.json"
 
@@ -161,11 +162,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--noise", type=float, default=1.5, help="The vehicle's execution noise, in the plan's.")
     ap.add_argument("--bias", default="speed=0.95,current_offset=0.1", help="The day's bias the plan does not know.")
     ap.add_argument("--work", type=Path, default=None, help="Directory for the plan (kept: made once).")
-    ap.add_argument("--quick", action="store_true", help="3 days, budget 14.")
+    ap.add_argument("--quick", action="store_true", help=f"A {QUICK_BUDGET}-run plan, 3 days, budget 14.")
     args = ap.parse_args(argv)
     days = 3 if args.quick else args.days
     budgets = [14] if args.quick else [int(b) for b in args.budgets.split(",")]
-    plan_file = make_plan(args.work or Path(tempfile.mkdtemp(prefix="rapt_afternoon_plan_")))
+    budget = QUICK_BUDGET if args.quick else BUDGET
+    plan_file = make_plan(args.work or Path(tempfile.mkdtemp(prefix="rapt_afternoon_plan_")), budget)
     plan = load_plan(plan_file)
     alternatives = study_alternatives(plan)
     vehicle = Vehicle(plan, args.noise, parse_bias(args.bias))

@@ -270,6 +270,22 @@ def conducted(here: Path, speedup: float, params: dict[str, float], pack_ah: flo
     return row
 
 
+def next_timing(here: Path, runs: int = CONDUCTED_RUNS) -> list[float]:
+    """``rapt-plan next``'s wall time per call, measured alone: the conducted afternoon's calls made again on a
+    fresh copy of the noon plan, each with the logs flown before it (the same answers: the same seed and logs)."""
+    logs = sorted(str(p) for p in (here / "conducted").glob("run*.mcap"))
+    plan_dir = here / "timing_plan"
+    shutil.rmtree(plan_dir, ignore_errors=True)
+    shutil.copytree(here / "plan", plan_dir, ignore=shutil.ignore_patterns("afternoon.json"))
+    times = []
+    for k in range(len(logs) + 1):
+        answer, took = next_answer(plan_dir, logs[:k], runs - k)
+        if "error" in answer:
+            raise RuntimeError(answer["error"])
+        times.append(took)
+    return times
+
+
 def confirmed(answer: dict) -> str:
     pairs = answer.get("pairs", [])
     return f"{sum(p['status'] == 'confirmed' for p in pairs)} of {len(pairs)}"
@@ -455,7 +471,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument(
         "--stages",
         default="committed,day,conducted",
-        help="committed (the committed plan), day (the loop), conducted (the afternoon run by run by next).",
+        help="committed (the committed plan), day (the loop), conducted (the afternoon run by run by next), "
+        "timing (next's calls of the conducted afternoon made again, alone, and timed; not by default).",
     )
     ap.add_argument("--work", type=Path, default=None, help="Directory for logs, plans and rows (resumable).")
     ap.add_argument("--quick", action="store_true")
@@ -524,6 +541,11 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"  {name}: the conducted afternoon failed: {row['error']}", file=sys.stderr)
                 continue
             print("\n".join([f"## {name}: the afternoon conducted", ""] + conducted_report(row)), flush=True)
+        if "timing" in stages and (here / "conducted").is_dir():
+            calls = next_timing(here)
+            t = sorted(calls)
+            print(f"- {name}: `next` alone, {len(t)} calls: median {t[len(t) // 2]:.1f} s, max {t[-1]:.1f} s "
+                  f"(the first, which reads the noon study: {calls[0]:.1f} s)", flush=True)  # fmt: skip
     return 0
 
 

@@ -121,7 +121,7 @@ def conduct(
         for r in (record.logs[k] for k in keys)
         if r.checks_passed
     ]
-    if record.alternatives is None:
+    if record.alternatives is None and runs_left > 0:
         say("reading the noon study's other pairs across each boundary")
         record.alternatives = study_alternatives(plan)
     say("forecasting the sides in the day's water")
