@@ -461,6 +461,34 @@ def report(
     return "\n".join(out)
 
 
+def the_day(name: str, here: Path, args, params: dict[str, float], pack_ah: float) -> bool:
+    """The morning, the noon step and the fixed afternoon of one vehicle, then its report; False when a stage failed."""
+    refly_rig_failures(here / "morning")
+    row = morning(here, args.speedup, params, pack_ah)
+    if "error" in row or not ended_by_scenario(row):
+        print(f"  {name}: the calibration run did not finish: {row.get('error') or row['ended']}", file=sys.stderr)
+        return False
+    fit = morning_fit(here)
+    if "error" in fit:
+        print(f"  {name}: the morning's calibration failed: {fit['error']}", file=sys.stderr)
+        return False
+    budget = 2000 if args.quick else args.budget
+    timing = noon(here, budget)
+    if "error" in timing:
+        print(f"  {name}: noon step failed: {timing['error']}", file=sys.stderr)
+        return False
+    ids = flown_ids(here / "plan" / "plan.json")
+    refly_rig_failures(here / "afternoon")
+    plan = here / "plan" / "plan.json"
+    fly_plan(plan, ids[:4] if args.quick else ids, here / "afternoon", args.speedup, params, pack_ah)
+    timing["budget"] = budget
+    day = compare(plan, here / "afternoon", here / "comparison")
+    base = compare(COMMITTED, here / "committed", here / "committed_comparison")
+    rep = repredictions(here) if (here / "committed").is_dir() else None
+    print(report(name, here, fit, timing, rep, day, base), flush=True)
+    return True
+
+
 def main(argv: list[str] | None = None) -> int:
     from planner.fly.ardusub_sitl import ENV, sitl_binary
 
@@ -504,37 +532,8 @@ def main(argv: list[str] | None = None) -> int:
                 params,
                 pack_ah,
             )
-        if "day" in stages:
-            refly_rig_failures(here / "morning")
-            row = morning(here, args.speedup, params, pack_ah)
-            if "error" in row or not ended_by_scenario(row):
-                print(
-                    f"  {name}: the calibration run did not finish: {row.get('error') or row['ended']}", file=sys.stderr
-                )
-                continue
-            fit = morning_fit(here)
-            if "error" in fit:
-                print(f"  {name}: the morning's calibration failed: {fit['error']}", file=sys.stderr)
-                continue
-            timing = noon(here, 2000 if args.quick else args.budget)
-            if "error" in timing:
-                print(f"  {name}: noon step failed: {timing['error']}", file=sys.stderr)
-                continue
-            ids = flown_ids(here / "plan" / "plan.json")
-            refly_rig_failures(here / "afternoon")
-            fly_plan(
-                here / "plan" / "plan.json",
-                ids[:4] if args.quick else ids,
-                here / "afternoon",
-                args.speedup,
-                params,
-                pack_ah,
-            )
-            timing["budget"] = 2000 if args.quick else args.budget
-            day = compare(here / "plan" / "plan.json", here / "afternoon", here / "comparison")
-            base = compare(COMMITTED, here / "committed", here / "committed_comparison")
-            rep = repredictions(here) if (here / "committed").is_dir() else None
-            print(report(name, here, fit, timing, rep, day, base), flush=True)
+        if "day" in stages and not the_day(name, here, args, params, pack_ah):
+            continue
         if "conducted" in stages and (here / "plan" / "plan.json").is_file():
             row = conducted(here, args.speedup, params, pack_ah)
             if "error" in row:
