@@ -287,8 +287,11 @@ def next_timing(here: Path, runs: int = CONDUCTED_RUNS) -> list[float]:
 
 
 def confirmed(answer: dict) -> str:
+    """Boundaries confirmed of the plan's: a new pair next wrote counts for the one it replaces."""
     pairs = answer.get("pairs", [])
-    return f"{sum(p['status'] == 'confirmed' for p in pairs)} of {len(pairs)}"
+    done = {p.get("replaces", p["id"]) for p in pairs if p["status"] == "confirmed"}
+    boundaries = [p["id"] for p in pairs if "replaces" not in p]
+    return f"{sum(b in done for b in boundaries)} of {len(boundaries)}"
 
 
 def conducted_report(row: dict) -> list[str]:

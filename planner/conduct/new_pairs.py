@@ -4,7 +4,9 @@ When a pair can no longer be confirmed with the runs left (both its sides, moved
 out of reach), its boundary may still be shown elsewhere.  The noon search holds every
 boundary pair it found (the plan directory's study store): :func:`study_alternatives` takes,
 per plan pair, the shortest few of the same type (level and differing elements) on other
-stretches of the boundary, at least :data:`MIN_APART` from the pair and from each other.  It
+stretches of the boundary, at least :data:`MIN_APART` from the pair and from each other, and
+no longer than a plan's flown pair may be (:data:`planner.plan.pair_choice.MAX_FLOWN_DISTANCE`:
+farther apart, the switch between its sides is no longer one boundary's).  It
 reads the store once an afternoon, at the first call, and the rows are kept in the day's
 record.  :func:`candidate` writes one at the range's resolution, keeps it only when its two
 sides still differ on the pair's elements in the plan's prediction, and ``rapt-plan next``
@@ -27,6 +29,7 @@ from planner.conduct.side_forecast import DRAWS, SCALES
 from planner.plan.analysis import analyse, pairs_across
 from planner.plan.exports import write_scenario_files
 from planner.plan.generate import GenerateConfig, auto_batch_size, search_mission
+from planner.plan.pair_choice import MAX_FLOWN_DISTANCE
 from rapt.errors import RaptError
 from sim.uuv.scoring import MODE_NAMES
 
@@ -70,7 +73,9 @@ def study_alternatives(plan: Plan) -> dict[str, list[list[list[float]]]]:
     for pair in plan.pairs:
         taken = [plan.u(s) for s in pair["scenarios"]]
         rows: list[list[list[float]]] = []
-        for i, j, _ in pairs_across(a, int(pair.get("level", 0)), list(pair.get("elements", []))):
+        for i, j, d in pairs_across(a, int(pair.get("level", 0)), list(pair.get("elements", []))):
+            if d > MAX_FLOWN_DISTANCE:
+                break  # shortest first: the rest are longer still
             mid = (a.X[i] + a.X[j]) / 2
             if min(float(np.linalg.norm(mid - t)) for t in taken) < MIN_APART:
                 continue
@@ -84,16 +89,17 @@ def study_alternatives(plan: Plan) -> dict[str, list[list[list[float]]]]:
 
 def candidate(plan: Plan, pair: dict, rows: list[list[float]], names: list[str]) -> NewPair | None:
     """One stored alternative written at the range's resolution and predicted; None when its sides no longer
-    differ on the pair's elements (or a side is not a valid run)."""
+    differ on the pair's elements, lie farther apart than a flown pair may, or a side is not a valid run."""
     m = plan.mission
     U = m.space.snap(np.asarray(rows, dtype=float))
     r = sim.uuv.simulate(m, U)
     if not r.valid.all():
         return None
     cols = [names.index(e) for e in pair.get("elements", []) if e in names] or [0, 1]
-    if np.array_equal(r.scores[0, cols], r.scores[1, cols]):
+    distance = float(np.linalg.norm(U[0] - U[1]))
+    if np.array_equal(r.scores[0, cols], r.scores[1, cols]) or distance > MAX_FLOWN_DISTANCE:
         return None
-    return NewPair(int(pair["id"]), U, r.scores, float(np.linalg.norm(U[0] - U[1])))
+    return NewPair(int(pair["id"]), U, r.scores, distance)
 
 
 def add_pair(
