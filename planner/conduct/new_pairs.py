@@ -4,9 +4,10 @@ When a pair can no longer be confirmed with the runs left (both its sides, moved
 out of reach), its boundary may still be shown elsewhere.  The noon search holds every
 boundary pair it found (the plan directory's study store): :func:`study_alternatives` takes,
 per plan pair, the shortest few of the same type (level and differing elements) on other
-stretches of the boundary, at least :data:`MIN_APART` from the pair and from each other, and
-no longer than a plan's flown pair may be (:data:`planner.plan.pair_choice.MAX_FLOWN_DISTANCE`:
-farther apart, the switch between its sides is no longer one boundary's).  It
+stretches of the boundary (their midpoints at least :data:`MIN_APART` from the pair's and from
+each other's), and no longer than a plan's flown pair may be (the pair's own length or
+:data:`planner.plan.pair_choice.MAX_FLOWN_DISTANCE`, whichever is longer: farther apart, the
+switch between its sides is no longer one boundary's).  It
 reads the store once an afternoon, at the first call, and the rows are kept in the day's
 record.  :func:`candidate` writes one at the range's resolution, keeps it only when its two
 sides still differ on the pair's elements in the plan's prediction, and ``rapt-plan next``
@@ -71,10 +72,11 @@ def study_alternatives(plan: Plan) -> dict[str, list[list[list[float]]]]:
         return {}  # a store this plan's search did not write: no alternatives
     out: dict[str, list[list[list[float]]]] = {}
     for pair in plan.pairs:
-        taken = [plan.u(s) for s in pair["scenarios"]]
+        longest = max(MAX_FLOWN_DISTANCE, float(pair.get("distance", 0.0)))
+        taken = [(plan.u(pair["scenarios"][0]) + plan.u(pair["scenarios"][1])) / 2]  # the pair's own stretch
         rows: list[list[list[float]]] = []
         for i, j, d in pairs_across(a, int(pair.get("level", 0)), list(pair.get("elements", []))):
-            if d > MAX_FLOWN_DISTANCE:
+            if d > longest:
                 break  # shortest first: the rest are longer still
             mid = (a.X[i] + a.X[j]) / 2
             if min(float(np.linalg.norm(mid - t)) for t in taken) < MIN_APART:
@@ -97,7 +99,7 @@ def candidate(plan: Plan, pair: dict, rows: list[list[float]], names: list[str])
         return None
     cols = [names.index(e) for e in pair.get("elements", []) if e in names] or [0, 1]
     distance = float(np.linalg.norm(U[0] - U[1]))
-    if np.array_equal(r.scores[0, cols], r.scores[1, cols]) or distance > MAX_FLOWN_DISTANCE:
+    if np.array_equal(r.scores[0, cols], r.scores[1, cols]) or distance > max(MAX_FLOWN_DISTANCE, pair["distance"]):
         return None
     return NewPair(int(pair["id"]), U, r.scores, distance)
 
