@@ -10,7 +10,7 @@ the plan does not know (``--bias``).  So a side shows its outcome with its own p
 which the table prints (1 - q is its flip probability, measured on 400 such runs).
 
 The plan is range2017's, generated as ``rapt-plan generate examples/range2017.toml --budget 4000
---pairs 5`` does (``--quick``: 1,500 runs; into ``--work``, kept: its study store is where ``next`` finds new pairs for a
+--pairs 5`` does (``--quick``: 1,500 runs, 100 dithers per side; into ``--work``, kept: its study store is where ``next`` finds new pairs for a
 boundary that fell through).  Each simulated day flies, with the same vehicle and seeds:
 
 * ``each side once``: every pair side as the range flies it (its robust variant where the plan made
@@ -55,8 +55,8 @@ from planner.review.forecast import plan_noise  # noqa: E402
 from sim.uuv.bias import Bias, parse_bias  # noqa: E402
 
 MISSION = ROOT / "examples" / "range2017.toml"
-#: The plan's search budget (``--quick``: the smaller) and pairs.
-BUDGET, QUICK_BUDGET, PAIRS = 4000, 1500, 5
+#: The plan's search budget (``--quick``: the smaller, with fewer dithers per side) and pairs.
+BUDGET, QUICK_BUDGET, QUICK_DITHERS, PAIRS = 4000, 1500, 100, 5
 
 
 def make_plan(work: Path, budget: int) -> Path:
@@ -67,7 +67,8 @@ def make_plan(work: Path, budget: int) -> Path:
     out = work / f"plan{budget}"
     if not (out / "plan.json").is_file():
         out.mkdir(parents=True, exist_ok=True)
-        cfg = GenerateConfig(budget=budget, pairs=PAIRS, seed=0, store=out / "study.db")
+        dithers = {} if budget != QUICK_BUDGET else {"dithers": QUICK_DITHERS}
+        cfg = GenerateConfig(budget=budget, pairs=PAIRS, seed=0, store=out / "study.db", **dithers)
         generate(sim.uuv.load_mission(MISSION), MISSION, out, cfg)
     return out / "plan.json"
 
