@@ -10,8 +10,8 @@ the plan does not know (``--bias``).  So a side shows its outcome with its own p
 which the table prints (1 - q is its flip probability, measured on 400 such runs).
 
 The plan is range2017's, generated as ``rapt-plan generate examples/range2017.toml --budget 4000
---pairs 5`` does (``--quick``: 1,500 runs, 100 dithers per side; into ``--work``, kept: its study store is where ``next`` finds new pairs for a
-boundary that fell through).  Each simulated day flies, with the same vehicle and seeds:
+--pairs 5`` does (``--quick``: 1,500 runs, 100 dithers per side), into ``--work`` and kept: its
+study store is where ``next`` finds new pairs for a boundary that fell through.  Each simulated day flies, with the same vehicle and seeds:
 
 * ``each side once``: every pair side as the range flies it (its robust variant where the plan made
   one), 10 runs;
