@@ -4,13 +4,9 @@ from __future__ import annotations
 
 from rich.table import Table
 
-__all__ = ["confirmation_rich_table", "side_cell"]
+from planner.review.confirmations import side_summary
 
-
-def side_cell(side: dict) -> str:
-    """One side: its status, and per scenario flown the runs that showed its outcome, e.g. ``shown (pair3bA1 2/3)``."""
-    flown = ", ".join(f"{f['scenario']} {f['showed']}/{f['runs']}" for f in side["flown"])
-    return f"{side['status']} ({flown})" if flown else side["status"]
+__all__ = ["confirmation_rich_table"]
 
 
 def confirmation_rich_table(pairs: list[dict], p_confirm: dict[int, float] | None = None) -> Table:
@@ -21,7 +17,7 @@ def confirmation_rich_table(pairs: list[dict], p_confirm: dict[int, float] | Non
         table.add_column(col, justify="right" if col in ("pair", "P(confirmed)") else "left")
     for pair in pairs:
         name = f"{pair['id']} (for {pair['replaces']})" if "replaces" in pair else str(pair["id"])
-        row = [name, ", ".join(pair["elements"]), side_cell(pair["sides"][0]), side_cell(pair["sides"][1])]
+        row = [name, ", ".join(pair["elements"]), side_summary(pair["sides"][0]), side_summary(pair["sides"][1])]
         row.append(pair["status"])
         if p_confirm is not None:
             row.append(f"{p_confirm.get(pair['id'], 0.0):.2f}")

@@ -34,7 +34,7 @@ from planner.plan.pair_choice import MAX_FLOWN_DISTANCE
 from rapt.errors import RaptError
 from sim.uuv.scoring import MODE_NAMES
 
-__all__ = ["ALTERNATIVES", "MIN_APART", "NewPair", "study_alternatives", "candidate", "add_pair"]
+__all__ = ["ALTERNATIVES", "MIN_APART", "NewPair", "study_alternatives", "candidate", "new_pair_id", "add_pair"]
 
 #: Other pairs kept per plan pair, shortest first.
 ALTERNATIVES = 3
@@ -104,13 +104,18 @@ def candidate(plan: Plan, pair: dict, rows: list[list[float]], names: list[str])
     return NewPair(int(pair["id"]), U, r.scores, distance)
 
 
+def new_pair_id(plan: Plan) -> int:
+    """The id the next new pair gets: one past the plan's largest."""
+    return max(int(p["id"]) for p in plan.pairs) + 1
+
+
 def add_pair(
     plan: Plan, new: NewPair, names: list[str], reason: str, after_logs: list[str], p_sides: list[float]
 ) -> list[str]:
     """Write ``new`` into the plan as pair ``max id + 1`` (scenarios ``pair<N>a``, ``pair<N>b``, their range
     files, ``plan.json`` written whole with the pair and its origin); the two scenario ids."""
     m = plan.mission
-    n = max(int(p["id"]) for p in plan.pairs) + 1
+    n = new_pair_id(plan)
     ids = [f"pair{n}a", f"pair{n}b"]
     old = next(p for p in plan.pairs if int(p["id"]) == new.replaces)
     keys = set(next(iter(plan.scenarios))["predicted"].get("scores", {})) if plan.scenarios else set()

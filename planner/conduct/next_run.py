@@ -30,7 +30,7 @@ import numpy as np
 import sim.uuv
 from planner.common.plans import Plan, load_plan
 from planner.conduct.day_record import DayRecord, load_record, read_logs, update_bias
-from planner.conduct.new_pairs import NewPair, add_pair, candidate, study_alternatives
+from planner.conduct.new_pairs import NewPair, add_pair, candidate, new_pair_id, study_alternatives
 from planner.conduct.side_forecast import SideForecasts, Target, forecast_sides
 from planner.conduct.side_moves import Move, add_variant, find_move, variant_id
 from planner.plan.dithering import Outcome
@@ -39,7 +39,9 @@ from planner.review.confirmations import (
     boundaries_confirmed,
     confirmation_table,
     outcome_columns,
+    shows,
     side_scenarios,
+    target_scores,
 )
 from planner.review.forecast import plan_noise
 from planner.review.runs import predict_plan
@@ -204,7 +206,7 @@ def _statuses(plan: Plan, pairs: list[Pair], choice) -> tuple[dict[int, str], di
     for b, pair in enumerate(_originals(plan)):
         members = [pair, *_replacements(plan, pair)]
         for k, q in enumerate(members):
-            own = (pairs[b].alternatives[k] if k < len(pairs[b].alternatives) else pairs[b]).own_confirmed
+            own = pairs[b].alternatives[k].own_confirmed  # the plan's pairs come first among the alternatives
             gone = choice.lost[b] or (k == 0 and len(members) > 1)
             status[int(q["id"])] = "confirmed" if own else "lost" if gone else "open"
             p[int(q["id"])] = 1.0 if own else 0.0 if gone else float(choice.p_confirm[b])
@@ -246,7 +248,7 @@ def _targets(day: Afternoon) -> dict[str, Target]:
 
 
 def _showed(run: RunOutcome, t: Target) -> bool:
-    return run.scores is not None and bool(np.array_equal(run.scores[list(t.columns)], np.asarray(t.values)))
+    return run.scores is not None and shows(run.scores, t.columns, t.values)
 
 
 def _flown(day: Afternoon, targets: dict[str, Target]) -> list[tuple[str, bool]]:
@@ -404,7 +406,7 @@ def _chosen(day: Afternoon, pair: dict, j: int, option: str | Move) -> tuple[str
     assert fc is not None
     sid = pair["scenarios"][j]
     cols, values = _side_target(day, pair, sid)
-    want = mode_name(_row(cols, values))
+    want = mode_name(target_scores(list(cols), np.asarray(values)))
     who = f"pair {pair['id']}'s {SIDE_NAMES[j]} side"
     side_runs = [r for r in day.runs if r.sid in side_scenarios(plan, sid) and r.scores is not None]
     if isinstance(option, Move):
@@ -430,10 +432,10 @@ def _new_pair_chosen(day: Afternoon, alt: Alternative, j: int, table: list[dict]
     """A new pair written into the plan for a boundary that fell through; its side ``j`` to fly, and the reason."""
     assert alt.new is not None and day.forecasts is not None
     old = alt.pair
-    p_sides = [day.forecasts.p[_candidate_id(alt.new, 0, side)] for side in "ab"]
+    p_sides = [day.forecasts.p[str(side[0])] for side in alt.options]  # this candidate's sides, as forecast
     row = next(r for r in table if r["id"] == old["id"])
     why = "; ".join(f"its {side} side {r['status']}" for side, r in zip("ab", row["sides"]))
-    n = max(int(p["id"]) for p in day.plan.pairs) + 1
+    n = new_pair_id(day.plan)
     sid = f"pair{n}{'ab'[j]}"
     reason = (
         f"pair {old['id']}'s boundary ({', '.join(old.get('elements', []))}) fell through ({why}, no move holds "
@@ -452,7 +454,7 @@ def _new_predictions(plan: Plan, alt: Alternative) -> dict[str, np.ndarray]:
 
 def _came_out(day: Afternoon, run: RunOutcome, cols: tuple[int, ...], values: tuple[float, ...]) -> str:
     """How the side's last run differed from its outcome: its mode, else the first element that differed."""
-    got, want = _scores(run), mode_name(_row(cols, values))
+    got, want = _scores(run), mode_name(target_scores(list(cols), np.asarray(values)))
     if mode_name(got) != want:
         return f"came out {mode_name(got)}, predicted {want}"
     for c, v in zip(cols, values):
@@ -464,12 +466,6 @@ def _came_out(day: Afternoon, run: RunOutcome, cols: tuple[int, ...], values: tu
 def _scores(run: RunOutcome) -> np.ndarray:
     assert run.scores is not None  # runs with an end only
     return run.scores
-
-
-def _row(cols: tuple[int, ...], values: tuple[float, ...]) -> np.ndarray:
-    out = np.zeros(max(cols) + 1)
-    out[list(cols)] = values
-    return out
 
 
 def _result(

@@ -32,6 +32,9 @@ __all__ = [
     "side_scenarios",
     "confirmation_table",
     "boundaries_confirmed",
+    "shows",
+    "side_summary",
+    "target_scores",
     "SIDE_ORDER",
 ]
 
@@ -66,9 +69,21 @@ def side_scenarios(plan: Plan, sid: str) -> list[str]:
     return [sid] + [v["id"] for v in plan.variants if v.get("variant_of") == sid]
 
 
+def shows(scores: np.ndarray, cols: Sequence[int], target: Sequence[float] | np.ndarray) -> bool:
+    """Whether a run's scores show an outcome: ``target`` on every column of ``cols``."""
+    return bool(np.array_equal(np.asarray(scores)[list(cols)], np.asarray(target)))
+
+
+def side_summary(side: dict) -> str:
+    """One side of :func:`confirmation_table` in words: its status, and per scenario flown the runs that showed
+    its outcome, e.g. ``shown (pair3bA1 2/3)``."""
+    flown = ", ".join(f"{f['scenario']} {f['showed']}/{f['runs']}" for f in side["flown"])
+    return f"{side['status']} ({flown})" if flown else side["status"]
+
+
 def _scenario_record(runs: list[RunOutcome], cols: list[int], target: np.ndarray) -> dict:
     ended = [r for r in runs if r.scores is not None]
-    showed = sum(bool(np.array_equal(r.scores[cols], target)) for r in ended)  # type: ignore[index]
+    showed = sum(shows(r.scores, cols, target) for r in ended)  # type: ignore[arg-type]
     modes: dict[str, int] = {}
     for r in ended:
         name = mode_name(np.asarray(r.scores))

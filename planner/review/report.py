@@ -27,6 +27,7 @@ import numpy as np
 from planner.common.atomic import write_text_atomic
 from planner.common.html.figures import draw_area, label_map_axes, rectangle_corners, save_figure
 from planner.common.html.text import EN_DASH, escape, percent, significant
+from planner.review.confirmations import side_summary
 from sim.uuv.scenario import make_scenarios
 
 __all__ = ["write_comparison_report", "REPORT_NAME"]
@@ -367,15 +368,11 @@ def _confirmation_section(result: dict) -> list[str]:
         "<th class='l'>side b</th><th>status</th></tr>"
     ]
 
-    def side(s: dict) -> str:
-        runs = ", ".join(f"{f['scenario']} {f['showed']}/{f['runs']}" for f in s["flown"])
-        return _e(f"{s['status']} ({runs})" if runs else s["status"])
-
     for p in result.get("confirmation", []):
         status = p["status"] if p["status"] == "confirmed" else f"<span class='bad'>{_e(p['status'])}</span>"
         parts.append(
-            f"<tr><td>{_e(p['id'])}</td><td class='l'>{side(p['sides'][0])}</td>"
-            f"<td class='l'>{side(p['sides'][1])}</td><td>{status}</td></tr>"
+            f"<tr><td>{_e(p['id'])}</td><td class='l'>{_e(side_summary(p['sides'][0]))}</td>"
+            f"<td class='l'>{_e(side_summary(p['sides'][1]))}</td><td>{status}</td></tr>"
         )
     parts.append("</table>")
     return parts
