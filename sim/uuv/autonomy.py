@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from sim.uuv.contact_memory import CONTACT_MEMORY_S, ContactMemory
 from sim.uuv.environment import tidal_current
 from sim.uuv.geometry import inside_rect, rect_closest_point, rect_signed_distance
 from sim.uuv.scenario import Scenarios
@@ -59,8 +60,6 @@ NOGO_GAIN = 2.0
 SLIDE_GAIN = 2.5
 #: The autonomy steers away from the operational area's edge within this distance.
 OP_MARGIN_M = 60.0
-#: Seconds a sonar contact is remembered after it leaves the field of view.
-CONTACT_MEMORY_S = 30.0
 #: Loiter speed as a fraction of cruise while surveying or transmitting.
 LOITER_FRACTION = 0.5
 
@@ -133,10 +132,7 @@ class Autonomy:
         else:
             near = np.zeros((n, W), dtype=bool)
         self.wp_doomed = near
-        # last seen sonar contacts (N, K): where, and when (None until the first step with contacts)
-        self.mem_x: np.ndarray | None = None
-        self.mem_y: np.ndarray | None = None
-        self.mem_t: np.ndarray | None = None
+        self.memory = ContactMemory(CONTACT_MEMORY_S)  # last seen sonar contacts (N, K)
         op = m.operational_area
         self._op_bounds = (op.x - op.width / 2, op.x + op.width / 2, op.y - op.height / 2, op.y + op.height / 2)
         self._rows = np.arange(n)
@@ -338,16 +334,9 @@ class Autonomy:
         """Add (in place) the push of remembered sonar contacts to ``fx``, ``fy``; ``ax``, ``ay`` point to the goal."""
         if not obs.contact_x.shape[1]:
             return
-        # remember where each obstacle was last seen
-        mem_x, mem_y, mem_t = self.mem_x, self.mem_y, self.mem_t
-        if mem_x is None or mem_y is None or mem_t is None or mem_t.shape != obs.contact_x.shape:
-            mem_x, mem_y = obs.contact_x.copy(), obs.contact_y.copy()
-            mem_t = np.full(obs.contact_x.shape, -np.inf)
-        seen = obs.detected
-        self.mem_x = mem_x = np.where(seen, obs.contact_x, mem_x)
-        self.mem_y = mem_y = np.where(seen, obs.contact_y, mem_y)
-        self.mem_t = mem_t = np.where(seen, obs.t, mem_t)
-        known = obs.t - mem_t <= CONTACT_MEMORY_S
+        known = self.memory.update(obs.t, obs.contact_x, obs.contact_y, obs.detected)
+        mem_x, mem_y = self.memory.x, self.memory.y
+        assert mem_x is not None and mem_y is not None, "update() has stored this step's contacts"
         rows = np.flatnonzero(np.any(known, axis=1))
         if rows.size:  # only vehicles with a (remembered) sonar contact
             d0 = self.spec.sonar_range_m

@@ -16,6 +16,7 @@ import numpy as np
 from rapt.errors import InputError
 from sim.uuv.autonomy import Autonomy, Observation
 from sim.uuv.bias import bias_arrays
+from sim.uuv.contact_memory import ContactMemory
 from sim.uuv.environment import tidal_current
 from sim.uuv.geometry import rect_signed_distance
 from sim.uuv.interface import decode_command, encode_command
@@ -128,10 +129,12 @@ COMPACT_BELOW = 0.85
 
 
 def _take_rows(obj, keep: np.ndarray, n: int) -> None:
-    """Keep rows ``keep`` of every per-vehicle array attribute of ``obj`` (first axis n)."""
+    """Keep rows ``keep`` of every per-vehicle array attribute of ``obj`` (first axis n), and of its contact memory."""
     for name, value in vars(obj).items():
         if isinstance(value, np.ndarray) and value.ndim and value.shape[0] == n:
             setattr(obj, name, value[keep])
+        elif isinstance(value, ContactMemory):
+            _take_rows(value, keep, n)
     if hasattr(obj, "_rows"):
         obj._rows = np.arange(keep.size)
 
