@@ -47,8 +47,8 @@ def inside_rect(x: np.ndarray, y: np.ndarray, rects: np.ndarray) -> np.ndarray:
 
 
 def triangle_vertices(cx: np.ndarray, cy: np.ndarray, side: float | np.ndarray) -> np.ndarray:
-    """(..., 3, 2) vertices of north-pointing equilateral triangles centred on (cx, cy)."""
-    r = side / np.sqrt(3.0)  # circumradius
+    """(..., 3, 2) vertices of north-pointing equilateral triangles centred on (cx, cy), each of its own ``side``."""
+    r = np.asarray(side, dtype=float)[..., None] / np.sqrt(3.0)  # circumradius, one per triangle
     angles = np.deg2rad([90.0, 210.0, 330.0])
     vx = cx[..., None] + r * np.cos(angles)
     vy = cy[..., None] + r * np.sin(angles)

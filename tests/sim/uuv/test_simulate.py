@@ -307,3 +307,16 @@ def test_a_run_rescored_from_its_telemetry_track_matches_the_batch():
             m, X[i], r.trajectories[i][:, :6], aborted, int(r.scores[i, names.index("mission.return_reason")])
         )
         np.testing.assert_array_equal(again, r.scores[i])
+
+
+def test_each_obstacle_is_a_triangle_of_its_own_side():
+    """Sides per obstacle: any number of obstacles, each as large as its own entry (not its corner's)."""
+    from sim.uuv.geometry import triangle_vertices
+
+    sides = np.array([40.0, 80.0, 120.0, 200.0, 10.0])
+    cx, cy = np.zeros((2, 5)), np.zeros((2, 5))
+    tri = triangle_vertices(cx, cy, sides)
+    assert tri.shape == (2, 5, 3, 2)
+    edges = np.linalg.norm(tri - np.roll(tri, -1, axis=2), axis=-1)  # (2, 5, 3) edge lengths
+    np.testing.assert_allclose(edges, np.broadcast_to(sides[None, :, None], edges.shape))
+    np.testing.assert_allclose(triangle_vertices(cx, cy, 80.0), triangle_vertices(cx, cy, np.full(5, 80.0)))
