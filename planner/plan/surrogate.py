@@ -70,6 +70,7 @@ def train_surrogate(
     seed: int = 0,
     on_iteration: Callable[[IterationRecord, Policy], None] | None = None,
     goal_classifier: bool = True,
+    observation: str = "contacts",
 ) -> Surrogate:
     """Imitate the mission's expert with ``runs`` annotated runs (``runs_per_iteration`` at a time).
 
@@ -90,7 +91,7 @@ def train_surrogate(
         raise InputError(f"--runs: expected at least {runs_per_iteration} annotated runs, got {runs!r}")
     if int(select_runs) != select_runs or select_runs < 0:
         raise InputError(f"--select-runs: expected a number of held-out expert runs >= 0, got {select_runs!r}")
-    spec = feature_spec(mission)
+    spec = feature_spec(mission, observation)
     select: Callable[[Policy], tuple[float, float]] | None = None
     if select_runs:
         Xs = draw_valid(mission, int(select_runs), np.random.default_rng([int(seed), 0x73656C]))
@@ -100,7 +101,7 @@ def train_surrogate(
         def select(policy: Policy) -> tuple[float, float]:
             # the held-out runs' mode agreement picks the best update; among equals (25 runs give
             # few distinct values) the one whose paths lie closest to the expert's
-            return held_out_agreement(mission, policy, Xs, expert_paths)
+            return held_out_agreement(mission, policy, Xs, expert_paths, observation)
 
     result = imitate(
         make_rollout(mission, spec, seed=seed, mixing=mixing),
@@ -137,7 +138,7 @@ def train_surrogate(
         "iterations": len(result.history),
         "threshold_reproduced": calibration,
     }
-    return Surrogate.for_mission(mission, result.policy, training, threshold)
+    return Surrogate.for_mission(mission, result.policy, training, threshold, observation)
 
 
 def calibrate_goal_threshold(
@@ -162,7 +163,7 @@ def calibrate_goal_threshold(
         if pending.size == 0:
             continue
         runs += 1
-        goal = policy(t.features[pending], quiet=spec.sonar)[:, GOAL]
+        goal = policy(t.features[pending], quiet=spec.quiet)[:, GOAL]
         turned = np.flatnonzero(t.expert[pending, GOAL] > 0)
         above = goal[:, None] > thresholds[None, :]
         first = np.where(above.any(axis=0), above.argmax(axis=0), -1)
@@ -198,10 +199,13 @@ def mode_agreement(mission: Mission, surrogate: Surrogate, X: np.ndarray, expert
     return float(np.mean(mine.modes[ok] == expert.modes[ok])) if ok.any() else float("nan")
 
 
-def held_out_agreement(mission: Mission, policy: Policy, X: np.ndarray, expert) -> tuple[float, float]:
+def held_out_agreement(
+    mission: Mission, policy: Policy, X: np.ndarray, expert, observation: str = "contacts"
+) -> tuple[float, float]:
     """(mode agreement, minus the mean path error in metres) of ``policy`` against the expert's runs
     ``expert`` (simulated with trajectories) on the valid scenarios ``X``."""
-    mine = sim.uuv.simulate(mission, X, surrogate=Surrogate.for_mission(mission, policy), trajectories=True)
+    sur = Surrogate.for_mission(mission, policy, observation=observation)
+    mine = sim.uuv.simulate(mission, X, surrogate=sur, trajectories=True)
     ok = np.flatnonzero(expert.valid & mine.valid)
     if not ok.size:
         return float("nan"), float("nan")
@@ -214,9 +218,11 @@ def held_out_agreement(mission: Mission, policy: Policy, X: np.ndarray, expert) 
     return float(np.mean(mine.modes[ok] == expert.modes[ok])), -path_error(*tracks)
 
 
-def policy_mode_agreement(mission: Mission, policy: Policy, X: np.ndarray, expert=None) -> float:
+def policy_mode_agreement(
+    mission: Mission, policy: Policy, X: np.ndarray, expert=None, observation: str = "contacts"
+) -> float:
     """:func:`mode_agreement` of ``policy`` (as a surrogate of ``mission``, default threshold) on ``X``."""
-    return mode_agreement(mission, Surrogate.for_mission(mission, policy), X, expert)
+    return mode_agreement(mission, Surrogate.for_mission(mission, policy, observation=observation), X, expert)
 
 
 class ModeValidation:
@@ -228,11 +234,11 @@ class ModeValidation:
     the same ground and the expert is not flown again.
     """
 
-    def __init__(self, mission: Mission, n: int, seed: int = 0):
-        self.mission = mission
+    def __init__(self, mission: Mission, n: int, seed: int = 0, observation: str = "contacts"):
+        self.mission, self.observation = mission, observation
         self.X: np.ndarray = qmc.Sobol(mission.dim, seed=seed).random(n)
         self.expert = sim.uuv.simulate(mission, self.X)
 
     def __call__(self, policy: Policy) -> float:
         """Share of the valid validation scenarios where ``policy`` flies into the expert's mode."""
-        return policy_mode_agreement(self.mission, policy, self.X, self.expert)
+        return policy_mode_agreement(self.mission, policy, self.X, self.expert, self.observation)

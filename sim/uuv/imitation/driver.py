@@ -5,9 +5,10 @@ active)`` returns a :class:`~sim.uuv.autonomy.Command`), so the batch simulator,
 in-the-loop back-seat and the scorer drive it exactly as they drive the expert.  Its
 decisions are the policy's velocity vector (section 6.5.3); it surfaces on arrival at the
 recovery point once it has been away from it (reaching the recovery point is what the
-dissertation's surrogate is scored on).  Its only memory is its goal: the next waypoint
-(advanced on arrival) and whether its own goal output has turned it home, which it
-latches as the expert latches its return.  It does not know why it turned home, so the
+dissertation's surrogate is scored on).  Its memory is the expert's: the sonar contacts
+seen in the last 30 s (:mod:`sim.uuv.contact_memory`, under the ``contacts`` observation
+model), the next waypoint (advanced on arrival) and whether its own goal output has
+turned it home, which it latches as the expert latches its return.  It does not know why it turned home, so the
 "return reason" score leaf reads "none".
 """
 
@@ -17,7 +18,16 @@ import numpy as np
 
 from rapt.errors import InputError
 from sim.uuv.autonomy import GOAL_RETURN, GOAL_WAYPOINT, Command, Observation
-from sim.uuv.imitation.features import GOAL, FeatureSpec, action_command, advance_waypoints, features, waypoint_target
+from sim.uuv.contact_memory import ContactMemory
+from sim.uuv.imitation.features import (
+    GOAL,
+    FeatureSpec,
+    action_command,
+    advance_waypoints,
+    contact_view,
+    features,
+    waypoint_target,
+)
 from sim.uuv.scenario import Scenarios
 
 __all__ = ["PolicyAutonomy", "AWAY_RADII"]
@@ -45,18 +55,30 @@ class PolicyAutonomy:
             None  # (x, y, pending) of the next waypoint
         )
         self.last_features: np.ndarray | None = None
+        self.memory = ContactMemory(spec.memory_s)
+        self.last_view: np.ndarray | None = None  # the obstacle view the last decision saw
+
+    def obstacle_view(self, obs: Observation) -> np.ndarray:
+        """This step's obstacle view (:func:`~sim.uuv.imitation.features.features`), updating the contact memory."""
+        if self.spec.observation == "scan":
+            if obs.scan is None:
+                raise InputError(
+                    "obs.scan: a scan-fed learned back-seat needs the 360-degree sonar scan (World(scan_beams=...))"
+                )
+            return obs.scan
+        known = self.memory.update(obs.t, obs.contact_x, obs.contact_y, obs.detected)
+        return contact_view(self.spec, obs.x, obs.y, obs.heading, self.memory.x, self.memory.y, known)
 
     def step(self, obs: Observation, dt: float, active: np.ndarray | None = None) -> Command:
-        if obs.scan is None:
-            raise InputError("obs.scan: a learned back-seat needs the 360-degree sonar scan (World(scan_beams=...))")
         m = self.mission
+        view = self.last_view = self.obstacle_view(obs)
         self.wp_next = advance_waypoints(m, self.wp_next, obs.x, obs.y)
         wx, wy, pending = self.last_target = waypoint_target(m, self.wp_next)
         self.was_home = self.home.copy()
         pending = pending & ~self.home
-        F = features(self.spec, m, obs.t, obs.x, obs.y, obs.heading, obs.battery, obs.scan, (wx, wy, pending))
+        F = features(self.spec, m, obs.t, obs.x, obs.y, obs.heading, obs.battery, view, (wx, wy, pending))
         self.last_features = F  # what the goal decision was taken on
-        action = self.policy(F, quiet=self.spec.sonar)  # open water: the scan reads +1
+        action = self.policy(F, quiet=self.spec.quiet)
         turn = pending & (action[:, GOAL] > self.goal_threshold)
         if np.any(turn):  # the decision takes effect at once: steer again with no waypoint pending
             rows = np.flatnonzero(turn)
@@ -68,10 +90,10 @@ class PolicyAutonomy:
                 obs.y[rows],
                 obs.heading[rows],
                 obs.battery[rows],
-                obs.scan[rows],
+                view[rows],
                 (wx[rows], wy[rows], np.zeros(rows.size, dtype=bool)),
             )
-            action[rows] = self.policy(G, quiet=self.spec.sonar)
+            action[rows] = self.policy(G, quiet=self.spec.quiet)
         self.home |= turn if active is None else turn & active
         heading, speed = action_command(self.spec, obs.heading, action)
         rx, ry = m.recovery

@@ -10,8 +10,19 @@ Features, all in the vehicle frame (x along the bow, y to starboard) and in [-1,
   direction legible at any range, which is what steering needs, while the distance
   carries the fuel decision.  The waypoint's three are zero once every waypoint has been
   reached (the vehicle knows which it has reached) or given up (see the goal decision);
-* ``sonar`` — a 360-beam, 1-degree range scan out to the sonar range (-1 touching, +1
-  nothing within range);
+* ``obstacles`` — what the expert knows of the obstacles, by the mission's observation model:
+
+  - ``contacts`` (the default): the sonar contacts the expert remembers
+    (:mod:`sim.uuv.contact_memory`): each closest point seen in the sonar's field of view
+    (120 degrees, 100 m) within the last 30 s, nearest first, in up to :data:`MAX_SLOTS`
+    slots of (closeness, forward, starboard): closeness ``(R - r) / R`` for a contact r
+    metres away out to the sonar range R, and the unit vector to it; all 0 for an empty
+    slot.  The expert steers on exactly these points, so a learner sees an obstacle
+    exactly while the expert avoids it: not the one beside the path that the sonar never
+    saw, and still the one it has turned away from;
+  - ``scan``: a 360-beam, 1-degree range scan out to the sonar range (-1 touching, +1
+    nothing within range), section 6.5.3's input.  It sees obstacles the expert has not
+    seen and forgets those it has, so a learner cannot copy the expert's collisions;
 * ``clock`` — mission time used, 2 t / limit - 1.  Not in the dissertation's list: our
   expert turns home when it runs out of time as well as fuel, and only the clock says so.
 
@@ -44,12 +55,17 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from rapt.errors import InputError
 from sim.uuv.angles import wrap_angle
+from sim.uuv.contact_memory import CONTACT_MEMORY_S
 from sim.uuv.mission import Mission
 from sim.uuv.sonar import SCAN_BEAMS
 
 __all__ = [
     "FeatureSpec",
+    "OBSERVATIONS",
+    "MAX_SLOTS",
+    "contact_view",
     "feature_spec",
     "features",
     "expert_action",
@@ -62,7 +78,13 @@ __all__ = [
     "SPEED",
 ]
 
-FEATURE_VERSION = 3
+FEATURE_VERSION = 4
+#: Observation models: the expert's remembered sonar contacts, or section 6.5.3's 360-degree scan.
+OBSERVATIONS = ("contacts", "scan")
+#: Remembered contacts a learner sees at most, nearest first (the expert rarely knows more at once).
+MAX_SLOTS = 4
+#: Columns per contact slot: closeness, forward and starboard unit vector.
+SLOT_COLUMNS = 3
 #: Network outputs: heading direction (forward, starboard), the goal decision and the speed.
 ACTIONS = 4
 #: The action column of the goal decision (+1: give the waypoint up and head home).
@@ -85,10 +107,18 @@ class FeatureSpec:
     time_limit_s: float
     max_speed: float
     actions: int = ACTIONS
+    observation: str = "contacts"
+    slots: int = 0  # contact slots (observation "contacts")
+    memory_s: float = CONTACT_MEMORY_S
+
+    @property
+    def view_size(self) -> int:
+        """Columns of the obstacle view: the scan's beams or the contact slots."""
+        return self.beams if self.observation == "scan" else SLOT_COLUMNS * self.slots
 
     @property
     def size(self) -> int:
-        return 1 + 6 + self.beams + 1
+        return 1 + 6 + self.view_size + 1
 
     @property
     def waypoint(self) -> slice:
@@ -101,8 +131,13 @@ class FeatureSpec:
 
     @property
     def sonar(self) -> slice:
-        """The scan's columns (each reads +1 when its beam sees nothing)."""
-        return slice(7, 7 + self.beams)
+        """The obstacle view's columns (the scan, or the remembered contacts)."""
+        return slice(7, 7 + self.view_size)
+
+    @property
+    def quiet(self) -> slice | None:
+        """Columns that mostly read +1 (a scan in open water), which the networks skip when they do."""
+        return self.sonar if self.observation == "scan" else None
 
     def names(self) -> list[str]:
         return (
@@ -115,7 +150,11 @@ class FeatureSpec:
                 "recovery_stbd",
                 "recovery_distance",
             ]
-            + [f"sonar_{b}" for b in range(self.beams)]
+            + (
+                [f"sonar_{b}" for b in range(self.beams)]
+                if self.observation == "scan"
+                else [f"contact{k}_{c}" for k in range(self.slots) for c in ("closeness", "fwd", "stbd")]
+            )
             + ["clock"]
         )
 
@@ -125,6 +164,12 @@ class FeatureSpec:
     @classmethod
     def from_dict(cls, d: dict) -> FeatureSpec:
         return cls(**d)
+
+    def describe(self) -> str:
+        """The observation model in a few words, for error messages."""
+        if self.observation == "scan":
+            return f"a {self.beams}-beam scan, no memory (feature version {self.version})"
+        return f"{self.slots} remembered contacts, {self.memory_s:g} s memory (feature version {self.version})"
 
 
 def policy_heads(spec: FeatureSpec) -> tuple[tuple[list[int] | None, list[int]], ...]:
@@ -139,17 +184,54 @@ def policy_heads(spec: FeatureSpec) -> tuple[tuple[list[int] | None, list[int]],
     return ((None, [0, 1, SPEED]), (mission_level, [GOAL]))
 
 
-def feature_spec(mission: Mission, beams: int = SCAN_BEAMS) -> FeatureSpec:
+def feature_spec(mission: Mission, observation: str = "contacts", beams: int = SCAN_BEAMS) -> FeatureSpec:
+    """The features of a learned back-seat for ``mission`` under an observation model (:data:`OBSERVATIONS`)."""
+    if observation not in OBSERVATIONS:
+        raise InputError(f"observation: expected one of {', '.join(OBSERVATIONS)}, got {observation!r}")
     op = mission.operational_area
+    scan = observation == "scan"
     return FeatureSpec(
         FEATURE_VERSION,
-        beams,
+        beams if scan else 0,
         float(mission.vehicle.sonar_range_m),
         float(np.hypot(op.width, op.height)),
         NEAR_M,
         float(mission.time_limit_s),
         float(mission.vehicle.max_speed),
+        ACTIONS,
+        observation,
+        0 if scan else min(len(mission.obstacles) + len(mission.barriers), MAX_SLOTS),
+        CONTACT_MEMORY_S,
     )
+
+
+def contact_view(
+    spec: FeatureSpec,
+    x: np.ndarray,
+    y: np.ndarray,
+    heading: np.ndarray,
+    memory_x: np.ndarray | None,
+    memory_y: np.ndarray | None,
+    known: np.ndarray | None,
+) -> np.ndarray:
+    """(N, 3 slots) remembered contacts, nearest first: closeness and the unit vector to each, 0 when empty."""
+    n = x.shape[0]
+    out = np.zeros((n, SLOT_COLUMNS * spec.slots))
+    if memory_x is None or memory_y is None or known is None or not spec.slots:
+        return out
+    dx, dy = memory_x - x[:, None], memory_y - y[:, None]
+    r = np.hypot(dx, dy)
+    close = np.where(known, np.clip((spec.sonar_range_m - r) / spec.sonar_range_m, 0.0, 1.0), 0.0)
+    order = np.argsort(-close, axis=1, kind="stable")[:, : spec.slots]  # nearest first
+    rows = np.arange(n)[:, None]
+    c, dx, dy, r = close[rows, order], dx[rows, order], dy[rows, order], np.maximum(r[rows, order], 1.0)
+    fwd, stbd = _body(dx, dy, heading[:, None])
+    on = c > 0
+    k = order.shape[1]
+    out[:, 0 : SLOT_COLUMNS * k : SLOT_COLUMNS] = c
+    out[:, 1 : SLOT_COLUMNS * k : SLOT_COLUMNS] = np.where(on, fwd / r, 0.0)
+    out[:, 2 : SLOT_COLUMNS * k : SLOT_COLUMNS] = np.where(on, stbd / r, 0.0)
+    return out
 
 
 def advance_waypoints(mission: Mission, nxt: np.ndarray, x: np.ndarray, y: np.ndarray) -> np.ndarray:
@@ -188,10 +270,14 @@ def features(
     y: np.ndarray,
     heading: np.ndarray,
     battery: np.ndarray,
-    scan: np.ndarray,
+    view: np.ndarray,
     waypoint: tuple[np.ndarray, np.ndarray, np.ndarray],
 ) -> np.ndarray:
-    """(N, spec.size) float32 features from one step's reports (see the module docstring)."""
+    """(N, spec.size) float32 features from one step's reports (see the module docstring).
+
+    ``view`` is the obstacle view: the scan's ranges in metres (observation ``scan``), or
+    :func:`contact_view`'s columns (observation ``contacts``).
+    """
     n = x.shape[0]
     out = np.empty((n, spec.size), dtype=np.float32)
     out[:, 0] = 2.0 * np.clip(battery, 0.0, 1.0) - 1.0
@@ -204,7 +290,10 @@ def features(
         out[:, col] = np.where(on, fwd / near, 0.0)
         out[:, col + 1] = np.where(on, stbd / near, 0.0)
         out[:, col + 2] = np.where(on, np.clip(2.0 * dist / spec.map_scale_m - 1.0, -1.0, 1.0), 0.0)
-    out[:, spec.sonar] = 2.0 * np.minimum(scan, spec.sonar_range_m) / spec.sonar_range_m - 1.0
+    if spec.observation == "scan":
+        out[:, spec.sonar] = 2.0 * np.minimum(view, spec.sonar_range_m) / spec.sonar_range_m - 1.0
+    else:
+        out[:, spec.sonar] = view
     out[:, -1] = np.clip(2.0 * t / spec.time_limit_s - 1.0, -1.0, 1.0)
     return out
 

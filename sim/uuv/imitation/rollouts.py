@@ -14,8 +14,16 @@ from rapt.errors import InputError
 from rapt.imitation.dagger import Trajectory
 from rapt.imitation.policies import MLPPolicy
 from sim.uuv.autonomy import Autonomy, Command
+from sim.uuv.contact_memory import ContactMemory
 from sim.uuv.imitation.driver import PolicyAutonomy
-from sim.uuv.imitation.features import FeatureSpec, advance_waypoints, expert_action, features, waypoint_target
+from sim.uuv.imitation.features import (
+    FeatureSpec,
+    advance_waypoints,
+    contact_view,
+    expert_action,
+    features,
+    waypoint_target,
+)
 from sim.uuv.metrics import metric_names, metric_types
 from sim.uuv.mission import Mission
 from sim.uuv.scenario import make_scenarios
@@ -71,7 +79,7 @@ class MixedDriver(PolicyAutonomy):
                 obs.y[extra],
                 obs.heading[extra],
                 obs.battery[extra],
-                obs.scan[extra],
+                self.last_view[extra],
                 (wx[extra], wy[extra], pending[extra]),
             )
             F, rows = np.concatenate([F, G]), np.concatenate([rows, extra])
@@ -126,6 +134,7 @@ def annotated_runs(
     got_r: list[np.ndarray] = []
 
     expert_home = np.zeros(sub.n, dtype=bool)  # the flying expert's return latch before the step
+    memory = ContactMemory(spec.memory_s)  # what the flying expert remembers, kept as a learner would
 
     def on_step(obs, cmd, active, driver):
         # Each state is recorded with the goal it was decided under, labelled with the
@@ -136,8 +145,13 @@ def annotated_runs(
         else:
             nxt = advance_waypoints(mission, nxt, obs.x, obs.y)
             wx, wy, pending = waypoint_target(mission, nxt)
+            if spec.observation == "scan":
+                view = obs.scan
+            else:
+                known = memory.update(obs.t, obs.contact_x, obs.contact_y, obs.detected)
+                view = contact_view(spec, obs.x, obs.y, obs.heading, memory.x, memory.y, known)
             F = features(
-                spec, mission, obs.t, obs.x, obs.y, obs.heading, obs.battery, obs.scan, (wx, wy, pending & ~expert_home)
+                spec, mission, obs.t, obs.x, obs.y, obs.heading, obs.battery, view, (wx, wy, pending & ~expert_home)
             )
             who, heading, speed, home = np.arange(sub.n), cmd.heading, cmd.speed, driver.returning.copy()
             expert_home[:] = home

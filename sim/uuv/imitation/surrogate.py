@@ -20,15 +20,23 @@ import numpy as np
 
 from rapt.errors import FileFormatError, InputError, MissingFileError, StudyMismatchError
 from rapt.imitation.policies import HeadsPolicy, MLPPolicy, policy_from_arrays
-from sim.uuv.imitation.features import FeatureSpec, feature_spec
+from sim.uuv.imitation.features import OBSERVATIONS, FeatureSpec, feature_spec
 from sim.uuv.mission import Mission
+from sim.uuv.sonar import SCAN_BEAMS
 
 __all__ = ["Surrogate", "mission_digest", "FORMAT"]
 
-FORMAT = "rapt.surrogate/3"
-#: Formats this version reads: /3 has a speed output and a classifier for the goal decision
-#: (/1 and /2 flew a velocity vector and must be retrained).
+FORMAT = "rapt.surrogate/4"
+#: Formats this version reads: /4 records its observation model (the expert's remembered
+#: contacts, or the 360-degree scan).  /3 saw a scan without memory, /1 and /2 flew a velocity
+#: vector: all must be retrained.
 READS = (FORMAT,)
+#: What each older format observed, for the message that refuses it.
+OLDER = {
+    "rapt.surrogate/3": "a 360-degree scan with no memory of contacts",
+    "rapt.surrogate/2": "a velocity vector on a 360-degree scan",
+    "rapt.surrogate/1": "a velocity vector on a 360-degree scan",
+}
 
 
 def mission_digest(mission: Mission) -> str:
@@ -57,8 +65,9 @@ class Surrogate:
         policy: MLPPolicy | HeadsPolicy,
         training: dict | None = None,
         goal_threshold: float = 0.0,
+        observation: str = "contacts",
     ) -> Surrogate:
-        spec = feature_spec(mission)
+        spec = feature_spec(mission, observation)
         if policy.n_features != spec.size:
             raise InputError(f"policy: takes {policy.n_features} features, the mission's definition has {spec.size}")
         if policy.n_outputs != spec.actions:
@@ -75,8 +84,17 @@ class Surrogate:
                 f"surrogate: trained for mission '{self.mission_name}' ({self.mission_sha}), not for "
                 f"'{mission.name}' ({mission_digest(mission)}); train one for this mission"
             )
-        if feature_spec(mission, self.spec.beams) != self.spec:
-            raise StudyMismatchError("surrogate: its feature definition does not match this mission's; retrain it")
+        if self.spec.observation not in OBSERVATIONS:
+            raise StudyMismatchError(
+                f"surrogate: observation model {self.spec.observation!r} is not one this version flies "
+                f"({', '.join(OBSERVATIONS)}); retrain it with `rapt-plan surrogate`"
+            )
+        mine = feature_spec(mission, self.spec.observation, self.spec.beams or SCAN_BEAMS)
+        if mine != self.spec:
+            raise StudyMismatchError(
+                f"surrogate: it observes {self.spec.describe()}, this mission's learner observes {mine.describe()}; "
+                "retrain it with `rapt-plan surrogate`"
+            )
 
     def autonomy(self, scen):
         """The back-seat flying ``scen``."""
@@ -123,6 +141,11 @@ class Surrogate:
         except not_ours as exc:
             raise FileFormatError(f"surrogate: {str(path)!r} is not a surrogate file ({exc})") from exc
         got = header.get("format") if isinstance(header, dict) else None
+        if got in OLDER:
+            raise FileFormatError(
+                f"surrogate: {str(path)!r} ({got}) observes {OLDER[got]}, not the expert's remembered contacts; "
+                "retrain it with `rapt-plan surrogate`"
+            )
         if got not in READS:
             raise FileFormatError(
                 f"surrogate: {str(path)!r} has format {got!r}, expected one of "

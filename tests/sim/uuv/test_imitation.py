@@ -23,7 +23,8 @@ from sim.uuv.world import World
 
 EXAMPLES = Path(__file__).resolve().parents[3] / "examples"
 IMITATION7 = sim.uuv.load_mission(EXAMPLES / "imitation7.toml")
-SPEC = feature_spec(IMITATION7)
+SPEC = feature_spec(IMITATION7)  # the expert's remembered contacts
+SCAN = feature_spec(IMITATION7, "scan")  # section 6.5.3's 360-degree scan
 NO_TRIANGLES = np.zeros((1, 0, 3, 2))
 
 
@@ -31,19 +32,19 @@ def _scene(x, y, heading, barriers, battery=0.5, t=0.0, waypoint=(0.0, 350.0), p
     h = np.array([heading])
     r = scan(np.array([x]), np.array([y]), h, NO_TRIANGLES, np.array([barriers], float), 100.0)
     target = (np.array([waypoint[0]]), np.array([waypoint[1]]), np.array([pending]))
-    return features(SPEC, IMITATION7, t, np.array([x]), np.array([y]), h, np.array([battery]), r, target)[0], r[0]
+    return features(SCAN, IMITATION7, t, np.array([x]), np.array([y]), h, np.array([battery]), r, target)[0], r[0]
 
 
 def test_features_of_a_hand_built_scene():
     # vehicle at the origin heading north; a wall 10 m ahead (x -5..5, y 10..20); waypoint 350 m north
     f, ranges = _scene(0.0, 0.0, 0.0, [[-5, 5, 10, 20]], battery=0.25, t=600.0)
-    assert f.shape == (SPEC.size,) == (368,) and f.dtype == np.float32
+    assert f.shape == (SCAN.size,) == (368,) and f.dtype == np.float32
     assert np.all(f >= -1) and np.all(f <= 1)
-    names = SPEC.names()
+    names = SCAN.names()
     col = {n: i for i, n in enumerate(names)}
     assert f[col["fuel"]] == pytest.approx(-0.5)
     assert f[col["waypoint_fwd"]] == pytest.approx(1.0) and f[col["waypoint_stbd"]] == pytest.approx(0.0, abs=1e-6)
-    assert f[col["waypoint_distance"]] == pytest.approx(2 * 350 / SPEC.map_scale_m - 1, abs=1e-6)
+    assert f[col["waypoint_distance"]] == pytest.approx(2 * 350 / SCAN.map_scale_m - 1, abs=1e-6)
     # recovery (0, -400) is dead astern
     assert f[col["recovery_fwd"]] == pytest.approx(-1.0) and f[col["recovery_distance"]] > f[col["waypoint_distance"]]
     assert f[col["clock"]] == pytest.approx(2 * 600 / IMITATION7.time_limit_s - 1)
@@ -283,14 +284,17 @@ def test_bad_learner_settings_are_named():
 
 
 # -- surrogate files --------------------------------------------------------------------------------
-def _steering_policy(home_below: float = 0.15):
+def _steering_policy(home_below: float = 0.15, spec=SPEC):
     """A hand-made linear policy: ahead at 80% of max speed, turning away from sonar returns ahead,
     homing on the waypoint, and giving it up when the charge is below ``home_below``."""
-    W = np.zeros((SPEC.size, 4), np.float32)
-    sonar = np.arange(SPEC.size)[SPEC.sonar]
-    ahead_stbd, ahead_port = sonar[1:30], sonar[331:360]
-    W[ahead_stbd, 1] = 0.05  # a return to starboard (feature < 1) lowers the starboard command: turn to port
-    W[ahead_port, 1] = -0.05
+    W = np.zeros((spec.size, 4), np.float32)
+    sonar = np.arange(spec.size)[spec.sonar]
+    if spec.observation == "scan":
+        ahead_stbd, ahead_port = sonar[1:30], sonar[331:360]
+        W[ahead_stbd, 1] = 0.05  # a return to starboard (feature < 1) lowers the starboard command: turn to port
+        W[ahead_port, 1] = -0.05
+    else:
+        W[sonar[2::3], 1] = -1.5  # a remembered contact to starboard turns it to port, and the other way
     W[2, 1] = W[5, 1] = 0.5  # steer towards the waypoint (or, with none pending, the recovery point)
     W[0, 2] = -10.0  # the goal output is positive below the charge home_below (fuel feature 2 b - 1)
     b = np.array([0.8, -0.05 * 29 + 0.05 * 29, 10.0 * (2 * home_below - 1), 0.8], np.float32)
@@ -320,8 +324,26 @@ def test_surrogate_files_round_trip_and_refuse_another_mission(tmp_path):
     header = json.loads(str(arrays["header"]))
     arrays["header"] = np.array(json.dumps({**header, "format": "rapt.surrogate/2"}))
     np.savez(tmp_path / "old.npz", **arrays)
-    with pytest.raises(FileFormatError, match=r"format 'rapt.surrogate/2', expected one of rapt.surrogate/3; retrain"):
+    with pytest.raises(FileFormatError, match=r"\(rapt.surrogate/2\) observes a velocity vector .*; retrain"):
         Surrogate.load(tmp_path / "old.npz", IMITATION7)
+    # a surrogate of the last format saw a scan without memory: another observation model, refused
+    arrays["header"] = np.array(json.dumps({**header, "format": "rapt.surrogate/3"}))
+    np.savez(tmp_path / "scan3.npz", **arrays)
+    with pytest.raises(FileFormatError, match=r"observes a 360-degree scan with no memory of contacts.*retrain"):
+        Surrogate.load(tmp_path / "scan3.npz", IMITATION7)
+    # a scan-fed surrogate of this format, edited to claim the contacts: its features do not match
+    scan_sur = Surrogate.for_mission(IMITATION7, _steering_policy(spec=SCAN), observation="scan").save(
+        tmp_path / "scan.npz"
+    )
+    assert Surrogate.load(scan_sur, IMITATION7).spec == SCAN
+    with np.load(scan_sur) as z:
+        arrays = {k: z[k] for k in z.files}
+    header = json.loads(str(arrays["header"]))
+    header["features"]["observation"] = "contacts"
+    arrays["header"] = np.array(json.dumps(header))
+    np.savez(tmp_path / "mixed.npz", **arrays)
+    with pytest.raises(StudyMismatchError, match=r"observes 0 remembered contacts.*this mission's learner observes 3"):
+        Surrogate.load(tmp_path / "mixed.npz", IMITATION7)
 
 
 def test_a_surrogate_flies_the_batch_simulator_and_the_expert_annotates_it():
@@ -483,7 +505,7 @@ def test_a_decision_does_not_depend_on_the_batch_it_is_in():
     rng = np.random.default_rng(0)
     policy = MLPPolicy(
         [
-            rng.normal(0, 0.3, (SPEC.size, 150)).astype(np.float32),
+            rng.normal(0, 0.3, (SCAN.size, 150)).astype(np.float32),
             rng.normal(0, 0.3, (150, 50)).astype(np.float32),
             rng.normal(0, 0.3, (50, 2)).astype(np.float32),
         ],
@@ -493,11 +515,11 @@ def test_a_decision_does_not_depend_on_the_batch_it_is_in():
             rng.normal(size=2).astype(np.float32),
         ],
     )
-    F = rng.uniform(-1, 1, (300, SPEC.size)).astype(np.float32)
-    F[::3, SPEC.sonar] = 1.0  # open water on a third of the rows
-    full = policy(F, quiet=SPEC.sonar)
+    F = rng.uniform(-1, 1, (300, SCAN.size)).astype(np.float32)
+    F[::3, SCAN.sonar] = 1.0  # open water on a third of the rows
+    full = policy(F, quiet=SCAN.quiet)
     for rows in (np.arange(1), np.arange(5, 6), np.arange(17, 120), rng.permutation(300)[:77]):
-        part = policy(F[rows], quiet=SPEC.sonar)
+        part = policy(F[rows], quiet=SCAN.quiet)
         np.testing.assert_array_equal(part, full[rows])
     np.testing.assert_allclose(policy(F), full, rtol=1e-5, atol=1e-6)
 
@@ -557,3 +579,43 @@ def test_the_exact_forward_pass_is_the_plain_network_and_saturates_without_warni
         nearly_quiet = F[1::4].copy()
         nearly_quiet[:, SPEC.sonar] = 1.0
         np.testing.assert_array_equal(got[1::4], MLPPolicy(W, B, "logistic")(nearly_quiet, quiet=SPEC.sonar))
+
+
+def test_the_learner_remembers_a_contact_that_left_the_sonars_view_as_the_expert_does():
+    """A contact seen ahead-starboard at t = 0 leaves the 120-degree field of view as the vehicle turns
+    east (no longer detected): for 30 s the learner's contact slot still holds it, in the new body
+    frame, and the expert still steers away from it; at t = 40 s both have forgotten it."""
+    from sim.uuv.autonomy import Autonomy, Observation
+    from sim.uuv.imitation.driver import PolicyAutonomy
+
+    X = np.full((1, IMITATION7.dim), 0.5)
+    scen = make_scenarios(IMITATION7, X)
+
+    def obs(t, heading, seen):
+        cx, cy = np.array([[10.0, 0.0, 0.0]]), np.array([[30.0, 0.0, 0.0]])
+        detected = np.array([[seen, False, False]])
+        one = np.zeros(1)
+        return Observation(t, one.copy(), one.copy(), np.array([heading]), np.array([0.3]), cx, cy, one, detected)
+
+    learner = PolicyAutonomy(scen, _steering_policy(), SPEC)
+    expert, forgetful = Autonomy(scen), Autonomy(scen)
+    learner.step(obs(0.0, 0.0, True), 2.0)
+    expert.step(obs(0.0, 0.0, True), 2.0)
+    slot = learner.last_features[0, SPEC.sonar]
+    r = np.hypot(10.0, 30.0)
+    np.testing.assert_allclose(slot[:3], [(100 - r) / 100, 30 / r, 10 / r], atol=1e-4)  # ahead, to starboard
+    assert np.all(slot[3:] == 0)  # the other slots are empty
+    # turned east, the contact is out of view: the learner still sees it, now to port
+    turned = obs(2.0, np.pi / 2, False)
+    learner.step(turned, 2.0)
+    slot = learner.last_features[0, SPEC.sonar]
+    np.testing.assert_allclose(slot[:3], [(100 - r) / 100, 10 / r, -30 / r], atol=1e-4)
+    # the expert steers away from it too: its command differs from one that never saw the contact
+    remembered, fresh = expert.step(turned, 2.0), forgetful.step(turned, 2.0)
+    assert abs(float(remembered.heading[0] - fresh.heading[0])) > 0.05
+    # the features are what the expert's memory holds: the same point, under the same rule
+    assert expert.memory.x[0, 0] == learner.memory.x[0, 0] == 10.0
+    late = obs(40.0, np.pi / 2, False)
+    learner.step(late, 2.0)
+    assert np.all(learner.last_features[0, SPEC.sonar] == 0)
+    np.testing.assert_array_equal(expert.step(late, 2.0).heading, Autonomy(scen).step(late, 2.0).heading)
