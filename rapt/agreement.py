@@ -16,7 +16,13 @@ figures compare their labels there:
 * **distance error** — mean over the scenarios of | D_surrogate(x) - D_system(x) |, where
   D is the distance from x to the nearest boundary-pair midpoint of that system's labels;
 * **mismatches near a boundary** — share of the scenarios the surrogate gets wrong that
-  lie within the 90th percentile pair length of one of the system's boundary midpoints.
+  lie within the 90th percentile pair length of one of the system's boundary midpoints;
+* **per boundary type** (:func:`boundary_types`): *recall*, the share of the system's
+  boundary pairs of that type with both ends labelled right by the surrogate (a
+  confirmation run of the pair would show the system's boundary where the surrogate put
+  it), and *precision*, the share of the surrogate's pairs of that type whose region the
+  system shares.  Mode accuracy hides a surrogate that is right everywhere but at the
+  boundaries, and a rare type (a collision) hides inside the overall figures.
 """
 
 from __future__ import annotations
@@ -29,7 +35,7 @@ from scipy.spatial import cKDTree
 from rapt.boundaries import boundary_pairs
 from rapt.errors import InputError
 
-__all__ = ["Agreement", "agreement", "path_error", "confusion_matrix"]
+__all__ = ["Agreement", "agreement", "path_error", "confusion_matrix", "TypeAgreement", "boundary_types"]
 
 
 def confusion_matrix(truth: np.ndarray, predicted: np.ndarray, n_modes: int) -> np.ndarray:
@@ -123,3 +129,52 @@ def agreement(X: np.ndarray, system: np.ndarray, surrogate: np.ndarray, n_modes:
         int(wrong.size),
         near,
     )
+
+
+@dataclass
+class TypeAgreement:
+    """Recall and precision of one boundary type (``modes`` (a, b), a < b; ``None``: all types)."""
+
+    modes: tuple[int, int] | None
+    system_pairs: int
+    recall: float  # system pairs of the type with both ends right
+    surrogate_pairs: int
+    precision: float  # surrogate pairs of the type whose region the system shares
+
+
+def boundary_types(
+    X: np.ndarray, system: np.ndarray, surrogate: np.ndarray, touching: tuple[int, ...] = ()
+) -> dict[tuple[int, int] | str, TypeAgreement]:
+    """Per boundary type (the sorted pair of modes), recall and precision (module docstring).
+
+    Also ``"all"`` (every pair) and, with ``touching`` modes, ``"touching"``: the pairs with an
+    end in one of them (the system's for recall, the surrogate's for precision).
+    """
+    X = np.asarray(X, dtype=float)
+    system, surrogate = np.asarray(system, int), np.asarray(surrogate, int)
+    if not (X.shape[0] == system.shape[0] == surrogate.shape[0]):
+        raise InputError("X, system, surrogate: expected one label per scenario")
+    ti, tj, t_mid = _midpoints(X, system)
+    si, sj, s_mid = _midpoints(X, surrogate)
+    right = (surrogate[ti] == system[ti]) & (surrogate[tj] == system[tj])
+    shared = _shared_regions(X, si, sj, s_mid, surrogate, ti, tj, t_mid, system)
+    t_type = np.sort(np.column_stack([system[ti], system[tj]]), axis=1)
+    s_type = np.sort(np.column_stack([surrogate[si], surrogate[sj]]), axis=1)
+
+    def one(modes, t_sel: np.ndarray, s_sel: np.ndarray) -> TypeAgreement:
+        return TypeAgreement(
+            modes,
+            int(t_sel.sum()),
+            float(np.mean(right[t_sel])) if t_sel.any() else float("nan"),
+            int(s_sel.sum()),
+            float(np.mean(shared[s_sel])) if s_sel.any() else float("nan"),
+        )
+
+    out: dict[tuple[int, int] | str, TypeAgreement] = {}
+    kinds = sorted({tuple(t) for t in t_type.tolist()} | {tuple(t) for t in s_type.tolist()})
+    for a, b in kinds:
+        out[(a, b)] = one((a, b), (t_type[:, 0] == a) & (t_type[:, 1] == b), (s_type[:, 0] == a) & (s_type[:, 1] == b))
+    out["all"] = one(None, np.ones(ti.size, dtype=bool), np.ones(si.size, dtype=bool))
+    if touching:
+        out["touching"] = one(None, np.isin(t_type, touching).any(axis=1), np.isin(s_type, touching).any(axis=1))
+    return out
