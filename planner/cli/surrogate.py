@@ -17,7 +17,12 @@ __all__ = ["surrogate"]
 def surrogate(
     mission_file: Annotated[Path, typer.Argument(help="Mission file (TOML).")],
     out_file: Annotated[Path, typer.Option("--out", help="Surrogate file to write (.npz).")],
-    method: Annotated[str, typer.Option(help="qdagger, dagger or supervised (behavioural cloning).")] = "qdagger",
+    method: Annotated[
+        str,
+        typer.Option(
+            help="qdagger (Algorithm 9: re-mines the aggregate), qdagger-new (trims only each new set), dagger or supervised."
+        ),
+    ] = "qdagger",
     quantile: Annotated[
         float,
         typer.Option(

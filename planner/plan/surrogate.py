@@ -123,7 +123,7 @@ def train_surrogate(
         threshold, share = calibrate_goal_threshold(result.policy, spec, held_out)
         calibration = [round(a, 4) for a in share]
     training = {
-        "method": method if method != "qdagger" else f"qdagger({int(round(quantile * 100))})",
+        "method": f"{method}({int(round(quantile * 100))})" if method.startswith("qdagger") else method,
         "runs": result.runs + int(select_runs),
         "annotated_runs": result.runs,
         "select_runs": int(select_runs),

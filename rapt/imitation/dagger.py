@@ -7,10 +7,15 @@ is None — and returns, per run, the features seen and the expert's action at e
 
 * ``supervised`` — behavioural cloning: the expert flies every run; all data kept.
 * ``dagger`` — the learned policy flies; every annotated state is aggregated.
-* ``qdagger`` — Algorithm 9: the learned policy flies; of each new set only the states it
-  predicted worst (loss at or above the ``quantile``) are aggregated, which over-samples
-  decisions (turns, aborts) and under-samples long straight legs, so each update trains
-  on less data.
+* ``qdagger`` — Algorithm 9 as written: the learned policy flies; its new set is
+  aggregated whole, and of the aggregate so far only the states the policy now predicts
+  worst (loss at or above the ``quantile`` of the aggregate's) are kept: D = D_i U D_eps.
+  Re-mining the whole aggregate over-samples decisions (turns, aborts) and under-samples
+  long straight legs, and bounds the training set (about |D_i| / (1 - quantile)), so each
+  update trains on less data.  (The algorithm's line reads L <= Q_eps; its text, "only
+  retain the worst predictions", is what is meant and what this does.)
+* ``qdagger-new`` — the variant RAPT used before: the aggregate is kept whole and only each
+  new set is trimmed to its worst-predicted quantile.
 
 Each update trains the networks of Table 6.1 (mean squared error, Adam) with scikit-learn
 and hands them on as the exact numpy policies of :mod:`rapt.imitation.policies`;
@@ -33,7 +38,7 @@ from rapt.imitation.policies import HeadsPolicy, MLPPolicy, Policy, reads_all_co
 
 __all__ = ["Trajectory", "IterationRecord", "ImitationResult", "Rollout", "imitate", "METHODS", "HIDDEN"]
 
-METHODS = ("supervised", "dagger", "qdagger")
+METHODS = ("supervised", "dagger", "qdagger", "qdagger-new")
 #: Hidden layers of Table 6.1 (input is the feature vector, output the action).
 HIDDEN = (150, 50)
 
@@ -66,6 +71,7 @@ class ImitationResult:
     quantile: float | None
     history: list[IterationRecord]
     chosen: int = -1  # the iteration whose policy this is (the best on ``select``, else the last)
+    aggregate: tuple[np.ndarray, np.ndarray] | None = None  # the last update's training set (features, actions)
 
     @property
     def runs(self) -> int:
@@ -182,8 +188,11 @@ def imitate(
             models = _learners(split, decisions, options, epochs, switch_weight, seed)
         elif method == "qdagger":
             assert policy is not None and Nt is not None  # F holds data, so an update has made a policy
-            loss = np.sum((policy(Fi) - Ai) ** 2, axis=1)
-            keep = loss >= np.quantile(loss, quantile)
+            keep = _worst(policy, F, A, quantile)  # re-mine the aggregate under the policy that flew
+            F, A, Nt = np.concatenate([Fi, F[keep]]), np.concatenate([Ai, A[keep]]), np.concatenate([Ni, Nt[keep]])
+        elif method == "qdagger-new":
+            assert policy is not None and Nt is not None
+            keep = _worst(policy, Fi, Ai, quantile)
             F, A, Nt = np.concatenate([F, Fi[keep]]), np.concatenate([A, Ai[keep]]), np.concatenate([Nt, Ni[keep]])
         else:
             assert Nt is not None
@@ -207,7 +216,16 @@ def imitate(
     assert policy is not None  # iterations >= 0 was checked, so the loop updated at least once
     if sharpen_iterations and isinstance(policy, HeadsPolicy) and F is not None and A is not None and Nt is not None:
         policy = _sharpen(policy, F, A, Nt, decisions, decided_where, sharpen_iterations, far_share, seed)
-    return ImitationResult(policy, method, quantile if method == "qdagger" else None, history, chosen)
+    aggregate = (F, A) if F is not None and A is not None else None
+    return ImitationResult(
+        policy, method, quantile if method.startswith("qdagger") else None, history, chosen, aggregate
+    )
+
+
+def _worst(policy: Policy, F: np.ndarray, A: np.ndarray, quantile: float) -> np.ndarray:
+    """Rows of states ``F`` whose squared error against the expert's ``A`` is at or above its ``quantile``."""
+    loss = np.sum((policy(F) - A) ** 2, axis=1)
+    return loss >= np.quantile(loss, quantile)
 
 
 def _check_options(
@@ -224,7 +242,7 @@ def _check_options(
     """:func:`imitate`'s options checked before any run is flown."""
     if method not in METHODS:
         raise InputError(f"method: expected one of {', '.join(METHODS)}, got {method!r}")
-    if method == "qdagger" and not 0.0 <= quantile < 1.0:
+    if method.startswith("qdagger") and not 0.0 <= quantile < 1.0:
         raise InputError(f"quantile: expected a fraction in [0, 1), got {quantile!r}")
     for name, value in (
         ("iterations", iterations),

@@ -104,7 +104,7 @@ def _point_mass_rollout(log):
     return rollout
 
 
-@pytest.mark.parametrize("method", ["supervised", "dagger", "qdagger"])
+@pytest.mark.parametrize("method", ["supervised", "dagger", "qdagger", "qdagger-new"])
 def test_each_learner_learns_a_tiny_expert(method):
     log = []
     result = imitate(
@@ -120,8 +120,12 @@ def test_each_learner_learns_a_tiny_expert(method):
         seed=1,
     )
     assert [r.runs for r in result.history] == [4, 8, 12, 16, 20, 24, 28]
-    grown = np.diff([r.samples for r in result.history])
-    if method == "qdagger":
+    sizes = [r.samples for r in result.history]
+    grown = np.diff(sizes)
+    if method == "qdagger":  # Algorithm 9: the new 100 states plus the worse half of the aggregate so far
+        assert sizes[0] == 100 and all(100 + s // 2 <= t <= 101 + s // 2 for s, t in zip(sizes, sizes[1:]))
+        assert max(sizes) < 200  # bounded by |D_i| / (1 - quantile)
+    elif method == "qdagger-new":
         assert np.all(grown <= 50) and np.all(grown >= 45)  # half of each new set of 100 states
     else:
         assert np.all(grown == 100)
@@ -130,6 +134,38 @@ def test_each_learner_learns_a_tiny_expert(method):
     _point_mass_rollout(test)(result.policy, 20, 1000)
     assert np.median(test) < 0.05, (method, np.median(test))
     assert result.history[-1].loss < 0.01
+
+
+def test_algorithm_9_re_mines_the_aggregate_for_what_the_policy_still_gets_wrong():
+    """Iteration 0's expert runs hold one hard state (a label the network cannot fit among its
+    neighbours); after it the rollouts are easy.  Algorithm 9 keeps re-selecting the hard state from
+    the aggregate while the easy old states drop out: it is still there after five updates, in a set
+    bounded near |D_i| / (1 - quantile); trimming only the new sets keeps every old state."""
+
+    def rollout(policy, k, iteration):
+        rng = np.random.default_rng(iteration)
+        F = rng.uniform(-1, 1, (k * 20, 1)).astype(np.float32)
+        A = np.zeros((k * 20, 1), np.float32)
+        if iteration == 0:
+            F[0], A[0] = 0.0, 1.0  # the hard state
+        return [Trajectory(F[r * 20 : (r + 1) * 20], A[r * 20 : (r + 1) * 20]) for r in range(k)]
+
+    sizes = {}
+    for method in ("qdagger", "qdagger-new"):
+        result = imitate(
+            rollout,
+            method=method,
+            iterations=5,
+            runs_per_iteration=2,
+            hidden=(4,),
+            epochs=5,
+            seed=0,
+        )
+        F, A = result.aggregate
+        assert np.sum((F[:, 0] == 0.0) & (A[:, 0] == 1.0)) == 1  # the hard state survived every re-mining
+        sizes[method] = F.shape[0]
+        assert result.method == method and result.quantile == 0.5
+    assert sizes["qdagger"] < 80 and sizes["qdagger-new"] == 40 + 5 * 20
 
 
 def test_the_best_policy_on_validation_is_returned():
