@@ -173,8 +173,11 @@ def boundary_types(
     out: dict[tuple[int, int] | str, TypeAgreement] = {}
     kinds = sorted({tuple(t) for t in t_type.tolist()} | {tuple(t) for t in s_type.tolist()})
     for a, b in kinds:
-        out[(a, b)] = one((a, b), (t_type[:, 0] == a) & (t_type[:, 1] == b), (s_type[:, 0] == a) & (s_type[:, 1] == b))
+        t_sel = np.asarray((t_type[:, 0] == a) & (t_type[:, 1] == b))
+        s_sel = np.asarray((s_type[:, 0] == a) & (s_type[:, 1] == b))
+        out[(a, b)] = one((a, b), t_sel, s_sel)
     out["all"] = one(None, np.ones(ti.size, dtype=bool), np.ones(si.size, dtype=bool))
     if touching:
-        out["touching"] = one(None, np.isin(t_type, touching).any(axis=1), np.isin(s_type, touching).any(axis=1))
+        t_touch = np.asarray(np.isin(t_type, touching).any(axis=1))
+        out["touching"] = one(None, t_touch, np.asarray(np.isin(s_type, touching).any(axis=1)))
     return out

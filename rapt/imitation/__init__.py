@@ -6,5 +6,7 @@
   (:class:`~rapt.imitation.policies.MLPPolicy`, :class:`~rapt.imitation.policies.HeadsPolicy`),
   and how they are saved;
 * :mod:`~rapt.imitation.decisions` - switch columns learned as classifiers and sharpened
-  at the end.
+  at the end;
+* :mod:`~rapt.imitation.queries` - where to ask the expert next: the learner's boundary
+  candidates and where its updates disagree.
 """

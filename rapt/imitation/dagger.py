@@ -187,11 +187,11 @@ def imitate(
             F, A, Nt = Fi, Ai, Ni
             models = _learners(split, decisions, options, epochs, switch_weight, seed)
         elif method == "qdagger":
-            assert policy is not None and Nt is not None  # F holds data, so an update has made a policy
+            assert policy is not None and A is not None and Nt is not None  # an update has made a policy
             keep = _worst(policy, F, A, quantile)  # re-mine the aggregate under the policy that flew
             F, A, Nt = np.concatenate([Fi, F[keep]]), np.concatenate([Ai, A[keep]]), np.concatenate([Ni, Nt[keep]])
         elif method == "qdagger-new":
-            assert policy is not None and Nt is not None
+            assert policy is not None and A is not None and Nt is not None
             keep = _worst(policy, Fi, Ai, quantile)
             F, A, Nt = np.concatenate([F, Fi[keep]]), np.concatenate([A, Ai[keep]]), np.concatenate([Nt, Ni[keep]])
         else:
