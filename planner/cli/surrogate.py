@@ -29,8 +29,8 @@ def surrogate(
             help="Q-DAgger: aggregate the states predicted worse than this quantile of each new set (0.5, 0.75)."
         ),
     ] = 0.5,
-    runs: Annotated[int, typer.Option(help="Annotated expert runs in all.")] = 75,
-    runs_per_iteration: Annotated[int, typer.Option("--runs-per-iteration", help="New runs per update.")] = 5,
+    runs: Annotated[int, typer.Option(help="Annotated expert runs in all.")] = 200,
+    runs_per_iteration: Annotated[int, typer.Option("--runs-per-iteration", help="New runs per update.")] = 10,
     epochs: Annotated[int, typer.Option(help="Training epochs per update (warm-started).")] = 30,
     mixing: Annotated[
         float,
@@ -43,11 +43,25 @@ def surrogate(
         int,
         typer.Option(
             "--select-runs",
-            help="Held-out expert runs that choose which update's "
-            "policy to keep (best mode accuracy; 0: the last) "
-            "and its goal threshold.",
+            help="Held-out expert runs that choose which update's policy to keep (directed: pairs at its "
+            "boundary candidates, the most expert boundary pairs reproduced per type; uniform: the best mode "
+            "accuracy; 0: the last) and its goal threshold.",
         ),
-    ] = 25,
+    ] = 50,
+    observation: Annotated[
+        str,
+        typer.Option(
+            help="What the learner observes: contacts (the expert's remembered sonar contacts) or scan "
+            "(a 360-degree scan, no memory: section 6.5.3)."
+        ),
+    ] = "contacts",
+    directed: Annotated[
+        bool,
+        typer.Option(
+            "--directed/--uniform",
+            help="Annotate at the learner's boundary candidates from the third update on (or draw uniformly).",
+        ),
+    ] = True,
     validate: Annotated[
         int, typer.Option(help="Sobol scenarios to measure mode accuracy on after each update (0: none).")
     ] = 256,
@@ -61,7 +75,9 @@ def surrogate(
         fail(f"--out: a surrogate file ends in .npz, got {out_file}")
     if validate < 0:
         fail(f"--validate: expected a number of scenarios >= 0, got {validate}")
-    accuracy = ModeValidation(mission, validate, seed) if validate else None
+    if observation not in ("contacts", "scan"):
+        fail(f"--observation: expected contacts or scan, got {observation!r}")
+    accuracy = ModeValidation(mission, validate, seed, observation) if validate else None
     table = Table(title=f"{mission.name}: {method} imitation of the autonomy")
     for col in ("iteration", "expert runs", "samples", "fit (s)", "train MSE") + (
         ("mode accuracy",) if validate else ()
@@ -87,14 +103,23 @@ def surrogate(
             select_runs=select_runs,
             seed=seed,
             on_iteration=on_iteration,
+            observation=observation,
+            directed=directed,
         )
     except ValueError as exc:
         fail(f"--{str(exc)}" if str(exc).split(":")[0] in ("method", "quantile", "epochs") else str(exc))
     sur.save(out_file)
     print_table(table)
     t = sur.training
+    judged = (
+        f"{t['selection']:.1%} of the expert's {t['held_out_boundary_pairs']} held-out boundary pairs, per type"
+        if t["directed"] and t["held_out_boundary_pairs"]
+        else "no held-out boundary pair: on mode accuracy"
+        if t["directed"]
+        else f"{t['selection']:.1%} mode accuracy"
+    )
     kept = (
-        f"update {t['chosen_iteration']} kept ({t['selection_accuracy']:.1%} on {t['select_runs']} held-out runs), "
+        f"update {t['chosen_iteration']} kept ({judged} on {t['select_runs']} held-out runs), "
         f"goal threshold {sur.goal_threshold:+.1f}"
         if t["select_runs"]
         else "last update kept"

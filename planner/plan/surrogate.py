@@ -21,6 +21,7 @@ import numpy as np
 from scipy.stats import qmc
 
 import sim.uuv
+from planner.plan.surrogate_training import DIRECTED_FROM, HeldOutPairs, directed_rollout
 from rapt.agreement import path_error
 from rapt.errors import InputError
 from rapt.imitation.dagger import IterationRecord, imitate
@@ -45,15 +46,16 @@ __all__ = [
 #: Goal thresholds tried on the held-out expert runs (the goal output is about -1 or +1).
 GOAL_THRESHOLDS = tuple(round(t, 1) for t in np.arange(-0.9, 0.91, 0.1))
 
-#: Section 6.6.1: 5 expert runs, then 5 annotated runs per iteration; 50-75 runs converge.
+#: Section 6.6.1's budget: 250 expert runs, 200 annotated (10 per update) and 50 held out.
 TRAINING_DEFAULTS = {
     "method": "qdagger",
     "quantile": 0.5,
-    "runs": 75,
-    "runs_per_iteration": 5,
+    "runs": 200,
+    "runs_per_iteration": 10,
     "epochs": 30,
     "mixing": 0.5,
-    "select_runs": 25,
+    "select_runs": 50,
+    "directed": True,
 }
 
 
@@ -62,56 +64,49 @@ def train_surrogate(
     *,
     method: str = "qdagger",
     quantile: float = 0.5,
-    runs: int = 75,
-    runs_per_iteration: int = 5,
+    runs: int = 200,
+    runs_per_iteration: int = 10,
     epochs: int = 30,
     mixing: float = 0.5,
-    select_runs: int = 25,
+    select_runs: int = 50,
     seed: int = 0,
     on_iteration: Callable[[IterationRecord, Policy], None] | None = None,
     goal_classifier: bool = True,
     observation: str = "contacts",
+    directed: bool = True,
 ) -> Surrogate:
     """Imitate the mission's expert with ``runs`` annotated runs (``runs_per_iteration`` at a time).
 
     ``mixing`` p: update i's runs obey the expert on a share p**i of their steps (DAgger's
     beta; 0 follows Algorithm 9 to the letter, the learner flying every step from update 1).
-    ``select_runs`` held-out expert runs choose the update whose policy is kept (the best
-    mode accuracy on them; 0 keeps the last), then its goal threshold
+    ``directed``: from the third update on, the annotated runs are the learner's boundary
+    candidates and disagreements, and the ``select_runs`` held-out expert runs are pairs of
+    them (:mod:`planner.plan.surrogate_training`): the update kept is the one that reproduces
+    most of the expert's held-out boundary pairs, type by type.  Otherwise the runs and the
+    held-out runs are drawn uniformly and the update kept has the best mode accuracy on them
+    (0 held-out runs keep the last).  The held-out runs then set the goal threshold
     (:func:`calibrate_goal_threshold`).  The surrogate's ``training["runs"]`` counts every
     expert run spent: annotated and held out.  ``goal_classifier`` trains the goal decision
     as a classifier weighted toward the expert's switches (:func:`rapt.imitation.dagger.imitate`'s
     ``decisions``); False regresses it on +-1 like the velocity, for comparison.
     """
-    if not 0.0 <= mixing < 1.0:
-        raise InputError(f"--mixing: expected a share in [0, 1), got {mixing!r}")
-    if int(runs_per_iteration) != runs_per_iteration or runs_per_iteration < 1:
-        raise InputError(f"--runs-per-iteration: expected a positive whole number, got {runs_per_iteration!r}")
-    if int(runs) != runs or runs < runs_per_iteration:
-        raise InputError(f"--runs: expected at least {runs_per_iteration} annotated runs, got {runs!r}")
-    if int(select_runs) != select_runs or select_runs < 0:
-        raise InputError(f"--select-runs: expected a number of held-out expert runs >= 0, got {select_runs!r}")
+    _check_training(runs, runs_per_iteration, mixing, select_runs)
     spec = feature_spec(mission, observation)
-    select: Callable[[Policy], tuple[float, float]] | None = None
-    if select_runs:
-        Xs = draw_valid(mission, int(select_runs), np.random.default_rng([int(seed), 0x73656C]))
-        _, held_out = annotated_runs(mission, Xs, spec)  # the expert's features, for the goal threshold
-        expert_paths = sim.uuv.simulate(mission, Xs, trajectories=True)
-
-        def select(policy: Policy) -> tuple[float, float]:
-            # the held-out runs' mode agreement picks the best update; among equals (25 runs give
-            # few distinct values) the one whose paths lie closest to the expert's
-            return held_out_agreement(mission, policy, Xs, expert_paths, observation)
-
+    held = _HeldOut(mission, spec, int(select_runs), seed, directed)
+    rollout = (
+        directed_rollout(mission, spec, seed=seed, mixing=mixing)
+        if directed
+        else make_rollout(mission, spec, seed=seed, mixing=mixing)
+    )
     result = imitate(
-        make_rollout(mission, spec, seed=seed, mixing=mixing),
+        rollout,
         method=method,
         quantile=quantile,
         iterations=runs // runs_per_iteration - 1,
         runs_per_iteration=runs_per_iteration,
         epochs=epochs,
         seed=seed,
-        select=select,
+        select=held.score if select_runs else None,
         on_iteration=on_iteration,
         heads=policy_heads(spec),
         decisions=[GOAL] if goal_classifier else [],
@@ -120,25 +115,71 @@ def train_surrogate(
     h = result.history[result.chosen]
     threshold, calibration = 0.0, None
     if select_runs:
-        threshold, share = calibrate_goal_threshold(result.policy, spec, held_out)
+        threshold, share = calibrate_goal_threshold(result.policy, spec, held.trajectories)
         calibration = [round(a, 4) for a in share]
     training = {
         "method": f"{method}({int(round(quantile * 100))})" if method.startswith("qdagger") else method,
+        "observation": observation,
+        "directed": bool(directed),
         "runs": result.runs + int(select_runs),
         "annotated_runs": result.runs,
         "select_runs": int(select_runs),
+        "held_out_boundary_pairs": held.boundary_pairs,
         "chosen_iteration": result.chosen,
-        "selection_accuracy": h.extra.get("selection"),
+        "selection": h.extra.get("selection"),
         "samples": h.samples,
         "seed": seed,
         "epochs": epochs,
         "mixing": mixing,
         "goal": "classifier" if goal_classifier else "regression",
         "fit_s": round(sum(r.fit_s for r in result.history), 2),
+        "train_s": round(result.history[-1].elapsed_s, 2),
         "iterations": len(result.history),
         "threshold_reproduced": calibration,
     }
     return Surrogate.for_mission(mission, result.policy, training, threshold, observation)
+
+
+def _check_training(runs: int, runs_per_iteration: int, mixing: float, select_runs: int) -> None:
+    """:func:`train_surrogate`'s options, checked before any run is flown."""
+    if not 0.0 <= mixing < 1.0:
+        raise InputError(f"--mixing: expected a share in [0, 1), got {mixing!r}")
+    if int(runs_per_iteration) != runs_per_iteration or runs_per_iteration < 1:
+        raise InputError(f"--runs-per-iteration: expected a positive whole number, got {runs_per_iteration!r}")
+    if int(runs) != runs or runs < runs_per_iteration:
+        raise InputError(f"--runs: expected at least {runs_per_iteration} annotated runs, got {runs!r}")
+    if int(select_runs) != select_runs or select_runs < 0:
+        raise InputError(f"--select-runs: expected a number of held-out expert runs >= 0, got {select_runs!r}")
+
+
+class _HeldOut:
+    """The held-out expert runs that choose the update kept: boundary pairs of the learner's
+    candidates, drawn once its search can show some (``directed``), else uniform draws."""
+
+    def __init__(self, mission: Mission, spec, runs: int, seed: int, directed: bool):
+        self.mission, self.spec, self.runs, self.seed, self.directed = mission, spec, runs, seed, directed
+        self.calls = 0
+        self.pairs: HeldOutPairs | None = None
+        self.trajectories: list = []
+        self.boundary_pairs: int | None = None
+        if runs and not directed:
+            X = draw_valid(mission, runs, np.random.default_rng([int(seed), 0x73656C]))
+            _, self.trajectories = annotated_runs(mission, X, spec)  # the expert's features, for the goal threshold
+            expert = sim.uuv.simulate(mission, X, trajectories=True)
+            self._uniform = lambda policy: held_out_agreement(mission, policy, X, expert, spec.observation)
+
+    def score(self, policy: Policy) -> tuple[float, ...]:
+        """Higher is better; updates before the held-out pairs exist are never kept."""
+        self.calls += 1
+        if not self.directed:
+            return self._uniform(policy)
+        if self.pairs is None and self.calls < DIRECTED_FROM:
+            return (-np.inf,)
+        if self.pairs is None:
+            self.pairs = HeldOutPairs.around(self.mission, self.spec, policy, self.runs, self.seed * 1000 + 0x5E1)
+            self.trajectories = self.pairs.trajectories
+            self.boundary_pairs = int(self.pairs.boundary_pairs().shape[0])
+        return self.pairs(policy)
 
 
 def calibrate_goal_threshold(

@@ -16,8 +16,8 @@ SPEC = feature_spec(IMITATION7)
 
 
 def _surrogate_args(mission: str, model: Path) -> list[str]:
-    """A small, quick training run: 4 expert runs, 3 epochs, 16 validation scenarios."""
-    options = "--runs 4 --runs-per-iteration 2 --epochs 3 --validate 16 --select-runs 4"
+    """A small, quick training run: 10 annotated and 4 held-out expert runs, 10 epochs, 16 validation scenarios."""
+    options = "--runs 10 --runs-per-iteration 5 --epochs 10 --validate 16 --select-runs 4"
     return ["surrogate", mission, "--out", str(model), *options.split()]
 
 
@@ -42,7 +42,7 @@ def test_cli_trains_a_surrogate_and_generate_searches_with_it_and_confirms_with_
     assert (
         model.is_file()
         and "mode accuracy" in result.output
-        and "8 expert runs: 4 annotated + 4 held out" in result.output
+        and "14 expert runs: 10 annotated + 4 held out" in result.output
     )
     policy = Surrogate.load(model, IMITATION7).policy  # the goal decision is its own network, blind to the scan
     (steer_in, steer_out, _), (goal_in, goal_out, goal) = policy.heads
@@ -56,9 +56,11 @@ def test_cli_trains_a_surrogate_and_generate_searches_with_it_and_confirms_with_
     plan = json.loads((out / "plan.json").read_text())
     s = plan["study"]["surrogate"]
     # the confirmation is a budget of expert runs: two at least for every candidate examined
-    assert s["expert_runs"]["training"] == 8 and s["confirm_budget"] == 20
+    assert s["expert_runs"]["training"] == 14 and s["confirm_budget"] == 20
     assert 2 * s["examined"] <= s["expert_runs"]["confirmation"] <= 20 and s["examined"] <= s["candidates"] <= 10
-    assert s["confirmed"] == len(plan["pairs"]) <= 2 and s["share_confirmed"] == s["confirmed"] / max(s["examined"], 1)
+    # every planned pair was confirmed; the ranking may still drop a confirmed pair (one boundary, two brackets)
+    assert 1 <= len(plan["pairs"]) <= s["confirmed"] <= 2
+    assert s["share_confirmed"] == s["confirmed"] / max(s["examined"], 1)
     assert sum(p["expert_runs"] for p in plan["pairs"]) <= s["expert_runs"]["confirmation"]
     assert f"confirmed {s['confirmed']} of {s['examined']} candidate pairs examined" in result.output
     for pair in plan["pairs"]:  # the expert's own outcome changes across every planned pair, in its elements
@@ -106,7 +108,10 @@ def test_a_corrupt_or_outdated_surrogate_file_is_refused_in_one_line(tmp_path):
     junk.write_bytes(b"PK\x03\x04 half a zip archive")
     old = tmp_path / "old.npz"  # a surrogate of the velocity-vector layout (format /2)
     np.savez(old, header=np.array(json.dumps({"format": "rapt.surrogate/2", "mission": "imitation7"})))
-    for path, message in ((junk, "is not a surrogate file"), (old, "expected one of rapt.surrogate/3; retrain it")):
+    for path, message in (
+        (junk, "is not a surrogate file"),
+        (old, "observes a velocity vector on a 360-degree scan, not the expert's remembered contacts; retrain it"),
+    ):
         out = tmp_path / path.stem
         args = ["generate", str(EXAMPLES / "imitation7.toml"), "--out", str(out), "--surrogate", str(path)]
         result = CliRunner().invoke(app, args)
