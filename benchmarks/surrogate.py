@@ -1,32 +1,32 @@
-"""Surrogate agents on the chapter 6 mission (issues 8, 26): speed, learners, agreement, expert runs saved.
+"""Surrogate agents (chapter 6, issues 8, 26, 50): speed, learners, agreement, expert runs saved, recall per type.
 
-Five tables, measured side by side in one run on ``examples/imitation7.toml``:
+Five tables, measured side by side in one run (``--tables`` picks some):
 
 1. Decision time of the expert autonomy and of the surrogate network, same process,
    100 decisions: one vehicle a call (as a back-seat decides on the vehicle) and one call
    for 100 vehicles (as the batch simulator decides); ratios (Table 6.2: 115x).
-2. Learners with the same expert-annotated runs: behavioural cloning, DAgger, Q-DAgger(50)
-   and Q-DAgger(75); mode accuracy on a tracking design after every update, cumulative
-   training time, and the training time each needs to reach the same accuracy
-   (Table 6.3: Q-DAgger(50) trained 3.0x faster than DAgger).
-3. The Q-DAgger(50) surrogate against the expert on the same Sobol validation set
-   (5,000 scenarios as in section 6.6.4): mode accuracy and confusion matrix, path error,
-   boundary accuracy (regions, and pairs the expert straddles), distance error, share of
-   mismatches next to a boundary (the paper: 84-85%, 86.8%, 0.0096, 95%).
+2. Learners with the same expert runs: DAgger, Q-DAgger(50) as Algorithm 9 writes it
+   (re-mining the aggregate) and the variant that trims only each new set; mode accuracy
+   on a tracking design after every update, cumulative training time, and the training
+   time each needs to reach the same accuracy (Table 6.3: Q-DAgger(50) 3.0x faster).
+3. The default surrogate against the expert on a Sobol validation set: mode accuracy and
+   confusion matrix, path error, boundary accuracy (regions, and pairs the expert
+   straddles), distance error, mismatches next to a boundary (84-85%, 86.8%, 0.0096, 95%).
 4. The surrogate workflow of section 6.2.3 against an expert-only search of the same
-   budget: expert runs spent, pairs confirmed, and whether the expert-only search finds
-   boundaries of the confirmed types.
+   budget: expert runs spent, pairs confirmed, and the expert-only runs to the same types.
+6. Boundary recall and precision per type, over training seeds and budgets of expert runs,
+   on imitation7 and imitation7_dense, beside a depth-3 tree and gradient boosting fitted
+   to the same expert runs, and beside the surrogate trained as before issue 50
+   (:mod:`surrogate_recall`).
 
-5. The spread over training seeds (default 0, 1, 2): each seed's surrogate on the same
-   Sobol validation set, mode and boundary accuracy, median and worst (issue 26: 90 % and
-   87 %); ``--regression-goal`` trains the goal decision by regression instead, to compare.
-
-Run:  python benchmarks/surrogate.py [--runs 75] [--validation 5000] [--methods ...] [--quick]
+Tables 1-4 use ``--mission`` (imitation7); table 6 ``--missions`` (both).
+Run:  python benchmarks/surrogate.py [--tables 1 2 3 4 6] [--mission FILE] [--quick]
 """
 
 from __future__ import annotations
 
 import argparse
+import sys
 import time
 from pathlib import Path
 
@@ -45,12 +45,18 @@ from sim.uuv.scoring import MODE_NAMES
 from sim.uuv.simulate import observation
 from sim.uuv.world import World
 
-MISSION = Path(__file__).resolve().parents[1] / "examples" / "imitation7.toml"
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from surrogate_recall import recall_table  # noqa: E402  (a sibling module of this script)
+
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
+MISSION = EXAMPLES / "imitation7.toml"
+MISSIONS = [MISSION, EXAMPLES / "imitation7_dense.toml"]
 METHODS = {
     "supervised": ("supervised", 0.0),
     "dagger": ("dagger", 0.0),
     "qdagger50": ("qdagger", 0.5),
     "qdagger75": ("qdagger", 0.75),
+    "qdagger-new50": ("qdagger-new", 0.5),
 }
 
 
@@ -69,7 +75,7 @@ def decision_time(mission, surrogate: Surrogate, repeats: int = 5) -> None:
     singles = [
         (scen.select(np.array([i])), observation(_row(tel, i), scen.select(np.array([i])))) for i in range(scen.n)
     ]
-    seen = int(np.sum(np.any(tel.scan <= surrogate.spec.sonar_range_m, axis=1)))
+    seen = int(np.sum(np.any(tel.detected, axis=1)))
 
     def best(fn) -> float:
         times = []
@@ -87,7 +93,7 @@ def decision_time(mission, surrogate: Surrogate, repeats: int = 5) -> None:
     batch_e, batch_l = Autonomy(scen), surrogate.autonomy(scen)
     batch_l.step(obs, mission.dt)
     F = batch_l.last_features
-    quiet = surrogate.spec.sonar
+    quiet = surrogate.spec.quiet
     rows = [
         (
             "expert autonomy",
@@ -114,7 +120,7 @@ def decision_time(mission, surrogate: Surrogate, repeats: int = 5) -> None:
     ]
     print(
         f"1. Decision time, 100 decisions, same process, one BLAS thread ({seen} of {scen.n} vehicles with "
-        f"sonar returns; best of {repeats})"
+        f"sonar contacts; best of {repeats})"
     )
     print(f"{'decider':<42} {'how':<24} {'ms per 100':>10} {'expert / this':>14}")
     for who, how, t in rows:
@@ -129,19 +135,19 @@ def decision_time(mission, surrogate: Surrogate, repeats: int = 5) -> None:
         "(Table 6.2 compares 100 evaluations: 0.487 s against 0.00421 s, 115x)"
     )
     print(
-        f"   100x here: the networks' {macs / 1e6:.2f} M multiply-adds for these 100 decisions (quiet scans "
-        f"skipped) in {need * 1e6:.0f} us, {macs / need / 1e9:.1f} G/s; this core's float64 matrix product "
+        f"   100x here: the networks' {macs / 1e6:.2f} M multiply-adds for these 100 decisions in {need * 1e6:.0f} us, {macs / need / 1e9:.1f} G/s; this core's float64 matrix product "
         f"peaks at {peak / 1e9:.1f} G/s (1000 x 1000, one thread), so the arithmetic alone takes "
         f"{macs / peak * 1e6:.0f} us ({rows[0][2] / (macs / peak):.0f}x at best)\n"
     )
 
 
-def multiply_adds(policy, F: np.ndarray, quiet: slice) -> int:
+def multiply_adds(policy, F: np.ndarray, quiet: slice | None) -> int:
     """Multiply-adds the networks spend on the rows ``F``, skipping the quiet scans as the policy does."""
     heads = policy.heads if hasattr(policy, "heads") else [(np.arange(F.shape[1]), None, policy)]
     q = np.zeros(F.shape[1], dtype=bool)
-    q[quiet] = True
-    busy = int(np.sum(np.any(F[:, quiet] != 1.0, axis=1)))
+    if quiet is not None:
+        q[quiet] = True
+    busy = int(np.sum(np.any(F[:, q] != 1.0, axis=1)))
     n, total = F.shape[0], 0
     for cols, _, net in heads:
         sizes = [w.shape for w in net.weights]
@@ -221,14 +227,15 @@ def learners(
             )
         sur.training["method"] = name
         out[name] = (sur, curve)
-        chosen = sur.training["selection_accuracy"]
+        chosen = sur.training["selection"]
         print(
             f"   {name}: update {sur.training['chosen_iteration']} kept (best on {select_runs} held-out expert "
-            f"runs: {float('nan') if chosen is None else chosen:.1%}; goal threshold {sur.goal_threshold:+.1f})",
+            f"runs: {float('nan') if chosen is None else chosen:.1%} of their boundary pairs per type; "
+            f"goal threshold {sur.goal_threshold:+.1f}; {sur.training['train_s']:.0f} s)",
             flush=True,
         )
     finals = {n: c[out[n][0].training["chosen_iteration"]][-1] for n, (_, c) in out.items()}
-    contenders = [n for n in ("dagger", "qdagger50", "qdagger75") if n in out]
+    contenders = [n for n in ("dagger", "qdagger50", "qdagger75", "qdagger-new50") if n in out]
     # the accuracy every contender reaches (its best), less 2 points of tracking-set noise
     target = min(max(c[-1] for c in out[n][1]) for n in contenders) - 0.02 if contenders else 0.0
     print(
@@ -244,7 +251,7 @@ def learners(
             f"{n:<11} {c[-1][0]:>5} {finals[n]:>9.1%} {max(r[-1] for r in c):>9.1%} {c[-1][1]:>8,} "
             f"{fit[-1]:>9.1f} {reach[n][0]:>10.1f}"
         )
-    for q in ("qdagger50", "qdagger75"):
+    for q in ("qdagger50", "qdagger75", "qdagger-new50"):
         if q in reach and "dagger" in reach:
             print(
                 f"   DAgger / {q} fit CPU time: {reach['dagger'][1] / reach[q][1]:.1f}x for all {runs} runs "
@@ -289,37 +296,6 @@ def validation(mission, surrogate: Surrogate, n: int, paths: int, seed: int) -> 
     for k, m in enumerate(MODE_NAMES):
         print(f"   {m:>4} " + "".join(f"{v:>7}" for v in a.confusion[k]))
     print()
-
-
-def seeds(mission, n: int, training_seeds: list[int], goal_classifier: bool = True) -> list[Surrogate]:
-    """Train the default Q-DAgger(50) surrogate once per seed and validate each on the same Sobol set."""
-    from threadpoolctl import threadpool_limits
-
-    X = qmc.Sobol(mission.dim, seed=0).random(n)
-    expert = sim.uuv.simulate(mission, X)
-    goal = "classifier" if goal_classifier else "regression"
-    print(f"5. Spread over training seeds: Q-DAgger(50), goal decision by {goal}, {n:,} Sobol validation scenarios")
-    print(f"{'seed':>5} {'update kept':>11} {'goal threshold':>14} {'mode accuracy':>14} {'boundary accuracy':>18}")
-    out, modes, bounds = [], [], []
-    for s in training_seeds:
-        with threadpool_limits(1):
-            sur = train_surrogate(mission, seed=s, goal_classifier=goal_classifier)
-        mine = sim.uuv.simulate(mission, X, surrogate=sur)
-        ok = expert.valid & mine.valid
-        a = agreement(X[ok], expert.modes[ok], mine.modes[ok])
-        modes.append(a.mode_accuracy)
-        bounds.append(a.boundary_accuracy)
-        print(
-            f"{s:>5} {sur.training['chosen_iteration']:>11} {sur.goal_threshold:>+14.1f} {a.mode_accuracy:>14.1%} "
-            f"{a.boundary_accuracy:>18.1%}",
-            flush=True,
-        )
-        out.append(sur)
-    print(
-        f"{'median':>5} {'':>11} {'':>14} {np.median(modes):>14.1%} {np.median(bounds):>18.1%}\n"
-        f"{'worst':>5} {'':>11} {'':>14} {min(modes):>14.1%} {min(bounds):>18.1%}   (targets: 90 % and 87 %)\n"
-    )
-    return out
 
 
 def workflow(mission, surrogate: Surrogate, budget: int, confirm: int, pairs: int, seed: int) -> None:
@@ -413,36 +389,46 @@ def _runs_to_types(mission, study, asked: np.ndarray, types: set[tuple]) -> tupl
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--runs", type=int, default=75, help="expert-annotated runs per learner")
-    ap.add_argument("--per", type=int, default=5, help="runs per update")
+    ap.add_argument("--tables", type=int, nargs="+", default=[1, 2, 3, 4, 6], help="tables to print")
+    ap.add_argument("--mission", type=Path, default=MISSION, help="mission of tables 1-4")
+    ap.add_argument("--missions", type=Path, nargs="+", default=MISSIONS, help="missions of table 6")
+    ap.add_argument("--runs", type=int, default=200, help="expert-annotated runs per learner (table 2)")
+    ap.add_argument("--per", type=int, default=10, help="runs per update")
     ap.add_argument("--epochs", type=int, default=30)
     ap.add_argument("--mixing", type=float, default=0.5, help="DAgger's beta = mixing**iteration")
     ap.add_argument(
         "--select-runs",
         type=int,
-        default=25,
+        default=50,
         help="held-out expert runs choosing the policy kept and its goal threshold",
     )
-    ap.add_argument("--methods", nargs="+", default=list(METHODS), choices=list(METHODS))
+    ap.add_argument("--methods", nargs="+", default=["dagger", "qdagger50", "qdagger-new50"], choices=list(METHODS))
     ap.add_argument("--track", type=int, default=256, help="Sobol scenarios tracking accuracy during training")
-    ap.add_argument("--validation", type=int, default=5000)
+    ap.add_argument("--validation", type=int, default=2048, help="Sobol validation scenarios (tables 3 and 6)")
     ap.add_argument("--paths", type=int, default=500, help="validation runs whose paths are compared")
-    ap.add_argument("--budget", type=int, default=6000, help="search budget of section 4 (the paper: 6,000)")
+    ap.add_argument("--budget", type=int, default=6000, help="search budget of table 4 (the paper: 6,000)")
     ap.add_argument("--confirm", type=int, default=100)
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--seeds", type=int, nargs="*", default=[0, 1, 2], help="training seeds of table 5 (none: skip)")
-    ap.add_argument("--regression-goal", action="store_true", help="table 5 with the goal decision regressed")
+    ap.add_argument("--seeds", type=int, nargs="*", default=[0, 1, 2], help="training seeds of table 6")
+    ap.add_argument("--budgets", type=int, nargs="+", default=[100, 250], help="expert runs per surrogate (table 6)")
+    ap.add_argument("--no-today", action="store_true", help="table 6 without today's surrogate beside it")
     ap.add_argument("--save", type=Path, help="save the Q-DAgger(50) surrogate here (.npz)")
     ap.add_argument("--load", type=Path, help="skip training: use this surrogate for tables 1, 3 and 4")
     ap.add_argument("--quick", action="store_true", help="small settings for a smoke run")
     args = ap.parse_args()
     if args.quick:
-        args.runs, args.track, args.validation, args.paths, args.budget, args.confirm = 20, 64, 500, 50, 1000, 20
-        args.epochs, args.methods, args.seeds = 10, ["dagger", "qdagger50"], []
-    mission = sim.uuv.load_mission(MISSION)
+        args.runs, args.per, args.select_runs, args.track, args.validation = 20, 5, 10, 64, 512
+        args.paths, args.budget, args.confirm, args.epochs = 50, 1000, 20, 10
+        args.methods, args.seeds, args.budgets = ["dagger", "qdagger50"], [0], [40]
+    if 6 in args.tables:
+        missions = [sim.uuv.load_mission(m) for m in args.missions]
+        recall_table(missions, args.budgets, args.seeds, args.validation, not args.no_today)
+    if not set(args.tables) & {1, 2, 3, 4}:
+        return
+    mission = sim.uuv.load_mission(args.mission)
     if args.load is not None:
         main_surrogate = Surrogate.load(args.load, mission)
-    else:
+    elif 2 in args.tables:
         trained = learners(
             mission,
             args.methods,
@@ -455,13 +441,16 @@ def main() -> None:
             args.select_runs,
         )
         main_surrogate = trained.get("qdagger50", next(iter(trained.values())))[0]
-        if args.save is not None:
-            main_surrogate.save(args.save)
-    decision_time(mission, main_surrogate)
-    validation(mission, main_surrogate, args.validation, args.paths, args.seed)
-    workflow(mission, main_surrogate, args.budget, args.confirm, 5, args.seed)
-    if args.seeds:
-        seeds(mission, args.validation, args.seeds, not args.regression_goal)
+    else:
+        main_surrogate = train_surrogate(mission, seed=args.seed)
+    if args.save is not None:
+        main_surrogate.save(args.save)
+    if 1 in args.tables:
+        decision_time(mission, main_surrogate)
+    if 3 in args.tables:
+        validation(mission, main_surrogate, args.validation, args.paths, args.seed)
+    if 4 in args.tables:
+        workflow(mission, main_surrogate, args.budget, args.confirm, 5, args.seed)
 
 
 if __name__ == "__main__":

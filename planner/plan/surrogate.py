@@ -56,6 +56,7 @@ TRAINING_DEFAULTS = {
     "mixing": 0.5,
     "select_runs": 50,
     "directed": True,
+    "directed_share": 0.5,
 }
 
 
@@ -74,13 +75,14 @@ def train_surrogate(
     goal_classifier: bool = True,
     observation: str = "contacts",
     directed: bool = True,
+    directed_share: float = 0.5,
 ) -> Surrogate:
     """Imitate the mission's expert with ``runs`` annotated runs (``runs_per_iteration`` at a time).
 
     ``mixing`` p: update i's runs obey the expert on a share p**i of their steps (DAgger's
     beta; 0 follows Algorithm 9 to the letter, the learner flying every step from update 1).
-    ``directed``: from the third update on, the annotated runs are the learner's boundary
-    candidates and disagreements, and the ``select_runs`` held-out expert runs are pairs of
+    ``directed``: from the third update on, a ``directed_share`` of the annotated runs are the
+    learner's boundary candidates and disagreements (the rest drawn uniformly), and the ``select_runs`` held-out expert runs are pairs of
     them (:mod:`planner.plan.surrogate_training`): the update kept is the one that reproduces
     most of the expert's held-out boundary pairs, type by type.  Otherwise the runs and the
     held-out runs are drawn uniformly and the update kept has the best mode accuracy on them
@@ -93,10 +95,11 @@ def train_surrogate(
     _check_training(runs, runs_per_iteration, mixing, select_runs)
     spec = feature_spec(mission, observation)
     held = _HeldOut(mission, spec, int(select_runs), seed, directed)
+    flown: list[np.ndarray] = []  # the scenarios the expert annotated, iteration by iteration
     rollout = (
-        directed_rollout(mission, spec, seed=seed, mixing=mixing)
+        directed_rollout(mission, spec, seed=seed, mixing=mixing, share=directed_share, record=flown)
         if directed
-        else make_rollout(mission, spec, seed=seed, mixing=mixing)
+        else make_rollout(mission, spec, seed=seed, mixing=mixing, record=flown)
     )
     result = imitate(
         rollout,
@@ -120,7 +123,7 @@ def train_surrogate(
     training = {
         "method": f"{method}({int(round(quantile * 100))})" if method.startswith("qdagger") else method,
         "observation": observation,
-        "directed": bool(directed),
+        "directed": float(directed_share) if directed else 0.0,
         "runs": result.runs + int(select_runs),
         "annotated_runs": result.runs,
         "select_runs": int(select_runs),
@@ -136,6 +139,8 @@ def train_surrogate(
         "train_s": round(result.history[-1].elapsed_s, 2),
         "iterations": len(result.history),
         "threshold_reproduced": calibration,
+        # every scenario the expert flew for this surrogate (unit cube): annotated, then held out
+        "expert_scenarios": np.vstack(flown + ([held.X] if held.X is not None else [])).tolist(),
     }
     return Surrogate.for_mission(mission, result.policy, training, threshold, observation)
 
@@ -159,11 +164,12 @@ class _HeldOut:
     def __init__(self, mission: Mission, spec, runs: int, seed: int, directed: bool):
         self.mission, self.spec, self.runs, self.seed, self.directed = mission, spec, runs, seed, directed
         self.calls = 0
+        self.X: np.ndarray | None = None
         self.pairs: HeldOutPairs | None = None
         self.trajectories: list = []
         self.boundary_pairs: int | None = None
         if runs and not directed:
-            X = draw_valid(mission, runs, np.random.default_rng([int(seed), 0x73656C]))
+            X = self.X = draw_valid(mission, runs, np.random.default_rng([int(seed), 0x73656C]))
             _, self.trajectories = annotated_runs(mission, X, spec)  # the expert's features, for the goal threshold
             expert = sim.uuv.simulate(mission, X, trajectories=True)
             self._uniform = lambda policy: held_out_agreement(mission, policy, X, expert, spec.observation)
@@ -177,7 +183,7 @@ class _HeldOut:
             return (-np.inf,)
         if self.pairs is None:
             self.pairs = HeldOutPairs.around(self.mission, self.spec, policy, self.runs, self.seed * 1000 + 0x5E1)
-            self.trajectories = self.pairs.trajectories
+            self.trajectories, self.X = self.pairs.trajectories, self.pairs.X
             self.boundary_pairs = int(self.pairs.boundary_pairs().shape[0])
         return self.pairs(policy)
 

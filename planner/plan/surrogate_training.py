@@ -64,24 +64,29 @@ def directed_rollout(
     mixing: float = 0.0,
     search_runs: int = SEARCH_RUNS,
     start: int = DIRECTED_FROM,
+    share: float = 1.0,
+    record: list | None = None,
 ):
     """A ``rollout(policy, k, iteration)`` for :func:`rapt.imitation.dagger.imitate` whose runs, from
-    iteration ``start``, are :func:`~rapt.imitation.queries.boundary_queries` of the learner's search.
+    iteration ``start``, are :func:`~rapt.imitation.queries.boundary_queries` of the learner's search
+    (a ``share`` of them; the rest drawn uniformly, which keeps the interior of the modes in view).
 
     Before that, and whenever the learner's search shows no boundary, it draws valid scenarios
     uniformly, seeded by ``(seed, iteration)`` as :func:`~sim.uuv.imitation.rollouts.make_rollout`.
+    ``record``, a list, gets each iteration's scenarios appended.
     """
     last: dict = {}
 
     def rollout(policy, k, iteration):
         rng = np.random.default_rng([int(seed), int(iteration)])
-        X = None
-        if policy is not None and iteration >= start:
+        X, aimed = None, int(round(share * k))
+        if policy is not None and iteration >= start and aimed:
             X = directed_scenarios(
-                mission, spec, policy, last.get("policy"), k, rng, search_runs, seed * 1000 + iteration
+                mission, spec, policy, last.get("policy"), aimed, rng, search_runs, seed * 1000 + iteration
             )
-        if X is None:
-            X = draw_valid(mission, k, rng)
+        X = draw_valid(mission, k, rng) if X is None else np.vstack([X, draw_valid(mission, k - aimed, rng)])
+        if record is not None:
+            record.append(X)
         if policy is not None:
             last["policy"] = policy
         beta = float(mixing) ** int(iteration) if mixing > 0 else 0.0

@@ -95,6 +95,8 @@ def test_cli_trains_a_surrogate_and_generate_searches_with_it_and_confirms_with_
     assert len([line for line in result.output.splitlines() if line.strip()]) == 1
     result = runner.invoke(app, ["surrogate", mission, "--out", str(tmp_path / "x.npz"), "--method", "bogus"])
     assert result.exit_code == 2 and "--method: expected one of" in result.output
+    result = runner.invoke(app, ["surrogate", mission, "--out", str(tmp_path / "x.npz"), "--observation", "sonar"])
+    assert result.exit_code == 2 and "--observation: expected contacts or scan, got 'sonar'" in result.output
 
 
 def test_a_corrupt_or_outdated_surrogate_file_is_refused_in_one_line(tmp_path):
@@ -108,9 +110,12 @@ def test_a_corrupt_or_outdated_surrogate_file_is_refused_in_one_line(tmp_path):
     junk.write_bytes(b"PK\x03\x04 half a zip archive")
     old = tmp_path / "old.npz"  # a surrogate of the velocity-vector layout (format /2)
     np.savez(old, header=np.array(json.dumps({"format": "rapt.surrogate/2", "mission": "imitation7"})))
+    scan = tmp_path / "scan.npz"  # the last format: a 360-degree scan with no memory of contacts
+    np.savez(scan, header=np.array(json.dumps({"format": "rapt.surrogate/3", "mission": "imitation7"})))
     for path, message in (
         (junk, "is not a surrogate file"),
         (old, "observes a velocity vector on a 360-degree scan, not the expert's remembered contacts; retrain it"),
+        (scan, "observes a 360-degree scan with no memory of contacts, not the expert's remembered contacts"),
     ):
         out = tmp_path / path.stem
         args = ["generate", str(EXAMPLES / "imitation7.toml"), "--out", str(out), "--surrogate", str(path)]

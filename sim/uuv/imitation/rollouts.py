@@ -188,16 +188,26 @@ def draw_valid(mission: Mission, k: int, rng: np.random.Generator) -> np.ndarray
     raise InputError(f"mission: fewer than {k} valid scenarios in {100 * max(2 * k, 8)} random draws")
 
 
-def make_rollout(mission: Mission, spec: FeatureSpec, seed: int = 0, stochastic: bool = False, mixing: float = 0.0):
+def make_rollout(
+    mission: Mission,
+    spec: FeatureSpec,
+    seed: int = 0,
+    stochastic: bool = False,
+    mixing: float = 0.0,
+    record: list | None = None,
+):
     """A ``rollout(policy, k, iteration)`` for :func:`rapt.imitation.dagger.imitate` on random valid scenarios.
 
     Iteration ``i`` draws its scenarios from a generator seeded by ``(seed, i)``, so every
     learner sees the same scenarios at the same iteration.  ``mixing`` p makes iteration i obey the
     expert on a share p**i of its steps (DAgger's decaying beta; 0: Algorithm 9 as written).
+    ``record``, a list, gets each iteration's scenarios appended.
     """
 
     def rollout(policy, k, iteration):
         X = draw_valid(mission, k, np.random.default_rng([int(seed), int(iteration)]))
+        if record is not None:
+            record.append(X)
         beta = float(mixing) ** int(iteration) if mixing > 0 else 0.0
         _, trajs = annotated_runs(
             mission, X, spec, policy, seed=seed + int(iteration), stochastic=stochastic, beta=beta
