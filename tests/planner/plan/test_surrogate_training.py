@@ -58,3 +58,18 @@ def test_held_out_pairs_score_an_update_on_the_experts_boundary_pairs_type_by_ty
     mine = sim.uuv.simulate(IMITATION7, u, surrogate=Surrogate.for_mission(IMITATION7, policy)).modes
     right = [(mine[i] == e[i]) & (mine[j] == e[j]) for i, j in ((0, 1), (2, 3))]
     assert recall == np.mean(right) and mode == np.mean(mine == e) and path < 0
+
+
+def test_training_is_seeded_and_lists_the_expert_runs_it_spent():
+    """Three updates (the third directed) and 10 held-out runs: the same seed gives the same surrogate and
+    the same expert scenarios, every one of which the file lists."""
+    from planner.plan.surrogate import train_surrogate
+
+    options = dict(runs=30, runs_per_iteration=10, select_runs=10, epochs=3, seed=4)
+    one, two = train_surrogate(IMITATION7, **options), train_surrogate(IMITATION7, **options)
+    flown = np.asarray(one.training["expert_scenarios"])
+    assert flown.shape == (40, IMITATION7.dim) and one.training["runs"] == 40
+    np.testing.assert_array_equal(flown, two.training["expert_scenarios"])
+    F = np.random.default_rng(0).uniform(-1, 1, (50, SPEC.size)).astype(np.float32)
+    np.testing.assert_array_equal(one.policy(F), two.policy(F))
+    assert one.training["directed"] == 0.5 and one.training["method"] == "qdagger(50)"
