@@ -26,6 +26,7 @@ from sim.uuv.imitation.features import (
     advance_waypoints,
     contact_view,
     features,
+    predicted_current,
     waypoint_target,
 )
 from sim.uuv.scenario import Scenarios
@@ -57,6 +58,7 @@ class PolicyAutonomy:
         self.last_features: np.ndarray | None = None
         self.memory = ContactMemory(spec.memory_s)
         self.last_view: np.ndarray | None = None  # the obstacle view the last decision saw
+        self.last_tide: tuple[np.ndarray, np.ndarray] | None = None  # and the tide it predicted
 
     def obstacle_view(self, obs: Observation) -> np.ndarray:
         """This step's obstacle view (:func:`~sim.uuv.imitation.features.features`), updating the contact memory."""
@@ -76,7 +78,8 @@ class PolicyAutonomy:
         wx, wy, pending = self.last_target = waypoint_target(m, self.wp_next)
         self.was_home = self.home.copy()
         pending = pending & ~self.home
-        F = features(self.spec, m, obs.t, obs.x, obs.y, obs.heading, obs.battery, view, (wx, wy, pending))
+        tide = self.last_tide = predicted_current(m, self.scen, obs)
+        F = features(self.spec, m, obs.t, obs.x, obs.y, obs.heading, obs.battery, view, (wx, wy, pending), tide)
         self.last_features = F  # what the goal decision was taken on
         action = self.policy(F, quiet=self.spec.quiet)
         turn = pending & (action[:, GOAL] > self.goal_threshold)
@@ -92,6 +95,7 @@ class PolicyAutonomy:
                 obs.battery[rows],
                 view[rows],
                 (wx[rows], wy[rows], np.zeros(rows.size, dtype=bool)),
+                (np.broadcast_to(tide[0], obs.x.shape)[rows], np.broadcast_to(tide[1], obs.x.shape)[rows]),
             )
             action[rows] = self.policy(G, quiet=self.spec.quiet)
         self.home |= turn if active is None else turn & active

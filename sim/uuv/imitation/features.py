@@ -10,6 +10,9 @@ Features, all in the vehicle frame (x along the bow, y to starboard) and in [-1,
   direction legible at any range, which is what steering needs, while the distance
   carries the fuel decision.  The waypoint's three are zero once every waypoint has been
   reached (the vehicle knows which it has reached) or given up (see the goal decision);
+* ``current`` — the predicted tidal current the expert crabs against (its tide table), in
+  the vehicle frame over the maximum speed (observation ``contacts``): the heading and
+  through-water speed the expert commands depend on it;
 * ``obstacles`` — what the expert knows of the obstacles, by the mission's observation model:
 
   - ``contacts`` (the default): the sonar contacts the expert remembers
@@ -66,6 +69,7 @@ __all__ = [
     "OBSERVATIONS",
     "MAX_SLOTS",
     "contact_view",
+    "predicted_current",
     "feature_spec",
     "features",
     "expert_action",
@@ -78,7 +82,7 @@ __all__ = [
     "SPEED",
 ]
 
-FEATURE_VERSION = 4
+FEATURE_VERSION = 5
 #: Observation models: the expert's remembered sonar contacts, or section 6.5.3's 360-degree scan.
 OBSERVATIONS = ("contacts", "scan")
 #: Remembered contacts a learner sees at most, nearest first (the expert rarely knows more at once).
@@ -117,8 +121,13 @@ class FeatureSpec:
         return self.beams if self.observation == "scan" else SLOT_COLUMNS * self.slots
 
     @property
+    def tide_size(self) -> int:
+        """Columns of the predicted current (observation ``contacts``; section 6.5.3's scan has none)."""
+        return 0 if self.observation == "scan" else 2
+
+    @property
     def size(self) -> int:
-        return 1 + 6 + self.view_size + 1
+        return 1 + 6 + self.tide_size + self.view_size + 1
 
     @property
     def waypoint(self) -> slice:
@@ -132,7 +141,7 @@ class FeatureSpec:
     @property
     def sonar(self) -> slice:
         """The obstacle view's columns (the scan, or the remembered contacts)."""
-        return slice(7, 7 + self.view_size)
+        return slice(7 + self.tide_size, 7 + self.tide_size + self.view_size)
 
     @property
     def quiet(self) -> slice | None:
@@ -150,6 +159,7 @@ class FeatureSpec:
                 "recovery_stbd",
                 "recovery_distance",
             ]
+            + ["current_fwd", "current_stbd"][: self.tide_size]
             + (
                 [f"sonar_{b}" for b in range(self.beams)]
                 if self.observation == "scan"
@@ -176,11 +186,11 @@ def policy_heads(spec: FeatureSpec) -> tuple[tuple[list[int] | None, list[int]],
     """Which features each network of a learned back-seat reads (``rapt.imitation.dagger.imitate(heads=)``).
 
     Heading and speed from every feature; the goal decision from the charge, the map vectors
-    and the clock only — what the expert's goal selection reads.  Learned by the steering
+    and the clock only — what the expert's goal selection reads (not the tide nor the obstacles).  Learned by the steering
     network, the decision leaned on the range scan (in the chapter 6 mission most early aborts of a
     single network fired on a sonar spike, its output with the scan cleared far below 0).
     """
-    mission_level = list(range(spec.sonar.start)) + list(range(spec.sonar.stop, spec.size))
+    mission_level = list(range(7)) + [spec.size - 1]
     return ((None, [0, 1, SPEED]), (mission_level, [GOAL]))
 
 
@@ -272,11 +282,13 @@ def features(
     battery: np.ndarray,
     view: np.ndarray,
     waypoint: tuple[np.ndarray, np.ndarray, np.ndarray],
+    current: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> np.ndarray:
     """(N, spec.size) float32 features from one step's reports (see the module docstring).
 
     ``view`` is the obstacle view: the scan's ranges in metres (observation ``scan``), or
-    :func:`contact_view`'s columns (observation ``contacts``).
+    :func:`contact_view`'s columns (observation ``contacts``); ``current`` the predicted tide
+    (east, north) in m/s that the expert crabs against (observation ``contacts``).
     """
     n = x.shape[0]
     out = np.empty((n, spec.size), dtype=np.float32)
@@ -290,6 +302,12 @@ def features(
         out[:, col] = np.where(on, fwd / near, 0.0)
         out[:, col + 1] = np.where(on, stbd / near, 0.0)
         out[:, col + 2] = np.where(on, np.clip(2.0 * dist / spec.map_scale_m - 1.0, -1.0, 1.0), 0.0)
+    if spec.tide_size:
+        if current is None:
+            raise InputError("current: the contacts observation model needs the predicted tide (east, north)")
+        fwd, stbd = _body(np.asarray(current[0], float), np.asarray(current[1], float), heading)
+        out[:, 7] = np.clip(fwd / spec.max_speed, -1.0, 1.0)
+        out[:, 8] = np.clip(stbd / spec.max_speed, -1.0, 1.0)
     if spec.observation == "scan":
         out[:, spec.sonar] = 2.0 * np.minimum(view, spec.sonar_range_m) / spec.sonar_range_m - 1.0
     else:
@@ -317,3 +335,12 @@ def action_command(spec: FeatureSpec, heading: np.ndarray, action: np.ndarray) -
     a = np.asarray(action, dtype=float)
     speed = np.clip(a[:, SPEED], 0.0, 1.0) * spec.max_speed
     return wrap_angle(np.asarray(heading, float) + np.arctan2(a[:, 1], a[:, 0])), speed
+
+
+def predicted_current(mission: Mission, scen, obs) -> tuple[np.ndarray, np.ndarray]:
+    """The tide (east, north) the back-seat predicts at this step: the report's, else the tide table's."""
+    if obs.current_e is not None and obs.current_n is not None:
+        return obs.current_e, obs.current_n
+    from sim.uuv.environment import tidal_current
+
+    return tidal_current(mission.current, scen.start_time + obs.t)

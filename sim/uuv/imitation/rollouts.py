@@ -22,6 +22,7 @@ from sim.uuv.imitation.features import (
     contact_view,
     expert_action,
     features,
+    predicted_current,
     waypoint_target,
 )
 from sim.uuv.metrics import metric_names, metric_types
@@ -81,6 +82,7 @@ class MixedDriver(PolicyAutonomy):
                 obs.battery[extra],
                 self.last_view[extra],
                 (wx[extra], wy[extra], pending[extra]),
+                tuple(np.broadcast_to(c, obs.x.shape)[extra] for c in self.last_tide),
             )
             F, rows = np.concatenate([F, G]), np.concatenate([rows, extra])
             heading = np.concatenate([heading, other.heading[extra]])
@@ -150,9 +152,9 @@ def annotated_runs(
             else:
                 known = memory.update(obs.t, obs.contact_x, obs.contact_y, obs.detected)
                 view = contact_view(spec, obs.x, obs.y, obs.heading, memory.x, memory.y, known)
-            F = features(
-                spec, mission, obs.t, obs.x, obs.y, obs.heading, obs.battery, view, (wx, wy, pending & ~expert_home)
-            )
+            target = (wx, wy, pending & ~expert_home)
+            tide = predicted_current(mission, sub, obs)
+            F = features(spec, mission, obs.t, obs.x, obs.y, obs.heading, obs.battery, view, target, tide)
             who, heading, speed, home = np.arange(sub.n), cmd.heading, cmd.speed, driver.returning.copy()
             expert_home[:] = home
         keep = np.flatnonzero(active[who])
