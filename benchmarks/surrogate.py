@@ -419,7 +419,7 @@ def main() -> None:
     if args.quick:
         args.runs, args.per, args.select_runs, args.track, args.validation = 20, 5, 10, 64, 512
         args.paths, args.budget, args.confirm, args.epochs = 50, 1000, 20, 10
-        args.methods, args.seeds, args.budgets = ["dagger", "qdagger50"], [0], [40]
+        args.methods, args.seeds, args.budgets, args.no_today = ["dagger", "qdagger50"], [0], [40], True
     if 6 in args.tables:
         missions = [sim.uuv.load_mission(m) for m in args.missions]
         recall_table(missions, args.budgets, args.seeds, args.validation, not args.no_today)
