@@ -412,6 +412,13 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, nargs="*", default=[0, 1, 2], help="training seeds of table 6")
     ap.add_argument("--budgets", type=int, nargs="+", default=[100, 250], help="expert runs per surrogate (table 6)")
     ap.add_argument("--no-today", action="store_true", help="table 6 without today's surrogate beside it")
+    ap.add_argument(
+        "--variants",
+        nargs="*",
+        default=[],
+        choices=["qdagger-new", "uniform"],
+        help="table 6: trainings beside the default",
+    )
     ap.add_argument("--save", type=Path, help="save the Q-DAgger(50) surrogate here (.npz)")
     ap.add_argument("--load", type=Path, help="skip training: use this surrogate for tables 1, 3 and 4")
     ap.add_argument("--quick", action="store_true", help="small settings for a smoke run")
@@ -422,7 +429,7 @@ def main() -> None:
         args.methods, args.seeds, args.budgets, args.no_today = ["dagger", "qdagger50"], [0], [40], True
     if 6 in args.tables:
         missions = [sim.uuv.load_mission(m) for m in args.missions]
-        recall_table(missions, args.budgets, args.seeds, args.validation, not args.no_today)
+        recall_table(missions, args.budgets, args.seeds, args.validation, not args.no_today, tuple(args.variants))
     if not set(args.tables) & {1, 2, 3, 4}:
         return
     mission = sim.uuv.load_mission(args.mission)

@@ -30,7 +30,7 @@ import sim.uuv
 from planner.plan.surrogate import train_surrogate
 from rapt.agreement import boundary_types
 
-__all__ = ["recall_table", "TODAY"]
+__all__ = ["recall_table", "TODAY", "VARIANTS"]
 
 #: MODE_NAMES indices of the safety failures: TF and MS.
 SAFETY_FAILURES = (0, 2)
@@ -42,6 +42,13 @@ TODAY = {
     "runs": 75,
     "runs_per_iteration": 5,
     "select_runs": 25,
+}
+
+
+#: Variants of the default training (``--variants``): the learner, or the choice of training runs, alone changed.
+VARIANTS = {
+    "qdagger-new": {"method": "qdagger-new"},
+    "uniform": {"directed": False},
 }
 
 
@@ -65,11 +72,11 @@ def _scores(X: np.ndarray, truth: np.ndarray, labels: np.ndarray) -> dict[str, f
     }
 
 
-def _one_budget(mission, X, expert, budget: int, seed: int, options: dict | None = None) -> list[tuple]:
+def _one_budget(mission, X, expert, budget: int, seed: int, label: str, options: dict) -> list[tuple]:
     """Rows (model, train s, scores) for one training of ``budget`` expert runs, and the classifiers beside it."""
     from threadpoolctl import threadpool_limits
 
-    options = options or {"runs": budget - budget // 5, "select_runs": budget // 5}
+    options = {"runs": budget - budget // 5, "select_runs": budget // 5, **options}
     t0 = time.process_time()
     with threadpool_limits(1):
         sur = train_surrogate(mission, seed=seed, **options)
@@ -93,8 +100,13 @@ def _one_budget(mission, X, expert, budget: int, seed: int, options: dict | None
     return rows
 
 
-def recall_table(missions: list, budgets: list[int], seeds: list[int], n: int, today: bool = True) -> dict:
-    """Print table 6; returns {(mission, budget, model): [scores per seed]}."""
+def recall_table(
+    missions: list, budgets: list[int], seeds: list[int], n: int, today: bool = True, variants: tuple = ()
+) -> dict:
+    """Print table 6; returns {(mission, budget, model): [scores per seed]}.
+
+    ``variants`` (keys of :data:`VARIANTS`) are trained beside the default at every budget and seed.
+    """
     print(
         f"6. Boundary recall per type, {n:,} Sobol validation scenarios per mission; beside the surrogate, plain "
         "classifiers of the scenario parameters fitted to the expert's modes at the same expert runs.\n"
@@ -107,9 +119,12 @@ def recall_table(missions: list, budgets: list[int], seeds: list[int], n: int, t
     for mission in missions:
         X = qmc.Sobol(mission.dim, seed=0).random(n)
         expert = sim.uuv.simulate(mission, X)
-        plans = [(b, s, None) for b in budgets for s in seeds] + ([(100, s, TODAY) for s in seeds] if today else [])
-        for budget, seed, options in plans:
-            for model, spent, runs, sc, sur in _one_budget(mission, X, expert, budget, seed, options):
+        plans = [(b, s, "surrogate", {}) for b in budgets for s in seeds]
+        plans += [(b, s, f"surrogate, {v}", VARIANTS[v]) for v in variants for b in budgets for s in seeds]
+        plans += [(100, s, "today's surrogate", TODAY) for s in seeds] if today else []
+        for budget, seed, label, options in plans:
+            rows = _one_budget(mission, X, expert, budget, seed, label, options)
+            for model, spent, runs, sc, sur in rows if label == "surrogate" else rows[:1]:
                 out.setdefault((mission.name, runs, model), []).append({**sc, "train": spent, "surrogate": sur})
                 print(
                     f"{mission.name:<18} {runs:>5} {model:<18} {seed:>4} {spent:>6.0f} {sc['mode']:>6.1%} "
