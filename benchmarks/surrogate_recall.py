@@ -83,15 +83,7 @@ def _one_budget(mission, X, expert, budget: int, seed: int, label: str, options:
     spent = time.process_time() - t0
     mine = sim.uuv.simulate(mission, X, surrogate=sur)
     ok = expert.valid & mine.valid
-    rows = [
-        (
-            "surrogate" if "observation" not in options else "today's surrogate",
-            spent,
-            sur.training["runs"],
-            _scores(X[ok], expert.modes[ok], mine.modes[ok]),
-            sur,
-        )
-    ]
+    rows = [(label, spent, sur.training["runs"], _scores(X[ok], expert.modes[ok], mine.modes[ok]), sur)]
     S = np.asarray(sur.training["expert_scenarios"])
     flown = sim.uuv.simulate(mission, S)
     for name, clf in _classifiers(seed).items():
@@ -113,7 +105,7 @@ def recall_table(
         "   recall: expert boundary pairs with both ends right; TF/MS: those with an end in TF or MS; "
         "precision: model pairs whose region the expert shares; train: CPU s, one BLAS thread"
     )
-    head = f"{'mission':<18} {'runs':>5} {'model':<18} {'seed':>4} {'train':>6} {'mode':>6} {'recall':>7} {'TF/MS':>6} {'prec.':>6}"
+    head = f"{'mission':<18} {'runs':>5} {'model':<24} {'seed':>4} {'train':>6} {'mode':>6} {'recall':>7} {'TF/MS':>6} {'prec.':>6}"
     print(head)
     out: dict = {}
     for mission in missions:
@@ -127,19 +119,19 @@ def recall_table(
             for model, spent, runs, sc, sur in rows if label == "surrogate" else rows[:1]:
                 out.setdefault((mission.name, runs, model), []).append({**sc, "train": spent, "surrogate": sur})
                 print(
-                    f"{mission.name:<18} {runs:>5} {model:<18} {seed:>4} {spent:>6.0f} {sc['mode']:>6.1%} "
+                    f"{mission.name:<18} {runs:>5} {model:<24} {seed:>4} {spent:>6.0f} {sc['mode']:>6.1%} "
                     f"{sc['recall']:>7.1%} {sc['safety']:>6.1%} {sc['precision']:>6.1%}",
                     flush=True,
                 )
     print(
-        f"\n{'mission':<18} {'runs':>5} {'model':<18} {'':>4} {'train':>6} {'mode':>6} {'recall':>7} {'TF/MS':>6} {'prec.':>6}  (median / worst of {len(seeds)} seeds)"
+        f"\n{'mission':<18} {'runs':>5} {'model':<24} {'':>4} {'train':>6} {'mode':>6} {'recall':>7} {'TF/MS':>6} {'prec.':>6}  (median / worst of {len(seeds)} seeds)"
     )
     for (name, runs, model), got in out.items():
         for label, pick in (("med", np.median), ("worst", np.min)):
             v = {k: pick([g[k] for g in got]) for k in ("mode", "recall", "safety", "precision")}
             train = np.median([g["train"] for g in got])
             print(
-                f"{name:<18} {runs:>5} {model:<18} {label:>5} {train:>5.0f} {v['mode']:>6.1%} {v['recall']:>7.1%} "
+                f"{name:<18} {runs:>5} {model:<24} {label:>5} {train:>5.0f} {v['mode']:>6.1%} {v['recall']:>7.1%} "
                 f"{v['safety']:>6.1%} {v['precision']:>6.1%}"
             )
     print(
