@@ -110,7 +110,7 @@ def generate(
         typer.Option(
             "--surrogate",
             help="Search with a learned surrogate of the autonomy (section 6.2.3): load this .npz "
-            "(trained for this mission), or train one (75 annotated + 25 held-out expert runs) "
+            "(trained for this mission), or train one (200 annotated + 50 held-out expert runs) "
             "and save it here; the expert then confirms the candidate pairs.",
         ),
     ] = None,
