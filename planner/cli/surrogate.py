@@ -26,7 +26,8 @@ def surrogate(
     quantile: Annotated[
         float,
         typer.Option(
-            help="Q-DAgger: aggregate the states predicted worse than this quantile of each new set (0.5, 0.75)."
+            help="Q-DAgger: keep the states predicted worse than this quantile of the aggregate "
+            "(qdagger-new: of each new set; 0.5, 0.75)."
         ),
     ] = 0.5,
     runs: Annotated[int, typer.Option(help="Annotated expert runs in all.")] = 200,
@@ -69,14 +70,15 @@ def surrogate(
 ) -> None:
     """Train a surrogate of a mission's back-seat autonomy by imitation learning (chapter 6)."""
     from planner.plan.surrogate import ModeValidation, train_surrogate
+    from sim.uuv.imitation.features import OBSERVATIONS
 
     mission = load_mission(mission_file)
     if out_file.suffix != ".npz":
         fail(f"--out: a surrogate file ends in .npz, got {out_file}")
     if validate < 0:
         fail(f"--validate: expected a number of scenarios >= 0, got {validate}")
-    if observation not in ("contacts", "scan"):
-        fail(f"--observation: expected contacts or scan, got {observation!r}")
+    if observation not in OBSERVATIONS:
+        fail(f"--observation: expected {' or '.join(OBSERVATIONS)}, got {observation!r}")
     accuracy = ModeValidation(mission, validate, seed, observation) if validate else None
     table = Table(title=f"{mission.name}: {method} imitation of the autonomy")
     for col in ("iteration", "expert runs", "samples", "fit (s)", "train MSE") + (

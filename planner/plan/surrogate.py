@@ -22,12 +22,11 @@ from scipy.stats import qmc
 
 import sim.uuv
 from planner.plan.surrogate_training import DIRECTED_FROM, HeldOutPairs, directed_rollout
-from rapt.agreement import path_error
 from rapt.errors import InputError
 from rapt.imitation.dagger import IterationRecord, imitate
 from rapt.imitation.policies import Policy
 from sim.uuv.imitation.features import GOAL, feature_spec, policy_heads
-from sim.uuv.imitation.rollouts import annotated_runs, draw_valid, make_rollout
+from sim.uuv.imitation.rollouts import make_rollout
 from sim.uuv.imitation.surrogate import Surrogate
 from sim.uuv.mission import Mission
 
@@ -37,7 +36,6 @@ __all__ = [
     "calibrate_goal_threshold",
     "mode_agreement",
     "policy_mode_agreement",
-    "held_out_agreement",
     "ModeValidation",
     "TRAINING_DEFAULTS",
     "GOAL_THRESHOLDS",
@@ -169,16 +167,16 @@ class _HeldOut:
         self.trajectories: list = []
         self.boundary_pairs: int | None = None
         if runs and not directed:
-            X = self.X = draw_valid(mission, runs, np.random.default_rng([int(seed), 0x73656C]))
-            _, self.trajectories = annotated_runs(mission, X, spec)  # the expert's features, for the goal threshold
-            expert = sim.uuv.simulate(mission, X, trajectories=True)
-            self._uniform = lambda policy: held_out_agreement(mission, policy, X, expert, spec.observation)
+            self.pairs = HeldOutPairs.uniform(mission, spec, runs, seed)
+            self.trajectories, self.X = self.pairs.trajectories, self.pairs.X
 
     def score(self, policy: Policy) -> tuple[float, ...]:
-        """Higher is better; updates before the held-out pairs exist are never kept."""
+        """Higher is better; updates before the held-out pairs exist are never kept.  Uniform held-out runs
+        hold no pairs: (mode accuracy, minus the path error)."""
         self.calls += 1
         if not self.directed:
-            return self._uniform(policy)
+            assert self.pairs is not None, "drawn when the runs are uniform"
+            return self.pairs(policy)[1:]
         if self.pairs is None and self.calls < DIRECTED_FROM:
             return (-np.inf,)
         if self.pairs is None:
@@ -244,25 +242,6 @@ def mode_agreement(mission: Mission, surrogate: Surrogate, X: np.ndarray, expert
     mine = sim.uuv.simulate(mission, X, surrogate=surrogate)
     ok = expert.valid & mine.valid
     return float(np.mean(mine.modes[ok] == expert.modes[ok])) if ok.any() else float("nan")
-
-
-def held_out_agreement(
-    mission: Mission, policy: Policy, X: np.ndarray, expert, observation: str = "contacts"
-) -> tuple[float, float]:
-    """(mode agreement, minus the mean path error in metres) of ``policy`` against the expert's runs
-    ``expert`` (simulated with trajectories) on the valid scenarios ``X``."""
-    sur = Surrogate.for_mission(mission, policy, observation=observation)
-    mine = sim.uuv.simulate(mission, X, surrogate=sur, trajectories=True)
-    ok = np.flatnonzero(expert.valid & mine.valid)
-    if not ok.size:
-        return float("nan"), float("nan")
-    tracks: list[list[np.ndarray]] = [[], []]
-    for i in ok.tolist():  # valid rows of a batch simulated with trajectories have one
-        for side, result in zip(tracks, (expert, mine)):
-            path = result.trajectory(i)
-            assert path is not None
-            side.append(path[:, 1:3])
-    return float(np.mean(mine.modes[ok] == expert.modes[ok])), -path_error(*tracks)
 
 
 def policy_mode_agreement(

@@ -22,6 +22,7 @@ import numpy as np
 
 import rapt
 import sim.uuv
+from planner.plan.generate import ROOT_COLUMNS, MissionScores
 from rapt.agreement import path_error
 from rapt.imitation.policies import Policy
 from rapt.imitation.queries import boundary_queries, pair_queries
@@ -36,22 +37,19 @@ __all__ = ["directed_rollout", "directed_scenarios", "learner_search", "HeldOutP
 DIRECTED_FROM = 2
 #: Runs of the learner's own S-NDV search per directed update.
 SEARCH_RUNS = 600
-#: Mission and safety success: what the learner's search steers on (as ``generate``'s).
-STEER = (0, 1)
 
 
 def learner_search(mission: Mission, policy: Policy, observation: str, runs: int, seed: int) -> tuple:
     """The learner's own S-NDV search of ``runs`` scenarios: (unit-cube states, modes) of the valid ones."""
-    sur = Surrogate.for_mission(mission, policy, observation=observation)
     study = rapt.search(
-        lambda U: sim.uuv.simulate(mission, U, surrogate=sur).scores,
+        MissionScores(mission, Surrogate.for_mission(mission, policy, observation=observation)),
         mission.space,
         int(runs),
         method="s-ndv",
         batch_size=max(50, int(runs) // 6),
         seed=int(seed),
         output_types=("binary", "binary"),
-        steer=STEER,
+        steer=ROOT_COLUMNS,  # mission and safety success, as generate's search
         n_initial=int(runs) // 3,
     )
     return study.U, sim.uuv.scoring.modes_from_scores(study.Y)
@@ -145,10 +143,20 @@ class HeldOutPairs:
         extra = runs - X.shape[0]
         if extra > 0:
             X = np.vstack([X, draw_valid(mission, extra, np.random.default_rng([int(seed), 0x686F6C64]))])
+        return cls.flown(mission, spec, X, np.arange(pairs.size).reshape(-1, 2))
+
+    @classmethod
+    def uniform(cls, mission: Mission, spec: FeatureSpec, runs: int, seed: int) -> HeldOutPairs:
+        """``runs`` expert runs on uniformly drawn valid scenarios, no pairs among them (``--uniform``)."""
+        X = draw_valid(mission, runs, np.random.default_rng([int(seed), 0x73656C]))
+        return cls.flown(mission, spec, X, np.zeros((0, 2), np.int64))
+
+    @classmethod
+    def flown(cls, mission: Mission, spec: FeatureSpec, X: np.ndarray, pairs: np.ndarray) -> HeldOutPairs:
+        """The expert's runs of ``X``: its annotated states (for the goal threshold) and its tracks."""
         _, trajectories = annotated_runs(mission, X, spec)
         expert = sim.uuv.simulate(mission, X, trajectories=True)
-        index = np.arange(pairs.size).reshape(-1, 2)
-        return cls(mission, spec.observation, X, index, expert, trajectories)
+        return cls(mission, spec.observation, X, pairs, expert, trajectories)
 
     def boundary_pairs(self) -> np.ndarray:
         """The held-out pairs across which the expert changes mode (its boundary pairs)."""

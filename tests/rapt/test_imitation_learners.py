@@ -9,6 +9,9 @@ from rapt.errors import InputError
 from rapt.imitation.dagger import Trajectory, imitate
 from rapt.imitation.policies import HeadsPolicy, MLPPolicy, policy_from_arrays
 
+#: A network and training small enough for the tiny problems: 4 runs an update, one hidden layer of 16.
+SMALL_NET = dict(runs_per_iteration=4, hidden=(16,), epochs=60, learning_rate=0.01, batch_size=64, seed=1)
+
 
 # -- the learners on a tiny problem ------------------------------------------------------------------
 def _point_mass_rollout(log):
@@ -42,12 +45,7 @@ def test_each_learner_learns_a_tiny_expert(method):
         method=method,
         quantile=0.5,
         iterations=6,
-        runs_per_iteration=4,
-        hidden=(16,),
-        epochs=60,
-        learning_rate=0.01,
-        batch_size=64,
-        seed=1,
+        **SMALL_NET,
     )
     assert [r.runs for r in result.history] == [4, 8, 12, 16, 20, 24, 28]
     sizes = [r.samples for r in result.history]
@@ -223,12 +221,7 @@ def test_heads_learn_their_parts_and_a_decision_ignores_what_it_cannot_see():
         rollout,
         method="dagger",
         iterations=3,
-        runs_per_iteration=4,
-        hidden=(16,),
-        epochs=60,
-        learning_rate=0.01,
-        batch_size=64,
-        seed=1,
+        **SMALL_NET,
         heads=((None, [0]), ([1], [1])),
     )
     policy = result.policy

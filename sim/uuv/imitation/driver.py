@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from rapt.errors import InputError
 from sim.uuv.autonomy import GOAL_RETURN, GOAL_WAYPOINT, Command, Observation
 from sim.uuv.contact_memory import ContactMemory
 from sim.uuv.imitation.features import (
@@ -24,8 +23,8 @@ from sim.uuv.imitation.features import (
     FeatureSpec,
     action_command,
     advance_waypoints,
-    contact_view,
     features,
+    obstacle_view,
     predicted_current,
     waypoint_target,
 )
@@ -60,20 +59,9 @@ class PolicyAutonomy:
         self.last_view: np.ndarray | None = None  # the obstacle view the last decision saw
         self.last_tide: tuple[np.ndarray, np.ndarray] | None = None  # and the tide it predicted
 
-    def obstacle_view(self, obs: Observation) -> np.ndarray:
-        """This step's obstacle view (:func:`~sim.uuv.imitation.features.features`), updating the contact memory."""
-        if self.spec.observation == "scan":
-            if obs.scan is None:
-                raise InputError(
-                    "obs.scan: a scan-fed learned back-seat needs the 360-degree sonar scan (World(scan_beams=...))"
-                )
-            return obs.scan
-        known = self.memory.update(obs.t, obs.contact_x, obs.contact_y, obs.detected)
-        return contact_view(self.spec, obs.x, obs.y, obs.heading, self.memory.x, self.memory.y, known)
-
     def step(self, obs: Observation, dt: float, active: np.ndarray | None = None) -> Command:
         m = self.mission
-        view = self.last_view = self.obstacle_view(obs)
+        view = self.last_view = obstacle_view(self.spec, self.memory, obs)
         self.wp_next = advance_waypoints(m, self.wp_next, obs.x, obs.y)
         wx, wy, pending = self.last_target = waypoint_target(m, self.wp_next)
         self.was_home = self.home.copy()
@@ -95,7 +83,7 @@ class PolicyAutonomy:
                 obs.battery[rows],
                 view[rows],
                 (wx[rows], wy[rows], np.zeros(rows.size, dtype=bool)),
-                (np.broadcast_to(tide[0], obs.x.shape)[rows], np.broadcast_to(tide[1], obs.x.shape)[rows]),
+                (tide[0][rows], tide[1][rows]),
             )
             action[rows] = self.policy(G, quiet=self.spec.quiet)
         self.home |= turn if active is None else turn & active

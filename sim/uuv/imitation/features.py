@@ -60,7 +60,8 @@ import numpy as np
 
 from rapt.errors import InputError
 from sim.uuv.angles import wrap_angle
-from sim.uuv.contact_memory import CONTACT_MEMORY_S
+from sim.uuv.contact_memory import CONTACT_MEMORY_S, ContactMemory
+from sim.uuv.environment import tidal_current
 from sim.uuv.mission import Mission
 from sim.uuv.sonar import SCAN_BEAMS
 
@@ -69,6 +70,7 @@ __all__ = [
     "OBSERVATIONS",
     "MAX_SLOTS",
     "contact_view",
+    "obstacle_view",
     "predicted_current",
     "feature_spec",
     "features",
@@ -338,9 +340,23 @@ def action_command(spec: FeatureSpec, heading: np.ndarray, action: np.ndarray) -
 
 
 def predicted_current(mission: Mission, scen, obs) -> tuple[np.ndarray, np.ndarray]:
-    """The tide (east, north) the back-seat predicts at this step: the report's, else the tide table's."""
+    """The tide (east, north) the back-seat predicts at this step, one value per vehicle: the report's,
+    else the tide table's."""
     if obs.current_e is not None and obs.current_n is not None:
-        return obs.current_e, obs.current_n
-    from sim.uuv.environment import tidal_current
+        e, n = obs.current_e, obs.current_n
+    else:
+        e, n = tidal_current(mission.current, scen.start_time + obs.t)
+    return np.broadcast_to(e, obs.x.shape), np.broadcast_to(n, obs.x.shape)
 
-    return tidal_current(mission.current, scen.start_time + obs.t)
+
+def obstacle_view(spec: FeatureSpec, memory: ContactMemory, obs) -> np.ndarray:
+    """This step's obstacle view for :func:`features`: the scan, or the contacts ``memory`` holds once it
+    has folded this step's reports in (a learner's memory, or one kept beside a flying expert)."""
+    if spec.observation == "scan":
+        if obs.scan is None:
+            raise InputError(
+                "obs.scan: a scan-fed learned back-seat needs the 360-degree sonar scan (World(scan_beams=...))"
+            )
+        return obs.scan
+    known = memory.update(obs.t, obs.contact_x, obs.contact_y, obs.detected)
+    return contact_view(spec, obs.x, obs.y, obs.heading, memory.x, memory.y, known)

@@ -19,9 +19,9 @@ from sim.uuv.imitation.driver import PolicyAutonomy
 from sim.uuv.imitation.features import (
     FeatureSpec,
     advance_waypoints,
-    contact_view,
     expert_action,
     features,
+    obstacle_view,
     predicted_current,
     waypoint_target,
 )
@@ -82,7 +82,7 @@ class MixedDriver(PolicyAutonomy):
                 obs.battery[extra],
                 self.last_view[extra],
                 (wx[extra], wy[extra], pending[extra]),
-                tuple(np.broadcast_to(c, obs.x.shape)[extra] for c in self.last_tide),
+                (self.last_tide[0][extra], self.last_tide[1][extra]),
             )
             F, rows = np.concatenate([F, G]), np.concatenate([rows, extra])
             heading = np.concatenate([heading, other.heading[extra]])
@@ -147,11 +147,7 @@ def annotated_runs(
         else:
             nxt = advance_waypoints(mission, nxt, obs.x, obs.y)
             wx, wy, pending = waypoint_target(mission, nxt)
-            if spec.observation == "scan":
-                view = obs.scan
-            else:
-                known = memory.update(obs.t, obs.contact_x, obs.contact_y, obs.detected)
-                view = contact_view(spec, obs.x, obs.y, obs.heading, memory.x, memory.y, known)
+            view = obstacle_view(spec, memory, obs)
             target = (wx, wy, pending & ~expert_home)
             tide = predicted_current(mission, sub, obs)
             F = features(spec, mission, obs.t, obs.x, obs.y, obs.heading, obs.battery, view, target, tide)
