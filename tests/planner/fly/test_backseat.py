@@ -209,3 +209,39 @@ def test_a_vehicle_floating_with_its_sensor_below_the_waterline_counts_as_surfac
     assert not any(_depth_profile(still, frame, [1.2] * 40))
     # a real reading of 0 is surfaced at once, as before
     assert _depth_profile(VehicleTelemetry(frame, VIRTUAL_BATTERY_ID), frame, [0.1]) == [True]
+
+
+def test_a_contacts_fed_surrogate_decides_by_the_vehicles_clock_and_a_scan_fed_one_is_refused(session):
+    """A surrogate that sees what the expert sees (contacts over OBSTACLE_DISTANCE_3D, no scan) flies a
+    vehicle-paced back-seat: one decision per 2 s of the vehicle's clock, heading for the waypoint until
+    the vehicle's fuel gauge falls below its 15 %, then for the recovery point.  A scan-fed surrogate
+    needs the simulator's 360-degree scan, which a vehicle does not send."""
+    from rapt.errors import InputError
+    from sim.uuv.imitation.surrogate import Surrogate
+    from tests.support.hand_policy import IMITATION7, GreedyPolicy
+
+    u = [0.5] * IMITATION7.dim
+    sur = Surrogate.for_mission(IMITATION7, GreedyPolicy())
+    got, seat = _fly(session, IMITATION7, u, _stream(IMITATION7), 0.0, surrogate=sur, source="autonomy")
+    decisions = list({c["tick_ms"]: c for c in got}.values())
+    assert [c["tick_ms"] for c in decisions] == list(range(START_MS + 2000, START_MS + 40_000, 2000))
+    x0, y0 = IMITATION7.launch
+    rx, ry = IMITATION7.recovery
+
+    def towards(c, gx, gy):  # the stream cruises north from launch at 1.5 m/s, heading north
+        y = y0 + 1.5 * (c["tick_ms"] - START_MS) / 1000
+        return abs(math.remainder(c["yaw"] - math.atan2(gx - x0, gy - y), 2 * math.pi)) < 0.05
+
+    wx, wy = IMITATION7.waypoints[0]
+    assert all(towards(c, wx, wy) for c in decisions[:4])  # 22.5 % charge at launch; the stream drains it fast
+    assert all(towards(c, rx, ry) for c in decisions[5:])  # below 15 % after about 10 s: home, and latched
+    scan = Surrogate.for_mission(IMITATION7, GreedyPolicy(spec=_scan_spec()), observation="scan")
+    with pytest.raises(InputError, match="a scan-fed surrogate needs the simulator's sonar scan; fly it lock-step"):
+        BackSeat(session, "uuv2", IMITATION7, u, surrogate=scan, pacing="vehicle")
+
+
+def _scan_spec():
+    from sim.uuv.imitation.features import feature_spec
+    from tests.support.hand_policy import IMITATION7
+
+    return feature_spec(IMITATION7, "scan")
