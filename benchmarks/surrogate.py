@@ -1,6 +1,6 @@
-"""Surrogate agents (chapter 6, issues 8, 26, 50): speed, learners, agreement, expert runs saved, recall per type.
+"""Surrogate agents (chapter 6, issues 8, 26, 50, 51): speed, learners, agreement, expert runs saved, recall.
 
-Five tables, measured side by side in one run (``--tables`` picks some):
+Six tables, measured side by side in one run (``--tables`` picks some):
 
 1. Decision time of the expert autonomy and of the surrogate network, same process,
    100 decisions: one vehicle a call (as a back-seat decides on the vehicle) and one call
@@ -14,13 +14,16 @@ Five tables, measured side by side in one run (``--tables`` picks some):
    straddles), distance error, mismatches next to a boundary (84-85%, 86.8%, 0.0096, 95%).
 4. The surrogate workflow of section 6.2.3 against an expert-only search of the same
    budget: expert runs spent, pairs confirmed, and the expert-only runs to the same types.
+5. Table 6.3 in the paper's layout: supervised learning, DAgger, Q-DAgger(50) and (75) at
+   the paper's budget (50 updates of 5 annotated runs), each one's run time, score (mode)
+   accuracy and path error beside the paper's (:mod:`surrogate_methods`).
 6. Boundary recall and precision per type, over training seeds and budgets of expert runs,
    on imitation7 and imitation7_dense, beside a depth-3 tree and gradient boosting fitted
    to the same expert runs, and beside the surrogate trained as before issue 50
    (:mod:`surrogate_recall`).
 
-Tables 1-4 use ``--mission`` (imitation7); table 6 ``--missions`` (both).
-Run:  python benchmarks/surrogate.py [--tables 1 2 3 4 6] [--mission FILE] [--quick]
+Tables 1-5 use ``--mission`` (imitation7); table 6 ``--missions`` (both).
+Run:  python benchmarks/surrogate.py [--tables 1 2 3 4 5 6] [--mission FILE] [--quick]
 """
 
 from __future__ import annotations
@@ -46,7 +49,8 @@ from sim.uuv.simulate import observation
 from sim.uuv.world import World
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from surrogate_recall import recall_table  # noqa: E402  (a sibling module of this script)
+from surrogate_methods import LEARNERS, methods_table  # noqa: E402  (sibling modules of this script)
+from surrogate_recall import recall_table  # noqa: E402
 
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 MISSION = EXAMPLES / "imitation7.toml"
@@ -389,7 +393,7 @@ def _runs_to_types(mission, study, asked: np.ndarray, types: set[tuple]) -> tupl
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--tables", type=int, nargs="+", default=[1, 2, 3, 4, 6], help="tables to print")
+    ap.add_argument("--tables", type=int, nargs="+", default=[1, 2, 3, 4, 5, 6], help="tables to print")
     ap.add_argument("--mission", type=Path, default=MISSION, help="mission of tables 1-4")
     ap.add_argument("--missions", type=Path, nargs="+", default=MISSIONS, help="missions of table 6")
     ap.add_argument("--runs", type=int, default=200, help="expert-annotated runs per learner (table 2)")
@@ -403,6 +407,7 @@ def main() -> None:
         help="held-out expert runs choosing the policy kept and its goal threshold",
     )
     ap.add_argument("--methods", nargs="+", default=["dagger", "qdagger50", "qdagger-new50"], choices=list(METHODS))
+    ap.add_argument("--learners", nargs="+", default=list(LEARNERS), choices=list(LEARNERS), help="table 5's learners")
     ap.add_argument("--track", type=int, default=256, help="Sobol scenarios tracking accuracy during training")
     ap.add_argument("--validation", type=int, default=2048, help="Sobol validation scenarios (tables 3 and 6)")
     ap.add_argument("--paths", type=int, default=500, help="validation runs whose paths are compared")
@@ -427,12 +432,15 @@ def main() -> None:
         args.runs, args.per, args.select_runs, args.track, args.validation = 20, 5, 10, 64, 512
         args.paths, args.budget, args.confirm, args.epochs = 50, 1000, 20, 10
         args.methods, args.seeds, args.budgets, args.no_today = ["dagger", "qdagger50"], [0], [40], True
+    mission = sim.uuv.load_mission(args.mission)
+    if 5 in args.tables:
+        small = {"runs": 20, "select_runs": 10} if args.quick else {}
+        methods_table(mission, args.learners, args.validation, args.paths, args.seed, small)
     if 6 in args.tables:
         missions = [sim.uuv.load_mission(m) for m in args.missions]
         recall_table(missions, args.budgets, args.seeds, args.validation, not args.no_today, tuple(args.variants))
     if not set(args.tables) & {1, 2, 3, 4}:
         return
-    mission = sim.uuv.load_mission(args.mission)
     if args.load is not None:
         main_surrogate = Surrogate.load(args.load, mission)
     elif 2 in args.tables:

@@ -96,6 +96,26 @@ def test_algorithm_9_re_mines_the_aggregate_for_what_the_policy_still_gets_wrong
     assert sizes["qdagger"] < 80 and sizes["qdagger-new"] == 40 + 5 * 20
 
 
+@pytest.mark.parametrize("method", ["supervised", "dagger", "qdagger"])
+def test_only_behavioural_cloning_leaves_every_run_to_the_expert(method):
+    """Supervised learning (Table 6.3's baseline) trains on the expert's own runs: the rollout is never
+    handed a policy, and every state is kept.  The DAgger family lets the learner fly from update 1."""
+    fliers = []
+    inner = _point_mass_rollout([])
+
+    def rollout(policy, k, iteration):
+        fliers.append(policy)
+        return inner(policy, k, iteration)
+
+    result = imitate(rollout, method=method, iterations=3, runs_per_iteration=2, hidden=(8,), epochs=5, seed=0)
+    assert fliers[0] is None
+    if method == "supervised":
+        assert all(p is None for p in fliers) and [r.samples for r in result.history] == [50, 100, 150, 200]
+        assert result.quantile is None
+    else:
+        assert all(p is not None for p in fliers[1:])
+
+
 def test_the_best_policy_on_validation_is_returned():
     """DAgger returns the best policy of the sequence on held-out runs, not the last (ties: the later)."""
     scores = iter([0.1, 0.5, 0.3, 0.5, 0.2])
