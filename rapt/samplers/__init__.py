@@ -8,6 +8,7 @@ from __future__ import annotations
 from rapt.errors import InputError
 from rapt.samplers.adaptive import GPRSampler, InformationSampler, NNDVSampler, ScaledNDVSampler
 from rapt.samplers.base import Sampler
+from rapt.samplers.lola_voronoi import LolaVoronoiSampler
 from rapt.samplers.space_filling import LatinHypercubeSampler, RandomSampler, SobolSampler
 
 __all__ = [
@@ -19,6 +20,7 @@ __all__ = [
     "NNDVSampler",
     "ScaledNDVSampler",
     "GPRSampler",
+    "LolaVoronoiSampler",
     "METHODS",
     "make_sampler",
 ]
@@ -31,6 +33,7 @@ METHODS: dict[str, type[Sampler]] = {
     "gpr": GPRSampler,
     "nndv": NNDVSampler,
     "s-ndv": ScaledNDVSampler,
+    "lola-voronoi": LolaVoronoiSampler,  # the dissertation's peer (Table 3.1)
 }
 
 
