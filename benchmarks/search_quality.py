@@ -24,7 +24,9 @@ each D_eps: it must stay below 40 %, otherwise every method covers everything an
 coverage says nothing.
 
 Methods: rapt's ``random``, ``sobol``, ``lhs``, ``nndv``, ``s-ndv`` and (2-D only)
-``gpr`` through ``rapt.search``; and two peers from ``benchmarks/peers.py``:
+``gpr`` through ``rapt.search``; the dissertation's own peer, ``lola-voronoi``
+(``rapt.samplers.lola_voronoi``, Crombecq et al. 2011; no target applies to it); and two
+peers from ``benchmarks/peers.py``:
 python-adaptive (``Learner2D`` / ``LearnerND``, where it runs; it is deterministic, so
 its seeds agree) and random-forest uncertainty sampling, the strong active-learning
 baseline: after every batch a 50-tree forest per output is refitted on all samples and
@@ -125,8 +127,8 @@ SYSTEMS: dict[str, SystemSpec] = {
     ),
 }
 
-RAPT_METHODS = ("random", "sobol", "lhs", "nndv", "s-ndv", "gpr")
-METHODS = ("random", "sobol", "lhs", "nndv", "s-ndv", "gpr", "python-adaptive", "uncertainty")
+RAPT_METHODS = ("random", "sobol", "lhs", "nndv", "s-ndv", "gpr", "lola-voronoi")
+METHODS = ("random", "sobol", "lhs", "nndv", "s-ndv", "gpr", "lola-voronoi", "python-adaptive", "uncertainty")
 #: Methods that always run every seed (the targets are about them).
 FULL_SEEDS = {"sobol", "s-ndv", "uncertainty"}
 

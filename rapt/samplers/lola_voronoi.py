@@ -75,21 +75,68 @@ def neighbourhood_score(offsets: np.ndarray) -> np.ndarray:
 
 
 def _neighbourhoods(X: np.ndarray, m: int, k: int) -> np.ndarray:
-    """Indices (N, m) of each sample's LOLA neighbourhood, chosen greedily among its ``k`` nearest samples."""
-    _, cand = cKDTree(X).query(X, k=k + 1)
-    cand = cand[:, 1:]  # drop the sample itself (rows are distinct)
-    hood = cand[:, :m].copy()
-    score = neighbourhood_score(X[hood] - X[:, None, :])
+    """Indices (N, m) of each sample's LOLA neighbourhood, chosen greedily among its ``k`` nearest samples.
+
+    Candidates are tried closest first; each replaces the member whose swap raises the
+    score most, if any does.  Rows of ``X`` must be distinct.
+    """
+    dist, cand = cKDTree(X).query(X, k=k + 1)
+    dist, cand = dist[:, 1:], cand[:, 1:]  # drop the sample itself
+    pos = np.tile(np.arange(m), (len(X), 1))  # members, as positions among the candidates
+    score = neighbourhood_score(X[cand[:, :m]] - X[:, None, :])
+    if X.shape[1] == 1:  # the 1-D ratio has no adhesion: score every swap directly
+        swap = lambda c: neighbourhood_score(_swapped(X, cand, pos, c) - X[:, None, None, :])  # noqa: E731
+    else:
+        P = X[cand]
+        between = np.linalg.norm(P[:, :, None, :] - P[:, None, :, :], axis=-1)  # (N, k, k)
+        swap = lambda c: _swap_scores(between, dist, pos, c)  # noqa: E731
     rows = np.arange(len(X))
     for c in range(m, k):
-        trial = np.repeat(hood[:, None, :], m, axis=1)  # (N, m swaps, m members)
-        trial[:, np.arange(m), np.arange(m)] = cand[:, c : c + 1]
-        trial_score = neighbourhood_score(X[trial] - X[:, None, None, :])
-        best = trial_score.argmax(axis=1)
-        better = trial_score[rows, best] > score
-        hood[better] = trial[rows[better], best[better]]
-        score = np.where(better, trial_score[rows, best], score)
-    return hood
+        trial = swap(c)  # (N, m): the score with member r replaced by candidate c
+        best = trial.argmax(axis=1)
+        better = trial[rows, best] > score
+        pos[rows[better], best[better]] = c
+        score = np.where(better, trial[rows, best], score)
+    return cand[rows[:, None], pos]
+
+
+def _swapped(X: np.ndarray, cand: np.ndarray, pos: np.ndarray, c: int) -> np.ndarray:
+    """Coordinates (N, m swaps, m, d) of every neighbourhood with one member replaced by candidate ``c``."""
+    m = pos.shape[1]
+    trial = np.repeat(cand[np.arange(len(X))[:, None], pos][:, None, :], m, axis=1)
+    trial[:, np.arange(m), np.arange(m)] = cand[:, c : c + 1]
+    return X[trial]
+
+
+def _min_excluding(D: np.ndarray) -> np.ndarray:
+    """``out[..., i, r] = min_{j != r} D[..., i, j]`` (the smallest and second smallest per row)."""
+    first = D.argmin(axis=-1)
+    low = np.take_along_axis(D, first[..., None], axis=-1)
+    rest = D.copy()
+    np.put_along_axis(rest, first[..., None], np.inf, axis=-1)
+    second = rest.min(axis=-1, keepdims=True)
+    r = np.arange(D.shape[-1])
+    return np.where(first[..., None] == r, second, low)
+
+
+def _swap_scores(between: np.ndarray, dist: np.ndarray, pos: np.ndarray, c: int) -> np.ndarray:
+    """Neighbourhood scores (N, m) of the neighbourhoods ``pos`` with member ``r`` replaced by candidate ``c``.
+
+    ``between`` (N, k, k): distances between candidates; ``dist`` (N, k): candidate to
+    sample.  O(N m^2) from the distances, where rescoring each swap costs O(N m^3 d).
+    """
+    n, m = pos.shape
+    rows = np.arange(n)[:, None, None]
+    M = between[rows, pos[:, :, None], pos[:, None, :]]  # (N, m, m) among members
+    M[:, np.arange(m), np.arange(m)] = np.inf
+    to_c = between[np.arange(n)[:, None], c, pos]  # (N, m) from each member to c
+    nearest = np.minimum(_min_excluding(M), to_c[:, :, None])  # [i, r]: member i's nearest once r is out
+    nearest[:, np.arange(m), np.arange(m)] = 0.0  # the member swapped out contributes nothing
+    own = _min_excluding(to_c[:, None, :])[:, 0, :]  # [r]: c's nearest member other than r
+    adhesion = (nearest.sum(axis=1) + own) / m
+    member = np.take_along_axis(dist, pos, axis=1)
+    cohesion = (member.sum(axis=1, keepdims=True) - member + dist[:, c : c + 1]) / m
+    return adhesion / (np.sqrt(2.0) * cohesion**2)
 
 
 def lola_gradients(X: np.ndarray, F: np.ndarray, hood: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -82,3 +82,20 @@ def test_a_batch_larger_than_the_cells_puts_extra_points_in_the_top_cells():
     Q = s.ask(30)
     assert Q.shape == (30, 2) and len(np.unique(Q, axis=0)) == 30
     assert s.last_scores is not None and len(s.last_scores) == 8
+
+
+@pytest.mark.parametrize("dim", [2, 3])
+def test_the_fast_swap_scores_equal_the_scores_of_the_swapped_neighbourhoods(dim):
+    from scipy.spatial import cKDTree
+
+    from rapt.samplers.lola_voronoi import _swap_scores, _swapped
+
+    X = np.random.default_rng(dim).random((40, dim))
+    m, k = 2 * dim, 6 * dim
+    dist, cand = cKDTree(X).query(X, k=k + 1)
+    dist, cand = dist[:, 1:], cand[:, 1:]
+    pos = np.array([np.random.default_rng(i).permutation(k - 1)[:m] for i in range(40)])
+    P = X[cand]
+    between = np.linalg.norm(P[:, :, None, :] - P[:, None, :, :], axis=-1)
+    direct = neighbourhood_score(_swapped(X, cand, pos, k - 1) - X[:, None, None, :])
+    assert np.allclose(_swap_scores(between, dist, pos, k - 1), direct)
