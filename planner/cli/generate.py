@@ -122,13 +122,26 @@ def generate(
             "candidate pairs (at least two per pair).",
         ),
     ] = 100,
+    noisy_search: Annotated[
+        bool,
+        typer.Option(
+            "--noisy-search",
+            help="Search the stochastic simulator (navigation drift, current perturbations; seeded by --seed) "
+            "and steer on the closest approaches, mission time and energy as well as the modes (section "
+            "4.2.3): under noise pass/fail blurs, while continuous metrics jump where the autonomy's "
+            "decision changes. Pairs still come from the modes; the study is stored in OUT/study-noisy.db.",
+        ),
+    ] = False,
 ) -> None:
     """Search a mission, choose boundary pairs, dither them and write a field plan."""
     from planner.plan.generate import GenerateConfig, make_executor
     from planner.plan.generate import generate as run_generate
+    from planner.plan.noisy_search import NOISY_STORE
 
     mission = load_mission(mission_file)
     store = out_dir / ("study.db" if surrogate is None else "study-surrogate.db")
+    if noisy_search:
+        store = out_dir / NOISY_STORE
     if store.exists() and not resume:
         fail(f"--out: {store} already holds a study; add --resume to continue it or choose another directory")
     cfg = GenerateConfig(
@@ -143,6 +156,7 @@ def generate(
         refine=refine_runs if refine else 0,
         confirm_runs=confirm_runs,
         surrogate_file=str(surrogate or ""),
+        noisy_search=noisy_search,
     )
     try:
         cfg.check()

@@ -46,14 +46,17 @@ class Analysis:
     surrogate: Any = None  # the learned autonomy the runs were simulated with (None: the expert)
 
 
-def analyse(mission: Mission, study: rapt.Study, surrogate=None) -> Analysis:
+def analyse(mission: Mission, study: rapt.Study, surrogate=None, stochastic_seed: int | None = None) -> Analysis:
     """Stage 2: every valid run re-scored in full, the sub-boundary tree, each root score's sensitivity.
 
     A few stored runs are simulated again first: a store of another mission file is refused.
+    ``stochastic_seed``: the study ran stochastic with this seed (``--noisy-search``), so they are too.
     """
     X, Y = study.X, study.Y
     names, types = metric_names(mission), metric_types(mission)
-    spot = sim.uuv.simulate(mission, X[:SPOT_CHECK_RUNS], surrogate=surrogate)
+    spot = sim.uuv.simulate(
+        mission, X[:SPOT_CHECK_RUNS], stochastic_seed or 0, stochastic_seed is not None, surrogate=surrogate
+    )
     if Y.shape[1] != len(names) or not np.array_equal(spot.scores, Y[:SPOT_CHECK_RUNS], equal_nan=True):
         raise StudyMismatchError(
             "study: the stored runs do not match the mission file (was it edited?); plan into a new --out directory"

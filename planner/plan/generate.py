@@ -3,7 +3,8 @@
 The stages of ``rapt-plan generate``, each a function a test can run on a small budget:
 
 1. :func:`search_mission` — a space-filling start, then S-NDV on the root scores, every
-   batch written to the study store (a killed run resumes where it stopped).
+   batch written to the study store (a killed run resumes where it stopped); with
+   ``--noisy-search`` on the stochastic simulator, steered by continuous metrics too.
 2. :func:`planner.plan.analysis.analyse` — every valid run re-scored in full (the simulator is deterministic),
    the sub-boundary tree over the mission's score tree, sensitivity of each root score.
 3. :func:`planner.plan.analysis.select_pairs` — K boundary pairs on different sub-boundaries, shortest first,
@@ -45,6 +46,7 @@ from planner.common.plans import PLAN_SCHEMA, coordinate_sensitivity, embedded_m
 from planner.plan.analysis import Analysis, analyse, confirm_with_expert, pair_points, select_pairs
 from planner.plan.confirmation import Confirmation
 from planner.plan.dithering import DEFAULT_NOISE, DitherNoise
+from planner.plan.noisy_search import NoisyMissionScores, noisy_columns, search_record
 from planner.plan.pair_choice import MAX_FLOWN_DISTANCE, Candidate, Dithering, evaluate_candidates, rank_candidates
 from planner.plan.pair_shifts import with_shifted_pairs
 from planner.plan.plan_scenarios import remove_unlisted, scenario_entries, variant_entries
@@ -93,6 +95,7 @@ class GenerateConfig:
     surrogate: Any = None  # a sim.uuv.imitation Surrogate: search and dither with it, confirm pairs with the expert
     surrogate_file: str = ""
     confirm_runs: int = 100  # expert runs that look for the expert's boundary near the candidate pairs
+    noisy_search: bool = False  # search the stochastic simulator, steered by continuous metrics too (noisy_search)
 
     def __post_init__(self) -> None:
         if self.batch_size is None and isinstance(self.budget, int):
@@ -125,6 +128,12 @@ class GenerateConfig:
         return DEFAULT_NOISE
 
     def check(self) -> None:
+        if self.noisy_search and (self.surrogate is not None or self.surrogate_file or self.refine):
+            raise InputError(
+                "--noisy-search: searches the stochastic expert itself; it cannot be combined with "
+                + ("--surrogate" if self.surrogate is not None or self.surrogate_file else "--refine")
+                + " (which re-searches a deterministic model)"
+            )
         if not isinstance(self.batch_size, int) or self.batch_size < 1:
             raise InputError(f"--batch-size: expected a positive number of runs, got {self.batch_size}")
         if not isinstance(self.budget, int) or self.budget < 2 * self.batch_size:
@@ -168,6 +177,7 @@ class MissionScores:
 
 
 ROOT_COLUMNS = (0, 1)  # mission and safety success: what the search steers on
+ROOT_OUTPUT_TYPES: tuple[str, ...] = ("binary", "binary")
 # S-NDV's neighbours come from at most this many samples (rapt NNDVSampler.max_reference):
 # a mission's parameters all matter, so its effective dimension is high and neighbour
 # queries cost O(n) each; past this the asks of a 10^5-run study would dominate it.
@@ -203,13 +213,20 @@ def search_mission(
 ) -> rapt.Study:
     """Global then adaptive search steered by mission and safety success; invalid scenarios fail.
 
+    With ``cfg.noisy_search`` the runs are stochastic and continuous metrics steer too
+    (:mod:`planner.plan.noisy_search`).
+
     Every score is stored with its run, so the sub-boundary analysis needs no second run,
     and the neighbour graph the analysis pairs through grows with the batches (and is
     stored with them), so it need not be built once the search ends.
     """
     batch_size = auto_batch_size(cfg.budget) if cfg.batch_size is None else cfg.batch_size  # as __post_init__
+    fn: Callable[[np.ndarray], np.ndarray] = MissionScores(mission, cfg.surrogate)
+    steer, types = list(ROOT_COLUMNS), ROOT_OUTPUT_TYPES
+    if cfg.noisy_search:  # section 4.2.3: stochastic runs, steered by continuous metrics as well as the modes
+        fn, (steer, types) = NoisyMissionScores(mission, cfg.seed), noisy_columns(mission)
     return rapt.search(
-        MissionScores(mission, cfg.surrogate),
+        fn,
         mission.space,
         cfg.search_budget,
         method="s-ndv",
@@ -217,8 +234,8 @@ def search_mission(
         seed=cfg.seed,
         store=cfg.store,
         executor=cfg.executor,
-        output_types=("binary", "binary"),
-        steer=ROOT_COLUMNS,
+        output_types=types,
+        steer=steer,
         sampler_options={"max_reference": SEARCH_REFERENCE},
         n_initial=int(round(cfg.search_budget * cfg.global_fraction)),
         progress=progress,
@@ -342,7 +359,7 @@ def _choose_pairs(
     study = search_mission(mission, cfg, searched, on_batch=status)
     clock.lap("search")
     sur = cfg.surrogate
-    a = analyse(mission, study, sur)
+    a = analyse(mission, study, sur, stochastic_seed=cfg.seed if cfg.noisy_search else None)
     clock.lap("analysis")
     wanted = cfg.pairs_wanted
     # more candidates than pairs: the plan keeps those the vehicle is most likely to show (pair_choice)
@@ -506,6 +523,7 @@ def _plan_document(
             "budget": cfg.budget,
             "seed": cfg.seed,
             "global_fraction": cfg.global_fraction,
+            "search": search_record(mission, cfg.noisy_search, sur is not None, ROOT_COLUMNS),
             "valid_runs": int(len(a.X)),
             "invalid_runs": int(len(a.X_invalid)),
             "modes": {MODE_NAMES[m]: int(c) for m, c in zip(*np.unique(modes, return_counts=True))},
