@@ -21,12 +21,14 @@ Three parts, each printed as a table:
    (sim.uuv.simulate, deterministic), then the sub-boundary tree (Algorithm 3, all 70
    score elements, 4 levels) against the old method (Algorithm 2: modes from k score
    elements at once, pairs between every two modes) on progressively deeper levels of
-   the score tree, and the tree's time as the study grows (Figure 4.19).
+   the score tree, and the tree's time as the study grows (Figure 4.19; fig4_19.png).
 
-Run:  python benchmarks/reproduce_noise.py [--quick] [--png DIR] [--seeds N]
+Run:  python benchmarks/reproduce_noise.py [--quick] [--png DIR] [--seeds N] [--fuzzy-model jitter]
                                            [--skip-noise] [--skip-table42] [--skip-subclustering]
                                            [--plan PATH] [--sizes N ...]
 
+``--fuzzy-model jitter`` runs Figure 4.4 only, with RAPT's own fuzzy boundary (labels
+at a Gaussian-jittered input) in place of the paper's formula (fig4_4_jitter.png).
 ``--quick``: one seed and 5 noise levels per figure, a 3,000-run UUV study.
 """
 
@@ -45,7 +47,7 @@ from rapt.boundaries import mutual_pairs
 from rapt.metrics import boundary_coverage, boundary_precision
 from rapt.modes import performance_modes
 from rapt.testfunctions.base import SyntheticSystem
-from rapt.testfunctions.noise import GlobalNoise
+from rapt.testfunctions.noise import FuzzyBoundary, GlobalNoise
 from rapt.testfunctions.shapes import Plates2D
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -90,12 +92,18 @@ class PaperFuzzy(SyntheticSystem):
         return self.base.boundary_distance(X)
 
 
-def noisy_system(kind: str, level: float, seed: int) -> SyntheticSystem:
-    """The noisy Plates2D of Figure 4.4 (``fuzzy``, level sigma) or 4.6 (``global``, level gamma)."""
-    return PaperFuzzy(level, seed) if kind == "fuzzy" else GlobalNoise(Plates2D(), level, seed=seed)
+def noisy_system(kind: str, level: float, seed: int, model: str = "paper") -> SyntheticSystem:
+    """The noisy Plates2D of Figure 4.4 (``fuzzy``, level sigma) or 4.6 (``global``, level gamma).
+
+    ``model="jitter"`` takes RAPT's own fuzzy boundary (labels at a Gaussian-jittered
+    input, :class:`rapt.testfunctions.noise.FuzzyBoundary`) in place of the paper's.
+    """
+    if kind == "global":
+        return GlobalNoise(Plates2D(), level, seed=seed)
+    return PaperFuzzy(level, seed) if model == "paper" else FuzzyBoundary(Plates2D(), level, seed=seed)
 
 
-def noise_sweep(kind: str, levels, seeds: int) -> tuple[dict, dict]:
+def noise_sweep(kind: str, levels, seeds: int, model: str = "paper") -> tuple[dict, dict]:
     """Precision and coverage (mean over seeds) per method, level and band; NNDV studies of seed 0."""
     truth = Plates2D()
     res: dict = {}
@@ -104,7 +112,7 @@ def noise_sweep(kind: str, levels, seeds: int) -> tuple[dict, dict]:
         for level in levels:
             runs = []
             for seed in range(seeds):
-                system = noisy_system(kind, level, seed)
+                system = noisy_system(kind, level, seed, model)
                 study = rapt.search(
                     system, [(0.0, 1.0)] * 2, BUDGET, method=method, batch_size=BATCH, seed=seed,
                     output_types=["categorical"],
@@ -122,9 +130,9 @@ def noise_sweep(kind: str, levels, seeds: int) -> tuple[dict, dict]:
     return res, shown
 
 
-def print_noise(kind: str, levels, res: dict, seeds: int) -> None:
+def print_noise(kind: str, levels, res: dict, seeds: int, model: str = "paper") -> None:
     name = "sigma" if kind == "fuzzy" else "gamma"
-    fig = "4.4, fuzzy boundary" if kind == "fuzzy" else "4.6, global error"
+    fig = f"4.4, fuzzy boundary ({model} model)" if kind == "fuzzy" else "4.6, global error"
     print(f"\nFigure {fig}: Plates2D, {BUDGET} samples, mean of {seeds} seed(s); P = precision, C = coverage")
     head = "  ".join(f"{m} P/C @{d:g}" for d in D_EPS for m in ("Sobol", "NNDV"))
     print(f"{name:>6}  {head}")
@@ -239,7 +247,7 @@ def table42(plan_path: Path) -> list[dict]:
             om = "–" if row["other_mode"] is None else f"{row['other_mode']:.3f}"
             sd = "–" if sub is None else f"{sub['nearest']:.3f}"
             print(f"{lead} {sid:<8} {row['mode']:>4} {row['p']:>8.1%} {om:>10} {row['sub'] or 'none':<44} {sd:>6}")
-    print("\nThe dissertation's Table 4.2 (5-D study space; 2,000 dithers per scenario):")
+    print("\nThe dissertation's Table 4.2 (13 parameters, 123k runs searched; 2,000 dithers per scenario):")
     for pid, dist, typ, sides in PAPER_42:
         for k, (sid, dd, dt) in enumerate(sides):
             lead = f"{pid:>4} {dist:>8.4g} {typ:<20}" if k == 0 else " " * 34
@@ -284,36 +292,69 @@ def old_method(X: np.ndarray, Y: np.ndarray, types) -> tuple[float, int, int]:
     return time.perf_counter() - t0, int(labels.max()) + 1, int(i.size)
 
 
-def subclustering(sizes: list[int], old_max_n: int) -> None:
+def subclustering(sizes: list[int], old_max_n: int, png: Path | None = None) -> None:
     """Figure 4.19 on UUV data: the tree against Algorithm 2 on deeper levels, and against study size."""
     n_big = max(sizes)
     t0 = time.perf_counter()
     X, Y, rows, mission, types = uuv_study(n_big)
     print(
         f"\nSection 4.3.5 on UUV data: Sobol study of range2017, {n_big:,} scenarios, {len(X):,} valid "
-        f"({time.perf_counter() - t0:.0f} s to simulate); {Y.shape[1]} score elements"
+        f"({time.perf_counter() - t0:.0f} s to simulate); {Y.shape[1]} score elements",
+        flush=True,
     )
     levels = _levels(mission.score_tree)
     print(f"score tree: {len(levels)} levels, {'/'.join(str(len(lv)) for lv in levels)} elements per level")
     n_old = min(old_max_n, len(X))
     print(f"\n(a) {n_old:,} valid runs: Algorithm 2 on levels 0..L at once against the sub-boundary tree")
     print(f"{'method':<40} {'elements':>8} {'time (s)':>9} {'modes/clusters':>17} {'pairs':>8}")
-    cols: list[int] = []
-    for depth, lv in enumerate(levels):
-        cols = cols + lv
+    bars: list[tuple[str, float]] = []
+    for depth in range(len(levels)):
+        cols = [c for lv in levels[: depth + 1] for c in lv]
         t, modes, pairs = old_method(X[:n_old], Y[:n_old, cols], [types[c] for c in cols])
-        print(
-            f"{'Algorithm 2, levels 0..' + str(depth):<34} {len(cols):>8} {t:>9.2f} {modes:>15,} {pairs:>8,}",
-            flush=True,
-        )
-    tree_row(X[:n_old], Y[:n_old], mission, types, "sub-boundary tree (Algorithm 3)")
-    print(f"\n(b) the sub-boundary tree as the study grows (all {Y.shape[1]} elements)")
+        bars.append((f"Alg. 2\n{len(cols)} scores", t))
+        label = f"Algorithm 2, levels 0..{depth}"
+        print(f"{label:<40} {len(cols):>8} {t:>9.2f} {modes:>17,} {pairs:>8,}", flush=True)
+    bars.append((f"tree\n{Y.shape[1]} scores", tree_row(X[:n_old], Y[:n_old], mission, types, "sub-boundary tree")))
+    cheap = [c for lv in levels[:2] for c in lv]
+    print(f"\n(b) as the study grows: the tree (all {Y.shape[1]} elements), Algorithm 2 on levels 0..1 ({len(cheap)})")
+    lines: list[tuple[int, float, float]] = []
     for n in sorted(sizes):
         m = int(np.sum(rows < n))
-        tree_row(X[:m], Y[:m], mission, types, f"tree, first {n:,} scenarios ({m:,} valid)")
+        t_tree = tree_row(X[:m], Y[:m], mission, types, f"tree, first {n:,} scenarios ({m:,} valid)")
+        t, modes, pairs = old_method(X[:m], Y[:m, cheap], [types[c] for c in cheap])
+        print(f"{'Algorithm 2, levels 0..1':<40} {len(cheap):>8} {t:>9.2f} {modes:>17,} {pairs:>8,}", flush=True)
+        lines.append((m, t_tree, t))
+    if png is not None:
+        plot_4_19(bars, lines, n_old, png / "fig4_19.png")
 
 
-def tree_row(X, Y, mission, types, label: str) -> None:
+def plot_4_19(bars: list[tuple[str, float]], lines: list[tuple[int, float, float]], n_old: int, path: Path) -> None:
+    """Figure 4.19's layout: time per method at one size (left), time against size (right)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (left, right) = plt.subplots(1, 2, figsize=(12, 4.5))
+    left.bar(range(len(bars)), [t for _, t in bars], color=["tab:blue"] * (len(bars) - 1) + ["tab:red"])
+    left.set_xticks(range(len(bars)), [lab for lab, _ in bars], fontsize=8)
+    left.set_ylabel("seconds")
+    left.set_title(f"{n_old:,} valid UUV runs")
+    n = [r[0] for r in lines]
+    right.plot(n, [r[1] for r in lines], "-o", color="tab:red", label="sub-boundary tree, all scores")
+    right.plot(n, [r[2] for r in lines], "--s", color="tab:blue", label="Algorithm 2, levels 0..1")
+    right.set_xlabel("valid runs")
+    right.set_ylabel("seconds")
+    right.legend()
+    right.grid(alpha=0.3)
+    fig.tight_layout()
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+    print(f"wrote {path}")
+
+
+def tree_row(X, Y, mission, types, label: str) -> float:
     """Time the sub-boundary tree; count its clusters per level, pairs and boundary types.
 
     A boundary type is a level and the discrete score elements of that level that differ
@@ -337,6 +378,7 @@ def tree_row(X, Y, mission, types, label: str) -> None:
         f"{label:<40} {Y.shape[1]:>8} {t:>9.2f} {clusters:>17} {i.size:>8,}  {kinds:,} types; split/graph/pairs {tm} s",
         flush=True,
     )
+    return t
 
 
 def main() -> None:
@@ -347,6 +389,9 @@ def main() -> None:
     ap.add_argument("--plan", type=Path, default=ROOT / "field_plans" / "range2017" / "plan.json")
     ap.add_argument("--sizes", type=int, nargs="+", default=None, help="UUV study sizes (default 10000 30000 100000)")
     ap.add_argument("--old-max", type=int, default=None, help="runs given to Algorithm 2 (default 5000; --quick 3000)")
+    ap.add_argument(
+        "--fuzzy-model", choices=("paper", "jitter"), default="paper", help="Figure 4.4's noise (jitter: RAPT's own)"
+    )
     ap.add_argument("--skip-noise", action="store_true")
     ap.add_argument("--skip-table42", action="store_true")
     ap.add_argument("--skip-subclustering", action="store_true")
@@ -356,15 +401,22 @@ def main() -> None:
         for kind, levels in (("fuzzy", SIGMAS), ("global", GAMMAS)):
             if args.quick:
                 levels = tuple(sorted({0.0, *SCATTER[kind]}))
-            res, shown = noise_sweep(kind, levels, seeds)
-            print_noise(kind, levels, res, seeds)
+            if kind == "global" and args.fuzzy_model == "jitter":
+                continue
+            res, shown = noise_sweep(kind, levels, seeds, args.fuzzy_model)
+            print_noise(kind, levels, res, seeds, args.fuzzy_model)
             if args.png is not None:
-                plot_noise(kind, levels, res, shown, args.png / ("fig4_4.png" if kind == "fuzzy" else "fig4_6.png"))
+                name = (
+                    "fig4_6.png"
+                    if kind == "global"
+                    else f"fig4_4{'_jitter' if args.fuzzy_model == 'jitter' else ''}.png"
+                )
+                plot_noise(kind, levels, res, shown, args.png / name)
     if not args.skip_table42:
         table42(args.plan.resolve())
     if not args.skip_subclustering:
         sizes = args.sizes or ([1_000, 3_000] if args.quick else [10_000, 30_000, 100_000])
-        subclustering(sizes, args.old_max or (3_000 if args.quick else 5_000))
+        subclustering(sizes, args.old_max or (3_000 if args.quick else 5_000), args.png)
 
 
 if __name__ == "__main__":
