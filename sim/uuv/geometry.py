@@ -76,9 +76,10 @@ def polygon_signed_distance(
     t = np.clip((rx * ex + ry * ey) * inv, 0.0, 1.0)
     qx, qy = t * ex - rx, t * ey - ry  # closest edge point relative to (x, y)
     d2 = qx * qx + qy * qy
-    best = np.argmin(d2, axis=-1)[..., None]
-    dist = np.sqrt(np.take_along_axis(d2, best, axis=-1)[..., 0])
-    cx = x[:, None] + np.take_along_axis(qx, best, axis=-1)[..., 0]
-    cy = y[:, None] + np.take_along_axis(qy, best, axis=-1)[..., 0]
+    V = d2.shape[-1]
+    best = np.argmin(d2, axis=-1).ravel() + np.arange(0, d2.size, V)  # flat index of each closest edge
+    dist = np.sqrt(d2.ravel()[best]).reshape(d2.shape[:-1])
+    cx = x[:, None] + qx.ravel()[best].reshape(d2.shape[:-1])
+    cy = y[:, None] + qy.ravel()[best].reshape(d2.shape[:-1])
     inside = np.all(ex * ry - ey * rx > 0, axis=-1)  # left of every CCW edge
     return np.where(inside, -dist, dist), cx, cy
