@@ -1,4 +1,4 @@
-"""A field plan on disk (``plan.json``, schema ``rapt.plan/1``): load it, name it, find its scenarios.
+"""A field plan on disk (``plan.json``, schema :data:`PLAN_SCHEMA`): load it, name it, find its scenarios.
 
 ``rapt-plan generate`` writes the plan; ``rapt-plan run PLAN --scenario pair1a`` flies one
 of its scenarios and ``rapt-plan compare PLAN_DIR LOGS`` reads the logs back against it.

@@ -20,7 +20,7 @@ The stages of ``rapt-plan generate``, each a function a test can run on a small 
 5. :func:`planner.plan.dithering.robust_variants` — fragile scenarios moved away from their
    boundary ("M") until they hold; each pair gets a verdict: sharp, robust or fragile.
 
-:func:`generate` runs them all and writes ``plan.json`` (schema ``rapt.plan/1``,
+:func:`generate` runs them all and writes ``plan.json`` (schema :data:`~planner.common.plans.PLAN_SCHEMA`,
 documented in ``planner/plan.schema.json``) and, per scenario, a QGroundControl
 ``.plan``, a ``QGC WPL 110`` file and its predicted track as GeoJSON
 (:mod:`planner.plan.plan_scenarios`), and ``report.html`` (:mod:`planner.plan.report`).
@@ -484,7 +484,7 @@ def _plan_document(
     scenarios: list[dict],
     variants: list[dict],
 ) -> dict:
-    """What ``plan.json`` holds (schema ``rapt.plan/1``)."""
+    """What ``plan.json`` holds (schema :data:`~planner.common.plans.PLAN_SCHEMA`)."""
     sur = cfg.surrogate
     variant_ids = {v["id"] for v in variants}
     plan_pairs = []

@@ -1,6 +1,6 @@
 """The HTML report of a field plan: what the test engineers read before going on the water.
 
-:func:`write_report` turns a ``rapt.plan/1`` plan (:func:`planner.plan.generate.generate`) into
+:func:`write_report` turns a field plan (:data:`~planner.common.plans.PLAN_SCHEMA`) (:func:`planner.plan.generate.generate`) into
 ``report.html`` plus PNG figures in ``figures/``, beside the plan's scenario files:
 
 * a header: mission, budget, seed, valid and invalid runs;
@@ -407,7 +407,7 @@ def _pair_section(
 def write_report(plan: dict, out_dir: Path, dithers: dict[str, tuple[np.ndarray, np.ndarray]] | None = None) -> Path:
     """Write ``out_dir/report.html`` and its figures (``out_dir/figures/*.png``); return the page's path.
 
-    ``plan`` is a ``rapt.plan/1`` plan (as :func:`planner.plan.generate.generate` returns it or
+    ``plan`` is a field plan (as :func:`planner.plan.generate.generate` returns it or
     ``plan.json`` holds); its scenario files are read from ``out_dir``.  ``dithers`` maps a
     scenario id to ``(U, modes)`` of its dithering runs: unit-cube rows (n, dim) and modes
     0..3 (TF, SS, MS, TS) or -1 (invalid); without it the dithering plots are left out.

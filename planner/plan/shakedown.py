@@ -292,7 +292,7 @@ TRACK_FIELDS = ("t", "x", "y", "heading", "speed", "surfaced")
 
 
 def shakedown_plan(design: ShakedownDesign, mission_file: Path, mission_text: str) -> dict[str, Any]:
-    """The calibration run's ``plan.json`` (schema ``rapt.plan/1`` with a ``calibration`` object):
+    """The calibration run's ``plan.json`` (a field plan with a ``calibration`` object):
     its one scenario ``shakedown`` with its row, legs and predicted run, flyable with ``rapt-plan run``."""
     m, o = design.mission, design.options
     cols = [TRAJECTORY_FIELDS.index(k) for k in TRACK_FIELDS]
