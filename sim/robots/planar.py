@@ -148,3 +148,48 @@ def planar_all_faces(F: PlanarFaces, theta: np.ndarray, chunk: int = 2000) -> di
         out["rest_id"].append(rest_id[m].astype(np.int64))
         out["count"].append(k)
     return {key: np.concatenate(v) if v else np.empty(0) for key, v in out.items()}
+
+
+def planar_snap(F: PlanarFaces, theta: np.ndarray, phi: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Algorithm 5's snap and stability test for many states ``[θ, φ]`` of a planar robot, without their hulls.
+
+    Returns the snapped face's body angle (n,), whether that face is stable (n,) and its identity
+    (n,): the same ``start``, ``stable`` and ``start_id`` as :meth:`StabilityFunction.__call__`
+    (checked in the tests), at a
+    fraction of the cost, which a PRM local planner checking millions of path states needs.
+    The face nearest ``φ``'s down direction ``d`` is one of the two hull edges at the vertex
+    extreme along ``d``; each is found as the neighbour making the smallest turn from the
+    tangent (collinear points: the farthest, as Qhull keeps only the ends).
+    """
+    theta = np.asarray(theta, dtype=float).reshape(-1, F.robot.dof)
+    phi = np.asarray(phi, dtype=float).reshape(-1)
+    uniq = np.unique(F.vertex_id)
+    P, com = _kinematics(F, theta, uniq)
+    n = len(P)
+    d = np.column_stack([np.sin(phi), -np.cos(phi)])  # down direction (x, z), base frame
+    t = np.column_stack([d[:, 1], -d[:, 0]])  # tangent: d turned by -90°
+    rows = np.arange(n)
+    s = np.argmax(np.einsum("nvk,nk->nv", P, d), axis=1)
+    w = P - P[rows, s][:, None, :]
+    length = np.linalg.norm(w, axis=2)
+    ang = np.arctan2(-np.einsum("nvk,nk->nv", w, d), np.einsum("nvk,nk->nv", w, t))  # in [0, π] (s is extreme)
+    ang = np.where(ang < -np.pi / 2, np.pi, np.maximum(ang, 0.0))  # round-off below the tangent (a tied extreme)
+    scale = np.maximum(length.max(axis=1, keepdims=True), 1e-300)
+    real = length > 1e-12 * scale
+    tie = 1e-12 * length / scale  # nearly equal turns: the farther point spans the face
+    a_idx = np.argmin(np.where(real, ang - tie, np.inf), axis=1)
+    b_idx = np.argmax(np.where(real, ang + tie, -np.inf), axis=1)
+    a, b = ang[rows, a_idx], ang[rows, b_idx]
+    # outward normals of the two edges at s (the polygon lies between their turns a and b, seen from s)
+    n_a = np.sin(a)[:, None] * t + np.cos(a)[:, None] * d
+    n_b = -np.sin(b)[:, None] * t - np.cos(b)[:, None] * d
+    first = np.cos(a) >= -np.cos(b)  # n_a · d against n_b · d: the face most nearly facing the ground
+    other = np.where(first, a_idx, b_idx)
+    normal = np.where(first[:, None], n_a, n_b)
+    start = np.arctan2(normal[:, 0], -normal[:, 1])
+    # the hull runs counter-clockwise along (-n_z, n_x): does the face run from s to the other end, or back?
+    forward = np.einsum("nk,nk->n", P[rows, other] - P[rows, s], np.column_stack([-normal[:, 1], normal[:, 0]])) > 0
+    ia, ib = np.where(forward, s, other), np.where(forward, other, s)
+    A, B = P[rows, ia][:, None, :], P[rows, ib][:, None, :]
+    nxt, _ = planar_tip_table(A, B, start[:, None], com, np.ones(n, dtype=int), F.gravity, F.robot.mass)
+    return start, nxt[:, 0] < 0, planar_face_ids(uniq[ia], uniq[ib]).astype(np.int64)
