@@ -24,15 +24,20 @@ setting and the settings it was chosen against, then on held-out seeds 24-119):
    energy lies from it ("m.err"): a witness up to a grid step past the boundary stands on a
    face that has turned, and can lose less (or more) than the crossing does.
 2. Table 5.1 — building the graph from the adaptive sample sets: Gabriel-graph
-   clustering (Algorithm 8) against PRM-style connection, in which every pair of stable
-   states within the same ``d_max`` is checked with a linear local planner (stability
-   evaluated every 1° along the straight line).  PRM time beyond 1,000 checked
-   edges is extrapolated from a seeded random subset (marked ``*``).
+   clustering (Algorithm 8) against PRM-style connection (:mod:`planner.selfright.prm`):
+   every pair of stable known states within the same ``d_max`` is checked with a linear
+   local planner, one path state every 1° (each snapped to its face, which must be stable
+   and stay on one manifold), all of them run, in numpy batches; and whether the PRM's
+   components, with Algorithm 8's transitions, make the same graph.  Without part 1
+   (``--skip fig53``) the adaptive studies run alone, without their grids.
 3. Figure 5.6 — the 5-DOF manipulator robot (Figure 5.5) with 1 to 5 active joints
-   (shoulder pitch; + shoulder yaw; + elbow; + wrist; + jaw; inactive joints held at 0,
-   the elbow straight): queries until the resolution cut-offs end the search, the
-   self-rightable fraction, the mean transition energy to the home state, and the
-   queries a 5° grid would need (mean hull faces × grid points, as in section 5.5.2).
+   (shoulder pitch; + shoulder yaw; + elbow; + wrist; + jaw; inactive joints held at home,
+   the elbow at full extension, 180°, as the text has it): queries until the resolution
+   cut-offs end the search, mean hull faces per joint state, the self-rightable fraction
+   and mean transition energy to the home state over every hull face of random joint states
+   and over random joint states dropped in random orientations (split by how the robot
+   lies: upright, upside down, on a side, on an end), and the queries a 5° grid would need
+   (mean hull faces × grid points, as in section 5.5.2).
 
 Run:  python benchmarks/selfright.py [--quick | --fine] [--robots 1dof ...] [--skip fig56 ...]
       (full: about 10 minutes on 2 cores; quick: about 2; ``--robots 1dof --skip fig56``: seconds)
@@ -44,13 +49,13 @@ import argparse
 import time
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from planner.selfright.analysis import analyse, compare_graphs
 from planner.selfright.crossing import crossing_energies
-from planner.selfright.probes import probe_states
+from planner.selfright.prm import prm_connect, same_graph
+from planner.selfright.probes import orientation_probes, probe_states
 from planner.selfright.search import adaptive_study, grid_study
-from sim.robots import StabilityFunction, load_robot
+from sim.robots import down_normals, load_robot
 
 ROBOTS = "examples/robots"
 # 1 DOF at a tenth of the grid's 2,153 queries: coarse interiors, small batches, 40 % kept for the
@@ -58,9 +63,9 @@ ROBOTS = "examples/robots"
 ONE_DOF_TENTH = dict(budget=210, r_min_deg=0.5, r_max_deg=45.0, batch_size=10, refine=0.4, outcomes=True)
 
 
-def fig53(quick: bool, seed: int, robots: list[str] | None = None, fine: bool = False) -> list:
-    # robot, slope, grid resolution (deg), adaptive options
-    cases = [
+def cases(quick: bool, fine: bool = False) -> list:
+    """Figure 5.3's robots: name, slope, grid resolution (deg), adaptive options."""
+    return [
         ("1dof", 20.0, 1.0, dict(ONE_DOF_TENTH)),
         ("2dof", 0.0, 3.0 if quick else 1.0, dict(budget=10000 if quick else 30000, r_min_deg=0.5, r_max_deg=10.0)),
         (
@@ -70,6 +75,20 @@ def fig53(quick: bool, seed: int, robots: list[str] | None = None, fine: bool = 
             dict(budget=10000 if quick else 40000, r_min_deg=2.0, r_max_deg=15.0, batch_size=100),
         ),
     ]
+
+
+def adaptive_only(quick: bool, seed: int, robots: list[str] | None = None) -> list:
+    """Figure 5.3's adaptive studies without the grids (Table 5.1 alone needs no more): (name, study, analysis, s)."""
+    studies = []
+    for name, slope, _res, opts in [c for c in cases(quick) if robots is None or c[0] in robots]:
+        robot = load_robot(f"{ROBOTS}/{name}.toml")
+        opts = dict(opts)
+        ad = adaptive_study(robot, slope, opts.pop("budget"), seed=seed, **opts)
+        studies.append((name, ad, analyse(ad), ad.seconds))
+    return studies
+
+
+def fig53(quick: bool, seed: int, robots: list[str] | None = None, fine: bool = False) -> list:
     print(
         "1. Figure 5.3: grid search against adaptive manifold sampling (a query = one [joint state, face]; "
         "graphs matched on probe states)"
@@ -80,7 +99,7 @@ def fig53(quick: bool, seed: int, robots: list[str] | None = None, fine: bool = 
         f"{'m.bdy J':>8} {'m.err J':>7}"
     )
     studies = []
-    for name, slope, res, opts in [c for c in cases if robots is None or c[0] in robots]:
+    for name, slope, res, opts in [c for c in cases(quick, fine) if robots is None or c[0] in robots]:
         robot = load_robot(f"{ROBOTS}/{name}.toml")
         probes = probe_states(robot, slope, 300 if quick else 500, seed + 1)
         grid = grid_study(robot, slope, res)
@@ -129,7 +148,7 @@ def fig53(quick: bool, seed: int, robots: list[str] | None = None, fine: bool = 
             f"   grid/adaptive ({stop}, {ad.joint_states:,} joint states)",
             flush=True,
         )
-        studies.append((name, ad, a))
+        studies.append((name, ad, a, ad_seconds))
     return studies
 
 
@@ -183,99 +202,75 @@ def one_dof_seeds(seeds: int = 8, held_out: range = range(24, 120)) -> None:
         )
 
 
-def prm_components(study, result, step_deg: float = 1.0, max_edges: int | None = None, seed: int = 0):
-    """PRM-style connection of the stable known states: a linear local planner on every pair within d_max.
-
-    A pair is connected when every state on the straight line between them (in angle
-    space, every ``step_deg``) is stable when evaluated; returns (components, seconds,
-    edges checked, edges in total, evaluations).
-    """
-    g = result.graph
-    stable_pts = np.flatnonzero(g.labels >= 0)
-    P = g.points[stable_pts]
-    pairs = cKDTree(P).query_pairs(result.max_edge, output_type="ndarray")
-    total = len(pairs)
-    if max_edges is not None and total > max_edges:
-        pairs = pairs[np.sort(np.random.default_rng(seed).choice(total, max_edges, replace=False))]
-    # angles of the stable known states, from their unit-cube coordinates
-    known = np.concatenate([study.X, study.rest[np.isfinite(study.rest).all(axis=1)], result.extra_states])[stable_pts]
-    ang = study.bounds[:, 0] + known * np.ptp(study.bounds, axis=1)
-    F = StabilityFunction(study.robot, study.slope)
-    m = study.n_free
-    t0 = time.perf_counter()
-    ok = np.zeros(len(pairs), dtype=bool)
-    evals = 0
-    for e, (i, j) in enumerate(pairs):
-        d = np.angle(np.exp(1j * (ang[j] - ang[i])))  # shortest way round for periodic angles
-        n = max(int(np.ceil(np.degrees(np.abs(d).max()) / step_deg)), 1)
-        s = (np.arange(1, n) / n)[:, None]
-        if len(s) == 0:
-            ok[e] = True
-            continue
-        path = ang[i] + s * d
-        res = F(path[:, :m], path[:, m:])
-        evals += len(s)
-        on_manifold = (
-            np.abs(np.angle(np.exp(1j * (res.start - path[:, m:])))).max(axis=1)
-            < 2 * np.radians(step_deg) + np.abs(d[m:]).max()
-        )
-        ok[e] = bool(np.all(res.stable & on_manifold))
-    seconds = time.perf_counter() - t0
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    adj = coo_matrix((np.ones(ok.sum()), (pairs[ok, 0], pairs[ok, 1])), shape=(len(P), len(P)))
-    _, labels = connected_components(adj, directed=False)
-    big = int((np.bincount(labels) >= max(2, len(P) // 200)).sum())
-    return big, seconds, len(pairs), total, evals
-
-
-def table51(studies, quick: bool, seed: int) -> None:
-    cap = 500 if quick else 1000
+def table51(studies) -> None:
+    """Table 5.1: Gabriel clustering against the PRM's linear local planner on every candidate edge (1° steps)."""
     print(
-        "\n2. Table 5.1: building the graph from the adaptive sample sets: Gabriel clustering against PRM edge checking"
+        "\n2. Table 5.1: building the graph from the adaptive sample sets: Gabriel clustering against PRM edge "
+        "checking (every pair within d_max, 1° steps)"
     )
     print(
-        f"{'robot':>5} {'known states':>12} {'d_max deg':>9} {'Gabriel s':>9} {'nodes':>5} {'PRM s':>9} {'PRM edges':>10} "
-        f"{'evaluations':>11} {'PRM regions':>11} {'PRM/Gabriel':>11}"
+        f"{'robot':>5} {'search s':>8} {'known states':>12} {'d_max deg':>9} {'Gabriel s':>9} {'PRM s':>8} "
+        f"{'PRM/Gabriel':>11} {'edges':>10} {'connected':>9} {'path states':>12} {'evaluated':>11} "
+        f"{'nodes G/P':>9} {'matched n/e':>11} {'states agree':>12} {'graph':>7}"
     )
-    for name, study, result in studies:
+    for name, study, result, search_s in studies:
         gab = result.graph_seconds  # analyse() built the graph (with its face identities) and timed it
-        regions, prm_s, checked, total, evals = prm_components(study, result, max_edges=cap, seed=seed)
-        est = prm_s * total / max(checked, 1)
-        mark = "*" if checked < total else " "
+        prm = prm_connect(study, result)
+        same = same_graph(result, study, prm)
         print(
-            f"{name:>5} {result.n_known_states:>12,} {np.degrees(result.max_edge):>9.1f} {gab:>9.2f} {result.n_nodes:>5} "
-            f"{est:>8.1f}{mark} {total:>10,} "
-            f"{int(evals * total / max(checked, 1)):>11,} {regions if checked == total else '-':>11} "
-            f"{est / gab:>10.0f}x",
+            f"{name:>5} {search_s:>8.1f} {result.n_known_states:>12,} {np.degrees(result.max_edge):>9.1f} "
+            f"{gab:>9.2f} {prm.seconds:>8.1f} {prm.seconds / gab:>10.0f}x {prm.edges_checked:>10,} "
+            f"{prm.edges_connected:>9,} {prm.path_states:>12,} {prm.evaluations:>11,} "
+            f"{f'{same.nodes[0]}/{same.nodes[1]}':>9} {f'{same.nodes_matched}/{same.edges_matched}':>11} "
+            f"{same.states_agreeing:>11.1%} {'same' if same.same else 'differs':>7}",
             flush=True,
         )
 
 
+def _lying(study, probes) -> np.ndarray:
+    """How each probe state lies, by the base's axis nearest the down direction: 0 upright, 1 upside down,
+    2 on a side, 3 on an end (nose or tail down)."""
+    body = study.bounds[study.n_free :, 0] + probes.U[:, study.n_free :] * np.ptp(study.bounds[study.n_free :], axis=1)
+    down = down_normals(body, False)
+    axis = np.argmax(np.abs(down), axis=1)
+    return np.select([axis == 2, axis == 1, axis == 0], [np.where(down[:, 2] < 0, 0, 1), 2, 3])
+
+
 def fig56(quick: bool, seed: int) -> None:
+    """Figure 5.6: inactive joints held at their home (the elbow at full extension, 180°, as the text has it).
+
+    The self-rightable share is counted two ways: over every hull face of random joint states
+    (each face once, however small), and over random joint states dropped in random
+    orientations (each face by the share of orientations landing on it; also split by how
+    the robot lies)."""
     robot = load_robot(f"{ROBOTS}/5dof.toml")
     order = ["shoulder_pitch", "shoulder_yaw", "elbow", "wrist", "jaw"]
+    home = {j.name: j.home for j in robot.all_joints}
     budget = 1000 if quick else 4000
     print(
-        f"\n3. Figure 5.6: 5-DOF manipulator robot, flat ground, active joints added one at a time "
-        f"(adaptive: r_min 3°, r_max 20°, at most {budget:,} queries)"
+        f"\n3. Figure 5.6: 5-DOF manipulator robot, flat ground, active joints added one at a time, the others at "
+        f"home (elbow at full extension) (adaptive: r_min 3°, r_max 20°, at most {budget:,} queries)"
     )
     print(
-        f"{'active':>6} {'joints':<52} {'queries':>8} {'stopped by':>10} {'time s':>7} {'nodes':>5} "
-        f"{'rightable':>9} {'energy to home J':>16} {'5° grid (est.)':>14}"
+        f"{'active':>6} {'joints':<52} {'queries':>8} {'stopped by':>10} {'time s':>7} {'nodes':>5} {'faces':>5} "
+        f"{'rightable':>9} {'energy J':>8} {'by orient.':>10} {'energy J':>8} "
+        f"{'upright/inverted/side/end':>25} {'5° grid (est.)':>14}"
     )
     for m in range(1, 6):
-        r = robot.lock({n: 0.0 for n in order[m:]})
+        r = robot.lock({n: home[n] for n in order[m:]})
         study = adaptive_study(r, 0.0, budget, seed=seed, r_min_deg=3.0, r_max_deg=20.0, batch_size=100, refine=0.0)
         res = analyse(study, probes=probe_states(r, 0.0, 150 if quick else 300, seed + 1))
+        drop = orientation_probes(r, 0.0, 300 if quick else 1000, seed + 1)
+        by_orientation = analyse(study, probes=drop)
+        lying = _lying(study, drop)
+        split = "/".join(f"{by_orientation.probe_rightable[lying == k].mean():.0%}" for k in range(4))
         faces = np.mean([len(f) for f in study.faces])
         grid = faces * np.prod([np.ptp(b) / np.radians(5.0) for b in r.joint_bounds])
         stop = "resolution" if study.stopped_by_resolution else "budget"
-        energy = res.energy_to_home
         print(
             f"{m:>6} {', '.join(j.name for j in r.joints):<52} {study.queries:>8,} {stop:>10} {study.seconds:>7.1f} "
-            f"{res.n_nodes:>5} {res.rightable:>9.1%} {energy:>16.2f} {grid:>14,.0f}",
+            f"{res.n_nodes:>5} {faces:>5.0f} {res.rightable:>9.1%} {res.energy_to_home:>8.2f} "
+            f"{by_orientation.rightable:>10.1%} {by_orientation.energy_to_home:>8.2f} {split:>25} {grid:>14,.0f}",
             flush=True,
         )
 
@@ -300,8 +295,8 @@ def main() -> None:
     studies = fig53(args.quick, args.seed, args.robots, args.fine) if "fig53" not in args.skip else []
     if "fig53" not in args.skip and not args.quick and (args.robots is None or "1dof" in args.robots):
         one_dof_seeds()
-    if "table51" not in args.skip and studies:
-        table51(studies, args.quick, args.seed)
+    if "table51" not in args.skip:
+        table51(studies or adaptive_only(args.quick, args.seed, args.robots))
     if "fig56" not in args.skip:
         fig56(args.quick, args.seed)
     print(f"\ntotal {time.perf_counter() - t0:.0f} s")

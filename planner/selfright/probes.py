@@ -12,9 +12,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from planner.selfright.space import space_bounds, to_unit
-from sim.robots import Robot, StabilityFunction
+from sim.robots import Robot, StabilityFunction, body_angles
 
-__all__ = ["Probes", "probe_states", "as_probes"]
+__all__ = ["Probes", "probe_states", "orientation_probes", "as_probes"]
 
 
 @dataclass
@@ -52,6 +52,27 @@ def probe_states(robot: Robot, slope: float, n: int, seed: int) -> Probes:
         ids.append(hull.ids)
     U = to_unit(np.concatenate(rows), bounds[:, 0], bounds[:, 1])
     return Probes(U, np.concatenate(ids), np.ones(len(U), dtype=bool))
+
+
+def orientation_probes(robot: Robot, slope: float, n: int, seed: int) -> Probes:
+    """Uniform random joint states, each dropped in a uniform random orientation: the face it lands on, with the truth.
+
+    :func:`probe_states` counts every hull face once, so a finely tessellated part (a rounded
+    track end) weighs more than a large flat side; here a face counts by the share of
+    orientations that snap onto it (the down direction uniform on the sphere), which does
+    not depend on how the model is meshed.  The stability comes from the stability function.
+    """
+    F = StabilityFunction(robot, slope)
+    bounds = space_bounds(robot, F.planar)
+    rng = np.random.default_rng(seed)
+    theta = bounds[: robot.dof, 0] + rng.random((n, robot.dof)) * np.ptp(bounds[: robot.dof], axis=1)
+    down = rng.normal(size=(n, 3))
+    down /= np.linalg.norm(down, axis=1, keepdims=True)
+    if F.planar:  # the robot moves in the x-z plane: only the down direction's angle in it matters
+        down[:, 1] = 0.0
+    res = F(theta, body_angles(down, F.planar))
+    U = to_unit(np.column_stack([res.theta, res.start]), bounds[:, 0], bounds[:, 1])
+    return Probes(U, res.start_id, res.stable)
 
 
 def as_probes(probes) -> Probes:
