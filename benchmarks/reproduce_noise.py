@@ -359,7 +359,8 @@ def tree_row(X, Y, mission, types, label: str) -> float:
 
     A boundary type is a level and the discrete score elements of that level that differ
     across a pair (as ``rapt-plan generate`` names them); pairs split only by continuous
-    elements share one type per level.
+    elements share one type per level. Discrete outcomes: distinct combinations of all
+    discrete score elements among the runs (sub-cluster types without continuous leaves).
     """
     t0 = time.perf_counter()
     tree = rapt.subboundary_tree(X, Y, mission.score_tree, output_types=types)
@@ -373,9 +374,11 @@ def tree_row(X, Y, mission, types, label: str) -> float:
             diff = Y[i[at]][:, disc] != Y[j[at]][:, disc]
             kinds += len(np.unique(diff, axis=0)) if disc else 1
     clusters = "/".join(str(tree.n_clusters(k)) for k in range(len(tree.levels)))
+    disc_all = [c for c, t in enumerate(types) if t != "continuous"]
+    combos = len(np.unique(Y[:, disc_all], axis=0))
     tm = "/".join(f"{tree.timings[k]:.1f}" for k in ("split", "graph", "pairs"))
     print(
-        f"{label:<40} {Y.shape[1]:>8} {t:>9.2f} {clusters:>17} {i.size:>8,}  {kinds:,} types; split/graph/pairs {tm} s",
+        f"{label:<40} {Y.shape[1]:>8} {t:>9.2f} {clusters:>17} {i.size:>8,}  {kinds:,} types; {combos:,} discrete outcomes; split/graph/pairs {tm} s",
         flush=True,
     )
     return t
