@@ -55,8 +55,12 @@ PAPER = {
 }
 
 
-def run_study(method: str, mission, runs: int, batch: int, store: Path, pool) -> tuple[rapt.Study, float]:
-    """One search of the mission, resumed from ``store`` if it exists; returns (study, seconds)."""
+def run_study(method: str, mission, runs: int, batch: int, store: Path, pool, workers: int) -> tuple[rapt.Study, float]:
+    """One search of the mission, resumed from ``store`` if it exists; returns (study, seconds).
+
+    Each batch is split into one chunk per worker: a chunk's last long runs step a few
+    vehicles at a time, so fewer, larger chunks waste less.
+    """
     options = {"max_reference": SEARCH_REFERENCE} if method == "s-ndv" else {}
     started = time.perf_counter()
     last = [started]
@@ -76,6 +80,7 @@ def run_study(method: str, mission, runs: int, batch: int, store: Path, pool) ->
         seed=0,
         store=store,
         executor=pool,
+        chunk_size=-(-batch // workers),
         output_types=ROOT_OUTPUT_TYPES,
         steer=list(ROOT_COLUMNS),
         sampler_options=options,
@@ -213,7 +218,9 @@ def main() -> None:
     context = multiprocessing.get_context("forkserver")
     with cf.ProcessPoolExecutor(args.workers, mp_context=context) as pool:
         for m in METHODS:
-            study, seconds[m] = run_study(m, mission, runs, batch, args.store / f"uuv18-{m}-{runs}.db", pool)
+            study, seconds[m] = run_study(
+                m, mission, runs, batch, args.store / f"uuv18-{m}-{runs}.db", pool, args.workers
+            )
             results[m] = analyse(study)
     report(results, seconds)
     if args.png is not None:
