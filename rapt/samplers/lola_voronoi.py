@@ -29,7 +29,8 @@ indicator / score rows averaged).
 
 Cost per batch with ``N`` samples, ``k = 3m`` neighbour candidates and ``T`` Monte Carlo
 points (``100 N``, capped at ``max_test_points``): k-d tree queries
-O((N k + T) log N), neighbourhood search O(N k m^3 d), gradients O(N m d^2): O(N k) in
+O((N k + T) log N), neighbourhood search O(N k^2 d) for the distances among candidates plus O(N k m^2)
+for the swaps, gradients O(N m d^2): O(N k) in
 ``N``.
 """
 
