@@ -236,7 +236,36 @@ def _lying(study, probes) -> np.ndarray:
     return np.select([axis == 2, axis == 1, axis == 0], [np.where(down[:, 2] < 0, 0, 1), 2, 3])
 
 
-def fig56(quick: bool, seed: int) -> None:
+def draw_fig56(rows: list[dict], path: str = "docs/reproduction/fig5_6.png") -> None:
+    """Figure 5.6 as a PNG: (a) queries against active joints, with the 5° grid's estimate; (b) mean energy to
+    home; (c) the self-rightable share (the paper's 78 % and 100 % marked)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    m = [r["m"] for r in rows]
+    fig, ax = plt.subplots(1, 3, figsize=(13, 3.6))
+    ax[0].semilogy(m, [r["queries"] for r in rows], "o-", label="adaptive (ours)")
+    ax[0].semilogy(m, [r["grid"] for r in rows], "s--", color="tab:gray", label="5° grid (estimate)")
+    ax[0].set(title="(a) queries", xlabel="active joints", ylabel="queries")
+    for key, label in (("energy", "every hull face"), ("energy_o", "random orientations")):
+        ax[1].plot(m, [r[key] for r in rows], "o-", label=label)
+    ax[1].set(title="(b) mean energy to reach home", xlabel="active joints", ylabel="J")
+    for key, label in (("rightable", "every hull face"), ("rightable_o", "random orientations")):
+        ax[2].plot(m, [100 * r[key] for r in rows], "o-", label=label)
+    ax[2].plot(m, [78 if k == 1 else 100 for k in m], "k*", markersize=10, label="dissertation")
+    ax[2].set(title="(c) self-rightable", xlabel="active joints", ylabel="% of states", ylim=(0, 105))
+    for a in ax:
+        a.set_xticks(m)
+        a.legend(fontsize=8)
+    fig.suptitle("Figure 5.6: the 5-DOF robot, joints added one at a time (benchmarks/selfright.py)")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def fig56(quick: bool, seed: int, budget: int | None = None) -> list[dict]:
     """Figure 5.6: inactive joints held at their home (the elbow at full extension, 180°, as the text has it).
 
     The self-rightable share is counted two ways: over every hull face of random joint states
@@ -246,7 +275,7 @@ def fig56(quick: bool, seed: int) -> None:
     robot = load_robot(f"{ROBOTS}/5dof.toml")
     order = ["shoulder_pitch", "shoulder_yaw", "elbow", "wrist", "jaw"]
     home = {j.name: j.home for j in robot.all_joints}
-    budget = 1000 if quick else 4000
+    budget = budget or (1000 if quick else 4000)
     print(
         f"\n3. Figure 5.6: 5-DOF manipulator robot, flat ground, active joints added one at a time, the others at "
         f"home (elbow at full extension) (adaptive: r_min 3°, r_max 20°, at most {budget:,} queries)"
@@ -256,6 +285,7 @@ def fig56(quick: bool, seed: int) -> None:
         f"{'rightable':>9} {'energy J':>8} {'by orient.':>10} {'energy J':>8} "
         f"{'upright/inverted/side/end':>25} {'5° grid (est.)':>14}"
     )
+    rows: list[dict] = []
     for m in range(1, 6):
         r = robot.lock({n: home[n] for n in order[m:]})
         study = adaptive_study(r, 0.0, budget, seed=seed, r_min_deg=3.0, r_max_deg=20.0, batch_size=100, refine=0.0)
@@ -267,12 +297,24 @@ def fig56(quick: bool, seed: int) -> None:
         faces = np.mean([len(f) for f in study.faces])
         grid = faces * np.prod([np.ptp(b) / np.radians(5.0) for b in r.joint_bounds])
         stop = "resolution" if study.stopped_by_resolution else "budget"
+        rows.append(
+            dict(
+                m=m,
+                queries=study.queries,
+                grid=grid,
+                energy=res.energy_to_home,
+                energy_o=by_orientation.energy_to_home,
+                rightable=res.rightable,
+                rightable_o=by_orientation.rightable,
+            )
+        )
         print(
             f"{m:>6} {', '.join(j.name for j in r.joints):<52} {study.queries:>8,} {stop:>10} {study.seconds:>7.1f} "
             f"{res.n_nodes:>5} {faces:>5.0f} {res.rightable:>9.1%} {res.energy_to_home:>8.2f} "
             f"{by_orientation.rightable:>10.1%} {by_orientation.energy_to_home:>8.2f} {split:>25} {grid:>14,.0f}",
             flush=True,
         )
+    return rows
 
 
 def main() -> None:
@@ -280,6 +322,9 @@ def main() -> None:
     ap.add_argument("--quick", action="store_true", help="smaller budgets and coarser grids (about a minute)")
     ap.add_argument("--fine", action="store_true", help="the 3-DOF grid at the paper's 3° (10.5 million queries)")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument(
+        "--budget56", type=int, default=None, help="Figure 5.6's query budget per row (default 4,000; --quick 1,000)"
+    )
     ap.add_argument("--skip", nargs="*", default=[], choices=["fig53", "table51", "fig56"])
     ap.add_argument(
         "--robots",
@@ -298,7 +343,9 @@ def main() -> None:
     if "table51" not in args.skip:
         table51(studies or adaptive_only(args.quick, args.seed, args.robots))
     if "fig56" not in args.skip:
-        fig56(args.quick, args.seed)
+        rows = fig56(args.quick, args.seed, args.budget56)
+        if not args.quick:
+            draw_fig56(rows)
     print(f"\ntotal {time.perf_counter() - t0:.0f} s")
 
 
