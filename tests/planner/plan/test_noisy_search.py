@@ -2,6 +2,7 @@
 
 import json
 from pathlib import Path
+from typing import Any
 
 import jsonschema
 import numpy as np
@@ -25,7 +26,7 @@ def range2017():
 
 
 def noisy(store: Path, **kw) -> GenerateConfig:
-    base = dict(budget=300, batch_size=100, global_fraction=0.5, store=store, noisy_search=True)
+    base: dict[str, Any] = dict(budget=300, batch_size=100, global_fraction=0.5, store=store, noisy_search=True)
     return GenerateConfig(**(base | kw))
 
 
