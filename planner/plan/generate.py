@@ -46,6 +46,7 @@ from planner.common.plans import PLAN_SCHEMA, coordinate_sensitivity, embedded_m
 from planner.plan.analysis import Analysis, analyse, confirm_with_expert, pair_points, select_pairs
 from planner.plan.confirmation import Confirmation
 from planner.plan.dithering import DEFAULT_NOISE, DitherNoise
+from planner.plan.mission_search import ROOT_OUTPUT_TYPES
 from planner.plan.noisy_search import NoisyMissionScores, noisy_columns, search_record
 from planner.plan.pair_choice import MAX_FLOWN_DISTANCE, Candidate, Dithering, evaluate_candidates, rank_candidates
 from planner.plan.pair_shifts import with_shifted_pairs
@@ -177,7 +178,6 @@ class MissionScores:
 
 
 ROOT_COLUMNS = (0, 1)  # mission and safety success: what the search steers on
-ROOT_OUTPUT_TYPES: tuple[str, ...] = ("binary", "binary")
 # S-NDV's neighbours come from at most this many samples (rapt NNDVSampler.max_reference):
 # a mission's parameters all matter, so its effective dimension is high and neighbour
 # queries cost O(n) each; past this the asks of a 10^5-run study would dominate it.

@@ -21,7 +21,7 @@ from rapt.search import Study
 __all__ = ["ROOT_OUTPUT_TYPES", "root_scores", "ModeSearch"]
 
 # the two root scores (mission success, safety success) are pass/fail
-ROOT_OUTPUT_TYPES = ("binary", "binary")
+ROOT_OUTPUT_TYPES: tuple[str, ...] = ("binary", "binary")
 
 
 def root_scores(mission, *, seed: int = 0, stochastic: bool = False) -> Callable[[np.ndarray], np.ndarray]:
