@@ -41,8 +41,9 @@ import numpy as np
 
 import rapt
 import sim.uuv
-from planner.plan.generate import ROOT_COLUMNS, ROOT_OUTPUT_TYPES, SEARCH_REFERENCE, MissionScores
-from rapt.boundaries import graph_mutual_pairs, knn_graph
+from planner.plan.generate import ROOT_COLUMNS, SEARCH_REFERENCE, MissionScores
+from planner.plan.mission_search import ROOT_OUTPUT_TYPES
+from rapt.boundaries import exact_order, graph_mutual_pairs, knn_graph
 from sim.uuv.scoring import MODE_NAMES
 
 MISSION = Path(__file__).resolve().parents[1] / "examples" / "uuv18.toml"
@@ -95,10 +96,7 @@ def analyse(study: rapt.Study) -> dict:
     X = study.X
     modes = (2 * study.Y[:, 0] + study.Y[:, 1]).astype(int)
     started = time.perf_counter()
-    _, idx = knn_graph(X, 12)
-    dist = np.linalg.norm(X[idx] - X[:, None, :], axis=2)  # exact distances of the graph's edges
-    order = np.argsort(dist, axis=1, kind="stable")
-    dist, idx = np.take_along_axis(dist, order, 1), np.take_along_axis(idx, order, 1)
+    dist, idx = exact_order(X, knn_graph(X, 12)[1])
     i, j, d = graph_mutual_pairs(dist, idx, modes)
     types: dict[str, np.ndarray] = {}
     for a in range(4):

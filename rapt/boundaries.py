@@ -24,7 +24,15 @@ from rapt.modes import performance_modes
 from rapt.parallel import query_workers
 from rapt.validation import check_scores, check_states
 
-__all__ = ["BoundaryPairs", "boundary_pairs", "mutual_pairs", "knn_graph", "graph_mutual_pairs", "pair_differences"]
+__all__ = [
+    "BoundaryPairs",
+    "boundary_pairs",
+    "mutual_pairs",
+    "knn_graph",
+    "exact_order",
+    "graph_mutual_pairs",
+    "pair_differences",
+]
 
 
 @dataclass
@@ -142,6 +150,24 @@ def knn_graph(X: np.ndarray, k: int, method: str = "auto") -> tuple[np.ndarray, 
     keep = np.ones_like(own)
     keep[np.arange(n), drop] = False
     return dist[keep].reshape(n, k), idx[keep].reshape(n, k).astype(np.int64)
+
+
+def exact_order(X: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Each row's neighbours ``idx`` with their exact distances in ``X``, nearest first.
+
+    An approximate graph (HNSW, or one stored in float32) holds the right neighbours in a
+    slightly wrong order; pairing through it needs each row's exact order and distances.
+    A row's own index (padding of a short list) gets an infinite distance.
+    """
+    n, k = idx.shape
+    d = np.empty(idx.shape)
+    for s in range(0, n, 65_536):  # blocks: (rows, k, dim) differences stay small
+        rows = np.arange(s, min(s + 65_536, n))
+        diff = X[idx[rows]] - X[rows][:, None, :]
+        d[rows] = np.sqrt(np.einsum("rkd,rkd->rk", diff, diff))
+    d[idx == np.arange(n)[:, None]] = np.inf
+    order = np.argsort(d, axis=1, kind="stable")
+    return np.take_along_axis(d, order, axis=1), np.take_along_axis(idx, order, axis=1).astype(np.int64)
 
 
 #: HNSW graph parameters (faiss): links per node, candidate list while building and while

@@ -24,7 +24,7 @@ from typing import Any
 
 import numpy as np
 
-from rapt.boundaries import graph_mutual_pairs, knn_graph
+from rapt.boundaries import exact_order, graph_mutual_pairs, knn_graph
 from rapt.errors import InputError
 from rapt.modes import mean_shift_normalised
 from rapt.scores import check_output_types, infer_output_types, row_codes
@@ -222,7 +222,7 @@ def subboundary_tree(
     if graph is None or n <= exact_below:
         dist, idx = knn_graph(Xs, n - 1 if n <= exact_below else int(k), method=neighbours)
     else:
-        dist, idx = _exact_order(Xs, graph[1][:, : int(k)])
+        dist, idx = exact_order(Xs, graph[1][:, : int(k)])
     graph_done = time.perf_counter()
     pairs = []
     for lv in range(len(levels)):
@@ -272,22 +272,6 @@ def _check_graph(graph: Any, n: int, weights: np.ndarray | None) -> tuple[np.nda
     if not np.issubdtype(idx.dtype, np.integer) or (idx.size and (idx.min() < 0 or idx.max() >= n)):
         raise InputError(f"graph: idx must hold integer sample indices in [0, {n})")
     return dist, idx
-
-
-def _exact_order(X: np.ndarray, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Each row's neighbours ``idx`` with their exact distances in ``X``, nearest first.
-
-    A row's own index (padding of a short list) gets an infinite distance.
-    """
-    n, k = idx.shape
-    d = np.empty(idx.shape)
-    for s in range(0, n, 65_536):  # blocks: (rows, k, dim) differences stay small
-        rows = np.arange(s, min(s + 65_536, n))
-        diff = X[idx[rows]] - X[rows][:, None, :]
-        d[rows] = np.sqrt(np.einsum("rkd,rkd->rk", diff, diff))
-    d[idx == np.arange(n)[:, None]] = np.inf
-    order = np.argsort(d, axis=1, kind="stable")
-    return np.take_along_axis(d, order, axis=1), np.take_along_axis(idx, order, axis=1).astype(np.int64)
 
 
 def _check_weights(weights: np.ndarray, d: int) -> np.ndarray:
