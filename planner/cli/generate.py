@@ -139,9 +139,7 @@ def generate(
     from planner.plan.noisy_search import NOISY_STORE
 
     mission = load_mission(mission_file)
-    store = out_dir / ("study.db" if surrogate is None else "study-surrogate.db")
-    if noisy_search:
-        store = out_dir / NOISY_STORE
+    store = out_dir / (NOISY_STORE if noisy_search else "study.db" if surrogate is None else "study-surrogate.db")
     if store.exists() and not resume:
         fail(f"--out: {store} already holds a study; add --resume to continue it or choose another directory")
     cfg = GenerateConfig(

@@ -55,7 +55,11 @@ def analyse(mission: Mission, study: rapt.Study, surrogate=None, stochastic_seed
     X, Y = study.X, study.Y
     names, types = metric_names(mission), metric_types(mission)
     spot = sim.uuv.simulate(
-        mission, X[:SPOT_CHECK_RUNS], stochastic_seed or 0, stochastic_seed is not None, surrogate=surrogate
+        mission,
+        X[:SPOT_CHECK_RUNS],
+        seed=stochastic_seed or 0,
+        stochastic=stochastic_seed is not None,
+        surrogate=surrogate,
     )
     if Y.shape[1] != len(names) or not np.array_equal(spot.scores, Y[:SPOT_CHECK_RUNS], equal_nan=True):
         raise StudyMismatchError(

@@ -1,6 +1,7 @@
 """The HTML report of a field plan: what the test engineers read before going on the water.
 
-:func:`write_report` turns a field plan (:data:`~planner.common.plans.PLAN_SCHEMA`) (:func:`planner.plan.generate.generate`) into
+:func:`write_report` turns a field plan (:func:`planner.plan.generate.generate`, schema
+:data:`~planner.common.plans.PLAN_SCHEMA`) into
 ``report.html`` plus PNG figures in ``figures/``, beside the plan's scenario files:
 
 * a header: mission, budget, seed, valid and invalid runs;
