@@ -26,7 +26,8 @@ Run:  ARDUSUB_SITL=../shared/ardusub/ardusub python benchmarks/range_day.py
       [--stages committed,day,conducted] [--quick]
 
 ``--work`` keeps every log and row; run again with it and only what is missing is flown or
-computed.  ``--quick``: one configuration, a 2,000-run re-plan and its first four scenarios.
+computed.  ``--quick``: one configuration, a 4,000-run re-plan and its first four scenarios
+(``--refine`` spends 1,600 of its runs; a 2,000-run budget would leave the search under two batches).
 """
 
 from __future__ import annotations
@@ -475,7 +476,7 @@ def the_day(name: str, here: Path, args, params: dict[str, float], pack_ah: floa
     if "error" in fit:
         print(f"  {name}: the morning's calibration failed: {fit['error']}", file=sys.stderr)
         return False
-    budget = 2000 if args.quick else args.budget
+    budget = 4000 if args.quick else args.budget
     timing = noon(here, budget)
     if "error" in timing:
         print(f"  {name}: noon step failed: {timing['error']}", file=sys.stderr)
